@@ -1,0 +1,1 @@
+"""Benchmarks, run on demand: ``guidebot bench NAME --json`` prints one JSON object last."""

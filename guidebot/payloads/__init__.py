@@ -1,0 +1,6 @@
+"""The catalogue of message types: one module per domain, each owning its payload models.
+
+Importing this package registers every known type (see guidebot.messages.register_payload).
+"""
+
+from guidebot.payloads import building, hub, petri, robot, tasks, traffic  # noqa: F401
