@@ -1,0 +1,221 @@
+"""Site checks beyond shapes: every reference must resolve, every id be unique.
+
+All problems are collected and returned together, each with its place (a dotted path into the
+document, and a line number when the site came from a YAML file).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import ValidationError
+
+from backend.site.building import IORef, PointKind
+from backend.site.schema import Site
+
+__all__ = ["SiteInvalid", "SiteIssue", "check_references", "validate_site"]
+
+
+@dataclass(frozen=True)
+class SiteIssue:
+    """One problem: where (``loc`` like ``edges[3].b``, ``line`` in the file) and what."""
+
+    loc: str
+    message: str
+    line: int | None = None
+
+    def __str__(self) -> str:
+        where = f"line {self.line}: " if self.line is not None else ""
+        return f"{where}{self.loc}: {self.message}"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"loc": self.loc, "msg": self.message, "line": self.line}
+
+
+class SiteInvalid(ValueError):
+    """A site refused as a whole; ``issues`` lists every problem found."""
+
+    def __init__(self, issues: list[SiteIssue]) -> None:
+        self.issues = issues
+        lines = "\n".join(f"  {issue}" for issue in issues)
+        super().__init__(f"site refused, {len(issues)} problem(s):\n{lines}")
+
+
+def format_loc(parts: Iterable[str | int]) -> str:
+    out = ""
+    for part in parts:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else str(part)
+    return out or "(document)"
+
+
+def validate_site(data: Any, *, lines: Any = None) -> Site:
+    """Parse and check a site document; raises SiteInvalid with every problem.
+
+    ``lines`` is an optional callable mapping a loc tuple to a line number.
+    """
+
+    def line_of(loc: tuple[str | int, ...]) -> int | None:
+        return lines(loc) if lines is not None else None
+
+    try:
+        site = Site.model_validate(data)
+    except ValidationError as exc:
+        issues = [
+            SiteIssue(format_loc(err["loc"]), err["msg"], line_of(tuple(err["loc"])))
+            for err in exc.errors(include_url=False)
+        ]
+        raise SiteInvalid(issues) from None
+    problems = check_references(site)
+    if problems:
+        raise SiteInvalid([SiteIssue(format_loc(loc), msg, line_of(loc)) for loc, msg in problems])
+    return site
+
+
+Problem = tuple[tuple[str | int, ...], str]
+
+
+def _unique(items: list[Any], attr: str, section: str) -> list[Problem]:
+    seen: set[str] = set()
+    out: list[Problem] = []
+    for i, item in enumerate(items):
+        value = getattr(item, attr)
+        if value in seen:
+            out.append(((section, i, attr), f"duplicate {attr} {value!r}"))
+        seen.add(value)
+    return out
+
+
+def check_references(site: Site) -> list[Problem]:
+    """Every cross reference of the site; returns (loc, message) pairs, empty when sound."""
+    p: list[Problem] = []
+    for section, attr in (
+        ("floors", "id"),
+        ("nodes", "id"),
+        ("pois", "id"),
+        ("tours", "id"),
+        ("charging_stations", "id"),
+        ("wait_points", "id"),
+        ("areas", "id"),
+        ("doors", "id"),
+        ("elevators", "id"),
+        ("modules", "id"),
+        ("buttons", "id"),
+        ("robots", "name"),
+    ):
+        p += _unique(getattr(site, section), attr, section)
+    floors = {f.id for f in site.floors}
+    nodes = {n.id: n for n in site.nodes}
+    pois = {poi.id for poi in site.pois}
+    tours = {t.id for t in site.tours}
+
+    def node_ref(loc: tuple[str | int, ...], node: str | None) -> None:
+        if node is not None and node not in nodes:
+            p.append((loc, f"unknown node {node!r}"))
+
+    for i, n in enumerate(site.nodes):
+        if n.floor not in floors:
+            p.append((("nodes", i, "floor"), f"unknown floor {n.floor!r}"))
+    seen_edges: set[tuple[str, str]] = set()
+    for i, e in enumerate(site.edges):
+        node_ref(("edges", i, "a"), e.a)
+        node_ref(("edges", i, "b"), e.b)
+        if e.a == e.b:
+            p.append((("edges", i), "an edge must join two different nodes"))
+        elif e.a in nodes and e.b in nodes:
+            if nodes[e.a].floor != nodes[e.b].floor:
+                p.append((("edges", i), "an edge joins nodes of one floor; use an elevator"))
+            key = (min(e.a, e.b), max(e.a, e.b))
+            if key in seen_edges:
+                p.append((("edges", i), f"duplicate edge {e.a}-{e.b}"))
+            seen_edges.add(key)
+    for i, poi in enumerate(site.pois):
+        node_ref(("pois", i, "node"), poi.node)
+    for i, t in enumerate(site.tours):
+        for j, point in enumerate(t.points):
+            if point not in pois:
+                p.append((("tours", i, "points", j), f"unknown point of interest {point!r}"))
+    for section in ("charging_stations", "wait_points"):
+        for i, item in enumerate(getattr(site, section)):
+            node_ref((section, i, "node"), item.node)
+    in_area: dict[str, str] = {}
+    for i, a in enumerate(site.areas):
+        for j, node in enumerate(a.nodes):
+            node_ref(("areas", i, "nodes", j), node)
+            if node in in_area and in_area[node] != a.id:
+                p.append(
+                    (("areas", i, "nodes", j), f"node {node!r} is already in area {in_area[node]}")
+                )
+            in_area[node] = a.id
+        node_ref(("areas", i, "passing_place"), a.passing_place)
+        if a.passing_place is not None and a.passing_place in a.nodes:
+            p.append((("areas", i, "passing_place"), "a passing place must lie outside its area"))
+
+    points = {(m.id, pt.name): pt.kind for m in site.modules for pt in m.points}
+    inputs = {PointKind.discrete_input, PointKind.input_register}
+    outputs = {PointKind.coil, PointKind.holding_register}
+
+    def io_ref(loc: tuple[str | int, ...], ref: IORef | None, want: set[PointKind]) -> None:
+        if ref is None:
+            return
+        kind = points.get((ref.module, ref.point))
+        if kind is None:
+            p.append((loc, f"unknown building point {ref.module}/{ref.point}"))
+        elif kind not in want:
+            expected = "an input" if want is inputs else "an output"
+            p.append((loc, f"{ref.module}/{ref.point} is a {kind}, expected {expected}"))
+
+    for i, m in enumerate(site.modules):
+        p += [(("modules", i, *loc), msg) for loc, msg in _unique(m.points, "name", "points")]
+        seen_addr: set[tuple[PointKind, int]] = set()
+        for j, pt in enumerate(m.points):
+            node_ref(("modules", i, "points", j, "node"), pt.node)
+            if (pt.kind, pt.address) in seen_addr:
+                p.append(
+                    (
+                        ("modules", i, "points", j, "address"),
+                        f"address {pt.address} used twice for {pt.kind}",
+                    )
+                )
+            seen_addr.add((pt.kind, pt.address))
+        ports = [(mm.host, mm.port) for mm in site.modules[:i] if mm.port != 0]
+        if m.port != 0 and (m.host, m.port) in ports:
+            p.append((("modules", i, "port"), f"{m.host}:{m.port} used by another module"))
+    for i, d in enumerate(site.doors):
+        node_ref(("doors", i, "node"), d.node)
+        io_ref(("doors", i, "open"), d.open, outputs)
+        io_ref(("doors", i, "is_open"), d.is_open, inputs)
+    for i, el in enumerate(site.elevators):
+        seen_floors: set[str] = set()
+        for j, stop in enumerate(el.stops):
+            if stop.floor not in floors:
+                p.append((("elevators", i, "stops", j, "floor"), f"unknown floor {stop.floor!r}"))
+            if stop.floor in seen_floors:
+                p.append((("elevators", i, "stops", j, "floor"), "two stops on one floor"))
+            seen_floors.add(stop.floor)
+            node_ref(("elevators", i, "stops", j, "node"), stop.node)
+            if stop.node in nodes and nodes[stop.node].floor != stop.floor:
+                loc = ("elevators", i, "stops", j, "node")
+                p.append((loc, f"node {stop.node!r} is on another floor"))
+            io_ref(("elevators", i, "stops", j, "call"), stop.call, outputs)
+            io_ref(("elevators", i, "stops", j, "in_position"), stop.in_position, inputs)
+    for i, b in enumerate(site.buttons):
+        node_ref(("buttons", i, "node"), b.node)
+        io_ref(("buttons", i, "input"), b.input, inputs)
+        io_ref(("buttons", i, "led"), b.led, outputs)
+        params = b.task.params
+        if b.task.kind == "tour" and params.get("tour") not in tours:
+            p.append((("buttons", i, "task", "params", "tour"), "unknown tour"))
+        if b.task.kind == "go_to_poi" and params.get("poi") not in pois:
+            p.append((("buttons", i, "task", "params", "poi"), "unknown point of interest"))
+        if b.task.kind == "go_to" and params.get("node") not in nodes:
+            p.append((("buttons", i, "task", "params", "node"), "unknown node"))
+    for i, r in enumerate(site.robots):
+        node_ref(("robots", i, "start_node"), r.start_node)
+        if r.battery_panic > r.battery_low:
+            p.append((("robots", i, "battery_panic"), "must not exceed battery_low"))
+    return p

@@ -1,0 +1,70 @@
+"""Site files: YAML in (with line numbers for every error), YAML out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from backend.site.schema import Site
+from backend.site.validate import SiteInvalid, SiteIssue, validate_site
+
+__all__ = ["MAX_SITE_BYTES", "dump_site", "load_site_file", "load_site_text"]
+
+MAX_SITE_BYTES = 5_000_000
+
+
+def _line_finder(root: yaml.Node | None) -> Any:
+    """Map a loc path (keys and indexes) to the 1-based line of the deepest node found."""
+
+    def find(loc: tuple[str | int, ...]) -> int | None:
+        node = root
+        if node is None:
+            return None
+        line = node.start_mark.line + 1
+        for part in loc:
+            nxt: yaml.Node | None = None
+            if isinstance(node, yaml.MappingNode) and isinstance(part, str):
+                for key, value in node.value:
+                    if isinstance(key, yaml.ScalarNode) and key.value == part:
+                        nxt = value
+                        line = key.start_mark.line + 1
+                        break
+            elif isinstance(node, yaml.SequenceNode) and isinstance(part, int):
+                if 0 <= part < len(node.value):
+                    nxt = node.value[part]
+            if nxt is None:
+                break
+            node = nxt
+            line = max(line, node.start_mark.line + 1)
+        return line
+
+    return find
+
+
+def load_site_text(text: str) -> Site:
+    """Parse a YAML site; raises SiteInvalid listing every problem with its line."""
+    if len(text.encode()) > MAX_SITE_BYTES:
+        raise SiteInvalid([SiteIssue("(document)", f"larger than {MAX_SITE_BYTES} bytes")])
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        raise SiteInvalid([SiteIssue("(document)", f"not valid YAML: {exc}", line)]) from None
+    if not isinstance(data, dict):
+        raise SiteInvalid([SiteIssue("(document)", "a site file is a mapping at top level", 1)])
+    return validate_site(data, lines=_line_finder(root))
+
+
+def load_site_file(path: str | Path) -> Site:
+    return load_site_text(Path(path).read_text(encoding="utf-8"))
+
+
+def dump_site(site: Site) -> str:
+    """YAML of a site, defaults left out so hand-written files stay short."""
+    data = site.model_dump(mode="json", exclude_defaults=True)
+    data = {"name": site.name, **data}
+    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
