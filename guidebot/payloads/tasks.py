@@ -2,6 +2,71 @@
 
 from __future__ import annotations
 
+from typing import Any, Literal
+
+from pydantic import Field
+
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["PayloadModel", "register_payload"]
+__all__ = [
+    "TaskAssigned",
+    "TaskCancel",
+    "TaskEnded",
+    "TaskEvent",
+    "TaskRequest",
+    "TaskStarted",
+]
+
+TaskKind = Literal["tour", "go_to_poi", "charge", "go_to"]
+Outcome = Literal["done", "failed", "cancelled"]
+
+
+@register_payload("task_request")
+class TaskRequest(PayloadModel):
+    """A visitor, button, robot screen or admin asks for a task; higher priority first."""
+
+    kind: TaskKind
+    params: dict[str, Any] = Field(default_factory=dict)
+    priority: int = Field(default=5, ge=0, le=100)
+    requester: str = Field(default="", max_length=64)
+
+
+@register_payload("task_assigned")
+class TaskAssigned(PayloadModel):
+    task_id: str
+    robot: str
+    net: str
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+@register_payload("task_cancel")
+class TaskCancel(PayloadModel):
+    task_id: str
+    reason: str = ""
+
+
+@register_payload("task_started")
+class TaskStarted(PayloadModel):
+    task_id: str
+    robot: str
+    outcome: Outcome | None = None
+    reason: str = ""
+
+
+@register_payload("task_ended")
+class TaskEnded(PayloadModel):
+    task_id: str
+    robot: str
+    outcome: Outcome = "done"
+    reason: str = ""
+
+
+@register_payload("task_event")
+class TaskEvent(PayloadModel):
+    """Every state change of a task, for GUIs, panels and the event log."""
+
+    task_id: str
+    state: str
+    robot: str | None = None
+    queue_position: int | None = None
+    eta_s: float | None = None

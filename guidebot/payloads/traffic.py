@@ -2,6 +2,64 @@
 
 from __future__ import annotations
 
+from pydantic import BaseModel, Field
+
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["PayloadModel", "register_payload"]
+__all__ = ["AreaGranted", "AreaYield", "GetPath", "Path", "PathStep", "ReleaseArea", "RequestArea"]
+
+
+@register_payload("get_path")
+class GetPath(PayloadModel):
+    robot: str = ""
+    from_node: str | None = None
+    """None: from the robot's current node (last robot_state)."""
+    to_node: str
+
+
+class PathStep(BaseModel):
+    """One node of a path with what lies on it."""
+
+    node: str
+    floor: str
+    x: float
+    y: float
+    door: str | None = None
+    elevator: str | None = None
+    area: str | None = None
+
+
+@register_payload("path")
+class Path(PayloadModel):
+    nodes: list[str] = Field(default_factory=list)
+    length_m: float | None = None
+    steps: list[PathStep] = Field(default_factory=list)
+    error: str | None = None
+    """Set (and nodes empty) when there is no path or a node is unknown."""
+
+
+@register_payload("request_area")
+class RequestArea(PayloadModel):
+    robot: str
+    area: str
+
+
+@register_payload("area_granted")
+class AreaGranted(PayloadModel):
+    robot: str
+    area: str
+
+
+@register_payload("release_area")
+class ReleaseArea(PayloadModel):
+    robot: str
+    area: str
+
+
+@register_payload("area_yield")
+class AreaYield(PayloadModel):
+    """Deadlock resolution: leave ``area`` for ``go_to_node``, release it, then ask again."""
+
+    robot: str
+    area: str
+    go_to_node: str
