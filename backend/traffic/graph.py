@@ -1,0 +1,234 @@
+"""The site's topological map as a routing graph: shortest paths across floors.
+
+Edges come from the site (two-way unless one-way); each elevator adds edges between its stops
+costing its travel time at a nominal speed. Paths are found with A* (straight-line heuristic,
+made admissible by scaling it to the shortest edge-length/straight-line ratio of the map).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from backend.site.schema import Site
+
+__all__ = ["NoPath", "PathResult", "PathStep", "SiteGraph", "UnknownNode"]
+
+NOMINAL_SPEED_MPS = 0.7
+
+
+class NoPath(LookupError):
+    """The target cannot be reached from the start (one-way edges, disconnected floors)."""
+
+
+class UnknownNode(KeyError):
+    """A node id the site does not have."""
+
+
+@dataclass(frozen=True, slots=True)
+class PathStep:
+    node: str
+    floor: str
+    x: float
+    y: float
+    door: str | None = None
+    elevator: str | None = None
+    area: str | None = None
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "node": self.node,
+            "floor": self.floor,
+            "x": self.x,
+            "y": self.y,
+            "door": self.door,
+            "elevator": self.elevator,
+            "area": self.area,
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class PathResult:
+    nodes: list[str]
+    length_m: float
+    steps: list[PathStep] = field(default_factory=list)
+
+    @property
+    def areas(self) -> list[str]:
+        """Restricted areas in the order the path enters them."""
+        out: list[str] = []
+        for step in self.steps:
+            if step.area is not None and (not out or out[-1] != step.area):
+                out.append(step.area)
+        return out
+
+
+class SiteGraph:
+    """Built once per site version; read-only afterwards (rebuild on site change)."""
+
+    def __init__(self, site: Site, *, nominal_speed_mps: float = NOMINAL_SPEED_MPS) -> None:
+        self.floor_of: dict[str, str] = {}
+        self.xy: dict[str, tuple[float, float]] = {}
+        self.passing: set[str] = set()
+        for n in site.nodes:
+            self.floor_of[n.id] = n.floor
+            self.xy[n.id] = (n.x, n.y)
+            if n.passing_place:
+                self.passing.add(n.id)
+        self.adj: dict[str, list[tuple[str, float]]] = {n: [] for n in self.floor_of}
+        self.radj: dict[str, list[tuple[str, float]]] = {n: [] for n in self.floor_of}
+        ratio = 1.0
+        for e in site.edges:
+            straight = self._dist(e.a, e.b)
+            length = e.length_m if e.length_m is not None else max(straight, 1e-6)
+            if straight > 0:
+                ratio = min(ratio, length / straight)
+            self._add(e.a, e.b, length)
+            if not e.one_way:
+                self._add(e.b, e.a, length)
+        self.door_at = {d.node: d.id for d in site.doors}
+        self.elevator_at: dict[str, str] = {}
+        shift = 0.0
+        for el in site.elevators:
+            cost = el.travel_time_s * nominal_speed_mps
+            for s in el.stops:
+                self.elevator_at[s.node] = el.id
+            for s in el.stops:
+                for t in el.stops:
+                    if s.node != t.node:
+                        self._add(s.node, t.node, cost)
+                        shift = max(shift, self._dist(s.node, t.node))
+        self.area_at: dict[str, str] = {}
+        self.area_nodes: dict[str, list[str]] = {}
+        self.area_passing: dict[str, str | None] = {}
+        for a in site.areas:
+            self.area_nodes[a.id] = list(a.nodes)
+            self.area_passing[a.id] = a.passing_place
+            for node in a.nodes:
+                self.area_at[node] = a.id
+        self._h_scale = ratio
+        self._h_shift = shift * len(site.elevators)
+        self._dist_cache: dict[str, dict[str, float]] = {}
+
+    def _add(self, a: str, b: str, cost: float) -> None:
+        self.adj[a].append((b, cost))
+        self.radj[b].append((a, cost))
+
+    def _dist(self, a: str, b: str) -> float:
+        (ax, ay), (bx, by) = self.xy[a], self.xy[b]
+        return math.hypot(ax - bx, ay - by)
+
+    def __contains__(self, node: object) -> bool:
+        return node in self.floor_of
+
+    def check(self, *nodes: str | None) -> None:
+        for node in nodes:
+            if node is None or node not in self.floor_of:
+                raise UnknownNode(node)
+
+    def shortest_path(self, start: str, goal: str) -> PathResult:
+        """A* from start to goal; raises UnknownNode or NoPath."""
+        self.check(start, goal)
+        if start == goal:
+            return PathResult([start], 0.0, [self.step(start)])
+        gx, gy = self.xy[goal]
+        scale, shift = self._h_scale, self._h_shift
+        xy, adj = self.xy, self.adj
+        best: dict[str, float] = {start: 0.0}
+        came: dict[str, str] = {}
+        sx, sy = xy[start]
+        heap: list[tuple[float, float, str]] = [
+            (max(0.0, math.hypot(sx - gx, sy - gy) * scale - shift), 0.0, start)
+        ]
+        closed: set[str] = set()
+        while heap:
+            _, g, node = heapq.heappop(heap)
+            if node == goal:
+                break
+            if node in closed:
+                continue
+            closed.add(node)
+            for nxt, cost in adj[node]:
+                ng = g + cost
+                if ng < best.get(nxt, math.inf):
+                    best[nxt] = ng
+                    came[nxt] = node
+                    nx, ny = xy[nxt]
+                    h = math.hypot(nx - gx, ny - gy) * scale - shift
+                    heapq.heappush(heap, (ng + (h if h > 0 else 0.0), ng, nxt))
+        else:
+            raise NoPath(f"no path from {start} to {goal}")
+        nodes = [goal]
+        while nodes[-1] != start:
+            nodes.append(came[nodes[-1]])
+        nodes.reverse()
+        return PathResult(nodes, round(best[goal], 3), [self.step(n) for n in nodes])
+
+    def step(self, node: str) -> PathStep:
+        x, y = self.xy[node]
+        return PathStep(
+            node=node,
+            floor=self.floor_of[node],
+            x=x,
+            y=y,
+            door=self.door_at.get(node),
+            elevator=self.elevator_at.get(node),
+            area=self.area_at.get(node),
+        )
+
+    def distances_to(self, goal: str) -> dict[str, float]:
+        """Path cost from every node to ``goal`` (one reverse Dijkstra, cached per goal).
+
+        The Task Manager ranks robots by this: one search per task target, not per robot.
+        """
+        cached = self._dist_cache.get(goal)
+        if cached is not None:
+            return cached
+        self.check(goal)
+        dist: dict[str, float] = {goal: 0.0}
+        heap = [(0.0, goal)]
+        radj = self.radj
+        while heap:
+            d, node = heapq.heappop(heap)
+            if d > dist[node]:
+                continue
+            for prev, cost in radj[node]:
+                nd = d + cost
+                if nd < dist.get(prev, math.inf):
+                    dist[prev] = nd
+                    heapq.heappush(heap, (nd, prev))
+        if len(self._dist_cache) >= 512:
+            self._dist_cache.pop(next(iter(self._dist_cache)))
+        self._dist_cache[goal] = dist
+        return dist
+
+    def passing_place_for(self, area: str, near: Iterable[str] = ()) -> str | None:
+        """Where a robot yielding ``area`` should go: the area's own, else the nearest marked
+        passing place outside it (breadth-first from the area), else any node next to it."""
+        own = self.area_passing.get(area)
+        if own is not None:
+            return own
+        inside = set(self.area_nodes.get(area, ()))
+        start = [*near, *self.area_nodes.get(area, ())]
+        seen = set(start)
+        frontier = list(start)
+        first_outside: str | None = None
+        while frontier:
+            nxt: list[str] = []
+            for node in frontier:
+                for other, _ in (*self.adj.get(node, ()), *self.radj.get(node, ())):
+                    if other in seen:
+                        continue
+                    seen.add(other)
+                    if other in inside:
+                        nxt.append(other)
+                        continue
+                    if other in self.passing:
+                        return other
+                    if first_outside is None:
+                        first_outside = other
+                    nxt.append(other)
+            frontier = nxt
+        return first_outside

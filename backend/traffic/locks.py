@@ -1,0 +1,295 @@
+"""Restricted-area locks: exclusive, granted in request order, with deadlock prevention and
+detection (docs/server.md, "Lock policy" and "Deadlock rule").
+
+Pure bookkeeping, no I/O: every call returns what the Traffic Manager must tell robots.
+
+Prevention: a request may name a *chain* of areas the robot will cross back to back (no free
+node between them). The chain is granted all at once or not at all, so a robot never holds one
+area of a chain while waiting for the next (no hold-and-wait inside a chain).
+
+Detection: a robot waits for the holders of the areas its request needs; those edges form the
+wait-for graph. A robot waits for one request at a time, so a cycle is found by walking from
+the new waiter. The cycle is broken by asking its newest waiter to yield the area it holds that
+the others need: it backs off to a passing place and releases the area there (area_yield).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+__all__ = ["AreaLocks", "Grant", "LockError", "LockState", "LockView", "Yield"]
+
+
+class LockError(ValueError):
+    """A lock operation that makes no sense (unknown area, releasing a lock one does not hold)."""
+
+
+class LockState(StrEnum):
+    FREE = "free"
+    HELD = "held"
+    """Held by a connected robot."""
+    HOLDER_OFFLINE = "holder_offline"
+    """Its robot dropped off the network: kept (it may be inside), shown to staff."""
+    YIELDING = "yielding"
+    """Its robot was asked to back off (deadlock resolution) and has not released it yet."""
+
+
+# The life cycle of one area lock; anything else is a bug and raises.
+TRANSITIONS: dict[LockState, frozenset[LockState]] = {
+    LockState.FREE: frozenset({LockState.HELD}),
+    LockState.HELD: frozenset({LockState.FREE, LockState.HOLDER_OFFLINE, LockState.YIELDING}),
+    LockState.HOLDER_OFFLINE: frozenset({LockState.FREE, LockState.HELD, LockState.YIELDING}),
+    LockState.YIELDING: frozenset({LockState.FREE, LockState.HOLDER_OFFLINE, LockState.HELD}),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Grant:
+    robot: str
+    area: str
+    request_id: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Yield:
+    robot: str
+    area: str
+    cycle: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class LockView:
+    area: str
+    state: LockState
+    holder: str | None
+    since: float | None
+    entered: bool
+    waiting: list[str]
+
+
+@dataclass(slots=True)
+class _Lock:
+    area: str
+    state: LockState = LockState.FREE
+    holder: str | None = None
+    since: float | None = None
+    entered: bool = False
+
+    def move(self, new: LockState) -> None:
+        if new not in TRANSITIONS[self.state]:
+            raise LockError(
+                f"area {self.area}: cannot go from {self.state.value} to {new.value} "
+                f"(expected one of {sorted(s.value for s in TRANSITIONS[self.state])})"
+            )
+        self.state = new
+
+
+@dataclass(slots=True)
+class _Wait:
+    robot: str
+    areas: tuple[str, ...]
+    request_id: str | None
+    seq: int
+    since: float = field(default_factory=time.monotonic)
+
+
+class AreaLocks:
+    """All area locks of a site. ``max_waiting`` bounds the waiting list (one entry per robot)."""
+
+    def __init__(self, areas: list[str], *, max_waiting: int = 100_000) -> None:
+        self._locks = {a: _Lock(a) for a in areas}
+        self._waits: dict[str, _Wait] = {}  # robot -> its one waiting request, FIFO by seq
+        self._seq = itertools.count()
+        self._offline: set[str] = set()
+        self.max_waiting = max_waiting
+        self.deadlocks_resolved = 0
+
+    # --- queries -------------------------------------------------------------------------
+    @property
+    def areas(self) -> list[str]:
+        return list(self._locks)
+
+    def holder(self, area: str) -> str | None:
+        return self._lock(area).holder
+
+    def held_by(self, robot: str) -> list[str]:
+        return [a for a, lock in self._locks.items() if lock.holder == robot]
+
+    def entered(self, area: str) -> bool:
+        return self._lock(area).entered
+
+    def waiting_for(self, robot: str) -> tuple[str, ...] | None:
+        wait = self._waits.get(robot)
+        return wait.areas if wait else None
+
+    def view(self) -> list[LockView]:
+        order = sorted(self._waits.values(), key=lambda w: w.seq)
+        return [
+            LockView(
+                area=a,
+                state=lock.state,
+                holder=lock.holder,
+                since=lock.since,
+                entered=lock.entered,
+                waiting=[w.robot for w in order if a in w.areas],
+            )
+            for a, lock in self._locks.items()
+        ]
+
+    def wait_for_graph(self) -> dict[str, set[str]]:
+        """robot -> the robots holding areas it waits for."""
+        graph: dict[str, set[str]] = {}
+        for wait in self._waits.values():
+            holders = {
+                h
+                for a in wait.areas
+                if (h := self._locks[a].holder) is not None and h != wait.robot
+            }
+            graph[wait.robot] = holders
+        return graph
+
+    # --- changes -------------------------------------------------------------------------
+    def request(
+        self, robot: str, areas: tuple[str, ...] | list[str], request_id: str | None = None
+    ) -> tuple[list[Grant], list[Yield]]:
+        """Ask for ``areas`` (one area, or a chain granted all at once).
+
+        Returns the grants now possible (possibly none: the robot waits in order) and the
+        yields needed to break a deadlock the request closes.
+        """
+        chain = tuple(dict.fromkeys(areas))
+        if not chain:
+            raise LockError("no area requested")
+        for a in chain:
+            self._lock(a)
+        if robot not in self._waits and len(self._waits) >= self.max_waiting:
+            raise LockError(f"too many robots waiting ({self.max_waiting})")
+        # A new request replaces the robot's previous one (it asks for one thing at a time).
+        self._waits[robot] = _Wait(robot, chain, request_id, next(self._seq))
+        grants = self._grant_waiting()
+        if robot not in self._waits:
+            return grants, []
+        return grants, self._resolve_cycle(robot)
+
+    def release(self, robot: str, area: str) -> list[Grant]:
+        lock = self._lock(area)
+        if lock.holder != robot:
+            raise LockError(f"{robot} does not hold area {area} (holder: {lock.holder})")
+        self._free(lock)
+        return self._grant_waiting()
+
+    def release_all(self, robot: str, *, keep: set[str] | None = None) -> list[Grant]:
+        """Release everything ``robot`` holds except ``keep``; drop its waiting request."""
+        self._waits.pop(robot, None)
+        for lock in self._locks.values():
+            if lock.holder == robot and not (keep and lock.area in keep):
+                self._free(lock)
+        return self._grant_waiting()
+
+    def cancel_wait(self, robot: str) -> list[Grant]:
+        self._waits.pop(robot, None)
+        return self._grant_waiting()
+
+    def force_release(self, area: str) -> tuple[str | None, list[Grant]]:
+        """Staff release (e.g. the holder is offline and known to be outside)."""
+        lock = self._lock(area)
+        holder = lock.holder
+        if holder is not None:
+            self._free(lock)
+        return holder, self._grant_waiting()
+
+    def set_online(self, robot: str, online: bool) -> None:
+        """Offline holders keep their locks (they may be inside); the state shows it."""
+        if online:
+            self._offline.discard(robot)
+        else:
+            self._offline.add(robot)
+        for lock in self._locks.values():
+            if lock.holder != robot:
+                continue
+            if not online and lock.state is LockState.HELD:
+                lock.move(LockState.HOLDER_OFFLINE)
+            elif online and lock.state is LockState.HOLDER_OFFLINE:
+                lock.move(LockState.HELD)
+
+    def mark_entered(self, robot: str, area: str) -> None:
+        lock = self._lock(area)
+        if lock.holder == robot:
+            lock.entered = True
+
+    # --- internals -----------------------------------------------------------------------
+    def _lock(self, area: str) -> _Lock:
+        try:
+            return self._locks[area]
+        except KeyError:
+            raise LockError(f"unknown area {area!r}") from None
+
+    def _free(self, lock: _Lock) -> None:
+        lock.move(LockState.FREE)
+        lock.holder = None
+        lock.since = None
+        lock.entered = False
+
+    def _grant_waiting(self) -> list[Grant]:
+        """Grant waiting requests in arrival order; an earlier waiter's areas are claimed, so a
+        later one cannot overtake it on those areas (no starvation)."""
+        grants: list[Grant] = []
+        claimed: set[str] = set()
+        for wait in sorted(self._waits.values(), key=lambda w: w.seq):
+            free = all(
+                (self._locks[a].holder in (None, wait.robot)) and a not in claimed
+                for a in wait.areas
+            )
+            if not free:
+                claimed.update(wait.areas)
+                continue
+            del self._waits[wait.robot]
+            now = time.time()
+            for a in wait.areas:
+                lock = self._locks[a]
+                if lock.holder is None:
+                    lock.move(LockState.HELD)
+                    lock.holder = wait.robot
+                    lock.since = now
+                    if wait.robot in self._offline:
+                        lock.move(LockState.HOLDER_OFFLINE)
+                grants.append(Grant(wait.robot, a, wait.request_id))
+        return grants
+
+    def _resolve_cycle(self, start: str) -> list[Yield]:
+        """Walk the wait-for graph from ``start``; on a cycle, the newest waiter yields."""
+        graph = self.wait_for_graph()
+        path: list[str] = []
+        on_path: set[str] = set()
+
+        def dfs(robot: str) -> list[str] | None:
+            path.append(robot)
+            on_path.add(robot)
+            for nxt in graph.get(robot, ()):
+                if nxt in on_path:
+                    return path[path.index(nxt) :]
+                if nxt in graph:
+                    found = dfs(nxt)
+                    if found:
+                        return found
+            on_path.discard(path.pop())
+            return None
+
+        cycle = dfs(start)
+        if not cycle:
+            return []
+        victim = max(cycle, key=lambda r: self._waits[r].seq)
+        needed = {a for r in cycle if r != victim for a in self._waits[r].areas}
+        yields: list[Yield] = []
+        for a in sorted(needed):
+            lock = self._locks[a]
+            if lock.holder == victim and lock.state is not LockState.YIELDING:
+                lock.move(LockState.YIELDING)
+                yields.append(Yield(victim, a, tuple(cycle)))
+        # The victim stops waiting: it must back off first, then ask again.
+        self._waits.pop(victim, None)
+        self.deadlocks_resolved += 1
+        return yields

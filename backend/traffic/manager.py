@@ -1,0 +1,250 @@
+"""The Traffic Manager: answers get_path, grants restricted areas, watches robots' positions.
+
+A plain asyncio-free service over a bus endpoint: every handler runs inline and returns fast.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from pydantic import ValidationError
+
+from backend.site.schema import Site
+from backend.traffic.graph import NoPath, PathResult, SiteGraph, UnknownNode
+from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
+
+__all__ = ["TrafficManager"]
+
+log = logging.getLogger(__name__)
+
+FINAL_TASK_STATES = frozenset({"done", "failed", "cancelled"})
+EventSink = Callable[[str, dict[str, Any]], None]
+
+
+class TrafficManager:
+    """Paths and area locks for one site; ``load_site`` swaps the map while running."""
+
+    def __init__(self, endpoint: BusEndpoint, site: Site, *, on_event: EventSink | None = None):
+        self.endpoint = endpoint
+        self.on_event = on_event
+        self._unsubscribe: list[Callable[[], None]] = []
+        self._positions: dict[str, str] = {}
+        self._paths: dict[str, PathResult] = {}
+        self.site = site
+        self.graph = SiteGraph(site)
+        self.locks = AreaLocks([a.id for a in site.areas])
+        self._robots = {r.name for r in site.robots}
+
+    # --- life cycle ----------------------------------------------------------------------
+    def start(self) -> None:
+        sub = self.endpoint.subscribe
+        self._unsubscribe = [
+            sub("get_path", self._on_get_path),
+            sub("request_area", self._on_request_area),
+            sub("release_area", self._on_release_area),
+            sub("robot_state", self._on_robot_state),
+            sub("task_ended", self._on_task_ended),
+            sub("task_event", self._on_task_event),
+            sub("robot_disconnected", self._on_robot_disconnected),
+        ]
+
+    def stop(self) -> None:
+        for unsubscribe in self._unsubscribe:
+            unsubscribe()
+        self._unsubscribe.clear()
+
+    def load_site(self, site: Site) -> None:
+        """New map, same locks: areas that still exist keep holder and queue."""
+        old = self.locks
+        self.site = site
+        self.graph = SiteGraph(site)
+        self._robots = {r.name for r in site.robots}
+        self._paths.clear()
+        new_areas = [a.id for a in site.areas]
+        if set(new_areas) != set(old.areas):
+            self.locks = AreaLocks(new_areas)
+            for view in old.view():
+                if view.holder is not None and view.area in self.locks.areas:
+                    self.locks.request(view.holder, [view.area])
+
+    # --- queries used by the API ---------------------------------------------------------
+    def path(self, start: str, goal: str) -> PathResult:
+        return self.graph.shortest_path(start, goal)
+
+    def lock_views(self) -> list[LockView]:
+        return self.locks.view()
+
+    def force_release(self, area: str, *, by: str) -> str | None:
+        """Staff release of an area lock; returns the robot that held it."""
+        holder, grants = self.locks.force_release(area)
+        self._emit("area_force_released", {"area": area, "robot": holder, "by": by})
+        self._send_grants(grants)
+        return holder
+
+    # --- handlers ------------------------------------------------------------------------
+    def _on_get_path(self, msg: Message) -> None:
+        try:
+            req = msg.payload_as(GetPath)
+        except ValidationError as exc:
+            self.endpoint.reply(msg, "path", {"error": f"bad get_path: {exc.errors()[0]['msg']}"})
+            return
+        robot = self._robot_of(msg, req.robot)
+        start = req.from_node or self._positions.get(robot or "")
+        try:
+            if start is None:
+                raise UnknownNode("the robot's position is unknown: give from_node")
+            result = self.graph.shortest_path(start, req.to_node)
+        except (UnknownNode, NoPath) as exc:
+            self.endpoint.reply(msg, "path", {"error": str(exc).strip("'\"")})
+            return
+        if robot:
+            self._paths[robot] = result
+        self.endpoint.reply(
+            msg,
+            "path",
+            {
+                "nodes": result.nodes,
+                "length_m": result.length_m,
+                "steps": [s.as_dict() for s in result.steps],
+            },
+        )
+
+    def _on_request_area(self, msg: Message) -> None:
+        try:
+            req = msg.payload_as(RequestArea)
+        except ValidationError:
+            return self._refuse(msg, "bad request_area payload")
+        robot = self._robot_of(msg, req.robot)
+        if robot is None:
+            return self._refuse(msg, f"{msg.source} may not ask for areas as {req.robot}")
+        chain = self._chain(robot, req.area)
+        try:
+            grants, yields = self.locks.request(robot, chain, msg.id)
+        except LockError as exc:
+            return self._refuse(msg, str(exc))
+        self._emit("area_requested", {"robot": robot, "area": req.area, "chain": list(chain)})
+        self._send_grants(grants)
+        self._send_yields(yields)
+
+    def _on_release_area(self, msg: Message) -> None:
+        try:
+            req = msg.payload_as(ReleaseArea)
+        except ValidationError:
+            return self._refuse(msg, "bad release_area payload")
+        robot = self._robot_of(msg, req.robot)
+        if robot is None:
+            return self._refuse(msg, f"{msg.source} may not release areas of {req.robot}")
+        try:
+            grants = self.locks.release(robot, req.area)
+        except LockError as exc:
+            return self._refuse(msg, str(exc))
+        self._emit("area_released", {"robot": robot, "area": req.area})
+        self._send_grants(grants)
+
+    def _on_robot_state(self, msg: Message) -> None:
+        robot = msg.payload.get("robot")
+        node = msg.payload.get("node")
+        if not isinstance(robot, str) or self._robot_of(msg, robot) is None:
+            return
+        mode = msg.payload.get("mode")
+        self.locks.set_online(robot, mode != "offline")
+        if not isinstance(node, str) or node not in self.graph:
+            return
+        self._positions[robot] = node
+        here = self.graph.area_at.get(node)
+        grants: list[Grant] = []
+        for area in self.locks.held_by(robot):
+            if area == here:
+                self.locks.mark_entered(robot, area)
+            elif self.locks.entered(area):
+                grants += self.locks.release(robot, area)
+                self._emit("area_released", {"robot": robot, "area": area, "left": True})
+        self._send_grants(grants)
+
+    def _on_task_ended(self, msg: Message) -> None:
+        robot = msg.payload.get("robot")
+        if isinstance(robot, str) and self._robot_of(msg, robot) is not None:
+            self._task_over(robot)
+
+    def _on_task_event(self, msg: Message) -> None:
+        robot = msg.payload.get("robot")
+        if msg.payload.get("state") in FINAL_TASK_STATES and isinstance(robot, str):
+            self._task_over(robot)
+
+    def _on_robot_disconnected(self, msg: Message) -> None:
+        robot = msg.payload.get("robot") or msg.payload.get("name")
+        if isinstance(robot, str):
+            self.locks.set_online(robot, False)
+
+    # --- helpers -------------------------------------------------------------------------
+    def _task_over(self, robot: str) -> None:
+        """Task over: its locks go, except the area it is standing in (released on leaving)."""
+        here = self.graph.area_at.get(self._positions.get(robot, ""))
+        held = self.locks.held_by(robot)
+        grants = self.locks.release_all(robot, keep={here} if here else None)
+        self._paths.pop(robot, None)
+        for area in held:
+            if area != here:
+                self._emit("area_released", {"robot": robot, "area": area, "task_ended": True})
+        self._send_grants(grants)
+
+    def _chain(self, robot: str, area: str) -> tuple[str, ...]:
+        """The areas the robot's known path crosses back to back from ``area`` (prevention)."""
+        path = self._paths.get(robot)
+        if path is None:
+            return (area,)
+        steps = path.steps
+        for i, step in enumerate(steps):
+            if step.area == area:
+                chain = [area]
+                for nxt in steps[i + 1 :]:
+                    if nxt.area is None:
+                        break
+                    if nxt.area != chain[-1]:
+                        chain.append(nxt.area)
+                return tuple(dict.fromkeys(chain))
+        return (area,)
+
+    def _robot_of(self, msg: Message, claimed: str) -> str | None:
+        """A robot speaks only as itself; in-process modules may speak for any robot."""
+        if msg.source in self._robots and msg.source != claimed:
+            return None
+        return claimed or (msg.source if msg.source in self._robots else None)
+
+    def _send_grants(self, grants: list[Grant]) -> None:
+        for g in grants:
+            self.endpoint.publish(
+                "area_granted",
+                {"robot": g.robot, "area": g.area},
+                destination=g.robot,
+                correlation_id=g.request_id,
+            )
+            self._emit("area_granted", {"robot": g.robot, "area": g.area})
+
+    def _send_yields(self, yields: list[Yield]) -> None:
+        for y in yields:
+            near = [self._positions[y.robot]] if y.robot in self._positions else []
+            go_to = self.graph.passing_place_for(y.area, near) or ""
+            self.endpoint.publish(
+                "area_yield",
+                {"robot": y.robot, "area": y.area, "go_to_node": go_to},
+                destination=y.robot,
+            )
+            self._emit(
+                "deadlock_resolved",
+                {"robot": y.robot, "area": y.area, "cycle": list(y.cycle), "go_to_node": go_to},
+            )
+
+    def _refuse(self, msg: Message, reason: str) -> None:
+        log.info("traffic: refused %s from %s: %s", msg.type, msg.source, reason)
+        payload = {"code": "refused", "reason": reason, "message_id": msg.id}
+        self.endpoint.reply(msg, "error", payload)
+
+    def _emit(self, kind: str, data: dict[str, Any]) -> None:
+        if self.on_event is not None:
+            self.on_event(kind, data)
