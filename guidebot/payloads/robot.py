@@ -1,7 +1,59 @@
-"""Payload models of the robot messages (registered by type name)."""
+"""Payload models of the robot messages (registered by type name).
+
+These are what a robot agent reports to the server: its state at a steady rate, battery
+thresholds crossed, and faults. On-board-only messages (navigate_to, say, ...) are not
+registered here: the on-board bus does not require registration.
+"""
 
 from __future__ import annotations
 
+from enum import StrEnum
+
+from pydantic import Field
+
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["PayloadModel", "register_payload"]
+__all__ = ["BatteryAlarm", "RobotFault", "RobotMode", "RobotState"]
+
+
+class RobotMode(StrEnum):
+    IDLE = "idle"
+    BUSY = "busy"
+    CHARGING = "charging"
+    FAULT = "fault"
+    OFFLINE = "offline"
+
+
+@register_payload("robot_state")
+class RobotState(PayloadModel):
+    """The robot's state, published at a steady rate and at once after a reconnect."""
+
+    robot: str
+    x: float = 0.0
+    y: float = 0.0
+    theta: float = 0.0
+    node: str | None = None
+    floor: str | None = None
+    battery: float = Field(default=1.0, ge=0.0, le=1.0)
+    mode: RobotMode = RobotMode.IDLE
+    task_id: str | None = None
+    speed: float = 0.0
+    nets: list[str] = Field(default_factory=list)
+    modules: dict[str, str] = Field(default_factory=dict)
+    seq: int = 0
+
+
+@register_payload("battery_low")
+@register_payload("battery_panic")
+class BatteryAlarm(PayloadModel):
+    """battery_low: finish the task then charge; battery_panic: cancel it and charge now."""
+
+    robot: str
+    level: float = Field(ge=0.0, le=1.0)
+
+
+@register_payload("robot_fault")
+class RobotFault(PayloadModel):
+    robot: str
+    kind: str = Field(min_length=1, max_length=64)
+    detail: str = ""

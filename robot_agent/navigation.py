@@ -1,0 +1,548 @@
+"""Navigation: follow the Traffic Manager's path with velocity commands and odometry back.
+
+One goal at a time (a new navigate_to pre-empts the old one). For each path the navigator
+- asks the Traffic Manager for each restricted area before entering it, releases it after
+  leaving it;
+- asks doors to open ``lookahead_m`` ahead so it rarely waits, and waits for door_opened;
+- calls elevators ahead, waits for elevator_in_position on its floor, rides, gets out;
+- stops on bumper_hit, reports it as robot_fault, and goes on after ``bumper_pause_s``;
+- stops for good on base_fault (a critical module lost) and fails the goal.
+
+Pose: odometry arrives in the base's own frame; the navigator keeps the transform to the map
+and re-anchors it on the path's first node and when it leaves an elevator (a new floor).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+from guidebot.bus import BusEndpoint, RequestTimeout
+from guidebot.messages import Message
+from robot_agent.clock import Clock
+
+__all__ = ["NavState", "NavigationFailed", "Navigator", "PathStep"]
+
+log = logging.getLogger(__name__)
+
+
+class NavigationFailed(Exception):
+    """A goal could not be reached; ``reason`` is sent in navigation_failed."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+class NavState(StrEnum):
+    IDLE = "idle"
+    PLANNING = "planning"
+    MOVING = "moving"
+    WAITING_AREA = "waiting_area"
+    WAITING_DOOR = "waiting_door"
+    WAITING_ELEVATOR = "waiting_elevator"
+    RIDING = "riding"
+    BUMPED = "bumped"
+    FAULT = "fault"
+
+
+@dataclass(frozen=True)
+class PathStep:
+    node: str
+    floor: str | None
+    x: float
+    y: float
+    door: str | None = None
+    elevator: str | None = None
+    area: str | None = None
+
+    @classmethod
+    def from_payload(cls, data: dict[str, Any]) -> PathStep:
+        return cls(
+            node=str(data["node"]),
+            floor=data.get("floor"),
+            x=float(data["x"]),
+            y=float(data["y"]),
+            door=data.get("door") or None,
+            elevator=data.get("elevator") or None,
+            area=data.get("area") or None,
+        )
+
+
+def _wrap(angle: float) -> float:
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+class Navigator:
+    """The on-board navigation module (an endpoint on the on-board bus)."""
+
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        clock: Clock,
+        robot: str,
+        *,
+        start_node: str | None = None,
+        max_speed: float = 0.7,
+        max_turn: float = 1.5,
+        tolerance_m: float = 0.15,
+        lookahead_m: float = 8.0,
+        bumper_pause_s: float = 3.0,
+        wait_timeout_s: float = 600.0,
+        path_timeout_s: float = 5.0,
+    ) -> None:
+        self.ep = endpoint
+        self.clock = clock
+        self.robot = robot
+        self.max_speed = max_speed
+        self.max_turn = max_turn
+        self.tolerance_m = tolerance_m
+        self.lookahead_m = lookahead_m
+        self.bumper_pause_s = bumper_pause_s
+        self.wait_timeout_s = wait_timeout_s
+        self.path_timeout_s = path_timeout_s
+        # Map pose and where the robot is in the graph.
+        self.node: str | None = start_node
+        self.floor: str | None = None
+        self.x = self.y = self.theta = 0.0
+        self.speed = 0.0
+        self.localized = False
+        self.state = NavState.IDLE
+        self.goal: str | None = None
+        self.held_areas: set[str] = set()
+        self.fault: str | None = None
+        self.bumps = 0
+        # Odometry frame -> map frame: map = R(dtheta) * odom + (tx, ty).
+        self._odom: tuple[float, float, float] | None = None
+        self._dtheta = 0.0
+        self._tx = self._ty = 0.0
+        self._odom_dt = 0.05
+        self._odom_last = 0.0
+        self._bumped_until = -1.0
+        self._doors_open: set[str] = set()
+        self._elevators: dict[str, str] = {}
+        self._granted: set[str] = set()
+        self._news = asyncio.Event()
+        self._odom_event = asyncio.Event()
+        self._last_cmd: tuple[float, float, float] = (math.nan, math.nan, 0.0)
+        self._goal_task: asyncio.Task[None] | None = None
+        self._unsubs: list[Callable[[], None]] = []
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def start(self) -> None:
+        sub = self.ep.subscribe
+        self._unsubs = [
+            sub("navigate_to", self._on_navigate_to),
+            sub("dock", self._on_dock),
+            sub("face_people", self._on_face_people),
+            sub("odometry", self._on_odometry),
+            sub("bumper_hit", self._on_bumper),
+            sub("base_fault", self._on_base_fault),
+            sub("module_status", self._on_module_status),
+            sub("door_opened", self._on_door),
+            sub("door_closed", self._on_door),
+            sub("elevator_in_position", self._on_elevator),
+            sub("area_granted", self._on_area_granted),
+        ]
+
+    async def stop(self) -> None:
+        for unsub in self._unsubs:
+            unsub()
+        self._unsubs.clear()
+        await self.cancel()
+
+    async def cancel(self) -> None:
+        """Abandon the current goal (task cancelled) and stop the base."""
+        task, self._goal_task = self._goal_task, None
+        if task is not None and not task.done():
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._send_velocity(0.0, 0.0, force=True)
+        if self.state is not NavState.FAULT:
+            self.state = NavState.IDLE
+        self.goal = None
+
+    # -- message handlers (inline, never block) ----------------------------------------------
+
+    def _on_navigate_to(self, message: Message) -> None:
+        node = message.payload.get("node")
+        if not isinstance(node, str) or not node:
+            self.ep.publish(
+                "navigation_failed",
+                {"node": node, "reason": "navigate_to needs a node id"},
+                correlation_id=message.id,
+            )
+            return
+        self._start_goal(self._goal(node, message.id, reply="goal_reached"))
+
+    def _on_dock(self, message: Message) -> None:
+        station = message.payload.get("station")
+        node = message.payload.get("node") or station
+        if not isinstance(node, str) or not node:
+            self.ep.publish("navigation_failed", {"node": node, "reason": "dock needs a station"})
+            return
+        self._start_goal(self._goal(node, message.id, reply="docked", station=station))
+
+    def _on_face_people(self, message: Message) -> None:
+        # Visitors follow the robot: they stand behind it. Turn around in place.
+        self._start_goal(self._face_people(message.id))
+
+    def _start_goal(self, coro: Any) -> None:
+        previous = self._goal_task
+        if previous is not None and not previous.done():
+            previous.cancel()
+        self._goal_task = asyncio.get_running_loop().create_task(coro, name="navigation-goal")
+
+    def _on_odometry(self, message: Message) -> None:
+        p = message.payload
+        ox, oy, oth = float(p.get("x", 0.0)), float(p.get("y", 0.0)), float(p.get("theta", 0.0))
+        now = time.monotonic()
+        if self._odom_last:
+            self._odom_dt = 0.8 * self._odom_dt + 0.2 * min(1.0, now - self._odom_last)
+        self._odom_last = now
+        self._odom = (ox, oy, oth)
+        c, s = math.cos(self._dtheta), math.sin(self._dtheta)
+        self.x = c * ox - s * oy + self._tx
+        self.y = s * ox + c * oy + self._ty
+        self.theta = _wrap(oth + self._dtheta)
+        self.speed = float(p.get("v", 0.0))
+        self._odom_event.set()
+
+    def _on_bumper(self, message: Message) -> None:
+        self.bumps += 1
+        self._bumped_until = self.clock.now() + self.bumper_pause_s
+        self._send_velocity(0.0, 0.0, force=True)
+        detail = f"bumper ring {message.payload.get('ring')} index {message.payload.get('index')}"
+        self.ep.publish("robot_fault", {"robot": self.robot, "kind": "bumper", "detail": detail})
+        self._news.set()
+
+    def _on_base_fault(self, message: Message) -> None:
+        self.fault = str(message.payload.get("reason") or "base fault")
+        self.state = NavState.FAULT
+        self._send_velocity(0.0, 0.0, force=True)
+        self.ep.publish(
+            "robot_fault", {"robot": self.robot, "kind": "motor_lost", "detail": self.fault}
+        )
+        self._news.set()
+        self._odom_event.set()
+
+    def _on_module_status(self, message: Message) -> None:
+        p = message.payload
+        if self.fault is not None and p.get("critical") and p.get("state") == "online":
+            log.info("%s: critical module %s back online, fault cleared", self.robot, p.get("name"))
+            self.fault = None
+            self.state = NavState.IDLE
+            self._news.set()
+
+    def _on_door(self, message: Message) -> None:
+        door = message.payload.get("door")
+        if message.type == "door_opened":
+            self._doors_open.add(door)
+        else:
+            self._doors_open.discard(door)
+        self._news.set()
+
+    def _on_elevator(self, message: Message) -> None:
+        p = message.payload
+        if p.get("door_open", True):
+            self._elevators[str(p.get("elevator"))] = str(p.get("floor"))
+        else:
+            self._elevators.pop(str(p.get("elevator")), None)
+        self._news.set()
+
+    def _on_area_granted(self, message: Message) -> None:
+        p = message.payload
+        if p.get("robot") in (None, self.robot):
+            self._granted.add(str(p.get("area")))
+            self._news.set()
+
+    # -- goals --------------------------------------------------------------------------------
+
+    async def _goal(self, node: str, request_id: str, *, reply: str, **extra: Any) -> None:
+        self.goal = node
+        try:
+            await self.go_to(node)
+        except NavigationFailed as failure:
+            self._send_velocity(0.0, 0.0, force=True)
+            self.ep.publish(
+                "navigation_failed",
+                {"node": node, "reason": failure.reason},
+                correlation_id=request_id,
+            )
+            return
+        finally:
+            self.goal = None
+        payload = {"node": node, **extra} if reply == "goal_reached" else {**extra, "node": node}
+        self.ep.publish(reply, payload, correlation_id=request_id)
+
+    async def _face_people(self, request_id: str) -> None:
+        with contextlib.suppress(NavigationFailed):
+            await self.turn_to(_wrap(self.theta + math.pi))
+        self.ep.publish("people_faced", {}, correlation_id=request_id)
+
+    async def go_to(self, node: str) -> None:
+        """Reach ``node``: plan with the Traffic Manager, then follow the path."""
+        self._check_fault()
+        if node == self.node:
+            return
+        self.state = NavState.PLANNING
+        path = await self._get_path(node)
+        await self.follow([PathStep.from_payload(s) for s in path.get("steps", [])])
+
+    async def _get_path(self, node: str) -> dict[str, Any]:
+        for attempt in range(3):
+            try:
+                reply = await self.ep.request(
+                    "get_path",
+                    {"robot": self.robot, "from_node": self.node, "to_node": node},
+                    timeout=self.path_timeout_s,
+                )
+            except RequestTimeout:
+                log.warning("%s: no path to %s yet (attempt %d)", self.robot, node, attempt + 1)
+                continue
+            if reply.type != "path":
+                raise NavigationFailed(f"no path to {node}: {reply.payload}")
+            if not reply.payload.get("steps"):
+                raise NavigationFailed(f"empty path to {node}")
+            return reply.payload
+        raise NavigationFailed(f"no answer to get_path for {node}")
+
+    async def follow(self, steps: list[PathStep]) -> None:
+        """Drive along ``steps``; the first step is where the robot is."""
+        if not steps:
+            return
+        first = steps[0]
+        if self.node in (None, first.node) or not self.localized:
+            self.relocalize(first)
+        requested_doors: set[str] = set()
+        called: set[tuple[str, str | None]] = set()
+        i = 1
+        while i < len(steps):
+            self._check_fault()
+            step = steps[i]
+            self._ask_ahead(steps, i, requested_doors, called)
+            if step.area is not None and step.area not in self.held_areas:
+                await self._acquire_area(step.area)
+            if step.door is not None:
+                await self._wait_door(step.door)
+            prev = steps[i - 1]
+            ride = (
+                step.elevator is not None
+                and prev.elevator == step.elevator
+                and prev.floor != step.floor
+            )
+            if ride:
+                await self._ride(prev, step)
+            else:
+                if step.elevator is not None and (
+                    i + 1 < len(steps)
+                    and steps[i + 1].elevator == step.elevator
+                    and steps[i + 1].floor != step.floor
+                ):
+                    # Entering the cabin: it must be here with its door open.
+                    await self._wait_elevator(step.elevator, step.floor, called)
+                await self.drive_to(step.x, step.y, stop=i == len(steps) - 1)
+            self.node = step.node
+            self.floor = step.floor
+            self._release_left(step, steps[i + 1] if i + 1 < len(steps) else None)
+            i += 1
+        self._send_velocity(0.0, 0.0, force=True)
+        self.state = NavState.IDLE
+
+    def relocalize(self, step: PathStep, theta: float | None = None) -> None:
+        """Anchor the map pose at a known node (path start, elevator exit)."""
+        heading = self.theta if theta is None else theta
+        ox, oy, oth = self._odom or (0.0, 0.0, 0.0)
+        self._dtheta = _wrap(heading - oth)
+        c, s = math.cos(self._dtheta), math.sin(self._dtheta)
+        self._tx = step.x - (c * ox - s * oy)
+        self._ty = step.y - (s * ox + c * oy)
+        self.x, self.y, self.theta = step.x, step.y, heading
+        self.node, self.floor = step.node, step.floor
+        self.localized = True
+
+    def _ask_ahead(
+        self,
+        steps: list[PathStep],
+        i: int,
+        requested_doors: set[str],
+        called: set[tuple[str, str | None]],
+    ) -> None:
+        """Open doors and call elevators within ``lookahead_m`` of path ahead."""
+        distance = math.hypot(steps[i].x - self.x, steps[i].y - self.y)
+        j = i
+        while j < len(steps) and (distance <= self.lookahead_m or j == i):
+            s = steps[j]
+            if s.door is not None and s.door not in requested_doors:
+                requested_doors.add(s.door)
+                if s.door not in self._doors_open:
+                    self.ep.publish("open_door", {"door": s.door})
+            nxt = steps[j + 1] if j + 1 < len(steps) else None
+            if (
+                s.elevator is not None
+                and nxt is not None
+                and nxt.elevator == s.elevator
+                and nxt.floor != s.floor
+                and (s.elevator, s.floor) not in called
+            ):
+                called.add((s.elevator, s.floor))
+                if self._elevators.get(s.elevator) != s.floor:
+                    self.ep.publish("call_elevator", {"elevator": s.elevator, "floor": s.floor})
+            if j + 1 < len(steps):
+                distance += math.hypot(steps[j + 1].x - s.x, steps[j + 1].y - s.y)
+            j += 1
+
+    async def _acquire_area(self, area: str) -> None:
+        self.state = NavState.WAITING_AREA
+        self._send_velocity(0.0, 0.0)
+        self._granted.discard(area)
+        self.ep.publish("request_area", {"robot": self.robot, "area": area})
+        await self._wait_until(lambda: area in self._granted, f"area {area}")
+        self.held_areas.add(area)
+        self.state = NavState.MOVING
+
+    def _release_left(self, here: PathStep, nxt: PathStep | None) -> None:
+        keep = {here.area, nxt.area if nxt else None}
+        for area in sorted(self.held_areas - keep):
+            self.held_areas.discard(area)
+            self._granted.discard(area)
+            self.ep.publish("release_area", {"robot": self.robot, "area": area})
+
+    async def _wait_door(self, door: str) -> None:
+        if door in self._doors_open:
+            return
+        self.state = NavState.WAITING_DOOR
+        self._send_velocity(0.0, 0.0)
+
+        def resend() -> None:
+            self.ep.publish("open_door", {"door": door})
+
+        await self._wait_until(lambda: door in self._doors_open, f"door {door}", retry=resend)
+        self.state = NavState.MOVING
+
+    async def _wait_elevator(
+        self, elevator: str, floor: str | None, called: set[tuple[str, str | None]]
+    ) -> None:
+        if (elevator, floor) not in called and self._elevators.get(elevator) != floor:
+            self.ep.publish("call_elevator", {"elevator": elevator, "floor": floor})
+        called.add((elevator, floor))
+        if self._elevators.get(elevator) == floor:
+            return
+        self.state = NavState.WAITING_ELEVATOR
+        self._send_velocity(0.0, 0.0)
+
+        def resend() -> None:
+            self.ep.publish("call_elevator", {"elevator": elevator, "floor": floor})
+
+        await self._wait_until(
+            lambda: self._elevators.get(elevator) == floor, f"elevator {elevator}", retry=resend
+        )
+
+    async def _ride(self, cabin: PathStep, exit_: PathStep) -> None:
+        """In the cabin at ``cabin.floor``: send it to ``exit_.floor`` and get out there."""
+        assert cabin.elevator is not None
+        self.state = NavState.RIDING
+        self._send_velocity(0.0, 0.0, force=True)
+        self._elevators.pop(cabin.elevator, None)
+        self.ep.publish("call_elevator", {"elevator": cabin.elevator, "floor": exit_.floor})
+        elevator = cabin.elevator
+
+        def resend() -> None:
+            self.ep.publish("call_elevator", {"elevator": elevator, "floor": exit_.floor})
+
+        await self._wait_until(
+            lambda: self._elevators.get(elevator) == exit_.floor,
+            f"elevator {elevator} to {exit_.floor}",
+            retry=resend,
+        )
+        self.relocalize(exit_)
+        self.state = NavState.MOVING
+
+    async def _wait_until(
+        self, ready: Callable[[], bool], what: str, *, retry: Callable[[], None] | None = None
+    ) -> None:
+        deadline = self.clock.now() + self.wait_timeout_s
+        next_retry = self.clock.now() + 10.0
+        while True:
+            self._news.clear()
+            self._check_fault()
+            if ready():
+                return
+            now = self.clock.now()
+            if now >= deadline:
+                raise NavigationFailed(f"timed out waiting for {what}")
+            if retry is not None and now >= next_retry:
+                retry()
+                next_retry = now + 10.0
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._news.wait(), self.clock.wall(1.0) + 0.05)
+
+    def _check_fault(self) -> None:
+        if self.fault is not None:
+            raise NavigationFailed(f"base fault: {self.fault}")
+
+    # -- motion -------------------------------------------------------------------------------
+
+    async def drive_to(self, x: float, y: float, *, stop: bool = True) -> None:
+        """Closed loop on odometry: turn towards the target, then drive with steering."""
+        self.state = NavState.MOVING
+        distance = math.hypot(x - self.x, y - self.y)
+        budget = self.clock.now() + 20.0 + 4.0 * distance / self.max_speed
+        while True:
+            await self._next_odometry()
+            self._check_fault()
+            if self.clock.now() < self._bumped_until:
+                self.state = NavState.BUMPED
+                self._send_velocity(0.0, 0.0)
+                budget += self._odom_dt * self.clock.time_scale
+                continue
+            self.state = NavState.MOVING
+            dx, dy = x - self.x, y - self.y
+            dist = math.hypot(dx, dy)
+            if dist < self.tolerance_m:
+                break
+            if self.clock.now() > budget:
+                raise NavigationFailed(f"stuck {dist:.2f} m from ({x:.1f}, {y:.1f})")
+            err = _wrap(math.atan2(dy, dx) - self.theta)
+            step = max(1e-3, self._odom_dt * self.clock.time_scale)
+            w = max(-self.max_turn, min(self.max_turn, 0.7 * err / step))
+            v = 0.0 if abs(err) > 0.35 else min(self.max_speed, 0.7 * dist / step) * math.cos(err)
+            self._send_velocity(v, w)
+        if stop:
+            self._send_velocity(0.0, 0.0, force=True)
+
+    async def turn_to(self, heading: float) -> None:
+        budget = self.clock.now() + 20.0
+        while True:
+            await self._next_odometry()
+            self._check_fault()
+            err = _wrap(heading - self.theta)
+            if abs(err) < 0.08 or self.clock.now() > budget:
+                break
+            step = max(1e-3, self._odom_dt * self.clock.time_scale)
+            self._send_velocity(0.0, max(-self.max_turn, min(self.max_turn, 0.7 * err / step)))
+        self._send_velocity(0.0, 0.0, force=True)
+
+    async def _next_odometry(self) -> None:
+        self._odom_event.clear()
+        try:
+            await asyncio.wait_for(self._odom_event.wait(), 2.0)
+        except TimeoutError:
+            raise NavigationFailed("no odometry from the base") from None
+
+    def _send_velocity(self, v: float, w: float, *, force: bool = False) -> None:
+        last_v, last_w, last_t = self._last_cmd
+        now = time.monotonic()
+        if not force and abs(v - last_v) < 0.01 and abs(w - last_w) < 0.01 and now - last_t < 0.5:
+            return
+        self._last_cmd = (v, w, now)
+        self.ep.publish("set_velocity", {"v": round(v, 4), "w": round(w, 4)})

@@ -1,0 +1,202 @@
+"""Main tasks on the robot: what the Task Manager assigns, run as RoboGraph nets.
+
+Only one main task runs at a time. While idle the robot runs its waiting net; a main task kills
+it and it is restarted when the main task ends. The runner talks to RG dispatch with messages
+only (run_petri_net / kill_petri_net / petri_net_ended) and reports task_started / task_ended
+to the Task Manager.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+
+__all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
+
+log = logging.getLogger(__name__)
+
+OUTCOMES = {"done": "done", "killed": "cancelled", "failed": "failed"}
+
+
+class TaskPhase(StrEnum):
+    STARTING = "starting"
+    RUNNING = "running"
+    CANCELLING = "cancelling"
+    ENDED = "ended"
+
+
+TRANSITIONS: dict[TaskPhase, frozenset[TaskPhase]] = {
+    TaskPhase.STARTING: frozenset({TaskPhase.RUNNING, TaskPhase.CANCELLING, TaskPhase.ENDED}),
+    TaskPhase.RUNNING: frozenset({TaskPhase.CANCELLING, TaskPhase.ENDED}),
+    TaskPhase.CANCELLING: frozenset({TaskPhase.ENDED}),
+    TaskPhase.ENDED: frozenset(),
+}
+
+
+class IllegalTransition(RuntimeError):
+    pass
+
+
+@dataclass
+class MainTask:
+    task_id: str
+    net: str
+    params: dict[str, Any]
+    instance_id: str
+    phase: TaskPhase = TaskPhase.STARTING
+    reason: str = ""
+    history: list[TaskPhase] = field(default_factory=list)
+
+    def move(self, to: TaskPhase) -> None:
+        if to not in TRANSITIONS[self.phase]:
+            raise IllegalTransition(
+                f"task {self.task_id}: {self.phase} -> {to} is illegal; "
+                f"expected one of {sorted(TRANSITIONS[self.phase])}"
+            )
+        self.history.append(self.phase)
+        self.phase = to
+
+
+class TaskRunner:
+    """Runs main tasks and the waiting task through RG dispatch."""
+
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        robot: str,
+        *,
+        waiting_net: str | None = "waiting",
+        on_cancel: Callable[[], Awaitable[None]] | None = None,
+        on_start: Callable[[], None] | None = None,
+    ) -> None:
+        self.ep = endpoint
+        self.robot = robot
+        self.waiting_net = waiting_net
+        self.on_cancel = on_cancel
+        self.on_start = on_start
+        self.current: MainTask | None = None
+        self.finished: list[MainTask] = []
+        self.running_nets: dict[str, str] = {}
+        self._waiting_instance: str | None = None
+        self._waiting_seq = 0
+        self._unsubs: list[Callable[[], None]] = []
+        self._background: set[asyncio.Task[None]] = set()
+
+    def start(self) -> None:
+        sub = self.ep.subscribe
+        self._unsubs = [
+            sub("task_assigned", self._on_assigned),
+            sub("task_cancel", self._on_cancel),
+            sub("petri_net_ended", self._on_net_ended),
+            sub("petri_net_event", self._on_net_event),
+        ]
+        self._start_waiting()
+
+    def stop(self) -> None:
+        for unsub in self._unsubs:
+            unsub()
+        self._unsubs.clear()
+
+    @property
+    def task_id(self) -> str | None:
+        return self.current.task_id if self.current else None
+
+    # -- waiting task -------------------------------------------------------------------------
+
+    def _start_waiting(self) -> None:
+        if self.waiting_net is None or self._waiting_instance is not None:
+            return
+        self._waiting_seq += 1
+        self._waiting_instance = f"{self.robot}-waiting-{self._waiting_seq}"
+        self.running_nets[self._waiting_instance] = self.waiting_net
+        self.ep.publish(
+            "run_petri_net",
+            {"net": self.waiting_net, "instance_id": self._waiting_instance, "main": False},
+        )
+
+    def _kill_waiting(self) -> None:
+        instance, self._waiting_instance = self._waiting_instance, None
+        if instance is not None:
+            self.ep.publish("kill_petri_net", {"instance_id": instance})
+
+    # -- main tasks ---------------------------------------------------------------------------
+
+    def _on_assigned(self, message: Message) -> None:
+        p = message.payload
+        if p.get("robot") not in (None, self.robot):
+            return
+        task_id, net = str(p.get("task_id") or ""), str(p.get("net") or "")
+        if not task_id or not net:
+            log.warning("%s: task_assigned without task_id or net: %s", self.robot, p)
+            return
+        if self.current is not None:
+            if self.current.task_id == task_id:
+                return  # a duplicate after a reconnect: already running
+            self._report("task_ended", task_id, outcome="failed", reason="robot busy")
+            return
+        params = p.get("params") or {}
+        task = MainTask(task_id, net, dict(params), instance_id=f"{self.robot}-task-{task_id}")
+        self.current = task
+        self._kill_waiting()
+        if self.on_start is not None:
+            self.on_start()
+        self.running_nets[task.instance_id] = net
+        self.ep.publish(
+            "run_petri_net",
+            {"net": net, "instance_id": task.instance_id, "params": task.params, "main": True},
+        )
+        task.move(TaskPhase.RUNNING)
+        self._report("task_started", task_id)
+
+    def _on_cancel(self, message: Message) -> None:
+        task = self.current
+        task_id = message.payload.get("task_id")
+        if task is None or task.task_id != task_id or task.phase is not TaskPhase.RUNNING:
+            return
+        task.reason = str(message.payload.get("reason") or "cancelled")
+        task.move(TaskPhase.CANCELLING)
+        self.ep.publish("kill_petri_net", {"instance_id": task.instance_id})
+        if self.on_cancel is not None:
+            background = asyncio.get_running_loop().create_task(self.on_cancel())
+            self._background.add(background)
+            background.add_done_callback(self._background.discard)
+
+    def _on_net_event(self, message: Message) -> None:
+        p = message.payload
+        instance, kind = p.get("instance_id"), p.get("kind")
+        if kind == "started" and instance:
+            self.running_nets[str(instance)] = str(p.get("net"))
+        elif kind == "ended" and instance:
+            self.running_nets.pop(str(instance), None)
+
+    def _on_net_ended(self, message: Message) -> None:
+        p = message.payload
+        instance = str(p.get("instance_id") or "")
+        self.running_nets.pop(instance, None)
+        if instance == self._waiting_instance:
+            # The waiting net ended by itself: start it again while idle.
+            self._waiting_instance = None
+            if self.current is None:
+                self._start_waiting()
+            return
+        task = self.current
+        if task is None or instance != task.instance_id:
+            return
+        outcome = OUTCOMES.get(str(p.get("outcome")), "failed")
+        if task.phase is TaskPhase.CANCELLING:
+            outcome = "cancelled"
+        task.move(TaskPhase.ENDED)
+        self.current = None
+        self.finished.append(task)
+        self._report("task_ended", task.task_id, outcome=outcome, reason=task.reason)
+        self._start_waiting()
+
+    def _report(self, type_: str, task_id: str, **extra: Any) -> None:
+        self.ep.publish(type_, {"task_id": task_id, "robot": self.robot, **extra})
