@@ -12,7 +12,9 @@ from typing import Any
 
 import click
 
-COMMANDS: dict[str, str] = {}
+COMMANDS: dict[str, str] = {
+    "server": "backend.server_cli:server",
+}
 
 BENCHMARKS: dict[str, str] = {}
 

@@ -1,6 +1,8 @@
-"""Payload models of the hub's own messages: errors, subscriptions, heartbeats."""
+"""Payload models of the hub's own messages: errors, subscriptions, heartbeats, welcome."""
 
 from __future__ import annotations
+
+from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 
@@ -22,3 +24,23 @@ class Ping(PayloadModel):
 @register_payload("pong")
 class Pong(PayloadModel):
     pass
+
+
+@register_payload("subscribe")
+class Subscribe(PayloadModel):
+    """Client -> hub: deliver messages whose type matches any of these patterns (wildcards)."""
+
+    patterns: list[str] = Field(min_length=1, max_length=256)
+
+
+@register_payload("unsubscribe")
+class Unsubscribe(PayloadModel):
+    patterns: list[str] = Field(min_length=1, max_length=256)
+
+
+@register_payload("welcome")
+class Welcome(PayloadModel):
+    """Hub -> client after authentication: the name the hub stamps on its messages."""
+
+    name: str
+    role: str

@@ -1,0 +1,118 @@
+"""The FastAPI application factory of the central server.
+
+``create_app(settings)`` builds nothing until the lifespan starts: then the hub, the token store
+and every component of ``COMPONENTS`` (Task Manager, Traffic Manager, BuildingInterface, ...)
+in order, torn down in reverse. Routers of ``ROUTERS`` are included by the factory.
+
+To add a server module, append ONE line to the list it belongs to:
+- ``COMPONENTS``: a callable taking the app and returning an async context manager; it runs
+  while the server runs and may keep its service on ``app.state``;
+- ``ROUTERS``: an APIRouter (import it at the top of this file).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import AsyncIterator, Callable
+from contextlib import AbstractAsyncContextManager
+from typing import Any
+
+import uvicorn
+from fastapi import APIRouter, FastAPI
+from fastapi.staticfiles import StaticFiles
+
+import guidebot
+from backend.auth import Role, TokenStore
+from backend.hub import Hub
+from backend.hub import routes as hub_routes
+from backend.hub import websocket as hub_websocket
+from backend.settings import Settings
+
+__all__ = ["COMPONENTS", "ROUTERS", "create_app", "uvicorn_config"]
+
+log = logging.getLogger(__name__)
+
+Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
+
+# Server modules started in this order after the hub (and stopped in reverse). One line each.
+COMPONENTS: list[Component] = []
+
+# REST/WebSocket routers of the server modules. One line each.
+ROUTERS: list[APIRouter] = [
+    hub_websocket.router,
+    hub_routes.router,
+]
+
+
+def _load_tokens(settings: Settings) -> TokenStore:
+    tokens = TokenStore()
+    tokens.add(settings.admin_token, "admin", Role.ADMIN)
+    for static in settings.tokens:
+        tokens.add(static.token, static.name, static.role)
+    return tokens
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the server app; ``settings`` default to the environment (GUIDEBOT_*)."""
+    settings = settings if settings is not None else Settings()
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        app.state.settings = settings
+        app.state.tokens = _load_tokens(settings)
+        app.state.hub = Hub(
+            queue_size=settings.hub_queue_size,
+            batch_max=settings.hub_batch_max,
+            max_message_bytes=settings.hub_max_message_bytes,
+        )
+        async with contextlib.AsyncExitStack() as stack:
+            stack.callback(app.state.hub.close)
+            for component in COMPONENTS:
+                await stack.enter_async_context(component(app))
+            log.info("GuideBot server ready (%d components)", len(COMPONENTS))
+            yield
+
+    app = FastAPI(
+        title="GuideBot central server (JCentral)",
+        version=guidebot.__version__,
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+
+    @app.get("/api/health", tags=["server"])
+    async def health() -> dict[str, Any]:
+        """Liveness and a glance at the hub: for load balancers, tests and the admin page."""
+        hub: Hub = app.state.hub
+        return {
+            "status": "ok",
+            "environment": settings.environment,
+            "clients": len(hub.clients),
+            "endpoints": len(hub.bus.endpoint_names),
+            "published": hub.bus.published,
+        }
+
+    for router in ROUTERS:
+        app.include_router(router)
+    if settings.web_dir.is_dir():
+        app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+    else:
+        log.warning("web directory %s not found: no static pages", settings.web_dir)
+    return app
+
+
+def uvicorn_config(
+    app: FastAPI, host: str, port: int, log_level: str = "warning"
+) -> uvicorn.Config:
+    """The server's uvicorn settings: sans-I/O websockets without compression (CPU matters)."""
+    return uvicorn.Config(
+        app,
+        host=host,
+        port=port,
+        log_level=log_level,
+        lifespan="on",
+        ws="websockets-sansio",
+        ws_per_message_deflate=False,
+        ws_max_size=16 * 1024 * 1024,
+        timeout_graceful_shutdown=5,
+    )

@@ -1,0 +1,384 @@
+"""JCentral: the hub that routes messages between in-process modules and WebSocket clients.
+
+In-process modules (Task Manager, Traffic Manager, ...) take ``hub.endpoint(name)``, a plain
+``guidebot.bus.Endpoint``. Each WebSocket client is a ``RemoteClient``: a bus endpoint whose
+handlers serialise the message (once per message, shared by every subscriber) into the client's
+bounded ``Outbox``. A writer task per client drains it (see backend/hub/websocket.py), so a slow
+or dead client only ever fills its own queue.
+
+This module knows nothing about FastAPI: the transport feeds ``Hub.receive`` with raw frames and
+drains ``RemoteClient.outbox``.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import orjson
+from pydantic import BaseModel, ValidationError
+from pydantic_core import to_jsonable_python
+
+from backend.auth import Role
+from guidebot.bus import Bus, Endpoint
+from guidebot.messages import Message, known_types, payload_model
+
+from .outbox import Outbox, OutboxOverflow
+
+__all__ = [
+    "CLOSE_NAME_IN_USE",
+    "CLOSE_OVERFLOW",
+    "CLOSE_REPLACED",
+    "CLOSE_SHUTDOWN",
+    "CLOSE_UNAUTHORIZED",
+    "COALESCED_TYPES",
+    "CONTROL_TYPES",
+    "HUB_NAME",
+    "ClientState",
+    "Hub",
+    "HubBus",
+    "RemoteClient",
+]
+
+log = logging.getLogger(__name__)
+
+HUB_NAME = "hub"
+"""The source of the hub's own messages (welcome, error, pong) and the address of ping."""
+
+# WebSocket close codes (docs/protocol.md).
+CLOSE_SHUTDOWN = 1001
+CLOSE_REPLACED = 4000
+CLOSE_UNAUTHORIZED = 4001
+CLOSE_FORBIDDEN = 4003
+CLOSE_OVERFLOW = 4008
+CLOSE_NAME_IN_USE = 4009
+
+CONTROL_TYPES = frozenset({"subscribe", "unsubscribe", "ping"})
+"""Types the hub answers itself instead of publishing (unless addressed to another client)."""
+
+COALESCED_TYPES = frozenset({"robot_state"})
+"""Types whose newest message per source replaces the queued one in a slow client's queue."""
+
+
+class ClientState(enum.Enum):
+    OPEN = "open"
+    CLOSING = "closing"
+    CLOSED = "closed"
+
+
+_TRANSITIONS: dict[ClientState, frozenset[ClientState]] = {
+    ClientState.OPEN: frozenset({ClientState.CLOSING, ClientState.CLOSED}),
+    ClientState.CLOSING: frozenset({ClientState.CLOSED}),
+    ClientState.CLOSED: frozenset(),
+}
+
+
+def _encode(message: Message) -> bytes:
+    return orjson.dumps(message.__dict__, default=to_jsonable_python)
+
+
+class HubBus(Bus):
+    """The in-process bus plus one rule for remote clients.
+
+    A message addressed to a WebSocket client reaches it even when the client has no matching
+    subscription (a robot need not subscribe to receive its task_assigned or a reply).
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.remote: dict[str, RemoteClient] = {}
+
+    def publish(self, message: Message) -> int:
+        delivered = super().publish(message)
+        destination = message.destination
+        if destination is not None:
+            client = self.remote.get(destination)
+            if client is not None and client.last_message is not message:
+                client.deliver(message)
+                delivered += 1
+        return delivered
+
+
+class RemoteClient:
+    """A WebSocket client as the hub sees it: a name, a role, subscriptions, an outbox."""
+
+    def __init__(self, hub: Hub, name: str, role: Role, endpoint: Endpoint) -> None:
+        self.hub = hub
+        self.name = name
+        self.role = role
+        self.endpoint = endpoint
+        self.outbox = Outbox(hub.queue_size)
+        self.patterns: dict[str, Callable[[], None]] = {}
+        self.last_message: Message | None = None
+        self.state = ClientState.OPEN
+        self.close_code: int | None = None
+        self.close_reason = ""
+        self.received = 0
+
+    def _move(self, new: ClientState) -> None:
+        if new not in _TRANSITIONS[self.state]:
+            raise RuntimeError(f"client {self.name}: cannot go from {self.state} to {new}")
+        self.state = new
+
+    def deliver(self, message: Message) -> None:
+        """Bus handler: queue the shared serialised bytes; overflow closes this client only."""
+        if message is self.last_message or self.state is not ClientState.OPEN:
+            return  # several matching patterns deliver once
+        self.last_message = message
+        key = message.source if message.type in COALESCED_TYPES else None
+        try:
+            self.outbox.put(self.hub.encode(message), key)
+        except OutboxOverflow as exc:
+            self.hub.overflow_disconnects += 1
+            self.request_close(CLOSE_OVERFLOW, f"slow consumer: {exc}")
+
+    def send_direct(self, message: Message) -> None:
+        """A message from the hub itself (welcome, error, pong), not routed through the bus."""
+        if self.state is not ClientState.OPEN:
+            return
+        try:
+            self.outbox.put(_encode(message))
+        except OutboxOverflow as exc:
+            self.hub.overflow_disconnects += 1
+            self.request_close(CLOSE_OVERFLOW, f"slow consumer: {exc}")
+
+    def error(self, code: str, reason: str, message_id: str | None = None) -> None:
+        self.hub.refused += 1
+        self.send_direct(
+            Message(
+                type="error",
+                source=HUB_NAME,
+                destination=self.name,
+                correlation_id=message_id,
+                payload={"code": code, "reason": reason, "message_id": message_id},
+            )
+        )
+
+    def subscribe(self, pattern: str) -> None:
+        if pattern not in self.patterns:
+            self.patterns[pattern] = self.endpoint.subscribe(pattern, self.deliver)
+
+    def unsubscribe(self, pattern: str) -> None:
+        unsubscribe = self.patterns.pop(pattern, None)
+        if unsubscribe is not None:
+            unsubscribe()
+
+    def request_close(self, code: int, reason: str) -> None:
+        """Stop routing to this client; its transport closes the socket with code and reason."""
+        if self.state is not ClientState.OPEN:
+            return
+        self._move(ClientState.CLOSING)
+        self.close_code, self.close_reason = code, reason
+        log.warning("hub: closing %s (%d): %s", self.name, code, reason)
+        self.hub.detach(self)
+        self.outbox.close()
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "role": self.role.value,
+            "state": self.state.value,
+            "patterns": sorted(self.patterns),
+            "queued": len(self.outbox),
+            "superseded": self.outbox.superseded,
+            "received": self.received,
+        }
+
+
+class Hub:
+    """JCentral: one bus for in-process modules and WebSocket clients (docs/protocol.md)."""
+
+    def __init__(
+        self, *, queue_size: int = 4096, batch_max: int = 512, max_message_bytes: int = 1 << 20
+    ) -> None:
+        self.bus = HubBus()
+        self.queue_size = queue_size
+        self.batch_max = batch_max
+        self.max_message_bytes = max_message_bytes
+        self.refused = 0
+        self.overflow_disconnects = 0
+        self._known: frozenset[str] = frozenset()
+        self._models: dict[str, type[BaseModel]] = {}
+        self._encoded_message: Message | None = None
+        self._encoded = b""
+        self._gui_counter = 0
+
+    # -- in-process side --------------------------------------------------------------------
+    def endpoint(self, name: str) -> Endpoint:
+        """A named in-process client (Task Manager, ...): publish, subscribe, request, reply."""
+        if name == HUB_NAME or name in self.bus.remote:
+            raise ValueError(f"the name {name!r} is taken")
+        return self.bus.endpoint(name)
+
+    @property
+    def clients(self) -> dict[str, RemoteClient]:
+        return self.bus.remote
+
+    def encode(self, message: Message) -> bytes:
+        """JSON bytes of a message, computed once however many clients receive it."""
+        if message is not self._encoded_message:
+            self._encoded = _encode(message)
+            self._encoded_message = message
+        return self._encoded
+
+    # -- remote clients ---------------------------------------------------------------------
+    def resolve_name(self, principal_name: str, role: Role, requested: str | None) -> str:
+        """The hub name of a new connection; raises PermissionError for a name not allowed.
+
+        Robots are their token's name; modules and admins may pick one; GUIs, panels and
+        operators share a token, so a second tab gets ``name#2``, ``name#3``, ...
+        """
+        if requested and requested != principal_name and role not in (Role.ADMIN, Role.MODULE):
+            raise PermissionError(
+                f"a {role.value} token may only connect as {principal_name!r}, not {requested!r}"
+            )
+        name = requested or principal_name
+        if role in (Role.GUI, Role.PANEL, Role.OPERATOR) and self._taken(name):
+            base = name
+            while self._taken(name):
+                self._gui_counter += 1
+                name = f"{base}#{self._gui_counter}"
+        return name
+
+    def _taken(self, name: str) -> bool:
+        return name == HUB_NAME or self.bus.get_endpoint(name) is not None
+
+    def attach(self, name: str, role: Role) -> RemoteClient:
+        """Register a remote client. A reconnecting client replaces its stale connection."""
+        if name == HUB_NAME:
+            raise PermissionError(f"{HUB_NAME!r} is reserved")
+        old = self.bus.remote.get(name)
+        if old is not None:
+            old.request_close(CLOSE_REPLACED, "replaced by a newer connection with this name")
+        elif self.bus.get_endpoint(name) is not None:
+            raise PermissionError(f"the name {name!r} belongs to an in-process module")
+        client = RemoteClient(self, name, role, self.bus.endpoint(name))
+        self.bus.remote[name] = client
+        client.send_direct(
+            Message(
+                type="welcome",
+                source=HUB_NAME,
+                destination=name,
+                payload={"name": name, "role": role.value},
+            )
+        )
+        return client
+
+    def detach(self, client: RemoteClient) -> None:
+        """Forget a client: no more routing to it. Safe to call twice."""
+        if self.bus.remote.get(client.name) is client:
+            del self.bus.remote[client.name]
+            client.endpoint.close()
+        client.patterns.clear()
+        if client.state is not ClientState.CLOSED:
+            client._move(ClientState.CLOSED)
+            client.outbox.close()
+
+    def close(self) -> None:
+        """Server shutdown: every client is told why."""
+        for client in list(self.bus.remote.values()):
+            client.request_close(CLOSE_SHUTDOWN, "server shutting down")
+
+    # -- inbound ----------------------------------------------------------------------------
+    def receive(self, client: RemoteClient, raw: str | bytes) -> None:
+        """Handle one frame from a client: a message object or a JSON array of them."""
+        if client.state is not ClientState.OPEN:
+            return
+        if len(raw) > self.max_message_bytes:
+            client.error("too_large", f"frame larger than {self.max_message_bytes} bytes")
+            return
+        try:
+            data = orjson.loads(raw)
+        except orjson.JSONDecodeError as exc:
+            client.error("malformed_json", f"frame is not JSON: {exc}")
+            return
+        if isinstance(data, list):
+            for item in data:
+                self._receive_one(client, item)
+        else:
+            self._receive_one(client, data)
+
+    def _receive_one(self, client: RemoteClient, data: Any) -> None:
+        client.received += 1
+        if not isinstance(data, dict):
+            client.error("malformed_message", "a message is a JSON object")
+            return
+        raw_id = data.get("id")
+        message_id = raw_id if isinstance(raw_id, str) else None
+        type_ = data.get("type")
+        if not isinstance(type_, str):
+            client.error("invalid_envelope", "a message needs a string 'type'", message_id)
+            return
+        if type_ not in self._known:
+            self._known = known_types()  # modules may register types after we started
+            if type_ not in self._known:
+                client.error("unknown_type", f"unknown message type {type_!r}", message_id)
+                return
+        try:
+            message = Message.model_validate(data)
+        except ValidationError as exc:
+            client.error("invalid_envelope", _short(exc), message_id)
+            return
+        if message.source and message.source != client.name:
+            client.error(
+                "impersonation",
+                f"you are {client.name!r}; you may not publish as {message.source!r}",
+                message.id,
+            )
+            return
+        if client.role is Role.ROBOT:
+            robot = message.payload.get("robot")
+            if robot is not None and robot != client.name:
+                client.error(
+                    "impersonation",
+                    f"robot {client.name!r} may not publish for robot {robot!r}",
+                    message.id,
+                )
+                return
+        message.source = client.name
+        if type_ in CONTROL_TYPES and message.destination in (None, HUB_NAME):
+            self._control(client, message)
+            return
+        model = self._models.get(type_)
+        if model is None:
+            model = self._models[type_] = payload_model(type_)
+        try:
+            model.model_validate(message.payload)
+        except ValidationError as exc:
+            client.error("invalid_payload", _short(exc), message.id)
+            return
+        destination = message.destination
+        if destination is not None and self.bus.get_endpoint(destination) is None:
+            client.error("unknown_destination", f"no client named {destination!r}", message.id)
+            return
+        self.bus.publish(message)
+
+    def _control(self, client: RemoteClient, message: Message) -> None:
+        if message.type == "ping":
+            client.send_direct(message.reply("pong", {}, source=HUB_NAME))
+            return
+        patterns = message.payload.get("patterns")
+        if (
+            not isinstance(patterns, list)
+            or not patterns
+            or not all(isinstance(p, str) and 0 < len(p) <= 64 for p in patterns)
+        ):
+            client.error(
+                "invalid_payload", "patterns must be a list of 1-64 character strings", message.id
+            )
+            return
+        for pattern in patterns:
+            if message.type == "subscribe":
+                client.subscribe(pattern)
+            else:
+                client.unsubscribe(pattern)
+
+
+def _short(exc: ValidationError) -> str:
+    parts = []
+    for err in exc.errors()[:3]:
+        where = ".".join(str(p) for p in err["loc"]) or "message"
+        parts.append(f"{where}: {err['msg']}")
+    return "; ".join(parts)

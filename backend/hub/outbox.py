@@ -1,0 +1,76 @@
+"""The bounded outbound queue of one hub client, with the overflow rule of docs/protocol.md.
+
+Rule: a message with a coalescing key (robot_state: the robot's name) replaces the queued
+message with the same key in place, so a slow GUI always gets the newest state of every robot
+and never an old one. Any other message that finds the queue full raises ``OutboxOverflow``:
+the hub then disconnects that client with close code 4008 and a reason. Nothing else is ever
+dropped silently.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections import deque
+
+__all__ = ["Outbox", "OutboxOverflow"]
+
+
+class OutboxOverflow(Exception):
+    """The client does not read fast enough: its queue is full of messages that cannot merge."""
+
+
+class Outbox:
+    """Serialised messages waiting for one client's writer task."""
+
+    def __init__(self, maxsize: int) -> None:
+        if maxsize < 1:
+            raise ValueError("an outbox needs room for at least one message")
+        self.maxsize = maxsize
+        self._items: deque[list[bytes | str | None]] = deque()
+        self._by_key: dict[str, list[bytes | str | None]] = {}
+        self._ready = asyncio.Event()
+        self.queued = 0
+        self.superseded = 0
+        self.closed = False
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def put(self, data: bytes, key: str | None = None) -> None:
+        """Queue one message; raises OutboxOverflow when full and ``data`` cannot merge."""
+        if key is not None:
+            entry = self._by_key.get(key)
+            if entry is not None:
+                entry[1] = data
+                self.superseded += 1
+                return
+        if len(self._items) >= self.maxsize:
+            raise OutboxOverflow(f"outbound queue full ({self.maxsize} messages)")
+        entry = [key, data]
+        self._items.append(entry)
+        if key is not None:
+            self._by_key[key] = entry
+        self.queued += 1
+        if not self._ready.is_set():
+            self._ready.set()
+
+    def close(self) -> None:
+        """Wake the writer for good: ``get_batch`` returns an empty batch once drained."""
+        self.closed = True
+        self._ready.set()
+
+    async def get_batch(self, max_items: int) -> list[bytes]:
+        """Wait for at least one message, then take up to ``max_items`` in queue order."""
+        while not self._items:
+            if self.closed:
+                return []
+            self._ready.clear()
+            await self._ready.wait()
+        batch: list[bytes] = []
+        items = self._items
+        while items and len(batch) < max_items:
+            key, data = items.popleft()
+            if key is not None:
+                del self._by_key[key]  # type: ignore[arg-type]
+            batch.append(data)  # type: ignore[arg-type]
+        return batch

@@ -1,0 +1,32 @@
+"""REST view of the hub for the admin GUI: who is connected, what they subscribe to."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Request
+
+from backend.auth import Principal, Role, require_roles
+
+from .core import Hub
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api/hub", tags=["hub"])
+
+Operator = Annotated[Principal, Depends(require_roles(Role.OPERATOR))]
+
+
+@router.get("/clients")
+async def list_clients(request: Request, _: Operator) -> dict[str, Any]:
+    """Connected WebSocket clients and in-process endpoints, with queue statistics."""
+    hub: Hub = request.app.state.hub
+    remote = [client.stats() for client in hub.clients.values()]
+    local = sorted(n for n in hub.bus.endpoint_names if n not in hub.clients)
+    return {
+        "clients": remote,
+        "modules": local,
+        "published": hub.bus.published,
+        "refused": hub.refused,
+        "overflow_disconnects": hub.overflow_disconnects,
+    }

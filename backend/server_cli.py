@@ -1,0 +1,51 @@
+"""``guidebot server``: run the central server (FastAPI + uvicorn) in the foreground."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+from pydantic import ValidationError
+
+
+@click.command()
+@click.option("--host", default=None, help="Bind address (default 127.0.0.1, GUIDEBOT_HOST).")
+@click.option("--port", type=int, default=None, help="Port (default 8000, GUIDEBOT_PORT).")
+@click.option("--db", "db_url", default=None, help="Database URL (GUIDEBOT_DB_URL).")
+@click.option(
+    "--site",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Site YAML file (GUIDEBOT_SITE).",
+)
+@click.option("--log-level", default=None, help="uvicorn log level (default info).")
+def server(
+    host: str | None, port: int | None, db_url: str | None, site: Path | None, log_level: str | None
+) -> None:
+    """Run the central server: hub at /ws, REST API at /api, docs at /docs, web pages at /."""
+    import uvicorn
+
+    from backend.app import create_app, uvicorn_config
+    from backend.settings import Settings
+
+    overrides = {
+        key: value
+        for key, value in {
+            "host": host,
+            "port": port,
+            "db_url": db_url,
+            "site": site,
+            "log_level": log_level,
+        }.items()
+        if value is not None
+    }
+    try:
+        settings = Settings(**overrides)
+    except ValidationError as exc:
+        raise click.UsageError(str(exc)) from None
+    app = create_app(settings)
+    click.echo(
+        f"GuideBot server on http://{settings.host}:{settings.port} "
+        f"(docs /docs, hub ws://{settings.host}:{settings.port}/ws)"
+    )
+    uvicorn.Server(uvicorn_config(app, settings.host, settings.port, settings.log_level)).run()
