@@ -1,7 +1,145 @@
-"""Payload models of the petri messages (registered by type name)."""
+"""Payload models of the petri messages and the on-board actions nets use (docs/messages.md)."""
 
 from __future__ import annotations
 
+from typing import Any, Literal
+
+from pydantic import Field
+
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["PayloadModel", "register_payload"]
+__all__ = [
+    "AskContinue",
+    "ContinueAnswer",
+    "KillPetriNet",
+    "MoveServos",
+    "PetriNetEnded",
+    "PetriNetEvent",
+    "RunPetriNet",
+    "ServoInPosition",
+]
+
+
+@register_payload("run_petri_net")
+class RunPetriNet(PayloadModel):
+    """Start a net of the library; ``main`` tasks run one at a time per robot."""
+
+    net: str = Field(min_length=1, max_length=64)
+    instance_id: str | None = Field(default=None, max_length=64)
+    params: dict[str, Any] = Field(default_factory=dict)
+    main: bool = False
+
+
+@register_payload("kill_petri_net")
+class KillPetriNet(PayloadModel):
+    """Kill one instance (by id) or every instance of a net (by name), with their sub-nets."""
+
+    instance_id: str | None = None
+    net: str | None = None
+
+
+@register_payload("petri_net_ended")
+class PetriNetEnded(PayloadModel):
+    net: str
+    instance_id: str
+    outcome: Literal["done", "killed", "failed"]
+    parent: str | None = None
+
+
+@register_payload("petri_net_event")
+class PetriNetEvent(PayloadModel):
+    """Monitoring: "started" carries the whole marking, "fired" the places it changed."""
+
+    instance_id: str
+    net: str
+    kind: Literal["started", "fired", "marking", "ended"]
+    transition: str | None = None
+    marking: dict[str, int] = Field(default_factory=dict)
+    time: float
+
+
+@register_payload("move_servos")
+class MoveServos(PayloadModel):
+    servos: dict[str, float]
+    speed: float = 1.0
+
+
+@register_payload("servo_in_position")
+class ServoInPosition(PayloadModel):
+    servo: str
+    position: float
+
+
+@register_payload("say")
+class Say(PayloadModel):
+    text: str
+    lang: str = "en"
+
+
+@register_payload("speech_started")
+class SpeechStarted(PayloadModel):
+    text: str = ""
+
+
+@register_payload("speech_ended")
+class SpeechEnded(PayloadModel):
+    text: str = ""
+
+
+@register_payload("face_people")
+class FacePeople(PayloadModel):
+    pass
+
+
+@register_payload("people_faced")
+class PeopleFaced(PayloadModel):
+    pass
+
+
+@register_payload("navigate_to")
+class NavigateTo(PayloadModel):
+    node: str
+
+
+@register_payload("goal_reached")
+class GoalReached(PayloadModel):
+    node: str
+
+
+@register_payload("navigation_failed")
+class NavigationFailed(PayloadModel):
+    node: str
+    reason: str = ""
+
+
+@register_payload("ask_continue")
+class AskContinue(PayloadModel):
+    question: str
+    timeout_s: float = 20.0
+
+
+@register_payload("continue_answer")
+class ContinueAnswer(PayloadModel):
+    answer: Literal["yes", "no", "timeout"]
+
+
+@register_payload("show_point")
+class ShowPoint(PayloadModel):
+    poi: str
+    text: str = ""
+    media: str | None = None
+
+
+@register_payload("dock")
+class Dock(PayloadModel):
+    station: str
+
+
+@register_payload("docked")
+class Docked(PayloadModel):
+    station: str
+
+
+@register_payload("charged")
+class Charged(PayloadModel):
+    station: str = ""

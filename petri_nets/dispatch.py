@@ -1,0 +1,312 @@
+"""Dispatch (the paper's RoboGraph dispatch): runs net instances over a message bus.
+
+It answers run_petri_net / kill_petri_net, publishes each net's actions, petri_net_ended and
+petri_net_event (monitoring), and routes incoming messages to the instances waiting for them.
+Sub-nets are started in-process (the same as a run_petri_net carrying the parent's id). Main
+tasks run one at a time: the idle net ("waiting" by default) is killed when a main task starts
+and started again when it ends.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from pydantic import ValidationError
+
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.petri import KillPetriNet, RunPetriNet
+from petri_nets.clock import Clock
+from petri_nets.compiled import missing_params
+from petri_nets.engine import Instance
+from petri_nets.library import NetLibrary, UnknownNet
+
+__all__ = ["Dispatch", "DispatchError", "MainTaskBusy"]
+
+log = logging.getLogger(__name__)
+
+
+class DispatchError(ValueError):
+    """A start request that cannot be honoured (unknown net, bad parameters, duplicate id)."""
+
+
+class MainTaskBusy(DispatchError):
+    """A main task is already running on this robot."""
+
+
+class Dispatch:
+    """Runs nets from ``library`` on ``bus``; ``open()`` to listen, ``close()`` to stop all."""
+
+    def __init__(
+        self,
+        bus: BusEndpoint,
+        library: NetLibrary,
+        clock: Clock,
+        *,
+        idle_net: str | None = "waiting",
+        idle_params: dict[str, Any] | None = None,
+        monitor: bool = True,
+        max_instances: int = 100_000,
+    ) -> None:
+        self.bus = bus
+        self.library = library
+        self.clock = clock
+        self.idle_net = idle_net
+        self.idle_params = idle_params or {}
+        self.monitor = monitor
+        self.max_instances = max_instances
+        self._instances: dict[str, Instance] = {}
+        self._waiting: dict[str, dict[Instance, None]] = {}
+        self._unsubscribe: dict[str, Callable[[], None]] = {}
+        self._own: list[Callable[[], None]] = []
+        self._ids = itertools.count(1)
+        self._main: Instance | None = None
+        self._idle: Instance | None = None
+        self._open = False
+
+    # ---------------------------------------------------------------- life cycle
+
+    def open(self) -> None:
+        """Listen for run/kill requests and start the idle net."""
+        if self._open:
+            return
+        self._open = True
+        self._own = [
+            self.bus.subscribe("run_petri_net", self._on_run),
+            self.bus.subscribe("kill_petri_net", self._on_kill),
+        ]
+        self._start_idle()
+
+    def close(self) -> None:
+        """Kill every instance and stop listening."""
+        self._open = False
+        for instance in [i for i in self._instances.values() if i.parent is None]:
+            instance.kill()
+        for unsubscribe in (*self._own, *self._unsubscribe.values()):
+            unsubscribe()
+        self._own = []
+        self._unsubscribe.clear()
+        self._waiting.clear()
+
+    def __enter__(self) -> Dispatch:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---------------------------------------------------------------- Python API
+
+    def start(
+        self,
+        net: str,
+        params: dict[str, Any] | None = None,
+        main: bool = False,
+        *,
+        instance_id: str | None = None,
+    ) -> str:
+        """Start a net; returns its instance id. Raises DispatchError / MainTaskBusy."""
+        if main and self._main is not None:
+            raise MainTaskBusy(f"main task {self._main.net.name} ({self._main.id}) is running")
+        instance = self._create(net, params or {}, None, instance_id, main)
+        if main:
+            self._main = instance
+            if self._idle is not None:
+                idle, self._idle = self._idle, None
+                idle.kill()
+        instance.begin()
+        return instance.id
+
+    def kill(self, instance_id: str) -> bool:
+        """Kill an instance and its sub-nets; False when no such instance runs."""
+        instance = self._instances.get(instance_id)
+        if instance is None:
+            return False
+        instance.kill()
+        return True
+
+    def kill_net(self, net: str) -> int:
+        """Kill every top-level instance of a net; returns how many."""
+        victims = [i for i in self._instances.values() if i.net.name == net]
+        for instance in victims:
+            instance.kill()
+        return len(victims)
+
+    def running(self) -> list[dict[str, Any]]:
+        """Every running instance: id, net, main, parent, marking (for GUIs and robot_state)."""
+        return [
+            {
+                "instance_id": i.id,
+                "net": i.net.name,
+                "main": i.main,
+                "parent": i.parent.id if i.parent else None,
+                "marking": i.marking(),
+            }
+            for i in self._instances.values()
+        ]
+
+    def get(self, instance_id: str) -> Instance | None:
+        return self._instances.get(instance_id)
+
+    @property
+    def main_task(self) -> str | None:
+        return self._main.id if self._main is not None else None
+
+    # ---------------------------------------------------------------- bus requests
+
+    def _on_run(self, message: Message) -> None:
+        try:
+            request = message.payload_as(RunPetriNet)
+        except ValidationError as exc:
+            self._refuse(message, "bad_request", str(exc).splitlines()[0], None, "")
+            return
+        try:
+            self.start(request.net, request.params, request.main, instance_id=request.instance_id)
+        except DispatchError as exc:
+            self._refuse(
+                message,
+                "busy" if isinstance(exc, MainTaskBusy) else "bad_request",
+                str(exc),
+                request.instance_id,
+                request.net,
+            )
+
+    def _refuse(
+        self, message: Message, code: str, reason: str, instance_id: str | None, net: str
+    ) -> None:
+        """Say why, to the requester, and end the request as failed so nobody waits forever."""
+        log.warning("run_petri_net refused: %s", reason)
+        self.bus.publish(
+            "error",
+            {"code": code, "reason": reason, "message_id": message.id},
+            destination=message.source or None,
+            correlation_id=message.id,
+        )
+        self.bus.publish(
+            "petri_net_ended",
+            {"net": net, "instance_id": instance_id or "", "outcome": "failed", "parent": None},
+        )
+
+    def _on_kill(self, message: Message) -> None:
+        try:
+            request = message.payload_as(KillPetriNet)
+        except ValidationError as exc:
+            log.warning("kill_petri_net refused: %s", exc)
+            return
+        if request.instance_id:
+            self.kill(request.instance_id)
+        elif request.net:
+            self.kill_net(request.net)
+
+    # ---------------------------------------------------------------- host of instances
+
+    def _create(
+        self,
+        net_name: str,
+        params: dict[str, Any],
+        parent: Instance | None,
+        instance_id: str | None,
+        main: bool,
+    ) -> Instance:
+        try:
+            net = self.library.get(net_name)
+        except UnknownNet as exc:
+            raise DispatchError(f"unknown net {exc.args[0]}") from None
+        missing = missing_params(net, params)
+        if missing:
+            raise DispatchError(f"net {net_name}: missing parameter(s) {', '.join(missing)}")
+        undeclared = [k for k in params if k not in net.params]
+        if undeclared:
+            raise DispatchError(f"net {net_name}: undeclared parameter(s) {', '.join(undeclared)}")
+        if instance_id is None:
+            instance_id = f"{net_name}#{next(self._ids)}"
+        elif instance_id in self._instances:
+            raise DispatchError(f"instance id {instance_id!r} is already running")
+        if len(self._instances) >= self.max_instances:
+            raise DispatchError(f"too many instances ({self.max_instances})")
+        instance = Instance(self, net, instance_id, params, parent, main)
+        self._instances[instance_id] = instance
+        for message_type in net.by_type:
+            waiting = self._waiting.get(message_type)
+            if waiting is None:
+                waiting = self._waiting[message_type] = {}
+                self._unsubscribe[message_type] = self.bus.subscribe(
+                    message_type, self._deliver_to(waiting)
+                )
+            waiting[instance] = None
+        return instance
+
+    @staticmethod
+    def _deliver_to(waiting: dict[Instance, None]) -> Callable[[Message], None]:
+        def deliver(message: Message) -> None:
+            for instance in list(waiting):
+                instance.on_message(message)
+
+        return deliver
+
+    def start_child(self, parent: Instance, net: str, params: dict[str, Any]) -> Instance:
+        child = self._create(net, params, parent, None, False)
+        parent.children[child.id] = child
+        child.begin()
+        return child
+
+    def publish_action(
+        self, instance: Instance, type: str, payload: dict[str, Any], destination: str | None
+    ) -> None:
+        self.bus.publish(type, payload, destination=destination)
+
+    def event(
+        self, instance: Instance, kind: str, transition: str | None, marking: dict[str, int]
+    ) -> None:
+        if self.monitor:
+            self.bus.publish(
+                "petri_net_event",
+                {
+                    "instance_id": instance.id,
+                    "net": instance.net.name,
+                    "kind": kind,
+                    "transition": transition,
+                    "marking": marking,
+                    "time": self.clock.now(),
+                },
+            )
+
+    def ended(self, instance: Instance) -> None:
+        self._instances.pop(instance.id, None)
+        for message_type in instance.net.by_type:
+            waiting = self._waiting.get(message_type)
+            if waiting is not None:
+                waiting.pop(instance, None)
+                if not waiting:
+                    del self._waiting[message_type]
+                    self._unsubscribe.pop(message_type)()
+        self.bus.publish(
+            "petri_net_ended",
+            {
+                "net": instance.net.name,
+                "instance_id": instance.id,
+                "outcome": instance.outcome,
+                "parent": instance.parent.id if instance.parent else None,
+            },
+        )
+        if instance is self._idle:
+            self._idle = None
+        if instance is self._main:
+            self._main = None
+            self._start_idle()
+
+    def _start_idle(self) -> None:
+        if not self._open or self.idle_net is None or self._main is not None:
+            return
+        if self._idle is not None and self._idle.running:
+            return
+        try:
+            instance = self._create(self.idle_net, dict(self.idle_params), None, None, False)
+        except DispatchError as exc:
+            log.error("idle net %s not started: %s", self.idle_net, exc)
+            return
+        self._idle = instance
+        instance.begin()
