@@ -1,0 +1,724 @@
+"""The Task Manager: queue, assignment by path cost/battery/availability, battery alarms,
+robot loss and reconciliation after a restart (docs/server.md).
+
+Handlers run inline on the bus and never block: persistence goes through a write-behind
+``TaskStore``; a watchdog task checks silent robots and tasks nobody started.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import math
+import time
+import uuid
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from pydantic import ValidationError
+
+from backend.site.schema import Site
+from backend.tasks.model import FINAL_STATES, Task, TaskError, TaskNotFound, TaskState
+from backend.tasks.queue import TaskQueue
+from backend.tasks.robots import RobotInfo
+from backend.traffic.graph import SiteGraph
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.tasks import TaskRequest
+
+__all__ = ["TaskManager", "TaskStore"]
+
+log = logging.getLogger(__name__)
+
+NETS = {
+    "tour": "give_tour",
+    "go_to_poi": "go_to_poi",
+    "charge": "battery_charge",
+    "go_to": "navigate_to_point",
+}
+DEFAULT_DURATION_S = {"tour": 600.0, "go_to_poi": 120.0, "go_to": 60.0, "charge": 1800.0}
+BATTERY_WEIGHT_S = 120.0
+"""Cost in seconds of an empty battery when ranking robots (a full one costs nothing)."""
+UNKNOWN_POSITION_COST_S = 3600.0
+MAX_FINISHED_IN_MEMORY = 5000
+
+
+class TaskStore(Protocol):
+    """Where tasks and their history go (backend.db.store.DbTaskStore); must not block."""
+
+    def record(self, task: Task, event: str) -> None: ...
+
+
+class TaskManager:
+    """One per server. ``graph`` is shared with the Traffic Manager (same site version)."""
+
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        site: Site,
+        *,
+        graph: SiteGraph | None = None,
+        store: TaskStore | None = None,
+        robot_timeout_s: float = 10.0,
+        lost_grace_s: float = 30.0,
+        start_timeout_s: float = 30.0,
+        tick_s: float = 0.5,
+        max_queued: int = 100_000,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.endpoint = endpoint
+        self.store = store
+        self.robot_timeout_s = robot_timeout_s
+        self.lost_grace_s = lost_grace_s
+        self.start_timeout_s = start_timeout_s
+        self.tick_s = tick_s
+        self.clock = clock
+        self.tasks: dict[str, Task] = {}
+        self.queue = TaskQueue(max_queued)
+        self.robots: dict[str, RobotInfo] = {}
+        self._seq = itertools.count(1)
+        self._finished: list[str] = []
+        self._assigned_at: dict[str, float] = {}
+        self._unconfirmed: set[str] = set()
+        self._avoid: dict[str, set[str]] = {}
+        self._durations: dict[str, float] = dict(DEFAULT_DURATION_S)
+        self._unsubscribe: list[Callable[[], None]] = []
+        self._watchdog: asyncio.Task[None] | None = None
+        self._dispatching = False
+        self._dispatch_again = False
+        self.assign_times_ms: list[float] | None = None
+        self.site = site
+        self.graph = graph or SiteGraph(site)
+        self.load_site(site, self.graph)
+
+    # --- life cycle ----------------------------------------------------------------------
+    def start(self) -> None:
+        sub = self.endpoint.subscribe
+        self._unsubscribe = [
+            sub("task_request", self._on_task_request),
+            sub("task_started", self._on_task_started),
+            sub("task_ended", self._on_task_ended),
+            sub("robot_state", self._on_robot_state),
+            sub("battery_low", self._on_battery_low),
+            sub("battery_panic", self._on_battery_panic),
+            sub("robot_disconnected", self._on_robot_disconnected),
+        ]
+        with contextlib.suppress(RuntimeError):
+            self._watchdog = asyncio.get_running_loop().create_task(
+                self._watch(), name="task-manager-watchdog"
+            )
+
+    async def stop(self) -> None:
+        for unsubscribe in self._unsubscribe:
+            unsubscribe()
+        self._unsubscribe.clear()
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._watchdog
+            self._watchdog = None
+
+    def load_site(self, site: Site, graph: SiteGraph | None = None) -> None:
+        """New site while running: robots added or removed, new map for costs."""
+        self.site = site
+        self.graph = graph or SiteGraph(site)
+        for cfg in site.robots:
+            info = self.robots.get(cfg.name)
+            if info is None:
+                self.robots[cfg.name] = RobotInfo(cfg.name, cfg, node=cfg.start_node)
+            else:
+                info.config = cfg
+        for name in [n for n in self.robots if site.robot(n) is None]:
+            info = self.robots.pop(name)
+            if info.current is not None:
+                self._requeue(self.tasks[info.current], "robot removed from the site")
+        self.dispatch()
+
+    def restore(self, tasks: list[Task]) -> None:
+        """After a restart: queued tasks queue again; running ones await their robot's word."""
+        for task in sorted(tasks, key=lambda t: t.seq):
+            self.tasks[task.id] = task
+            if task.state is TaskState.QUEUED:
+                self.queue.push(task)
+            elif task.robot in self.robots:
+                self.robots[task.robot].current = task.id
+                self._unconfirmed.add(task.id)
+                self._assigned_at[task.id] = self.clock()
+            elif not task.final:
+                task.move(TaskState.QUEUED, reason="robot unknown after restart")
+                task.robot = None
+                self.queue.push(task)
+                self._record(task, "requeued")
+        last = max((t.seq for t in tasks), default=0)
+        self._seq = itertools.count(last + 1)
+        self.dispatch()
+
+    # --- requests (API, buttons, robots) -------------------------------------------------
+    def request(
+        self,
+        kind: str,
+        params: dict[str, Any] | None = None,
+        *,
+        priority: int = 5,
+        requester: str = "",
+        robot: str | None = None,
+        internal: bool = False,
+    ) -> Task:
+        """Queue a task; raises TaskError if its parameters do not fit the site."""
+        params = dict(params or {})
+        self._target_node(kind, params)  # validates
+        if robot is not None and robot not in self.robots:
+            raise TaskError(f"unknown robot {robot!r}")
+        if not internal and self.queue.full:
+            raise TaskError(f"the queue is full ({self.queue.maxsize} tasks waiting)")
+        task = Task(
+            id=uuid.uuid4().hex[:12],
+            kind=kind,
+            params=params,
+            priority=priority,
+            requester=requester,
+            seq=next(self._seq),
+            pinned_robot=robot,
+            internal=internal,
+        )
+        self.tasks[task.id] = task
+        self.queue.push(task)
+        self._changed(task, "created")
+        self.dispatch()
+        return task
+
+    def get(self, task_id: str) -> Task:
+        task = self.tasks.get(task_id)
+        if task is None:
+            raise TaskNotFound(f"no task {task_id!r}")
+        return task
+
+    def cancel(self, task_id: str, *, reason: str = "cancelled", by: str = "") -> Task:
+        task = self.get(task_id)
+        if task.final:
+            raise TaskError(f"task {task_id} is already {task.state.value}")
+        self._leave_robot(task, f"{reason} by {by}".strip())
+        self.queue.remove(task.id)
+        task.move(TaskState.CANCELLED, reason=f"{reason} ({by})" if by else reason)
+        self._changed(task, "cancelled")
+        self.dispatch()
+        return task
+
+    def reprioritise(self, task_id: str, priority: int) -> Task:
+        task = self.get(task_id)
+        if task.final:
+            raise TaskError(f"task {task_id} is already {task.state.value}")
+        task.priority = priority
+        task.version += 1
+        if task.state is TaskState.QUEUED:
+            self.queue.push(task)
+        self._changed(task, "reprioritised")
+        self.dispatch()
+        return task
+
+    def reassign(self, task_id: str, robot: str | None = None, *, by: str = "") -> Task:
+        """Take a task off its robot (even a broken one) and give it to ``robot`` or the
+        next free robot but that one."""
+        task = self.get(task_id)
+        if task.final:
+            raise TaskError(f"task {task_id} is already {task.state.value}")
+        if robot is not None and robot not in self.robots:
+            raise TaskError(f"unknown robot {robot!r}")
+        old = task.robot
+        if old is not None:
+            self._avoid.setdefault(task.id, set()).add(old)
+        task.pinned_robot = robot
+        if robot is not None:
+            self._avoid.get(task.id, set()).discard(robot)
+        if task.state is TaskState.QUEUED:
+            task.version += 1
+            self.queue.push(task)
+            self._changed(task, "reassigned")
+        else:
+            self._requeue(task, f"reassigned by {by}".strip())
+        self.dispatch()
+        return task
+
+    def queue_position(self, task: Task) -> int | None:
+        return self.queue.position(task) if task.state is TaskState.QUEUED else None
+
+    def eta_s(self, task: Task) -> float | None:
+        """Estimated wait before a robot starts on it: robots work the queue in waves."""
+        if task.state is not TaskState.QUEUED:
+            return 0.0 if task.state in (TaskState.ASSIGNED, TaskState.RUNNING) else None
+        position = self.queue.position(task) or 1
+        working = [r for r in self.robots.values() if r.online and not r.fault]
+        free = sum(1 for r in working if self._available(r))
+        if not working:
+            return None
+        avg = sum(self._durations[k] for k in ("tour", "go_to_poi")) / 2
+        if position <= free:
+            return 0.0
+        waves = (position - free - 1) // len(working)
+        return round((waves + 0.5) * avg, 1)
+
+    def status(self, task: Task) -> dict[str, Any]:
+        return {
+            **task.as_dict(),
+            "queue_position": self.queue_position(task),
+            "eta_s": self.eta_s(task),
+        }
+
+    # --- assignment ----------------------------------------------------------------------
+    def dispatch(self) -> None:
+        """Give queued tasks to available robots, best first; then send idle robots home."""
+        if self._dispatching:
+            self._dispatch_again = True
+            return
+        self._dispatching = True
+        try:
+            again = True
+            while again:
+                self._dispatch_again = False
+                self._assign_queued()
+                self._send_idle_robots()
+                again = self._dispatch_again
+        finally:
+            self._dispatching = False
+
+    def _available(self, robot: RobotInfo) -> bool:
+        if not robot.online or robot.fault or robot.needs_charge:
+            return False
+        if robot.battery <= robot.config.battery_low:
+            return False
+        if robot.current is None:
+            return True
+        current = self.tasks.get(robot.current)
+        return current is None or current.internal
+
+    def _assign_queued(self) -> None:
+        free = {r.name: r for r in self.robots.values() if self._available(r)}
+        if not free or not len(self.queue):
+            return
+        plan: list[tuple[Task, RobotInfo]] = []
+        timed = self.assign_times_ms is not None
+        for task in self.queue.head():
+            t0 = time.perf_counter() if timed else 0.0
+            best = self._best_robot(task, free)
+            if best is None:
+                continue
+            plan.append((task, best))
+            del free[best.name]
+            if timed and self.assign_times_ms is not None:
+                self.assign_times_ms.append((time.perf_counter() - t0) * 1000)
+            if not free:
+                break
+        for task, robot in plan:
+            self._assign(task, robot)
+
+    def _best_robot(self, task: Task, free: dict[str, RobotInfo]) -> RobotInfo | None:
+        if task.pinned_robot is not None:
+            robot = free.get(task.pinned_robot)
+            return robot
+        avoid = self._avoid.get(task.id, ())
+        dist = self.graph.distances_to(self._target_node(task.kind, task.params))
+        best: RobotInfo | None = None
+        best_cost = math.inf
+        for robot in free.values():
+            if robot.name in avoid:
+                continue
+            metres = dist.get(robot.node) if robot.node is not None else None
+            travel = (
+                metres / robot.config.max_speed_mps
+                if metres is not None
+                else UNKNOWN_POSITION_COST_S
+            )
+            cost = travel + (1.0 - robot.battery) * BATTERY_WEIGHT_S
+            if cost < best_cost:
+                best, best_cost = robot, cost
+        return best
+
+    def _assign(self, task: Task, robot: RobotInfo) -> None:
+        if robot.current is not None:
+            previous = self.tasks.get(robot.current)
+            if previous is not None and not previous.final:
+                self._send_cancel(robot.name, previous.id, "preempted by a main task")
+                previous.move(TaskState.CANCELLED, reason="preempted by a main task")
+                self._changed(previous, "cancelled")
+        self.queue.remove(task.id)
+        task.robot = robot.name
+        task.net = NETS[task.kind]
+        task.assigned_params = self._net_params(task)
+        task.move(TaskState.ASSIGNED, reason="")
+        robot.current = task.id
+        self._assigned_at[task.id] = self.clock()
+        self._unconfirmed.discard(task.id)
+        self.endpoint.publish(
+            "task_assigned",
+            {
+                "task_id": task.id,
+                "robot": robot.name,
+                "net": task.net,
+                "params": task.assigned_params,
+            },
+            destination=robot.name,
+        )
+        self._changed(task, "assigned")
+
+    def _send_idle_robots(self) -> None:
+        """Robots with nothing to do: charge if they must, else a free station, else the
+        wait point."""
+        idle = [r for r in self.robots.values() if r.current is None and r.online and not r.fault]
+        if not idle:
+            return
+        taken: set[str | None] = set()
+        for r in self.robots.values():
+            current = self.tasks.get(r.current) if r.current else None
+            if current is not None and current.kind == "charge":
+                taken.add(current.params.get("station"))
+        at = {s.node: s.id for s in self.site.charging_stations}
+        taken |= {at[r.node] for r in self.robots.values() if r.node in at}
+        wait_nodes = {w.node for w in self.site.wait_points}
+        free_stations = [s for s in self.site.charging_stations if s.id not in taken]
+        for robot in idle:
+            if robot.current is not None:
+                continue
+            if self._available(robot) and self._has_work_for(robot):
+                continue
+            if robot.node in at:
+                if robot.needs_charge and robot.mode != "charging":
+                    self._internal(robot, "charge", {"station": at[robot.node]})
+                continue
+            if robot.node in wait_nodes and not robot.needs_charge:
+                continue
+            station = self._nearest(robot, [s for s in free_stations if s.id not in taken])
+            if station is not None:
+                taken.add(station.id)
+                self._internal(robot, "charge", {"station": station.id})
+            elif not robot.needs_charge:
+                wait = self._nearest(robot, list(self.site.wait_points))
+                if wait is not None:
+                    self._internal(robot, "go_to", {"node": wait.node})
+
+    def _has_work_for(self, robot: RobotInfo) -> bool:
+        for task in self.queue.head():
+            if task.pinned_robot in (None, robot.name):
+                return True
+        return False
+
+    def _nearest(self, robot: RobotInfo, places: list[Any]) -> Any:
+        best, best_cost = None, math.inf
+        for place in places:
+            dist = self.graph.distances_to(place.node).get(robot.node or "", math.inf)
+            if best is None or dist < best_cost:
+                best, best_cost = place, dist
+        return best
+
+    def _internal(self, robot: RobotInfo, kind: str, params: dict[str, Any]) -> None:
+        task = Task(
+            id=uuid.uuid4().hex[:12],
+            kind=kind,
+            params=params,
+            priority=0,
+            requester="task_manager",
+            seq=next(self._seq),
+            pinned_robot=robot.name,
+            internal=True,
+        )
+        self.tasks[task.id] = task
+        self._changed(task, "created")
+        self._assign(task, robot)
+
+    # --- robot messages ------------------------------------------------------------------
+    def _on_task_request(self, msg: Message) -> None:
+        try:
+            req = msg.payload_as(TaskRequest)
+            requester = req.requester or msg.source
+            robot = msg.source if msg.source in self.robots else None
+            # A visitor at a robot's screen: that robot takes it.
+            task = self.request(
+                req.kind, req.params, priority=req.priority, requester=requester, robot=robot
+            )
+        except (ValidationError, TaskError) as exc:
+            reason = str(exc) if isinstance(exc, TaskError) else exc.errors()[0]["msg"]
+            self.endpoint.reply(
+                msg, "error", {"code": "task_refused", "reason": reason, "message_id": msg.id}
+            )
+            return
+        self.endpoint.reply(msg, "task_event", self._event_payload(task))
+
+    def _robot_msg(self, msg: Message) -> RobotInfo | None:
+        name = msg.payload.get("robot")
+        if not isinstance(name, str) or name not in self.robots:
+            return None
+        if msg.source in self.robots and msg.source != name:
+            return None  # a robot speaks only for itself
+        return self.robots[name]
+
+    def _on_task_started(self, msg: Message) -> None:
+        robot = self._robot_msg(msg)
+        task = self.tasks.get(str(msg.payload.get("task_id")))
+        if robot is None or task is None:
+            return
+        if task.robot != robot.name or task.final:
+            self._send_cancel(robot.name, task.id, "this task is not yours any more")
+            return
+        if task.state is TaskState.ASSIGNED:
+            task.move(TaskState.RUNNING)
+            self._unconfirmed.discard(task.id)
+            self._changed(task, "started")
+
+    def _on_task_ended(self, msg: Message) -> None:
+        robot = self._robot_msg(msg)
+        task = self.tasks.get(str(msg.payload.get("task_id")))
+        if robot is None or task is None or task.robot != robot.name or task.final:
+            return
+        outcome = msg.payload.get("outcome", "done")
+        state = {"done": TaskState.DONE, "failed": TaskState.FAILED}.get(
+            outcome, TaskState.CANCELLED
+        )
+        task.move(state, reason=str(msg.payload.get("reason", "")))
+        if robot.current == task.id:
+            robot.current = None
+        if task.kind == "charge" and state is TaskState.DONE:
+            robot.needs_charge = False
+        if state is TaskState.DONE and task.started_at and not task.internal:
+            took = time.time() - task.started_at
+            self._durations[task.kind] = 0.8 * self._durations[task.kind] + 0.2 * took
+        self._changed(task, state.value)
+        self.dispatch()
+
+    def _on_robot_state(self, msg: Message) -> None:
+        robot = self._robot_msg(msg)
+        if robot is None:
+            return
+        p = msg.payload
+        if p.get("mode") == "offline":
+            self._robot_lost(robot)
+            return
+        came_back = not robot.online
+        robot.online = True
+        robot.offline_since = None
+        robot.last_seen = self.clock()
+        robot.mode = str(p.get("mode", "idle"))
+        if isinstance(p.get("node"), str) and p["node"] in self.graph:
+            robot.node = p["node"]
+        robot.floor = p.get("floor") or robot.floor
+        battery = p.get("battery")
+        if isinstance(battery, int | float) and 0 <= battery <= 1:
+            robot.battery = float(battery)
+            if robot.needs_charge and robot.battery >= 0.95:
+                robot.needs_charge = False
+        reported = p.get("task_id") or None
+        robot.reported_task = reported
+        was_fault = robot.fault
+        robot.fault = robot.mode == "fault"
+        self._reconcile(robot, reported)
+        if robot.fault and not was_fault and robot.current is not None:
+            self._requeue(self.tasks[robot.current], "robot fault")
+        if came_back or was_fault != robot.fault or robot.current is None:
+            self.dispatch()
+
+    def _reconcile(self, robot: RobotInfo, reported: str | None) -> None:
+        """Match what the robot says it runs with what we gave it."""
+        ours = self.tasks.get(robot.current) if robot.current else None
+        if reported is not None and (ours is None or ours.id != reported):
+            task = self.tasks.get(reported)
+            if task is None or task.robot != robot.name or task.final:
+                self._send_cancel(robot.name, reported, "not assigned to you")
+        if ours is None or ours.final:
+            return
+        if reported == ours.id:
+            if ours.state is TaskState.ASSIGNED:
+                ours.move(TaskState.RUNNING, reason="reported by the robot")
+                self._changed(ours, "started")
+            self._unconfirmed.discard(ours.id)
+        elif ours.id in self._unconfirmed:
+            # Restarted server (or robot back from a long absence): it no longer runs it.
+            self._unconfirmed.discard(ours.id)
+            self._requeue(ours, "the robot no longer runs it")
+
+    def _on_battery_low(self, msg: Message) -> None:
+        robot = self._robot_msg(msg)
+        if robot is None:
+            return
+        robot.needs_charge = True
+        current = self.tasks.get(robot.current) if robot.current else None
+        if current is not None and current.internal and current.kind != "charge":
+            self._send_cancel(robot.name, current.id, "battery low")
+            current.move(TaskState.CANCELLED, reason="battery low")
+            robot.current = None
+            self._changed(current, "cancelled")
+        self.dispatch()
+
+    def _on_battery_panic(self, msg: Message) -> None:
+        robot = self._robot_msg(msg)
+        if robot is None:
+            return
+        robot.needs_charge = True
+        current = self.tasks.get(robot.current) if robot.current else None
+        if current is not None and current.kind != "charge":
+            if current.internal:
+                self._send_cancel(robot.name, current.id, "battery panic")
+                current.move(TaskState.CANCELLED, reason="battery panic")
+                robot.current = None
+                self._changed(current, "cancelled")
+            else:
+                self._avoid.setdefault(current.id, set()).add(robot.name)
+                self._requeue(current, "battery panic")
+        self.dispatch()
+
+    def _on_robot_disconnected(self, msg: Message) -> None:
+        name = msg.payload.get("robot") or msg.payload.get("name")
+        if isinstance(name, str) and name in self.robots:
+            self._robot_lost(self.robots[name])
+
+    def _robot_lost(self, robot: RobotInfo) -> None:
+        """Off the network: it may still be running its task; after ``lost_grace_s`` the task
+        goes to another robot."""
+        if robot.online:
+            robot.online = False
+            robot.mode = "offline"
+            robot.offline_since = self.clock()
+            self.dispatch()
+
+    # --- watchdog ------------------------------------------------------------------------
+    async def _watch(self) -> None:
+        while True:
+            await asyncio.sleep(self.tick_s)
+            try:
+                self.check_timeouts()
+            except Exception:
+                log.exception("task manager watchdog failed")
+
+    def check_timeouts(self) -> None:
+        now = self.clock()
+        for robot in self.robots.values():
+            if robot.online and robot.last_seen is not None:
+                if now - robot.last_seen > self.robot_timeout_s:
+                    self._robot_lost(robot)
+            if not robot.online and robot.current is not None:
+                since = robot.offline_since if robot.offline_since is not None else now
+                if robot.offline_since is None:
+                    robot.offline_since = now
+                if now - since > self.lost_grace_s:
+                    task = self.tasks[robot.current]
+                    self._avoid.setdefault(task.id, set()).add(robot.name)
+                    self._requeue(task, "robot lost")
+        for task_id, at in list(self._assigned_at.items()):
+            task = self.tasks.get(task_id)
+            if task is None or task.state is not TaskState.ASSIGNED:
+                self._assigned_at.pop(task_id, None)
+                continue
+            robot = self.robots.get(task.robot or "")
+            if robot is not None and robot.online and now - at > self.start_timeout_s:
+                if task.internal:
+                    task.move(TaskState.FAILED, reason="the robot did not start it")
+                    robot.current = None
+                    self._changed(task, "failed")
+                else:
+                    self._requeue(task, "the robot did not start it")
+        self.dispatch()
+
+    # --- helpers -------------------------------------------------------------------------
+    def _requeue(self, task: Task, reason: str) -> None:
+        """Back to the queue in its old place (same priority and arrival order)."""
+        if task.internal:
+            self._leave_robot(task, reason)
+            task.move(TaskState.CANCELLED, reason=reason)
+            self._changed(task, "cancelled")
+            return
+        self._leave_robot(task, reason)
+        task.robot = None
+        task.move(TaskState.QUEUED, reason=reason)
+        self.queue.push(task)
+        self._changed(task, "requeued")
+
+    def _leave_robot(self, task: Task, reason: str) -> None:
+        if task.robot is None:
+            return
+        robot = self.robots.get(task.robot)
+        if task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
+            self._send_cancel(task.robot, task.id, reason)
+        if robot is not None and robot.current == task.id:
+            robot.current = None
+        self._assigned_at.pop(task.id, None)
+        self._unconfirmed.discard(task.id)
+
+    def _send_cancel(self, robot: str, task_id: str, reason: str) -> None:
+        self.endpoint.publish(
+            "task_cancel", {"task_id": task_id, "reason": reason}, destination=robot
+        )
+
+    def _target_node(self, kind: str, params: dict[str, Any]) -> str:
+        """Where a task starts (for path cost); raises TaskError if params do not fit."""
+        site = self.site
+        if kind == "tour":
+            tour = site.tour(str(params.get("tour")))
+            if tour is None:
+                raise TaskError(f"unknown tour {params.get('tour')!r}")
+            poi = site.poi(tour.points[0])
+            assert poi is not None
+            return poi.node
+        if kind == "go_to_poi":
+            poi = site.poi(str(params.get("poi")))
+            if poi is None:
+                raise TaskError(f"unknown point of interest {params.get('poi')!r}")
+            return poi.node
+        if kind == "go_to":
+            node = params.get("node")
+            if not isinstance(node, str) or node not in self.graph:
+                raise TaskError(f"unknown node {node!r}")
+            return node
+        if kind == "charge":
+            stations = {s.id: s.node for s in site.charging_stations}
+            station = params.get("station")
+            if station is None and stations:
+                return next(iter(stations.values()))
+            if station not in stations:
+                raise TaskError(f"unknown charging station {station!r}")
+            return stations[str(station)]
+        raise TaskError(f"unknown task kind {kind!r} (expected one of {sorted(NETS)})")
+
+    def _net_params(self, task: Task) -> dict[str, Any]:
+        """Everything the robot's net needs, so it never asks back."""
+        site, p = self.site, task.params
+        if task.kind == "tour":
+            tour = site.tour(p["tour"])
+            assert tour is not None
+            points = []
+            for poi_id in tour.points:
+                poi = site.poi(poi_id)
+                assert poi is not None
+                points.append(
+                    {"poi": poi.id, "node": poi.node, "text": poi.text, "media": poi.media}
+                )
+            return {"tour": tour.id, "points": points}
+        if task.kind == "go_to_poi":
+            poi = site.poi(p["poi"])
+            assert poi is not None
+            return {"poi": poi.id, "node": poi.node, "text": poi.text}
+        if task.kind == "charge":
+            station = p.get("station") or site.charging_stations[0].id
+            node = next(s.node for s in site.charging_stations if s.id == station)
+            return {"station": station, "node": node}
+        return {"node": p["node"]}
+
+    def _event_payload(self, task: Task) -> dict[str, Any]:
+        return {
+            "task_id": task.id,
+            "state": task.state.value,
+            "robot": task.robot,
+            "queue_position": self.queue_position(task),
+            "eta_s": self.eta_s(task),
+        }
+
+    def _changed(self, task: Task, event: str) -> None:
+        """Every state change: an event on the hub and a row in the task's history."""
+        if self.store is not None:
+            self.store.record(task, event)
+        self.endpoint.publish("task_event", self._event_payload(task))
+        if task.state in FINAL_STATES:
+            self._avoid.pop(task.id, None)
+            self._finished.append(task.id)
+            if len(self._finished) > MAX_FINISHED_IN_MEMORY:
+                old = self._finished.pop(0)
+                if old in self.tasks and self.tasks[old].final:
+                    del self.tasks[old]

@@ -1,0 +1,118 @@
+"""Tasks and their life cycle (docs/server.md, "Task life cycle")."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+__all__ = [
+    "FINAL_STATES",
+    "TRANSITIONS",
+    "IllegalTransition",
+    "Task",
+    "TaskError",
+    "TaskNotFound",
+    "TaskState",
+]
+
+
+class TaskError(ValueError):
+    """A task operation refused (bad parameters, wrong state); the API maps it to 409/422."""
+
+
+class TaskNotFound(TaskError, LookupError):
+    """No task with that id (404)."""
+
+
+class IllegalTransition(TaskError):
+    """A state change the life cycle does not allow."""
+
+
+class TaskState(StrEnum):
+    QUEUED = "queued"
+    ASSIGNED = "assigned"
+    """Sent to a robot; not yet confirmed running."""
+    RUNNING = "running"
+    DONE = "done"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+
+FINAL_STATES = frozenset({TaskState.DONE, TaskState.FAILED, TaskState.CANCELLED})
+
+TRANSITIONS: dict[TaskState, frozenset[TaskState]] = {
+    TaskState.QUEUED: frozenset({TaskState.ASSIGNED, TaskState.CANCELLED}),
+    TaskState.ASSIGNED: frozenset(
+        {TaskState.RUNNING, TaskState.QUEUED, TaskState.ASSIGNED, *FINAL_STATES}
+    ),
+    TaskState.RUNNING: frozenset({TaskState.QUEUED, TaskState.ASSIGNED, *FINAL_STATES}),
+    TaskState.DONE: frozenset(),
+    TaskState.FAILED: frozenset(),
+    TaskState.CANCELLED: frozenset(),
+}
+
+
+@dataclass(slots=True)
+class Task:
+    id: str
+    kind: str
+    params: dict[str, Any]
+    priority: int
+    requester: str
+    seq: int
+    state: TaskState = TaskState.QUEUED
+    robot: str | None = None
+    pinned_robot: str | None = None
+    """Only this robot may take it (reassign to a robot; the idle tasks of a robot)."""
+    internal: bool = False
+    """Created by the Task Manager itself (charge, go to the wait point): preemptible."""
+    net: str = ""
+    assigned_params: dict[str, Any] = field(default_factory=dict)
+    reason: str = ""
+    created_at: float = field(default_factory=time.time)
+    updated_at: float = field(default_factory=time.time)
+    started_at: float | None = None
+    ended_at: float | None = None
+    version: int = 0
+    """Bumped on every change; the queue uses it to skip stale entries."""
+
+    def move(self, new: TaskState, *, reason: str = "") -> None:
+        if new not in TRANSITIONS[self.state]:
+            raise IllegalTransition(
+                f"task {self.id}: cannot go from {self.state.value} to {new.value} "
+                f"(allowed: {sorted(s.value for s in TRANSITIONS[self.state]) or 'none, final'})"
+            )
+        self.state = new
+        self.reason = reason
+        self.version += 1
+        self.updated_at = time.time()
+        if new is TaskState.RUNNING and self.started_at is None:
+            self.started_at = self.updated_at
+        if new in FINAL_STATES:
+            self.ended_at = self.updated_at
+
+    @property
+    def final(self) -> bool:
+        return self.state in FINAL_STATES
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "kind": self.kind,
+            "params": self.params,
+            "priority": self.priority,
+            "requester": self.requester,
+            "seq": self.seq,
+            "state": self.state.value,
+            "robot": self.robot,
+            "pinned_robot": self.pinned_robot,
+            "internal": self.internal,
+            "net": self.net,
+            "reason": self.reason,
+            "created_at": self.created_at,
+            "updated_at": self.updated_at,
+            "started_at": self.started_at,
+            "ended_at": self.ended_at,
+        }

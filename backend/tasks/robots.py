@@ -1,0 +1,42 @@
+"""What the Task Manager knows about each robot, from its robot_state and alarms."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from backend.site.schema import RobotConfig
+
+__all__ = ["RobotInfo"]
+
+
+@dataclass(slots=True)
+class RobotInfo:
+    name: str
+    config: RobotConfig
+    online: bool = False
+    last_seen: float | None = None
+    offline_since: float | None = None
+    node: str | None = None
+    floor: str | None = None
+    battery: float = 1.0
+    mode: str = "offline"
+    reported_task: str | None = None
+    current: str | None = None
+    """The task the Task Manager gave it and considers live."""
+    needs_charge: bool = False
+    fault: bool = False
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "name": self.name,
+            "online": self.online,
+            "mode": self.mode,
+            "node": self.node,
+            "floor": self.floor,
+            "battery": self.battery,
+            "task_id": self.current,
+            "reported_task_id": self.reported_task,
+            "needs_charge": self.needs_charge,
+            "fault": self.fault,
+            "last_seen": self.last_seen,
+        }
