@@ -402,9 +402,12 @@ class Navigator:
             j += 1
 
     async def _acquire_area(self, area: str) -> None:
+        if area in self._granted:
+            # Granted ahead as part of a chain of back-to-back areas.
+            self.held_areas.add(area)
+            return
         self.state = NavState.WAITING_AREA
         self._send_velocity(0.0, 0.0)
-        self._granted.discard(area)
         self.ep.publish("request_area", {"robot": self.robot, "area": area})
         await self._wait_until(lambda: area in self._granted, f"area {area}")
         self.held_areas.add(area)

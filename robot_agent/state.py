@@ -1,0 +1,99 @@
+"""The robot's state report: pose, floor, battery, task, running nets, module health.
+
+Published on the on-board bus as robot_state at a steady rate (the link forwards it to the
+hub) and on demand (``publish_now``) after a reconnect so the server resynchronises at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Callable
+from typing import Any
+
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.robot import RobotMode
+from robot_agent.battery import BatteryMonitor
+from robot_agent.navigation import Navigator
+from robot_agent.tasks import TaskRunner
+
+__all__ = ["StateReporter"]
+
+
+class StateReporter:
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        robot: str,
+        navigator: Navigator,
+        battery: BatteryMonitor,
+        tasks: TaskRunner,
+        *,
+        nets: Callable[[], list[str]] | None = None,
+        period_s: float = 1.0,
+    ) -> None:
+        self.ep = endpoint
+        self.robot = robot
+        self.nav = navigator
+        self.battery = battery
+        self.tasks = tasks
+        self.nets = nets or (lambda: sorted(set(tasks.running_nets.values())))
+        self.period_s = period_s
+        self.modules: dict[str, str] = {}
+        self.seq = 0
+        self._task: asyncio.Task[None] | None = None
+        self._unsub: Callable[[], None] | None = None
+
+    def start(self) -> None:
+        self._unsub = self.ep.subscribe("module_status", self._on_module_status)
+        self._task = asyncio.get_running_loop().create_task(self._run(), name="robot-state")
+
+    async def stop(self) -> None:
+        if self._unsub is not None:
+            self._unsub()
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+    def _on_module_status(self, message: Message) -> None:
+        p = message.payload
+        name = str(p.get("name") or p.get("module_id"))
+        self.modules[name] = "ok" if p.get("state") == "online" else "lost"
+
+    def mode(self) -> RobotMode:
+        if self.nav.fault is not None:
+            return RobotMode.FAULT
+        if self.tasks.current is not None:
+            return RobotMode.BUSY
+        if self.battery.docked_at is not None or self.battery.charging:
+            return RobotMode.CHARGING
+        return RobotMode.IDLE
+
+    def snapshot(self) -> dict[str, Any]:
+        self.seq += 1
+        level = self.battery.level
+        return {
+            "robot": self.robot,
+            "x": round(self.nav.x, 3),
+            "y": round(self.nav.y, 3),
+            "theta": round(self.nav.theta, 3),
+            "node": self.nav.node,
+            "floor": self.nav.floor,
+            "battery": 1.0 if level is None else round(level, 3),
+            "mode": self.mode().value,
+            "task_id": self.tasks.task_id,
+            "speed": round(self.nav.speed, 3),
+            "nets": self.nets(),
+            "modules": dict(self.modules),
+            "seq": self.seq,
+        }
+
+    def publish_now(self) -> Message:
+        return self.ep.publish("robot_state", self.snapshot())
+
+    async def _run(self) -> None:
+        while True:
+            self.publish_now()
+            await asyncio.sleep(self.period_s)

@@ -1,0 +1,89 @@
+"""Shared pieces of the robot agent tests: the demo site and a building stand-in on a Bus."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from backend.site.schema import Site
+from backend.site.yamlio import load_site_file
+from guidebot.bus import Bus, Endpoint
+from guidebot.messages import Message
+
+ROOT = Path(__file__).resolve().parents[2]
+DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
+
+
+@pytest.fixture(scope="session")
+def demo_site() -> Site:
+    return load_site_file(DEMO_SITE)
+
+
+class Recorder:
+    """Every message of some types seen on a bus, with an awaitable condition."""
+
+    def __init__(self, endpoint: Endpoint, *patterns: str) -> None:
+        self.messages: list[Message] = []
+        self._changed = asyncio.Event()
+        for pattern in patterns:
+            endpoint.subscribe(pattern, self._add, tap=True)
+
+    def _add(self, message: Message) -> None:
+        self.messages.append(message)
+        self._changed.set()
+
+    def of(self, type_: str) -> list[Message]:
+        return [m for m in self.messages if m.type == type_]
+
+    async def wait_for(self, predicate: Callable[[], bool], timeout: float = 20.0) -> None:
+        async with asyncio.timeout(timeout):
+            while not predicate():
+                self._changed.clear()
+                if predicate():
+                    return
+                await self._changed.wait()
+
+
+class BuildingStandIn:
+    """Answers open_door and call_elevator on a Bus after a robot-time delay (unit tests only;
+    the end-to-end tests use the real BuildingInterface over Modbus with building_sim)."""
+
+    def __init__(self, bus: Bus, *, delay_s: float = 0.05) -> None:
+        self.ep = bus.endpoint("building")
+        self.delay_s = delay_s
+        self.opened: list[str] = []
+        self.calls: list[tuple[str, str]] = []
+        self._tasks: set[asyncio.Task[None]] = set()
+        self.ep.subscribe("open_door", self._on_open)
+        self.ep.subscribe("call_elevator", self._on_call)
+
+    def _later(self, type_: str, payload: dict[str, object]) -> None:
+        async def send() -> None:
+            await asyncio.sleep(self.delay_s)
+            self.ep.publish(type_, payload)
+
+        task = asyncio.get_running_loop().create_task(send())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def _on_open(self, message: Message) -> None:
+        door = str(message.payload["door"])
+        self.opened.append(door)
+        self._later("door_opened", {"door": door})
+
+    def _on_call(self, message: Message) -> None:
+        elevator, floor = str(message.payload["elevator"]), str(message.payload["floor"])
+        self.calls.append((elevator, floor))
+        self._later(
+            "elevator_in_position", {"elevator": elevator, "floor": floor, "door_open": True}
+        )
+
+
+@pytest.fixture
+def helpers() -> SimpleNamespace:
+    """The helper classes, as a fixture: test modules here do not import each other."""
+    return SimpleNamespace(Recorder=Recorder, BuildingStandIn=BuildingStandIn)

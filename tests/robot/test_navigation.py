@@ -1,0 +1,118 @@
+"""Navigation over the real Traffic Manager and the simulated base, on one in-process Bus."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+
+from backend.site.schema import Site
+from backend.traffic.manager import TrafficManager
+from guidebot.bus import Bus
+from robot_agent.clock import Clock
+from robot_agent.navigation import Navigator
+from robot_agent.sim_base import SimulatedBase
+
+
+@dataclass
+class Rig:
+    bus: Bus
+    nav: Navigator
+    base: SimulatedBase
+    building: Any
+    traffic: TrafficManager
+    seen: Any
+
+
+@pytest.fixture
+async def rig(demo_site: Site, helpers: Any) -> AsyncIterator[Rig]:
+    bus = Bus()
+    clock = Clock(time_scale=20.0)
+    traffic = TrafficManager(bus.endpoint("traffic"), demo_site)
+    traffic.start()
+    building = helpers.BuildingStandIn(bus)
+    seen = helpers.Recorder(
+        bus.endpoint("test"),
+        "set_velocity",
+        "request_area",
+        "area_granted",
+        "release_area",
+        "open_door",
+        "call_elevator",
+        "goal_reached",
+        "navigation_failed",
+        "robot_fault",
+    )
+    base = SimulatedBase(bus.endpoint("R1.base"), clock)
+    nav = Navigator(bus.endpoint("R1"), clock, "R1", start_node="charge_a")
+    nav.start()
+    await base.start()
+    yield Rig(bus, nav, base, building, traffic, seen)
+    await nav.stop()
+    await base.stop()
+    traffic.stop()
+
+
+async def test_navigate_through_door_corridor_area(rig: Rig) -> None:
+    """charge_a -> gb1: through door_gallery and the restricted corridor."""
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert not rig.seen.of("navigation_failed"), rig.seen.of("navigation_failed")[0].payload
+    assert rig.nav.node == "gb1"
+    assert math.hypot(rig.nav.x - 30, rig.nav.y - 0) < 0.3
+    assert [m.payload["door"] for m in rig.seen.of("open_door")] == ["door_gallery"]
+    assert [m.payload["area"] for m in rig.seen.of("request_area")] == ["corridor"]
+    assert [m.payload["area"] for m in rig.seen.of("area_granted")] == ["corridor"]
+    assert [m.payload["area"] for m in rig.seen.of("release_area")] == ["corridor"]
+    # The base really moved: many velocity commands, and the last one stops it.
+    assert len(rig.seen.of("set_velocity")) > 10
+    assert rig.seen.of("set_velocity")[-1].payload == {"v": 0.0, "w": 0.0}
+
+
+async def test_navigate_with_elevator_ride(rig: Rig) -> None:
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gc1"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert not rig.seen.of("navigation_failed"), rig.seen.of("navigation_failed")[0].payload
+    assert rig.nav.node == "gc1" and rig.nav.floor == "F1"
+    assert rig.building.calls == [("lift", "F0"), ("lift", "F1")]
+    assert rig.building.opened == ["door_upstairs"]
+    assert [m.payload["area"] for m in rig.seen.of("request_area")] == ["elevator"]
+    assert [m.payload["area"] for m in rig.seen.of("release_area")] == ["elevator"]
+
+
+async def test_bumper_hit_stops_and_reports(rig: Rig) -> None:
+    rig.nav.bumper_pause_s = 2.0
+    net = rig.bus.endpoint("net")
+    net.publish("navigate_to", {"node": "hall"})
+    await rig.seen.wait_for(lambda: len(rig.seen.of("set_velocity")) >= 3)
+    rig.bus.endpoint("bumper").publish("bumper_hit", {"ring": 0, "index": 2})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("robot_fault")))
+    fault = rig.seen.of("robot_fault")[0].payload
+    assert fault["kind"] == "bumper" and fault["robot"] == "R1"
+    # It stops at once, then goes on and still reaches its goal.
+    assert rig.seen.of("set_velocity")[-1].payload == {"v": 0.0, "w": 0.0}
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("goal_reached")))
+    assert rig.nav.node == "hall"
+
+
+async def test_base_fault_fails_the_goal(rig: Rig) -> None:
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: len(rig.seen.of("set_velocity")) >= 3)
+    rig.bus.endpoint("base").publish("base_fault", {"reason": "motor module lost"})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("navigation_failed")))
+    assert "motor module lost" in rig.seen.of("navigation_failed")[0].payload["reason"]
+    assert rig.seen.of("robot_fault")[0].payload["kind"] == "motor_lost"
+    assert rig.seen.of("set_velocity")[-1].payload == {"v": 0.0, "w": 0.0}
+    # While the fault lasts, new goals fail at once with a clear reason.
+    rig.bus.endpoint("net2").publish("navigate_to", {"node": "hall"})
+    await rig.seen.wait_for(lambda: len(rig.seen.of("navigation_failed")) >= 2)
+    assert "base fault" in rig.seen.of("navigation_failed")[1].payload["reason"]
+
+
+async def test_unknown_node_fails_with_the_traffic_managers_reason(rig: Rig) -> None:
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "nowhere"})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("navigation_failed")))
+    assert "nowhere" in rig.seen.of("navigation_failed")[0].payload["reason"]
