@@ -63,6 +63,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.tokens = _load_tokens(settings)
         app.state.hub = Hub(
             queue_size=settings.hub_queue_size,
+            coalesce_after=settings.hub_coalesce_after,
             batch_max=settings.hub_batch_max,
             max_message_bytes=settings.hub_max_message_bytes,
         )

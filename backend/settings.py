@@ -45,6 +45,7 @@ class Settings(BaseSettings):
     web_dir: Path = WEB_DIR
     # Hub (docs/protocol.md): per-client outbound queue, batching and limits.
     hub_queue_size: int = Field(default=4096, ge=8)
+    hub_coalesce_after: int = Field(default=256, ge=0)
     hub_batch_max: int = Field(default=512, ge=1)
     hub_max_message_bytes: int = Field(default=1 << 20, ge=1024)
     log_level: str = "info"

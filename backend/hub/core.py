@@ -109,7 +109,7 @@ class RemoteClient:
         self.name = name
         self.role = role
         self.endpoint = endpoint
-        self.outbox = Outbox(hub.queue_size)
+        self.outbox = Outbox(hub.queue_size, hub.coalesce_after)
         self.patterns: dict[str, Callable[[], None]] = {}
         self.last_message: Message | None = None
         self.state = ClientState.OPEN
@@ -191,10 +191,16 @@ class Hub:
     """JCentral: one bus for in-process modules and WebSocket clients (docs/protocol.md)."""
 
     def __init__(
-        self, *, queue_size: int = 4096, batch_max: int = 512, max_message_bytes: int = 1 << 20
+        self,
+        *,
+        queue_size: int = 4096,
+        coalesce_after: int = 256,
+        batch_max: int = 512,
+        max_message_bytes: int = 1 << 20,
     ) -> None:
         self.bus = HubBus()
         self.queue_size = queue_size
+        self.coalesce_after = coalesce_after
         self.batch_max = batch_max
         self.max_message_bytes = max_message_bytes
         self.refused = 0

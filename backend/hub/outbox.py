@@ -1,10 +1,11 @@
 """The bounded outbound queue of one hub client, with the overflow rule of docs/protocol.md.
 
-Rule: a message with a coalescing key (robot_state: the robot's name) replaces the queued
-message with the same key in place, so a slow GUI always gets the newest state of every robot
-and never an old one. Any other message that finds the queue full raises ``OutboxOverflow``:
-the hub then disconnects that client with close code 4008 and a reason. Nothing else is ever
-dropped silently.
+Rule: while the client keeps up (fewer than ``coalesce_after`` messages queued) every message is
+sent. Once it falls behind, a message with a coalescing key (robot_state: the robot's name)
+replaces the newest queued message with the same key in place, so a slow GUI gets the newest
+state of every robot and the queue stops growing. Any other message that finds the queue full
+raises ``OutboxOverflow``: the hub then disconnects that client with close code 4008 and a
+reason. Nothing else is ever dropped silently.
 """
 
 from __future__ import annotations
@@ -22,10 +23,11 @@ class OutboxOverflow(Exception):
 class Outbox:
     """Serialised messages waiting for one client's writer task."""
 
-    def __init__(self, maxsize: int) -> None:
+    def __init__(self, maxsize: int, coalesce_after: int | None = None) -> None:
         if maxsize < 1:
             raise ValueError("an outbox needs room for at least one message")
         self.maxsize = maxsize
+        self.coalesce_after = maxsize // 8 if coalesce_after is None else coalesce_after
         self._items: deque[list[bytes | str | None]] = deque()
         self._by_key: dict[str, list[bytes | str | None]] = {}
         self._ready = asyncio.Event()
@@ -38,7 +40,7 @@ class Outbox:
 
     def put(self, data: bytes, key: str | None = None) -> None:
         """Queue one message; raises OutboxOverflow when full and ``data`` cannot merge."""
-        if key is not None:
+        if key is not None and len(self._items) >= self.coalesce_after:
             entry = self._by_key.get(key)
             if entry is not None:
                 entry[1] = data
@@ -69,8 +71,9 @@ class Outbox:
         batch: list[bytes] = []
         items = self._items
         while items and len(batch) < max_items:
-            key, data = items.popleft()
-            if key is not None:
+            entry = items.popleft()
+            key = entry[0]
+            if key is not None and self._by_key.get(key) is entry:  # type: ignore[arg-type]
                 del self._by_key[key]  # type: ignore[arg-type]
-            batch.append(data)  # type: ignore[arg-type]
+            batch.append(entry[1])  # type: ignore[arg-type]
         return batch

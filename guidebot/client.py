@@ -1,0 +1,508 @@
+"""Client library of the JCentral hub: what robot agents, the building simulator and external
+modules use to talk to the central server over WebSocket.
+
+``HubClient`` satisfies ``guidebot.bus.BusEndpoint`` (publish, send, subscribe, request), so a
+module written against the in-process bus runs unchanged against the hub::
+
+    async with HubClient("ws://127.0.0.1:8000/ws", token) as hub:
+        hub.subscribe("task_*", on_task)
+        reply = await hub.request("get_path", {...}, timeout=2.0)
+
+Behaviour (docs/protocol.md, "Client library"):
+- heartbeats: a ``ping`` every ``heartbeat_interval``; no frame at all for ``heartbeat_timeout``
+  means the server is dead: the connection is dropped and re-established;
+- reconnect with exponential back-off (``backoff_initial`` doubling up to ``backoff_max``, with
+  jitter); subscriptions are sent again and ``on_connect`` callbacks run after every connection
+  (resynchronise there);
+- outgoing messages wait in one bounded queue (``queue_size``) while disconnected and are flushed
+  in order on reconnect. Overflow rule: a robot_state replaces the queued robot_state of the same
+  source; otherwise the oldest queued message is dropped, counted in ``dropped`` and logged;
+- close codes 4000 (replaced), 4001 (bad token) and 4003 (forbidden) are final: no reconnect,
+  ``failure`` says why.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import fnmatch
+import inspect
+import logging
+import random
+from collections import deque
+from collections.abc import Awaitable, Callable
+from typing import Any
+from urllib.parse import urlencode, urlsplit, urlunsplit
+
+import orjson
+from pydantic_core import to_jsonable_python
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed, InvalidHandshake
+
+from guidebot.bus import Handler, RequestTimeout, is_wildcard
+from guidebot.messages import Message
+
+__all__ = ["FINAL_CLOSE_CODES", "HubClient", "HubClosed", "HubError", "HubRefused"]
+
+log = logging.getLogger(__name__)
+
+FINAL_CLOSE_CODES = frozenset({4000, 4001, 4003})
+"""Close codes after which reconnecting would not help (or would fight another connection)."""
+
+_COALESCED = frozenset({"robot_state"})
+_BATCH_MAX = 256
+
+
+class HubError(Exception):
+    """The hub refused a message (an ``error`` reply); ``code`` is the protocol's error code."""
+
+    def __init__(self, code: str, reason: str) -> None:
+        super().__init__(f"{code}: {reason}")
+        self.code = code
+        self.reason = reason
+
+
+class HubRefused(ConnectionError):
+    """The hub closed the connection for good (bad token, forbidden name, replaced)."""
+
+    def __init__(self, code: int, reason: str) -> None:
+        super().__init__(f"hub closed the connection ({code}): {reason}")
+        self.code = code
+        self.reason = reason
+
+
+class HubClosed(ConnectionError):
+    """The client was closed, or could not connect in time."""
+
+
+def _encode(message: Message) -> bytes:
+    return orjson.dumps(message.__dict__, default=to_jsonable_python)
+
+
+OnConnect = Callable[[], Awaitable[None] | None]
+
+
+class HubClient:
+    """A named client of the hub over WebSocket, with heartbeats and reconnection."""
+
+    def __init__(
+        self,
+        url: str,
+        token: str,
+        *,
+        name: str | None = None,
+        heartbeat_interval: float = 5.0,
+        heartbeat_timeout: float = 15.0,
+        backoff_initial: float = 0.2,
+        backoff_max: float = 10.0,
+        queue_size: int = 1000,
+        connect_timeout: float | None = 10.0,
+        max_size: int = 16 * 1024 * 1024,
+    ) -> None:
+        if queue_size < 1:
+            raise ValueError("queue_size must be at least 1")
+        self.url = url
+        self.name = name or ""
+        self.role = ""
+        self.heartbeat_interval = heartbeat_interval
+        self.heartbeat_timeout = heartbeat_timeout
+        self.backoff_initial = backoff_initial
+        self.backoff_max = backoff_max
+        self.queue_size = queue_size
+        self.connect_timeout = connect_timeout
+        self.connected = asyncio.Event()
+        self.failure: HubRefused | None = None
+        self.last_error: HubError | None = None
+        self.dropped = 0
+        self.connections = 0
+        self._token = token
+        self._requested_name = name
+        self._max_size = max_size
+        self._exact: dict[str, list[Handler]] = {}
+        self._wild: list[tuple[str, Handler]] = []
+        self._patterns: dict[str, int] = {}
+        self._pending: dict[str, asyncio.Future[Message]] = {}
+        self._on_connect: list[OnConnect] = []
+        self._out: deque[list[Any]] = deque()
+        self._out_by_key: dict[str, list[Any]] = {}
+        self._out_ready = asyncio.Event()
+        self._ws: ClientConnection | None = None
+        self._runner: asyncio.Task[None] | None = None
+        self._closing = False
+        self._last_seen = 0.0
+
+    # -- life cycle ---------------------------------------------------------------------------
+    async def __aenter__(self) -> HubClient:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.close()
+
+    async def start(self) -> None:
+        """Start connecting; waits ``connect_timeout`` for the first connection (None: no wait)."""
+        if self._runner is None:
+            self._runner = asyncio.create_task(self._run(), name=f"hub-client-{self.name}")
+        if self.connect_timeout is None:
+            return
+        done = asyncio.ensure_future(self.connected.wait())
+        try:
+            await asyncio.wait(
+                {done, self._runner},
+                timeout=self.connect_timeout,
+                return_when=asyncio.FIRST_COMPLETED,
+            )
+        finally:
+            done.cancel()
+        if not self.connected.is_set():
+            failure = self.failure
+            await self.close(flush=False)
+            if failure is not None:
+                raise failure
+            raise HubClosed(f"no connection to {self.url} within {self.connect_timeout} s")
+
+    async def close(self, *, flush: bool = True, flush_timeout: float = 2.0) -> None:
+        """Send what is queued (if connected, up to ``flush_timeout``), then disconnect."""
+        if flush and self.connected.is_set() and self._out:
+            with contextlib.suppress(TimeoutError, RequestTimeout, HubError):
+                await self.sync(timeout=flush_timeout)
+        self._closing = True
+        ws = self._ws
+        if ws is not None:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(ws.close(), flush_timeout)
+        runner, self._runner = self._runner, None
+        if runner is not None:
+            runner.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await runner
+        for future in self._pending.values():
+            if not future.done():
+                future.cancel()
+        self._pending.clear()
+        self.connected.clear()
+
+    def on_connect(self, callback: OnConnect) -> Callable[[], None]:
+        """Run ``callback`` after every (re)connection, subscriptions already restored."""
+        self._on_connect.append(callback)
+        return lambda: self._on_connect.remove(callback) if callback in self._on_connect else None
+
+    # -- BusEndpoint ----------------------------------------------------------------------------
+    def publish(
+        self,
+        type: str,
+        payload: dict[str, Any] | None = None,
+        *,
+        destination: str | None = None,
+        correlation_id: str | None = None,
+    ) -> Message:
+        message = Message(
+            type=type,
+            source=self.name,
+            destination=destination,
+            correlation_id=correlation_id,
+            payload=payload or {},
+        )
+        self._enqueue(message)
+        return message
+
+    def send(self, message: Message) -> None:
+        """Send a ready-made message; the hub stamps this client's name as its source."""
+        if message.source != self.name:
+            message = message.model_copy(update={"source": self.name})
+        self._enqueue(message)
+
+    def reply(self, request: Message, type: str, payload: dict[str, Any] | None = None) -> Message:
+        message = request.reply(type, payload, source=self.name)
+        self._enqueue(message)
+        return message
+
+    def subscribe(self, pattern: str, handler: Handler) -> Callable[[], None]:
+        """Call ``handler`` for messages whose type matches; returns the unsubscribe function.
+
+        The subscription reaches the hub asynchronously; ``await sync()`` to know it is active.
+        Messages addressed to this client arrive whether or not a pattern matches them, but
+        only handlers whose pattern matches are called.
+        """
+        wild = is_wildcard(pattern)
+        entry = (pattern, handler)
+        if wild:
+            self._wild.append(entry)
+        else:
+            self._exact.setdefault(pattern, []).append(handler)
+        self._patterns[pattern] = self._patterns.get(pattern, 0) + 1
+        if self._patterns[pattern] == 1 and self.connected.is_set():
+            self._control("subscribe", [pattern])
+        removed = False
+
+        def unsubscribe() -> None:
+            nonlocal removed
+            if removed:
+                return
+            removed = True
+            if wild:
+                self._wild.remove(entry)
+            else:
+                handlers = self._exact[pattern]
+                handlers.remove(handler)
+                if not handlers:
+                    del self._exact[pattern]
+            self._patterns[pattern] -= 1
+            if not self._patterns[pattern]:
+                del self._patterns[pattern]
+                if self.connected.is_set():
+                    self._control("unsubscribe", [pattern])
+
+        return unsubscribe
+
+    async def request(
+        self,
+        type: str,
+        payload: dict[str, Any] | None = None,
+        *,
+        destination: str | None = None,
+        timeout: float = 2.0,
+    ) -> Message:
+        """Send and wait for the message correlated to it; an ``error`` reply raises HubError."""
+        message = Message(
+            type=type, source=self.name, destination=destination, payload=payload or {}
+        )
+        future: asyncio.Future[Message] = asyncio.get_running_loop().create_future()
+        self._pending[message.id] = future
+        try:
+            self._enqueue(message)
+            reply = await asyncio.wait_for(future, timeout)
+        except TimeoutError:
+            raise RequestTimeout(f"no reply to {type!r} within {timeout} s") from None
+        finally:
+            self._pending.pop(message.id, None)
+        if reply.type == "error" and reply.source == "hub":
+            raise HubError(str(reply.payload.get("code")), str(reply.payload.get("reason")))
+        return reply
+
+    async def sync(self, timeout: float = 5.0) -> None:
+        """Round trip through the hub: everything sent before (subscriptions too) is applied."""
+        await self.request("ping", timeout=timeout)
+
+    # -- outgoing queue -------------------------------------------------------------------------
+    def _enqueue(self, message: Message) -> None:
+        if self._closing:
+            raise HubClosed("the hub client is closed")
+        # Coalesce only while offline: when connected every state is sent (seq has no gaps).
+        coalesce = message.type in _COALESCED and not self.connected.is_set()
+        key = message.source if coalesce else None
+        data = _encode(message)
+        if key is not None:
+            entry = self._out_by_key.get(key)
+            if entry is not None:
+                entry[1] = data
+                return
+        if len(self._out) >= self.queue_size:
+            old_key, _ = self._out.popleft()
+            if old_key is not None:
+                self._out_by_key.pop(old_key, None)
+            self.dropped += 1
+            log.warning("%s: outgoing queue full, oldest message dropped", self.name)
+        entry = [key, data]
+        self._out.append(entry)
+        if key is not None:
+            self._out_by_key[key] = entry
+        if not self._out_ready.is_set():
+            self._out_ready.set()
+
+    def _control(self, type: str, patterns: list[str]) -> None:
+        self._enqueue(Message(type=type, source=self.name, payload={"patterns": patterns}))
+
+    async def _writer(self, ws: ClientConnection) -> None:
+        out = self._out
+        while True:
+            while not out:
+                self._out_ready.clear()
+                await self._out_ready.wait()
+            batch = []
+            while out and len(batch) < _BATCH_MAX:
+                entry = out.popleft()
+                if entry[0] is not None:
+                    self._out_by_key.pop(entry[0], None)
+                batch.append(entry)
+            data = batch[0][1] if len(batch) == 1 else b"[" + b",".join(e[1] for e in batch) + b"]"
+            try:
+                await ws.send(data, text=True)
+            except BaseException:
+                # Not sent: put back in order, the next connection sends them.
+                for entry in reversed(batch):
+                    out.appendleft(entry)
+                    if entry[0] is not None and entry[0] not in self._out_by_key:
+                        self._out_by_key[entry[0]] = entry
+                raise
+
+    # -- connection -----------------------------------------------------------------------------
+    def _connect_url(self) -> str:
+        if not self._requested_name:
+            return self.url
+        parts = urlsplit(self.url)
+        query = "&".join(q for q in (parts.query, urlencode({"name": self._requested_name})) if q)
+        return urlunsplit(parts._replace(query=query))
+
+    async def _run(self) -> None:
+        delay = self.backoff_initial
+        while not self._closing:
+            try:
+                ws = await connect(
+                    self._connect_url(),
+                    additional_headers={"Authorization": f"Bearer {self._token}"},
+                    compression=None,
+                    proxy=None,
+                    ping_interval=None,
+                    open_timeout=max(self.heartbeat_timeout, 5.0),
+                    close_timeout=2.0,
+                    max_size=self._max_size,
+                )
+            except (OSError, InvalidHandshake, TimeoutError) as exc:
+                log.info("hub %s unreachable (%r); retrying in %.1f s", self.url, exc, delay)
+            else:
+                try:
+                    welcomed = await self._session(ws)
+                except HubRefused as exc:
+                    self.failure = exc
+                    log.error("%s", exc)
+                    return
+                if welcomed:
+                    delay = self.backoff_initial
+            if self._closing:
+                return
+            await asyncio.sleep(delay * random.uniform(0.8, 1.2))
+            delay = min(delay * 2, self.backoff_max)
+
+    async def _session(self, ws: ClientConnection) -> bool:
+        """One connection: welcome, resubscribe, then read until it drops. True if welcomed."""
+        self._ws = ws
+        loop = asyncio.get_running_loop()
+        tasks: list[asyncio.Task[None]] = []
+        try:
+            first = await asyncio.wait_for(ws.recv(), self.heartbeat_timeout)
+            welcome = orjson.loads(first)
+            if not isinstance(welcome, dict) or welcome.get("type") != "welcome":
+                raise ConnectionError(f"expected welcome, got {first[:200]!r}")
+            self.name = welcome["payload"]["name"]
+            self.role = welcome["payload"]["role"]
+            self._last_seen = loop.time()
+            if self._patterns:
+                sub = Message(
+                    type="subscribe", source=self.name, payload={"patterns": list(self._patterns)}
+                )
+                await ws.send(_encode(sub), text=True)
+            self.connections += 1
+            self.connected.set()
+            tasks = [
+                asyncio.create_task(self._writer(ws), name=f"hub-writer-{self.name}"),
+                asyncio.create_task(self._heartbeat(ws), name=f"hub-heartbeat-{self.name}"),
+            ]
+            for callback in list(self._on_connect):
+                tasks.append(asyncio.create_task(self._run_callback(callback)))
+            with contextlib.suppress(ConnectionClosed):
+                await self._read(ws, tasks[:2])
+            self._check_close(ws)
+            return True
+        except ConnectionClosed:
+            self._check_close(ws)
+            return False
+        except (OSError, TimeoutError, ConnectionError, ValueError) as exc:
+            log.warning("%s: hub session failed: %r", self.name or "client", exc)
+            return False
+        finally:
+            self.connected.clear()
+            self._ws = None
+            for task in tasks:
+                task.cancel()
+            for task in tasks:
+                with contextlib.suppress(BaseException):
+                    await task
+            if ws.transport is not None:
+                ws.transport.abort()
+
+    def _check_close(self, ws: ClientConnection) -> None:
+        """Raise HubRefused if the hub closed with a final code; otherwise log and go on."""
+        rcvd = ws.protocol.close_rcvd
+        code = rcvd.code if rcvd is not None else None
+        reason = rcvd.reason if rcvd is not None else ""
+        if code in FINAL_CLOSE_CODES:
+            raise HubRefused(code, reason)
+        if not self._closing:
+            log.warning("%s: connection to the hub lost (%s %s)", self.name, code, reason)
+
+    async def _read(self, ws: ClientConnection, workers: list[asyncio.Task[None]]) -> None:
+        loop = asyncio.get_running_loop()
+        receiver = asyncio.ensure_future(self._receive_loop(ws, loop))
+        try:
+            done, _ = await asyncio.wait({receiver, *workers}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            receiver.cancel()
+            with contextlib.suppress(BaseException):
+                await receiver
+        for task in done:
+            if not task.cancelled() and task.exception() is not None:
+                raise task.exception()  # type: ignore[misc]
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(ws.wait_closed(), 2.0)
+
+    async def _receive_loop(self, ws: ClientConnection, loop: asyncio.AbstractEventLoop) -> None:
+        async for frame in ws:
+            self._last_seen = loop.time()
+            try:
+                data = orjson.loads(frame)
+            except orjson.JSONDecodeError:
+                log.warning("%s: hub sent a frame that is not JSON", self.name)
+                continue
+            if isinstance(data, list):
+                for item in data:
+                    self._dispatch(item)
+            else:
+                self._dispatch(data)
+
+    async def _heartbeat(self, ws: ClientConnection) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(self.heartbeat_interval)
+            if loop.time() - self._last_seen > self.heartbeat_timeout:
+                log.warning(
+                    "%s: no frame from the hub for %.1f s: dropping the connection",
+                    self.name,
+                    loop.time() - self._last_seen,
+                )
+                ws.transport.abort()
+                return
+            self._enqueue(Message(type="ping", source=self.name))
+
+    async def _run_callback(self, callback: OnConnect) -> None:
+        try:
+            result = callback()
+            if inspect.isawaitable(result):
+                await result
+        except Exception:
+            log.exception("%s: on_connect callback failed", self.name)
+
+    def _dispatch(self, data: Any) -> None:
+        if not isinstance(data, dict):
+            return
+        try:
+            message = Message.model_construct(**data)
+        except TypeError:
+            return
+        if message.correlation_id is not None:
+            future = self._pending.get(message.correlation_id)
+            if future is not None and not future.done():
+                future.set_result(message)
+        if message.type == "error" and message.source == "hub":
+            payload = message.payload or {}
+            self.last_error = HubError(str(payload.get("code")), str(payload.get("reason")))
+            log.warning("%s: hub refused a message: %s", self.name, self.last_error)
+        handlers: list[Handler] = list(self._exact.get(message.type, ()))
+        for pattern, handler in self._wild:
+            if fnmatch.fnmatchcase(message.type, pattern):
+                handlers.append(handler)
+        for handler in handlers:
+            try:
+                handler(message)
+            except Exception:
+                log.exception("%s: handler for %r failed", self.name, message.type)
