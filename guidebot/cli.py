@@ -13,10 +13,13 @@ from typing import Any
 import click
 
 COMMANDS: dict[str, str] = {
+    "petri": "petri_nets.cli:petri",
     "server": "backend.server_cli:server",
 }
 
-BENCHMARKS: dict[str, str] = {}
+BENCHMARKS: dict[str, str] = {
+    "petri": "bench.petri:main",
+}
 
 
 class LazyGroup(click.Group):

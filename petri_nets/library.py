@@ -86,6 +86,16 @@ class NetLibrary:
         self._entries[name] = entry
         return entry
 
+    def add_file(self, path: str | Path) -> str:
+        """Add a net that lives outside the folder (``guidebot petri run FILE``); its name."""
+        path = Path(path)
+        self._load(path.stem, path)
+        return path.stem
+
+    def problems_of(self, name: str) -> list[Problem]:
+        entry = self._entries.get(name)
+        return list(entry.problems) if entry else []
+
     def names(self) -> list[str]:
         return sorted(name for name, e in self._entries.items() if e.net is not None)
 
