@@ -1,0 +1,245 @@
+"""The server's persistence: a write-behind store for tasks, history and events, plus the
+site document.
+
+Bus handlers must not block, so ``record`` and ``record_event`` only queue; a background task
+writes batches in one transaction each. Overflow rule: task snapshots coalesce per task (the
+latest wins, so they are bounded by the number of tasks); history and event rows are bounded
+by ``max_pending`` and the oldest unwritten ones are dropped (counted in ``dropped``, logged).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections import deque
+from typing import Any
+
+from sqlalchemy import func, select
+
+from backend.db.models import EventRow, SiteRow, TaskHistoryRow, TaskRow
+from backend.tasks.model import FINAL_STATES, Task, TaskState
+
+__all__ = ["DbStore"]
+
+log = logging.getLogger(__name__)
+
+TASK_FIELDS = (
+    "kind",
+    "params",
+    "priority",
+    "requester",
+    "seq",
+    "robot",
+    "pinned_robot",
+    "internal",
+    "net",
+    "reason",
+    "created_at",
+    "updated_at",
+    "started_at",
+    "ended_at",
+)
+
+
+class DbStore:
+    def __init__(self, sessionmaker: Any, *, max_pending: int = 100_000) -> None:
+        self.sessionmaker = sessionmaker
+        self.max_pending = max_pending
+        self._tasks: dict[str, dict[str, Any]] = {}
+        self._history: deque[dict[str, Any]] = deque()
+        self._events: deque[dict[str, Any]] = deque()
+        self._wake = asyncio.Event()
+        self._writer: asyncio.Task[None] | None = None
+        self._flush_lock = asyncio.Lock()
+        self.dropped = 0
+        self.written = 0
+
+    # --- write-behind --------------------------------------------------------------------
+    def record(self, task: Task, event: str) -> None:
+        """A task changed: its snapshot and one history row."""
+        snapshot = {f: getattr(task, f) for f in TASK_FIELDS}
+        snapshot["params"] = dict(task.params)
+        snapshot["state"] = task.state.value
+        self._tasks[task.id] = snapshot
+        self._append(
+            self._history,
+            {
+                "task_id": task.id,
+                "at": task.updated_at,
+                "event": event,
+                "state": task.state.value,
+                "robot": task.robot,
+                "reason": task.reason,
+            },
+        )
+        self.record_event(
+            "task_" + event,
+            "task_manager",
+            {"task_id": task.id, "state": task.state.value, "robot": task.robot},
+        )
+
+    def record_event(self, kind: str, source: str, data: dict[str, Any]) -> None:
+        self._append(
+            self._events, {"at": time.time(), "kind": kind[:64], "source": source, "data": data}
+        )
+
+    def _append(self, rows: deque[dict[str, Any]], row: dict[str, Any]) -> None:
+        if len(rows) >= self.max_pending:
+            rows.popleft()
+            self.dropped += 1
+            if self.dropped == 1 or self.dropped % 1000 == 0:
+                log.error("database writer behind: %d rows dropped so far", self.dropped)
+        rows.append(row)
+        self._wake.set()
+
+    def start(self) -> None:
+        self._writer = asyncio.get_running_loop().create_task(self._run(), name="db-writer")
+
+    async def stop(self) -> None:
+        """Stop the writer and write what is pending."""
+        if self._writer is not None:
+            self._writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._writer
+            self._writer = None
+        await self.flush()
+
+    async def _run(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            try:
+                await self.flush()
+            except Exception:
+                log.exception("database write failed; retrying in 1 s")
+                await asyncio.sleep(1.0)
+                self._wake.set()
+
+    async def flush(self) -> None:
+        async with self._flush_lock:
+            if not (self._tasks or self._history or self._events):
+                return
+            tasks, self._tasks = self._tasks, {}
+            history = list(self._history)
+            events = list(self._events)
+            try:
+                async with self.sessionmaker() as session, session.begin():
+                    if tasks:
+                        rows = (
+                            await session.execute(select(TaskRow).where(TaskRow.id.in_(tasks)))
+                        ).scalars()
+                        existing = {row.id: row for row in rows}
+                        for task_id, snap in tasks.items():
+                            row = existing.get(task_id)
+                            if row is None:
+                                session.add(TaskRow(id=task_id, **snap))
+                            else:
+                                for key, value in snap.items():
+                                    setattr(row, key, value)
+                    session.add_all(TaskHistoryRow(**h) for h in history)
+                    session.add_all(EventRow(**e) for e in events)
+            except Exception:
+                for task_id, snap in tasks.items():
+                    self._tasks.setdefault(task_id, snap)
+                raise
+            for _ in history:
+                self._history.popleft()
+            for _ in events:
+                self._events.popleft()
+            self.written += len(tasks) + len(history) + len(events)
+
+    # --- reads ---------------------------------------------------------------------------
+    async def load_open_tasks(self) -> list[Task]:
+        """Tasks not yet finished, for the Task Manager after a restart."""
+        finals = [s.value for s in FINAL_STATES]
+        async with self.sessionmaker() as session:
+            rows = (
+                await session.execute(select(TaskRow).where(TaskRow.state.not_in(finals)))
+            ).scalars()
+            return [_task(row) for row in rows]
+
+    async def max_seq(self) -> int:
+        async with self.sessionmaker() as session:
+            return int((await session.execute(select(func.max(TaskRow.seq)))).scalar() or 0)
+
+    async def task(self, task_id: str) -> Task | None:
+        async with self.sessionmaker() as session:
+            row = await session.get(TaskRow, task_id)
+            return _task(row) if row is not None else None
+
+    async def history(self, task_id: str) -> list[dict[str, Any]]:
+        await self.flush()
+        async with self.sessionmaker() as session:
+            rows = (
+                await session.execute(
+                    select(TaskHistoryRow)
+                    .where(TaskHistoryRow.task_id == task_id)
+                    .order_by(TaskHistoryRow.id)
+                )
+            ).scalars()
+            return [
+                {
+                    "at": r.at,
+                    "event": r.event,
+                    "state": r.state,
+                    "robot": r.robot,
+                    "reason": r.reason,
+                }
+                for r in rows
+            ]
+
+    async def events(
+        self, *, after_id: int = 0, limit: int = 100, kind: str | None = None
+    ) -> list[dict[str, Any]]:
+        await self.flush()
+        query = select(EventRow).where(EventRow.id > after_id)
+        if kind:
+            query = query.where(EventRow.kind == kind)
+        async with self.sessionmaker() as session:
+            rows = (await session.execute(query.order_by(EventRow.id).limit(limit))).scalars()
+            return [
+                {"id": r.id, "at": r.at, "kind": r.kind, "source": r.source, "data": r.data}
+                for r in rows
+            ]
+
+    async def load_site(self) -> tuple[int, dict[str, Any]] | None:
+        async with self.sessionmaker() as session:
+            row = await session.get(SiteRow, 1)
+            return (row.version, row.data) if row is not None else None
+
+    async def save_site(self, data: dict[str, Any]) -> int:
+        """Store a new site document; returns its version."""
+        async with self.sessionmaker() as session, session.begin():
+            row = await session.get(SiteRow, 1)
+            if row is None:
+                row = SiteRow(id=1, version=1, data=data, updated_at=time.time())
+                session.add(row)
+            else:
+                row.version += 1
+                row.data = data
+                row.updated_at = time.time()
+            return row.version
+
+
+def _task(row: TaskRow) -> Task:
+    task = Task(
+        id=row.id,
+        kind=row.kind,
+        params=dict(row.params or {}),
+        priority=row.priority,
+        requester=row.requester,
+        seq=row.seq,
+        state=TaskState(row.state),
+        robot=row.robot,
+        pinned_robot=row.pinned_robot,
+        internal=row.internal,
+        net=row.net,
+        reason=row.reason,
+        created_at=row.created_at,
+        updated_at=row.updated_at,
+        started_at=row.started_at,
+        ended_at=row.ended_at,
+    )
+    return task
