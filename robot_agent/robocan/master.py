@@ -1,0 +1,574 @@
+"""The RoboCAN master: discovers modules from their frames, queries and configures them,
+loads their drivers, watches their time-outs and routes data frames (RoboCAN paper, section 6).
+
+Receiving is split in two so that no module can starve another: python-can's reader thread
+only sorts frames into one bounded queue per CAN ID (overflow rule: the oldest frame is dropped
+and counted), and one asyncio task drains the queues round-robin.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import enum
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+
+from guidebot.bus import BusEndpoint
+from robot_agent.robocan import protocol as p
+from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
+from robot_agent.robocan.drivers import Driver, DriverConfig, DriverRegistry, UnknownDriver
+
+__all__ = ["CommandFailed", "IllegalTransition", "Master", "Module", "ModuleState"]
+
+log = logging.getLogger(__name__)
+
+QUEUE_PER_ID = 256  # frames buffered per CAN ID before the oldest is dropped
+DRAIN_BATCH = 16  # frames taken from one ID before moving to the next (fairness)
+QUERY_ATTEMPTS = 3
+RETRY_FAILED_S = 1.0
+
+
+class ModuleState(enum.Enum):
+    QUERYING = "querying"
+    CONFIGURING = "configuring"
+    ONLINE = "online"
+    LOST = "lost"
+    FAILED = "failed"
+
+
+TRANSITIONS: dict[ModuleState, frozenset[ModuleState]] = {
+    ModuleState.QUERYING: frozenset(
+        {ModuleState.CONFIGURING, ModuleState.LOST, ModuleState.FAILED}
+    ),
+    ModuleState.CONFIGURING: frozenset(
+        {ModuleState.ONLINE, ModuleState.LOST, ModuleState.FAILED, ModuleState.QUERYING}
+    ),
+    ModuleState.ONLINE: frozenset({ModuleState.LOST, ModuleState.QUERYING}),
+    ModuleState.LOST: frozenset({ModuleState.QUERYING}),
+    ModuleState.FAILED: frozenset({ModuleState.QUERYING, ModuleState.LOST}),
+}
+
+
+class IllegalTransition(RuntimeError):
+    def __init__(self, module_id: int, current: ModuleState, target: ModuleState) -> None:
+        allowed = ", ".join(sorted(s.value for s in TRANSITIONS[current]))
+        super().__init__(
+            f"module 0x{module_id:02X}: {current.value} -> {target.value} is illegal "
+            f"(expected one of: {allowed})"
+        )
+
+
+class CommandFailed(RuntimeError):
+    """A module did not acknowledge a command after all retries, or refused it."""
+
+
+@dataclass(eq=False)
+class Module:
+    """The master's view of one slave module (an entry of the module table)."""
+
+    module_id: int
+    state: ModuleState = ModuleState.QUERYING
+    description: p.Description | None = None
+    last_seen: float = field(default_factory=time.monotonic)
+    first_seen: float = field(default_factory=time.monotonic)
+    online_since: float | None = None
+    slave_state: p.SlaveState | None = None
+    frames_rx: int = 0
+    frames_tx: int = 0
+    errors: int = 0
+    drivers: list[Driver] = field(default_factory=list)
+    routes: dict[int, list[Driver]] = field(default_factory=dict)
+    watchdog_s: float = p.WATCHDOG_PERIOD_S
+    retry_at: float = 0.0
+    announced: bool = False
+
+    @property
+    def name(self) -> str:
+        return self.description.name if self.description else f"module_{self.module_id:02x}"
+
+    @property
+    def critical(self) -> bool:
+        return any(d.critical for d in self.drivers)
+
+    @property
+    def lost_timeout_s(self) -> float:
+        return self.watchdog_s * p.LOST_TIMEOUT_FACTOR
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "module_id": self.module_id,
+            "name": self.name,
+            "state": self.state.value,
+            "critical": self.critical,
+            "elements": [e.kind_name for e in self.description.elements]
+            if self.description
+            else [],
+            "frames_rx": self.frames_rx,
+            "frames_tx": self.frames_tx,
+            "errors": self.errors,
+        }
+
+
+@dataclass
+class Counters:
+    """Everything odd the master saw on the bus; never a reason to stop."""
+
+    frames_rx: int = 0
+    frames_tx: int = 0
+    unknown_id: int = 0
+    bad_frame: int = 0
+    overflow: int = 0
+    block_errors: int = 0
+    send_errors: int = 0
+    driver_errors: int = 0
+
+
+class Master:
+    """One master per CAN bus. Start with ``await start()``, stop with ``await stop()``."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        endpoint: BusEndpoint,
+        *,
+        config: DriverConfig | None = None,
+        registry: DriverRegistry | None = None,
+        recorder: can.Listener | None = None,
+        announce: bool = True,
+    ) -> None:
+        self.bus = bus
+        self.endpoint = endpoint
+        self.config = config or DriverConfig()
+        self.registry = registry or DriverRegistry()
+        self.recorder = recorder
+        self.announce = announce
+        self.modules: dict[int, Module] = {}
+        self.counters = Counters()
+        self.drivers: dict[type[Driver], Driver] = {}
+        self._queues: dict[int, collections.deque[can.Message]] = {}
+        self._queue_lock = threading.Lock()
+        self._record_lock = threading.Lock()
+        self._wake = asyncio.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._notifier: can.Notifier | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._bring_up: dict[int, asyncio.Task[None]] = {}
+        self._acks: dict[tuple[int, int, int], asyncio.Future[int]] = {}
+        self._descriptions: dict[int, asyncio.Future[bytes]] = {}
+        self._receivers: dict[int, tuple[BlockReceiver, float]] = {}
+        self._senders: dict[int, tuple[BlockSender, asyncio.Event]] = {}
+        self._last_warning: dict[str, float] = {}
+        self.running = False
+
+    # --- life cycle -------------------------------------------------------------------
+
+    async def start(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self.running = True
+        self._notifier = can.Notifier(self.bus, [self._on_frame_thread], timeout=0.05)
+        self._tasks = [
+            asyncio.create_task(self._drain(), name="robocan-drain"),
+            asyncio.create_task(self._supervise(), name="robocan-supervise"),
+        ]
+        if self.announce:
+            # Every slave drops to DISABLED and is re-queried: a restarted master never
+            # inherits motors it did not command itself.
+            self.send(p.BROADCAST_ID, bytes([p.Op.MASTER_START]))
+
+    async def stop(self) -> None:
+        if not self.running:
+            return
+        self.running = False
+        for task in [*self._bring_up.values(), *self._tasks]:
+            task.cancel()
+        for task in [*self._bring_up.values(), *self._tasks]:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        self._bring_up.clear()
+        if self._notifier is not None:
+            await asyncio.to_thread(self._notifier.stop, 1.0)
+        for driver in self.drivers.values():
+            driver.close()
+
+    # --- sending ----------------------------------------------------------------------
+
+    def send(self, can_id: int, data: bytes) -> bool:
+        """Put one frame on the bus; a send error is counted and logged, never raised."""
+        msg = can.Message(
+            arbitration_id=can_id, data=data, is_extended_id=False, timestamp=time.time()
+        )
+        try:
+            self.bus.send(msg, timeout=0.05)
+        except can.CanError as exc:
+            self.counters.send_errors += 1
+            self._warn("send", f"send to 0x{can_id:03X} failed: {exc}")
+            return False
+        self.counters.frames_tx += 1
+        module = self.modules.get(can_id - 1)
+        if module is not None:
+            module.frames_tx += 1
+        if self.recorder is not None:
+            with self._record_lock:
+                self.recorder.on_message_received(msg)
+        return True
+
+    def send_to(self, module_id: int, data: bytes) -> bool:
+        return self.send(module_id + 1, data)
+
+    async def command(
+        self, module_id: int, data: bytes, *, retries: int = p.COMMAND_RETRIES
+    ) -> None:
+        """Send a configuration command and wait for its ACK; raises CommandFailed."""
+        element = data[1] if len(data) > 1 else p.MODULE
+        key = (module_id, data[0], element)
+        assert self._loop is not None
+        for _ in range(retries):
+            future: asyncio.Future[int] = self._loop.create_future()
+            self._acks[key] = future
+            self.send_to(module_id, data)
+            try:
+                status = await asyncio.wait_for(future, p.COMMAND_TIMEOUT_S)
+            except TimeoutError:
+                continue
+            finally:
+                self._acks.pop(key, None)
+            if status != p.AckStatus.OK:
+                raise CommandFailed(
+                    f"module 0x{module_id:02X} refused 0x{data[0]:02X}: "
+                    f"{p.AckStatus(status).name if status <= max(p.AckStatus) else status}"
+                )
+            return
+        raise CommandFailed(f"module 0x{module_id:02X} did not acknowledge 0x{data[0]:02X}")
+
+    async def send_block(self, module_id: int, block_type: int, data: bytes) -> None:
+        """Master -> slave block transfer (e.g. a firing sequence); raises CommandFailed."""
+        sender = BlockSender(block_type, data)
+        done = asyncio.Event()
+        self._senders[module_id] = (sender, done)
+        try:
+            for _ in range(p.BLOCK_RETRIES):
+                self.send_to(module_id, sender.start())
+                while sender.state is BlockState.ACTIVE:
+                    done.clear()
+                    try:
+                        await asyncio.wait_for(done.wait(), p.BLOCK_TIMEOUT_S * 2)
+                    except TimeoutError:
+                        break
+                if sender.state is BlockState.DONE:
+                    return
+                sender = BlockSender(block_type, data)
+                self._senders[module_id] = (sender, done)
+            raise CommandFailed(f"block transfer to 0x{module_id:02X} failed")
+        finally:
+            self._senders.pop(module_id, None)
+
+    # --- receiving --------------------------------------------------------------------
+
+    def _on_frame_thread(self, msg: can.Message) -> None:
+        """python-can's reader thread: sort the frame into its ID's bounded queue, no more."""
+        key = (
+            -1
+            if (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame)
+            else (msg.arbitration_id)
+        )
+        with self._queue_lock:
+            queue = self._queues.get(key)
+            if queue is None:
+                queue = self._queues[key] = collections.deque(maxlen=QUEUE_PER_ID)
+            if len(queue) == QUEUE_PER_ID:
+                self.counters.overflow += 1
+            queue.append(msg)
+        if self.recorder is not None:
+            with self._record_lock:
+                self.recorder.on_message_received(msg)
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(self._wake.set)
+
+    async def _drain(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            while True:
+                batch: list[can.Message] = []
+                with self._queue_lock:
+                    for queue in self._queues.values():
+                        for _ in range(min(DRAIN_BATCH, len(queue))):
+                            batch.append(queue.popleft())
+                if not batch:
+                    break
+                for msg in batch:
+                    try:
+                        self._handle(msg)
+                    except Exception:
+                        self.counters.bad_frame += 1
+                        log.exception("robocan: frame 0x%03X broke its handler", msg.arbitration_id)
+                await asyncio.sleep(0)
+
+    def _handle(self, msg: can.Message) -> None:
+        self.counters.frames_rx += 1
+        can_id = msg.arbitration_id
+        if msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame:
+            self.counters.bad_frame += 1
+            self._warn("bad", f"ignored error/extended/remote frame 0x{can_id:X}")
+            return
+        if not p.is_module_id(can_id):
+            self.counters.unknown_id += 1
+            self._warn("id", f"ignored frame with ID 0x{can_id:03X} (not a slave ID)")
+            return
+        data = bytes(msg.data)
+        module = self.modules.get(can_id)
+        now = time.monotonic()
+        try:
+            op = p.check_length(data)
+        except p.ProtocolError as exc:
+            self.counters.bad_frame += 1
+            if module is not None:
+                module.errors += 1
+            self._warn(f"bad{can_id}", f"module 0x{can_id:02X}: {exc}")
+            return
+        if module is None:
+            module = self.modules[can_id] = Module(can_id)
+            self._start_bring_up(module)
+        module.last_seen = now
+        module.frames_rx += 1
+        if module.state is ModuleState.LOST or (
+            module.state is ModuleState.FAILED and now >= module.retry_at
+        ):
+            self._transition(module, ModuleState.QUERYING)
+            self._start_bring_up(module)
+        if op == p.Op.WATCHDOG:
+            self._on_watchdog(
+                module,
+                p.SlaveState(data[0] & 0x0F)
+                if (data[0] & 0x0F) in (0, 1)
+                else p.SlaveState.DISABLED,
+            )
+        elif op == p.Op.ACK:
+            future = self._acks.get((can_id, data[1], data[2]))
+            if future is not None and not future.done():
+                future.set_result(data[3])
+        elif op == p.Op.BLOCK_START:
+            self._on_block_start(module, data)
+        elif op == p.Op.BLOCK_DATA:
+            self._on_block_data(module, data)
+        elif op in (p.Op.BLOCK_FLOW, p.Op.BLOCK_END):
+            entry = self._senders.get(can_id)
+            if entry is None:
+                self.counters.block_errors += 1
+                return
+            sender, done = entry
+            try:
+                frames = sender.on_frame(data)
+            except p.ProtocolError as exc:
+                self.counters.block_errors += 1
+                self._warn(f"blk{can_id}", f"module 0x{can_id:02X}: {exc}")
+                return
+            for frame in frames:
+                self.send_to(can_id, frame)
+            done.set()
+        elif module.state is ModuleState.ONLINE:
+            for driver in module.routes.get(op, ()):
+                try:
+                    driver.on_frame(module, data)
+                except Exception:
+                    self.counters.driver_errors += 1
+                    log.exception("robocan: driver %s failed on a frame", type(driver).__name__)
+
+    def _on_watchdog(self, module: Module, state: p.SlaveState) -> None:
+        previous, module.slave_state = module.slave_state, state
+        if (
+            module.state is ModuleState.ONLINE
+            and state is p.SlaveState.DISABLED
+            and previous is p.SlaveState.ENABLED
+        ):
+            # It rebooted faster than its time-out: treat as lost and configure it again.
+            self._lose(module, "module reset")
+            self._transition(module, ModuleState.QUERYING)
+            self._start_bring_up(module)
+
+    def _on_block_start(self, module: Module, data: bytes) -> None:
+        try:
+            receiver = BlockReceiver(data)
+        except p.ProtocolError as exc:
+            self.counters.block_errors += 1
+            self._warn(f"blk{module.module_id}", f"module 0x{module.module_id:02X}: {exc}")
+            return
+        self._receivers[module.module_id] = (receiver, time.monotonic())
+        self.send_to(module.module_id, receiver.first_reply())
+        self._block_progress(module, receiver)
+
+    def _on_block_data(self, module: Module, data: bytes) -> None:
+        entry = self._receivers.get(module.module_id)
+        if entry is None:
+            self.counters.block_errors += 1
+            return
+        receiver = entry[0]
+        self._receivers[module.module_id] = (receiver, time.monotonic())
+        for frame in receiver.on_data(data):
+            self.send_to(module.module_id, frame)
+        self._block_progress(module, receiver)
+
+    def _block_progress(self, module: Module, receiver: BlockReceiver) -> None:
+        if receiver.state is BlockState.ACTIVE:
+            return
+        self._receivers.pop(module.module_id, None)
+        if receiver.state is BlockState.FAILED:
+            self.counters.block_errors += 1
+            self._warn(f"blk{module.module_id}", f"block from 0x{module.module_id:02X} failed")
+            return
+        if receiver.block_type == p.BlockType.DESCRIPTION:
+            future = self._descriptions.get(module.module_id)
+            if future is not None and not future.done():
+                future.set_result(receiver.data)
+
+    # --- module life cycle ------------------------------------------------------------
+
+    def _transition(self, module: Module, target: ModuleState) -> None:
+        if target not in TRANSITIONS[module.state]:
+            raise IllegalTransition(module.module_id, module.state, target)
+        module.state = target
+
+    def _start_bring_up(self, module: Module) -> None:
+        old = self._bring_up.get(module.module_id)
+        if old is not None and not old.done():
+            old.cancel()
+        self._bring_up[module.module_id] = asyncio.create_task(
+            self._run_bring_up(module), name=f"robocan-bring-up-{module.module_id:02x}"
+        )
+
+    async def _run_bring_up(self, module: Module) -> None:
+        try:
+            await self._query_and_configure(module)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            if module.state in (ModuleState.QUERYING, ModuleState.CONFIGURING):
+                self._transition(module, ModuleState.FAILED)
+                module.retry_at = time.monotonic() + RETRY_FAILED_S
+                module.errors += 1
+                log.warning("robocan: module 0x%02X failed to come up: %s", module.module_id, exc)
+
+    async def _query_and_configure(self, module: Module) -> None:
+        assert self._loop is not None
+        raw: bytes | None = None
+        for _ in range(QUERY_ATTEMPTS):
+            future: asyncio.Future[bytes] = self._loop.create_future()
+            self._descriptions[module.module_id] = future
+            self.send_to(module.module_id, bytes([p.Op.QUERY]))
+            try:
+                raw = await asyncio.wait_for(future, 1.0)
+                break
+            except TimeoutError:
+                continue
+            finally:
+                self._descriptions.pop(module.module_id, None)
+        if raw is None:
+            raise CommandFailed("no description")
+        module.description = p.Description.decode(raw)
+        self._transition(module, ModuleState.CONFIGURING)
+        module.drivers, module.routes = [], {}
+        for index, element in enumerate(module.description.elements):
+            driver = self._driver_for(element.kind_name)
+            if driver is None:
+                continue
+            if driver not in module.drivers:
+                module.drivers.append(driver)
+                for op in driver.opcodes:
+                    module.routes.setdefault(op, []).append(driver)
+            await driver.configure(module, index, element)
+        await self.command(module.module_id, p.enable(p.MODULE, True))
+        self._transition(module, ModuleState.ONLINE)
+        module.online_since = time.monotonic()
+        module.announced = True
+        for driver in module.drivers:
+            driver.on_online(module)
+        self._publish_status(module)
+
+    def _driver_for(self, kind: str) -> Driver | None:
+        try:
+            cls = self.registry.driver_class(kind)
+        except UnknownDriver as exc:
+            self._warn(f"drv{kind}", str(exc))
+            return None
+        driver = self.drivers.get(cls)
+        if driver is None:
+            driver = self.drivers[cls] = cls(self, self.endpoint, self.config)
+            driver.start()
+        return driver
+
+    def _lose(self, module: Module, reason: str) -> None:
+        task = self._bring_up.pop(module.module_id, None)
+        if task is not None and not task.done() and task is not asyncio.current_task():
+            task.cancel()
+        was_online = module.state is ModuleState.ONLINE
+        self._transition(module, ModuleState.LOST)
+        module.online_since = None
+        if was_online:
+            for driver in module.drivers:
+                try:
+                    driver.on_lost(module, reason)
+                except Exception:
+                    self.counters.driver_errors += 1
+                    log.exception("robocan: driver %s failed on loss", type(driver).__name__)
+        if module.announced:
+            self._publish_status(module)
+        log.warning("robocan: module 0x%02X (%s) lost: %s", module.module_id, module.name, reason)
+
+    async def _supervise(self) -> None:
+        while True:
+            await asyncio.sleep(0.02)
+            now = time.monotonic()
+            for module in list(self.modules.values()):
+                if module.state is not ModuleState.LOST and (
+                    now - module.last_seen > module.lost_timeout_s
+                ):
+                    self._lose(module, "time-out")
+            for module_id, (receiver, last) in list(self._receivers.items()):
+                if now - last > p.BLOCK_TIMEOUT_S:
+                    self._receivers[module_id] = (receiver, now)
+                    for frame in receiver.on_timeout():
+                        self.send_to(module_id, frame)
+                    module = self.modules.get(module_id)
+                    if module is not None:
+                        self._block_progress(module, receiver)
+
+    def _publish_status(self, module: Module) -> None:
+        self.endpoint.publish(
+            "module_status",
+            {
+                "module_id": module.module_id,
+                "name": module.name,
+                "state": "online" if module.state is ModuleState.ONLINE else "lost",
+                "critical": module.critical,
+            },
+        )
+
+    def _warn(self, key: str, text: str) -> None:
+        """Log odd traffic at most once a second per kind, so a flood cannot flood the log."""
+        now = time.monotonic()
+        if now - self._last_warning.get(key, 0.0) >= 1.0:
+            self._last_warning[key] = now
+            log.warning("robocan: %s", text)
+
+    # --- queries for the agent and tests ----------------------------------------------
+
+    def module_table(self) -> list[dict[str, Any]]:
+        return [m.to_dict() for m in sorted(self.modules.values(), key=lambda m: m.module_id)]
+
+    def online(self) -> set[int]:
+        return {m.module_id for m in self.modules.values() if m.state is ModuleState.ONLINE}
+
+    def driver(self, cls: type[Driver]) -> Driver | None:
+        return self.drivers.get(cls)
+
+    def drivers_of(self, kind: type[Driver]) -> list[Driver]:
+        return [d for d in self.drivers.values() if isinstance(d, kind)]
