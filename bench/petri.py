@@ -25,7 +25,7 @@ from guidebot.messages import Message
 from petri_nets.builder import NetBuilder
 from petri_nets.clock import AsyncioClock
 from petri_nets.dispatch import Dispatch
-from petri_nets.library import NetLibrary
+from petri_nets.library import DEFAULT_LIBRARY, NetLibrary
 from petri_nets.pnml import write_pnml
 
 TOUR = {
@@ -69,7 +69,7 @@ def measure_start(dispatch: Dispatch, bus: Bus, samples: int) -> list[float]:
     return times
 
 
-def measure_firings(folder: Path, dispatch: Dispatch, length: int, rounds: int) -> float:
+def measure_firings(dispatch: Dispatch, length: int, rounds: int) -> float:
     rates = []
     for _ in range(rounds):
         t0 = time.perf_counter()
@@ -94,26 +94,18 @@ def measure_memory(dispatch: Dispatch, count: int) -> float:
     return (after - before) / 1e6 * 1000 / count
 
 
-async def run_bench(samples: int, length: int, instances: int) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        library_src = Path(__file__).resolve().parent.parent / "petri_nets" / "library"
-        for path in library_src.glob("*.pnml"):
-            (folder / path.name).write_bytes(path.read_bytes())
-        (folder / "chain.pnml").write_bytes(chain_net(length))
-        bus = Bus()
-        dispatch = Dispatch(
-            bus.endpoint("dispatch"), NetLibrary(folder), AsyncioClock(), idle_net=None
-        )
-        dispatch.open()
-        try:
-            # RSS first, and over 10x the instances: memory freed by loading would hide growth
-            rss = measure_memory(dispatch, 10 * instances)
-            measure_start(dispatch, bus, 50)  # warm-up
-            start = measure_start(dispatch, bus, samples)
-            firings = measure_firings(folder, dispatch, length, 7)
-        finally:
-            dispatch.close()
+async def run_bench(folder: Path, samples: int, length: int, instances: int) -> dict[str, Any]:
+    bus = Bus()
+    dispatch = Dispatch(bus.endpoint("dispatch"), NetLibrary(folder), AsyncioClock(), idle_net=None)
+    dispatch.open()
+    try:
+        # RSS first, and over 10x the instances: memory freed by loading would hide growth
+        rss = measure_memory(dispatch, 10 * instances)
+        measure_start(dispatch, bus, 50)  # warm-up
+        start = measure_start(dispatch, bus, samples)
+        firings = measure_firings(dispatch, length, 7)
+    finally:
+        dispatch.close()
     return {
         "start_ms": percentiles(start, digits=4),
         "firings_per_s": round(firings),
@@ -140,7 +132,12 @@ async def run_bench(samples: int, length: int, instances: int) -> dict[str, Any]
 @click.option("--json", "as_json", is_flag=True, help="Only the JSON line.")
 def main(samples: int, length: int, instances: int, as_json: bool) -> None:
     """Start latency (p50/p99 ms), firings per second, RSS per 1000 give_tour instances."""
-    result = asyncio.run(run_bench(samples, length, instances))
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for path in DEFAULT_LIBRARY.glob("*.pnml"):
+            (folder / path.name).write_bytes(path.read_bytes())
+        (folder / "chain.pnml").write_bytes(chain_net(length))
+        result = asyncio.run(run_bench(folder, samples, length, instances))
     if not as_json:
         click.echo("goals: start p50 < 0.5 ms, >= 50000 firings/s, < 50 MB per 1000 tours")
     print_result(result)
