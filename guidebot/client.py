@@ -182,6 +182,14 @@ class HubClient:
         self._pending.clear()
         self.connected.clear()
 
+    async def wait_stopped(self) -> HubRefused | None:
+        """Wait until the client stops for good (closed, or refused: then the refusal)."""
+        runner = self._runner
+        if runner is not None:
+            with contextlib.suppress(asyncio.CancelledError):
+                await asyncio.shield(runner)
+        return self.failure
+
     def on_connect(self, callback: OnConnect) -> Callable[[], None]:
         """Run ``callback`` after every (re)connection, subscriptions already restored."""
         self._on_connect.append(callback)
@@ -222,7 +230,8 @@ class HubClient:
 
         The subscription reaches the hub asynchronously; ``await sync()`` to know it is active.
         Messages addressed to this client arrive whether or not a pattern matches them, but
-        only handlers whose pattern matches are called.
+        only handlers whose pattern matches are called. Replies that complete a ``request`` and
+        the hub's heartbeat pongs are not passed to handlers.
         """
         wild = is_wildcard(pattern)
         entry = (pattern, handler)
@@ -407,6 +416,8 @@ class HubClient:
         except ConnectionClosed:
             self._check_close(ws)
             return False
+        except HubRefused:
+            raise
         except (OSError, TimeoutError, ConnectionError, ValueError) as exc:
             log.warning("%s: hub session failed: %r", self.name or "client", exc)
             return False
@@ -492,7 +503,10 @@ class HubClient:
         if message.correlation_id is not None:
             future = self._pending.get(message.correlation_id)
             if future is not None and not future.done():
-                future.set_result(message)
+                future.set_result(message)  # a reply goes to its request, not to handlers
+                return
+        if message.type == "pong" and message.source == "hub":
+            return  # heartbeat
         if message.type == "error" and message.source == "hub":
             payload = message.payload or {}
             self.last_error = HubError(str(payload.get("code")), str(payload.get("reason")))

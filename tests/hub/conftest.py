@@ -1,0 +1,50 @@
+"""A real server on 127.0.0.1 (ephemeral port) with one token per role, and hub clients."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Any
+
+import pytest
+
+from backend.settings import Settings, StaticToken
+from backend.testing import RunningServer, running_server
+from guidebot.client import HubClient
+
+TOKENS = {
+    "R1": StaticToken(token="token-robot-R1", name="R1", role="robot"),
+    "R2": StaticToken(token="token-robot-R2", name="R2", role="robot"),
+    "gui": StaticToken(token="token-gui-admin-page", name="gui", role="gui"),
+    "tm": StaticToken(token="token-module-tasks", name="task_manager", role="module"),
+    "op": StaticToken(token="token-operator-ann", name="ann", role="operator"),
+}
+
+
+def hub_settings(**overrides: Any) -> Settings:
+    return Settings(tokens=list(TOKENS.values()), **overrides)
+
+
+@pytest.fixture
+async def server() -> AsyncIterator[RunningServer]:
+    async with running_server(hub_settings()) as running:
+        yield running
+
+
+ClientFactory = Callable[..., Awaitable[HubClient]]
+
+
+@pytest.fixture
+async def connect(server: RunningServer) -> AsyncIterator[ClientFactory]:
+    """``await connect("R1")``: a connected HubClient with that token, closed after the test."""
+    clients: list[HubClient] = []
+
+    async def factory(who: str, **kwargs: Any) -> HubClient:
+        token = TOKENS[who].token if who in TOKENS else who
+        client = HubClient(server.ws_url, token, **kwargs)
+        await client.start()
+        clients.append(client)
+        return client
+
+    yield factory
+    for client in reversed(clients):
+        await client.close()
