@@ -13,6 +13,7 @@ from typing import Any
 import click
 
 COMMANDS: dict[str, str] = {
+    "robot": "robot_agent.cli:robot",
     "petri": "petri_nets.cli:petri",
     "server": "backend.server_cli:server",
 }

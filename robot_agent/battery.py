@@ -29,6 +29,7 @@ class BatteryMonitor:
         panic: float = 0.1,
         full: float = 0.95,
         rearm: float = 0.05,
+        alarms: bool = True,
     ) -> None:
         if not 0.0 <= panic < low < full <= 1.0:
             raise ValueError(f"need 0 <= panic < low < full <= 1, got {panic}, {low}, {full}")
@@ -38,6 +39,8 @@ class BatteryMonitor:
         self.panic = panic
         self.full = full
         self.rearm = rearm
+        self.alarms = alarms
+        """False when the battery entity already publishes the alarms (RoboCAN's driver)."""
         self.level: float | None = None
         self.charging = False
         self.docked_at: str | None = None
@@ -58,13 +61,13 @@ class BatteryMonitor:
 
     def _on_docked(self, message: Message) -> None:
         self.docked_at = str(message.payload.get("station") or message.payload.get("node") or "")
-        self.ep.publish("charger_contact", {"station": self.docked_at, "on": True})
+        self.ep.publish("set_charging", {"on": True, "station": self.docked_at})
         self._check_charged()
 
     def undock(self) -> None:
         """Leaving the station (a task starts): open the charger contact."""
         if self.docked_at is not None:
-            self.ep.publish("charger_contact", {"station": self.docked_at, "on": False})
+            self.ep.publish("set_charging", {"on": False, "station": self.docked_at})
             self.docked_at = None
 
     def _on_level(self, message: Message) -> None:
@@ -73,7 +76,9 @@ class BatteryMonitor:
         self.charging = bool(message.payload.get("charging", False))
         if self.level >= self.low + self.rearm:
             self._low_sent = self._panic_sent = False
-        if self.level <= self.panic and not self._panic_sent:
+        if not self.alarms:
+            pass
+        elif self.level <= self.panic and not self._panic_sent:
             self._panic_sent = self._low_sent = True
             log.warning("%s: battery panic at %.2f", self.robot, self.level)
             self.ep.publish("battery_panic", {"robot": self.robot, "level": round(self.level, 3)})

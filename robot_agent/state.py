@@ -72,7 +72,12 @@ class StateReporter:
         return RobotMode.IDLE
 
     def snapshot(self) -> dict[str, Any]:
+        """The next robot_state payload (advances ``seq``)."""
         self.seq += 1
+        return self.snapshot_view()
+
+    def snapshot_view(self) -> dict[str, Any]:
+        """The state as it is now, for the touch screen (``seq`` unchanged)."""
         level = self.battery.level
         return {
             "robot": self.robot,

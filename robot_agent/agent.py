@@ -1,0 +1,262 @@
+"""One robot agent: the on-board bus and every module on it, started and stopped in order.
+
+Layers (GuideBot paper, section 4): hardware servers (RoboCAN master and its entities, or a
+bare simulated base), control (navigation, speech, battery logic), executive (RG dispatch with
+the net library, the main-task runner), interface (the link to the server, the touch screen).
+``async with RobotAgent(config) as agent`` runs it; ``agent.bus`` is the on-board bus.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from guidebot.bus import Bus
+from robot_agent.battery import BatteryMonitor
+from robot_agent.clock import Clock
+from robot_agent.gui import OnboardScreen, ScreenServer
+from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
+from robot_agent.link import Link
+from robot_agent.navigation import Navigator
+from robot_agent.speech import Speech
+from robot_agent.state import StateReporter
+from robot_agent.tasks import TaskRunner
+
+__all__ = ["AgentConfig", "RobotAgent", "hub_ws_url"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class AgentConfig:
+    """Everything ``guidebot robot`` takes; defaults suit a simulated robot."""
+
+    name: str
+    server: str | None = None
+    """Server URL (http://host:port or ws://host:port/ws); None: no link (standalone)."""
+    token: str | None = None
+    can: str | None = None
+    """``virtual:R1`` or ``socketcan:can0``; None: no CAN, a bare simulated base."""
+    simulate: bool = True
+    time_scale: float = 1.0
+    gui_port: int | None = None
+    start_node: str | None = None
+    max_speed: float = 0.7
+    battery_low: float = 0.3
+    battery_panic: float = 0.1
+    battery_level: float | None = None
+    """Initial level of the simulated battery (None: the simulator's default)."""
+    state_period_s: float = 1.0
+    site: Path | None = None
+    """Site file: tours and points of interest for the touch screen."""
+    speech_engine: str | None = "auto"
+    idle_net: str | None = "waiting"
+    link_queue_size: int = 1000
+
+
+def hub_ws_url(server: str) -> str:
+    """Accept http(s)://host:port or ws(s)://host:port/ws and return the hub's WebSocket URL."""
+    url = server.rstrip("/")
+    if url.startswith("http://"):
+        url = "ws://" + url[len("http://") :]
+    elif url.startswith("https://"):
+        url = "wss://" + url[len("https://") :]
+    elif not url.startswith(("ws://", "wss://")):
+        raise ValueError(f"server URL {server!r}: expected http://host:port or ws://host:port/ws")
+    return url if url.endswith("/ws") else url + "/ws"
+
+
+def _site_menu(path: Path | None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    if path is None:
+        return [], []
+    from backend.site.yamlio import load_site_file
+
+    site = load_site_file(path)
+    tours = [{"id": t.id, "name": t.name, "points": t.points} for t in site.tours]
+    pois = [{"id": p.id, "name": p.name, "node": p.node} for p in site.pois]
+    return tours, pois
+
+
+class RobotAgent:
+    def __init__(self, config: AgentConfig) -> None:
+        self.config = config
+        self.clock = Clock(config.time_scale)
+        self.bus = Bus()
+        self.hardware: Hardware | None = None
+        self.navigator: Navigator | None = None
+        self.speech: Speech | None = None
+        self.battery: BatteryMonitor | None = None
+        self.tasks: TaskRunner | None = None
+        self.state: StateReporter | None = None
+        self.dispatch: Any = None
+        self.hub: Any = None
+        self.link: Link | None = None
+        self.screen: OnboardScreen | None = None
+        self.screen_server: ScreenServer | None = None
+        self._stack = contextlib.AsyncExitStack()
+
+    async def __aenter__(self) -> RobotAgent:
+        try:
+            await self.start()
+        except BaseException:
+            await self.stop()
+            raise
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.stop()
+
+    async def start(self) -> None:
+        c = self.config
+        name = c.name
+        bus, stack = self.bus, self._stack
+
+        # Hardware servers.
+        hw_ep = bus.endpoint("robocan" if c.can else "base")
+        if c.can:
+            self.hardware = RoboCANHardware(
+                hw_ep,
+                self.clock,
+                can=c.can,
+                simulate=c.simulate,
+                robot=name,
+                battery_low=c.battery_low,
+                battery_panic=c.battery_panic,
+                battery_level=c.battery_level,
+            )
+        else:
+            self.hardware = BareSimulation(hw_ep, self.clock)
+        await self.hardware.start()
+        stack.push_async_callback(self.hardware.stop)
+
+        # Control modules.
+        self.navigator = Navigator(
+            bus.endpoint("navigation"),
+            self.clock,
+            name,
+            start_node=c.start_node,
+            max_speed=c.max_speed,
+        )
+        self.navigator.start()
+        stack.push_async_callback(self.navigator.stop)
+        self.speech = Speech(bus.endpoint("speech"), self.clock, engine=c.speech_engine)
+        self.speech.start()
+        stack.push_async_callback(self.speech.stop)
+        self.battery = BatteryMonitor(
+            bus.endpoint("battery"),
+            name,
+            low=c.battery_low,
+            panic=c.battery_panic,
+            alarms=not c.can,  # RoboCAN's battery entity publishes the alarms itself
+        )
+        self.battery.start()
+        stack.callback(self.battery.stop)
+
+        # Executive: RG dispatch and the main-task runner.
+        self.dispatch = self._make_dispatch()
+        nets = None
+        if self.dispatch is not None:
+            self.dispatch.open()
+            stack.callback(self.dispatch.close)
+            dispatch = self.dispatch
+
+            def nets() -> list[str]:
+                return sorted({i["net"] for i in dispatch.running()})
+
+        navigator, battery = self.navigator, self.battery
+        self.tasks = TaskRunner(
+            bus.endpoint("tasks"),
+            name,
+            waiting_net=None if self.dispatch is not None else c.idle_net,
+            on_cancel=navigator.cancel,
+            on_start=battery.undock,
+        )
+        self.tasks.start()
+        stack.callback(self.tasks.stop)
+        self.state = StateReporter(
+            bus.endpoint("state"),
+            name,
+            navigator,
+            battery,
+            self.tasks,
+            nets=nets,
+            period_s=c.state_period_s,
+        )
+
+        # Interface: the link to the server, the touch screen.
+        if c.server:
+            await self._start_link()
+        self.state.start()
+        stack.push_async_callback(self.state.stop)
+        if c.gui_port is not None:
+            tours, pois = _site_menu(c.site)
+            self.screen = OnboardScreen(
+                bus.endpoint("screen"),
+                self.clock,
+                name,
+                tours=tours,
+                pois=pois,
+                state=self.state.snapshot_view,
+            )
+            self.screen.start()
+            stack.callback(self.screen.stop)
+            self.screen_server = ScreenServer(self.screen, port=c.gui_port)
+            await self.screen_server.start()
+            stack.push_async_callback(self.screen_server.stop)
+        log.info(
+            "robot %s up: hardware=%s link=%s screen=%s",
+            name,
+            type(self.hardware).__name__,
+            c.server or "none",
+            self.screen_server.url if self.screen_server else "none",
+        )
+
+    def _make_dispatch(self) -> Any:
+        try:
+            from petri_nets.clock import AsyncioClock
+            from petri_nets.dispatch import Dispatch
+            from petri_nets.library import NetLibrary
+        except ImportError as exc:  # RoboGraph missing: tasks cannot run, say so loudly
+            log.error("RoboGraph is not available (%s): main tasks will fail", exc)
+            return None
+        library = NetLibrary(watch=False)
+        for problem in library.problems():
+            log.warning("net library: %s", problem)
+        return Dispatch(
+            self.bus.endpoint("dispatch"),
+            library,
+            AsyncioClock(scale=self.config.time_scale),
+            idle_net=self.config.idle_net,
+        )
+
+    async def _start_link(self) -> None:
+        from guidebot.client import HubClient
+
+        c = self.config
+        if not c.token:
+            raise ValueError("a server URL needs a token (--token)")
+        self.hub = HubClient(
+            hub_ws_url(c.server or ""),
+            c.token,
+            connect_timeout=None,
+            queue_size=c.link_queue_size,
+        )
+        state = self.state
+        assert state is not None
+        self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=state.publish_now)
+        self.link.start()
+        self._stack.callback(self.link.stop)
+        await self.hub.start()
+        self._stack.push_async_callback(self.hub.close)
+
+    async def stop(self) -> None:
+        await self._stack.aclose()

@@ -1,0 +1,142 @@
+"""The link (the paper's robot Wi-Fi interface): a gateway between the on-board bus and the hub.
+
+Up: the on-board messages the server must see (state, alarms, faults, task reports, requests to
+the Traffic Manager and the building) are sent to the hub. Down: messages from the hub for this
+robot (tasks, path replies, area grants) and the building's broadcasts the robot needs (doors,
+elevators) are published on the on-board bus; a reply goes back to the on-board module that sent
+the request (its correlation id is remembered), so ``endpoint.request`` works across the link.
+
+While the link is down the robot goes on by itself; what it must report waits in the hub
+client's bounded queue (overflow: robot_state is coalesced to the latest, otherwise the oldest
+message is dropped and counted) and is flushed in order on reconnect, after which the agent
+resynchronises (``on_connect``: robot_state with the running task at once).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import OrderedDict
+from collections.abc import Awaitable, Callable
+from typing import Any, Protocol
+
+from guidebot.bus import Endpoint, Handler
+from guidebot.messages import Message
+
+__all__ = ["DOWN_TYPES", "UP_TYPES", "Link", "Upstream"]
+
+log = logging.getLogger(__name__)
+
+UP_TYPES: tuple[str, ...] = (
+    "robot_state",
+    "battery_low",
+    "battery_panic",
+    "robot_fault",
+    "task_started",
+    "task_ended",
+    "task_request",
+    "get_path",
+    "request_area",
+    "release_area",
+    "open_door",
+    "call_elevator",
+    "petri_net_ended",
+)
+"""On-board message types sent to the hub."""
+
+DOWN_TYPES: tuple[str, ...] = (
+    "task_assigned",
+    "task_cancel",
+    "path",
+    "area_granted",
+    "area_yield",
+    "door_opened",
+    "door_closed",
+    "elevator_in_position",
+    "command_failed",
+    "error",
+)
+"""Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
+
+MAX_PENDING_REPLIES = 1000
+
+
+class Upstream(Protocol):
+    """What the link needs from the hub client (guidebot.client.HubClient has it)."""
+
+    name: str
+
+    def send(self, message: Message) -> None: ...
+
+    def subscribe(self, pattern: str, handler: Handler) -> Callable[[], None]: ...
+
+    def on_connect(self, callback: Callable[[], Awaitable[None] | None]) -> Callable[[], None]: ...
+
+
+class Link:
+    """Forwards messages both ways between ``onboard`` and ``upstream``."""
+
+    def __init__(
+        self,
+        onboard: Endpoint,
+        upstream: Upstream,
+        robot: str,
+        *,
+        on_connect: Callable[[], Any] | None = None,
+    ) -> None:
+        self.onboard = onboard
+        self.upstream = upstream
+        self.robot = robot
+        self.on_connect_callback = on_connect
+        self.sent_up = 0
+        self.sent_down = 0
+        self.connections = 0
+        self.on_message_down: Callable[[Message], None] | None = None
+        # Request id -> on-board endpoint that sent it (bounded: oldest forgotten first).
+        self._requesters: OrderedDict[str, str] = OrderedDict()
+        self._unsubs: list[Callable[[], None]] = []
+
+    def start(self) -> None:
+        for type_ in UP_TYPES:
+            self._unsubs.append(self.onboard.subscribe(type_, self._up))
+        for type_ in DOWN_TYPES:
+            self._unsubs.append(self.upstream.subscribe(type_, self._down))
+        self._unsubs.append(self.upstream.on_connect(self._connected))
+
+    def stop(self) -> None:
+        for unsub in self._unsubs:
+            unsub()
+        self._unsubs.clear()
+
+    def _connected(self) -> None:
+        self.connections += 1
+        log.info("%s: link up (connection %d)", self.robot, self.connections)
+        if self.on_connect_callback is not None:
+            self.on_connect_callback()
+
+    def _up(self, message: Message) -> None:
+        if message.source == self.onboard.name:
+            return  # came down from the hub: never echo it back
+        if message.correlation_id is None:
+            self._requesters[message.id] = message.source
+            if len(self._requesters) > MAX_PENDING_REPLIES:
+                self._requesters.popitem(last=False)
+        self.sent_up += 1
+        self.upstream.send(message)
+
+    def _down(self, message: Message) -> None:
+        if message.destination not in (None, self.upstream.name, self.robot):
+            return
+        requester = self._requesters.get(message.correlation_id or "")
+        local = Message(
+            type=message.type,
+            id=message.id,
+            timestamp=message.timestamp,
+            source=self.onboard.name,
+            destination=requester,
+            correlation_id=message.correlation_id,
+            payload=dict(message.payload or {}),
+        )
+        self.sent_down += 1
+        if self.on_message_down is not None:
+            self.on_message_down(local)
+        self.onboard.bus.publish(local)
