@@ -23,6 +23,8 @@ from fastapi import APIRouter, FastAPI
 from fastapi.staticfiles import StaticFiles
 
 import guidebot
+from backend.api import ROUTERS as api_routers
+from backend.api.component import server_brain
 from backend.auth import Role, TokenStore
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
@@ -36,12 +38,15 @@ log = logging.getLogger(__name__)
 Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 
 # Server modules started in this order after the hub (and stopped in reverse). One line each.
-COMPONENTS: list[Component] = []
+COMPONENTS: list[Component] = [
+    server_brain,
+]
 
 # REST/WebSocket routers of the server modules. One line each.
 ROUTERS: list[APIRouter] = [
     hub_websocket.router,
     hub_routes.router,
+    *api_routers,
 ]
 
 

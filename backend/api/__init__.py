@@ -1,0 +1,8 @@
+"""REST API of the server brain (site, robots, tasks, tours, points of interest, locks,
+events) and the component that runs the services behind it."""
+
+from backend.api import events, locks, robots, site, tasks, tours
+
+ROUTERS = [site.router, tours.router, tasks.router, robots.router, locks.router, events.router]
+
+__all__ = ["ROUTERS"]

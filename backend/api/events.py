@@ -1,0 +1,26 @@
+"""The event log, paged by id: task changes, locks, battery alarms, faults."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Request
+
+from backend.api.deps import Staff, store
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api/events", tags=["events"])
+
+
+@router.get("")
+async def list_events(
+    request: Request,
+    _: Staff,
+    after_id: Annotated[int, Query(ge=0, le=2**62)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    kind: Annotated[str | None, Query(max_length=64)] = None,
+) -> dict[str, Any]:
+    """Events with id greater than ``after_id``; pass ``next_after_id`` to get the next page."""
+    events = await store(request).events(after_id=after_id, limit=limit, kind=kind)
+    return {"events": events, "next_after_id": events[-1]["id"] if events else after_id}

@@ -1,0 +1,41 @@
+"""Area lock routes: what staff see and the one thing they may do (force a release)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Path, Request
+
+from backend.api.deps import Staff, not_found, traffic
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api/locks", tags=["locks"])
+
+
+@router.get("")
+async def list_locks(request: Request, _: Staff) -> list[dict[str, Any]]:
+    """Every restricted area: free, held, holder_offline (kept: it may be inside) or yielding."""
+    return [
+        {
+            "area": v.area,
+            "state": v.state.value,
+            "holder": v.holder,
+            "since": v.since,
+            "entered": v.entered,
+            "waiting": v.waiting,
+        }
+        for v in traffic(request).lock_views()
+    ]
+
+
+@router.post("/{area}/release")
+async def force_release(
+    request: Request, who: Staff, area: Annotated[str, Path(max_length=64)]
+) -> dict[str, Any]:
+    """Release an area by hand, e.g. its robot is offline and staff saw it is outside."""
+    manager = traffic(request)
+    if area not in manager.locks.areas:
+        raise not_found(f"area {area!r}")
+    holder = manager.force_release(area, by=who.name)
+    return {"area": area, "released_from": holder}

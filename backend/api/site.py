@@ -1,0 +1,101 @@
+"""Site routes: read, replace, import and export the whole site (admin), and paths."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, HTTPException, Query, Request, Response, status
+
+from backend.api.deps import Admin, Requester, Staff, forbid, sites, traffic
+from backend.auth import Role
+from backend.site.validate import SiteInvalid
+from backend.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
+from backend.traffic.graph import NoPath, UnknownNode
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api", tags=["site"])
+
+
+def invalid(exc: SiteInvalid) -> HTTPException:
+    return HTTPException(
+        status.HTTP_422_UNPROCESSABLE_CONTENT, [issue.as_dict() for issue in exc.issues]
+    )
+
+
+@router.get("/site")
+async def get_site(request: Request, _: Admin) -> dict[str, Any]:
+    """The whole site document with its version (it holds robot tokens: admin only)."""
+    service = sites(request)
+    return {"version": service.version, "site": service.site.model_dump(mode="json")}
+
+
+@router.put("/site")
+async def put_site(
+    request: Request, _: Admin, document: Annotated[dict[str, Any], Body()]
+) -> dict[str, Any]:
+    """Replace the site while running; refused as a whole (422, every problem) if broken."""
+    service = sites(request)
+    try:
+        await service.replace(document)
+    except SiteInvalid as exc:
+        raise invalid(exc) from None
+    return {"version": service.version}
+
+
+@router.get("/site/export", response_class=Response)
+async def export_site(request: Request, _: Admin) -> Response:
+    """The site as a YAML file."""
+    text = dump_site(sites(request).site)
+    return Response(
+        text,
+        media_type="application/yaml",
+        headers={"Content-Disposition": 'attachment; filename="site.yaml"'},
+    )
+
+
+@router.post(
+    "/site/import",
+    openapi_extra={
+        "requestBody": {"content": {"application/yaml": {"schema": {"type": "string"}}}}
+    },
+)
+async def import_site(request: Request, _: Admin) -> dict[str, Any]:
+    """Replace the site with a YAML file (request body); 422 lists every error with its line."""
+    raw = await request.body()
+    if len(raw) > MAX_SITE_BYTES:
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site file too large")
+    try:
+        site = load_site_text(raw.decode("utf-8", errors="replace"))
+        service = sites(request)
+        await service.replace(site)
+    except SiteInvalid as exc:
+        raise invalid(exc) from None
+    return {"version": service.version}
+
+
+@router.get("/paths")
+async def get_path(
+    request: Request,
+    who: Requester,
+    from_node: Annotated[str, Query(max_length=64)],
+    to_node: Annotated[str, Query(max_length=64)],
+) -> dict[str, Any]:
+    """Shortest path between two nodes, with the doors, elevators and areas on it."""
+    if who.role is Role.PANEL:
+        raise forbid("panels do not plan paths")
+    try:
+        result = traffic(request).path(from_node, to_node)
+    except UnknownNode as exc:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"unknown node {exc}") from None
+    except NoPath as exc:
+        raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
+    return {
+        "nodes": result.nodes,
+        "length_m": result.length_m,
+        "areas": result.areas,
+        "steps": [s.as_dict() for s in result.steps],
+    }
+
+
+__all__ += ["Staff"]

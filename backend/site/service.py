@@ -1,0 +1,66 @@
+"""The live site: one current version, edited while the server runs (no restart).
+
+An accepted edit is validated as a whole, stored (new version), then handed to every listener
+(Task Manager, Traffic Manager, robot tokens) in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable
+from typing import Any, Protocol
+
+from backend.site.schema import Site
+from backend.site.validate import validate_site
+
+__all__ = ["EMPTY_SITE", "SiteService", "SiteStore"]
+
+EMPTY_SITE: dict[str, Any] = {
+    "name": "Unconfigured site",
+    "floors": [{"id": "F0", "name": "Ground floor"}],
+    "nodes": [{"id": "origin", "floor": "F0", "x": 0, "y": 0}],
+}
+
+Listener = Callable[[Site], None]
+
+
+class SiteStore(Protocol):
+    async def save_site(self, data: dict[str, Any]) -> int: ...
+
+
+class SiteService:
+    def __init__(self, site: Site, version: int, store: SiteStore | None = None) -> None:
+        self.site = site
+        self.version = version
+        self.store = store
+        self._listeners: list[Listener] = []
+        self._lock = asyncio.Lock()
+
+    def on_change(self, listener: Listener) -> None:
+        self._listeners.append(listener)
+
+    async def replace(self, data: dict[str, Any] | Site) -> Site:
+        """Validate (raises SiteInvalid with every problem), store, apply."""
+        site = data if isinstance(data, Site) else validate_site(data)
+        return await self._apply(site)
+
+    async def edit(self, change: Callable[[dict[str, Any]], Awaitable[None] | None]) -> Site:
+        """Apply ``change`` to a copy of the current document, then replace as a whole."""
+        async with self._lock:
+            doc = self.site.model_dump(mode="json")
+            result = change(doc)
+            if result is not None:
+                await result
+            site = validate_site(doc)
+        return await self._apply(site)
+
+    async def _apply(self, site: Site) -> Site:
+        async with self._lock:
+            if self.store is not None:
+                self.version = await self.store.save_site(site.model_dump(mode="json"))
+            else:
+                self.version += 1
+            self.site = site
+            for listener in self._listeners:
+                listener(site)
+            return site
