@@ -16,10 +16,12 @@ COMMANDS: dict[str, str] = {
     "robot": "robot_agent.cli:robot",
     "petri": "petri_nets.cli:petri",
     "server": "backend.server_cli:server",
+    "robocan": "robot_agent.robocan.cli:robocan",
 }
 
 BENCHMARKS: dict[str, str] = {
     "petri": "bench.petri:main",
+    "robocan": "bench.robocan:main",
 }
 
 

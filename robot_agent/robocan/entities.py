@@ -156,9 +156,14 @@ class BaseDriver(Driver):
                 self.master.send_to(mid, p.set_velocity(wheel.pid_element, speed))
 
     async def _repeat_commands(self) -> None:
+        # Deadline-based so that the rate stays at 8 Hz however late one wake-up is.
+        loop = asyncio.get_running_loop()
+        period = self.config.command_period_s
+        deadline = loop.time()
         with contextlib.suppress(asyncio.CancelledError):
             while True:
-                await asyncio.sleep(self.config.command_period_s)
+                deadline += period
+                await asyncio.sleep(max(0.0, deadline - loop.time()))
                 self.send_velocity()
 
     def stop(self) -> None:

@@ -202,7 +202,11 @@ class Master:
     def send(self, can_id: int, data: bytes) -> bool:
         """Put one frame on the bus; a send error is counted and logged, never raised."""
         msg = can.Message(
-            arbitration_id=can_id, data=data, is_extended_id=False, timestamp=time.time()
+            arbitration_id=can_id,
+            data=data,
+            is_extended_id=False,
+            is_rx=False,
+            timestamp=time.time(),
         )
         try:
             self.bus.send(msg, timeout=0.05)

@@ -1,0 +1,143 @@
+"""``guidebot robocan``: run a master (with the simulated BellBot), analyse a bus log, compare
+with CANopen DS402, list the installed drivers."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from pathlib import Path
+
+import click
+
+__all__ = ["robocan"]
+
+
+@click.group()
+def robocan() -> None:
+    """The on-board CAN master and the bandwidth study (docs/robocan.md)."""
+
+
+@robocan.command()
+@click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--bitrate", type=click.IntRange(min=1), default=1_000_000, show_default=True)
+@click.option("--window", type=click.FloatRange(min=0.01), default=1.0, show_default=True)
+@click.option("--png", type=click.Path(dir_okay=False, path_type=Path), default=None)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def analyze(log: Path, bitrate: int, window: float, png: Path | None, as_json: bool) -> None:
+    """Bandwidth per module in 1 s windows and transmission efficiency of a bus LOG
+    (.asc, .blf, candump .log, ...)."""
+    from robot_agent.robocan.analysis import analyze_log, plot
+
+    try:
+        result = analyze_log(log, bitrate=bitrate, window_s=window)
+    except (ValueError, OSError) as exc:
+        raise click.ClickException(f"cannot read {log}: {exc}") from None
+    if png is not None:
+        plot(result, png, title=log.name)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    click.echo(
+        f"{result['frames']} frames over {result['duration_s']} s; bus load "
+        f"{100 * result['bus_load']['mean']:.2f}% (peak {100 * result['bus_load']['peak']:.2f}%)"
+        f"; efficiency {result['efficiency']} (ceiling {result['efficiency_ceiling']})"
+    )
+    for name, usage in result["modules"].items():
+        click.echo(
+            f"  {name:>9}: tx {usage['tx_bps']:9.1f} bit/s  rx {usage['rx_bps']:9.1f} bit/s  "
+            f"efficiency tx {usage['efficiency']['tx']} rx {usage['efficiency']['rx']}"
+        )
+
+
+@robocan.command()
+@click.option(
+    "--seconds",
+    type=click.FloatRange(min=1.0),
+    default=3.0,
+    show_default=True,
+    help="Length of each phase (moving, stopped).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object as the last line.")
+def compare(seconds: float, as_json: bool) -> None:
+    """BellBot motor profile with RoboCAN and with CANopen DS402 (canopen package)."""
+    from robot_agent.robocan.compare import compare as run_compare
+
+    result = asyncio.run(run_compare(seconds))
+    if not as_json:
+        for phase in ("moving", "stopped"):
+            r = result[phase]
+            click.echo(
+                f"{phase:>8}: RoboCAN {r['robocan_bps']:.0f} bit/s, CANopen "
+                f"{r['canopen_bps']:.0f} bit/s per motor controller: {100 * r['saving']:.1f}% less"
+            )
+        click.echo(f"efficiency: {result['efficiency']} (paper: about 6% and 25% less)")
+    click.echo(json.dumps(result))
+
+
+@robocan.command()
+@click.option(
+    "--bus",
+    "buses",
+    multiple=True,
+    default=["virtual:R1"],
+    show_default=True,
+    help="python-can bus, e.g. virtual:R1 or socketcan:can0 (repeatable).",
+)
+@click.option("--simulate/--no-simulate", default=True, show_default=True)
+@click.option("--time-scale", type=click.FloatRange(min=0.01), default=1.0, show_default=True)
+@click.option("--seconds", type=click.FloatRange(min=0.1), default=10.0, show_default=True)
+@click.option("--move", type=float, default=0.0, help="Drive at this speed (m/s) meanwhile.")
+@click.option(
+    "--record",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Record the bus (.asc, .blf, .log).",
+)
+def run(
+    buses: tuple[str, ...],
+    simulate: bool,
+    time_scale: float,
+    seconds: float,
+    move: float,
+    record: Path | None,
+) -> None:
+    """Run the master (and the simulated BellBot) for a while; print the module table."""
+    from guidebot.bus import Bus
+    from robot_agent.robocan.busopen import BusSpecError
+    from robot_agent.robocan.stack import RoboCanStack
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+
+    async def main() -> None:
+        bus = Bus()
+        endpoint, operator = bus.endpoint("robocan"), bus.endpoint("operator")
+        operator.subscribe("module_status", lambda m: click.echo(f"module_status {m.payload}"))
+        operator.subscribe("base_fault", lambda m: click.echo(f"base_fault {m.payload}"))
+        async with RoboCanStack(
+            endpoint, list(buses), simulate=simulate, time_scale=time_scale, record=record
+        ) as stack:
+            if simulate:
+                await stack.wait_online()
+            if move:
+                operator.publish("set_velocity", {"v": move, "w": 0.0})
+            await asyncio.sleep(seconds)
+            operator.publish("set_velocity", {"v": 0.0, "w": 0.0})
+            click.echo(json.dumps(stack.module_table(), indent=1))
+
+    try:
+        asyncio.run(main())
+    except (BusSpecError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+@robocan.command()
+def drivers() -> None:
+    """The driver plug-ins found in the guidebot.robocan_drivers entry points."""
+    from robot_agent.robocan.drivers import DriverRegistry
+
+    registry = DriverRegistry()
+    for kind in registry.kinds:
+        cls = registry.driver_class(kind)
+        critical = " (critical)" if cls.critical else ""
+        click.echo(f"{kind:>16}: {cls.__module__}.{cls.__qualname__}{critical}")

@@ -1,0 +1,216 @@
+"""RoboCAN against CANopen DS402 on the BellBot motor profile (the paper's Figure 10 and 11).
+
+Both runs are real traffic on python-can virtual buses, recorded and measured with the same
+exact frame lengths: RoboCAN = our master and simulated motor controllers (encoder frames at
+10 Hz, velocity commands at 8 Hz while moving, none while stopped, 10 Hz watchdogs); CANopen =
+frames built and sent by the ``canopen`` package as a DS402 drive pair and its master would
+(TPDO1 position + velocity actual at 10 Hz, RPDO1 controlword + target velocity at 8 Hz, sent
+cyclically moving or not, SYNC at 10 Hz, heartbeat at 10 Hz).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import tempfile
+import threading
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import can
+import canopen
+from canopen.objectdictionary import (
+    INTEGER32,
+    UNSIGNED8,
+    UNSIGNED16,
+    UNSIGNED32,
+    ODRecord,
+    ODVariable,
+)
+
+from guidebot.bus import Bus
+from robot_agent.robocan.analysis import read_log
+from robot_agent.robocan.busopen import open_bus
+from robot_agent.robocan.framebits import frame_bits
+from robot_agent.robocan.stack import RoboCanStack
+
+__all__ = ["compare", "ds402_dictionary", "measure"]
+
+MOTORS = (0x02, 0x04)
+PUBLISH_HZ = 10
+COMMAND_HZ = 8
+SETTLE_S = 0.5  # skip the first half second of each phase (start-up, last command)
+
+
+def _var(name: str, index: int, subindex: int, data_type: int) -> ODVariable:
+    var = ODVariable(name, index, subindex)
+    var.data_type = data_type
+    var.access_type = "rw"
+    return var
+
+
+def ds402_dictionary() -> canopen.ObjectDictionary:
+    """The slice of a DS402 drive's object dictionary the PDOs need."""
+    od = canopen.ObjectDictionary()
+    for base in (0x1400, 0x1600, 0x1800, 0x1A00):
+        for n in range(4):
+            record = ODRecord(f"pdo_{base + n:04X}", base + n)
+            record.add_member(_var("count", base + n, 0, UNSIGNED8))
+            for sub in range(1, 9):
+                record.add_member(_var(f"sub{sub}", base + n, sub, UNSIGNED32))
+            od.add_object(record)
+    for index, name, data_type in (
+        (0x6040, "controlword", UNSIGNED16),
+        (0x6041, "statusword", UNSIGNED16),
+        (0x6060, "modes_of_operation", UNSIGNED8),
+        (0x6064, "position_actual_value", INTEGER32),
+        (0x606C, "velocity_actual_value", INTEGER32),
+        (0x60FF, "target_velocity", INTEGER32),
+    ):
+        od.add_object(_var(name, index, 0, data_type))
+    return od
+
+
+class _Collector(can.Listener):
+    def __init__(self) -> None:
+        self.frames: list[can.Message] = []
+        self._lock = threading.Lock()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        with self._lock:
+            self.frames.append(msg)
+
+
+def measure(
+    frames: Iterable[can.Message], owner_of: dict[int, int], start: float, end: float, nodes: int
+) -> tuple[float, int, int]:
+    """Bits per second per node of the frames whose ID ``owner_of`` lists, in [start, end).
+
+    ``owner_of`` maps an ID to a node, or to 0 for frames shared by all nodes (SYNC), which
+    are divided among them. Returns (bps per node, payload bits, frame bits).
+    """
+    bits = payload = 0
+    for msg in frames:
+        if not start <= msg.timestamp < end or msg.arbitration_id not in owner_of:
+            continue
+        data = bytes(msg.data)
+        bits += frame_bits(msg.arbitration_id, data)
+        payload += 8 * len(data)
+    return bits / (end - start) / nodes, payload, bits
+
+
+async def run_robocan(phase_s: float, log_path: Path) -> dict[str, Any]:
+    """The real master and two simulated motor controllers, recorded to a candump log."""
+    channel = f"virtual:compare-robocan-{time.monotonic_ns()}"
+    bus = Bus()
+    endpoint, navigation = bus.endpoint("robocan"), bus.endpoint("navigation")
+    layout = {0x02: "motor", 0x04: "motor"}
+    async with RoboCanStack(endpoint, [channel], layout=layout, record=log_path) as stack:
+        await stack.wait_online(set(MOTORS))
+        await asyncio.sleep(SETTLE_S)
+        t_move = time.time()
+        navigation.publish("set_velocity", {"v": 0.5, "w": 0.1})
+        await asyncio.sleep(phase_s)
+        t_stop = time.time()
+        navigation.publish("set_velocity", {"v": 0.0, "w": 0.0})
+        await asyncio.sleep(phase_s)
+        t_end = time.time()
+    frames = read_log(log_path)
+    ids = {can_id: 1 for m in MOTORS for can_id in (m, m + 1)}
+    return _phases(frames, ids, t_move, t_stop, t_end)
+
+
+def _phases(
+    frames: list[can.Message], ids: dict[int, int], t_move: float, t_stop: float, t_end: float
+) -> dict[str, Any]:
+    moving, p1, b1 = measure(frames, ids, t_move + SETTLE_S, t_stop, len(MOTORS))
+    stopped, p2, b2 = measure(frames, ids, t_stop + SETTLE_S, t_end, len(MOTORS))
+    return {"moving": moving, "stopped": stopped, "efficiency": (p1 + p2) / (b1 + b2)}
+
+
+async def run_canopen(phase_s: float) -> dict[str, Any]:
+    """A DS402 master and two drives built with the canopen package, on a virtual bus."""
+    channel = f"virtual:compare-canopen-{time.monotonic_ns()}"
+    master_bus, drive_bus, tap_bus = (open_bus(channel) for _ in range(3))
+    collector = _Collector()
+    tap = can.Notifier(tap_bus, [collector], timeout=0.05)
+    master_net, drive_net = canopen.Network(master_bus), canopen.Network(drive_bus)
+    tasks: list[Any] = []
+    rpdos = []
+    try:
+        for node_id in MOTORS:
+            remote = canopen.RemoteNode(node_id, ds402_dictionary())
+            master_net.add_node(remote)
+            rpdo = remote.rpdo[1]
+            rpdo.clear()
+            rpdo.add_variable(0x6040)
+            rpdo.add_variable(0x60FF)
+            rpdo.cob_id, rpdo.enabled = 0x200 + node_id, True
+            rpdo[0x6040].raw = 0x000F  # operation enabled
+            rpdo[0x60FF].raw = 0
+            rpdos.append(rpdo)
+
+            drive = canopen.LocalNode(node_id, ds402_dictionary())
+            drive_net.add_node(drive)
+            tpdo = drive.tpdo[1]
+            tpdo.clear()
+            tpdo.add_variable(0x6064)
+            tpdo.add_variable(0x606C)
+            tpdo.cob_id, tpdo.enabled = 0x180 + node_id, True
+            tpdo[0x6064].raw = 0
+            tpdo[0x606C].raw = 0
+            tpdo.start(1 / PUBLISH_HZ)
+            drive.nmt.state = "OPERATIONAL"
+            drive.nmt.start_heartbeat(1000 // PUBLISH_HZ)
+            tasks += [tpdo, drive.nmt]
+        master_net.sync.start(1 / PUBLISH_HZ)
+        await asyncio.sleep(SETTLE_S)
+        t_move = time.time()
+        for rpdo in rpdos:
+            rpdo[0x60FF].raw = 500_000  # counts/s: moving
+            rpdo.start(1 / COMMAND_HZ)
+        await asyncio.sleep(phase_s)
+        t_stop = time.time()
+        for rpdo in rpdos:
+            rpdo[0x60FF].raw = 0
+            rpdo.update()  # a cyclic DS402 master keeps sending its set-point
+        await asyncio.sleep(phase_s)
+        t_end = time.time()
+    finally:
+        master_net.sync.stop()
+        for rpdo in rpdos:
+            rpdo.stop()
+        for task in tasks:
+            if isinstance(task, canopen.pdo.base.PdoMap):
+                task.stop()
+            else:
+                task.stop_heartbeat()
+        await asyncio.to_thread(tap.stop, 1.0)
+        for b in (master_bus, drive_bus, tap_bus):
+            b.shutdown()
+    ids = {0x080: 0}
+    for node_id in MOTORS:
+        for base in (0x180, 0x200, 0x700):
+            ids[base + node_id] = node_id
+    return _phases(collector.frames, ids, t_move, t_stop, t_end)
+
+
+async def compare(phase_s: float = 3.0) -> dict[str, Any]:
+    """Both runs; the result has the issue's keys (bits per second per motor controller)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        robocan = await run_robocan(phase_s, Path(tmp) / "robocan.log")
+    canopen_result = await run_canopen(phase_s)
+    result: dict[str, Any] = {}
+    for phase in ("moving", "stopped"):
+        r, c = robocan[phase], canopen_result[phase]
+        result[phase] = {
+            "robocan_bps": round(r, 1),
+            "canopen_bps": round(c, 1),
+            "saving": round(1 - r / c, 4) if c else None,
+        }
+    result["efficiency"] = {
+        "robocan": round(robocan["efficiency"], 4),
+        "canopen": round(canopen_result["efficiency"], 4),
+    }
+    return result
