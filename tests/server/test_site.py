@@ -1,0 +1,72 @@
+"""The site file: the demo loads, round-trips, and a broken file is refused with every error."""
+
+from __future__ import annotations
+
+import pytest
+
+from backend.site import SiteInvalid, dump_site, load_site_text
+
+from .helpers import DEMO, demo_site
+
+
+def test_demo_site_has_what_the_issue_asks_for() -> None:
+    site = demo_site()
+    assert len(site.floors) == 2
+    assert len(site.elevators) == 1 and {s.floor for s in site.elevators[0].stops} == {"F0", "F1"}
+    assert len(site.doors) == 2
+    assert "corridor" in {a.id for a in site.areas}
+    assert len(site.pois) == 8 and len(site.tours) == 3
+    assert len(site.charging_stations) == 2 and len(site.wait_points) == 1
+    assert len(site.buttons) == 2 and len(site.robots) == 3
+    assert all(m.sampling_period_ms == 200 for m in site.modules)
+
+
+def test_export_then_import_gives_the_same_site() -> None:
+    site = demo_site()
+    assert load_site_text(dump_site(site)) == site
+
+
+def test_broken_site_is_refused_with_every_error_and_its_line() -> None:
+    text = DEMO.read_text()
+    text = text.replace("{id: gb2, floor: F0, x: 30, y: 8}", "{id: gb2, floor: F0, x: 30, y: up}")
+    text = text.replace(
+        "sampling_period_ms: 200\n    points:\n      - {name: button_landing",
+        "sampling_period_ms: -5\n    points:\n      - {name: button_landing",
+    )
+    with pytest.raises(SiteInvalid) as info:
+        load_site_text(text)
+    issues = info.value.issues
+    assert {i.loc for i in issues} == {"nodes[11].y", "modules[1].sampling_period_ms"}
+    lines = text.splitlines()
+    for issue in issues:
+        assert issue.line is not None
+        assert issue.loc.split(".")[-1] in lines[issue.line - 1]
+
+
+def test_references_are_checked_all_at_once() -> None:
+    text = DEMO.read_text()
+    text = text.replace("points: [tapestries, globes, telescope]", "points: [tapestries, nothing]")
+    text = text.replace("{a: gc2, b: gc3}", "{a: gc2, b: nowhere}")
+    text = text.replace(
+        "point: lift_here}\n      - floor: F1", "point: led_entrance}\n      - floor: F1"
+    )
+    with pytest.raises(SiteInvalid) as info:
+        load_site_text(text)
+    messages = {(i.loc, i.message) for i in info.value.issues}
+    assert ("tours[1].points[1]", "unknown point of interest 'nothing'") in messages
+    assert ("edges[17].b", "unknown node 'nowhere'") in messages
+    assert any(
+        loc == "elevators[0].stops[0].in_position" and "expected an input" in msg
+        for loc, msg in messages
+    )
+    assert len(info.value.issues) == 3
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["", "- just\n- a list\n", "name: [unclosed\n", "name: x\nfloors: []\nnodes: []\n"],
+)
+def test_garbage_is_refused_not_crashed(text: str) -> None:
+    with pytest.raises(SiteInvalid) as info:
+        load_site_text(text)
+    assert info.value.issues

@@ -1,0 +1,242 @@
+"""Traffic Manager over a real bus: paths across floors, area locks, no deadlock."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from backend.site import Site, validate_site
+from backend.traffic import LockState, NoPath, SiteGraph, TrafficManager, UnknownNode
+from guidebot.bus import Bus
+
+from .helpers import RobotStub, demo_site
+
+
+def line_site() -> Site:
+    """w - x1 - x2 - e (a narrow corridor split in two areas) and a loop of three areas."""
+    nodes: list[dict[str, Any]] = [
+        {"id": "w", "floor": "F0", "x": 0, "y": 0, "passing_place": True},
+        {"id": "x1", "floor": "F0", "x": 5, "y": 0},
+        {"id": "x2", "floor": "F0", "x": 10, "y": 0},
+        {"id": "e", "floor": "F0", "x": 15, "y": 0, "passing_place": True},
+        {"id": "a", "floor": "F0", "x": 0, "y": 20},
+        {"id": "b", "floor": "F0", "x": 10, "y": 20},
+        {"id": "c", "floor": "F0", "x": 5, "y": 30},
+    ]
+    return validate_site(
+        {
+            "name": "line",
+            "floors": [{"id": "F0"}],
+            "nodes": nodes,
+            "edges": [
+                {"a": "w", "b": "x1"},
+                {"a": "x1", "b": "x2"},
+                {"a": "x2", "b": "e"},
+                {"a": "a", "b": "b"},
+                {"a": "b", "b": "c"},
+                {"a": "c", "b": "a"},
+                {"a": "a", "b": "w"},
+            ],
+            "areas": [
+                {"id": "west", "nodes": ["x1"]},
+                {"id": "east", "nodes": ["x2"]},
+                {"id": "A", "nodes": ["a"], "passing_place": "w"},
+                {"id": "B", "nodes": ["b"], "passing_place": "w"},
+                {"id": "C", "nodes": ["c"], "passing_place": "w"},
+            ],
+            "robots": [{"name": n, "token": f"token-{n}-xxxx"} for n in ("R1", "R2", "R3")],
+        }
+    )
+
+
+@pytest.fixture
+def bus() -> Bus:
+    return Bus()
+
+
+def start_traffic(bus: Bus, site: Site) -> TrafficManager:
+    manager = TrafficManager(bus.endpoint("traffic_manager"), site)
+    manager.start()
+    return manager
+
+
+def test_path_across_floors_goes_through_the_elevator_and_names_doors() -> None:
+    graph = SiteGraph(demo_site())
+    path = graph.shortest_path("ga1", "gc3")
+    assert path.nodes[:3] == ["ga1", "door_hall", "hall"]
+    assert ["lift0", "lift1"] == path.nodes[3:5]
+    steps = {s.node: s for s in path.steps}
+    assert steps["door_hall"].door == "door_gallery"
+    assert steps["door_f1"].door == "door_upstairs"
+    assert steps["lift0"].elevator == "lift" and steps["lift1"].floor == "F1"
+    assert path.areas == ["elevator"]
+
+
+def test_one_way_edges_are_respected() -> None:
+    graph = SiteGraph(demo_site())
+    back = graph.shortest_path("gb2", "ga2")  # the back gallery is one-way east to west
+    assert back.nodes == ["gb2", "ga2"]
+    forth = graph.shortest_path("ga2", "gb2")
+    assert forth.nodes == ["ga2", "ga1", "corridor_w", "corridor_e", "gb1", "gb2"]
+    assert forth.areas == ["corridor"]
+
+
+def test_unknown_nodes_and_unreachable_targets_are_errors() -> None:
+    site = demo_site()
+    doc = site.model_dump(mode="json")
+    doc["nodes"].append({"id": "island", "floor": "F0", "x": 99, "y": 99})
+    graph = SiteGraph(validate_site(doc))
+    with pytest.raises(UnknownNode):
+        graph.shortest_path("hall", "nowhere")
+    with pytest.raises(NoPath):
+        graph.shortest_path("hall", "island")
+
+
+async def test_get_path_is_answered_over_the_bus(bus: Bus) -> None:
+    start_traffic(bus, demo_site())
+    robot = bus.endpoint("R1")
+    ask = {"robot": "R1", "from_node": "entrance", "to_node": "gc3"}
+    reply = await robot.request("get_path", ask)
+    assert reply.type == "path" and reply.payload["nodes"][0] == "entrance"
+    assert reply.payload["steps"][-1]["node"] == "gc3"
+    bad = await robot.request("get_path", {"robot": "R1", "from_node": "entrance", "to_node": "x"})
+    assert bad.payload.get("error") and not bad.payload.get("nodes")
+
+
+async def test_waiting_robots_are_served_in_order(bus: Bus) -> None:
+    traffic = start_traffic(bus, demo_site())
+    r1, r2, r3 = (RobotStub(bus, n, "ga1") for n in ("R1", "R2", "R3"))
+    for robot in (r1, r2, r3):
+        robot.endpoint.publish("request_area", {"robot": robot.name, "area": "corridor"})
+    await r1.wait_for("area_granted")
+    assert not r2.of_type("area_granted") and not r3.of_type("area_granted")
+    assert traffic.lock_views()[0].waiting == ["R2", "R3"]
+    r1.endpoint.publish("release_area", {"robot": "R1", "area": "corridor"})
+    await r2.wait_for("area_granted")
+    assert not r3.of_type("area_granted")
+    r2.endpoint.publish("release_area", {"robot": "R2", "area": "corridor"})
+    grant = await r3.wait_for("area_granted")
+    assert grant.payload == {"robot": "R3", "area": "corridor"}
+
+
+async def test_a_grant_answers_the_request_it_belongs_to(bus: Bus) -> None:
+    start_traffic(bus, demo_site())
+    robot = RobotStub(bus, "R1", "ga1")
+    reply = await robot.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
+    assert reply.type == "area_granted"
+
+
+async def test_robot_may_not_ask_or_release_for_another(bus: Bus) -> None:
+    traffic = start_traffic(bus, demo_site())
+    r1 = RobotStub(bus, "R1", "ga1")
+    reply = await r1.endpoint.request("request_area", {"robot": "R2", "area": "corridor"})
+    assert reply.type == "error"
+    await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
+    r2 = RobotStub(bus, "R2", "ga1")
+    reply = await r2.endpoint.request("release_area", {"robot": "R1", "area": "corridor"})
+    assert reply.type == "error"
+    assert traffic.locks.holder("corridor") == "R1"
+    reply = await r1.endpoint.request("request_area", {"robot": "R1", "area": "no_such_area"})
+    assert reply.type == "error" and "unknown area" in reply.payload["reason"]
+
+
+async def test_lock_is_released_when_the_robot_leaves_the_area(bus: Bus) -> None:
+    traffic = start_traffic(bus, demo_site())
+    r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "gb1")
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
+    r2.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
+    await r1.wait_for("area_granted")
+    for node in ("ga1", "corridor_w", "corridor_e"):
+        r1.node = node
+        r1.state("busy")
+    assert traffic.locks.holder("corridor") == "R1"  # still inside
+    r1.node = "gb1"
+    r1.state("busy")
+    await r2.wait_for("area_granted")
+
+
+async def test_offline_holder_keeps_its_lock_until_staff_release_it(bus: Bus) -> None:
+    traffic = start_traffic(bus, demo_site())
+    r1, r2 = RobotStub(bus, "R1", "corridor_w"), RobotStub(bus, "R2", "gb1")
+    await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
+    r1.state("busy")
+    r1.state("offline")
+    r2.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
+    view = next(v for v in traffic.lock_views() if v.area == "corridor")
+    assert view.state is LockState.HOLDER_OFFLINE and view.holder == "R1"
+    assert view.waiting == ["R2"] and not r2.of_type("area_granted")
+    assert traffic.force_release("corridor", by="staff") == "R1"
+    await r2.wait_for("area_granted")
+
+
+async def test_task_end_releases_locks_except_the_area_the_robot_stands_in(bus: Bus) -> None:
+    traffic = start_traffic(bus, demo_site())
+    r1 = RobotStub(bus, "R1", "corridor_e")
+    await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
+    await r1.endpoint.request("request_area", {"robot": "R1", "area": "elevator"})
+    r1.state("busy")
+    r1.end("t1")
+    assert traffic.locks.held_by("R1") == ["corridor"]
+
+
+async def test_head_on_with_known_paths_is_prevented(bus: Bus) -> None:
+    traffic = start_traffic(bus, line_site())
+    r1, r2 = RobotStub(bus, "R1", "w"), RobotStub(bus, "R2", "e")
+    await r1.endpoint.request("get_path", {"robot": "R1", "from_node": "w", "to_node": "e"})
+    await r2.endpoint.request("get_path", {"robot": "R2", "from_node": "e", "to_node": "w"})
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "west"})
+    r2.endpoint.publish("request_area", {"robot": "R2", "area": "east"})
+    await r1.wait_for("area_granted", 2)  # west and east at once: the chain
+    assert {m.payload["area"] for m in r1.of_type("area_granted")} == {"west", "east"}
+    assert not r2.of_type("area_granted")
+    for node in ("x1", "x2", "e"):
+        r1.node = node
+        r1.state("busy")
+    await r2.wait_for("area_granted", 2)
+    assert not r1.of_type("area_yield") and not r2.of_type("area_yield")
+    assert traffic.locks.deadlocks_resolved == 0
+
+
+async def test_head_on_without_paths_is_detected_and_one_robot_backs_off(bus: Bus) -> None:
+    traffic = start_traffic(bus, line_site())
+    r1, r2 = RobotStub(bus, "R1", "x1"), RobotStub(bus, "R2", "x2")
+    await r1.endpoint.request("request_area", {"robot": "R1", "area": "west"})
+    await r2.endpoint.request("request_area", {"robot": "R2", "area": "east"})
+    r1.state("busy")
+    r2.state("busy")
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "east"})
+    r2.endpoint.publish("request_area", {"robot": "R2", "area": "west"})
+    order = await r2.wait_for("area_yield")
+    assert order.payload == {"robot": "R2", "area": "east", "go_to_node": "e"}
+    assert traffic.locks.deadlocks_resolved == 1
+    r2.node = "e"
+    r2.state("busy")  # backed off: leaving the area releases it
+    await r1.wait_for("area_granted", 2)
+    assert traffic.locks.holder("east") == "R1"
+
+
+async def test_three_robots_in_a_circle_all_get_through(bus: Bus) -> None:
+    traffic = start_traffic(bus, line_site())
+    robots = [RobotStub(bus, "R1", "a"), RobotStub(bus, "R2", "b"), RobotStub(bus, "R3", "c")]
+    held = ["A", "B", "C"]
+    for robot, area in zip(robots, held, strict=True):
+        await robot.endpoint.request("request_area", {"robot": robot.name, "area": area})
+        robot.state("busy")
+    for robot, area in zip(robots, ["B", "C", "A"], strict=True):
+        robot.endpoint.publish("request_area", {"robot": robot.name, "area": area})
+    r1, r2, r3 = robots
+    order = await r3.wait_for("area_yield")
+    assert order.payload["area"] == "C" and order.payload["go_to_node"] == "w"
+    assert traffic.locks.wait_for_graph() == {"R1": {"R2"}, "R2": {"R3"}}
+    r3.node = "w"
+    r3.state("busy")
+    await r2.wait_for("area_granted", 2)  # C
+    r2.node = "c"
+    r2.state("busy")  # leaves B
+    await r1.wait_for("area_granted", 2)  # B
+    r1.node = "b"
+    r1.state("busy")  # leaves A
+    r3.endpoint.publish("request_area", {"robot": "R3", "area": "A"})
+    await r3.wait_for("area_granted", 2)
+    assert traffic.locks.wait_for_graph() == {}
