@@ -51,6 +51,7 @@ FINAL_CLOSE_CODES = frozenset({4000, 4001, 4003})
 
 _COALESCED = frozenset({"robot_state"})
 _BATCH_MAX = 256
+_BATCH_BYTES = 1 << 18
 
 
 class HubError(Exception):
@@ -95,7 +96,7 @@ class HubClient:
         heartbeat_timeout: float = 15.0,
         backoff_initial: float = 0.2,
         backoff_max: float = 10.0,
-        queue_size: int = 1000,
+        queue_size: int = 4096,
         connect_timeout: float | None = 10.0,
         max_size: int = 16 * 1024 * 1024,
     ) -> None:
@@ -123,6 +124,7 @@ class HubClient:
         self._patterns: dict[str, int] = {}
         self._pending: dict[str, asyncio.Future[Message]] = {}
         self._on_connect: list[OnConnect] = []
+        self._on_disconnect: list[Callable[[], None]] = []
         self._out: deque[list[Any]] = deque()
         self._out_by_key: dict[str, list[Any]] = {}
         self._out_ready = asyncio.Event()
@@ -189,6 +191,13 @@ class HubClient:
             with contextlib.suppress(asyncio.CancelledError):
                 await asyncio.shield(runner)
         return self.failure
+
+    def on_disconnect(self, callback: Callable[[], None]) -> Callable[[], None]:
+        """Call ``callback`` when an established connection is lost (the link is down)."""
+        self._on_disconnect.append(callback)
+        return lambda: (
+            self._on_disconnect.remove(callback) if callback in self._on_disconnect else None
+        )
 
     def on_connect(self, callback: OnConnect) -> Callable[[], None]:
         """Run ``callback`` after every (re)connection, subscriptions already restored."""
@@ -329,8 +338,10 @@ class HubClient:
                 self._out_ready.clear()
                 await self._out_ready.wait()
             batch = []
-            while out and len(batch) < _BATCH_MAX:
+            size = 0
+            while out and len(batch) < _BATCH_MAX and size < _BATCH_BYTES:
                 entry = out.popleft()
+                size += len(entry[1])
                 if entry[0] is not None:
                     self._out_by_key.pop(entry[0], None)
                 batch.append(entry)
@@ -422,8 +433,15 @@ class HubClient:
             log.warning("%s: hub session failed: %r", self.name or "client", exc)
             return False
         finally:
+            was_connected = self.connected.is_set()
             self.connected.clear()
             self._ws = None
+            if was_connected:
+                for callback in list(self._on_disconnect):
+                    try:
+                        callback()
+                    except Exception:
+                        log.exception("%s: on_disconnect callback failed", self.name)
             for task in tasks:
                 task.cancel()
             for task in tasks:

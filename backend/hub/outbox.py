@@ -61,8 +61,11 @@ class Outbox:
         self.closed = True
         self._ready.set()
 
-    async def get_batch(self, max_items: int) -> list[bytes]:
-        """Wait for at least one message, then take up to ``max_items`` in queue order."""
+    async def get_batch(self, max_items: int, max_bytes: int = 1 << 18) -> list[bytes]:
+        """Wait for at least one message, then take up to ``max_items`` in queue order.
+
+        The batch stops growing once it holds ``max_bytes`` (one message may be larger).
+        """
         while not self._items:
             if self.closed:
                 return []
@@ -70,10 +73,12 @@ class Outbox:
             await self._ready.wait()
         batch: list[bytes] = []
         items = self._items
-        while items and len(batch) < max_items:
+        size = 0
+        while items and len(batch) < max_items and size < max_bytes:
             entry = items.popleft()
             key = entry[0]
             if key is not None and self._by_key.get(key) is entry:  # type: ignore[arg-type]
                 del self._by_key[key]  # type: ignore[arg-type]
             batch.append(entry[1])  # type: ignore[arg-type]
+            size += len(entry[1])  # type: ignore[arg-type]
         return batch

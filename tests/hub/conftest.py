@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
 
+import backend.app
 from backend.settings import Settings, StaticToken
 from backend.testing import RunningServer, running_server
 from guidebot.client import HubClient
@@ -15,13 +17,20 @@ TOKENS = {
     "R1": StaticToken(token="token-robot-R1", name="R1", role="robot"),
     "R2": StaticToken(token="token-robot-R2", name="R2", role="robot"),
     "gui": StaticToken(token="token-gui-admin-page", name="gui", role="gui"),
-    "tm": StaticToken(token="token-module-tasks", name="task_manager", role="module"),
+    "tm": StaticToken(token="token-module-tours", name="tour_module", role="module"),
     "op": StaticToken(token="token-operator-ann", name="ann", role="operator"),
 }
 
 
 def hub_settings(**overrides: Any) -> Settings:
     return Settings(tokens=list(TOKENS.values()), **overrides)
+
+
+@pytest.fixture(autouse=True)
+def hub_only(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """These tests exercise the hub alone: no server components, no database in the cwd."""
+    monkeypatch.setattr(backend.app, "COMPONENTS", [])
+    monkeypatch.setenv("GUIDEBOT_DB_URL", f"sqlite+aiosqlite:///{tmp_path}/hub.db")
 
 
 @pytest.fixture

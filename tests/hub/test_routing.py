@@ -93,7 +93,7 @@ async def test_point_to_point_reaches_only_the_destination(connect: ClientFactor
         "task_assigned", {"task_id": "t1", "robot": "R2", "net": "give_tour"}, destination="R2"
     )
     got = await r2_inbox.next()
-    assert got.payload["task_id"] == "t1" and got.source == "task_manager"
+    assert got.payload["task_id"] == "t1" and got.source == "tour_module"
     await asyncio.gather(r1.sync(), gui.sync())
     assert r1_inbox.queue.empty() and gui_inbox.queue.empty()
 
@@ -120,7 +120,7 @@ async def test_request_reply_between_websocket_clients(connect: ClientFactory) -
     reply = await r1.request("get_path", {"robot": "R1", "to_node": "B"}, timeout=WAIT)
     assert reply.type == "path"
     assert reply.payload["nodes"] == ["A", "B"]
-    assert reply.source == "task_manager" and reply.destination == "R1"
+    assert reply.source == "tour_module" and reply.destination == "R1"
 
 
 async def test_request_times_out_without_a_replier(connect: ClientFactory) -> None:

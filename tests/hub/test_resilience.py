@@ -1,0 +1,235 @@
+"""Slow clients, server restarts and dead links: the hub and its clients keep going."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+from collections.abc import AsyncIterator
+from typing import Any
+
+import orjson
+import pytest
+import websockets
+from fastapi import FastAPI
+from websockets.exceptions import ConnectionClosed
+
+import backend.app
+from backend.testing import running_server
+from guidebot.client import HubClient
+from guidebot.messages import Message
+
+from .conftest import TOKENS, hub_settings
+from .test_routing import Inbox
+
+WAIT = 15.0
+
+
+async def test_a_client_that_never_reads_does_not_slow_the_others() -> None:
+    settings = hub_settings(hub_queue_size=64, hub_coalesce_after=16)
+    async with running_server(settings) as server:
+        # The slow client: a tiny receive buffer, and it never reads after subscribing.
+        sock = socket.socket()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.connect(("127.0.0.1", server.port))
+        slow = await websockets.connect(
+            server.ws_url,
+            sock=sock,
+            additional_headers={"Authorization": f"Bearer {TOKENS['op'].token}"},
+            proxy=None,
+            compression=None,
+            max_queue=1,
+            max_size=None,
+        )
+        await slow.recv()  # welcome
+        await slow.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["*"]}}))
+        await slow.send(orjson.dumps({"type": "ping", "id": "p"}))
+        assert orjson.loads(await asyncio.wait_for(slow.recv(), WAIT))["type"] == "pong"
+
+        async with (
+            HubClient(server.ws_url, TOKENS["gui"].token) as gui,
+            HubClient(server.ws_url, TOKENS["R1"].token) as r1,
+        ):
+            inbox = Inbox()
+            gui.subscribe("say", inbox)
+            await gui.sync()
+            text = "x" * 8192
+            count = 1500  # 12 MB: more than the kernel buffers between server and slow client
+            for i in range(count):
+                r1.publish("say", {"text": f"{i}:{text}"})
+            received = [await asyncio.wait_for(inbox.queue.get(), WAIT) for _ in range(count)]
+            assert [int(m.payload["text"].split(":")[0]) for m in received] == list(range(count))
+
+            hub = server.app.state.hub
+            assert hub.overflow_disconnects == 1
+            assert "ann" not in hub.clients and "gui" in hub.clients
+
+        # Once the slow client reads again it finds the reason at the end of its stream.
+        with pytest.raises(ConnectionClosed) as closed:
+            while True:
+                await asyncio.wait_for(slow.recv(), WAIT)
+        assert closed.value.rcvd is not None
+        assert closed.value.rcvd.code == 4008
+        assert "slow consumer" in closed.value.rcvd.reason
+        await slow.close()
+
+
+def _recorder(app: FastAPI) -> contextlib.AbstractAsyncContextManager[None]:
+    """A server component, as the Task Manager would be one: records every message."""
+
+    @contextlib.asynccontextmanager
+    async def run() -> AsyncIterator[None]:
+        endpoint = app.state.hub.endpoint("recorder")
+        app.state.recorded = []
+        endpoint.subscribe("*", app.state.recorded.append)
+        try:
+            yield
+        finally:
+            endpoint.close()
+
+    return run()
+
+
+async def test_clients_reconnect_resubscribe_and_flush_after_server_restart(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(backend.app, "COMPONENTS", [_recorder])
+    settings = hub_settings()
+    fast = {"backoff_initial": 0.05, "backoff_max": 0.5}
+    async with running_server(settings) as first:
+        port = first.port
+        gui = HubClient(first.ws_url, TOKENS["gui"].token, **fast)  # type: ignore[arg-type]
+        r1 = HubClient(first.ws_url, TOKENS["R1"].token, **fast)  # type: ignore[arg-type]
+        await gui.start()
+        await r1.start()
+        resynchronised: list[int] = []
+        gui.on_connect(lambda: resynchronised.append(gui.connections))
+        r1_down = asyncio.Event()
+        r1.on_disconnect(r1_down.set)
+        inbox = Inbox()
+        gui.subscribe("say", inbox)
+        await gui.sync()
+        r1.publish("say", {"text": "before"})
+        assert (await inbox.next()).payload["text"] == "before"
+    try:
+        await asyncio.wait_for(r1_down.wait(), WAIT)
+        assert not r1.connected.is_set()
+        queued = r1.publish("say", {"text": "while the server was down"})
+        async with running_server(settings, port=port) as second:
+            await asyncio.wait_for(asyncio.gather(gui.connected.wait(), r1.connected.wait()), WAIT)
+            await r1.sync()  # the queued message went out before this ping
+            recorded: list[Message] = second.app.state.recorded
+            flushed = [m for m in recorded if m.id == queued.id]
+            assert len(flushed) == 1 and flushed[0].source == "R1"
+            await gui.sync()
+            r1.publish("say", {"text": "after"})
+            while (await inbox.next()).payload["text"] != "after":
+                pass  # "while the server was down" may or may not arrive before gui resubscribed
+            assert resynchronised == [2]
+            assert gui.connections == 2 and r1.connections == 2
+    finally:
+        await gui.close()
+        await r1.close()
+
+
+class Blackhole:
+    """A TCP relay in front of the server that can go silent without closing (a dead Wi-Fi)."""
+
+    def __init__(self, target_port: int) -> None:
+        self.target_port = target_port
+        self.silent = False
+        self.port = 0
+        self._server: asyncio.Server | None = None
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._writers: list[asyncio.StreamWriter] = []
+
+    async def __aenter__(self) -> Blackhole:
+        self._server = await asyncio.start_server(self._relay, "127.0.0.1", 0)
+        self.port = self._server.sockets[0].getsockname()[1]
+        return self
+
+    async def __aexit__(self, *exc: Any) -> None:
+        assert self._server is not None
+        self._server.close()
+        for writer in self._writers:
+            writer.close()
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await self._server.wait_closed()
+
+    async def _relay(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.target_port)
+        self._writers += [writer, up_writer]
+        for pipe in (self._pipe(reader, up_writer), self._pipe(up_reader, writer)):
+            task = asyncio.create_task(pipe)
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+
+    async def _pipe(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        with contextlib.suppress(ConnectionError, OSError):
+            while data := await reader.read(65536):
+                if self.silent:
+                    continue  # swallowed: neither side hears anything, nobody closes
+                writer.write(data)
+                await writer.drain()
+
+
+async def test_heartbeat_detects_a_silent_link_and_reconnects() -> None:
+    async with running_server(hub_settings()) as server, Blackhole(server.port) as relay:
+        client = HubClient(
+            f"ws://127.0.0.1:{relay.port}/ws",
+            TOKENS["R1"].token,
+            heartbeat_interval=0.1,
+            heartbeat_timeout=0.6,
+            backoff_initial=0.05,
+        )
+        lost = asyncio.Event()
+        client.on_disconnect(lost.set)
+        async with client:
+            await client.sync()
+            relay.silent = True
+            await asyncio.wait_for(lost.wait(), WAIT)
+            relay.silent = False  # the link comes back: new connections go through
+            await asyncio.wait_for(client.connected.wait(), WAIT)
+            await client.sync()
+            assert client.connections == 2
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+async def test_offline_queue_keeps_the_newest_state_and_drops_the_oldest(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Published before the server exists: robot_state coalesces, other overflow drops oldest."""
+    monkeypatch.setattr(backend.app, "COMPONENTS", [_recorder])
+    port = _free_port()
+    client = HubClient(
+        f"ws://127.0.0.1:{port}/ws",
+        TOKENS["R1"].token,
+        queue_size=3,
+        connect_timeout=None,
+        backoff_initial=0.05,
+        backoff_max=0.2,
+    )
+    await client.start()
+    try:
+        for i in range(5):
+            client.publish("robot_state", {"robot": "R1", "seq": i})
+        for text in "abc":
+            client.publish("say", {"text": text})
+        assert client.dropped == 1  # the (coalesced) robot_state was the oldest
+        async with running_server(hub_settings(), port=port) as server:
+            await asyncio.wait_for(client.connected.wait(), WAIT)
+            await client.sync()
+            recorded = [(m.type, m.payload) for m in server.app.state.recorded]
+            assert recorded == [("say", {"text": t}) for t in "abc"]
+            client.publish("robot_state", {"robot": "R1", "seq": 9})
+            await client.sync()
+            assert server.app.state.recorded[-1].payload == {"robot": "R1", "seq": 9}
+    finally:
+        await client.close()
