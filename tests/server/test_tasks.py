@@ -1,0 +1,288 @@
+"""Task Manager over a real bus with scripted robots: the life of tasks, priorities, battery
+alarms, robot loss, reassignment, idle robots and reconciliation after a restart."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from backend.tasks import Task, TaskError, TaskManager, TaskState
+from guidebot.bus import Bus
+from guidebot.messages import Message
+
+from .helpers import RobotStub, demo_site
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def bus() -> Bus:
+    return Bus()
+
+
+@pytest.fixture
+def clock() -> Clock:
+    return Clock()
+
+
+@pytest.fixture
+def events(bus: Bus) -> list[Message]:
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("task_event", seen.append)
+    return seen
+
+
+@pytest.fixture
+def manager(bus: Bus, clock: Clock) -> Iterator[TaskManager]:
+    tm = TaskManager(
+        bus.endpoint("task_manager"),
+        demo_site(),
+        clock=clock,
+        robot_timeout_s=5,
+        lost_grace_s=20,
+        start_timeout_s=30,
+    )
+    tm.start()
+    yield tm
+
+
+def fleet(bus: Bus) -> tuple[RobotStub, RobotStub, RobotStub]:
+    """Three robots at home (two stations and the wait point), online and idle."""
+    robots = (
+        RobotStub(bus, "R1", "charge_a"),
+        RobotStub(bus, "R2", "charge_b"),
+        RobotStub(bus, "R3", "entrance"),
+    )
+    for robot in robots:
+        robot.state()
+    return robots
+
+
+def assigned(robot: RobotStub, net: str | None = None) -> list[Message]:
+    return [m for m in robot.of_type("task_assigned") if net is None or m.payload["net"] == net]
+
+
+def states_of(events: list[Message], task_id: str) -> list[str]:
+    return [m.payload["state"] for m in events if m.payload["task_id"] == task_id]
+
+
+async def test_full_life_of_a_tour(bus: Bus, manager: TaskManager, events: list[Message]) -> None:
+    r1, r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"}, requester="panel-1")
+    order = await r3.wait_for("task_assigned")  # nearest to the first point (the hall)
+    assert order.payload["net"] == "give_tour"
+    params = order.payload["params"]
+    assert params["tour"] == "ground"
+    assert [p["poi"] for p in params["points"]] == [
+        "welcome",
+        "mosaics",
+        "amphorae",
+        "sword",
+        "loom",
+    ]
+    assert params["points"][2]["media"] == ["amphorae.jpg"] and params["points"][0]["text"]
+    r3.start(task.id)
+    assert task.state is TaskState.RUNNING
+    r3.end(task.id)
+    assert task.state is TaskState.DONE
+    assert states_of(events, task.id) == ["queued", "assigned", "running", "done"]
+    assert not assigned(r1) and not assigned(r2)
+
+
+async def test_priorities_then_first_come_first_served(bus: Bus, manager: TaskManager) -> None:
+    robot = RobotStub(bus, "R1", "hall")
+    low = manager.request("go_to_poi", {"poi": "loom"}, priority=1)
+    robot.state()
+    first = await robot.wait_for("task_assigned")
+    assert first.payload["task_id"] == low.id
+    robot.start(low.id)
+    later = [
+        manager.request("go_to_poi", {"poi": "sword"}, priority=1),
+        manager.request("go_to_poi", {"poi": "globes"}, priority=9),
+        manager.request("go_to_poi", {"poi": "mosaics"}, priority=5),
+        manager.request("go_to_poi", {"poi": "telescope"}, priority=9),
+    ]
+    assert [manager.queue_position(t) for t in later] == [4, 1, 3, 2]
+    served = []
+    for i in range(4):
+        task_id = robot.of_type("task_assigned")[-1].payload["task_id"]
+        robot.end(task_id)
+        msg = await robot.wait_for("task_assigned", i + 2)
+        served.append(msg.payload["task_id"])
+        robot.start(msg.payload["task_id"])
+    assert served == [later[1].id, later[3].id, later[2].id, later[0].id]
+
+
+async def test_queue_position_and_wait_are_known_at_once(bus: Bus, manager: TaskManager) -> None:
+    robot = RobotStub(bus, "R1", "hall")
+    robot.state()
+    busy = manager.request("tour", {"tour": "ground"})
+    robot.start(busy.id)
+    waiting = manager.request("tour", {"tour": "upstairs"}, requester="visitor")
+    status = manager.status(waiting)
+    assert status["queue_position"] == 1
+    assert status["eta_s"] is not None and status["eta_s"] > 0
+    third = manager.request("tour", {"tour": "highlights"})
+    assert manager.eta_s(third) > manager.eta_s(waiting)
+
+
+async def test_battery_low_finishes_the_task_then_charges(bus: Bus, manager: TaskManager) -> None:
+    r1, r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    await r3.wait_for("task_assigned")
+    r3.start(task.id)
+    r3.endpoint.publish("battery_low", {"robot": "R3", "level": 0.25})
+    assert not r3.of_type("task_cancel") and task.state is TaskState.RUNNING
+    other = manager.request("go_to_poi", {"poi": "welcome"})
+    assert other.robot in ("R1", "R2")  # R3 is not given new work
+    taker = r1 if other.robot == "R1" else r2
+    taker.node = "hall"  # it leaves its station: a station is free for R3
+    taker.state("busy", task_id=other.id)
+    r3.end(task.id)
+    charge = await r3.wait_for("task_assigned", 2)
+    assert charge.payload["net"] == "battery_charge"
+    assert charge.payload["params"]["station"] in ("station_a", "station_b")
+    assert charge.payload["params"]["node"] in ("charge_a", "charge_b")
+
+
+async def test_battery_panic_cancels_and_requeues_for_another_robot(
+    bus: Bus, manager: TaskManager
+) -> None:
+    r1, _r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    await r3.wait_for("task_assigned")
+    r3.start(task.id)
+    r1.node = "hall"  # R1 has left its station: R3 can charge there
+    r1.state()
+    r3.endpoint.publish("battery_panic", {"robot": "R3", "level": 0.05})
+    cancel = await r3.wait_for("task_cancel")
+    assert cancel.payload["task_id"] == task.id
+    assert task.state is TaskState.ASSIGNED and task.robot == "R1"  # the nearest other one
+    assert assigned(r1, "give_tour")[0].payload["task_id"] == task.id
+    charge = await r3.wait_for("task_assigned", 2)
+    assert charge.payload["net"] == "battery_charge"
+
+
+async def test_lost_robot_task_goes_to_another_after_grace(
+    bus: Bus, manager: TaskManager, clock: Clock, events: list[Message]
+) -> None:
+    r1, r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    await r3.wait_for("task_assigned")
+    r3.start(task.id)
+    clock.now += 6  # R3 falls silent; the others keep reporting
+    r1.state()
+    r2.state()
+    manager.check_timeouts()
+    assert not manager.robots["R3"].online and task.robot == "R3"  # grace: may still run
+    clock.now += 21
+    r1.state()
+    r2.state()
+    manager.check_timeouts()
+    assert task.robot in ("R1", "R2")
+    assert states_of(events, task.id)[2:4] == ["running", "queued"]
+    r3.state("busy")  # back, still running the old task: told to drop it
+    cancel = await r3.wait_for("task_cancel")
+    assert cancel.payload["task_id"] == task.id
+
+
+async def test_staff_reassign_a_task_off_a_broken_robot(bus: Bus, manager: TaskManager) -> None:
+    _r1, r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    await r3.wait_for("task_assigned")
+    r3.start(task.id)
+    r3.state("fault")  # broke down: its task is re-queued at once
+    assert task.robot in ("R1", "R2")
+    manager.reassign(task.id, "R2")
+    assert task.robot == "R2"
+    assert (await r2.wait_for("task_assigned")).payload["task_id"] == task.id
+    with pytest.raises(TaskError):
+        manager.reassign(task.id, "R9")
+
+
+async def test_cancel_reprioritise_and_visitor_at_robot_screen(
+    bus: Bus, manager: TaskManager
+) -> None:
+    robot = RobotStub(bus, "R1", "hall")
+    robot.state()
+    running = manager.request("tour", {"tour": "ground"})
+    robot.start(running.id)
+    a = manager.request("go_to_poi", {"poi": "loom"}, priority=1)
+    b = manager.request("go_to_poi", {"poi": "sword"}, priority=1)
+    manager.reprioritise(b.id, 7)
+    assert manager.queue_position(b) == 1
+    manager.cancel(a.id, by="operator")
+    assert a.state is TaskState.CANCELLED and manager.queue_position(a) is None
+    manager.cancel(running.id, by="operator")
+    await robot.wait_for("task_cancel")
+    assert running.id in [m.payload["task_id"] for m in robot.of_type("task_cancel")]
+    assert b.robot == "R1"
+    with pytest.raises(TaskError):
+        manager.cancel(a.id)
+    reply = await robot.endpoint.request(
+        "task_request", {"kind": "go_to_poi", "params": {"poi": "globes"}}
+    )
+    assert reply.type == "task_event"
+    mine = manager.get(reply.payload["task_id"])
+    assert mine.pinned_robot == "R1" and mine.requester == "R1"
+    bad = await robot.endpoint.request("task_request", {"kind": "tour", "params": {"tour": "x"}})
+    assert bad.type == "error" and "unknown tour" in bad.payload["reason"]
+
+
+async def test_idle_robots_go_to_stations_or_the_wait_point(bus: Bus, manager: TaskManager) -> None:
+    robots = [RobotStub(bus, name, "gc3") for name in ("R1", "R2", "R3")]
+    for robot in robots:
+        robot.state()
+    nets = sorted(assigned(r)[0].payload["net"] for r in robots)
+    assert nets == ["battery_charge", "battery_charge", "navigate_to_point"]
+    stations = {
+        assigned(r)[0].payload["params"]["station"]
+        for r in robots
+        if assigned(r)[0].payload["net"] == "battery_charge"
+    }
+    assert stations == {"station_a", "station_b"}
+    waiter = next(r for r in robots if assigned(r)[0].payload["net"] == "navigate_to_point")
+    assert assigned(waiter)[0].payload["params"] == {"node": "entrance"}
+    # A visitor's task preempts the trip home.
+    task = manager.request("go_to_poi", {"poi": "telescope"})
+    assert task.robot is not None and task.state is TaskState.ASSIGNED
+
+
+async def test_restart_keeps_queued_and_reconciles_running(bus: Bus, manager: TaskManager) -> None:
+    queued = Task("q1", "tour", {"tour": "ground"}, 5, "panel", 1)
+    still = Task("r1", "tour", {"tour": "upstairs"}, 5, "panel", 2, TaskState.RUNNING, "R1")
+    lost = Task("r2", "tour", {"tour": "highlights"}, 5, "panel", 3, TaskState.RUNNING, "R2")
+    manager.restore([queued, still, lost])
+    assert manager.queue_position(queued) == 1
+    r1, r2 = RobotStub(bus, "R1", "gc1"), RobotStub(bus, "R2", "ga1")
+    r1.task_id = "r1"
+    r1.state("busy")
+    assert still.state is TaskState.RUNNING and still.robot == "R1"
+    r2.state("idle")  # restarted without it
+    assert lost.state in (TaskState.QUEUED, TaskState.ASSIGNED)
+    assert manager.robots["R2"].current in ("q1", "r2")
+    r1.end("r1")
+    assert still.state is TaskState.DONE
+    next_id = manager.request("go_to_poi", {"poi": "globes"}).seq
+    assert next_id > 3
+
+
+async def test_bad_requests_are_refused_and_nothing_is_lost(manager: TaskManager) -> None:
+    kept = manager.request("tour", {"tour": "ground"})
+    for kind, params in [
+        ("tour", {"tour": "nope"}),
+        ("go_to_poi", {}),
+        ("go_to", {"node": 5}),
+        ("charge", {"station": "x"}),
+        ("fly", {}),
+    ]:
+        with pytest.raises(TaskError):
+            manager.request(kind, params)
+    assert [t.id for t in manager.queue.ordered()] == [kept.id]
