@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
 }
 
 BENCHMARKS: dict[str, str] = {
+    "hub": "bench.hub:hub",
     "petri": "bench.petri:main",
     "robocan": "bench.robocan:main",
 }
