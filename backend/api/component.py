@@ -3,6 +3,7 @@ event log, building buttons and robot tokens. Listed in backend.app.COMPONENTS."
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator
@@ -26,7 +27,14 @@ __all__ = ["LOGGED_TYPES", "server_brain"]
 
 log = logging.getLogger(__name__)
 
-LOGGED_TYPES = ("battery_low", "battery_panic", "robot_fault", "area_yield")
+LOGGED_TYPES = (
+    "battery_low",
+    "battery_panic",
+    "robot_fault",
+    "area_yield",
+    "robot_connected",
+    "robot_disconnected",
+)
 """Hub messages copied into the event log (task changes and lock changes are logged directly)."""
 
 
@@ -53,6 +61,31 @@ def _sync_robot_tokens(tokens: TokenStore, site: Site, known: dict[str, str]) ->
         if token not in known:
             tokens.add(token, name, Role.ROBOT)
             known[token] = name
+
+
+async def watch_robot_links(
+    hub: Any, sites: SiteService, tasks: TaskManager, period_s: float = 0.25
+) -> None:
+    """Tell the managers when a robot's WebSocket link comes up or drops.
+
+    A robot the Task Manager believes online but that has no hub link any more is announced
+    as disconnected, even if its whole connection fell between two looks.
+    """
+    endpoint = hub.endpoint("link_watcher")
+    connected: set[str] = set()
+    try:
+        while True:
+            robots = {r.name for r in sites.site.robots}
+            now = robots & set(hub.clients)
+            believed = {name for name, info in tasks.robots.items() if info.online}
+            for name in sorted(now - connected):
+                endpoint.publish("robot_connected", {"robot": name})
+            for name in sorted(((connected | believed) & robots) - now):
+                endpoint.publish("robot_disconnected", {"robot": name})
+            connected = now
+            await asyncio.sleep(period_s)
+    finally:
+        endpoint.close()
 
 
 @contextlib.asynccontextmanager
@@ -103,9 +136,15 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
             app.state.sites = sites
             app.state.task_manager = tasks
             app.state.traffic = traffic
+            links = asyncio.get_running_loop().create_task(
+                watch_robot_links(hub, sites, tasks), name="robot-link-watcher"
+            )
             try:
                 yield
             finally:
+                links.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await links
                 buttons.stop()
                 await tasks.stop()
                 traffic.stop()

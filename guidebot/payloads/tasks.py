@@ -9,6 +9,7 @@ from pydantic import Field
 from guidebot.messages import PayloadModel, register_payload
 
 __all__ = [
+    "RobotLink",
     "TaskAssigned",
     "TaskCancel",
     "TaskEnded",
@@ -70,3 +71,11 @@ class TaskEvent(PayloadModel):
     robot: str | None = None
     queue_position: int | None = None
     eta_s: float | None = None
+
+
+@register_payload("robot_connected")
+@register_payload("robot_disconnected")
+class RobotLink(PayloadModel):
+    """A robot's hub link came up or dropped (published by the server, not by robots)."""
+
+    robot: str

@@ -1,0 +1,55 @@
+"""Fixtures of the server tests: a real uvicorn server on 127.0.0.1 with the demo site."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
+
+import httpx
+import pytest
+
+from backend.auth import Role
+from backend.settings import Settings, StaticToken
+from backend.testing import RunningServer, running_server
+
+from .helpers import DEMO
+
+PANEL_TOKEN = "panel-token-1234"
+OPERATOR_TOKEN = "operator-token-1234"
+GUI_TOKEN = "gui-token-12345678"
+
+
+def server_settings(tmp_path: Path) -> Settings:
+    return Settings(
+        db_url=f"sqlite+aiosqlite:///{tmp_path / 'guidebot.db'}",
+        site=DEMO,
+        tokens=[
+            StaticToken(token=PANEL_TOKEN, name="panel-1", role=Role.PANEL),
+            StaticToken(token=OPERATOR_TOKEN, name="operator-1", role=Role.OPERATOR),
+            StaticToken(token=GUI_TOKEN, name="gui-1", role=Role.GUI),
+        ],
+    )
+
+
+@pytest.fixture
+async def server(tmp_path: Path) -> AsyncIterator[RunningServer]:
+    async with running_server(server_settings(tmp_path)) as srv:
+        yield srv
+
+
+ClientFactory = Callable[[str | None], Awaitable[httpx.AsyncClient]]
+
+
+@pytest.fixture
+async def http(server: RunningServer) -> AsyncIterator[Callable[[str | None], httpx.AsyncClient]]:
+    clients: list[httpx.AsyncClient] = []
+
+    def make(token: str | None) -> httpx.AsyncClient:
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        client = httpx.AsyncClient(base_url=server.url, headers=headers, timeout=10)
+        clients.append(client)
+        return client
+
+    yield make
+    for client in clients:
+        await client.aclose()
