@@ -99,11 +99,34 @@ class VirtualClock:
         """Move time forward by ``seconds``, running every callback due on the way, in order."""
         self.run(until=self._now + seconds)
 
-    def run(self, until: float | None = None, stop: Callable[[], bool] | None = None) -> None:
-        """Run callbacks in time order until none is left, ``until`` is passed or ``stop()``."""
+    def run_ready(self) -> int:
+        """Run the callbacks already due now (not those they schedule): one loop iteration."""
+        last = next(self._seq)
+        ran = 0
+        while self._queue and self._queue[0][0] <= self._now and self._queue[0][1] < last:
+            _, _, handle = heapq.heappop(self._queue)
+            if not handle.cancelled:
+                handle.callback()
+                ran += 1
+        return ran
+
+    def run(
+        self,
+        until: float | None = None,
+        stop: Callable[[], bool] | None = None,
+        max_callbacks: int | None = None,
+    ) -> None:
+        """Run callbacks in time order until none is left, ``until`` is passed, ``stop()`` or
+        ``max_callbacks`` ran (a net that reschedules itself at once would never let time pass).
+        """
+        budget = max_callbacks
         while True:
             if stop is not None and stop():
                 return
+            if budget is not None:
+                if budget <= 0:
+                    return
+                budget -= 1
             when = self.next_time()
             if when is None or (until is not None and when > until):
                 break
