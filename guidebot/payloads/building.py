@@ -1,7 +1,94 @@
-"""Payload models of the building messages (registered by type name)."""
+"""Payload models of the building messages (registered by type name).
+
+The BuildingInterface answers commands (open_door, close_door, call_elevator, set_output) with a
+confirmation or ``command_failed``, correlated to the request, and broadcasts input changes and
+module health. Field names are the contract in docs/messages.md.
+"""
 
 from __future__ import annotations
 
+from pydantic import Field
+
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["PayloadModel", "register_payload"]
+__all__ = [
+    "BuildingInputChanged",
+    "BuildingModuleHealth",
+    "CallElevator",
+    "CloseDoor",
+    "CommandFailed",
+    "DoorClosed",
+    "DoorOpened",
+    "ElevatorInPosition",
+    "OpenDoor",
+    "SetOutput",
+]
+
+
+@register_payload("open_door")
+class OpenDoor(PayloadModel):
+    door: str = Field(min_length=1, max_length=64)
+
+
+@register_payload("close_door")
+class CloseDoor(PayloadModel):
+    door: str = Field(min_length=1, max_length=64)
+
+
+@register_payload("door_opened")
+class DoorOpened(PayloadModel):
+    door: str
+
+
+@register_payload("door_closed")
+class DoorClosed(PayloadModel):
+    door: str
+
+
+@register_payload("call_elevator")
+class CallElevator(PayloadModel):
+    elevator: str = Field(min_length=1, max_length=64)
+    floor: str = Field(min_length=1, max_length=64)
+
+
+@register_payload("elevator_in_position")
+class ElevatorInPosition(PayloadModel):
+    elevator: str
+    floor: str
+    door_open: bool = True
+
+
+@register_payload("set_output")
+class SetOutput(PayloadModel):
+    """Write one output: a coil (bool) or a holding register (0..65535)."""
+
+    module: str = Field(min_length=1, max_length=64)
+    point: str = Field(min_length=1, max_length=64)
+    value: int | bool
+
+
+@register_payload("command_failed")
+class CommandFailed(PayloadModel):
+    """The reason says what failed and why, in words an operator can act on."""
+
+    command: str
+    reason: str
+
+
+@register_payload("building_input_changed")
+class BuildingInputChanged(PayloadModel):
+    module: str
+    point: str
+    name: str
+    value: int | bool
+    node: str | None = None
+    floor: str | None = None
+
+
+@register_payload("building_module_health")
+class BuildingModuleHealth(PayloadModel):
+    module: str
+    online: bool
+    rtt_ms: float | None = None
+    errors: int = 0
+    last_error: str | None = None

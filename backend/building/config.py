@@ -1,0 +1,178 @@
+"""The building section of a site, checked as a whole before anything connects.
+
+The models of single items live in backend.site.building (owned by the site schema); this
+module groups them and refuses a building whose references or addresses do not make sense,
+with an error that names the module, point or device at fault.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from backend.site.building import (
+    BuildingModule,
+    Button,
+    Door,
+    Elevator,
+    IOPoint,
+    IORef,
+    PointKind,
+)
+
+__all__ = [
+    "BuildingConfig",
+    "BuildingConfigError",
+    "load_building",
+    "load_building_file",
+]
+
+BUILDING_KEYS = ("modules", "doors", "elevators", "buttons")
+WRITABLE = frozenset({PointKind.coil, PointKind.holding_register})
+READABLE_INPUTS = frozenset({PointKind.discrete_input, PointKind.coil})
+
+
+class BuildingConfigError(ValueError):
+    """A site whose building part cannot work; the message says where and why."""
+
+
+class BuildingConfig(BaseModel):
+    """Every Modbus module of the venue and the devices bound to their points."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    modules: list[BuildingModule] = Field(default_factory=list)
+    doors: list[Door] = Field(default_factory=list)
+    elevators: list[Elevator] = Field(default_factory=list)
+    buttons: list[Button] = Field(default_factory=list)
+
+    def module(self, module_id: str) -> BuildingModule:
+        for module in self.modules:
+            if module.id == module_id:
+                return module
+        raise KeyError(module_id)
+
+    def resolve(self, ref: IORef) -> tuple[BuildingModule, IOPoint]:
+        module = self.module(ref.module)
+        point = module.point(ref.point)
+        if point is None:
+            raise KeyError(f"{ref.module}.{ref.point}")
+        return module, point
+
+    def check(self) -> BuildingConfig:
+        """Raise BuildingConfigError on the first inconsistency; returns self when sound."""
+        _check(self)
+        return self
+
+
+def _check(config: BuildingConfig) -> None:
+    ids: set[str] = set()
+    for module in config.modules:
+        if module.id in ids:
+            raise BuildingConfigError(f"module {module.id!r} is defined twice")
+        ids.add(module.id)
+        names: set[str] = set()
+        addresses: dict[tuple[PointKind, int], str] = {}
+        for point in module.points:
+            if point.name in names:
+                raise BuildingConfigError(
+                    f"module {module.id!r}: point name {point.name!r} is used twice"
+                )
+            names.add(point.name)
+            other = addresses.get((point.kind, point.address))
+            if other is not None:
+                raise BuildingConfigError(
+                    f"module {module.id!r}: point {point.name!r} has address {point.address},"
+                    f" already used by {other!r} ({point.kind.value})"
+                )
+            addresses[(point.kind, point.address)] = point.name
+        if module.timeout_ms >= module.sampling_period_ms * 10:
+            raise BuildingConfigError(
+                f"module {module.id!r}: timeout_ms {module.timeout_ms} is more than ten"
+                f" sampling periods ({module.sampling_period_ms} ms)"
+            )
+
+    def ref(owner: str, ref: IORef, kinds: frozenset[PointKind], role: str) -> None:
+        if ref.module not in ids:
+            raise BuildingConfigError(f"{owner}: {role} names unknown module {ref.module!r}")
+        point = config.module(ref.module).point(ref.point)
+        if point is None:
+            raise BuildingConfigError(
+                f"{owner}: {role} names unknown point {ref.point!r} of module {ref.module!r}"
+            )
+        if point.kind not in kinds:
+            wanted = " or ".join(sorted(k.value for k in kinds))
+            raise BuildingConfigError(
+                f"{owner}: {role} {ref.module}.{ref.point} is a {point.kind.value}, needs {wanted}"
+            )
+
+    coil = frozenset({PointKind.coil})
+    for kind_name, items in (
+        ("door", config.doors),
+        ("elevator", config.elevators),
+        ("button", config.buttons),
+    ):
+        seen: set[str] = set()
+        for item in items:
+            if item.id in seen:
+                raise BuildingConfigError(f"{kind_name} {item.id!r} is defined twice")
+            seen.add(item.id)
+    for door in config.doors:
+        ref(f"door {door.id!r}", door.open, coil, "open")
+        if door.is_open is not None:
+            ref(f"door {door.id!r}", door.is_open, READABLE_INPUTS, "is_open")
+    for elevator in config.elevators:
+        floors: set[str] = set()
+        for stop in elevator.stops:
+            if stop.floor in floors:
+                raise BuildingConfigError(
+                    f"elevator {elevator.id!r}: floor {stop.floor!r} listed twice"
+                )
+            floors.add(stop.floor)
+            owner = f"elevator {elevator.id!r} floor {stop.floor!r}"
+            ref(owner, stop.call, coil, "call")
+            ref(owner, stop.in_position, READABLE_INPUTS, "in_position")
+    for button in config.buttons:
+        ref(f"button {button.id!r}", button.input, READABLE_INPUTS, "input")
+        if button.led is not None:
+            ref(f"button {button.id!r}", button.led, coil, "led")
+
+
+def load_building(data: Mapping[str, Any]) -> BuildingConfig:
+    """Build and check the building part of a site mapping.
+
+    Accepts a whole site (the building keys at top level or under ``building``); other site
+    sections are ignored here.
+    """
+    section = data.get("building", data)
+    if not isinstance(section, Mapping):
+        raise BuildingConfigError("the site's 'building' section must be a mapping")
+    picked = {key: section[key] for key in BUILDING_KEYS if section.get(key) is not None}
+    try:
+        config = BuildingConfig.model_validate(picked)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise BuildingConfigError(
+            f"site building section, at {where}: {first['msg']}"
+            + (f" ({exc.error_count()} errors)" if exc.error_count() > 1 else "")
+        ) from exc
+    return config.check()
+
+
+def load_building_file(path: str | Path) -> BuildingConfig:
+    """Read a YAML (or JSON) site file and return its checked building part."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise BuildingConfigError(f"cannot read site file {path}: {exc.strerror}") from exc
+    except yaml.YAMLError as exc:
+        raise BuildingConfigError(f"site file {path} is not valid YAML: {exc}") from exc
+    if not isinstance(data, Mapping):
+        raise BuildingConfigError(f"site file {path} must hold a mapping at top level")
+    return load_building(data)

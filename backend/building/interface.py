@@ -1,0 +1,341 @@
+"""BuildingInterface: the central server's link to the building's Modbus I/O modules.
+
+Generic (the paper's point): everything venue-specific comes from the site's building section.
+It polls every module (backend.building.poller), filters inputs (backend.building.filter),
+publishes ``building_input_changed`` and ``building_module_health`` on the hub, turns a button
+press into a ``task_request`` for the Task Manager, and executes ``open_door``, ``close_door``,
+``call_elevator`` and ``set_output``, confirming each or answering ``command_failed``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Awaitable, Callable
+from types import TracebackType
+from typing import Any
+
+from pydantic import ValidationError
+
+from backend.building._modbus import ModbusIOError
+from backend.building.config import WRITABLE, BuildingConfig
+from backend.building.filter import InputFilter
+from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
+from backend.site.building import IOPoint, IORef, PointKind
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.building import CallElevator, CloseDoor, OpenDoor, SetOutput
+
+__all__ = ["BuildingInterface", "CommandError"]
+
+log = logging.getLogger(__name__)
+
+MAX_COMMANDS = 64  # commands in progress; beyond this a command fails at once with "busy"
+LED_ON_S = 5.0  # a button's LED shows the press was taken for this long
+
+
+class CommandError(Exception):
+    """A building command that cannot be done; the text is the command_failed reason."""
+
+
+class BuildingInterface:
+    """Polls the modules of one site and serves building commands on the hub."""
+
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        config: BuildingConfig,
+        *,
+        filter_ms: float = 200.0,
+        command_margin_s: float = 5.0,
+        health_interval_s: float = 5.0,
+    ) -> None:
+        self.endpoint = endpoint
+        self.config = config.check()
+        self.filter_s = filter_ms / 1000
+        self.command_margin_s = command_margin_s
+        self.pollers = {
+            m.id: ModulePoller(m, self._on_sample, self._on_health, health_interval_s)
+            for m in config.modules
+        }
+        # (module, kind, address) -> point, for decoding samples.
+        self._points: dict[str, dict[tuple[PointKind, int], IOPoint]] = {
+            m.id: {(p.kind, p.address): p for p in m.points} for m in config.modules
+        }
+        self.values: dict[tuple[str, str], int] = {}
+        self._filters: dict[tuple[str, str], InputFilter] = {}
+        self._waiters: dict[tuple[str, str], list[tuple[int, asyncio.Future[None]]]] = {}
+        self._buttons = {(b.input.module, b.input.point): b for b in config.buttons}
+        self._floors: dict[tuple[str, str], str] = {}
+        for elevator in config.elevators:
+            for stop in elevator.stops:
+                self._floors[(stop.in_position.module, stop.in_position.point)] = stop.floor
+        self._commands: set[asyncio.Task[None]] = set()
+        self._timers: list[asyncio.TimerHandle] = []
+        self._unsubscribe: list[Callable[[], None]] = []
+        self.events = 0
+
+    # -- life cycle ----------------------------------------------------------------------------
+
+    async def start(self) -> None:
+        handlers: dict[str, Callable[[Message], Awaitable[dict[str, Any]]]] = {
+            "open_door": self._open_door,
+            "close_door": self._close_door,
+            "call_elevator": self._call_elevator,
+            "set_output": self._set_output,
+        }
+        for type_name, handler in handlers.items():
+            self._unsubscribe.append(
+                self.endpoint.subscribe(type_name, lambda m, h=handler: self._spawn(m, h))
+            )
+        for poller in self.pollers.values():
+            poller.start()
+
+    async def stop(self) -> None:
+        for unsubscribe in self._unsubscribe:
+            unsubscribe()
+        self._unsubscribe.clear()
+        for timer in self._timers:
+            timer.cancel()
+        while pending := [t for t in self._commands if not t.done()]:
+            for task in pending:  # repeated: see ModulePoller.stop
+                task.cancel()
+            await asyncio.wait(pending, timeout=0.5)
+        for poller in self.pollers.values():
+            await poller.stop()
+
+    async def __aenter__(self) -> BuildingInterface:
+        await self.start()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.stop()
+
+    def health(self) -> list[dict[str, object]]:
+        """Every module's health, for the admin GUI and the REST API."""
+        return [p.health.payload() | {"state": p.health.state.value} for p in self.pollers.values()]
+
+    # -- inputs --------------------------------------------------------------------------------
+
+    def _on_health(self, health: ModuleHealth) -> None:
+        self.endpoint.publish("building_module_health", health.payload())
+
+    def _on_sample(self, module_id: str, sample: Sample, t: float) -> None:
+        points = self._points[module_id]
+        for kind, (first, values) in sample.items():
+            for offset, raw in enumerate(values):
+                point = points.get((kind, first + offset))
+                if point is not None:
+                    self._observe(module_id, point, raw, t)
+
+    def _observe(self, module_id: str, point: IOPoint, raw: int, t: float) -> None:
+        key = (module_id, point.name)
+        if key not in self.values:  # first sample: the baseline, not an event
+            self.values[key] = raw
+            if point.kind == PointKind.discrete_input:
+                self._filters[key] = InputFilter(self.filter_s, raw)
+            self._wake(key, raw)
+            return
+        if point.kind == PointKind.discrete_input:
+            new = self._filters[key].update(raw, t)
+            if new is None:
+                return
+        elif raw == self.values[key]:
+            return
+        else:
+            new = raw
+        self.values[key] = new
+        self.events += 1
+        value: int | bool = (
+            bool(new) if point.kind in (PointKind.discrete_input, PointKind.coil) else new
+        )
+        self.endpoint.publish(
+            "building_input_changed",
+            {
+                "module": module_id,
+                "point": point.name,
+                "name": point.description or point.name,
+                "value": value,
+                "node": point.node,
+                "floor": self._floors.get(key),
+            },
+        )
+        self._wake(key, new)
+        button = self._buttons.get(key)
+        if button is not None and new:
+            self._button_pressed(button.id)
+
+    def _button_pressed(self, button_id: str) -> None:
+        """The paper's T2-T4: a building button starts the task bound to it."""
+        button = next(b for b in self.config.buttons if b.id == button_id)
+        self.endpoint.publish(
+            "task_request",
+            {
+                "kind": button.task.kind,
+                "params": dict(button.task.params),
+                "priority": button.task.priority,
+                "requester": f"button:{button.id}",
+            },
+        )
+        if button.led is not None:
+            led = button.led
+            self._spawn_write(led, 1)
+            loop = asyncio.get_running_loop()
+            self._timers = [t for t in self._timers if not t.cancelled()]
+            self._timers.append(loop.call_later(LED_ON_S, self._spawn_write, led, 0))
+
+    def _spawn_write(self, ref: IORef, value: int) -> None:
+        async def write() -> None:
+            with contextlib.suppress(ModbusIOError, CommandError):
+                await self._write(ref, value)
+
+        task = asyncio.create_task(write())
+        self._commands.add(task)
+        task.add_done_callback(self._commands.discard)
+
+    def _wake(self, key: tuple[str, str], value: int) -> None:
+        waiters = self._waiters.get(key)
+        if not waiters:
+            return
+        for wanted, future in list(waiters):
+            if wanted == value and not future.done():
+                future.set_result(None)
+
+    async def _wait_value(self, ref: IORef, wanted: int, timeout_s: float, what: str) -> None:
+        key = (ref.module, ref.point)
+        if self.values.get(key) == wanted:
+            return
+        future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        entry = (wanted, future)
+        self._waiters.setdefault(key, []).append(entry)
+        try:
+            await asyncio.wait_for(future, timeout_s)
+        except TimeoutError:
+            health = self.pollers[ref.module].health
+            why = f"; module {ref.module} is {health.state.value}" if not health.online else ""
+            raise CommandError(f"{what} not confirmed within {timeout_s:g} s{why}") from None
+        finally:
+            self._waiters[key].remove(entry)
+
+    # -- commands ------------------------------------------------------------------------------
+
+    def _spawn(
+        self, message: Message, handler: Callable[[Message], Awaitable[dict[str, Any]]]
+    ) -> None:
+        """Bus handlers must not block: each command runs as its own task (bounded)."""
+        if len(self._commands) >= MAX_COMMANDS:
+            self._fail(message, f"building interface busy ({MAX_COMMANDS} commands in progress)")
+            return
+        task = asyncio.create_task(self._run_command(message, handler))
+        self._commands.add(task)
+        task.add_done_callback(self._commands.discard)
+
+    async def _run_command(
+        self, message: Message, handler: Callable[[Message], Awaitable[dict[str, Any]]]
+    ) -> None:
+        try:
+            await handler(message)
+        except ValidationError as exc:
+            self._fail(message, f"bad payload: {exc.errors()[0]['msg']}")
+        except (CommandError, ModbusIOError) as exc:
+            self._fail(message, str(exc))
+
+    def _confirm(self, request: Message, type_name: str, payload: dict[str, Any]) -> None:
+        """Reply to the requester (correlated) and tell everyone else."""
+        if request.source:
+            self.endpoint.publish(
+                type_name, payload, destination=request.source, correlation_id=request.id
+            )
+        self.endpoint.publish(type_name, payload)
+
+    def _fail(self, request: Message, reason: str) -> None:
+        log.info("%s from %s failed: %s", request.type, request.source, reason)
+        payload = {"command": request.type, "reason": reason}
+        if request.source:
+            self.endpoint.publish(
+                "command_failed", payload, destination=request.source, correlation_id=request.id
+            )
+        else:
+            self.endpoint.publish("command_failed", payload)
+
+    async def _write(self, ref: IORef, value: int) -> None:
+        module, point = self.config.resolve(ref)
+        poller = self.pollers[module.id]
+        if poller.health.state == HealthState.offline:
+            raise CommandError(
+                f"module {module.id} is offline ({poller.health.last_error or 'no answer'})"
+            )
+        await poller.client.write(point.kind, point.address, value)
+
+    def _door(self, door_id: str) -> Any:
+        door = next((d for d in self.config.doors if d.id == door_id), None)
+        if door is None:
+            known = ", ".join(d.id for d in self.config.doors) or "none"
+            raise CommandError(f"unknown door {door_id!r} (known: {known})")
+        return door
+
+    async def _open_door(self, message: Message) -> dict[str, Any]:
+        door = self._door(message.payload_as(OpenDoor).door)
+        await self._write(door.open, 1)
+        if door.is_open is None:
+            await asyncio.sleep(door.open_time_s)
+        else:
+            timeout = door.open_time_s + self.command_margin_s
+            await self._wait_value(door.is_open, 1, timeout, f"door {door.id} open")
+        payload = {"door": door.id}
+        self._confirm(message, "door_opened", payload)
+        return payload
+
+    async def _close_door(self, message: Message) -> dict[str, Any]:
+        door = self._door(message.payload_as(CloseDoor).door)
+        await self._write(door.open, 0)
+        if door.is_open is not None:
+            timeout = door.open_time_s + self.command_margin_s
+            await self._wait_value(door.is_open, 0, timeout, f"door {door.id} closing")
+        payload = {"door": door.id}
+        self._confirm(message, "door_closed", payload)
+        return payload
+
+    async def _call_elevator(self, message: Message) -> dict[str, Any]:
+        call = message.payload_as(CallElevator)
+        elevator = next((e for e in self.config.elevators if e.id == call.elevator), None)
+        if elevator is None:
+            known = ", ".join(e.id for e in self.config.elevators) or "none"
+            raise CommandError(f"unknown elevator {call.elevator!r} (known: {known})")
+        stop = next((s for s in elevator.stops if s.floor == call.floor), None)
+        if stop is None:
+            floors = ", ".join(s.floor for s in elevator.stops)
+            raise CommandError(f"elevator {elevator.id} has no floor {call.floor!r} ({floors})")
+        await self._write(stop.call, 1)
+        timeout = elevator.travel_time_s + self.command_margin_s
+        what = f"elevator {elevator.id} at floor {stop.floor}"
+        await self._wait_value(stop.in_position, 1, timeout, what)
+        payload = {"elevator": elevator.id, "floor": stop.floor, "door_open": True}
+        self._confirm(message, "elevator_in_position", payload)
+        return payload
+
+    async def _set_output(self, message: Message) -> dict[str, Any]:
+        """Write an output; the new value shows in building_input_changed once read back."""
+        command = message.payload_as(SetOutput)
+        ref = IORef(module=command.module, point=command.point)
+        try:
+            _, point = self.config.resolve(ref)
+        except KeyError:
+            raise CommandError(f"no point {command.point!r} on module {command.module!r}") from None
+        if point.kind not in WRITABLE:
+            raise CommandError(
+                f"{command.module}.{command.point} is a {point.kind.value}: read-only"
+            )
+        value = int(command.value)
+        if point.kind == PointKind.coil and value not in (0, 1):
+            raise CommandError(f"coil {command.module}.{command.point} takes 0/1, got {value}")
+        if not 0 <= value <= 0xFFFF:
+            raise CommandError(f"register value {value} is outside 0..65535")
+        await self._write(ref, value)
+        return {"module": command.module, "point": command.point, "value": value}

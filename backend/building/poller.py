@@ -1,0 +1,164 @@
+"""One polling loop per I/O module: fixed-rate sampling, health, reconnect with back-off.
+
+Each module has its own client and its own task, so a slow or dead module never delays
+another. Polls are scheduled on a fixed grid (start + n x period): a late wake-up is not carried
+over, and slots missed by a slow answer are skipped rather than run in a burst.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+from backend.building._modbus import (
+    ModbusIOError,
+    ModuleClient,
+    ModuleExceptionAnswer,
+    ModuleUnreachable,
+)
+from backend.site.building import BuildingModule, PointKind
+
+__all__ = ["HealthState", "ModuleHealth", "ModulePoller", "Sample"]
+
+log = logging.getLogger(__name__)
+
+# kind -> (first address, values); one read per table covers every point of that kind.
+Sample = dict[PointKind, tuple[int, list[int]]]
+
+BACKOFF_FIRST_S = 0.1
+BACKOFF_MAX_S = 5.0
+JITTER_SAMPLES = 20_000  # ring buffer: the oldest jitter samples are dropped
+
+
+class HealthState(StrEnum):
+    connecting = "connecting"
+    online = "online"  # answering normally
+    faulty = "faulty"  # answering, but with Modbus exception codes
+    offline = "offline"  # no connection or no answer in time
+
+
+@dataclass
+class ModuleHealth:
+    module: str
+    state: HealthState = HealthState.connecting
+    rtt_ms: float | None = None
+    errors: int = 0
+    last_error: str | None = None
+    polls: int = 0
+    overruns: int = 0
+
+    @property
+    def online(self) -> bool:
+        return self.state in (HealthState.online, HealthState.faulty)
+
+    def payload(self) -> dict[str, object]:
+        """building_module_health payload (docs/messages.md)."""
+        return {
+            "module": self.module,
+            "online": self.state == HealthState.online,
+            "rtt_ms": None if self.rtt_ms is None else round(self.rtt_ms, 3),
+            "errors": self.errors,
+            "last_error": self.last_error,
+        }
+
+
+@dataclass
+class ModulePoller:
+    """Polls one module; calls ``on_sample(module_id, sample, t)`` and ``on_health(health)``."""
+
+    module: BuildingModule
+    on_sample: Callable[[str, Sample, float], None]
+    on_health: Callable[[ModuleHealth], None]
+    health_interval_s: float = 5.0
+    jitter_s: collections.deque[float] = field(
+        default_factory=lambda: collections.deque(maxlen=JITTER_SAMPLES)
+    )
+
+    def __post_init__(self) -> None:
+        self.client = ModuleClient(
+            self.module.host,
+            self.module.port,
+            unit_id=self.module.unit_id,
+            timeout_s=self.module.timeout_ms / 1000,
+        )
+        self.health = ModuleHealth(self.module.id)
+        self.period_s = self.module.sampling_period_ms / 1000
+        self.ranges: dict[PointKind, tuple[int, int]] = {}
+        for kind in PointKind:
+            addresses = [p.address for p in self.module.points if p.kind == kind]
+            if addresses:
+                self.ranges[kind] = (min(addresses), max(addresses) - min(addresses) + 1)
+        self._task: asyncio.Task[None] | None = None
+        self._last_health_report = -math.inf
+
+    def start(self) -> None:
+        self._task = asyncio.create_task(self._run(), name=f"building-poll-{self.module.id}")
+
+    async def stop(self) -> None:
+        task, self._task = self._task, None
+        # Python 3.11's wait_for (used inside pymodbus) can swallow a cancellation that races
+        # with an answer: cancel until the task is really done.
+        while task is not None and not task.done():
+            task.cancel()
+            await asyncio.wait([task], timeout=0.5)
+        self.client.close()
+
+    def _set_health(self, state: HealthState, error: str | None = None) -> None:
+        """Report on every change of state, and at least every health_interval_s."""
+        changed = state != self.health.state or (
+            error is not None and error != self.health.last_error
+        )
+        self.health.state = state
+        if error is not None:
+            self.health.errors += 1
+            self.health.last_error = error
+        now = asyncio.get_running_loop().time()
+        if changed or now - self._last_health_report >= self.health_interval_s:
+            self._last_health_report = now
+            self.on_health(self.health)
+
+    async def _run(self) -> None:
+        loop = asyncio.get_running_loop()
+        backoff = BACKOFF_FIRST_S
+        due = loop.time()
+        me = asyncio.current_task()
+        while me is None or not me.cancelling():
+            if not self.client.connected:
+                try:
+                    await self.client.connect()
+                except ModuleUnreachable as exc:
+                    self._set_health(HealthState.offline, str(exc))
+                    await asyncio.sleep(backoff)
+                    backoff = min(backoff * 2, BACKOFF_MAX_S)
+                    continue
+                backoff = BACKOFF_FIRST_S
+                due = loop.time()
+            woke = loop.time()
+            self.jitter_s.append(woke - due)
+            try:
+                sample: Sample = {}
+                for kind, (first, count) in self.ranges.items():
+                    sample[kind] = (first, await self.client.read(kind, first, count))
+                self.health.rtt_ms = (loop.time() - woke) * 1000
+                self.health.polls += 1
+                self.on_sample(self.module.id, sample, woke)
+                self._set_health(HealthState.online)
+            except ModuleExceptionAnswer as exc:
+                self._set_health(HealthState.faulty, str(exc))
+            except ModuleUnreachable as exc:
+                self._set_health(HealthState.offline, str(exc))
+                continue  # reconnect (with back-off) at the top of the loop
+            except ModbusIOError as exc:  # pragma: no cover - a programming error in ranges
+                log.error("module %s: %s", self.module.id, exc)
+            due += self.period_s
+            now = loop.time()
+            if due < now:  # a slow answer overran one or more slots: skip them
+                missed = math.ceil((now - due) / self.period_s)
+                self.health.overruns += missed
+                due += missed * self.period_s
+            await asyncio.sleep(due - now)

@@ -1,0 +1,166 @@
+"""BuildingInterface against building_sim over real Modbus/TCP on loopback."""
+
+from __future__ import annotations
+
+from backend.building.interface import BuildingInterface
+from building_sim.simulator import BuildingSimulator
+from guidebot.bus import Bus
+
+from .conftest import Recorder, wait_until
+
+
+async def test_300ms_press_gives_one_event_and_one_task_request(
+    sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    sim.press("B1", ms=300)
+    pressed = await recorder.wait("building_input_changed", point="b1", value=True)
+    assert pressed.payload["module"] == "M1"
+    assert pressed.payload["node"] == "hall"
+    await recorder.wait("building_input_changed", point="b1", value=False)
+    assert len(recorder.of("building_input_changed", point="b1", value=True)) == 1
+    requests = recorder.of("task_request")
+    assert len(requests) == 1
+    assert requests[0].payload == {
+        "kind": "tour",
+        "params": {"tour": "main"},
+        "priority": 7,
+        "requester": "button:B1",
+    }
+    # The button's LED shows the press was taken.
+    await recorder.wait("building_input_changed", point="b1_led", value=True)
+
+
+async def test_100ms_pulse_is_filtered_out(
+    sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    poller = interface.pollers["M1"]
+    sim.press("B1", ms=100)
+    await wait_until(lambda: not sim.state()["buttons"]["B1"])
+    polls = poller.health.polls
+    # Several more samples after the release: the filter has had every chance to fire.
+    await wait_until(lambda: poller.health.polls >= polls + 6)
+    assert recorder.of("building_input_changed", point="b1") == []
+    assert recorder.of("task_request") == []
+
+
+async def test_open_door_is_confirmed_to_the_requester_and_broadcast(
+    hub: Bus, sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    robot = hub.endpoint("R1")
+    reply = await robot.request("open_door", {"door": "D1"}, timeout=10)
+    assert reply.type == "door_opened"
+    assert reply.payload == {"door": "D1"}
+    assert sim.doors["D1"].state == "open"
+    await recorder.wait("door_opened", door="D1")
+    # The door closes by itself after its hold time; the sensor follows.
+    await recorder.wait("building_input_changed", point="d1_open", value=False)
+
+
+async def test_close_door_is_confirmed(
+    hub: Bus, sim: BuildingSimulator, interface: BuildingInterface
+) -> None:
+    robot = hub.endpoint("R1")
+    assert (await robot.request("open_door", {"door": "D1"}, timeout=10)).type == "door_opened"
+    reply = await robot.request("close_door", {"door": "D1"}, timeout=10)
+    assert reply.type == "door_closed"
+    assert sim.doors["D1"].state in ("closing", "closed")
+
+
+async def test_elevator_call_is_confirmed_at_the_right_floor(
+    hub: Bus, sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    robot = hub.endpoint("R1")
+    reply = await robot.request("call_elevator", {"elevator": "E1", "floor": "2"}, timeout=15)
+    assert reply.type == "elevator_in_position"
+    assert reply.payload == {"elevator": "E1", "floor": "2", "door_open": True}
+    assert sim.elevators["E1"].floor == "2"
+    assert sim.elevators["E1"].state == "door_open"
+    changed = recorder.of("building_input_changed", point="e1_at_2", value=True)
+    assert changed[0].payload["floor"] == "2"
+    # The floor register followed the cabin (index of the stop).
+    await recorder.wait("building_input_changed", point="E1_floor", value=2)
+
+
+async def test_unknown_door_and_floor_fail_with_a_reason(
+    hub: Bus, interface: BuildingInterface
+) -> None:
+    robot = hub.endpoint("R1")
+    reply = await robot.request("open_door", {"door": "NOPE"}, timeout=5)
+    assert reply.type == "command_failed"
+    assert reply.payload["command"] == "open_door"
+    assert "unknown door 'NOPE'" in reply.payload["reason"]
+    reply = await robot.request("call_elevator", {"elevator": "E1", "floor": "9"}, timeout=5)
+    assert reply.type == "command_failed"
+    assert "no floor '9'" in reply.payload["reason"]
+    reply = await robot.request("open_door", {"gate": "D1"}, timeout=5)
+    assert reply.type == "command_failed"
+    assert reply.payload["reason"].startswith("bad payload")
+
+
+async def test_set_output_writes_a_coil_and_refuses_an_input(
+    hub: Bus, sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    operator = hub.endpoint("admin")
+    operator.publish("set_output", {"module": "M2", "point": "lamp", "value": True})
+    await recorder.wait("building_input_changed", module="M2", point="lamp", value=True)
+    assert sim.state()["modules"]["M2"]["points"]["lamp"] == 1
+    reply = await operator.request("set_output", {"module": "M2", "point": "b2", "value": 1})
+    assert reply.type == "command_failed"
+    assert "read-only" in reply.payload["reason"]
+
+
+async def test_offline_module_is_reported_and_recovers_by_itself(
+    hub: Bus, sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    await recorder.wait("building_module_health", module="M2", online=True)
+    await sim.set_fault("M2", "offline")
+    down = await recorder.wait("building_module_health", module="M2", online=False)
+    assert down.payload["errors"] >= 1
+    assert down.payload["last_error"]
+    # A command to an offline module fails at once with the reason.
+    reply = await hub.endpoint("admin").request(
+        "set_output", {"module": "M2", "point": "lamp", "value": 1}
+    )
+    assert reply.type == "command_failed"
+    assert "offline" in reply.payload["reason"]
+    # The other module keeps working meanwhile.
+    sim.press("B1", ms=400)
+    await recorder.wait("task_request", requester="button:B1")
+    recorder.messages.clear()
+    await sim.set_fault("M2", "none")
+    up = await recorder.wait("building_module_health", module="M2", online=True)
+    assert up.payload["rtt_ms"] is not None
+    sim.press("B2", ms=400)
+    await recorder.wait("task_request", requester="button:B2")
+
+
+async def test_exception_answer_is_reported_and_others_keep_polling(
+    sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    await sim.set_fault("M2", "exception", code=4)
+    faulty = await recorder.wait("building_module_health", module="M2", online=False)
+    assert "Modbus exception 4 (device failure)" in faulty.payload["last_error"]
+    m1 = interface.pollers["M1"].health
+    polls = m1.polls
+    await wait_until(lambda: m1.polls >= polls + 5)
+    sim.press("B1", ms=400)
+    await recorder.wait("task_request", requester="button:B1")
+    # M2 is still polled (its error count grows), and recovers when the fault clears.
+    m2 = interface.pollers["M2"].health
+    errors = m2.errors
+    await wait_until(lambda: m2.errors > errors)
+    await sim.set_fault("M2", "none")
+    await recorder.wait("building_module_health", module="M2", online=True)
+
+
+async def test_slow_module_does_not_delay_the_others(
+    sim: BuildingSimulator, interface: BuildingInterface, recorder: Recorder
+) -> None:
+    await sim.set_fault("M2", "slow", delay_ms=150)
+    m1, m2 = interface.pollers["M1"], interface.pollers["M2"]
+    await wait_until(lambda: (m2.health.rtt_ms or 0) >= 150)
+    start = len(m1.jitter_s)
+    await wait_until(lambda: len(m1.jitter_s) >= start + 10)
+    # M1 kept its 50 ms rhythm while M2 took 150 ms per table read.
+    assert m1.health.rtt_ms is not None and m1.health.rtt_ms < 150
+    assert m2.health.overruns > 0
