@@ -31,8 +31,10 @@ def analyze(log: Path, bitrate: int, window: float, png: Path | None, as_json: b
 
     try:
         result = analyze_log(log, bitrate=bitrate, window_s=window)
-    except (ValueError, OSError) as exc:
+    except Exception as exc:  # the log readers raise anything from ValueError to struct.error
         raise click.ClickException(f"cannot read {log}: {exc}") from None
+    if not result["frames"]:
+        raise click.ClickException(f"no CAN frames in {log}")
     if png is not None:
         plot(result, png, title=log.name)
     if as_json:

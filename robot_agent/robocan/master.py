@@ -128,6 +128,7 @@ class Counters:
     block_errors: int = 0
     send_errors: int = 0
     driver_errors: int = 0
+    record_errors: int = 0
 
 
 class Master:
@@ -218,10 +219,19 @@ class Master:
         module = self.modules.get(can_id - 1)
         if module is not None:
             module.frames_tx += 1
-        if self.recorder is not None:
+        self._record(msg)
+        return True
+
+    def _record(self, msg: can.Message) -> None:
+        """Log a frame; a failing log writer is counted, never allowed to stop the master."""
+        if self.recorder is None:
+            return
+        try:
             with self._record_lock:
                 self.recorder.on_message_received(msg)
-        return True
+        except Exception as exc:
+            self.counters.record_errors += 1
+            self._warn("record", f"recording failed: {exc}")
 
     def send_to(self, module_id: int, data: bytes) -> bool:
         return self.send(module_id + 1, data)
@@ -289,9 +299,7 @@ class Master:
             if len(queue) == QUEUE_PER_ID:
                 self.counters.overflow += 1
             queue.append(msg)
-        if self.recorder is not None:
-            with self._record_lock:
-                self.recorder.on_message_received(msg)
+        self._record(msg)
         loop = self._loop
         if loop is not None and not loop.is_closed():
             with contextlib.suppress(RuntimeError):

@@ -8,6 +8,7 @@ and, when simulating, the simulated modules on the first (virtual) bus in this p
 from __future__ import annotations
 
 import asyncio
+import copy
 import time
 from pathlib import Path
 from types import TracebackType
@@ -35,6 +36,9 @@ class _LockedLogger(can.Listener):
         self._lock = threading.Lock()
 
     def on_message_received(self, msg: can.Message) -> None:
+        if msg.channel is not None and not isinstance(msg.channel, int):
+            msg = copy.copy(msg)  # BLF stores channels as numbers; a virtual channel is a name
+            msg.channel = None
         with self._lock:
             self._logger.on_message_received(msg)
 
