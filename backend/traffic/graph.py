@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -68,7 +69,9 @@ class PathResult:
 class SiteGraph:
     """Built once per site version; read-only afterwards (rebuild on site change)."""
 
-    def __init__(self, site: Site, *, nominal_speed_mps: float = NOMINAL_SPEED_MPS) -> None:
+    def __init__(
+        self, site: Site, *, nominal_speed_mps: float = NOMINAL_SPEED_MPS, warm: bool = True
+    ) -> None:
         self.floor_of: dict[str, str] = {}
         self.xy: dict[str, tuple[float, float]] = {}
         self.passing: set[str] = set()
@@ -110,7 +113,21 @@ class SiteGraph:
                 self.area_at[node] = a.id
         self._h_scale = ratio
         self._h_shift = shift * len(site.elevators)
-        self._dist_cache: dict[str, dict[str, float]] = {}
+        # Integer-indexed copies for the hot loops.
+        self.names: list[str] = list(self.floor_of)
+        self.index: dict[str, int] = {n: i for i, n in enumerate(self.names)}
+        idx = self.index
+        self._adj_i = [[(idx[b], c) for b, c in self.adj[n]] for n in self.names]
+        self._radj_i = [[(idx[a], c) for a, c in self.radj[n]] for n in self.names]
+        self._fields: dict[str, array[float]] = {}
+        self._pinned: set[str] = set()
+        self.field_cache_size = 256
+        if warm:
+            self.warm(
+                [p.node for p in site.pois]
+                + [c.node for c in site.charging_stations]
+                + [w.node for w in site.wait_points]
+            )
 
     def _add(self, a: str, b: str, cost: float) -> None:
         self.adj[a].append((b, cost))
@@ -133,6 +150,9 @@ class SiteGraph:
         self.check(start, goal)
         if start == goal:
             return PathResult([start], 0.0, [self.step(start)])
+        field = self._fields.get(goal)
+        if field is not None:
+            return self._descend(start, goal, field)
         gx, gy = self.xy[goal]
         scale, shift = self._h_scale, self._h_shift
         xy, adj = self.xy, self.adj
@@ -178,31 +198,72 @@ class SiteGraph:
             area=self.area_at.get(node),
         )
 
-    def distances_to(self, goal: str) -> dict[str, float]:
-        """Path cost from every node to ``goal`` (one reverse Dijkstra, cached per goal).
+    def warm(self, goals: Iterable[str]) -> None:
+        """Precompute and keep the distance fields of the site's usual destinations (points
+        of interest, stations, wait points): paths to them then cost a walk down the field."""
+        for goal in goals:
+            if goal in self.index:
+                self._field(goal)
+                self._pinned.add(goal)
 
-        The Task Manager ranks robots by this: one search per task target, not per robot.
-        """
-        cached = self._dist_cache.get(goal)
-        if cached is not None:
-            return cached
+    def _field(self, goal: str) -> array[float]:
+        """Cost from every node to ``goal``: one reverse Dijkstra, cached per goal."""
+        field = self._fields.get(goal)
+        if field is not None:
+            return field
         self.check(goal)
-        dist: dict[str, float] = {goal: 0.0}
-        heap = [(0.0, goal)]
-        radj = self.radj
+        inf = math.inf
+        dist = [inf] * len(self.names)
+        g = self.index[goal]
+        dist[g] = 0.0
+        heap = [(0.0, g)]
+        radj = self._radj_i
+        pop, push = heapq.heappop, heapq.heappush
         while heap:
-            d, node = heapq.heappop(heap)
+            d, node = pop(heap)
             if d > dist[node]:
                 continue
             for prev, cost in radj[node]:
                 nd = d + cost
-                if nd < dist.get(prev, math.inf):
+                if nd < dist[prev]:
                     dist[prev] = nd
-                    heapq.heappush(heap, (nd, prev))
-        if len(self._dist_cache) >= 512:
-            self._dist_cache.pop(next(iter(self._dist_cache)))
-        self._dist_cache[goal] = dist
-        return dist
+                    push(heap, (nd, prev))
+        field = array("d", dist)
+        unpinned = [k for k in self._fields if k not in self._pinned]
+        if len(unpinned) >= self.field_cache_size:
+            del self._fields[unpinned[0]]
+        self._fields[goal] = field
+        return field
+
+    def _descend(self, start: str, goal: str, field: array[float]) -> PathResult:
+        """Follow the distance field downhill: each step takes the edge on a shortest path."""
+        s, g = self.index[start], self.index[goal]
+        total = field[s]
+        if total == math.inf:
+            raise NoPath(f"no path from {start} to {goal}")
+        adj, names = self._adj_i, self.names
+        path = [s]
+        node = s
+        while node != g:
+            here = field[node]
+            best, best_left = -1, math.inf
+            for nxt, cost in adj[node]:
+                left = cost + field[nxt]
+                if left < best_left:
+                    best, best_left = nxt, left
+            if best < 0 or best_left > here + 1e-6 or len(path) > len(names):
+                raise NoPath(f"no path from {start} to {goal}")
+            path.append(best)
+            node = best
+        nodes = [names[i] for i in path]
+        return PathResult(nodes, round(total, 3), [self.step(n) for n in nodes])
+
+    def distances_to(self, goal: str) -> _FieldView:
+        """Path cost from every node to ``goal`` (mapping node -> metres; cached per goal).
+
+        The Task Manager ranks robots by this: one search per task target, not per robot.
+        """
+        return _FieldView(self.index, self._field(goal))
 
     def passing_place_for(self, area: str, near: Iterable[str] = ()) -> str | None:
         """Where a robot yielding ``area`` should go: the area's own, else the nearest marked
@@ -232,3 +293,26 @@ class SiteGraph:
                     nxt.append(other)
             frontier = nxt
         return first_outside
+
+
+class _FieldView:
+    """Read-only mapping view of a distance field by node name."""
+
+    __slots__ = ("_field", "_index")
+
+    def __init__(self, index: dict[str, int], field: array[float]) -> None:
+        self._index = index
+        self._field = field
+
+    def get(self, node: str | None, default: float | None = None) -> float | None:
+        i = self._index.get(node) if node is not None else None
+        if i is None:
+            return default
+        value = self._field[i]
+        return default if value == math.inf else value
+
+    def __getitem__(self, node: str) -> float:
+        value = self.get(node)
+        if value is None:
+            raise KeyError(node)
+        return value
