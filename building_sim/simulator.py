@@ -143,6 +143,9 @@ class BuildingSimulator:
         _, point = self._resolve(ref)
         return self.stores[ref.module].get(point.kind, point.address)
 
+    def read_point(self, module: str, point: str) -> int:
+        return self.read(IORef(module=module, point=point))
+
     def write(self, ref: IORef, value: int) -> None:
         """Set a point from the device side (inputs) or as a wire would (outputs)."""
         _, point = self._resolve(ref)

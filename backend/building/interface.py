@@ -2,17 +2,20 @@
 
 Generic (the paper's point): everything venue-specific comes from the site's building section.
 It polls every module (backend.building.poller), filters inputs (backend.building.filter),
-publishes ``building_input_changed`` and ``building_module_health`` on the hub, turns a button
-press into a ``task_request`` for the Task Manager, and executes ``open_door``, ``close_door``,
+publishes ``building_input_changed`` (with the point's map node and floor) and
+``building_module_health`` on the hub, and executes ``open_door``, ``close_door``,
 ``call_elevator`` and ``set_output``, confirming each or answering ``command_failed``.
+
+A button press is the paper's T1-T4: this module publishes the input change with its map
+position (T2-T3); the Task Manager's ButtonWatcher (backend.tasks.buttons) turns it into the
+task bound to the button and drives the button's LED through ``set_output`` (T4).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from types import TracebackType
 from typing import Any
 
@@ -32,7 +35,6 @@ __all__ = ["BuildingInterface", "CommandError"]
 log = logging.getLogger(__name__)
 
 MAX_COMMANDS = 64  # commands in progress; beyond this a command fails at once with "busy"
-LED_ON_S = 5.0  # a button's LED shows the press was taken for this long
 
 
 class CommandError(Exception):
@@ -50,6 +52,7 @@ class BuildingInterface:
         filter_ms: float = 200.0,
         command_margin_s: float = 5.0,
         health_interval_s: float = 5.0,
+        floor_of_node: Mapping[str, str] | None = None,
     ) -> None:
         self.endpoint = endpoint
         self.config = config.check()
@@ -66,13 +69,16 @@ class BuildingInterface:
         self.values: dict[tuple[str, str], int] = {}
         self._filters: dict[tuple[str, str], InputFilter] = {}
         self._waiters: dict[tuple[str, str], list[tuple[int, asyncio.Future[None]]]] = {}
-        self._buttons = {(b.input.module, b.input.point): b for b in config.buttons}
         self._floors: dict[tuple[str, str], str] = {}
+        if floor_of_node:
+            for module in config.modules:
+                for point in module.points:
+                    if point.node is not None and point.node in floor_of_node:
+                        self._floors[(module.id, point.name)] = floor_of_node[point.node]
         for elevator in config.elevators:
             for stop in elevator.stops:
                 self._floors[(stop.in_position.module, stop.in_position.point)] = stop.floor
         self._commands: set[asyncio.Task[None]] = set()
-        self._timers: list[asyncio.TimerHandle] = []
         self._unsubscribe: list[Callable[[], None]] = []
         self.events = 0
 
@@ -96,8 +102,6 @@ class BuildingInterface:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
-        for timer in self._timers:
-            timer.cancel()
         while pending := [t for t in self._commands if not t.done()]:
             for task in pending:  # repeated: see ModulePoller.stop
                 task.cancel()
@@ -167,37 +171,6 @@ class BuildingInterface:
             },
         )
         self._wake(key, new)
-        button = self._buttons.get(key)
-        if button is not None and new:
-            self._button_pressed(button.id)
-
-    def _button_pressed(self, button_id: str) -> None:
-        """The paper's T2-T4: a building button starts the task bound to it."""
-        button = next(b for b in self.config.buttons if b.id == button_id)
-        self.endpoint.publish(
-            "task_request",
-            {
-                "kind": button.task.kind,
-                "params": dict(button.task.params),
-                "priority": button.task.priority,
-                "requester": f"button:{button.id}",
-            },
-        )
-        if button.led is not None:
-            led = button.led
-            self._spawn_write(led, 1)
-            loop = asyncio.get_running_loop()
-            self._timers = [t for t in self._timers if not t.cancelled()]
-            self._timers.append(loop.call_later(LED_ON_S, self._spawn_write, led, 0))
-
-    def _spawn_write(self, ref: IORef, value: int) -> None:
-        async def write() -> None:
-            with contextlib.suppress(ModbusIOError, CommandError):
-                await self._write(ref, value)
-
-        task = asyncio.create_task(write())
-        self._commands.add(task)
-        task.add_done_callback(self._commands.discard)
 
     def _wake(self, key: tuple[str, str], value: int) -> None:
         waiters = self._waiters.get(key)

@@ -1,0 +1,94 @@
+"""The BuildingInterface as a server component (listed in backend.app.COMPONENTS).
+
+Runs after the server brain (it needs ``app.state.sites``), on hub endpoint "building", and
+restarts with the new module list whenever the site changes. ``app.state.building`` holds the
+running interface (None when the site has no modules or the building is disabled).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator
+from typing import Any
+
+from fastapi import FastAPI
+
+from backend.building.config import BuildingConfigError, load_building
+from backend.building.interface import BuildingInterface
+
+__all__ = ["building_interface"]
+
+log = logging.getLogger(__name__)
+
+
+class _Runner:
+    """Holds the current interface; a site change swaps it for one built from the new site."""
+
+    def __init__(self, app: FastAPI) -> None:
+        self.app = app
+        self.settings = app.state.settings
+        self.endpoint = app.state.hub.endpoint("building")
+        self.current: BuildingInterface | None = None
+        self._lock = asyncio.Lock()
+        self._reloads: set[asyncio.Task[None]] = set()
+
+    def _build(self, site: Any) -> BuildingInterface | None:
+        data = site.model_dump(mode="json")
+        config = load_building(data)
+        if not config.modules:
+            return None
+        floors = {node.id: node.floor for node in getattr(site, "nodes", [])}
+        return BuildingInterface(
+            self.endpoint,
+            config,
+            filter_ms=getattr(self.settings, "building_filter_ms", 200.0),
+            floor_of_node=floors,
+        )
+
+    async def load(self, site: Any) -> None:
+        async with self._lock:
+            if self.current is not None:
+                await self.current.stop()
+                self.current = None
+            try:
+                self.current = self._build(site)
+            except BuildingConfigError as exc:
+                log.error("building interface not started: %s", exc)
+                self.current = None
+            if self.current is not None:
+                await self.current.start()
+            self.app.state.building = self.current
+
+    def on_site(self, site: Any) -> None:
+        task = asyncio.get_running_loop().create_task(self.load(site))
+        self._reloads.add(task)
+        task.add_done_callback(self._reloads.discard)
+
+    async def close(self) -> None:
+        for task in list(self._reloads):
+            task.cancel()
+        await asyncio.gather(*self._reloads, return_exceptions=True)
+        async with self._lock:
+            if self.current is not None:
+                await self.current.stop()
+                self.current = None
+        self.endpoint.close()
+
+
+@contextlib.asynccontextmanager
+async def building_interface(app: FastAPI) -> AsyncIterator[None]:
+    """Component: poll the site's Modbus modules while the server runs."""
+    app.state.building = None
+    if not getattr(app.state.settings, "building_enabled", True):
+        yield
+        return
+    runner = _Runner(app)
+    sites = app.state.sites
+    await runner.load(sites.site)
+    sites.on_change(runner.on_site)
+    try:
+        yield
+    finally:
+        await runner.close()

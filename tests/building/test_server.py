@@ -1,0 +1,45 @@
+"""The BuildingInterface inside the real server: a button press in building_sim becomes a task
+(the paper's T1-T4) and the button's LED is lit through set_output."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from backend.building.config import load_building
+from backend.settings import Settings
+from backend.testing import running_server
+from building_sim.simulator import BuildingSimulator
+from guidebot.messages import Message
+
+from .conftest import Recorder, wait_until
+
+DEMO_SITE = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
+
+
+async def test_button_press_requests_its_task_and_lights_its_led(tmp_path: Path) -> None:
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        site_file = tmp_path / "site.yaml"
+        site_file.write_text(yaml.safe_dump(site), encoding="utf-8")
+        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=site_file)
+        async with running_server(settings) as server:
+            building = server.app.state.building
+            assert building is not None
+            recorder = Recorder(server.app.state.hub.endpoint("test"), ["task_event", "building_*"])
+            await wait_until(lambda: all(p.health.polls > 0 for p in building.pollers.values()))
+
+            sim.press("button_entrance", ms=600)
+
+            changed = await recorder.wait("building_input_changed", point="button_entrance")
+            assert changed.payload["node"] == "entrance"
+            assert changed.payload["floor"] is not None
+            event: Message = await recorder.wait("task_event")
+            assert event.payload["state"] == "queued"
+            led = {"module": "otb_ground", "point": "led_entrance"}
+            await wait_until(lambda: sim.read_point(**led) == 1)
+            health = {h["module"]: h for h in building.health()}
+            assert health["otb_ground"]["online"] is True
