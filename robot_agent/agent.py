@@ -8,6 +8,7 @@ the net library, the main-task runner), interface (the link to the server, the t
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 from dataclasses import dataclass
@@ -20,6 +21,7 @@ from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
 from robot_agent.gui import OnboardScreen, ScreenServer
 from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
+from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
 from robot_agent.navigation import Navigator
 from robot_agent.speech import Speech
@@ -89,6 +91,7 @@ class RobotAgent:
         self.hardware: Hardware | None = None
         self.navigator: Navigator | None = None
         self.speech: Speech | None = None
+        self.head: HeadWatchdog | None = None
         self.battery: BatteryMonitor | None = None
         self.tasks: TaskRunner | None = None
         self.state: StateReporter | None = None
@@ -120,6 +123,10 @@ class RobotAgent:
         name = c.name
         bus, stack = self.bus, self._stack
 
+        # The net library first: parsing it takes a while and must not stall the hardware's
+        # watchdogs once RoboCAN runs (so it is parsed in a thread, before).
+        self.dispatch = await self._make_dispatch()
+
         # Hardware servers.
         hw_ep = bus.endpoint("robocan" if c.can else "base")
         if c.can:
@@ -148,6 +155,9 @@ class RobotAgent:
         )
         self.navigator.start()
         stack.push_async_callback(self.navigator.stop)
+        self.head = HeadWatchdog(bus.endpoint("head_watchdog"), self.clock)
+        self.head.start()
+        stack.callback(self.head.stop)
         self.speech = Speech(bus.endpoint("speech"), self.clock, engine=c.speech_engine)
         self.speech.start()
         stack.push_async_callback(self.speech.stop)
@@ -162,7 +172,6 @@ class RobotAgent:
         stack.callback(self.battery.stop)
 
         # Executive: RG dispatch and the main-task runner.
-        self.dispatch = self._make_dispatch()
         nets = None
         if self.dispatch is not None:
             self.dispatch.open()
@@ -220,7 +229,7 @@ class RobotAgent:
             self.screen_server.url if self.screen_server else "none",
         )
 
-    def _make_dispatch(self) -> Any:
+    async def _make_dispatch(self) -> Any:
         try:
             from petri_nets.clock import AsyncioClock
             from petri_nets.dispatch import Dispatch
@@ -228,7 +237,7 @@ class RobotAgent:
         except ImportError as exc:  # RoboGraph missing: tasks cannot run, say so loudly
             log.error("RoboGraph is not available (%s): main tasks will fail", exc)
             return None
-        library = NetLibrary(watch=False)
+        library = await asyncio.to_thread(NetLibrary, watch=False)
         for problem in library.problems():
             log.warning("net library: %s", problem)
         return Dispatch(

@@ -97,6 +97,7 @@ class Navigator:
         bumper_pause_s: float = 3.0,
         wait_timeout_s: float = 600.0,
         path_timeout_s: float = 5.0,
+        docking_s: float = 5.0,
     ) -> None:
         self.ep = endpoint
         self.clock = clock
@@ -108,6 +109,7 @@ class Navigator:
         self.bumper_pause_s = bumper_pause_s
         self.wait_timeout_s = wait_timeout_s
         self.path_timeout_s = path_timeout_s
+        self.docking_s = docking_s
         # Map pose and where the robot is in the graph.
         self.node: str | None = start_node
         self.floor: str | None = None
@@ -185,10 +187,11 @@ class Navigator:
         self._start_goal(self._goal(node, message.id, reply="goal_reached"))
 
     def _on_dock(self, message: Message) -> None:
+        """The battery_charge net is at the station's node: run the docking approach."""
         station = message.payload.get("station")
-        node = message.payload.get("node") or station
+        node = message.payload.get("node") or self.node
         if not isinstance(node, str) or not node:
-            self.ep.publish("navigation_failed", {"node": node, "reason": "dock needs a station"})
+            self.ep.publish("navigation_failed", {"node": node, "reason": "dock: position unknown"})
             return
         self._start_goal(self._goal(node, message.id, reply="docked", station=station))
 
@@ -281,8 +284,9 @@ class Navigator:
             return
         finally:
             self.goal = None
-        payload = {"node": node, **extra} if reply == "goal_reached" else {**extra, "node": node}
-        self.ep.publish(reply, payload, correlation_id=request_id)
+        if reply == "docked":
+            await self.clock.sleep(self.docking_s)  # the final approach onto the contacts
+        self.ep.publish(reply, {**extra, "node": node}, correlation_id=request_id)
 
     async def _face_people(self, request_id: str) -> None:
         with contextlib.suppress(NavigationFailed):
@@ -474,7 +478,9 @@ class Navigator:
         self, ready: Callable[[], bool], what: str, *, retry: Callable[[], None] | None = None
     ) -> None:
         deadline = self.clock.now() + self.wait_timeout_s
-        next_retry = self.clock.now() + 10.0
+        # Re-ask no sooner than the building's own time-out (a few wall seconds).
+        retry_every = max(10.0, 7.0 * self.clock.time_scale)
+        next_retry = self.clock.now() + retry_every
         while True:
             self._news.clear()
             self._check_fault()
@@ -485,7 +491,7 @@ class Navigator:
                 raise NavigationFailed(f"timed out waiting for {what}")
             if retry is not None and now >= next_retry:
                 retry()
-                next_retry = now + 10.0
+                next_retry = now + retry_every
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._news.wait(), self.clock.wall(1.0) + 0.05)
 

@@ -1,0 +1,88 @@
+"""Head watchdog: the head is not critical, so a lost or refusing head must not stop a tour.
+
+Gesture nets wait for servo_in_position after each move_servos. When the head module is
+unplugged (or refuses a servo name) that answer never comes and the tour would hang. The
+watchdog remembers every commanded servo; if the head driver has not confirmed it within
+``timeout_s`` robot seconds (at least ``min_wall_s`` of wall time), it confirms it itself with
+``degraded: true`` and counts it, so gestures are skipped and the tour goes on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from robot_agent.clock import Clock
+
+__all__ = ["HeadWatchdog"]
+
+log = logging.getLogger(__name__)
+
+
+class HeadWatchdog:
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        clock: Clock,
+        *,
+        timeout_s: float = 3.0,
+        min_wall_s: float = 0.5,
+    ) -> None:
+        self.ep = endpoint
+        self.clock = clock
+        self.timeout_s = timeout_s
+        self.min_wall_s = min_wall_s
+        self.degraded = 0
+        self._pending: dict[str, tuple[Any, asyncio.TimerHandle]] = {}
+        self._unsubs: list[Callable[[], None]] = []
+
+    def start(self) -> None:
+        self._unsubs = [
+            self.ep.subscribe("move_servos", self._on_move),
+            self.ep.subscribe("servo_in_position", self._on_in_position),
+        ]
+
+    def stop(self) -> None:
+        for unsub in self._unsubs:
+            unsub()
+        self._unsubs.clear()
+        for _, timer in self._pending.values():
+            timer.cancel()
+        self._pending.clear()
+
+    def _on_move(self, message: Message) -> None:
+        servos = message.payload.get("servos")
+        if not isinstance(servos, dict):
+            return
+        loop = asyncio.get_running_loop()
+        delay = max(self.clock.wall(self.timeout_s), self.min_wall_s)
+        for servo, position in servos.items():
+            previous = self._pending.pop(str(servo), None)
+            if previous is not None:
+                previous[1].cancel()
+            timer = loop.call_later(delay, self._expire, str(servo))
+            self._pending[str(servo)] = (position, timer)
+
+    def _on_in_position(self, message: Message) -> None:
+        if message.source == self.ep.name:
+            return
+        entry = self._pending.pop(str(message.payload.get("servo")), None)
+        if entry is not None:
+            entry[1].cancel()
+
+    def _expire(self, servo: str) -> None:
+        entry = self._pending.pop(servo, None)
+        if entry is None:
+            return
+        self.degraded += 1
+        if self.degraded == 1 or self.degraded % 100 == 0:
+            log.warning(
+                "head did not confirm servo %r (%d so far): gestures skipped", servo, self.degraded
+            )
+        self.ep.publish(
+            "servo_in_position", {"servo": servo, "position": entry[0], "degraded": True}
+        )
