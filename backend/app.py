@@ -26,6 +26,7 @@ import guidebot
 from backend.api import ROUTERS as api_routers
 from backend.api.component import server_brain
 from backend.auth import Role, TokenStore
+from backend.building.component import building_interface
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
@@ -40,6 +41,7 @@ Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 # Server modules started in this order after the hub (and stopped in reverse). One line each.
 COMPONENTS: list[Component] = [
     server_brain,
+    building_interface,
 ]
 
 # REST/WebSocket routers of the server modules. One line each.

@@ -49,6 +49,9 @@ class Settings(BaseSettings):
     hub_batch_max: int = Field(default=512, ge=1)
     hub_max_message_bytes: int = Field(default=1 << 20, ge=1024)
     log_level: str = "info"
+    # BuildingInterface (docs/building.md): poll the site's Modbus modules; input filter.
+    building_enabled: bool = True
+    building_filter_ms: float = Field(default=200.0, ge=0, le=5000)
 
     @model_validator(mode="after")
     def _refuse_default_secrets(self) -> Settings:
