@@ -161,7 +161,18 @@ class Dispatch:
         try:
             request = message.payload_as(RunPetriNet)
         except ValidationError as exc:
-            self._refuse(message, "bad_request", str(exc).splitlines()[0], None, "")
+            reason = "; ".join(
+                f"{'.'.join(map(str, e['loc'])) or 'payload'}: {e['msg']}" for e in exc.errors()
+            )
+            net = message.payload.get("net")
+            instance_id = message.payload.get("instance_id")
+            self._refuse(
+                message,
+                "bad_request",
+                f"run_petri_net refused: {reason}",
+                instance_id if isinstance(instance_id, str) else None,
+                net if isinstance(net, str) else "",
+            )
             return
         try:
             self.start(request.net, request.params, request.main, instance_id=request.instance_id)
