@@ -117,19 +117,20 @@ def run_net(
         clock.run(
             until=max_time, stop=lambda: top["outcome"] is not None, max_callbacks=MAX_CALLBACKS
         )
+        outcome = top["outcome"] or ("running" if clock.next_time() is not None else "stuck")
+        final = {k: v for k, v in marking.items() if v}
     except DispatchError as exc:
         raise click.ClickException(str(exc)) from None
     finally:
         dispatch.close()
         environment.close()
         monitor.close()
-    outcome = top["outcome"] or ("running" if clock.next_time() is not None else "stuck")
     return {
         "net": name,
         "outcome": outcome,
         "fired": fired,
         "published": published,
-        "final_marking": {k: v for k, v in marking.items() if v},
+        "final_marking": final,
     }
 
 
