@@ -6,6 +6,8 @@ interface as ``interface:channel[,key=value...]`` e.g. ``pcan:PCAN_USBBUS1,bitra
 
 from __future__ import annotations
 
+from typing import Any
+
 import can
 
 __all__ = ["BusSpecError", "open_bus", "parse_bus_spec"]
@@ -15,7 +17,7 @@ class BusSpecError(ValueError):
     """A bus configuration string that cannot be understood."""
 
 
-def parse_bus_spec(spec: str) -> tuple[str, str, dict[str, str | int]]:
+def parse_bus_spec(spec: str) -> tuple[str, str, dict[str, Any]]:
     """Split ``interface:channel,key=value`` into its parts; integers are converted."""
     interface, sep, rest = spec.partition(":")
     if not sep or not interface or not rest:
@@ -23,7 +25,7 @@ def parse_bus_spec(spec: str) -> tuple[str, str, dict[str, str | int]]:
     channel, *options = rest.split(",")
     if not channel:
         raise BusSpecError(f"bus {spec!r}: empty channel")
-    kwargs: dict[str, str | int] = {}
+    kwargs: dict[str, Any] = {}
     for option in options:
         key, eq, value = option.partition("=")
         if not eq or not key:

@@ -137,7 +137,7 @@ async def run_canopen(phase_s: float) -> dict[str, Any]:
     tap = can.Notifier(tap_bus, [collector], timeout=0.05)
     master_net, drive_net = canopen.Network(master_bus), canopen.Network(drive_bus)
     tasks: list[Any] = []
-    rpdos = []
+    rpdos, tpdos = [], []
     try:
         for node_id in MOTORS:
             remote = canopen.RemoteNode(node_id, ds402_dictionary())
@@ -158,9 +158,10 @@ async def run_canopen(phase_s: float) -> dict[str, Any]:
             tpdo.add_variable(0x6064)
             tpdo.add_variable(0x606C)
             tpdo.cob_id, tpdo.enabled = 0x180 + node_id, True
-            tpdo[0x6064].raw = 0
+            tpdo[0x6064].raw = 1_234_567  # a drive that has travelled: realistic stuffing
             tpdo[0x606C].raw = 0
             tpdo.start(1 / PUBLISH_HZ)
+            tpdos.append(tpdo)
             drive.nmt.state = "OPERATIONAL"
             drive.nmt.start_heartbeat(1000 // PUBLISH_HZ)
             tasks += [tpdo, drive.nmt]
@@ -170,11 +171,17 @@ async def run_canopen(phase_s: float) -> dict[str, Any]:
         for rpdo in rpdos:
             rpdo[0x60FF].raw = 500_000  # counts/s: moving
             rpdo.start(1 / COMMAND_HZ)
+        for tpdo in tpdos:
+            tpdo[0x606C].raw = 499_871
+            tpdo.update()
         await asyncio.sleep(phase_s)
         t_stop = time.time()
         for rpdo in rpdos:
             rpdo[0x60FF].raw = 0
             rpdo.update()  # a cyclic DS402 master keeps sending its set-point
+        for tpdo in tpdos:
+            tpdo[0x606C].raw = 0
+            tpdo.update()
         await asyncio.sleep(phase_s)
         t_end = time.time()
     finally:

@@ -253,6 +253,11 @@ class Master:
                 continue
             finally:
                 self._acks.pop(key, None)
+            if status == p.AckStatus.OK and data[0] == p.Op.SET_PARAM:
+                element, param, value = p.parse_set_param(data)
+                module = self.modules.get(module_id)
+                if module is not None and element == p.MODULE and param == p.Param.WATCHDOG_MS:
+                    module.watchdog_s = value / 1000  # its time-out follows its new period
             if status != p.AckStatus.OK:
                 raise CommandFailed(
                     f"module 0x{module_id:02X} refused 0x{data[0]:02X}: "
@@ -549,9 +554,9 @@ class Master:
                     self._receivers[module_id] = (receiver, now)
                     for frame in receiver.on_timeout():
                         self.send_to(module_id, frame)
-                    module = self.modules.get(module_id)
-                    if module is not None:
-                        self._block_progress(module, receiver)
+                    owner = self.modules.get(module_id)
+                    if owner is not None:
+                        self._block_progress(owner, receiver)
 
     def _publish_status(self, module: Module) -> None:
         self.endpoint.publish(

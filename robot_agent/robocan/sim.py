@@ -199,9 +199,9 @@ class SimModule:
         elif op == p.Op.STOP:
             self.on_stop()
         else:
-            status = self.on_command(op, data)
-            if status is not None:
-                self.send(p.ack(op, data[1] if len(data) > 1 else p.MODULE, status))
+            reply = self.on_command(op, data)
+            if reply is not None:
+                self.send(p.ack(op, data[1] if len(data) > 1 else p.MODULE, reply))
 
     def _set_param(self, element: int, param: int, value: int) -> p.AckStatus:
         if element == p.MODULE:
