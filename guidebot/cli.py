@@ -17,12 +17,16 @@ COMMANDS: dict[str, str] = {
     "petri": "petri_nets.cli:petri",
     "server": "backend.server_cli:server",
     "robocan": "robot_agent.robocan.cli:robocan",
+    "building-sim": "building_sim.cli:building_sim",
 }
 
 BENCHMARKS: dict[str, str] = {
     "hub": "bench.hub:hub",
     "petri": "bench.petri:main",
     "robocan": "bench.robocan:main",
+    "traffic": "bench.traffic:main",
+    "tasks": "bench.tasks:main",
+    "modbus": "bench.modbus:main",
 }
 
 

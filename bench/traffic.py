@@ -1,0 +1,157 @@
+"""Traffic Manager benchmark: path queries on a large site and area-lock round trips over the
+hub while many robots ask at once.
+
+    guidebot bench traffic --nodes 10000 --robots 1000 --json
+
+Last line: {"path_ms": {"p50", "p99"}, "lock_rtt_ms": {"p50", "p99"}}.
+path_ms: a robot's position (any node) to a site destination (point of interest, charging
+station, wait point), the queries robots make. lock_rtt_ms: request_area sent by a robot
+endpoint of the JCentral hub until its area_granted arrives, all robots asking concurrently,
+each for its own area (no waiting behind another robot: the round trip itself), each robot
+asking at random times at ``--rate`` per second (open loop). The closed-loop saturation rate
+(every robot asking again the moment it is answered) is printed as information.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import random
+import time
+
+import click
+
+from backend.hub import Hub
+from backend.site.schema import Site
+from backend.site.synthetic import synthetic_site
+from backend.traffic.graph import SiteGraph
+from backend.traffic.manager import TrafficManager
+from guidebot.benchutil import percentiles, print_result
+
+__all__ = ["main"]
+
+
+def bench_paths(graph: SiteGraph, nodes: list[str], goals: list[str], queries: int) -> list[float]:
+    rng = random.Random(7)
+    samples = []
+    for _ in range(queries):
+        start, goal = rng.choice(nodes), rng.choice(goals)
+        t0 = time.perf_counter()
+        graph.shortest_path(start, goal)
+        samples.append((time.perf_counter() - t0) * 1000)
+    return samples
+
+
+def bench_any_pair(graph: SiteGraph, nodes: list[str], queries: int) -> list[float]:
+    rng = random.Random(8)
+    samples = []
+    for _ in range(queries):
+        start, goal = rng.sample(nodes, 2)
+        t0 = time.perf_counter()
+        graph.shortest_path(start, goal)
+        samples.append((time.perf_counter() - t0) * 1000)
+    return samples
+
+
+async def bench_locks(
+    site: Site, robots: int, rate: float, seconds: float
+) -> tuple[list[float], int]:
+    """Open loop: each robot asks at random times (Poisson, ``rate`` per second), as robots
+    reaching restricted areas do; returns round trips measured after a 1 s warm-up."""
+    hub = Hub()
+    traffic = TrafficManager(hub.endpoint("traffic_manager"), site)
+    traffic.start()
+    areas = traffic.locks.areas
+    samples: list[float] = []
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    warm_until, stop_at = start + 1.0, start + 1.0 + seconds
+    asked = 0
+
+    async def robot(k: int) -> None:
+        nonlocal asked
+        rng = random.Random(k)
+        name = f"R{k}"
+        endpoint = hub.endpoint(name)
+        area = areas[k % len(areas)]
+        while True:
+            await asyncio.sleep(rng.expovariate(rate))
+            if loop.time() >= stop_at:
+                return
+            t0 = time.perf_counter()
+            reply = await endpoint.request(
+                "request_area", {"robot": name, "area": area}, timeout=30.0
+            )
+            rtt = (time.perf_counter() - t0) * 1000
+            if reply.type != "area_granted":
+                raise RuntimeError(f"refused: {reply.payload}")
+            endpoint.publish("release_area", {"robot": name, "area": area})
+            asked += 1
+            if loop.time() >= warm_until:
+                samples.append(rtt)
+
+    await asyncio.gather(*(robot(k) for k in range(robots)))
+    traffic.stop()
+    hub.close()
+    return samples, asked
+
+
+async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
+    """Closed loop, every robot asking again at once: round trips per second at saturation."""
+    hub = Hub()
+    traffic = TrafficManager(hub.endpoint("traffic_manager"), site)
+    traffic.start()
+    areas = traffic.locks.areas
+
+    async def robot(k: int) -> None:
+        name = f"S{k}"
+        endpoint = hub.endpoint(name)
+        for _ in range(rounds):
+            await endpoint.request("request_area", {"robot": name, "area": areas[k % len(areas)]})
+            endpoint.publish("release_area", {"robot": name, "area": areas[k % len(areas)]})
+
+    t0 = time.perf_counter()
+    await asyncio.gather(*(robot(k) for k in range(robots)))
+    elapsed = time.perf_counter() - t0
+    traffic.stop()
+    hub.close()
+    return robots * rounds / elapsed
+
+
+@click.command()
+@click.option("--nodes", default=10_000, show_default=True, help="Nodes of the synthetic site.")
+@click.option("--robots", default=1000, show_default=True, help="Robots asking for areas.")
+@click.option("--queries", default=5000, show_default=True, help="Path queries to time.")
+@click.option("--rate", default=1.0, show_default=True, help="Area requests per robot per s.")
+@click.option("--seconds", default=5.0, show_default=True, help="Measured lock phase.")
+@click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
+def main(nodes: int, robots: int, queries: int, rate: float, seconds: float, as_json: bool) -> None:
+    """Path and lock latency of the Traffic Manager."""
+    if nodes < 4 or robots < 1 or queries < 1 or rate <= 0 or seconds <= 0:
+        raise click.UsageError("need nodes >= 4, robots and queries >= 1, rate and seconds > 0")
+    site = synthetic_site(nodes=nodes, robots=robots, areas=robots, pois=100)
+    t0 = time.perf_counter()
+    graph = SiteGraph(site)
+    warm_s = time.perf_counter() - t0
+    gc.collect()
+    gc.freeze()  # the site is long-lived: keep the collector from rescanning it (as the server)
+    names = [n.id for n in site.nodes]
+    goals = [p.node for p in site.pois] + [c.node for c in site.charging_stations]
+    paths = bench_paths(graph, names, goals, queries)
+    any_pair = bench_any_pair(SiteGraph(site, warm=False), names, max(50, queries // 20))
+    locks, asked = asyncio.run(bench_locks(site, robots, rate, seconds))
+    ceiling = asyncio.run(saturation(site, robots))
+    if not as_json:
+        click.echo(
+            f"site: {len(site.nodes)} nodes, {len(site.edges)} edges, {len(site.floors)} floors; "
+            f"distance fields for {len(goals) + 1} destinations built in {warm_s:.2f} s"
+        )
+        click.echo(f"path to a destination: {percentiles(paths)} ms over {queries} queries")
+        click.echo(f"path between any two nodes (A*): {percentiles(any_pair)} ms")
+        click.echo(
+            f"locks: {robots} robots asking {rate}/s each ({robots * rate:.0f}/s offered), "
+            f"{len(locks)} round trips measured of {asked}; saturation (all asking again at "
+            f"once): {ceiling:.0f} round trips/s"
+        )
+        click.echo("goals: path p99 < 2 ms, lock round trip p99 < 10 ms")
+    print_result({"path_ms": percentiles(paths), "lock_rtt_ms": percentiles(locks)})
