@@ -159,7 +159,7 @@ class Dispatch:
 
     def _on_run(self, message: Message) -> None:
         try:
-            request = message.payload_as(RunPetriNet)
+            request: RunPetriNet = message.payload_as(RunPetriNet)
         except ValidationError as exc:
             reason = "; ".join(
                 f"{'.'.join(map(str, e['loc'])) or 'payload'}: {e['msg']}" for e in exc.errors()
@@ -203,7 +203,7 @@ class Dispatch:
 
     def _on_kill(self, message: Message) -> None:
         try:
-            request = message.payload_as(KillPetriNet)
+            request: KillPetriNet = message.payload_as(KillPetriNet)
         except ValidationError as exc:
             log.warning("kill_petri_net refused: %s", exc)
             return

@@ -101,4 +101,7 @@ class ScriptedEnvironment:
                 self.clock.call_later(delay, self._sender(reply["type"], payload))
 
     def _sender(self, message_type: str, payload: dict[str, Any]) -> Callable[[], None]:
-        return lambda: self.endpoint.publish(message_type, payload)
+        def send() -> None:
+            self.endpoint.publish(message_type, payload)
+
+        return send

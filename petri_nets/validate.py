@@ -8,7 +8,7 @@ undeclared parameters, transitions that can never be enabled, no reachable end.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from petri_nets.model import (
     ACTION_KINDS,
@@ -57,10 +57,12 @@ def validate(net: NetDoc) -> list[Problem]:
                     problem(line, f"{where}: parameter {name!r} is used but not declared")
 
     seen: dict[str, int] = {}
-    for node in (*net.places, *net.transitions, *net.arcs):
-        if node.id and node.id in seen:
-            problem(node.line, f"id {node.id!r} is used twice (first on line {seen[node.id]})")
-        seen.setdefault(node.id, node.line)
+    nodes: list[tuple[str, int]] = [(n.id, n.line) for n in net.places]
+    nodes += [(n.id, n.line) for n in net.transitions] + [(n.id, n.line) for n in net.arcs]
+    for node_id, node_line in nodes:
+        if node_id and node_id in seen:
+            problem(node_line, f"id {node_id!r} is used twice (first on line {seen[node_id]})")
+        seen.setdefault(node_id, node_line)
     param_seen: set[str] = set()
     for param in net.params:
         if param.name in param_seen:
@@ -203,7 +205,13 @@ def validate(net: NetDoc) -> list[Problem]:
     return sorted(out, key=lambda p: p.line)
 
 
-def _check_reachability(net, inputs, outputs, blocked, problem) -> None:  # type: ignore[no-untyped-def]
+def _check_reachability(
+    net: NetDoc,
+    inputs: dict[str, list[str]],
+    outputs: dict[str, list[str]],
+    blocked: set[str],
+    problem: Callable[[int, str], None],
+) -> None:
     """Structural over-approximation: a place is markable if marked at start or an output of a
     transition whose input places are all markable. Anything else can never happen."""
     markable = {p.id for p in net.places if p.initial > 0}
