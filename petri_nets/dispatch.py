@@ -230,8 +230,8 @@ class Dispatch:
         if missing:
             raise DispatchError(f"net {net_name}: missing parameter(s) {', '.join(missing)}")
         undeclared = [k for k in params if k not in net.params]
-        if undeclared:
-            raise DispatchError(f"net {net_name}: undeclared parameter(s) {', '.join(undeclared)}")
+        if undeclared:  # kept (a sender may know more than the net needs), but said
+            log.info("net %s: parameter(s) %s not declared", net_name, ", ".join(undeclared))
         if instance_id is None:
             instance_id = f"{net_name}#{next(self._ids)}"
         elif instance_id in self._instances:

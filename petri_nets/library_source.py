@@ -261,16 +261,18 @@ def navigate_to_point() -> NetDoc:
 def go_to_poi() -> NetDoc:
     b = NetBuilder(
         "go_to_poi",
-        "Take the visitor to one point of interest and say so.",
-        params={"poi": "", "arrival_text": "Here we are."},
+        "Take the visitor to one point of interest, show it and explain it.",
+        params={"poi": "", "text": "Here we are."},
         required=("node",),
     )
     b.place("navigate", initial=1, action=run("navigate_to_point", {"node": "${node}"}))
-    b.place("announce", action=publish("say", {"text": "${arrival_text}", "lang": "en"}))
+    b.place("show_point", action=publish("show_point", {"poi": "${poi}", "text": "${text}"}))
+    b.place("explain_point", action=run("explain_point", {"text": "${text}"}))
     b.place("arrived", final=True).place("failed", final=True, outcome="failed")
-    b.transition("reached", ["navigate"], ["announce"], net_ended("navigate_to_point", "done"))
+    b.transition("reached", ["navigate"], ["show_point"], net_ended("navigate_to_point", "done"))
     b.transition("not_reached", ["navigate"], ["failed"], net_ended("navigate_to_point"))
-    b.transition("announced", ["announce"], ["arrived"], message("speech_ended"))
+    b.transition("shown", ["show_point"], ["explain_point"])
+    b.transition("explained", ["explain_point"], ["arrived"], net_ended("explain_point"))
     return b.build()
 
 

@@ -68,6 +68,7 @@ class MoveServos(PayloadModel):
 class ServoInPosition(PayloadModel):
     servo: str
     position: float
+    degraded: bool = False
 
 
 @register_payload("say")
@@ -84,6 +85,7 @@ class SpeechStarted(PayloadModel):
 @register_payload("speech_ended")
 class SpeechEnded(PayloadModel):
     text: str = ""
+    outcome: str | None = None
 
 
 @register_payload("face_people")
@@ -137,9 +139,11 @@ class Dock(PayloadModel):
 
 @register_payload("docked")
 class Docked(PayloadModel):
-    station: str
+    station: str | None = None
+    node: str | None = None
 
 
 @register_payload("charged")
 class Charged(PayloadModel):
-    station: str = ""
+    station: str | None = None
+    level: float | None = None

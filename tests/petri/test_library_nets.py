@@ -162,10 +162,14 @@ def test_waiting_is_killed_by_a_main_task_and_restarted_after() -> None:
     assert len(waiting) == 1
     rig.clock.advance(60)  # random gestures while idle
     assert rig.published("move_servos")
-    task = rig.dispatch.start("go_to_poi", {"node": "n5"}, main=True)
+    # the params exactly as the Task Manager sends them in task_assigned
+    params = {"poi": "p5", "node": "n5", "text": "The fountain."}
+    task = rig.dispatch.start("go_to_poi", params, main=True)
     assert rig.ended(waiting[0]["instance_id"]) == "killed"
     assert {r["net"] for r in rig.dispatch.running() if r["parent"] is None} == {"go_to_poi"}
     rig.clock.advance(60)
     assert rig.ended(task) == "done"
+    assert rig.published("show_point") == [{"poi": "p5", "text": "The fountain."}]
+    assert rig.published("say")[-1]["text"] == "The fountain."
     again = [r for r in rig.dispatch.running() if r["net"] == "waiting"]
     assert len(again) == 1 and again[0]["instance_id"] != waiting[0]["instance_id"]
