@@ -10,11 +10,15 @@ from typing import Any
 
 import can
 
-__all__ = ["BusSpecError", "open_bus", "parse_bus_spec"]
+__all__ = ["BusOpenError", "BusSpecError", "open_bus", "parse_bus_spec"]
 
 
 class BusSpecError(ValueError):
     """A bus configuration string that cannot be understood."""
+
+
+class BusOpenError(OSError):
+    """The interface exists but the bus cannot be opened (no device, no permission...)."""
 
 
 def parse_bus_spec(spec: str) -> tuple[str, str, dict[str, Any]]:
@@ -35,11 +39,14 @@ def parse_bus_spec(spec: str) -> tuple[str, str, dict[str, Any]]:
 
 
 def open_bus(spec: str) -> can.BusABC:
-    """Open the bus a spec names. Raises BusSpecError or python-can's CanError."""
+    """Open the bus a spec names. Raises BusSpecError (bad string) or BusOpenError."""
     interface, channel, kwargs = parse_bus_spec(spec)
     if interface not in can.VALID_INTERFACES:
         raise BusSpecError(
             f"bus {spec!r}: unknown interface {interface!r}; "
             f"known: {', '.join(sorted(can.VALID_INTERFACES))}"
         )
-    return can.Bus(interface=interface, channel=channel, **kwargs)
+    try:
+        return can.Bus(interface=interface, channel=channel, **kwargs)
+    except (OSError, can.CanError, ImportError) as exc:
+        raise BusOpenError(f"bus {spec!r} cannot be opened: {exc}") from exc

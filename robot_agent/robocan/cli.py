@@ -105,6 +105,8 @@ def run(
     record: Path | None,
 ) -> None:
     """Run the master (and the simulated BellBot) for a while; print the module table."""
+    import can
+
     from guidebot.bus import Bus
     from robot_agent.robocan.busopen import BusSpecError
     from robot_agent.robocan.stack import RoboCanStack
@@ -129,7 +131,7 @@ def run(
 
     try:
         asyncio.run(main())
-    except (BusSpecError, ValueError) as exc:
+    except (BusSpecError, ValueError, OSError, can.CanError) as exc:
         raise click.ClickException(str(exc)) from None
 
 

@@ -39,6 +39,7 @@ class ModuleState(enum.Enum):
     QUERYING = "querying"
     CONFIGURING = "configuring"
     ONLINE = "online"
+    DISABLED = "disabled"  # attached and powered, told by the master not to publish
     LOST = "lost"
     FAILED = "failed"
 
@@ -50,7 +51,8 @@ TRANSITIONS: dict[ModuleState, frozenset[ModuleState]] = {
     ModuleState.CONFIGURING: frozenset(
         {ModuleState.ONLINE, ModuleState.LOST, ModuleState.FAILED, ModuleState.QUERYING}
     ),
-    ModuleState.ONLINE: frozenset({ModuleState.LOST, ModuleState.QUERYING}),
+    ModuleState.ONLINE: frozenset({ModuleState.LOST, ModuleState.QUERYING, ModuleState.DISABLED}),
+    ModuleState.DISABLED: frozenset({ModuleState.ONLINE, ModuleState.LOST, ModuleState.QUERYING}),
     ModuleState.LOST: frozenset({ModuleState.QUERYING}),
     ModuleState.FAILED: frozenset({ModuleState.QUERYING, ModuleState.LOST}),
 }
@@ -88,6 +90,7 @@ class Module:
     watchdog_s: float = p.WATCHDOG_PERIOD_S
     retry_at: float = 0.0
     announced: bool = False
+    disabling: bool = False  # the master disabled it: a DISABLED watchdog is no reset
 
     @property
     def name(self) -> str:
@@ -404,6 +407,7 @@ class Master:
         previous, module.slave_state = module.slave_state, state
         if (
             module.state is ModuleState.ONLINE
+            and not module.disabling
             and state is p.SlaveState.DISABLED
             and previous is p.SlaveState.ENABLED
         ):
@@ -502,6 +506,7 @@ class Master:
                 for op in driver.opcodes:
                     module.routes.setdefault(op, []).append(driver)
             await driver.configure(module, index, element)
+        module.disabling = False
         await self.command(module.module_id, p.enable(p.MODULE, True))
         self._transition(module, ModuleState.ONLINE)
         module.online_since = time.monotonic()
@@ -564,7 +569,9 @@ class Master:
             {
                 "module_id": module.module_id,
                 "name": module.name,
-                "state": "online" if module.state is ModuleState.ONLINE else "lost",
+                "state": module.state.value
+                if module.state in (ModuleState.ONLINE, ModuleState.DISABLED)
+                else "lost",
                 "critical": module.critical,
             },
         )
@@ -575,6 +582,30 @@ class Master:
         if now - self._last_warning.get(key, 0.0) >= 1.0:
             self._last_warning[key] = now
             log.warning("robocan: %s", text)
+
+    async def set_enabled(self, module_id: int, on: bool) -> None:
+        """Disable an online module (it stays attached and watched, publishes nothing, its
+        drivers are told as for a loss) or enable it again. Raises IllegalTransition or
+        CommandFailed."""
+        module = self.modules.get(module_id)
+        if module is None:
+            raise KeyError(f"no module 0x{module_id:02X} on this bus")
+        target = ModuleState.ONLINE if on else ModuleState.DISABLED
+        if target not in TRANSITIONS[module.state]:
+            raise IllegalTransition(module_id, module.state, target)
+        module.disabling = not on
+        await self.command(module_id, p.enable(p.MODULE, on))
+        self._transition(module, target)
+        for driver in module.drivers:
+            try:
+                if on:
+                    driver.on_online(module)
+                else:
+                    driver.on_lost(module, "disabled by the master")
+            except Exception:
+                self.counters.driver_errors += 1
+                log.exception("robocan: driver %s failed", type(driver).__name__)
+        self._publish_status(module)
 
     # --- queries for the agent and tests ----------------------------------------------
 

@@ -64,6 +64,8 @@ class RoboCanStack:
     ) -> None:
         self.endpoint = endpoint
         self.bus_specs = list(buses or ["virtual:R1"])
+        for spec in self.bus_specs:
+            parse_bus_spec(spec)  # a bad string fails here, before anything starts
         if simulate and parse_bus_spec(self.bus_specs[0])[0] != "virtual":
             raise ValueError("simulated modules need a virtual bus (e.g. 'virtual:R1')")
         self.simulate = simulate
@@ -154,6 +156,14 @@ class RoboCanStack:
         if self.simulator is None:
             raise RuntimeError("plug/unplug needs simulate=True")
         await self.simulator.unplug(module_id)
+
+    async def set_enabled(self, module_id: int, on: bool) -> None:
+        """Enable or disable a module through the master of the bus it is on."""
+        for master in self.masters:
+            if module_id in master.modules:
+                await master.set_enabled(module_id, on)
+                return
+        raise KeyError(f"no module 0x{module_id:02X} on any bus")
 
     def set_battery_level(self, level: float) -> None:
         """Test hook: the simulated battery jumps to ``level`` (0..1) and reports it at once."""

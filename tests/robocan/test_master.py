@@ -268,3 +268,67 @@ async def test_garbage_is_counted_and_starves_nobody(stack: RoboCanStack, watch:
         assert master.running
     finally:
         junk.shutdown()
+
+
+async def test_disable_and_enable_a_module(stack: RoboCanStack, watch: Watch) -> None:
+    await stack.set_enabled(0x10, False)
+    disabled = await watch.wait_for("module_status", watch.status(0x10, "disabled"))
+    assert disabled.payload["name"] == "sonar_ring_10"
+    assert stack.simulator is not None
+    ring = stack.simulator.modules[0x10]
+    await wait_until(lambda: not ring.enabled)
+    # it keeps its watchdog going: disabled, not lost, and no sonar frames from it
+    mark = len(watch.messages)
+    await watch.wait_for("sonar_ranges", lambda m: m.payload["ring"] == 1)
+    await watch.wait_for(
+        "sonar_ranges", lambda m: m.payload["ring"] == 1 and watch.messages.index(m) > mark
+    )
+    assert not [
+        m for m in watch.messages[mark:] if m.type == "sonar_ranges" and m.payload["ring"] == 0
+    ]
+    assert not [m for m in watch.messages[mark:] if m.type == "module_status"]
+    with pytest.raises(RuntimeError, match="expected one of"):
+        await stack.set_enabled(0x10, False)
+    await stack.set_enabled(0x10, True)
+    await watch.wait_for("module_status", watch.status(0x10, "online"))
+    await watch.wait_for(
+        "sonar_ranges", lambda m: m.payload["ring"] == 0 and watch.messages.index(m) > mark
+    )
+
+
+async def test_two_buses_two_masters(onboard: Bus, channel: str, watch: Watch) -> None:
+    second = channel + "-b"
+    async with RoboCanStack(
+        onboard.endpoint("robocan"), [channel, second], layout={0x02: "motor"}
+    ) as stack:
+        await stack.wait_online({0x02})
+        assert len(stack.masters) == 2
+        raw = open_bus(second)
+        try:
+            raw.send(
+                can.Message(
+                    arbitration_id=0x70,
+                    data=p.watchdog(p.SlaveState.DISABLED),
+                    is_extended_id=False,
+                )
+            )
+            await wait_until(lambda: 0x70 in stack.masters[1].modules)
+        finally:
+            raw.shutdown()
+        assert 0x70 not in stack.masters[0].modules
+        assert 0x02 not in stack.masters[1].modules
+
+
+async def test_unopenable_bus_is_a_clear_error(onboard: Bus) -> None:
+    from robot_agent.robocan.busopen import BusOpenError, BusSpecError
+
+    with pytest.raises(BusSpecError, match="expected 'interface:channel'"):
+        RoboCanStack(onboard.endpoint("a"), ["can0"], simulate=False)
+    with pytest.raises(ValueError, match="virtual bus"):
+        RoboCanStack(onboard.endpoint("b"), ["socketcan:can0"], simulate=True)
+    with pytest.raises(BusSpecError, match="unknown interface"):
+        async with RoboCanStack(onboard.endpoint("c"), ["warp:0"], simulate=False):
+            pass
+    with pytest.raises(BusOpenError, match="socketcan:nope0"):
+        async with RoboCanStack(onboard.endpoint("d"), ["socketcan:nope0"], simulate=False):
+            pass
