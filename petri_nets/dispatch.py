@@ -129,7 +129,7 @@ class Dispatch:
         return True
 
     def kill_net(self, net: str) -> int:
-        """Kill every top-level instance of a net; returns how many."""
+        """Kill every instance of a net (sub-nets of others included); returns how many."""
         victims = [i for i in self._instances.values() if i.net.name == net]
         for instance in victims:
             instance.kill()
