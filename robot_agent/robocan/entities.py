@@ -382,16 +382,19 @@ class IoDriver(Driver):
 
 
 class BatteryDriver(Driver):
-    """Battery level; ``battery_low``/``battery_panic`` once per downward crossing;
-    ``set_charging {on}`` tells the charger contact (the dock) to charge."""
+    """Battery level; ``battery_low`` / ``battery_panic`` once per discharge (re-armed when the
+    level is back 5 points above the threshold); ``set_charging {on}`` closes the charger
+    contact (the dock)."""
 
     kinds = ("battery",)
     opcodes = frozenset({p.Op.BATTERY})
+    REARM = 0.05
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.modules: set[int] = set()
         self.level: float | None = None
+        self.sent: set[str] = set()
 
     def start(self) -> None:
         self._unsubscribe.append(self.endpoint.subscribe("set_charging", self._on_set_charging))
@@ -406,14 +409,15 @@ class BatteryDriver(Driver):
 
     def on_frame(self, module: Module, data: bytes) -> None:
         level, voltage, charging = p.parse_battery(data)
-        previous, self.level = self.level, level
+        self.level = level
         self.endpoint.publish(
             "battery_level", {"level": level, "charging": charging, "voltage": voltage}
         )
-        for threshold, kind in (
-            (self.config.battery_panic, "battery_panic"),
-            (self.config.battery_low, "battery_low"),
-        ):
-            if level <= threshold and (previous is None or previous > threshold):
-                self.endpoint.publish(kind, {"robot": self.config.robot, "level": level})
-                break
+        if level >= self.config.battery_low + self.REARM:
+            self.sent.clear()
+        if level <= self.config.battery_panic and "battery_panic" not in self.sent:
+            self.sent |= {"battery_panic", "battery_low"}
+            self.endpoint.publish("battery_panic", {"robot": self.config.robot, "level": level})
+        elif level <= self.config.battery_low and "battery_low" not in self.sent:
+            self.sent.add("battery_low")
+            self.endpoint.publish("battery_low", {"robot": self.config.robot, "level": level})

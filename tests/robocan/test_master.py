@@ -332,3 +332,20 @@ async def test_unopenable_bus_is_a_clear_error(onboard: Bus) -> None:
     with pytest.raises(BusOpenError, match="socketcan:nope0"):
         async with RoboCanStack(onboard.endpoint("d"), ["socketcan:nope0"], simulate=False):
             pass
+
+
+async def test_battery_alarms_fire_once_per_discharge(
+    onboard: Bus, stack: RoboCanStack, watch: Watch
+) -> None:
+    await watch.wait_for("battery_level")
+    for level in (0.24, 0.22, 0.26, 0.2):  # hovering around "low" (0.25): one alarm
+        stack.set_battery_level(level)
+        await watch.wait_for("battery_level", lambda m, lv=level: m.payload["level"] == lv)
+    assert len(watch.of("battery_low")) == 1
+    stack.set_battery_level(0.9)  # charged: re-armed
+    await watch.wait_for("battery_level", lambda m: m.payload["level"] == 0.9)
+    stack.set_battery_level(0.2)
+    await watch.wait_for(
+        "battery_level", lambda m: m.payload["level"] == 0.2 and len(watch.of("battery_low")) == 2
+    )
+    assert not watch.of("battery_panic")
