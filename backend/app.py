@@ -72,6 +72,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             queue_size=settings.hub_queue_size,
             coalesce_after=settings.hub_coalesce_after,
             batch_max=settings.hub_batch_max,
+            linger=settings.hub_linger_ms / 1000,
             max_message_bytes=settings.hub_max_message_bytes,
         )
         async with contextlib.AsyncExitStack() as stack:

@@ -90,6 +90,7 @@ async def _robots(url: str, first: int, count: int, rate: float) -> None:
     seconds = await _read_start_time()
     end_at = start_at + seconds
     period = 1.0 / rate
+    cpu0, t0 = time.process_time(), time.monotonic()
     published = [0] * count
 
     async def run(k: int, client: HubClient) -> None:
@@ -109,11 +110,13 @@ async def _robots(url: str, first: int, count: int, rate: float) -> None:
         published[k] = seq
 
     await asyncio.gather(*(run(k, c) for k, c in enumerate(clients)))
+    cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
     await asyncio.gather(*(c.sync(timeout=30.0) for c in clients))
     dropped_here = sum(c.dropped for c in clients)
     for c in clients:
         await c.close(flush=False)
-    print(json.dumps({"published": sum(published), "client_dropped": dropped_here}), flush=True)
+    result = {"published": sum(published), "client_dropped": dropped_here, "cpu": cpu_percent}
+    print(json.dumps(result), flush=True)
 
 
 async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
@@ -156,6 +159,10 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
     start_at = await _read_start_time()
     seconds = await _read_start_time()
     window[0], window[1] = start_at + WARMUP_S, start_at + seconds
+    await asyncio.sleep(max(0.0, window[0] - time.time()))
+    cpu0, t0 = time.process_time(), time.monotonic()
+    await asyncio.sleep(max(0.0, window[1] - time.time()))
+    cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
     done = await _read_start_time()  # the robots finished and synced: everything was routed
     del done
     await asyncio.gather(*(c.sync(timeout=30.0) for c in clients))
@@ -175,6 +182,7 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
                 "superseded": superseded,
                 "latency_ms": percentiles([x * 1000 for x in latencies]),
                 "latency_samples": in_window,
+                "cpu_percent": round(cpu_percent, 1),
             }
         ),
         flush=True,
@@ -277,7 +285,8 @@ def run_benchmark(
         f"published {published}, GUI receipts {gui_result['received']} of {expected}, "
         f"superseded {gui_result['superseded']}, seq gaps {gui_result['gaps']}, "
         f"client-side dropped {sum(r['client_dropped'] for r in robot_results)}, "
-        f"latency samples {gui_result['latency_samples']}"
+        f"latency samples {gui_result['latency_samples']}; CPU % GUI process "
+        f"{gui_result['cpu_percent']}, robot processes {[round(r['cpu']) for r in robot_results]}"
     )
     return {
         "robots": robots,

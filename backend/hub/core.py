@@ -196,12 +196,14 @@ class Hub:
         queue_size: int = 4096,
         coalesce_after: int = 256,
         batch_max: int = 512,
+        linger: float = 0.005,
         max_message_bytes: int = 1 << 20,
     ) -> None:
         self.bus = HubBus()
         self.queue_size = queue_size
         self.coalesce_after = coalesce_after
         self.batch_max = batch_max
+        self.linger = linger
         self.max_message_bytes = max_message_bytes
         self.refused = 0
         self.overflow_disconnects = 0

@@ -34,6 +34,7 @@ class Outbox:
         self.queued = 0
         self.superseded = 0
         self.closed = False
+        self._more: tuple[asyncio.Future[None], int] | None = None
 
     def __len__(self) -> int:
         return len(self._items)
@@ -55,22 +56,40 @@ class Outbox:
         self.queued += 1
         if not self._ready.is_set():
             self._ready.set()
+        more = self._more
+        if more is not None and len(self._items) >= more[1] and not more[0].done():
+            more[0].set_result(None)
 
     def close(self) -> None:
         """Wake the writer for good: ``get_batch`` returns an empty batch once drained."""
         self.closed = True
         self._ready.set()
+        if self._more is not None:
+            _wake(self._more[0])
 
-    async def get_batch(self, max_items: int, max_bytes: int = 1 << 18) -> list[bytes]:
-        """Wait for at least one message, then take up to ``max_items`` in queue order.
-
-        The batch stops growing once it holds ``max_bytes`` (one message may be larger).
-        """
-        while not self._items:
-            if self.closed:
-                return []
+    async def wait(self) -> None:
+        """Return once a message is queued or the outbox is closed."""
+        while not self._items and not self.closed:
             self._ready.clear()
             await self._ready.wait()
+
+    async def linger(self, delay: float, enough: int) -> None:
+        """Wait up to ``delay`` for more messages; return early once ``enough`` are queued."""
+        if len(self._items) >= enough or self.closed:
+            return
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[None] = loop.create_future()
+        self._more = (future, enough)
+        timer = loop.call_later(delay, _wake, future)
+        try:
+            await future
+        finally:
+            timer.cancel()
+            self._more = None
+
+    def take(self, max_items: int, max_bytes: int = 1 << 18) -> list[bytes]:
+        """Up to ``max_items`` queued messages in order, stopping once ``max_bytes`` are taken
+        (one message may be larger)."""
         batch: list[bytes] = []
         items = self._items
         size = 0
@@ -82,3 +101,13 @@ class Outbox:
             batch.append(entry[1])  # type: ignore[arg-type]
             size += len(entry[1])  # type: ignore[arg-type]
         return batch
+
+    async def get_batch(self, max_items: int, max_bytes: int = 1 << 18) -> list[bytes]:
+        """Wait for at least one message, then take a batch; empty once closed and drained."""
+        await self.wait()
+        return self.take(max_items, max_bytes)
+
+
+def _wake(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
