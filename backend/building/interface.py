@@ -58,9 +58,12 @@ class BuildingInterface:
         self.config = config.check()
         self.filter_s = filter_ms / 1000
         self.command_margin_s = command_margin_s
+        count = max(1, len(config.modules))
         self.pollers = {
-            m.id: ModulePoller(m, self._on_sample, self._on_health, health_interval_s)
-            for m in config.modules
+            m.id: ModulePoller(
+                m, self._on_sample, self._on_health, health_interval_s, phase=index / count
+            )
+            for index, m in enumerate(config.modules)
         }
         # (module, kind, address) -> point, for decoding samples.
         self._points: dict[str, dict[tuple[PointKind, int], IOPoint]] = {

@@ -69,12 +69,19 @@ class ModuleHealth:
 
 @dataclass
 class ModulePoller:
-    """Polls one module; calls ``on_sample(module_id, sample, t)`` and ``on_health(health)``."""
+    """Polls one module; calls ``on_sample(module_id, sample, t)`` and ``on_health(health)``.
+
+    ``t`` is the poll's slot on the schedule, not its actual start: the input filter then
+    compares whole periods, and a late wake-up cannot make a held press look 1 ms too short.
+    """
 
     module: BuildingModule
     on_sample: Callable[[str, Sample, float], None]
     on_health: Callable[[ModuleHealth], None]
     health_interval_s: float = 5.0
+    phase: float = 0.0
+    """Fraction of a period to wait before the first poll: spreads modules over the period so
+    they do not all wake at the same instant (which would make the last one late)."""
     jitter_s: collections.deque[float] = field(
         default_factory=lambda: collections.deque(maxlen=JITTER_SAMPLES)
     )
@@ -125,6 +132,7 @@ class ModulePoller:
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
         backoff = BACKOFF_FIRST_S
+        await asyncio.sleep(self.phase * self.period_s)
         due = loop.time()
         me = asyncio.current_task()
         while me is None or not me.cancelling():
@@ -137,7 +145,10 @@ class ModulePoller:
                     backoff = min(backoff * 2, BACKOFF_MAX_S)
                     continue
                 backoff = BACKOFF_FIRST_S
-                due = loop.time()
+                # Back on the grid after a (re)connect, keeping this module's phase.
+                now = loop.time()
+                due += math.ceil(max(0.0, now - due) / self.period_s) * self.period_s
+                await asyncio.sleep(due - now)
             woke = loop.time()
             self.jitter_s.append(woke - due)
             try:
@@ -146,7 +157,7 @@ class ModulePoller:
                     sample[kind] = (first, await self.client.read(kind, first, count))
                 self.health.rtt_ms = (loop.time() - woke) * 1000
                 self.health.polls += 1
-                self.on_sample(self.module.id, sample, woke)
+                self.on_sample(self.module.id, sample, due)
                 self._set_health(HealthState.online)
             except ModuleExceptionAnswer as exc:
                 self._set_health(HealthState.faulty, str(exc))
