@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import httpx
 import yaml
 
 from backend.building.config import load_building
@@ -41,5 +42,17 @@ async def test_button_press_requests_its_task_and_lights_its_led(tmp_path: Path)
             assert event.payload["state"] == "queued"
             led = {"module": "otb_ground", "point": "led_entrance"}
             await wait_until(lambda: sim.read_point(**led) == 1)
-            health = {h["module"]: h for h in building.health()}
+            # ... and the interface has read the LED back.
+            await wait_until(lambda: building.values.get(("otb_ground", "led_entrance")) == 1)
+            headers = {"Authorization": f"Bearer {server.admin_token}"}
+            async with httpx.AsyncClient(base_url=server.url, headers=headers) as http:
+                state = (await http.get("/api/building")).json()
+                assert (await http.get("/api/building")).status_code == 200
+                assert (
+                    await http.get("/api/building", headers={"Authorization": ""})
+                ).status_code == 401
+            health = {h["module"]: h for h in state["modules"]}
             assert health["otb_ground"]["online"] is True
+            assert health["otb_ground"]["rtt_ms"] is not None
+            values = {(p["module"], p["point"]): p["value"] for p in state["points"]}
+            assert values[("otb_ground", "led_entrance")] == 1

@@ -1,0 +1,32 @@
+"""REST view of the building for the admin GUI: module health and the current point values."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Request
+
+from backend.api.deps import Staff
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api/building", tags=["building"])
+
+
+@router.get("")
+async def building_state(request: Request, _: Staff) -> dict[str, Any]:
+    """Each module's health (online, round-trip, errors, last error) and every point's value.
+
+    ``enabled`` is false when the site has no modules or the building interface is off.
+    """
+    building = getattr(request.app.state, "building", None)
+    if building is None:
+        return {"enabled": False, "modules": [], "points": []}
+    return {
+        "enabled": True,
+        "modules": building.health(),
+        "points": [
+            {"module": module, "point": point, "value": value}
+            for (module, point), value in sorted(building.values.items())
+        ],
+    }
