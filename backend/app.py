@@ -26,6 +26,7 @@ import guidebot
 from backend.api import ROUTERS as api_routers
 from backend.api.component import server_brain
 from backend.auth import Role, TokenStore
+from backend.building import routes as building_routes
 from backend.building.component import building_interface
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
@@ -49,6 +50,7 @@ ROUTERS: list[APIRouter] = [
     hub_websocket.router,
     hub_routes.router,
     *api_routers,
+    building_routes.router,
 ]
 
 
