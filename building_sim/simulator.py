@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 from collections.abc import Callable
 from types import TracebackType
 from typing import Any
@@ -61,21 +62,21 @@ class BuildingSimulator:
         self.elevators: dict[str, ElevatorSim] = {}
         for elevator in config.elevators:
             first = elevator.stops[0].call.module
-            regs = (self._optional(first, f"{elevator.id}_floor"),)
-            regs += (self._optional(first, f"{elevator.id}_door"),)
+            regs = (
+                self._optional(first, f"{elevator.id}_floor"),
+                self._optional(first, f"{elevator.id}_door"),
+            )
             sim = ElevatorSim(
                 elevator, self.write, time_scale=time_scale, hold_s=elevator_hold_s, registers=regs
             )
             self.elevators[elevator.id] = sim
             for index, stop in enumerate(elevator.stops):
-                self._hook(stop.call, lambda v, s=sim, i=index: s.on_call(i, v))
+                self._hook(stop.call, functools.partial(sim.on_call, index))
         self.buttons = {b.id: b for b in config.buttons}
         self.presses = 0
         self._releases: dict[str, asyncio.TimerHandle] = {}
         for module_id, store in self.stores.items():
-            store.on_write = lambda kind, addr, value, m=module_id: self._written(
-                m, kind, addr, value
-            )
+            store.on_write = functools.partial(self._written, module_id)
 
     def _optional(self, module_id: str, name: str) -> IORef | None:
         point = self.config.module(module_id).point(name)

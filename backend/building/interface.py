@@ -14,6 +14,7 @@ task bound to the button and drives the button's LED through ``set_output`` (T4)
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 from collections.abc import Awaitable, Callable, Mapping
 from types import TracebackType
@@ -96,7 +97,7 @@ class BuildingInterface:
         }
         for type_name, handler in handlers.items():
             self._unsubscribe.append(
-                self.endpoint.subscribe(type_name, lambda m, h=handler: self._spawn(m, h))
+                self.endpoint.subscribe(type_name, functools.partial(self._spawn, handler=handler))
             )
         for poller in self.pollers.values():
             poller.start()
@@ -257,7 +258,8 @@ class BuildingInterface:
         return door
 
     async def _open_door(self, message: Message) -> dict[str, Any]:
-        door = self._door(message.payload_as(OpenDoor).door)
+        open_door: OpenDoor = message.payload_as(OpenDoor)
+        door = self._door(open_door.door)
         await self._write(door.open, 1)
         if door.is_open is None:
             await asyncio.sleep(door.open_time_s)
@@ -269,7 +271,8 @@ class BuildingInterface:
         return payload
 
     async def _close_door(self, message: Message) -> dict[str, Any]:
-        door = self._door(message.payload_as(CloseDoor).door)
+        close_door: CloseDoor = message.payload_as(CloseDoor)
+        door = self._door(close_door.door)
         await self._write(door.open, 0)
         if door.is_open is not None:
             timeout = door.open_time_s + self.command_margin_s
@@ -279,7 +282,7 @@ class BuildingInterface:
         return payload
 
     async def _call_elevator(self, message: Message) -> dict[str, Any]:
-        call = message.payload_as(CallElevator)
+        call: CallElevator = message.payload_as(CallElevator)
         elevator = next((e for e in self.config.elevators if e.id == call.elevator), None)
         if elevator is None:
             known = ", ".join(e.id for e in self.config.elevators) or "none"
@@ -298,7 +301,7 @@ class BuildingInterface:
 
     async def _set_output(self, message: Message) -> dict[str, Any]:
         """Write an output; the new value shows in building_input_changed once read back."""
-        command = message.payload_as(SetOutput)
+        command: SetOutput = message.payload_as(SetOutput)
         ref = IORef(module=command.module, point=command.point)
         try:
             _, point = self.config.resolve(ref)
