@@ -16,7 +16,8 @@ import time
 from collections import deque
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import Insert, func, insert, select
+from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.db.models import EventRow, SiteRow, TaskHistoryRow, TaskRow
 from backend.tasks.model import FINAL_STATES, Task, TaskState
@@ -24,6 +25,9 @@ from backend.tasks.model import FINAL_STATES, Task, TaskState
 __all__ = ["DbStore"]
 
 log = logging.getLogger(__name__)
+
+UPSERT_CHUNK = 500
+"""Rows per INSERT ... ON CONFLICT statement (SQLite allows 32766 bound parameters)."""
 
 TASK_FIELDS = (
     "kind",
@@ -127,19 +131,13 @@ class DbStore:
             try:
                 async with self.sessionmaker() as session, session.begin():
                     if tasks:
-                        rows = (
-                            await session.execute(select(TaskRow).where(TaskRow.id.in_(tasks)))
-                        ).scalars()
-                        existing = {row.id: row for row in rows}
-                        for task_id, snap in tasks.items():
-                            row = existing.get(task_id)
-                            if row is None:
-                                session.add(TaskRow(id=task_id, **snap))
-                            else:
-                                for key, value in snap.items():
-                                    setattr(row, key, value)
-                    session.add_all(TaskHistoryRow(**h) for h in history)
-                    session.add_all(EventRow(**e) for e in events)
+                        rows = [{"id": task_id, **snap} for task_id, snap in tasks.items()]
+                        for i in range(0, len(rows), UPSERT_CHUNK):
+                            await session.execute(_upsert(session, rows[i : i + UPSERT_CHUNK]))
+                    if history:
+                        await session.execute(insert(TaskHistoryRow), history)
+                    if events:
+                        await session.execute(insert(EventRow), events)
             except Exception:
                 for task_id, snap in tasks.items():
                     self._tasks.setdefault(task_id, snap)
@@ -221,6 +219,15 @@ class DbStore:
                 row.data = data
                 row.updated_at = time.time()
             return row.version
+
+
+def _upsert(session: Any, rows: list[dict[str, Any]]) -> Insert:
+    """INSERT ... ON CONFLICT (id) DO UPDATE: one statement for a batch of task snapshots."""
+    dialect = session.bind.dialect.name
+    module = postgresql if dialect == "postgresql" else sqlite
+    statement = module.insert(TaskRow).values(rows)
+    updated = {key: statement.excluded[key] for key in (*TASK_FIELDS, "state")}
+    return statement.on_conflict_do_update(index_elements=[TaskRow.id], set_=updated)
 
 
 def _task(row: TaskRow) -> Task:

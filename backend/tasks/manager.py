@@ -88,6 +88,8 @@ class TaskManager:
         self._watchdog: asyncio.Task[None] | None = None
         self._dispatching = False
         self._dispatch_again = False
+        self._idle: set[str] = set()
+        """Robots free for a main task as far as tasks go: nothing, or an internal task."""
         self.assign_times_ms: list[float] | None = None
         self.site = site
         self.graph = graph or SiteGraph(site)
@@ -128,10 +130,12 @@ class TaskManager:
             info = self.robots.get(cfg.name)
             if info is None:
                 self.robots[cfg.name] = RobotInfo(cfg.name, cfg, node=cfg.start_node)
+                self._idle.add(cfg.name)
             else:
                 info.config = cfg
         for name in [n for n in self.robots if site.robot(n) is None]:
             info = self.robots.pop(name)
+            self._idle.discard(name)
             if info.current is not None:
                 self._requeue(self.tasks[info.current], "robot removed from the site")
         self.dispatch()
@@ -143,7 +147,7 @@ class TaskManager:
             if task.state is TaskState.QUEUED:
                 self.queue.push(task)
             elif task.robot in self.robots:
-                self.robots[task.robot].current = task.id
+                self._set_current(self.robots[task.robot], task.id)
                 self._unconfirmed.add(task.id)
                 self._assigned_at[task.id] = self.clock()
             elif not task.final:
@@ -294,7 +298,8 @@ class TaskManager:
         return current is None or current.internal
 
     def _assign_queued(self) -> None:
-        free = {r.name: r for r in self.robots.values() if self._available(r)}
+        robots = self.robots
+        free = {n: robots[n] for n in self._idle if self._available(robots[n])}
         if not free or not len(self.queue):
             return
         plan: list[tuple[Task, RobotInfo]] = []
@@ -347,7 +352,7 @@ class TaskManager:
         task.net = NETS[task.kind]
         task.assigned_params = self._net_params(task)
         task.move(TaskState.ASSIGNED, reason="")
-        robot.current = task.id
+        self._set_current(robot, task.id)
         self._assigned_at[task.id] = self.clock()
         self._unconfirmed.discard(task.id)
         self.endpoint.publish(
@@ -365,7 +370,11 @@ class TaskManager:
     def _send_idle_robots(self) -> None:
         """Robots with nothing to do: charge if they must, else a free station, else the
         wait point."""
-        idle = [r for r in self.robots.values() if r.current is None and r.online and not r.fault]
+        idle = [
+            r
+            for n in self._idle
+            if (r := self.robots[n]).current is None and r.online and not r.fault
+        ]
         if not idle:
             return
         taken: set[str | None] = set()
@@ -476,7 +485,7 @@ class TaskManager:
         )
         task.move(state, reason=str(msg.payload.get("reason", "")))
         if robot.current == task.id:
-            robot.current = None
+            self._set_current(robot, None)
         if task.kind == "charge" and state is TaskState.DONE:
             robot.needs_charge = False
         if state is TaskState.DONE and task.started_at and not task.internal:
@@ -544,7 +553,7 @@ class TaskManager:
         if current is not None and current.internal and current.kind != "charge":
             self._send_cancel(robot.name, current.id, "battery low")
             current.move(TaskState.CANCELLED, reason="battery low")
-            robot.current = None
+            self._set_current(robot, None)
             self._changed(current, "cancelled")
         self.dispatch()
 
@@ -558,7 +567,7 @@ class TaskManager:
             if current.internal:
                 self._send_cancel(robot.name, current.id, "battery panic")
                 current.move(TaskState.CANCELLED, reason="battery panic")
-                robot.current = None
+                self._set_current(robot, None)
                 self._changed(current, "cancelled")
             else:
                 self._avoid.setdefault(current.id, set()).add(robot.name)
@@ -611,7 +620,7 @@ class TaskManager:
             if robot is not None and robot.online and now - at > self.start_timeout_s:
                 if task.internal:
                     task.move(TaskState.FAILED, reason="the robot did not start it")
-                    robot.current = None
+                    self._set_current(robot, None)
                     self._changed(task, "failed")
                 else:
                     self._requeue(task, "the robot did not start it")
@@ -638,9 +647,17 @@ class TaskManager:
         if task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
             self._send_cancel(task.robot, task.id, reason)
         if robot is not None and robot.current == task.id:
-            robot.current = None
+            self._set_current(robot, None)
         self._assigned_at.pop(task.id, None)
         self._unconfirmed.discard(task.id)
+
+    def _set_current(self, robot: RobotInfo, task_id: str | None) -> None:
+        robot.current = task_id
+        task = self.tasks.get(task_id) if task_id is not None else None
+        if task is None or task.internal:
+            self._idle.add(robot.name)
+        else:
+            self._idle.discard(robot.name)
 
     def _send_cancel(self, robot: str, task_id: str, reason: str) -> None:
         self.endpoint.publish(
