@@ -25,7 +25,8 @@ from petri_nets.pnml import write_pnml
 
 __all__ = ["library_nets", "write_library"]
 
-EYES = {"open": 1.0, "closed": 0.0, "speed": 1.0}
+EYES = {"open": 0.0, "closed": 60.0, "speed": 180.0}
+"""Eyelid positions in degrees and servo speed in degrees per second (the RoboCAN head)."""
 
 
 def wink_one_eye() -> NetDoc:
@@ -33,9 +34,12 @@ def wink_one_eye() -> NetDoc:
     b = NetBuilder(
         "wink_one_eye",
         "Open both eyes, wait, close and reopen one eye (Figure 9).",
-        params={"eye": "right_eye", "hold_s": 0.5, **EYES},
+        params={"eye": "eyelid_right", "hold_s": 0.5, **EYES},
     )
-    both_open = {"servos": {"left_eye": "${open}", "right_eye": "${open}"}, "speed": "${speed}"}
+    both_open = {
+        "servos": {"eyelid_left": "${open}", "eyelid_right": "${open}"},
+        "speed": "${speed}",
+    }
     b.place("open_eyes", initial=1, action=publish("move_servos", both_open))
     b.place("left_moving").place("right_moving").place("left_open").place("right_open")
     b.place("wait", action=timer("${hold_s}"))
@@ -53,13 +57,13 @@ def wink_one_eye() -> NetDoc:
         "l_opened",
         ["left_moving"],
         ["left_open"],
-        message("servo_in_position", servo="left_eye", position="${open}"),
+        message("servo_in_position", servo="eyelid_left"),
     )
     b.transition(
         "r_opened",
         ["right_moving"],
         ["right_open"],
-        message("servo_in_position", servo="right_eye", position="${open}"),
+        message("servo_in_position", servo="eyelid_right"),
     )
     b.transition("both_open", ["left_open", "right_open"], ["wait"])
     b.transition("end_wait", ["wait"], ["close_eye"], timer_elapsed())
@@ -67,13 +71,13 @@ def wink_one_eye() -> NetDoc:
         "eye_closed",
         ["close_eye"],
         ["open_eye"],
-        message("servo_in_position", servo="${eye}", position="${closed}"),
+        message("servo_in_position", servo="${eye}"),
     )
     b.transition(
         "eye_opened",
         ["open_eye"],
         ["winked"],
-        message("servo_in_position", servo="${eye}", position="${open}"),
+        message("servo_in_position", servo="${eye}"),
     )
     return b.build()
 
@@ -82,7 +86,7 @@ def blink() -> NetDoc:
     b = NetBuilder(
         "blink", "Close both eyes, wait until both closed, reopen them.", params=dict(EYES)
     )
-    both = {"left_eye": "${closed}", "right_eye": "${closed}"}
+    both = {"eyelid_left": "${closed}", "eyelid_right": "${closed}"}
     b.place(
         "close_eyes",
         initial=1,
@@ -93,7 +97,7 @@ def blink() -> NetDoc:
         "open_eyes",
         action=publish(
             "move_servos",
-            {"servos": {"left_eye": "${open}", "right_eye": "${open}"}, "speed": "${speed}"},
+            {"servos": {"eyelid_left": "${open}", "eyelid_right": "${open}"}, "speed": "${speed}"},
         ),
     )
     b.place("left_opening").place("right_opening").place("left_open").place("right_open")
@@ -103,13 +107,13 @@ def blink() -> NetDoc:
         "l_closed",
         ["left_closing"],
         ["left_closed"],
-        message("servo_in_position", servo="left_eye", position="${closed}"),
+        message("servo_in_position", servo="eyelid_left"),
     )
     b.transition(
         "r_closed",
         ["right_closing"],
         ["right_closed"],
-        message("servo_in_position", servo="right_eye", position="${closed}"),
+        message("servo_in_position", servo="eyelid_right"),
     )
     b.transition("both_closed", ["left_closed", "right_closed"], ["open_eyes"])
     b.transition("opening", ["open_eyes"], ["left_opening", "right_opening"])
@@ -117,13 +121,13 @@ def blink() -> NetDoc:
         "l_opened",
         ["left_opening"],
         ["left_open"],
-        message("servo_in_position", servo="left_eye", position="${open}"),
+        message("servo_in_position", servo="eyelid_left"),
     )
     b.transition(
         "r_opened",
         ["right_opening"],
         ["right_open"],
-        message("servo_in_position", servo="right_eye", position="${open}"),
+        message("servo_in_position", servo="eyelid_right"),
     )
     b.transition("both_open", ["left_open", "right_open"], ["blinked"])
     return b.build()
@@ -135,17 +139,17 @@ def head_talk() -> NetDoc:
         "Open and close the mouth while speaking; endless, killed from "
         "outside when the speech ends.",
         endless=True,
-        params={"mouth_open": 0.6, "mouth_closed": 0.0, "period_s": 0.25},
+        params={"mouth_open": 20.0, "mouth_closed": 0.0, "period_s": 0.25},
     )
     b.place(
         "mouth_open",
         initial=1,
-        action=publish("move_servos", {"servos": {"mouth": "${mouth_open}"}, "speed": 2.0}),
+        action=publish("move_servos", {"servos": {"mouth": "${mouth_open}"}, "speed": 360.0}),
     )
     b.place("hold_open", action=timer("${period_s}"))
     b.place(
         "mouth_close",
-        action=publish("move_servos", {"servos": {"mouth": "${mouth_closed}"}, "speed": 2.0}),
+        action=publish("move_servos", {"servos": {"mouth": "${mouth_closed}"}, "speed": 360.0}),
     )
     b.place("hold_closed", action=timer("${period_s}"))
     b.transition("opened", ["mouth_open"], ["hold_open"])
@@ -173,7 +177,7 @@ def rest_expression() -> NetDoc:
     b = NetBuilder(
         "rest_expression",
         "Put eyes and mouth in their rest position and wait until every servo is there.",
-        params={"eyes": 1.0, "mouth": 0.0},
+        params={"eyes": 0.0, "mouth": 0.0},
     )
     b.place(
         "move",
@@ -181,28 +185,28 @@ def rest_expression() -> NetDoc:
         action=publish(
             "move_servos",
             {
-                "servos": {"left_eye": "${eyes}", "right_eye": "${eyes}", "mouth": "${mouth}"},
-                "speed": 1.0,
+                "servos": {
+                    "eyelid_left": "${eyes}",
+                    "eyelid_right": "${eyes}",
+                    "mouth": "${mouth}",
+                },
+                "speed": 180.0,
             },
         ),
     )
-    for servo in ("left_eye", "right_eye", "mouth"):
+    for servo in ("eyelid_left", "eyelid_right", "mouth"):
         b.place(f"{servo}_moving").place(f"{servo}_rest")
     b.place("at_rest", final=True)
-    b.transition("moving", ["move"], ["left_eye_moving", "right_eye_moving", "mouth_moving"])
-    for servo, position in (
-        ("left_eye", "${eyes}"),
-        ("right_eye", "${eyes}"),
-        ("mouth", "${mouth}"),
-    ):
+    b.transition("moving", ["move"], ["eyelid_left_moving", "eyelid_right_moving", "mouth_moving"])
+    for servo in ("eyelid_left", "eyelid_right", "mouth"):
         b.transition(
             f"{servo}_reached",
             [f"{servo}_moving"],
             [f"{servo}_rest"],
-            message("servo_in_position", servo=servo, position=position),
+            message("servo_in_position", servo=servo),
         )
     b.transition(
-        "expression_reached", ["left_eye_rest", "right_eye_rest", "mouth_rest"], ["at_rest"]
+        "expression_reached", ["eyelid_left_rest", "eyelid_right_rest", "mouth_rest"], ["at_rest"]
     )
     return b.build()
 

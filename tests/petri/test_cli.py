@@ -66,7 +66,7 @@ def test_run_prints_the_trace_and_a_json_result_last() -> None:
 
 def test_run_with_silence_lets_the_virtual_timer_fire() -> None:
     code, lines = invoke(
-        "petri", "run", str(LIBRARY / "wink_one_eye.pnml"), "--param", "eye=left_eye", "--json"
+        "petri", "run", str(LIBRARY / "wink_one_eye.pnml"), "--param", "eye=eyelid_left", "--json"
     )
     assert code == 0
     assert json.loads(lines[-1])["published"] == ["move_servos"] * 3

@@ -187,8 +187,8 @@ def test_a_killed_sub_net_is_reported_to_its_parent(tmp_path: Path) -> None:
 def test_monitoring_events_replay_to_the_live_marking(tmp_path: Path) -> None:
     rig = make_rig()
     iid = rig.dispatch.start("wink_one_eye")
-    rig.say("servo_in_position", servo="left_eye", position=1.0)
-    rig.say("servo_in_position", servo="right_eye", position=1.0)
+    rig.say("servo_in_position", servo="eyelid_left", position=0.0)
+    rig.say("servo_in_position", servo="eyelid_right", position=0.0)
     replayed: dict[str, int] = {}
     for m in rig.log:
         if m.type == "petri_net_event" and m.payload["instance_id"] == iid:

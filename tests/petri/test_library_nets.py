@@ -31,24 +31,24 @@ def test_library_is_valid_and_complete() -> None:
 
 
 def test_wink_one_eye_moves_servos_in_the_paper_order(rig: Rig) -> None:
-    iid = rig.dispatch.start("wink_one_eye", {"eye": "left_eye"})
+    iid = rig.dispatch.start("wink_one_eye", {"eye": "eyelid_left"})
     assert rig.published("move_servos") == [
-        {"servos": {"left_eye": 1.0, "right_eye": 1.0}, "speed": 1.0}
+        {"servos": {"eyelid_left": 0.0, "eyelid_right": 0.0}, "speed": 180.0}
     ]
-    rig.say("servo_in_position", servo="right_eye", position=1.0)
-    rig.say("servo_in_position", servo="left_eye", position=1.0)
+    rig.say("servo_in_position", servo="eyelid_right", position=0.0)
+    rig.say("servo_in_position", servo="eyelid_left", position=0.0)
     # both eyes open: the wait place holds the mark for hold_s
     assert rig.dispatch.get(iid).marking() == {"wait": 1}  # type: ignore[union-attr]
     rig.clock.advance(0.49)
     assert len(rig.published("move_servos")) == 1
     rig.clock.advance(0.02)
-    assert rig.published("move_servos")[1] == {"servos": {"left_eye": 0.0}, "speed": 1.0}
-    rig.say("servo_in_position", servo="right_eye", position=0.0)  # not the winked eye
+    assert rig.published("move_servos")[1] == {"servos": {"eyelid_left": 60.0}, "speed": 180.0}
+    rig.say("servo_in_position", servo="eyelid_right", position=0.0)  # not the winked eye
     assert len(rig.published("move_servos")) == 2
-    rig.say("servo_in_position", servo="left_eye", position=0.0)
-    assert rig.published("move_servos")[2] == {"servos": {"left_eye": 1.0}, "speed": 1.0}
+    rig.say("servo_in_position", servo="eyelid_left", position=60.0)
+    assert rig.published("move_servos")[2] == {"servos": {"eyelid_left": 0.0}, "speed": 180.0}
     assert rig.ended(iid) is None
-    rig.say("servo_in_position", servo="left_eye", position=1.0)
+    rig.say("servo_in_position", servo="eyelid_left", position=0.0)
     assert rig.ended(iid) == "done"
     assert rig.fired(iid) == [
         "eyes_moving",
@@ -74,7 +74,7 @@ def test_explain_point_kills_head_talk_when_speech_ends(rig: Rig) -> None:
     rig.say("speech_ended", text="Hello visitors")
     assert rig.ended(talk[0]["instance_id"]) == "killed"
     rest = rig.published("move_servos")[-1]["servos"]
-    assert rest == {"left_eye": 1.0, "right_eye": 1.0, "mouth": 0.0}
+    assert rest == {"eyelid_left": 0.0, "eyelid_right": 0.0, "mouth": 0.0}
     for servo, position in rest.items():
         rig.say("servo_in_position", servo=servo, position=position)
     assert rig.ended(iid) == "done"
