@@ -53,10 +53,11 @@ def synthetic_site(
     elevators: list[dict[str, Any]] = []
     if floors > 1:
         for e, (i, j) in enumerate([(0, 0), (side - 1, side - 1), (side // 2, side // 2)]):
-            module = {"id": f"m{e}", "port": 0, "points": []}
+            points: list[dict[str, Any]] = []
+            module = {"id": f"m{e}", "port": 0, "points": points}
             stops = []
             for f in range(floors):
-                module["points"] += [
+                points += [
                     {"name": f"call{f}", "address": f + 1, "kind": "coil"},
                     {"name": f"here{f}", "address": f + 1, "kind": "discrete_input"},
                 ]

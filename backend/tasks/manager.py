@@ -154,7 +154,7 @@ class TaskManager:
                 task.move(TaskState.QUEUED, reason="robot unknown after restart")
                 task.robot = None
                 self.queue.push(task)
-                self._record(task, "requeued")
+                self._changed(task, "requeued")
         last = max((t.seq for t in tasks), default=0)
         self._seq = itertools.count(last + 1)
         self.dispatch()
@@ -415,7 +415,8 @@ class TaskManager:
     def _nearest(self, robot: RobotInfo, places: list[Any]) -> Any:
         best, best_cost = None, math.inf
         for place in places:
-            dist = self.graph.distances_to(place.node).get(robot.node or "", math.inf)
+            found = self.graph.distances_to(place.node).get(robot.node)
+            dist = math.inf if found is None else found
             if best is None or dist < best_cost:
                 best, best_cost = place, dist
         return best
@@ -438,7 +439,7 @@ class TaskManager:
     # --- robot messages ------------------------------------------------------------------
     def _on_task_request(self, msg: Message) -> None:
         try:
-            req = msg.payload_as(TaskRequest)
+            req: TaskRequest = msg.payload_as(TaskRequest)
             requester = req.requester or msg.source
             robot = msg.source if msg.source in self.robots else None
             # A visitor at a robot's screen: that robot takes it.
@@ -447,11 +448,10 @@ class TaskManager:
             )
         except (ValidationError, TaskError) as exc:
             reason = str(exc) if isinstance(exc, TaskError) else exc.errors()[0]["msg"]
-            self.endpoint.reply(
-                msg, "error", {"code": "task_refused", "reason": reason, "message_id": msg.id}
-            )
+            refusal = {"code": "task_refused", "reason": reason, "message_id": msg.id}
+            self._reply(msg, "error", refusal)
             return
-        self.endpoint.reply(msg, "task_event", self._event_payload(task))
+        self._reply(msg, "task_event", self._event_payload(task))
 
     def _robot_msg(self, msg: Message) -> RobotInfo | None:
         name = msg.payload.get("robot")
@@ -608,19 +608,19 @@ class TaskManager:
                 if robot.offline_since is None:
                     robot.offline_since = now
                 if now - since > self.lost_grace_s:
-                    task = self.tasks[robot.current]
-                    self._avoid.setdefault(task.id, set()).add(robot.name)
-                    self._requeue(task, "robot lost")
+                    lost = self.tasks[robot.current]
+                    self._avoid.setdefault(lost.id, set()).add(robot.name)
+                    self._requeue(lost, "robot lost")
         for task_id, at in list(self._assigned_at.items()):
             task = self.tasks.get(task_id)
             if task is None or task.state is not TaskState.ASSIGNED:
                 self._assigned_at.pop(task_id, None)
                 continue
-            robot = self.robots.get(task.robot or "")
-            if robot is not None and robot.online and now - at > self.start_timeout_s:
+            holder = self.robots.get(task.robot or "")
+            if holder is not None and holder.online and now - at > self.start_timeout_s:
                 if task.internal:
                     task.move(TaskState.FAILED, reason="the robot did not start it")
-                    self._set_current(robot, None)
+                    self._set_current(holder, None)
                     self._changed(task, "failed")
                 else:
                     self._requeue(task, "the robot did not start it")
@@ -650,6 +650,9 @@ class TaskManager:
             self._set_current(robot, None)
         self._assigned_at.pop(task.id, None)
         self._unconfirmed.discard(task.id)
+
+    def _reply(self, msg: Message, type_: str, payload: dict[str, Any]) -> None:
+        self.endpoint.send(msg.reply(type_, payload))
 
     def _set_current(self, robot: RobotInfo, task_id: str | None) -> None:
         robot.current = task_id

@@ -89,9 +89,9 @@ class TrafficManager:
     # --- handlers ------------------------------------------------------------------------
     def _on_get_path(self, msg: Message) -> None:
         try:
-            req = msg.payload_as(GetPath)
+            req: GetPath = msg.payload_as(GetPath)
         except ValidationError as exc:
-            self.endpoint.reply(msg, "path", {"error": f"bad get_path: {exc.errors()[0]['msg']}"})
+            self._reply(msg, "path", {"error": f"bad get_path: {exc.errors()[0]['msg']}"})
             return
         robot = self._robot_of(msg, req.robot)
         start = req.from_node or self._positions.get(robot or "")
@@ -100,11 +100,11 @@ class TrafficManager:
                 raise UnknownNode("the robot's position is unknown: give from_node")
             result = self.graph.shortest_path(start, req.to_node)
         except (UnknownNode, NoPath) as exc:
-            self.endpoint.reply(msg, "path", {"error": str(exc).strip("'\"")})
+            self._reply(msg, "path", {"error": str(exc).strip("'\"")})
             return
         if robot:
             self._paths[robot] = result
-        self.endpoint.reply(
+        self._reply(
             msg,
             "path",
             {
@@ -116,7 +116,7 @@ class TrafficManager:
 
     def _on_request_area(self, msg: Message) -> None:
         try:
-            req = msg.payload_as(RequestArea)
+            req: RequestArea = msg.payload_as(RequestArea)
         except ValidationError:
             return self._refuse(msg, "bad request_area payload")
         robot = self._robot_of(msg, req.robot)
@@ -133,7 +133,7 @@ class TrafficManager:
 
     def _on_release_area(self, msg: Message) -> None:
         try:
-            req = msg.payload_as(ReleaseArea)
+            req: ReleaseArea = msg.payload_as(ReleaseArea)
         except ValidationError:
             return self._refuse(msg, "bad release_area payload")
         robot = self._robot_of(msg, req.robot)
@@ -243,7 +243,10 @@ class TrafficManager:
     def _refuse(self, msg: Message, reason: str) -> None:
         log.info("traffic: refused %s from %s: %s", msg.type, msg.source, reason)
         payload = {"code": "refused", "reason": reason, "message_id": msg.id}
-        self.endpoint.reply(msg, "error", payload)
+        self._reply(msg, "error", payload)
+
+    def _reply(self, msg: Message, type_: str, payload: dict[str, Any]) -> None:
+        self.endpoint.send(msg.reply(type_, payload))
 
     def _emit(self, kind: str, data: dict[str, Any]) -> None:
         if self.on_event is not None:
