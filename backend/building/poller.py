@@ -32,6 +32,7 @@ Sample = dict[PointKind, tuple[int, list[int]]]
 
 BACKOFF_FIRST_S = 0.1
 BACKOFF_MAX_S = 5.0
+SLOT_STAMP_MAX_LATE_S = 0.010
 JITTER_SAMPLES = 20_000  # ring buffer: the oldest jitter samples are dropped
 
 
@@ -73,6 +74,7 @@ class ModulePoller:
 
     ``t`` is the poll's slot on the schedule, not its actual start: the input filter then
     compares whole periods, and a late wake-up cannot make a held press look 1 ms too short.
+    A poll more than 10 ms late is stamped with its real start instead.
     """
 
     module: BuildingModule
@@ -157,7 +159,10 @@ class ModulePoller:
                     sample[kind] = (first, await self.client.read(kind, first, count))
                 self.health.rtt_ms = (loop.time() - woke) * 1000
                 self.health.polls += 1
-                self.on_sample(self.module.id, sample, due)
+                # The slot, unless this poll ran late: then the real time, so that a stalled
+                # loop cannot stretch a short pulse into one that passes the filter.
+                stamp = due if woke - due <= SLOT_STAMP_MAX_LATE_S else woke
+                self.on_sample(self.module.id, sample, stamp)
                 self._set_health(HealthState.online)
             except ModuleExceptionAnswer as exc:
                 self._set_health(HealthState.faulty, str(exc))
