@@ -291,3 +291,30 @@ async def test_restart_keeps_queued_and_reconciles_running(tmp_path: Path) -> No
                 await eventually(lambda: manager.get(ids[1]).state != "running")
                 assert manager.get(ids[0]).state == "running"
                 assert manager.get(ids[1]).robot != "R1"
+
+
+async def test_robot_added_to_the_site_can_connect_at_once(
+    server: RunningServer, http: Http
+) -> None:
+    admin, staff = http(server.admin_token), http(OPERATOR_TOKEN)
+    document = (await admin.get("/api/site")).json()["site"]
+    document["robots"].append({"name": "R4", "token": "robot-R4-new-token", "start_node": "hall"})
+    document["robots"] = [r for r in document["robots"] if r["name"] != "R3"]
+    assert (await admin.put("/api/site", json=document)).status_code == 200
+    async with HubClient(server.ws_url, "robot-R4-new-token") as client:
+        await client.sync()
+        assert client.name == "R4"
+    assert (await http("robot-R3-demo-token").get("/api/tours")).status_code == 401
+    names = {r["name"] for r in (await staff.get("/api/robots")).json()}
+    assert names == {"R1", "R2", "R4"}
+
+
+async def test_events_are_paged(server: RunningServer, http: Http) -> None:
+    staff = http(OPERATOR_TOKEN)
+    for _ in range(3):
+        await staff.post("/api/tasks", json=GROUND)
+    first = (await staff.get("/api/events", params={"limit": 2})).json()
+    assert len(first["events"]) == 2
+    rest = (await staff.get("/api/events", params={"after_id": first["next_after_id"]})).json()
+    ids = [e["id"] for e in first["events"] + rest["events"]]
+    assert ids == sorted(set(ids)) and len(ids) >= 3

@@ -286,3 +286,42 @@ async def test_bad_requests_are_refused_and_nothing_is_lost(manager: TaskManager
         with pytest.raises(TaskError):
             manager.request(kind, params)
     assert [t.id for t in manager.queue.ordered()] == [kept.id]
+
+
+async def test_restored_task_of_a_robot_no_longer_in_the_site_is_queued(
+    manager: TaskManager, events: list[Message]
+) -> None:
+    orphan = Task("o1", "tour", {"tour": "ground"}, 5, "panel", 4, TaskState.RUNNING, "R7")
+    manager.restore([orphan])
+    assert orphan.state is TaskState.QUEUED and orphan.robot is None
+    assert states_of(events, "o1") == ["queued"]
+
+
+async def test_button_press_requests_a_task_and_lights_its_led(
+    bus: Bus, manager: TaskManager
+) -> None:
+    from backend.tasks.buttons import ButtonWatcher
+
+    site = manager.site
+    watcher = ButtonWatcher(bus.endpoint("buttons"), manager, site)
+    watcher.start()
+    outputs: list[Message] = []
+    bus.endpoint("building").subscribe("set_output", outputs.append)
+    press = {"module": "otb_ground", "point": "button_entrance", "name": "b", "value": 1}
+    building = bus.get_endpoint("building")
+    assert building is not None
+    building.publish("building_input_changed", press)
+    building.publish("building_input_changed", press)  # pressed twice: one request
+    queued = list(manager.queue.ordered())
+    assert len(queued) == 1
+    task = queued[0]
+    assert task.kind == "tour" and task.params == {"tour": "ground"}
+    assert task.requester == "button:button_entrance"
+    assert outputs[-1].payload == {"module": "otb_ground", "point": "led_entrance", "value": 1}
+    robot = RobotStub(bus, "R1", "hall")
+    robot.state()
+    assert task.robot == "R1"
+    assert outputs[-1].payload["value"] == 0  # a robot is coming: LED off
+    building.publish("building_input_changed", {**press, "value": 0})  # release: nothing
+    assert len(list(manager.queue.ordered())) == 0
+    watcher.stop()
