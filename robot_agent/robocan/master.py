@@ -33,6 +33,8 @@ QUEUE_PER_ID = 256  # frames buffered per CAN ID before the oldest is dropped
 DRAIN_BATCH = 16  # frames taken from one ID before moving to the next (fairness)
 QUERY_ATTEMPTS = 3
 RETRY_FAILED_S = 1.0
+SUPERVISE_S = 0.02  # time-out check period
+STALL_S = 0.05  # a supervisor tick this late means the process itself was not running
 
 
 class ModuleState(enum.Enum):
@@ -132,6 +134,7 @@ class Counters:
     send_errors: int = 0
     driver_errors: int = 0
     record_errors: int = 0
+    stalls: int = 0
 
 
 class Master:
@@ -157,6 +160,7 @@ class Master:
         self.counters = Counters()
         self.drivers: dict[type[Driver], Driver] = {}
         self._queues: dict[int, collections.deque[can.Message]] = {}
+        self._arrivals: dict[int, float] = {}  # written by the reader thread
         self._queue_lock = threading.Lock()
         self._record_lock = threading.Lock()
         self._wake = asyncio.Event()
@@ -300,6 +304,7 @@ class Master:
             if (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame)
             else (msg.arbitration_id)
         )
+        self._arrivals[key] = time.monotonic()
         with self._queue_lock:
             queue = self._queues.get(key)
             if queue is None:
@@ -546,13 +551,24 @@ class Master:
         log.warning("robocan: module 0x%02X (%s) lost: %s", module.module_id, module.name, reason)
 
     async def _supervise(self) -> None:
+        """Time-outs. Time during which this process was not scheduled (a stalled event loop,
+        a loaded machine) does not count against the modules: the master cannot tell silence
+        from its own absence, so it credits the lag instead of declaring everyone lost."""
+        tick = SUPERVISE_S
+        last = time.monotonic()
         while True:
-            await asyncio.sleep(0.02)
+            await asyncio.sleep(tick)
             now = time.monotonic()
+            lag = now - last - tick
+            last = now
+            if lag > STALL_S:
+                self.counters.stalls += 1
+                for module in self.modules.values():
+                    module.last_seen += lag
             for module in list(self.modules.values()):
-                if module.state is not ModuleState.LOST and (
-                    now - module.last_seen > module.lost_timeout_s
-                ):
+                # a frame already received by the reader thread but not yet drained counts
+                seen = max(module.last_seen, self._arrivals.get(module.module_id, 0.0))
+                if module.state is not ModuleState.LOST and now - seen > module.lost_timeout_s:
                     self._lose(module, "time-out")
             for module_id, (receiver, last) in list(self._receivers.items()):
                 if now - last > p.BLOCK_TIMEOUT_S:

@@ -349,3 +349,19 @@ async def test_battery_alarms_fire_once_per_discharge(
         "battery_level", lambda m: m.payload["level"] == 0.2 and len(watch.of("battery_low")) == 2
     )
     assert not watch.of("battery_panic")
+
+
+async def test_a_stalled_process_does_not_lose_its_modules(
+    stack: RoboCanStack, watch: Watch
+) -> None:
+    """A loaded machine can stop the event loop for longer than the 350 ms time-out; the time
+    the master itself was not running must not count against the modules."""
+    import time
+
+    master = stack.masters[0]
+    time.sleep(0.8)  # the stall under test: blocks the loop, master and simulated modules alike
+    start = len(watch.of("odometry"))
+    await watch.wait_for("odometry", lambda m: len(watch.of("odometry")) > start + 3)
+    assert master.counters.stalls >= 1
+    assert not [m for m in watch.of("module_status") if m.payload["state"] == "lost"]
+    assert stack.online() == BELLBOT_IDS
