@@ -359,7 +359,7 @@ async def test_a_stalled_process_does_not_lose_its_modules(
     import time
 
     master = stack.masters[0]
-    time.sleep(0.8)  # the stall under test: blocks the loop, master and simulated modules alike
+    time.sleep(0.8)  # noqa: ASYNC251 -- the stall under test: blocks the whole loop
     start = len(watch.of("odometry"))
     await watch.wait_for("odometry", lambda m: len(watch.of("odometry")) > start + 3)
     assert master.counters.stalls >= 1
