@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 from pydantic import ValidationError
@@ -28,7 +29,7 @@ def server(
     from backend.app import create_app, uvicorn_config
     from backend.settings import Settings
 
-    overrides = {
+    overrides: dict[str, Any] = {
         key: value
         for key, value in {
             "host": host,

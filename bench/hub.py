@@ -53,14 +53,16 @@ def _log(message: str) -> None:
 async def _serve(robots: int, full_app: bool) -> None:
     """Server process: print the bound port, then serve until killed."""
     import backend.app
+    from backend.auth import Role
     from backend.settings import Settings, StaticToken
     from backend.testing import running_server
 
     if not full_app:
         backend.app.COMPONENTS = []
-    tokens = [StaticToken(token=GUI_TOKEN, name="gui", role="gui")]
+    tokens = [StaticToken(token=GUI_TOKEN, name="gui", role=Role.GUI)]
     tokens += [
-        StaticToken(token=robot_token(i), name=robot_name(i), role="robot") for i in range(robots)
+        StaticToken(token=robot_token(i), name=robot_name(i), role=Role.ROBOT)
+        for i in range(robots)
     ]
     settings = Settings(
         tokens=tokens, db_url=f"sqlite+aiosqlite:///{os.getcwd()}/.bench-hub-{os.getpid()}.db"

@@ -337,7 +337,7 @@ class HubClient:
             while not out:
                 self._out_ready.clear()
                 await self._out_ready.wait()
-            batch = []
+            batch: list[list[Any]] = []
             size = 0
             while out and len(batch) < _BATCH_MAX and size < _BATCH_BYTES:
                 entry = out.popleft()

@@ -9,16 +9,17 @@ from typing import Any
 import pytest
 
 import backend.app
+from backend.auth import Role
 from backend.settings import Settings, StaticToken
 from backend.testing import RunningServer, running_server
 from guidebot.client import HubClient
 
 TOKENS = {
-    "R1": StaticToken(token="token-robot-R1", name="R1", role="robot"),
-    "R2": StaticToken(token="token-robot-R2", name="R2", role="robot"),
-    "gui": StaticToken(token="token-gui-admin-page", name="gui", role="gui"),
-    "tm": StaticToken(token="token-module-tours", name="tour_module", role="module"),
-    "op": StaticToken(token="token-operator-ann", name="ann", role="operator"),
+    "R1": StaticToken(token="token-robot-R1", name="R1", role=Role.ROBOT),
+    "R2": StaticToken(token="token-robot-R2", name="R2", role=Role.ROBOT),
+    "gui": StaticToken(token="token-gui-admin-page", name="gui", role=Role.GUI),
+    "tm": StaticToken(token="token-module-tours", name="tour_module", role=Role.MODULE),
+    "op": StaticToken(token="token-operator-ann", name="ann", role=Role.OPERATOR),
 }
 
 

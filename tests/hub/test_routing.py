@@ -155,8 +155,12 @@ async def test_in_process_module_and_websocket_client_talk(
     await r1.sync()
     assert [m.payload["seq"] for m in seen] == [1]
     assert seen[0].source == "R1"
+
     # and the other way round: a module's request answered by the robot
-    r1.subscribe("navigate_to", lambda m: r1.reply(m, "goal_reached", {"node": m.payload["node"]}))
+    def arrive(request: Message) -> None:
+        r1.reply(request, "goal_reached", {"node": request.payload["node"]})
+
+    r1.subscribe("navigate_to", arrive)
     await r1.sync()
     answer = await traffic.request("navigate_to", {"node": "N7"}, destination="R1", timeout=WAIT)
     assert answer.type == "goal_reached" and answer.payload == {"node": "N7"}
