@@ -65,15 +65,63 @@ def validate_site(data: Any, *, lines: Any = None) -> Site:
     try:
         site = Site.model_validate(data)
     except ValidationError as exc:
+        errors = exc.errors(include_url=False)
         issues = [
             SiteIssue(format_loc(err["loc"]), err["msg"], line_of(tuple(err["loc"])))
-            for err in exc.errors(include_url=False)
+            for err in errors
+        ]
+        issues += [
+            SiteIssue(format_loc(loc), msg, line_of(loc)) for loc, msg in _salvaged(data, errors)
         ]
         raise SiteInvalid(issues) from None
     problems = check_references(site)
     if problems:
         raise SiteInvalid([SiteIssue(format_loc(loc), msg, line_of(loc)) for loc, msg in problems])
     return site
+
+
+def _salvaged(data: Any, errors: list[Any]) -> list[Problem]:
+    """Reference problems among the items whose shape is sound, so one pass shows them too.
+
+    Items with shape errors are left out; references to their ids are not reported (they
+    exist, only broken), and item indexes are mapped back to the file's."""
+    if not isinstance(data, dict):
+        return []
+    bad: dict[str, set[int]] = {}
+    for err in errors:
+        loc = err["loc"]
+        if len(loc) >= 2 and isinstance(loc[1], int):
+            bad.setdefault(str(loc[0]), set()).add(loc[1])
+        elif loc:
+            return []  # a whole section or top-level field is broken: nothing sound to check
+    doc = dict(data)
+    index_maps: dict[str, list[int]] = {}
+    dropped_ids: set[str] = set()
+    for section, indexes in bad.items():
+        items = doc.get(section)
+        if not isinstance(items, list):
+            return []
+        kept = [i for i in range(len(items)) if i not in indexes]
+        for i in indexes:
+            if i < len(items) and isinstance(items[i], dict):
+                for key in ("id", "name"):
+                    if isinstance(items[i].get(key), str):
+                        dropped_ids.add(items[i][key])
+        index_maps[section] = kept
+        doc[section] = [items[i] for i in kept]
+    try:
+        site = Site.model_validate(doc)
+    except ValidationError:
+        return []
+    out: list[Problem] = []
+    for loc, msg in check_references(site):
+        if any(f"'{x}'" in msg for x in dropped_ids):
+            continue
+        section = str(loc[0])
+        if section in index_maps and len(loc) > 1 and isinstance(loc[1], int):
+            loc = (section, index_maps[section][loc[1]], *loc[2:])
+        out.append((loc, msg))
+    return out
 
 
 Problem = tuple[tuple[str | int, ...], str]
@@ -164,7 +212,7 @@ def check_references(site: Site) -> list[Problem]:
             return
         kind = points.get((ref.module, ref.point))
         if kind is None:
-            p.append((loc, f"unknown building point {ref.module}/{ref.point}"))
+            p.append((loc, f"unknown building point {ref.module!r}/{ref.point!r}"))
         elif kind not in want:
             expected = "an input" if want is inputs else "an output"
             p.append((loc, f"{ref.module}/{ref.point} is a {kind}, expected {expected}"))

@@ -70,3 +70,17 @@ def test_garbage_is_refused_not_crashed(text: str) -> None:
     with pytest.raises(SiteInvalid) as info:
         load_site_text(text)
     assert info.value.issues
+
+
+def test_shape_and_reference_errors_are_reported_in_one_pass() -> None:
+    text = DEMO.read_text()
+    text = text.replace("{id: gb2, floor: F0, x: 30, y: 8}", "{id: gb2, floor: F0, x: 30, y: up}")
+    text = text.replace("{a: gc2, b: gc3}", "{a: gc2, b: nowhere}")
+    with pytest.raises(SiteInvalid) as info:
+        load_site_text(text)
+    found = {(i.loc, i.message) for i in info.value.issues}
+    assert ("edges[17].b", "unknown node 'nowhere'") in found
+    assert any(loc == "nodes[11].y" for loc, _ in found)
+    # gb2 exists (only its y is broken): edges and points naming it are not reported
+    assert not any("'gb2'" in msg for _, msg in found)
+    assert len(found) == 2
