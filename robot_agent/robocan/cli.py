@@ -60,12 +60,16 @@ def analyze(log: Path, bitrate: int, window: float, png: Path | None, as_json: b
     show_default=True,
     help="Length of each phase (moving, stopped).",
 )
+@click.option("--png", type=click.Path(dir_okay=False, path_type=Path), default=None)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object as the last line.")
-def compare(seconds: float, as_json: bool) -> None:
+def compare(seconds: float, png: Path | None, as_json: bool) -> None:
     """BellBot motor profile with RoboCAN and with CANopen DS402 (canopen package)."""
     from robot_agent.robocan.compare import compare as run_compare
+    from robot_agent.robocan.compare import plot_compare
 
     result = asyncio.run(run_compare(seconds))
+    if png is not None:
+        plot_compare(result, png)
     if not as_json:
         for phase in ("moving", "stopped"):
             r = result[phase]

@@ -35,7 +35,7 @@ from robot_agent.robocan.busopen import open_bus
 from robot_agent.robocan.framebits import frame_bits
 from robot_agent.robocan.stack import RoboCanStack
 
-__all__ = ["compare", "ds402_dictionary", "measure"]
+__all__ = ["compare", "ds402_dictionary", "measure", "plot_compare"]
 
 MOTORS = (0x02, 0x04)
 PUBLISH_HZ = 10
@@ -221,3 +221,29 @@ async def compare(phase_s: float = 3.0) -> dict[str, Any]:
         "canopen": round(canopen_result["efficiency"], 4),
     }
     return result
+
+
+def plot_compare(result: dict[str, Any], png: str | Path) -> None:
+    """Bandwidth per motor controller, moving and stopped, and efficiency (Figures 10, 11)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (bw, eff) = plt.subplots(1, 2, figsize=(9, 3.5), gridspec_kw={"width_ratios": [2, 1]})
+    phases = ["moving", "stopped"]
+    for offset, (key, label) in enumerate(
+        [("robocan_bps", "RoboCAN"), ("canopen_bps", "CANopen DS402")]
+    ):
+        values = [result[phase][key] / 1000 for phase in phases]
+        bw.bar([i + offset * 0.38 for i in range(2)], values, width=0.38, label=label)
+    bw.set_xticks([0.19, 1.19], [f"{ph} (-{100 * result[ph]['saving']:.0f}%)" for ph in phases])
+    bw.set_ylabel("kbit/s per motor controller")
+    bw.legend()
+    eff.bar(["RoboCAN", "CANopen"], [100 * v for v in result["efficiency"].values()])
+    eff.axhline(100 * 64 / 111, color="grey", linestyle="--", label="ceiling 57.66%")
+    eff.set_ylabel("efficiency (%)")
+    eff.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(str(png), dpi=100)
+    plt.close(fig)
