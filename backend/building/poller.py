@@ -11,6 +11,7 @@ import asyncio
 import collections
 import logging
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -132,10 +133,11 @@ class ModulePoller:
             self.on_health(self.health)
 
     async def _run(self) -> None:
-        loop = asyncio.get_running_loop()
+        # time.monotonic, not loop.time: uvloop's loop clock has 1 ms steps.
+        clock = time.monotonic
         backoff = BACKOFF_FIRST_S
         await asyncio.sleep(self.phase * self.period_s)
-        due = loop.time()
+        due = clock()
         me = asyncio.current_task()
         while me is None or not me.cancelling():
             if not self.client.connected:
@@ -148,16 +150,16 @@ class ModulePoller:
                     continue
                 backoff = BACKOFF_FIRST_S
                 # Back on the grid after a (re)connect, keeping this module's phase.
-                now = loop.time()
+                now = clock()
                 due += math.ceil(max(0.0, now - due) / self.period_s) * self.period_s
                 await asyncio.sleep(due - now)
-            woke = loop.time()
-            self.jitter_s.append(woke - due)
+            woke = clock()
+            self.jitter_s.append(abs(woke - due))  # timers may also fire a little early
             try:
                 sample: Sample = {}
                 for kind, (first, count) in self.ranges.items():
                     sample[kind] = (first, await self.client.read(kind, first, count))
-                self.health.rtt_ms = (loop.time() - woke) * 1000
+                self.health.rtt_ms = (clock() - woke) * 1000
                 self.health.polls += 1
                 # The slot, unless this poll ran late: then the real time, so that a stalled
                 # loop cannot stretch a short pulse into one that passes the filter.
@@ -172,7 +174,7 @@ class ModulePoller:
             except ModbusIOError as exc:  # pragma: no cover - a programming error in ranges
                 log.error("module %s: %s", self.module.id, exc)
             due += self.period_s
-            now = loop.time()
+            now = clock()
             if due < now:  # a slow answer overran one or more slots: skip them
                 missed = math.ceil((now - due) / self.period_s)
                 self.health.overruns += missed
