@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import re
 from collections.abc import AsyncIterator, Callable
 from contextlib import AbstractAsyncContextManager
 from typing import Any
@@ -115,8 +116,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 def uvicorn_config(
     app: FastAPI, host: str, port: int, log_level: str = "warning"
 ) -> uvicorn.Config:
-    """The server's uvicorn settings: sans-I/O websockets without compression (CPU matters)."""
-    return uvicorn.Config(
+    """The server's uvicorn settings: sans-I/O websockets without compression (CPU matters).
+
+    Browsers pass the hub token as ``?token=``: uvicorn's log lines are redacted.
+    """
+    config = uvicorn.Config(
         app,
         host=host,
         port=port,
@@ -127,3 +131,23 @@ def uvicorn_config(
         ws_max_size=16 * 1024 * 1024,
         timeout_graceful_shutdown=5,
     )
+    for name in ("uvicorn.error", "uvicorn.access"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, RedactTokens) for f in logger.filters):
+            logger.addFilter(RedactTokens())
+    return config
+
+
+class RedactTokens(logging.Filter):
+    """Replace ``token=<secret>`` in log lines by ``token=***``."""
+
+    _pattern = re.compile(r"(token=)[^&\s\"']+")
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.args, tuple):
+            record.args = tuple(
+                self._pattern.sub(r"\1***", a) if isinstance(a, str) else a for a in record.args
+            )
+        if isinstance(record.msg, str):
+            record.msg = self._pattern.sub(r"\1***", record.msg)
+        return True

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
@@ -184,3 +185,14 @@ def test_settings_read_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     settings = Settings()
     assert settings.port == 9123
     assert settings.tokens[0].name == "R7" and settings.tokens[0].role == "robot"
+
+
+async def test_tokens_in_query_strings_are_not_logged(
+    server: RunningServer, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="uvicorn.error")
+    async with raw_socket(f"{server.ws_url}?token={TOKENS['gui'].token}") as ws:
+        await receive(ws)
+    logged = "\n".join(r.getMessage() for r in caplog.records)
+    assert "token=***" in logged
+    assert TOKENS["gui"].token not in logged
