@@ -90,11 +90,6 @@ def _check(config: BuildingConfig) -> None:
                     f" already used by {other!r} ({point.kind.value})"
                 )
             addresses[(point.kind, point.address)] = point.name
-        if module.timeout_ms >= module.sampling_period_ms * 10:
-            raise BuildingConfigError(
-                f"module {module.id!r}: timeout_ms {module.timeout_ms} is more than ten"
-                f" sampling periods ({module.sampling_period_ms} ms)"
-            )
 
     def ref(owner: str, ref: IORef, kinds: frozenset[PointKind], role: str) -> None:
         if ref.module not in ids:
