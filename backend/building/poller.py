@@ -106,6 +106,10 @@ class ModulePoller:
         self._task: asyncio.Task[None] | None = None
         self._last_health_report = -math.inf
 
+    @property
+    def running(self) -> bool:
+        return self._task is not None and not self._task.done()
+
     def start(self) -> None:
         self._task = asyncio.create_task(self._run(), name=f"building-poll-{self.module.id}")
 

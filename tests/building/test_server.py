@@ -56,3 +56,24 @@ async def test_button_press_requests_its_task_and_lights_its_led(tmp_path: Path)
             assert health["otb_ground"]["rtt_ms"] is not None
             values = {(p["module"], p["point"]): p["value"] for p in state["points"]}
             assert values[("otb_ground", "led_entrance")] == 1
+
+
+async def test_site_change_restarts_the_interface_with_the_new_modules(tmp_path: Path) -> None:
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        site_file = tmp_path / "site.yaml"
+        site_file.write_text(yaml.safe_dump(site), encoding="utf-8")
+        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=site_file)
+        async with running_server(settings) as server:
+            state = server.app.state
+            old = state.building
+            assert old.pollers["otb_ground"].period_s == 0.2
+            site["modules"][0]["sampling_period_ms"] = 100
+            await state.sites.replace(site)
+            await wait_until(lambda: state.building is not None and state.building is not old)
+            new = state.building
+            assert new.pollers["otb_ground"].period_s == 0.1
+            await wait_until(lambda: new.pollers["otb_ground"].health.polls > 0)
+            assert not any(p.running for p in old.pollers.values())  # the old one stopped
