@@ -104,6 +104,7 @@ class AreaLocks:
         self._waits: dict[str, _Wait] = {}  # robot -> its one waiting request, FIFO by seq
         self._seq = itertools.count()
         self._offline: set[str] = set()
+        self._held: dict[str, list[str]] = {}  # robot -> areas it holds, in grant order
         self.max_waiting = max_waiting
         self.deadlocks_resolved = 0
 
@@ -116,7 +117,7 @@ class AreaLocks:
         return self._lock(area).holder
 
     def held_by(self, robot: str) -> list[str]:
-        return [a for a, lock in self._locks.items() if lock.holder == robot]
+        return list(self._held.get(robot, ()))
 
     def entered(self, area: str) -> bool:
         return self._lock(area).entered
@@ -184,9 +185,9 @@ class AreaLocks:
     def release_all(self, robot: str, *, keep: set[str] | None = None) -> list[Grant]:
         """Release everything ``robot`` holds except ``keep``; drop its waiting request."""
         self._waits.pop(robot, None)
-        for lock in self._locks.values():
-            if lock.holder == robot and not (keep and lock.area in keep):
-                self._free(lock)
+        for area in self.held_by(robot):
+            if not (keep and area in keep):
+                self._free(self._locks[area])
         return self._grant_waiting()
 
     def cancel_wait(self, robot: str) -> list[Grant]:
@@ -203,13 +204,14 @@ class AreaLocks:
 
     def set_online(self, robot: str, online: bool) -> None:
         """Offline holders keep their locks (they may be inside); the state shows it."""
+        if online == (robot not in self._offline):
+            return
         if online:
             self._offline.discard(robot)
         else:
             self._offline.add(robot)
-        for lock in self._locks.values():
-            if lock.holder != robot:
-                continue
+        for area in self._held.get(robot, ()):
+            lock = self._locks[area]
             if not online and lock.state is LockState.HELD:
                 lock.move(LockState.HOLDER_OFFLINE)
             elif online and lock.state is LockState.HOLDER_OFFLINE:
@@ -229,6 +231,12 @@ class AreaLocks:
 
     def _free(self, lock: _Lock) -> None:
         lock.move(LockState.FREE)
+        if lock.holder is not None:
+            held = self._held.get(lock.holder, [])
+            if lock.area in held:
+                held.remove(lock.area)
+            if not held:
+                self._held.pop(lock.holder, None)
         lock.holder = None
         lock.since = None
         lock.entered = False
@@ -253,6 +261,7 @@ class AreaLocks:
                 if lock.holder is None:
                     lock.move(LockState.HELD)
                     lock.holder = wait.robot
+                    self._held.setdefault(wait.robot, []).append(a)
                     lock.since = now
                     if wait.robot in self._offline:
                         lock.move(LockState.HOLDER_OFFLINE)
