@@ -149,6 +149,7 @@ class ElevatorSim(_Timed):
         self.floor_s = elevator.travel_time_s / max(1, len(elevator.stops) - 1)
         self.state = CabinState.idle
         self.index = 0
+        self.direction = 0
         self.pending: set[int] = set()
         self.floor_register, self.door_register = registers
         self.arrivals = 0
@@ -190,19 +191,23 @@ class ElevatorSim(_Timed):
         if target == self.index:
             self._arrive()
             return
+        self.direction = 1 if target > self.index else -1
         self._go(CabinState.moving)
         self._report(False)
         self._after(self.floor_s / self.scale, self._step)
 
     def _step(self) -> None:
-        target = min(self.pending, key=lambda i: abs(i - self.index), default=self.index)
-        self.index += 1 if target > self.index else -1 if target < self.index else 0
+        """One floor further in the travel direction; a cabin never turns back mid-floor."""
+        self.index += self.direction
         self._report(False)
+        ahead = [i for i in self.pending if (i - self.index) * self.direction > 0]
         if self.index in self.pending or not self.pending:
             self._arrive()
-        else:
-            self._go(CabinState.moving)
-            self._after(self.floor_s / self.scale, self._step)
+            return
+        if not ahead:  # the only calls left are behind: turn round
+            self.direction = -self.direction
+        self._go(CabinState.moving)
+        self._after(self.floor_s / self.scale, self._step)
 
     def _arrive(self) -> None:
         self.pending.discard(self.index)
