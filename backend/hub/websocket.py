@@ -62,7 +62,11 @@ async def hub_socket(websocket: WebSocket) -> None:
             raw = frame.get("text")
             if raw is None:
                 raw = frame.get("bytes") or b""
-            hub.receive(client, raw)
+            try:
+                hub.receive(client, raw)
+            except Exception:  # a bug in a handler must not take the connection down
+                log.exception("hub: frame from %s failed", client.name)
+                client.error("internal_error", "the server failed to handle this frame")
             if client.close_code is not None:
                 break
     except WebSocketDisconnect:
