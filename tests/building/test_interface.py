@@ -150,6 +150,7 @@ async def test_slow_module_does_not_delay_the_others(
     await wait_until(lambda: (m2.health.rtt_ms or 0) >= 150)
     start = len(m1.jitter_s)
     await wait_until(lambda: len(m1.jitter_s) >= start + 10)
-    # M1 kept its 50 ms rhythm while M2 took 150 ms per table read.
-    assert m1.health.rtt_ms is not None and m1.health.rtt_ms < 150
+    # M1 kept polling on its own while each of M2's polls (two tables, 150 ms each) overran.
+    assert m1.health.rtt_ms is not None and m2.health.rtt_ms is not None
+    assert m1.health.rtt_ms < m2.health.rtt_ms
     assert m2.health.overruns > 0
