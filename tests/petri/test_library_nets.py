@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import copy
+import json
 
 import pytest
 
+from petri_nets.describe import describe
 from petri_nets.library import NetLibrary
 from petri_nets.scripted import DEFAULT_REPLIES
 
@@ -173,3 +175,18 @@ def test_waiting_is_killed_by_a_main_task_and_restarted_after() -> None:
     assert rig.published("say")[-1]["text"] == "The fountain."
     again = [r for r in rig.dispatch.running() if r["net"] == "waiting"]
     assert len(again) == 1 and again[0]["instance_id"] != waiting[0]["instance_id"]
+
+
+def test_describe_gives_a_gui_everything_to_draw_a_net() -> None:
+    net = NetLibrary().get("give_tour")
+    described = describe(net)
+    json.dumps(described)  # JSON-ready
+    assert described["version"] == net.version
+    assert described["required"] == ["tour", "points"]
+    places = {p["id"]: p for p in described["places"]}
+    assert places["navigation_failed"]["outcome"] == "failed"
+    assert places["ask_continue"]["action"] == "publish"
+    assert places["ask_continue"]["position"] is not None
+    answers = {t["id"]: t for t in described["transitions"]}
+    assert answers["answer_no"]["detail"] == "continue_answer answer=no"
+    assert len(described["arcs"]) == len(net.doc.arcs)
