@@ -344,6 +344,7 @@ class HeadIo(SimModule):
         self.target = [0.0] * self.SERVOS
         self.speed = [90.0] * self.SERVOS
         self.next_publish = [0.0] * self.SERVOS
+        self.report = [False] * self.SERVOS
         self.touch_mask = 0
         self.outputs = [0] * 4
 
@@ -354,6 +355,7 @@ class HeadIo(SimModule):
                 self.target[index] = position
                 self.speed[index] = speed or 90.0
                 self.next_publish[index] = 0.0
+                self.report[index] = True  # confirmed even when it is already there
         elif op == p.Op.SET_OUTPUT and self.enabled:
             if data[2] < len(self.outputs):
                 self.outputs[data[2]] = data[3]
@@ -362,6 +364,9 @@ class HeadIo(SimModule):
     def step(self, now: float, dt_sim: float) -> None:
         for i in range(self.SERVOS):
             if self.position[i] == self.target[i]:
+                if self.report[i] and self.enabled:
+                    self.report[i] = False
+                    self.send(p.servo(0, i, self.position[i], True))
                 continue
             move = self.speed[i] * dt_sim
             gap = self.target[i] - self.position[i]
@@ -371,6 +376,8 @@ class HeadIo(SimModule):
                 else self.position[i] + (move if gap > 0 else -move)
             )
             arrived = self.position[i] == self.target[i]
+            if arrived:
+                self.report[i] = False
             if self.enabled and (arrived or now >= self.next_publish[i]):
                 self.next_publish[i] = now + 0.1
                 self.send(p.servo(0, i, self.position[i], arrived))

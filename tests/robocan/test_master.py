@@ -182,6 +182,13 @@ async def test_head_servos_sonar_touch_and_leds(
         for s in ("head_pan", "eyelid_left")
     }
     assert done == {30.0, -10.0}
+    # a servo told to go where it already is still confirms
+    count = len(watch.of("servo_in_position"))
+    nets.publish("move_servos", {"servos": {"head_pan": 30}, "speed": 120})
+    await watch.wait_for(
+        "servo_in_position",
+        lambda m: m.payload["servo"] == "head_pan" and len(watch.of("servo_in_position")) > count,
+    )
     ranges = await watch.wait_for("sonar_ranges", lambda m: m.payload["ring"] == 0)
     assert ranges.payload["ranges"] == [pytest.approx(3.0)] * 8
     assert stack.simulator is not None
