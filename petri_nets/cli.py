@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import click
 
@@ -18,6 +19,7 @@ from petri_nets.model import Problem
 from petri_nets.pnml import read_pnml_file, write_pnml
 from petri_nets.scripted import DEFAULT_REPLIES, ScriptedEnvironment, parse_reply_option
 from petri_nets.templates import parse_literal
+from petri_nets.trace import TraceWriter
 from petri_nets.validate import validate
 
 __all__ = ["check_files", "petri", "run_net"]
@@ -67,6 +69,7 @@ def run_net(
     library_folder: Path | None = None,
     max_time: float = 3600.0,
     echo: Any = None,
+    trace: IO[str] | None = None,
 ) -> dict[str, Any]:
     """Run one net on a virtual clock against scripted replies; the result of ``petri run``."""
     library = NetLibrary(library_folder or path.parent, watch=False)
@@ -110,6 +113,8 @@ def run_net(
 
     monitor = bus.endpoint("monitor")
     monitor.subscribe("*", watch, tap=True)
+    if trace is not None:
+        monitor.subscribe("*", TraceWriter(trace), tap=True)
     dispatch.open()
     try:
         top["id"] = f"{name}#run"
@@ -158,6 +163,12 @@ def run_net(
     help="Folder of sub-nets (default: the file's folder).",
 )
 @click.option("--max-time", default=3600.0, show_default=True, help="Virtual seconds to run.")
+@click.option(
+    "--trace",
+    "trace_file",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Record every message as JSON lines (replay with petri_nets.trace).",
+)
 @click.option("--json", "as_json", is_flag=True, help="End with one JSON line (the result).")
 def run_command(
     file: Path,
@@ -166,6 +177,7 @@ def run_command(
     no_default_replies: bool,
     library_folder: Path | None,
     max_time: float,
+    trace_file: Path | None,
     as_json: bool,
 ) -> None:
     """Run FILE against a scripted environment on a virtual clock; print the firing trace."""
@@ -185,9 +197,17 @@ def run_command(
     folder = library_folder
     if folder is None and not any(file.parent.glob("*.pnml")):
         folder = DEFAULT_LIBRARY
-    result = run_net(
-        file, values, script, library_folder=folder, max_time=max_time, echo=click.echo
-    )
+    with contextlib.ExitStack() as stack:
+        trace = stack.enter_context(trace_file.open("w")) if trace_file else None
+        result = run_net(
+            file,
+            values,
+            script,
+            library_folder=folder,
+            max_time=max_time,
+            echo=click.echo,
+            trace=trace,
+        )
     if as_json:
         click.echo(json.dumps(result))
     else:

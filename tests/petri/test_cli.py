@@ -9,6 +9,7 @@ from click.testing import CliRunner
 
 from guidebot.cli import main
 from petri_nets.pnml import read_pnml
+from petri_nets.trace import read_trace, replay
 
 from .test_pnml import PLAIN
 
@@ -108,3 +109,36 @@ def test_export_writes_pnml_another_tool_reads_back(tmp_path: Path) -> None:
     doc, problems = read_pnml(out.read_bytes())
     assert problems == [] and doc is not None
     assert [p.id for p in doc.places] == ["ready", "buffer"]
+
+
+def test_a_recorded_trace_replays_to_the_final_marking(tmp_path: Path) -> None:
+    trace = tmp_path / "tour.jsonl"
+    code, lines = invoke(
+        "petri",
+        "run",
+        str(LIBRARY / "give_tour.pnml"),
+        "--param",
+        "tour=t1",
+        "--param",
+        f"points={POINTS}",
+        "--trace",
+        str(trace),
+        "--json",
+    )
+    assert code == 0
+    result = json.loads(lines[-1])
+    messages = list(read_trace(trace))
+    assert [
+        m["type"]
+        for m in messages
+        if m["source"] == "dispatch" and m["type"] not in ("petri_net_event", "petri_net_ended")
+    ] == result["published"]
+    markings = replay(messages)
+    assert markings["give_tour#run"] == result["final_marking"] == {"tour_done": 1}
+    asked_at = next(
+        m["payload"]["time"]
+        for m in messages
+        if m["type"] == "petri_net_event" and m["payload"]["transition"] == "more_points"
+    )
+    midway = replay(messages, until=asked_at)
+    assert midway["give_tour#run"] == {"ask_continue": 1, "answer_wait": 1}
