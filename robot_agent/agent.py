@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -72,15 +73,36 @@ def hub_ws_url(server: str) -> str:
     return url if url.endswith("/ws") else url + "/ws"
 
 
-def _site_menu(path: Path | None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+@dataclass
+class OnboardSite:
+    """What the robot knows of the site: the touch screen's menu and the on-board map."""
+
+    tours: list[dict[str, Any]]
+    pois: list[dict[str, Any]]
+    planner: Callable[[str, str], dict[str, Any]] | None
+
+
+def load_onboard_site(path: Path | None) -> OnboardSite:
+    """Parse the site file (slow: call it in a thread)."""
     if path is None:
-        return [], []
+        return OnboardSite([], [], None)
     from backend.site.yamlio import load_site_file
+    from backend.traffic.graph import SiteGraph
 
     site = load_site_file(path)
+    graph = SiteGraph(site)
+
+    def planner(start: str, goal: str) -> dict[str, Any]:
+        result = graph.shortest_path(start, goal)
+        return {
+            "nodes": result.nodes,
+            "length_m": result.length_m,
+            "steps": [s.as_dict() for s in result.steps],
+        }
+
     tours = [{"id": t.id, "name": t.name, "points": t.points} for t in site.tours]
     pois = [{"id": p.id, "name": p.name, "node": p.node} for p in site.pois]
-    return tours, pois
+    return OnboardSite(tours, pois, planner)
 
 
 class RobotAgent:
@@ -126,6 +148,7 @@ class RobotAgent:
         # The net library first: parsing it takes a while and must not stall the hardware's
         # watchdogs once RoboCAN runs (so it is parsed in a thread, before).
         self.dispatch = await self._make_dispatch()
+        onboard_site = await asyncio.to_thread(load_onboard_site, c.site)
 
         # Hardware servers.
         hw_ep = bus.endpoint("robocan" if c.can else "base")
@@ -142,8 +165,6 @@ class RobotAgent:
             )
         else:
             self.hardware = BareSimulation(hw_ep, self.clock)
-        await self.hardware.start()
-        stack.push_async_callback(self.hardware.stop)
 
         # Control modules.
         self.navigator = Navigator(
@@ -152,6 +173,7 @@ class RobotAgent:
             name,
             start_node=c.start_node,
             max_speed=c.max_speed,
+            planner=onboard_site.planner,
         )
         self.navigator.start()
         stack.push_async_callback(self.navigator.stop)
@@ -186,7 +208,7 @@ class RobotAgent:
             bus.endpoint("tasks"),
             name,
             waiting_net=None if self.dispatch is not None else c.idle_net,
-            on_cancel=navigator.cancel,
+            on_cancel=navigator.cancel_goal,
             on_start=battery.undock,
         )
         self.tasks.start()
@@ -207,7 +229,7 @@ class RobotAgent:
         self.state.start()
         stack.push_async_callback(self.state.stop)
         if c.gui_port is not None:
-            tours, pois = _site_menu(c.site)
+            tours, pois = onboard_site.tours, onboard_site.pois
             self.screen = OnboardScreen(
                 bus.endpoint("screen"),
                 self.clock,
@@ -221,6 +243,9 @@ class RobotAgent:
             self.screen_server = ScreenServer(self.screen, port=c.gui_port)
             await self.screen_server.start()
             stack.push_async_callback(self.screen_server.stop)
+        # Hardware last: its watchdogs run from here on, with every module ready to listen.
+        await self.hardware.start()
+        stack.push_async_callback(self.hardware.stop)
         log.info(
             "robot %s up: hardware=%s link=%s screen=%s",
             name,
@@ -263,7 +288,7 @@ class RobotAgent:
         assert state is not None
         self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=state.publish_now)
         self.link.start()
-        self._stack.callback(self.link.stop)
+        self._stack.push_async_callback(self.link.stop)
         await self.hub.start()
         self._stack.push_async_callback(self.hub.close)
 

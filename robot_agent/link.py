@@ -14,8 +14,11 @@ resynchronises (``on_connect``: robot_state with the running task at once).
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
-from collections import OrderedDict
+import time
+from collections import OrderedDict, deque
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
@@ -59,11 +62,29 @@ DOWN_TYPES: tuple[str, ...] = (
 
 MAX_PENDING_REPLIES = 1000
 
+REPORT_TYPES = frozenset(
+    {
+        "task_started",
+        "task_ended",
+        "task_request",
+        "battery_low",
+        "battery_panic",
+        "robot_fault",
+        "petri_net_ended",
+    }
+)
+"""Reports that must survive a link drop: the ones sent in the last seconds before the drop may
+have died in flight (TCP gives no receipt), so they are sent again after the reconnect with their
+original ids. Receivers treat them idempotently (the Task Manager ignores a second task_ended)."""
+IN_FLIGHT_S = 5.0
+MAX_RECENT_REPORTS = 200
+
 
 class Upstream(Protocol):
     """What the link needs from the hub client (guidebot.client.HubClient has it)."""
 
     name: str
+    connected: asyncio.Event
 
     def send(self, message: Message) -> None: ...
 
@@ -93,7 +114,11 @@ class Link:
         self.on_message_down: Callable[[Message], None] | None = None
         # Request id -> on-board endpoint that sent it (bounded: oldest forgotten first).
         self._requesters: OrderedDict[str, str] = OrderedDict()
+        self.resent = 0
         self._unsubs: list[Callable[[], None]] = []
+        self._recent: deque[tuple[float, Message]] = deque(maxlen=MAX_RECENT_REPORTS)
+        self._down_since: float | None = None
+        self._watch: asyncio.Task[None] | None = None
 
     def start(self) -> None:
         for type_ in UP_TYPES:
@@ -101,15 +126,38 @@ class Link:
         for type_ in DOWN_TYPES:
             self._unsubs.append(self.upstream.subscribe(type_, self._down))
         self._unsubs.append(self.upstream.on_connect(self._connected))
+        self._watch = asyncio.get_running_loop().create_task(self._watch_link(), name="link")
 
-    def stop(self) -> None:
+    async def stop(self) -> None:
         for unsub in self._unsubs:
             unsub()
         self._unsubs.clear()
+        if self._watch is not None:
+            self._watch.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._watch
+
+    async def _watch_link(self) -> None:
+        """Notes when the link drops (the hub client only says when it is up again)."""
+        while True:
+            await self.upstream.connected.wait()
+            # The hub client has no "disconnected" event: poll its flag (cheap, 10 Hz).
+            while self.upstream.connected.is_set():  # noqa: ASYNC110
+                await asyncio.sleep(0.1)
+            if self._down_since is None:
+                self._down_since = time.monotonic()
+            log.warning("%s: link down; reports are queued until it is back", self.robot)
 
     def _connected(self) -> None:
         self.connections += 1
         log.info("%s: link up (connection %d)", self.robot, self.connections)
+        down_since, self._down_since = self._down_since, None
+        if down_since is not None:
+            # Reports sent just before the drop may have died in flight: send them again.
+            for sent_at, message in list(self._recent):
+                if down_since - IN_FLIGHT_S <= sent_at <= down_since:
+                    self.resent += 1
+                    self.upstream.send(message)
         if self.on_connect_callback is not None:
             self.on_connect_callback()
 
@@ -121,6 +169,8 @@ class Link:
             if len(self._requesters) > MAX_PENDING_REPLIES:
                 self._requesters.popitem(last=False)
         self.sent_up += 1
+        if message.type in REPORT_TYPES and self.upstream.connected.is_set():
+            self._recent.append((time.monotonic(), message))
         self.upstream.send(message)
 
     def _down(self, message: Message) -> None:

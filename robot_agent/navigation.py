@@ -98,6 +98,7 @@ class Navigator:
         wait_timeout_s: float = 600.0,
         path_timeout_s: float = 5.0,
         docking_s: float = 5.0,
+        planner: Callable[[str, str], dict[str, Any]] | None = None,
     ) -> None:
         self.ep = endpoint
         self.clock = clock
@@ -110,6 +111,8 @@ class Navigator:
         self.wait_timeout_s = wait_timeout_s
         self.path_timeout_s = path_timeout_s
         self.docking_s = docking_s
+        self.planner = planner
+        """On-board map (the site graph): plans when the Traffic Manager cannot be reached."""
         # Map pose and where the robot is in the graph.
         self.node: str | None = start_node
         self.floor: str | None = None
@@ -161,17 +164,27 @@ class Navigator:
         self._unsubs.clear()
         await self.cancel()
 
-    async def cancel(self) -> None:
-        """Abandon the current goal (task cancelled) and stop the base."""
+    def cancel_goal(self) -> None:
+        """Abandon the current goal now (its task was cancelled) and stop the base.
+
+        Synchronous on purpose: a new goal published right after (the next task's first
+        navigate_to) must not be hit by a cancellation that runs later.
+        """
         task, self._goal_task = self._goal_task, None
         if task is not None and not task.done():
             task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
         self._send_velocity(0.0, 0.0, force=True)
         if self.state is not NavState.FAULT:
             self.state = NavState.IDLE
         self.goal = None
+
+    async def cancel(self) -> None:
+        """cancel_goal, then wait until the goal's coroutine has unwound."""
+        task = self._goal_task
+        self.cancel_goal()
+        if task is not None:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
 
     # -- message handlers (inline, never block) ----------------------------------------------
 
@@ -303,7 +316,8 @@ class Navigator:
         await self.follow([PathStep.from_payload(s) for s in path.get("steps", [])])
 
     async def _get_path(self, node: str) -> dict[str, Any]:
-        for attempt in range(3):
+        attempts = 3 if self.planner is None else 1
+        for attempt in range(attempts):
             try:
                 reply = await self.ep.request(
                     "get_path",
@@ -313,11 +327,18 @@ class Navigator:
             except RequestTimeout:
                 log.warning("%s: no path to %s yet (attempt %d)", self.robot, node, attempt + 1)
                 continue
-            if reply.type != "path":
-                raise NavigationFailed(f"no path to {node}: {reply.payload}")
-            if not reply.payload.get("steps"):
-                raise NavigationFailed(f"empty path to {node}")
+            if reply.type != "path" or not reply.payload.get("steps"):
+                reason = reply.payload.get("error") or reply.payload.get("reason") or reply.payload
+                raise NavigationFailed(f"no path to {node}: {reason}")
             return reply.payload
+        if self.planner is not None and self.node is not None:
+            # The link is down: plan on the on-board map and go on alone (areas, doors and
+            # elevators still wait for the server's answers).
+            log.warning("%s: Traffic Manager silent, planning to %s on board", self.robot, node)
+            try:
+                return self.planner(self.node, node)
+            except Exception as exc:
+                raise NavigationFailed(f"no path to {node}: {exc}") from None
         raise NavigationFailed(f"no answer to get_path for {node}")
 
     async def follow(self, steps: list[PathStep]) -> None:

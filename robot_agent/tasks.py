@@ -8,9 +8,8 @@ to the Task Manager.
 
 from __future__ import annotations
 
-import asyncio
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -73,7 +72,7 @@ class TaskRunner:
         robot: str,
         *,
         waiting_net: str | None = "waiting",
-        on_cancel: Callable[[], Awaitable[None]] | None = None,
+        on_cancel: Callable[[], None] | None = None,
         on_start: Callable[[], None] | None = None,
     ) -> None:
         self.ep = endpoint
@@ -87,7 +86,6 @@ class TaskRunner:
         self._waiting_instance: str | None = None
         self._waiting_seq = 0
         self._unsubs: list[Callable[[], None]] = []
-        self._background: set[asyncio.Task[None]] = set()
 
     def start(self) -> None:
         sub = self.ep.subscribe
@@ -164,9 +162,7 @@ class TaskRunner:
         task.move(TaskPhase.CANCELLING)
         self.ep.publish("kill_petri_net", {"instance_id": task.instance_id})
         if self.on_cancel is not None:
-            background = asyncio.get_running_loop().create_task(self.on_cancel())
-            self._background.add(background)
-            background.add_done_callback(self._background.discard)
+            self.on_cancel()
 
     def _on_net_event(self, message: Message) -> None:
         p = message.payload

@@ -254,3 +254,121 @@ async def test_tour_from_request_to_end(tmp_path: Path, demo_site: Site) -> None
             "telescope",
         ]
         assert len(fleet.onboard_of("continue_answer")) >= 2
+
+
+async def test_link_cut_mid_tour_and_restored(
+    tmp_path: Path, demo_site: Site, helpers: Any
+) -> None:
+    """Wi-Fi lost mid-tour: the robot goes on alone, reports everything on reconnect, resyncs."""
+    async with fleet_up(tmp_path, demo_site, cutter_class=helpers.LinkCutter) as fleet:
+        hub = fleet.agent.hub
+        task_id = await fleet.request_task("tour", {"tour": "upstairs"})
+        await fleet.wait_for(lambda: fleet.onboard_of("show_point"), timeout=60)
+        await fleet.cutter.cut()
+        await fleet.wait_for(lambda: not hub.connected.is_set(), timeout=20)
+        states_before = len(fleet.of("robot_state"))
+        # Offline, the robot goes on with its tour by itself: it reaches the next point.
+        await fleet.wait_for(lambda: len(fleet.onboard_of("show_point")) >= 2, timeout=60)
+        assert len(fleet.of("robot_state")) == states_before, "the link was not cut"
+        offline_reports = [
+            m.id
+            for t in ("petri_net_ended", "task_ended", "robot_state")
+            for m in fleet.onboard_of(t)
+            if m.source != "link"
+        ]
+        await fleet.cutter.restore()
+        await fleet.wait_for(lambda: fleet.ended(task_id), timeout=75)
+        [ended] = fleet.ended(task_id)  # exactly once: nothing lost, nothing doubled
+        assert ended.payload["outcome"] == "done"
+        assert hub.connections >= 2
+        # Nothing lost: every report made while offline reached the hub after the reconnect
+        # (robot_state is coalesced to the latest while offline, by design).
+        on_hub = {m.id for t in ("petri_net_ended", "task_ended") for m in fleet.of(t)}
+        lost = [
+            i
+            for t in ("petri_net_ended", "task_ended")
+            for m in fleet.onboard_of(t)
+            if (i := m.id) in offline_reports and i not in on_hub
+        ]
+        assert not lost
+        # Resynchronised: the server's last robot_state is where the robot really is.
+        await fleet.wait_for(
+            lambda: fleet.of("robot_state")[-1].payload["node"] == fleet.agent.navigator.node
+        )
+        assert (await fleet.task(task_id))["state"] == "done"
+
+
+async def test_battery_panic_mid_tour(tmp_path: Path, demo_site: Site) -> None:
+    """battery_panic: the tour is cancelled and re-queued, the robot goes to dock."""
+    async with fleet_up(tmp_path, demo_site) as fleet:
+        task_id = await fleet.request_task("tour", {"tour": "upstairs"})
+        await fleet.wait_for(lambda: fleet.onboard_of("show_point"), timeout=60)
+        fleet.agent.bus.endpoint("operator").publish("sim_set_battery", {"level": 0.05})
+        await fleet.wait_for(lambda: fleet.of("battery_panic"), timeout=20)
+        assert fleet.of("battery_panic")[0].payload["robot"] == "R1"
+        await fleet.wait_for(lambda: fleet.ended(task_id), timeout=30)
+        assert fleet.ended(task_id)[0].payload["outcome"] == "cancelled"
+        assert (await fleet.task(task_id))["state"] == "queued"
+        await fleet.wait_for(lambda: fleet.onboard_of("docked"), timeout=75)
+        assert fleet.onboard_of("set_charging")[-1].payload["on"] is True
+        await fleet.wait_for(lambda: fleet.of("robot_state")[-1].payload["mode"] == "busy")
+        assert fleet.agent.navigator.node in {"charge_a", "charge_b"}
+
+
+async def test_bumper_hit_stops_and_is_reported(tmp_path: Path, demo_site: Site) -> None:
+    async with fleet_up(tmp_path, demo_site) as fleet:
+        task_id = await fleet.request_task("go_to_poi", {"poi": "mosaics"})
+        await fleet.wait_for(lambda: fleet.can_tap.velocity_frames(moving=True), timeout=30)
+        ring = fleet.agent.hardware.stack.simulator.modules[0x10]  # type: ignore[union-attr]
+        ring.press_bumper(0)
+        await fleet.wait_for(lambda: fleet.of("robot_fault"), timeout=20)
+        fault = fleet.of("robot_fault")[0]
+        assert fault.source == "R1" and fault.payload["kind"] == "bumper"
+        hit = fleet.onboard_of("bumper_hit")[0]
+        stops = [
+            m
+            for m in fleet.onboard_of("set_velocity")
+            if m.timestamp >= hit.timestamp and m.payload["v"] == 0.0 and m.payload["w"] == 0.0
+        ]
+        assert stops, "navigation did not stop the base after the bumper hit"
+        ring.press_bumper(0, False)
+        await fleet.wait_for(lambda: fleet.ended(task_id), timeout=60)
+        assert fleet.ended(task_id)[0].payload["outcome"] == "done"
+
+
+async def test_head_unplugged_mid_tour_tour_goes_on(tmp_path: Path, demo_site: Site) -> None:
+    async with fleet_up(tmp_path, demo_site) as fleet:
+        task_id = await fleet.request_task("tour", {"tour": "upstairs"})
+        await fleet.wait_for(lambda: fleet.can_tap.velocity_frames(moving=True), timeout=30)
+        fleet.agent.bus.endpoint("operator").publish(
+            "module_plug", {"module_id": 0x40, "plugged": False}
+        )
+        await fleet.wait_for(
+            lambda: any(
+                m.payload["module_id"] == 0x40 and m.payload["state"] == "lost"
+                for m in fleet.onboard_of("module_status")
+            ),
+            timeout=20,
+        )
+        await fleet.wait_for(lambda: fleet.ended(task_id), timeout=75)
+        assert fleet.ended(task_id)[0].payload["outcome"] == "done"
+        assert len(fleet.onboard_of("show_point")) == 3
+        modules = fleet.of("robot_state")[-1].payload["modules"]
+        assert "lost" in modules.values()
+
+
+async def test_motor_unplugged_robot_stops_fault_reported(tmp_path: Path, demo_site: Site) -> None:
+    async with fleet_up(tmp_path, demo_site) as fleet:
+        task_id = await fleet.request_task("go_to_poi", {"poi": "sword"})
+        await fleet.wait_for(lambda: fleet.can_tap.velocity_frames(moving=True), timeout=30)
+        fleet.agent.bus.endpoint("operator").publish(
+            "module_plug", {"module_id": 0x02, "plugged": False}
+        )
+        await fleet.wait_for(lambda: fleet.of("robot_fault"), timeout=20)
+        assert fleet.of("robot_fault")[0].payload["kind"] == "motor_lost"
+        await fleet.wait_for(lambda: fleet.ended(task_id), timeout=30)
+        assert fleet.ended(task_id)[0].payload["outcome"] in {"failed", "cancelled"}
+        await fleet.wait_for(lambda: fleet.of("robot_state")[-1].payload["mode"] == "fault")
+        fault_at = fleet.onboard_of("base_fault")[0].timestamp
+        after = [m for m in fleet.onboard_of("set_velocity") if m.timestamp > fault_at]
+        assert all(m.payload == {"v": 0.0, "w": 0.0} for m in after), after
