@@ -177,6 +177,8 @@ class Instance:
             action = net.actions[p]
             if action is not None:
                 for _ in range(net.initial[p]):
+                    if self.state is not InstanceState.RUNNING:
+                        return
                     self._act(p)
             for t in net.downstream[p]:
                 heapq.heappush(self._heap, t)
@@ -335,6 +337,8 @@ class Instance:
         for p, w in outputs:
             if net.actions[p] is not None:
                 for _ in range(w):
+                    if self.state is not InstanceState.RUNNING:
+                        return  # killed by someone reacting inline to an earlier action
                     self._act(p)
             for d in net.downstream[p]:
                 heapq.heappush(heap, d)

@@ -236,3 +236,19 @@ def test_guards_choose_by_variables(tmp_path: Path) -> None:
     rig = rig_with(tmp_path, b.build())
     assert rig.fired(rig.dispatch.start("pick")) == ["is_fast"]
     assert rig.fired(rig.dispatch.start("pick", {"mode": "slow"})) == ["is_slow"]
+
+
+def test_killed_inline_by_a_listener_publishes_nothing_more(tmp_path: Path) -> None:
+    b = NetBuilder("two_steps")
+    b.place("start", initial=1)
+    b.place("first", action=publish("first")).place("second", action=publish("second"))
+    b.place("end", final=True)
+    b.transition("go", ["start"], ["first", "second"])
+    b.transition("both", ["first", "second"], ["end"], message("never"))
+    rig = rig_with(tmp_path, b.build())
+    rig.client.subscribe(
+        "first", lambda m: rig.client.publish("kill_petri_net", {"net": "two_steps"})
+    )
+    iid = rig.dispatch.start("two_steps")
+    assert rig.ended(iid) == "killed"
+    assert rig.action_types() == ["first"]
