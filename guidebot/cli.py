@@ -16,6 +16,7 @@ COMMANDS: dict[str, str] = {
     "robot": "robot_agent.cli:robot",
     "petri": "petri_nets.cli:petri",
     "server": "backend.server_cli:server",
+    "site": "backend.site.cli:site",
     "robocan": "robot_agent.robocan.cli:robocan",
     "building-sim": "building_sim.cli:building_sim",
 }

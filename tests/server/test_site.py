@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
+from click.testing import CliRunner
 
 from backend.site import SiteInvalid, dump_site, load_site_text
+from guidebot.cli import main
 
 from .helpers import DEMO, demo_site
 
@@ -84,3 +88,14 @@ def test_shape_and_reference_errors_are_reported_in_one_pass() -> None:
     # gb2 exists (only its y is broken): edges and points naming it are not reported
     assert not any("'gb2'" in msg for _, msg in found)
     assert len(found) == 2
+
+
+def test_site_check_command_lists_problems_with_lines(tmp_path: Path) -> None:
+    runner = CliRunner()
+    ok = runner.invoke(main, ["site", "check", str(DEMO)])
+    assert ok.exit_code == 0 and "8 points of interest" in ok.output
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(DEMO.read_text().replace("{a: gc2, b: gc3}", "{a: gc2, b: nowhere}"))
+    bad = runner.invoke(main, ["site", "check", str(broken)])
+    assert bad.exit_code == 1
+    assert f"{broken}:" in bad.output and "edges[17].b: unknown node 'nowhere'" in bad.output

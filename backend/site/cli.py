@@ -1,0 +1,46 @@
+"""``guidebot site``: check a site file (every error with its line) and print it normalised."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from backend.site.validate import SiteInvalid
+from backend.site.yamlio import dump_site, load_site_file
+
+__all__ = ["site"]
+
+
+@click.group()
+def site() -> None:
+    """Site files: check them before loading them into a server."""
+
+
+@site.command("check")
+@click.argument("path", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+def check(path: Path) -> None:
+    """Validate PATH; exit 1 listing every problem with its line."""
+    try:
+        loaded = load_site_file(path)
+    except SiteInvalid as exc:
+        for issue in exc.issues:
+            click.echo(f"{path}:{issue.line or 0}: {issue.loc}: {issue.message}", err=True)
+        click.echo(f"{len(exc.issues)} problem(s): site refused", err=True)
+        sys.exit(1)
+    click.echo(
+        f"{path}: ok: {len(loaded.floors)} floors, {len(loaded.nodes)} nodes, "
+        f"{len(loaded.pois)} points of interest, {len(loaded.tours)} tours, "
+        f"{len(loaded.areas)} restricted areas, {len(loaded.robots)} robots"
+    )
+
+
+@site.command("format")
+@click.argument("path", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+def format_(path: Path) -> None:
+    """Print PATH as the server would export it (defaults left out)."""
+    try:
+        click.echo(dump_site(load_site_file(path)), nl=False)
+    except SiteInvalid as exc:
+        raise click.ClickException(str(exc)) from None
