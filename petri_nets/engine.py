@@ -261,18 +261,23 @@ class Instance:
         held = self._held.get(timer.place)
         if held is not None and timer in held:
             held.remove(timer)
+            if not held:
+                del self._held[timer.place]
             for t in self.net.downstream[timer.place]:
                 heapq.heappush(self._heap, t)
 
     # ---------------------------------------------------------------- firing
 
-    def _ready(self, p: int) -> int:
-        held = self._held.get(p)
-        return self.marks[p] - len(held) if held else self.marks[p]
-
     def _enabled_ready(self, t: int) -> bool:
+        marks = self.marks
+        held_map = self._held
         for p, w in self.net.inputs[t]:
-            if self._ready(p) < w:
+            ready = marks[p]
+            if held_map:
+                held = held_map.get(p)
+                if held:
+                    ready -= len(held)
+            if ready < w:
                 return False
         cond = self.net.conditions[t]
         if cond.kind == "guard":
@@ -301,7 +306,8 @@ class Instance:
                 heapq.heappop(heap)
             if self._enabled_ready(t):
                 self._fire(t)
-                heapq.heappush(heap, t)
+                if self._enabled_any(t):  # enough marks left to fire again
+                    heapq.heappush(heap, t)
                 budget -= 1
                 if budget == 0:
                     self.host.clock.call_soon(lambda: self._post(_nothing))
@@ -315,13 +321,17 @@ class Instance:
         marks = self.marks
         final = net.final
         changed: dict[str, int] = {}
+        held_map = self._held
         for p, w in net.inputs[t]:
-            held = self._held.get(p)
-            if held:
-                extra = w - (marks[p] - len(held))
-                while extra > 0 and held:
-                    held.popleft().cancel()
-                    extra -= 1
+            if held_map:
+                held = held_map.get(p)
+                if held:
+                    extra = w - (marks[p] - len(held))
+                    while extra > 0 and held:
+                        held.popleft().cancel()
+                        extra -= 1
+                    if not held:
+                        del held_map[p]
             marks[p] -= w
             if not final[p]:
                 self._nonfinal -= w
