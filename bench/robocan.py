@@ -109,7 +109,9 @@ async def throughput(frames: int) -> float:
         thread.join()
         flood.shutdown()
         handled = master.counters.frames_rx - start_rx
-    return 0.5 * handled / cpu if cpu > 0 else float("inf")
+    if cpu < 0.05:
+        raise click.UsageError(f"{frames} frames cost too little CPU to measure: use more")
+    return 0.5 * handled / cpu
 
 
 async def command_latency(samples: int) -> list[float]:
