@@ -110,7 +110,7 @@ class RemoteClient:
         self.role = role
         self.endpoint = endpoint
         self.outbox = Outbox(hub.queue_size, hub.coalesce_after)
-        self.patterns: dict[str, Callable[[], None]] = {}
+        self.patterns: dict[str, bool] = {}
         self.last_message: Message | None = None
         self.state = ClientState.OPEN
         self.close_code: int | None = None
@@ -158,12 +158,12 @@ class RemoteClient:
 
     def subscribe(self, pattern: str) -> None:
         if pattern not in self.patterns:
-            self.patterns[pattern] = self.endpoint.subscribe(pattern, self.deliver)
+            self.patterns[pattern] = True
+            self.hub._join(self, pattern)
 
     def unsubscribe(self, pattern: str) -> None:
-        unsubscribe = self.patterns.pop(pattern, None)
-        if unsubscribe is not None:
-            unsubscribe()
+        if self.patterns.pop(pattern, None):
+            self.hub._leave(self, pattern)
 
     def request_close(self, code: int, reason: str) -> None:
         """Stop routing to this client; its transport closes the socket with code and reason."""
@@ -185,6 +185,16 @@ class RemoteClient:
             "superseded": self.outbox.superseded,
             "received": self.received,
         }
+
+
+class _Group:
+    """The WebSocket clients subscribed to one pattern."""
+
+    __slots__ = ("members", "unsubscribe")
+
+    def __init__(self) -> None:
+        self.members: tuple[RemoteClient, ...] = ()
+        self.unsubscribe: Callable[[], None] = lambda: None
 
 
 class Hub:
@@ -212,6 +222,10 @@ class Hub:
         self._encoded_message: Message | None = None
         self._encoded = b""
         self._gui_counter = 0
+        # Remote subscriptions are grouped by pattern: one bus subscription per pattern fans a
+        # message out to every WebSocket client of the group (serialised once).
+        self._own = self.bus.endpoint(HUB_NAME)
+        self._groups: dict[str, _Group] = {}
 
     # -- in-process side --------------------------------------------------------------------
     def endpoint(self, name: str) -> Endpoint:
@@ -230,6 +244,43 @@ class Hub:
             self._encoded = _encode(message)
             self._encoded_message = message
         return self._encoded
+
+    def _join(self, client: RemoteClient, pattern: str) -> None:
+        group = self._groups.get(pattern)
+        if group is None:
+            group = self._groups[pattern] = _Group()
+            group.unsubscribe = self._own.subscribe(
+                pattern, lambda message: self._fan_out(group, message)
+            )
+        group.members = (*group.members, client)
+
+    def _leave(self, client: RemoteClient, pattern: str) -> None:
+        group = self._groups.get(pattern)
+        if group is None:
+            return
+        group.members = tuple(c for c in group.members if c is not client)
+        if not group.members:
+            group.unsubscribe()
+            del self._groups[pattern]
+
+    def _fan_out(self, group: _Group, message: Message) -> None:
+        """Bus handler of a pattern group: queue the shared bytes for each member once."""
+        if message.destination is not None:
+            return  # addressed messages reach their client through HubBus.publish
+        data: bytes | None = None
+        key: str | None = None
+        for client in group.members:
+            if client.last_message is message or client.state is not ClientState.OPEN:
+                continue
+            client.last_message = message
+            if data is None:
+                data = self.encode(message)
+                key = message.source if message.type in COALESCED_TYPES else None
+            try:
+                client.outbox.put(data, key)
+            except OutboxOverflow as exc:
+                self.overflow_disconnects += 1
+                client.request_close(CLOSE_OVERFLOW, f"slow consumer: {exc}")
 
     # -- remote clients ---------------------------------------------------------------------
     def resolve_name(self, principal_name: str, role: Role, requested: str | None) -> str:
@@ -279,6 +330,8 @@ class Hub:
         if self.bus.remote.get(client.name) is client:
             del self.bus.remote[client.name]
             client.endpoint.close()
+        for pattern in client.patterns:
+            self._leave(client, pattern)
         client.patterns.clear()
         if client.state is not ClientState.CLOSED:
             client._move(ClientState.CLOSED)
@@ -358,7 +411,9 @@ class Hub:
             client.error("invalid_payload", _short(exc), message.id)
             return
         destination = message.destination
-        if destination is not None and self.bus.get_endpoint(destination) is None:
+        if destination is not None and (
+            destination == HUB_NAME or self.bus.get_endpoint(destination) is None
+        ):
             client.error("unknown_destination", f"no client named {destination!r}", message.id)
             return
         self.bus.publish(message)

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Request
 
 from backend.auth import Principal, Role, require_roles
 
-from .core import Hub
+from .core import HUB_NAME, Hub
 
 __all__ = ["router"]
 
@@ -22,7 +22,7 @@ async def list_clients(request: Request, _: Operator) -> dict[str, Any]:
     """Connected WebSocket clients and in-process endpoints, with queue statistics."""
     hub: Hub = request.app.state.hub
     remote = [client.stats() for client in hub.clients.values()]
-    local = sorted(n for n in hub.bus.endpoint_names if n not in hub.clients)
+    local = sorted(n for n in hub.bus.endpoint_names if n not in hub.clients and n != HUB_NAME)
     return {
         "clients": remote,
         "modules": local,
