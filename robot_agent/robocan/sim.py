@@ -201,7 +201,8 @@ class SimModule:
         else:
             reply = self.on_command(op, data)
             if reply is not None:
-                self.send(p.ack(op, data[1] if len(data) > 1 else p.MODULE, reply))
+                element = data[1] if len(data) > 1 and op != p.Op.SET_CHARGING else p.MODULE
+                self.send(p.ack(op, element, reply))
 
     def _set_param(self, element: int, param: int, value: int) -> p.AckStatus:
         if element == p.MODULE:
