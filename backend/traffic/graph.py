@@ -119,6 +119,8 @@ class SiteGraph:
         idx = self.index
         self._adj_i = [[(idx[b], c) for b, c in self.adj[n]] for n in self.names]
         self._radj_i = [[(idx[a], c) for a, c in self.radj[n]] for n in self.names]
+        self._xs = [self.xy[n][0] for n in self.names]
+        self._ys = [self.xy[n][1] for n in self.names]
         self._fields: dict[str, array[float]] = {}
         self._pinned: set[str] = set()
         self.field_cache_size = 256
@@ -153,38 +155,38 @@ class SiteGraph:
         field = self._fields.get(goal)
         if field is not None:
             return self._descend(start, goal, field)
-        gx, gy = self.xy[goal]
+        return self._astar(self.index[start], self.index[goal])
+
+    def _astar(self, s: int, g: int) -> PathResult:
+        """A* over integer node indexes (targets without a precomputed distance field)."""
+        xs, ys, adj = self._xs, self._ys, self._adj_i
+        gx, gy = xs[g], ys[g]
         scale, shift = self._h_scale, self._h_shift
-        xy, adj = self.xy, self.adj
-        best: dict[str, float] = {start: 0.0}
-        came: dict[str, str] = {}
-        sx, sy = xy[start]
-        heap: list[tuple[float, float, str]] = [
-            (max(0.0, math.hypot(sx - gx, sy - gy) * scale - shift), 0.0, start)
-        ]
-        closed: set[str] = set()
+        hypot, pop, push = math.hypot, heapq.heappop, heapq.heappush
+        best = [math.inf] * len(xs)
+        came = [-1] * len(xs)
+        best[s] = 0.0
+        heap = [(max(0.0, hypot(xs[s] - gx, ys[s] - gy) * scale - shift), 0.0, s)]
         while heap:
-            _, g, node = heapq.heappop(heap)
-            if node == goal:
+            _, cost_here, node = pop(heap)
+            if node == g:
                 break
-            if node in closed:
+            if cost_here > best[node]:
                 continue
-            closed.add(node)
             for nxt, cost in adj[node]:
-                ng = g + cost
-                if ng < best.get(nxt, math.inf):
+                ng = cost_here + cost
+                if ng < best[nxt]:
                     best[nxt] = ng
                     came[nxt] = node
-                    nx, ny = xy[nxt]
-                    h = math.hypot(nx - gx, ny - gy) * scale - shift
-                    heapq.heappush(heap, (ng + (h if h > 0 else 0.0), ng, nxt))
+                    h = hypot(xs[nxt] - gx, ys[nxt] - gy) * scale - shift
+                    push(heap, (ng + (h if h > 0 else 0.0), ng, nxt))
         else:
-            raise NoPath(f"no path from {start} to {goal}")
-        nodes = [goal]
-        while nodes[-1] != start:
-            nodes.append(came[nodes[-1]])
-        nodes.reverse()
-        return PathResult(nodes, round(best[goal], 3), [self.step(n) for n in nodes])
+            raise NoPath(f"no path from {self.names[s]} to {self.names[g]}")
+        path = [g]
+        while path[-1] != s:
+            path.append(came[path[-1]])
+        nodes = [self.names[i] for i in reversed(path)]
+        return PathResult(nodes, round(best[g], 3), [self.step(n) for n in nodes])
 
     def step(self, node: str) -> PathStep:
         x, y = self.xy[node]
