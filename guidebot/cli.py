@@ -14,6 +14,7 @@ import click
 
 COMMANDS: dict[str, str] = {
     "robot": "robot_agent.cli:robot",
+    "demo": "guidebot.demo:demo",
     "petri": "petri_nets.cli:petri",
     "server": "backend.server_cli:server",
     "site": "backend.site.cli:site",
