@@ -22,6 +22,7 @@ import json
 import random
 import sys
 import tempfile
+import time
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,7 @@ from guidebot.messages import Message
 __all__ = ["main"]
 
 BUTTONS_PER_MODULE = 8
+PRESSERS = 5  # concurrent "visitors", each on its own modules
 
 
 def synthetic_building(modules: int, period_ms: int) -> dict[str, Any]:
@@ -114,7 +116,7 @@ async def run(modules: int, period_ms: int, filter_ms: float, seconds: float) ->
             key = (message.payload["module"], message.payload["point"])
             future = detected.get(key)
             if message.payload["value"] and future is not None and not future.done():
-                future.set_result(loop.time())
+                future.set_result(time.monotonic())
 
         hub.endpoint("bench").subscribe("building_input_changed", on_change)
         async with (
@@ -130,27 +132,34 @@ async def run(modules: int, period_ms: int, filter_ms: float, seconds: float) ->
                 poller.jitter_s.clear()
             process = psutil.Process()
             cpu0, wall0 = sum(process.cpu_times()[:2]), loop.time()
-            rng = random.Random(6)
             press_ms = filter_ms + period_ms + 200  # always long enough to be seen
             detect: list[float] = []
-            end = loop.time() + seconds
-            while loop.time() < end:
-                module = rng.randrange(modules)
-                point = f"in{rng.randrange(BUTTONS_PER_MODULE)}"
-                key = (f"m{module}", point)
-                future: asyncio.Future[float] = loop.create_future()
-                detected[key] = future
-                sent = loop.time()
-                reply = await http.post(
-                    f"/buttons/b{module}_{point[2:]}/press", json={"ms": press_ms}
-                )
-                reply.raise_for_status()
-                started = (sent + loop.time()) / 2
-                with contextlib.suppress(TimeoutError):
-                    detect.append((await asyncio.wait_for(future, 5) - started) * 1000)
-                del detected[key]
-                # Let the press end, then a random phase against the poll grid.
-                await asyncio.sleep(press_ms / 1000 + rng.uniform(0.05, period_ms / 1000))
+            stop_at = time.monotonic() + seconds
+            workers = min(PRESSERS, modules)
+
+            async def presser(worker: int) -> None:
+                """Presses buttons of its own modules (worker, worker + W, ...), one at a time."""
+                rng = random.Random(worker)
+                mine = list(range(worker, modules, workers))
+                while time.monotonic() < stop_at:
+                    module = rng.choice(mine)
+                    button = rng.randrange(BUTTONS_PER_MODULE)
+                    key = (f"m{module}", f"in{button}")
+                    future: asyncio.Future[float] = loop.create_future()
+                    detected[key] = future
+                    sent = time.monotonic()
+                    reply = await http.post(
+                        f"/buttons/b{module}_{button}/press", json={"ms": press_ms}
+                    )
+                    reply.raise_for_status()
+                    started = (sent + time.monotonic()) / 2
+                    with contextlib.suppress(TimeoutError):
+                        detect.append((await asyncio.wait_for(future, 5) - started) * 1000)
+                    del detected[key]
+                    # Let the press end, then a random phase against the poll grid.
+                    await asyncio.sleep(press_ms / 1000 + rng.uniform(0.05, period_ms / 1000))
+
+            await asyncio.gather(*(presser(w) for w in range(workers)))
             cpu = sum(process.cpu_times()[:2]) - cpu0
             wall = loop.time() - wall0
             jitter = [j * 1000 for p in bi.pollers.values() for j in p.jitter_s]
