@@ -42,25 +42,27 @@ class SiteService:
     async def replace(self, data: dict[str, Any] | Site) -> Site:
         """Validate (raises SiteInvalid with every problem), store, apply."""
         site = data if isinstance(data, Site) else validate_site(data)
-        return await self._apply(site)
+        async with self._lock:
+            return await self._apply(site)
 
     async def edit(self, change: Callable[[dict[str, Any]], Awaitable[None] | None]) -> Site:
-        """Apply ``change`` to a copy of the current document, then replace as a whole."""
+        """Apply ``change`` to a copy of the current document, then replace it as a whole.
+
+        Edits are serialised: two concurrent edits both land, neither overwrites the other."""
         async with self._lock:
             doc = self.site.model_dump(mode="json")
             result = change(doc)
             if result is not None:
                 await result
-            site = validate_site(doc)
-        return await self._apply(site)
+            return await self._apply(validate_site(doc))
 
     async def _apply(self, site: Site) -> Site:
-        async with self._lock:
-            if self.store is not None:
-                self.version = await self.store.save_site(site.model_dump(mode="json"))
-            else:
-                self.version += 1
-            self.site = site
-            for listener in self._listeners:
-                listener(site)
-            return site
+        """Store and hand to the listeners; the caller holds the lock."""
+        if self.store is not None:
+            self.version = await self.store.save_site(site.model_dump(mode="json"))
+        else:
+            self.version += 1
+        self.site = site
+        for listener in self._listeners:
+            listener(site)
+        return site

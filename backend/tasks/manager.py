@@ -134,10 +134,18 @@ class TaskManager:
             else:
                 info.config = cfg
         for name in [n for n in self.robots if site.robot(n) is None]:
-            info = self.robots.pop(name)
-            self._idle.discard(name)
+            info = self.robots[name]
             if info.current is not None:
                 self._requeue(self.tasks[info.current], "robot removed from the site")
+            del self.robots[name]
+            self._idle.discard(name)
+        for task in [t for t in self.queue.ordered()]:
+            try:
+                self._target_node(task.kind, task.params)
+            except TaskError as exc:
+                self.queue.remove(task.id)
+                task.move(TaskState.CANCELLED, reason=f"the site changed: {exc}")
+                self._changed(task, "cancelled")
         self.dispatch()
 
     def restore(self, tasks: list[Task]) -> None:
@@ -306,7 +314,10 @@ class TaskManager:
         timed = self.assign_times_ms is not None
         for task in self.queue.head():
             t0 = time.perf_counter() if timed else 0.0
-            best = self._best_robot(task, free)
+            try:
+                best = self._best_robot(task, free)
+            except TaskError:
+                continue  # cannot happen after load_site's check; never stop the others
             if best is None:
                 continue
             plan.append((task, best))

@@ -3,10 +3,14 @@ alarms, robot loss, reassignment, idle robots and reconciliation after a restart
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import asyncio
+from collections.abc import Awaitable, Callable, Iterator
+from typing import Any
 
 import pytest
 
+from backend.site import validate_site
+from backend.site.service import SiteService
 from backend.tasks import Task, TaskError, TaskManager, TaskState
 from guidebot.bus import Bus
 from guidebot.messages import Message
@@ -325,3 +329,28 @@ async def test_button_press_requests_a_task_and_lights_its_led(
     building.publish("building_input_changed", {**press, "value": 0})  # release: nothing
     assert len(list(manager.queue.ordered())) == 0
     watcher.stop()
+
+
+async def test_site_change_cancels_queued_tasks_it_invalidates(manager: TaskManager) -> None:
+    doomed = manager.request("tour", {"tour": "highlights"})
+    kept = manager.request("tour", {"tour": "ground"})
+    doc = manager.site.model_dump(mode="json")
+    doc["tours"] = [t for t in doc["tours"] if t["id"] != "highlights"]
+    manager.load_site(validate_site(doc))
+    assert doomed.state is TaskState.CANCELLED and "unknown tour" in doomed.reason
+    assert kept.state is TaskState.QUEUED and manager.queue_position(kept) == 1
+
+
+async def test_concurrent_site_edits_both_land() -> None:
+    service = SiteService(demo_site(), 1)
+
+    def add(poi_id: str) -> Callable[[dict[str, Any]], Awaitable[None]]:
+        async def change(doc: dict[str, Any]) -> None:
+            await asyncio.sleep(0)  # let the other edit run in between
+            doc["pois"].append({"id": poi_id, "node": "hall"})
+
+        return change
+
+    await asyncio.gather(service.edit(add("a")), service.edit(add("b")))
+    ids = {p.id for p in service.site.pois}
+    assert {"a", "b"} <= ids and service.version == 3
