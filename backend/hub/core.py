@@ -13,8 +13,9 @@ drains ``RemoteClient.outbox``.
 from __future__ import annotations
 
 import enum
+import fnmatch
 import logging
-from collections.abc import Callable
+from collections.abc import Iterable
 from typing import Any
 
 import orjson
@@ -22,7 +23,7 @@ from pydantic import BaseModel, ValidationError
 from pydantic_core import to_jsonable_python
 
 from backend.auth import Role
-from guidebot.bus import Bus, Endpoint
+from guidebot.bus import Bus, Endpoint, is_wildcard
 from guidebot.messages import Message, known_types, payload_model
 
 from .outbox import Outbox, OutboxOverflow
@@ -95,7 +96,7 @@ class HubBus(Bus):
         destination = message.destination
         if destination is not None:
             client = self.remote.get(destination)
-            if client is not None and client.last_message is not message:
+            if client is not None:
                 client.deliver(message)
                 delivered += 1
         return delivered
@@ -111,7 +112,6 @@ class RemoteClient:
         self.endpoint = endpoint
         self.outbox = Outbox(hub.queue_size, hub.coalesce_after)
         self.patterns: dict[str, bool] = {}
-        self.last_message: Message | None = None
         self.state = ClientState.OPEN
         self.close_code: int | None = None
         self.close_reason = ""
@@ -123,10 +123,9 @@ class RemoteClient:
         self.state = new
 
     def deliver(self, message: Message) -> None:
-        """Bus handler: queue the shared serialised bytes; overflow closes this client only."""
-        if message is self.last_message or self.state is not ClientState.OPEN:
-            return  # several matching patterns deliver once
-        self.last_message = message
+        """Queue a message addressed to this client; overflow closes this client only."""
+        if self.state is not ClientState.OPEN:
+            return
         key = message.source if message.type in COALESCED_TYPES else None
         try:
             self.outbox.put(self.hub.encode(message), key)
@@ -187,16 +186,6 @@ class RemoteClient:
         }
 
 
-class _Group:
-    """The WebSocket clients subscribed to one pattern."""
-
-    __slots__ = ("members", "unsubscribe")
-
-    def __init__(self) -> None:
-        self.members: tuple[RemoteClient, ...] = ()
-        self.unsubscribe: Callable[[], None] = lambda: None
-
-
 class Hub:
     """JCentral: one bus for in-process modules and WebSocket clients (docs/protocol.md)."""
 
@@ -222,10 +211,13 @@ class Hub:
         self._encoded_message: Message | None = None
         self._encoded = b""
         self._gui_counter = 0
-        # Remote subscriptions are grouped by pattern: one bus subscription per pattern fans a
-        # message out to every WebSocket client of the group (serialised once).
+        # WebSocket subscriptions, by pattern: one bus subscription ("*") finds every remote
+        # recipient of a message once, however many of its patterns match, and queues the
+        # message serialised once. Tuples: replaced, never mutated, so iteration is safe.
         self._own = self.bus.endpoint(HUB_NAME)
-        self._groups: dict[str, _Group] = {}
+        self._exact: dict[str, tuple[RemoteClient, ...]] = {}
+        self._wild: dict[str, tuple[RemoteClient, ...]] = {}
+        self._own.subscribe("*", self._fan_out)
 
     # -- in-process side --------------------------------------------------------------------
     def endpoint(self, name: str) -> Endpoint:
@@ -246,36 +238,39 @@ class Hub:
         return self._encoded
 
     def _join(self, client: RemoteClient, pattern: str) -> None:
-        group = self._groups.get(pattern)
-        if group is None:
-            group = self._groups[pattern] = _Group()
-            group.unsubscribe = self._own.subscribe(
-                pattern, lambda message: self._fan_out(group, message)
-            )
-        group.members = (*group.members, client)
+        table = self._wild if is_wildcard(pattern) else self._exact
+        table[pattern] = (*table.get(pattern, ()), client)
 
     def _leave(self, client: RemoteClient, pattern: str) -> None:
-        group = self._groups.get(pattern)
-        if group is None:
-            return
-        group.members = tuple(c for c in group.members if c is not client)
-        if not group.members:
-            group.unsubscribe()
-            del self._groups[pattern]
+        table = self._wild if is_wildcard(pattern) else self._exact
+        members = tuple(c for c in table.get(pattern, ()) if c is not client)
+        if members:
+            table[pattern] = members
+        else:
+            table.pop(pattern, None)
 
-    def _fan_out(self, group: _Group, message: Message) -> None:
-        """Bus handler of a pattern group: queue the shared bytes for each member once."""
+    def _fan_out(self, message: Message) -> None:
+        """Queue a published message for every WebSocket client subscribed to its type."""
         if message.destination is not None:
             return  # addressed messages reach their client through HubBus.publish
-        data: bytes | None = None
-        key: str | None = None
-        for client in group.members:
-            if client.last_message is message or client.state is not ClientState.OPEN:
+        type_ = message.type
+        recipients: Iterable[RemoteClient] | None = self._exact.get(type_)
+        several = False
+        for pattern, members in self._wild.items():
+            if fnmatch.fnmatchcase(type_, pattern):
+                if recipients is None:
+                    recipients = members
+                else:
+                    recipients, several = (*recipients, *members), True
+        if not recipients:
+            return
+        if several:
+            recipients = dict.fromkeys(recipients)  # a client matched twice gets it once
+        data = self.encode(message)
+        key = message.source if type_ in COALESCED_TYPES else None
+        for client in recipients:
+            if client.state is not ClientState.OPEN:
                 continue
-            client.last_message = message
-            if data is None:
-                data = self.encode(message)
-                key = message.source if message.type in COALESCED_TYPES else None
             try:
                 client.outbox.put(data, key)
             except OutboxOverflow as exc:
