@@ -518,7 +518,9 @@ class TaskManager:
         robot.offline_since = None
         robot.last_seen = self.clock()
         robot.mode = str(p.get("mode", "idle"))
+        moved = False
         if isinstance(p.get("node"), str) and p["node"] in self.graph:
+            moved = robot.node != p["node"]
             robot.node = p["node"]
         robot.floor = p.get("floor") or robot.floor
         battery = p.get("battery")
@@ -526,14 +528,18 @@ class TaskManager:
             robot.battery = float(battery)
             if robot.needs_charge and robot.battery >= 0.95:
                 robot.needs_charge = False
+                came_back = True  # available again: worth a dispatch
         reported = p.get("task_id") or None
         robot.reported_task = reported
+        before = robot.current
         was_fault = robot.fault
         robot.fault = robot.mode == "fault"
         self._reconcile(robot, reported)
         if robot.fault and not was_fault and robot.current is not None:
             self._requeue(self.tasks[robot.current], "robot fault")
-        if came_back or was_fault != robot.fault or robot.current is None:
+        # robot_state comes at a steady rate from every robot: re-plan only on news.
+        released = robot.current is None and before is not None
+        if came_back or was_fault != robot.fault or released or (robot.current is None and moved):
             self.dispatch()
 
     def _reconcile(self, robot: RobotInfo, reported: str | None) -> None:

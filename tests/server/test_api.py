@@ -318,3 +318,17 @@ async def test_events_are_paged(server: RunningServer, http: Http) -> None:
     rest = (await staff.get("/api/events", params={"after_id": first["next_after_id"]})).json()
     ids = [e["id"] for e in first["events"] + rest["events"]]
     assert ids == sorted(set(ids)) and len(ids) >= 3
+
+
+async def test_path_across_floors_through_doors_over_rest_and_hub(
+    server: RunningServer, http: Http
+) -> None:
+    staff = http(OPERATOR_TOKEN)
+    path = (await staff.get("/api/paths", params={"from_node": "gb1", "to_node": "gc3"})).json()
+    doors = [s["door"] for s in path["steps"] if s["door"]]
+    assert doors == ["door_gallery", "door_upstairs"]
+    assert path["areas"] == ["corridor", "elevator"]
+    assert {s["floor"] for s in path["steps"]} == {"F0", "F1"}
+    async with robot(server, "R2", "gb1") as r2:
+        reply = await r2.client.request("get_path", {"robot": "R2", "to_node": "gc3"})
+        assert reply.payload["nodes"] == path["nodes"]  # from its reported position
