@@ -165,8 +165,13 @@ def main(cycles: int, frames: int, samples: int, as_json: bool) -> None:
             "command_to_frame_ms": percentiles(latency),
         }
 
-    logging.getLogger("robot_agent.robocan").setLevel(logging.ERROR)  # lost modules are expected
-    result = asyncio.run(run())
+    logger = logging.getLogger("robot_agent.robocan")
+    level = logger.level
+    logger.setLevel(logging.ERROR)  # lost modules are expected here
+    try:
+        result = asyncio.run(run())
+    finally:
+        logger.setLevel(level)
     if not as_json:
         click.echo(
             f"plug -> online {result['plug_detect_ms']} ms, unplug -> lost "
