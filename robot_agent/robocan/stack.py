@@ -133,10 +133,12 @@ class RoboCanStack:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
-        if self.simulator is not None:
-            await self.simulator.stop()
+        # Masters first: a robot shutting down must not report every module lost and a base
+        # fault on its way out.
         for master in self.masters:
             await master.stop()
+        if self.simulator is not None:
+            await self.simulator.stop()
         for bus in self._buses:
             bus.shutdown()
         self.masters.clear()

@@ -374,3 +374,10 @@ async def test_a_stalled_process_does_not_lose_its_modules(
     assert master.counters.stalls >= 1
     assert not [m for m in watch.of("module_status") if m.payload["state"] == "lost"]
     assert stack.online() == BELLBOT_IDS
+
+
+async def test_shutdown_reports_no_loss(onboard: Bus, channel: str, watch: Watch) -> None:
+    async with RoboCanStack(onboard.endpoint("robocan"), [channel]) as stack:
+        await stack.wait_online()
+    assert not [m for m in watch.of("module_status") if m.payload["state"] == "lost"]
+    assert not watch.of("base_fault")
