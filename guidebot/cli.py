@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
 }
 
 BENCHMARKS: dict[str, str] = {
+    "robot": "bench.robot:main",
     "hub": "bench.hub:hub",
     "petri": "bench.petri:main",
     "robocan": "bench.robocan:main",

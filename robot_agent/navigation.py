@@ -527,8 +527,11 @@ class Navigator:
         self.state = NavState.MOVING
         distance = math.hypot(x - self.x, y - self.y)
         budget = self.clock.now() + 20.0 + 4.0 * distance / self.max_speed
+        fresh = self._odom is not None  # first command at once, from the pose we have
         while True:
-            await self._next_odometry()
+            if not fresh:
+                await self._next_odometry()
+            fresh = False
             self._check_fault()
             if self.clock.now() < self._bumped_until:
                 self.state = NavState.BUMPED

@@ -1,0 +1,226 @@
+"""``guidebot bench robot``: the robot agent's reaction time and footprint.
+
+- cmd_to_velocity_frame_ms: a task arriving over the link (task_assigned received by the
+  robot's link from the hub) -> the first non-zero velocity frame on the robot's CAN bus. In
+  between: RG dispatch starts navigate_to_point, navigation asks the Traffic Manager for a path
+  over the hub (a WebSocket round trip), plans, commands the base, the RoboCAN base entity
+  sends the frame. The GuideBot paper's T8 -> T14, 772 ms on average. Real server on loopback,
+  real agent with simulated RoboCAN modules, time scale 1.
+- cpu_percent_idle / cpu_percent_touring / rss_mb: a separate ``guidebot robot --simulate``
+  process connected to the same server: its CPU (percent of one core) while idle (waiting net
+  running, state at 1 Hz, CAN watchdogs) and while giving a tour, and its resident memory.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import sys
+import tempfile
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import can
+import click
+import httpx
+import psutil
+import yaml
+
+from guidebot.benchutil import percentiles, print_result
+
+ROOT = Path(__file__).resolve().parent.parent
+SITE = ROOT / "sites" / "demo_museum.yaml"
+
+
+class _FirstMovingFrame(can.Listener):
+    """Remembers the wall time of the first velocity frame with a non-zero speed after arm()."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.at: float | None = None
+        self._armed = False
+
+    def arm(self) -> None:
+        self.at = None
+        self.event.clear()
+        self._armed = True
+
+    def on_message_received(self, msg: can.Message) -> None:
+        from robot_agent.robocan import protocol as p
+
+        if not self._armed or not msg.data or msg.data[0] != p.Op.SET_VELOCITY or msg.dlc < 6:
+            return
+        if int.from_bytes(msg.data[2:6], "little", signed=True) != 0:
+            self._armed = False
+            self.at = msg.timestamp
+            self.event.set()
+
+
+def _bench_site(tmp: Path, robots: list[str]) -> Path:
+    from backend.site.yamlio import load_site_file
+
+    data = load_site_file(SITE).model_dump(mode="json")
+    data["robots"] = [r for r in data["robots"] if r["name"] in robots]
+    data["modules"] = []  # no building: the path used here crosses no door or elevator
+    data["doors"], data["elevators"], data["buttons"] = [], [], []
+    path = tmp / "site.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+async def _latency(server: Any, site: Path, samples: int) -> list[float]:
+    from robot_agent.agent import AgentConfig, RobotAgent
+
+    channel = f"bench-{uuid.uuid4().hex[:8]}"
+    tap = _FirstMovingFrame()
+    tap_bus = can.Bus(interface="virtual", channel=channel)
+    notifier = can.Notifier(tap_bus, [tap], timeout=0.05)
+    config = AgentConfig(
+        name="R1",
+        server=server.url,
+        token="robot-R1-demo-token",
+        can=f"virtual:{channel}",
+        simulate=True,
+        time_scale=1.0,
+        start_node="entrance",
+        site=site,
+        speech_engine=None,
+    )
+    arrived: dict[str, float] = {}
+    results: list[float] = []
+    headers = {"Authorization": f"Bearer {server.admin_token}"}
+    try:
+        async with (
+            RobotAgent(config) as agent,
+            httpx.AsyncClient(base_url=server.url, headers=headers) as http,
+        ):
+            assert agent.link is not None and agent.hardware is not None
+            await agent.hardware.stack.wait_online(timeout=30)  # type: ignore[attr-defined]
+
+            def on_down(message: Any) -> None:
+                if message.type == "task_assigned":
+                    arrived[str(message.payload.get("task_id"))] = time.time()
+
+            agent.link.on_message_down = on_down
+            for i in range(samples):
+                # A cancelled goal leaves the robot's node unchanged: always ask for the other.
+                target = "hall" if agent.navigator.node != "hall" else "entrance"
+                await _idle(agent, http)
+                tap.arm()
+                r = await http.post(
+                    "/api/tasks",
+                    json={"kind": "go_to", "params": {"node": target}, "robot": "R1"},
+                )
+                r.raise_for_status()
+                task_id = r.json()["id"]
+                if not await asyncio.to_thread(tap.event.wait, 10.0):
+                    tasks = (await http.get("/api/tasks")).json()["tasks"]
+                    summary = [(t["kind"], t["state"], t["robot"], t["reason"]) for t in tasks]
+                    raise RuntimeError(f"sample {i}: no velocity frame within 10 s: {summary}")
+                assert tap.at is not None
+                results.append((tap.at - arrived[task_id]) * 1000.0)
+                await http.post(f"/api/tasks/{task_id}/cancel", json={"reason": "bench"})
+    finally:
+        await asyncio.to_thread(notifier.stop, 1.0)
+        tap_bus.shutdown()
+    return results
+
+
+async def _idle(agent: Any, http: httpx.AsyncClient) -> None:
+    """Wait until the robot has no main task (cancel the Task Manager's own errands)."""
+    deadline = time.monotonic() + 30
+    while agent.tasks.current is not None:
+        if time.monotonic() > deadline:
+            raise RuntimeError("the robot stays busy")
+        await http.post(f"/api/tasks/{agent.tasks.current.task_id}/cancel", json={"reason": "x"})
+        await asyncio.sleep(0.2)
+    await asyncio.sleep(0.3)  # let the cancelled goal unwind and the base come to rest
+
+
+async def _footprint(server: Any, site: Path, seconds: float) -> dict[str, float]:
+    args = [sys.executable, "-m", "guidebot.cli", "robot", "--name", "R2", "--server", server.url]
+    args += ["--token", "robot-R2-demo-token", "--simulate", "--can", "virtual:R2", "--site"]
+    args += [str(site), "--start-node", "charge_b", "--log-level", "warning"]
+    child = await asyncio.create_subprocess_exec(
+        *args, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL
+    )
+    headers = {"Authorization": f"Bearer {server.admin_token}"}
+    try:
+        assert child.stdout is not None
+        line = await asyncio.wait_for(child.stdout.readline(), 60)
+        if b"ready" not in line:
+            raise RuntimeError(f"robot process did not start: {line!r}")
+        proc = psutil.Process(child.pid)
+        await asyncio.sleep(3.0)  # bring-up of the CAN modules done, idle net running
+        proc.cpu_percent(None)
+        await asyncio.sleep(seconds)
+        idle = proc.cpu_percent(None)
+        async with httpx.AsyncClient(base_url=server.url, headers=headers) as http:
+            r = await http.post(
+                "/api/tasks",
+                json={"kind": "tour", "params": {"tour": "ground"}, "robot": "R2"},
+            )
+            r.raise_for_status()
+            await asyncio.sleep(1.0)
+            proc.cpu_percent(None)
+            await asyncio.sleep(seconds)
+            touring = proc.cpu_percent(None)
+            rss = proc.memory_info().rss / 1e6
+        return {"cpu_percent_idle": idle, "cpu_percent_touring": touring, "rss_mb": rss}
+    finally:
+        child.terminate()
+        try:
+            await asyncio.wait_for(child.wait(), 15)
+        except TimeoutError:
+            child.kill()
+            await child.wait()
+
+
+async def _run(samples: int, seconds: float) -> dict[str, Any]:
+    from backend.settings import Settings
+    from backend.testing import running_server
+
+    with tempfile.TemporaryDirectory(prefix="guidebot-bench-robot-") as tmp:
+        site = _bench_site(Path(tmp), ["R1", "R2"])
+        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp}/bench.db", site=site)
+        async with running_server(settings) as server:
+            latencies = await _latency(server, site, samples)
+            footprint = await _footprint(server, site, seconds)
+    return {
+        "cmd_to_velocity_frame_ms": percentiles(latencies, digits=2),
+        "cpu_percent_idle": round(footprint["cpu_percent_idle"], 2),
+        "cpu_percent_touring": round(footprint["cpu_percent_touring"], 2),
+        "rss_mb": round(footprint["rss_mb"], 1),
+    }
+
+
+@click.command()
+@click.option("--samples", type=click.IntRange(min=1), default=30, show_default=True)
+@click.option(
+    "--seconds",
+    type=click.FloatRange(min=1),
+    default=10.0,
+    show_default=True,
+    help="Length of each CPU measurement window.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
+def main(samples: int, seconds: float, as_json: bool) -> None:
+    """Task over the link -> first velocity frame on CAN; idle and touring CPU; memory."""
+    logging.basicConfig(level=logging.ERROR)
+    result = asyncio.run(_run(samples, seconds))
+    if not as_json:
+        latency = result["cmd_to_velocity_frame_ms"]
+        click.echo(
+            f"task -> velocity frame: p50 {latency['p50']} ms, p99 {latency['p99']} ms "
+            "(paper T8->T14: 772 ms average)"
+        )
+        click.echo(
+            f"robot process: idle {result['cpu_percent_idle']}% of a core, touring "
+            f"{result['cpu_percent_touring']}%, {result['rss_mb']} MB resident"
+        )
+    with contextlib.suppress(BrokenPipeError):
+        print_result(result)
