@@ -1,0 +1,234 @@
+"""Speech, battery logic, the task runner, the head watchdog and the link, each on a real Bus."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import pytest
+
+from guidebot.bus import Bus
+from guidebot.messages import Message
+from robot_agent.battery import BatteryMonitor
+from robot_agent.clock import Clock
+from robot_agent.head import HeadWatchdog
+from robot_agent.link import Link
+from robot_agent.speech import Speech, simulated_duration
+from robot_agent.tasks import IllegalTransition, MainTask, TaskPhase, TaskRunner
+
+
+async def test_speech_simulated_is_scaled_by_the_clock(helpers: Any) -> None:
+    bus = Bus()
+    speech = Speech(bus.endpoint("speech"), Clock(50.0), engine=None)
+    speech.start()
+    seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
+    text = "Welcome to the museum, please follow me to the first room."
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    bus.endpoint("net").publish("say", {"text": text})
+    await seen.wait_for(lambda: seen.of("speech_ended"))
+    took = loop.time() - t0
+    assert [m.type for m in seen.messages] == ["speech_started", "speech_ended"]
+    assert seen.of("speech_ended")[0].payload["text"] == text
+    # Robot time is 50x wall time: a ~5 s sentence takes well under its real duration.
+    assert took < simulated_duration(text)
+    await speech.stop()
+
+
+async def test_speech_with_espeak_ng(helpers: Any) -> None:
+    import shutil
+
+    if shutil.which("espeak-ng") is None:
+        pytest.skip("espeak-ng not installed (make system-deps)")
+    bus = Bus()
+    speech = Speech(bus.endpoint("speech"), Clock(100.0))
+    assert speech.engine is not None
+    speech.start()
+    seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
+    bus.endpoint("net").publish("say", {"text": "Hello visitors.", "lang": "en"})
+    await seen.wait_for(lambda: seen.of("speech_ended"))
+    assert seen.of("speech_ended")[0].payload["outcome"] == "done"
+    await speech.stop()
+
+
+async def test_a_new_say_interrupts_the_current_one(helpers: Any) -> None:
+    bus = Bus()
+    speech = Speech(bus.endpoint("speech"), Clock(1.0), engine=None)
+    speech.start()
+    seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
+    net = bus.endpoint("net")
+    net.publish("say", {"text": "a long story " * 50})
+    await seen.wait_for(lambda: seen.of("speech_started"))
+    net.publish("say", {"text": "Short."})
+    await seen.wait_for(lambda: len(seen.of("speech_ended")) == 2)
+    first, second = seen.of("speech_ended")
+    assert first.payload["outcome"] == "interrupted"
+    assert second.payload == {"text": "Short.", "outcome": "done"}
+    await speech.stop()
+
+
+def test_battery_thresholds_fire_once_per_discharge(helpers: Any) -> None:
+    bus = Bus()
+    battery = BatteryMonitor(bus.endpoint("battery"), "R1", low=0.3, panic=0.1)
+    battery.start()
+    seen = helpers.Recorder(bus.endpoint("t"), "battery_low", "battery_panic", "charged")
+    entity = bus.endpoint("entity")
+    for level in (0.5, 0.31, 0.29, 0.25, 0.2, 0.09, 0.05):
+        entity.publish("battery_level", {"level": level, "charging": False})
+    assert [(m.type, m.payload["level"]) for m in seen.messages] == [
+        ("battery_low", 0.29),
+        ("battery_panic", 0.09),
+    ]
+    # Docked and charging: "charged" ends the docking when full, and the alarms re-arm.
+    bus.endpoint("nav").publish("docked", {"station": "station_a", "node": "charge_a"})
+    for level in (0.5, 0.9, 0.96):
+        entity.publish("battery_level", {"level": level, "charging": True})
+    assert seen.of("charged")[0].payload["station"] == "station_a"
+    entity.publish("battery_level", {"level": 0.28, "charging": False})
+    assert len(seen.of("battery_low")) == 2
+
+
+def test_battery_refuses_inconsistent_thresholds() -> None:
+    with pytest.raises(ValueError, match="panic < low"):
+        BatteryMonitor(Bus().endpoint("b"), "R1", low=0.1, panic=0.2)
+
+
+def test_task_phase_transitions_are_checked() -> None:
+    task = MainTask("t1", "give_tour", {}, "i1")
+    task.move(TaskPhase.RUNNING)
+    task.move(TaskPhase.ENDED)
+    with pytest.raises(IllegalTransition, match="ended -> running"):
+        task.move(TaskPhase.RUNNING)
+
+
+def test_task_runner_reports_start_end_cancel_and_refuses_a_second_task(helpers: Any) -> None:
+    bus = Bus()
+    cancelled: list[bool] = []
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", on_cancel=lambda: cancelled.append(True))
+    seen = helpers.Recorder(bus.endpoint("t"), "task_*", "run_petri_net", "kill_petri_net")
+    runner.start()
+    tm = bus.endpoint("task_manager")
+    dispatch = bus.endpoint("dispatch")
+    # Idle: the waiting net runs.
+    assert seen.of("run_petri_net")[0].payload["net"] == "waiting"
+    tm.publish("task_assigned", {"task_id": "t1", "robot": "R1", "net": "give_tour", "params": {}})
+    assert seen.of("kill_petri_net")[0].payload["instance_id"].startswith("R1-waiting")
+    run = seen.of("run_petri_net")[1].payload
+    assert run["net"] == "give_tour" and run["main"] is True
+    assert seen.of("task_started")[0].payload == {"task_id": "t1", "robot": "R1"}
+    # A second main task while busy is refused, the first is untouched.
+    tm.publish("task_assigned", {"task_id": "t2", "robot": "R1", "net": "give_tour"})
+    assert seen.of("task_ended")[0].payload["outcome"] == "failed"
+    assert runner.task_id == "t1"
+    # Cancel: the net is killed, navigation stopped, the end reported as cancelled.
+    tm.publish("task_cancel", {"task_id": "t1", "reason": "battery panic"})
+    assert cancelled == [True]
+    dispatch.publish(
+        "petri_net_ended",
+        {"net": "give_tour", "instance_id": run["instance_id"], "outcome": "killed"},
+    )
+    ended = seen.of("task_ended")[-1].payload
+    assert ended == {
+        "task_id": "t1",
+        "robot": "R1",
+        "outcome": "cancelled",
+        "reason": "battery panic",
+    }
+    assert runner.current is None
+    assert seen.of("run_petri_net")[-1].payload["net"] == "waiting"
+
+
+async def test_head_watchdog_confirms_servos_a_lost_head_never_does(helpers: Any) -> None:
+    bus = Bus()
+    head = HeadWatchdog(bus.endpoint("head_watchdog"), Clock(10.0), timeout_s=1.0, min_wall_s=0.05)
+    head.start()
+    seen = helpers.Recorder(bus.endpoint("t"), "servo_in_position")
+    net = bus.endpoint("net")
+    net.publish("move_servos", {"servos": {"mouth": 0.5, "left_eye": 1.0}})
+    # The real head answers for the mouth only.
+    bus.endpoint("head").publish("servo_in_position", {"servo": "mouth", "position": 0.5})
+    await seen.wait_for(lambda: len(seen.of("servo_in_position")) == 2)
+    degraded = [m.payload for m in seen.messages if m.payload.get("degraded")]
+    assert degraded == [{"servo": "left_eye", "position": 1.0, "degraded": True}]
+    assert head.degraded == 1
+    head.stop()
+
+
+class _FakeUpstream:
+    """Stands in for the hub client's surface only (the end-to-end tests use the real one)."""
+
+    def __init__(self) -> None:
+        self.name = "R1"
+        self.connected = asyncio.Event()
+        self.sent: list[Message] = []
+        self.handlers: dict[str, Any] = {}
+        self.on_connect_callbacks: list[Any] = []
+
+    def send(self, message: Message) -> None:
+        self.sent.append(message.model_copy(update={"source": self.name}))
+
+    def subscribe(self, pattern: str, handler: Any) -> Any:
+        self.handlers[pattern] = handler
+        return lambda: self.handlers.pop(pattern, None)
+
+    def on_connect(self, callback: Any) -> Any:
+        self.on_connect_callbacks.append(callback)
+        return lambda: None
+
+    def deliver(self, message: Message) -> None:
+        self.handlers[message.type](message)
+
+
+async def test_link_routes_replies_to_the_requester_and_never_echoes() -> None:
+    bus = Bus()
+    up = _FakeUpstream()
+    up.connected.set()
+    link = Link(bus.endpoint("link"), up, "R1")
+    link.start()
+    nav = bus.endpoint("navigation")
+    request = asyncio.ensure_future(nav.request("get_path", {"to_node": "hall"}, timeout=5))
+    await asyncio.sleep(0)
+    [sent] = up.sent
+    assert sent.type == "get_path"
+    up.deliver(
+        Message(
+            type="path",
+            source="traffic",
+            destination="R1",
+            correlation_id=sent.id,
+            payload={"steps": []},
+        )
+    )
+    reply = await request
+    assert reply.type == "path" and reply.correlation_id == sent.id
+    # Hub messages published on board are not sent back up.
+    up.deliver(Message(type="door_opened", source="building", payload={"door": "d1"}))
+    assert [m.type for m in up.sent] == ["get_path"]
+    # Messages for another robot are ignored.
+    seen: list[Message] = []
+    nav.subscribe("task_assigned", seen.append)
+    up.deliver(
+        Message(type="task_assigned", source="tm", destination="R2", payload={"task_id": "x"})
+    )
+    assert seen == []
+    await link.stop()
+
+
+async def test_link_resends_reports_that_may_have_died_in_flight() -> None:
+    bus = Bus()
+    up = _FakeUpstream()
+    up.connected.set()
+    states: list[int] = []
+    link = Link(bus.endpoint("link"), up, "R1", on_connect=lambda: states.append(1))
+    link.start()
+    bus.endpoint("tasks").publish("task_ended", {"task_id": "t1", "robot": "R1"})
+    await asyncio.sleep(0.15)  # the link's watcher is running
+    up.connected.clear()  # the Wi-Fi drops
+    await asyncio.sleep(0.3)  # the link notices within its 0.1 s poll
+    up.connected.set()
+    for callback in up.on_connect_callbacks:
+        callback()
+    ended = [m for m in up.sent if m.type == "task_ended"]
+    assert len(ended) == 2 and ended[0].id == ended[1].id  # same id: receivers deduplicate
+    assert states == [1]  # resynchronised (robot_state at once)
+    await link.stop()
