@@ -105,8 +105,9 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
             def log_event(kind: str, data: dict[str, Any]) -> None:
                 store.record_event(kind, "traffic_manager", data)
 
-            traffic = TrafficManager(hub.endpoint("traffic_manager"), site, on_event=log_event)
-            traffic.graph = graph
+            traffic = TrafficManager(
+                hub.endpoint("traffic_manager"), site, graph=graph, on_event=log_event
+            )
             tasks = TaskManager(hub.endpoint("task_manager"), site, graph=graph, store=store)
             buttons = ButtonWatcher(hub.endpoint("buttons"), tasks, site)
             known_tokens: dict[str, str] = {}
@@ -114,8 +115,7 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
 
             def on_site(new: Site) -> None:
                 new_graph = SiteGraph(new)
-                traffic.load_site(new)
-                traffic.graph = new_graph
+                traffic.load_site(new, new_graph)
                 tasks.load_site(new, new_graph)
                 buttons.load_site(new)
                 _sync_robot_tokens(app.state.tokens, new, known_tokens)

@@ -47,16 +47,25 @@ def load_site_text(text: str) -> Site:
     """Parse a YAML site; raises SiteInvalid listing every problem with its line."""
     if len(text.encode()) > MAX_SITE_BYTES:
         raise SiteInvalid([SiteIssue("(document)", f"larger than {MAX_SITE_BYTES} bytes")])
+    loader_class = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when present
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=loader_class)  # a safe loader: plain data only
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = mark.line + 1 if mark is not None else None
         raise SiteInvalid([SiteIssue("(document)", f"not valid YAML: {exc}", line)]) from None
     if not isinstance(data, dict):
         raise SiteInvalid([SiteIssue("(document)", "a site file is a mapping at top level", 1)])
-    return validate_site(data, lines=_line_finder(root))
+
+    finder: list[Any] = []
+
+    def lines(loc: tuple[str | int, ...]) -> int | None:
+        # Only a refused file pays for the node tree that gives line numbers (built once).
+        if not finder:
+            finder.append(_line_finder(yaml.compose(text, Loader=loader_class)))
+        return finder[0](loc)  # type: ignore[no-any-return]
+
+    return validate_site(data, lines=lines)
 
 
 def load_site_file(path: str | Path) -> Site:
@@ -67,4 +76,5 @@ def dump_site(site: Site) -> str:
     """YAML of a site, defaults left out so hand-written files stay short."""
     data = site.model_dump(mode="json", exclude_defaults=True)
     data = {"name": site.name, **data}
-    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)
+    dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+    return yaml.dump(data, Dumper=dumper, sort_keys=False, allow_unicode=True, width=100)

@@ -29,14 +29,21 @@ EventSink = Callable[[str, dict[str, Any]], None]
 class TrafficManager:
     """Paths and area locks for one site; ``load_site`` swaps the map while running."""
 
-    def __init__(self, endpoint: BusEndpoint, site: Site, *, on_event: EventSink | None = None):
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        site: Site,
+        *,
+        graph: SiteGraph | None = None,
+        on_event: EventSink | None = None,
+    ) -> None:
         self.endpoint = endpoint
         self.on_event = on_event
         self._unsubscribe: list[Callable[[], None]] = []
         self._positions: dict[str, str] = {}
         self._paths: dict[str, PathResult] = {}
         self.site = site
-        self.graph = SiteGraph(site)
+        self.graph = graph or SiteGraph(site)
         self.locks = AreaLocks([a.id for a in site.areas])
         self._robots = {r.name for r in site.robots}
 
@@ -58,11 +65,11 @@ class TrafficManager:
             unsubscribe()
         self._unsubscribe.clear()
 
-    def load_site(self, site: Site) -> None:
+    def load_site(self, site: Site, graph: SiteGraph | None = None) -> None:
         """New map, same locks: areas that still exist keep holder and queue."""
         old = self.locks
         self.site = site
-        self.graph = SiteGraph(site)
+        self.graph = graph or SiteGraph(site)
         self._robots = {r.name for r in site.robots}
         self._paths.clear()
         new_areas = [a.id for a in site.areas]
