@@ -6,7 +6,8 @@ hub while many robots ask at once.
 Last line: {"path_ms": {"p50", "p99"}, "lock_rtt_ms": {"p50", "p99"}}.
 path_ms: a robot's position (any node) to a site destination (point of interest, charging
 station, wait point), the queries robots make. lock_rtt_ms: request_area sent by a robot
-endpoint of the JCentral hub until its area_granted arrives, all robots asking concurrently,
+endpoint of the JCentral hub of a running server until its area_granted arrives (the
+``--ws-robots`` WebSocket robots are printed apart), all robots asking concurrently,
 each for its own area (no waiting behind another robot: the round trip itself), each robot
 asking at random times at ``--rate`` per second (open loop). The closed-loop saturation rate
 (every robot asking again the moment it is answered) is printed as information.
@@ -17,16 +18,22 @@ from __future__ import annotations
 import asyncio
 import gc
 import random
+import tempfile
 import time
+from pathlib import Path
 
 import click
 
 from backend.hub import Hub
+from backend.settings import Settings
 from backend.site.schema import Site
 from backend.site.synthetic import synthetic_site
+from backend.site.yamlio import dump_site
+from backend.testing import running_server
 from backend.traffic.graph import SiteGraph
 from backend.traffic.manager import TrafficManager
 from guidebot.benchutil import percentiles, print_result
+from guidebot.client import HubClient
 
 __all__ = ["main"]
 
@@ -54,46 +61,62 @@ def bench_any_pair(graph: SiteGraph, nodes: list[str], queries: int) -> list[flo
 
 
 async def bench_locks(
-    site: Site, robots: int, rate: float, seconds: float
-) -> tuple[list[float], int]:
+    site: Site, robots: int, rate: float, seconds: float, ws_robots: int, tmp: Path
+) -> tuple[list[float], list[float], int]:
     """Open loop: each robot asks at random times (Poisson, ``rate`` per second), as robots
-    reaching restricted areas do; returns round trips measured after a 1 s warm-up."""
-    hub = Hub()
-    traffic = TrafficManager(hub.endpoint("traffic_manager"), site)
-    traffic.start()
-    areas = traffic.locks.areas
-    samples: list[float] = []
-    loop = asyncio.get_running_loop()
-    start = loop.time()
-    warm_until, stop_at = start + 1.0, start + 1.0 + seconds
+    reaching restricted areas do. The first ``ws_robots`` robots are real WebSocket clients
+    of a real server (uvicorn on 127.0.0.1); the others are in-process hub endpoints of that
+    same server. Returns (in-process round trips, WebSocket round trips, requests made),
+    measured after a 1 s warm-up."""
+    site_file = tmp / "site.yaml"
+    site_file.write_text(dump_site(site))
+    settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp / 'bench.db'}", site=site_file)
+    hub_samples: list[float] = []
+    ws_samples: list[float] = []
     asked = 0
+    async with running_server(settings, start_timeout=300) as server:
+        hub = server.app.state.hub
+        areas = server.app.state.traffic.locks.areas
+        loop = asyncio.get_running_loop()
+        clients = [
+            HubClient(server.ws_url, site.robots[k].token) for k in range(min(ws_robots, robots))
+        ]
+        for client in clients:
+            await client.start()
+        for client in clients:
+            await asyncio.wait_for(client.connected.wait(), 30)
+        start = loop.time()
+        warm_until, stop_at = start + 1.0, start + 1.0 + seconds
 
-    async def robot(k: int) -> None:
-        nonlocal asked
-        rng = random.Random(k)
-        name = f"R{k}"
-        endpoint = hub.endpoint(name)
-        area = areas[k % len(areas)]
-        while True:
-            await asyncio.sleep(rng.expovariate(rate))
-            if loop.time() >= stop_at:
-                return
-            t0 = time.perf_counter()
-            reply = await endpoint.request(
-                "request_area", {"robot": name, "area": area}, timeout=30.0
-            )
-            rtt = (time.perf_counter() - t0) * 1000
-            if reply.type != "area_granted":
-                raise RuntimeError(f"refused: {reply.payload}")
-            endpoint.publish("release_area", {"robot": name, "area": area})
-            asked += 1
-            if loop.time() >= warm_until:
-                samples.append(rtt)
+        async def robot(k: int) -> None:
+            nonlocal asked
+            rng = random.Random(k)
+            name = site.robots[k].name
+            endpoint = clients[k] if k < len(clients) else hub.endpoint(name)
+            samples = ws_samples if k < len(clients) else hub_samples
+            area = areas[k % len(areas)]
+            while True:
+                await asyncio.sleep(rng.expovariate(rate))
+                if loop.time() >= stop_at:
+                    return
+                t0 = time.perf_counter()
+                reply = await endpoint.request(
+                    "request_area", {"robot": name, "area": area}, timeout=30.0
+                )
+                rtt = (time.perf_counter() - t0) * 1000
+                if reply.type != "area_granted":
+                    raise RuntimeError(f"refused: {reply.payload}")
+                endpoint.publish("release_area", {"robot": name, "area": area})
+                asked += 1
+                if loop.time() >= warm_until:
+                    samples.append(rtt)
 
-    await asyncio.gather(*(robot(k) for k in range(robots)))
-    traffic.stop()
-    hub.close()
-    return samples, asked
+        try:
+            await asyncio.gather(*(robot(k) for k in range(robots)))
+        finally:
+            for client in clients:
+                await client.close()
+    return hub_samples, ws_samples, asked
 
 
 async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
@@ -124,8 +147,19 @@ async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
 @click.option("--queries", default=5000, show_default=True, help="Path queries to time.")
 @click.option("--rate", default=1.0, show_default=True, help="Area requests per robot per s.")
 @click.option("--seconds", default=5.0, show_default=True, help="Measured lock phase.")
+@click.option(
+    "--ws-robots", default=20, show_default=True, help="Robots that are WebSocket clients."
+)
 @click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
-def main(nodes: int, robots: int, queries: int, rate: float, seconds: float, as_json: bool) -> None:
+def main(
+    nodes: int,
+    robots: int,
+    queries: int,
+    rate: float,
+    seconds: float,
+    ws_robots: int,
+    as_json: bool,
+) -> None:
     """Path and lock latency of the Traffic Manager."""
     if nodes < 4 or robots < 1 or queries < 1 or rate <= 0 or seconds <= 0:
         raise click.UsageError("need nodes >= 4, robots and queries >= 1, rate and seconds > 0")
@@ -139,7 +173,10 @@ def main(nodes: int, robots: int, queries: int, rate: float, seconds: float, as_
     goals = [p.node for p in site.pois] + [c.node for c in site.charging_stations]
     paths = bench_paths(graph, names, goals, queries)
     any_pair = bench_any_pair(SiteGraph(site, warm=False), names, max(50, queries // 20))
-    locks, asked = asyncio.run(bench_locks(site, robots, rate, seconds))
+    with tempfile.TemporaryDirectory(prefix="guidebot-bench-") as tmp:
+        locks, ws_locks, asked = asyncio.run(
+            bench_locks(site, robots, rate, seconds, ws_robots, Path(tmp))
+        )
     ceiling = asyncio.run(saturation(site, robots))
     if not as_json:
         click.echo(
@@ -150,8 +187,11 @@ def main(nodes: int, robots: int, queries: int, rate: float, seconds: float, as_
         click.echo(f"path between any two nodes (A*): {percentiles(any_pair)} ms")
         click.echo(
             f"locks: {robots} robots asking {rate}/s each ({robots * rate:.0f}/s offered), "
-            f"{len(locks)} round trips measured of {asked}; saturation (all asking again at "
-            f"once): {ceiling:.0f} round trips/s"
+            f"{len(locks) + len(ws_locks)} round trips measured of {asked}; saturation (all "
+            f"asking again at once, in-process): {ceiling:.0f} round trips/s"
         )
+        click.echo(f"lock round trip, in-process hub endpoints: {percentiles(locks)} ms")
+        ws_count = min(ws_robots, robots)
+        click.echo(f"lock round trip, {ws_count} WebSocket robots: {percentiles(ws_locks)} ms")
         click.echo("goals: path p99 < 2 ms, lock round trip p99 < 10 ms")
     print_result({"path_ms": percentiles(paths), "lock_rtt_ms": percentiles(locks)})
