@@ -652,6 +652,12 @@ class TaskManager:
             self._changed(task, "cancelled")
             return
         self._leave_robot(task, reason)
+        try:
+            self._target_node(task.kind, task.params)
+        except TaskError as exc:  # the site changed under it: nothing to go back to
+            task.move(TaskState.CANCELLED, reason=f"{reason}; the site changed: {exc}")
+            self._changed(task, "cancelled")
+            return
         task.robot = None
         task.move(TaskState.QUEUED, reason=reason)
         self.queue.push(task)
