@@ -220,12 +220,23 @@ def create_screen_app(screen: OnboardScreen) -> FastAPI:
         await websocket.accept()
         with screen.watch() as queue:
             await websocket.send_json({"kind": "screen", "data": screen.screen()})
-            try:
+
+            async def push() -> None:
                 while True:
-                    event = await queue.get()
-                    await websocket.send_json(event)
-            except WebSocketDisconnect:
-                return
+                    await websocket.send_json(await queue.get())
+
+            async def until_closed() -> None:
+                with contextlib.suppress(WebSocketDisconnect):
+                    while True:
+                        await websocket.receive_text()  # the screen sends nothing; see the close
+
+            pusher = asyncio.create_task(push())
+            try:
+                await until_closed()
+            finally:
+                pusher.cancel()
+                with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, RuntimeError):
+                    await pusher
 
     return app
 
@@ -260,6 +271,7 @@ class ScreenServer:
             log_level="warning",
             lifespan="off",
             ws="websockets-sansio",
+            timeout_graceful_shutdown=2,
         )
         self._server = _QuietServer(config)
         self._task = asyncio.create_task(self._server.serve(), name="screen-server")
