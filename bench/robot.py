@@ -99,6 +99,7 @@ async def _latency(server: Any, site: Path, samples: int) -> list[float]:
             httpx.AsyncClient(base_url=server.url, headers=headers) as http,
         ):
             assert agent.link is not None and agent.hardware is not None
+            assert agent.navigator is not None
             await agent.hardware.stack.wait_online(timeout=30)  # type: ignore[attr-defined]
 
             def on_down(message: Any) -> None:

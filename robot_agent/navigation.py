@@ -260,7 +260,7 @@ class Navigator:
             self._news.set()
 
     def _on_door(self, message: Message) -> None:
-        door = message.payload.get("door")
+        door = str(message.payload.get("door"))
         if message.type == "door_opened":
             self._doors_open.add(door)
         else:
