@@ -337,8 +337,17 @@ async def test_bumper_hit_stops_and_is_reported(tmp_path: Path, demo_site: Site)
 
 
 async def test_head_unplugged_mid_tour_tour_goes_on(tmp_path: Path, demo_site: Site) -> None:
+    """A visitor asks for the tour on the robot's touch screen; the head dies mid-tour."""
     async with fleet_up(tmp_path, demo_site) as fleet:
-        task_id = await fleet.request_task("tour", {"tour": "upstairs"})
+        assert fleet.agent.screen_server is not None
+        async with httpx.AsyncClient(base_url=fleet.agent.screen_server.url) as http:
+            r = await http.post("/api/request", json={"kind": "tour", "tour": "upstairs"})
+        assert r.status_code == 202
+        await fleet.wait_for(lambda: fleet.onboard_of("task_assigned"), timeout=20)
+        assigned = fleet.onboard_of("task_assigned")[0].payload
+        task_id = assigned["task_id"]
+        assert assigned["robot"] == "R1" and assigned["net"] == "give_tour"
+        assert fleet.of("task_request")[0].payload["requester"] == "R1"
         await fleet.wait_for(lambda: fleet.can_tap.velocity_frames(moving=True), timeout=30)
         fleet.agent.bus.endpoint("operator").publish(
             "module_plug", {"module_id": 0x40, "plugged": False}
