@@ -200,7 +200,7 @@ async def _run(samples: int, seconds: float) -> dict[str, Any]:
 
 
 @click.command()
-@click.option("--samples", type=click.IntRange(min=1), default=30, show_default=True)
+@click.option("--samples", type=click.IntRange(min=1), default=60, show_default=True)
 @click.option(
     "--seconds",
     type=click.FloatRange(min=1),
