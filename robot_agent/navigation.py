@@ -41,6 +41,15 @@ class NavigationFailed(Exception):
         self.reason = reason
 
 
+class YieldRequested(Exception):
+    """The Traffic Manager asks this robot to back off from an area (deadlock resolution)."""
+
+    def __init__(self, area: str, node: str) -> None:
+        super().__init__(f"yield {area}, back off to {node}")
+        self.area = area
+        self.node = node
+
+
 class NavState(StrEnum):
     IDLE = "idle"
     PLANNING = "planning"
@@ -124,6 +133,8 @@ class Navigator:
         self.held_areas: set[str] = set()
         self.fault: str | None = None
         self.bumps = 0
+        self.yields = 0
+        self._yield: YieldRequested | None = None
         # Odometry frame -> map frame: map = R(dtheta) * odom + (tx, ty).
         self._odom: tuple[float, float, float] | None = None
         self._dtheta = 0.0
@@ -156,6 +167,7 @@ class Navigator:
             sub("door_closed", self._on_door),
             sub("elevator_in_position", self._on_elevator),
             sub("area_granted", self._on_area_granted),
+            sub("area_yield", self._on_area_yield),
         ]
 
     async def stop(self) -> None:
@@ -281,12 +293,27 @@ class Navigator:
             self._granted.add(str(p.get("area")))
             self._news.set()
 
+    def _on_area_yield(self, message: Message) -> None:
+        p = message.payload
+        if p.get("robot") not in (None, self.robot) or self._goal_task is None:
+            return
+        self._yield = YieldRequested(str(p.get("area")), str(p.get("go_to_node") or ""))
+        self._news.set()
+        self._odom_event.set()
+
     # -- goals --------------------------------------------------------------------------------
 
     async def _goal(self, node: str, request_id: str, *, reply: str, **extra: Any) -> None:
         self.goal = node
         try:
-            await self.go_to(node)
+            for _attempt in range(4):
+                try:
+                    await self.go_to(node)
+                    break
+                except YieldRequested as request:
+                    await self._back_off(request)
+            else:
+                raise NavigationFailed(f"asked to yield too often on the way to {node}")
         except NavigationFailed as failure:
             self._send_velocity(0.0, 0.0, force=True)
             self.ep.publish(
@@ -300,6 +327,19 @@ class Navigator:
         if reply == "docked":
             await self.clock.sleep(self.docking_s)  # the final approach onto the contacts
         self.ep.publish(reply, {**extra, "node": node}, correlation_id=request_id)
+
+    async def _back_off(self, request: YieldRequested) -> None:
+        """Leave the area for its passing place, give it up, then the goal is tried again."""
+        self.yields += 1
+        self._yield = None
+        self._send_velocity(0.0, 0.0, force=True)
+        log.info("%s: yielding area %s, backing off to %s", self.robot, request.area, request.node)
+        if request.node and request.node != self.node:
+            await self.go_to(request.node)
+        if request.area in self.held_areas or request.area in self._granted:
+            self.held_areas.discard(request.area)
+            self._granted.discard(request.area)
+            self.ep.publish("release_area", {"robot": self.robot, "area": request.area})
 
     async def _face_people(self, request_id: str) -> None:
         with contextlib.suppress(NavigationFailed):
@@ -519,6 +559,8 @@ class Navigator:
     def _check_fault(self) -> None:
         if self.fault is not None:
             raise NavigationFailed(f"base fault: {self.fault}")
+        if self._yield is not None:
+            raise self._yield
 
     # -- motion -------------------------------------------------------------------------------
 

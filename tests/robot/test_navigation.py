@@ -116,3 +116,21 @@ async def test_unknown_node_fails_with_the_traffic_managers_reason(rig: Rig) -> 
     rig.bus.endpoint("net").publish("navigate_to", {"node": "nowhere"})
     await rig.seen.wait_for(lambda: bool(rig.seen.of("navigation_failed")))
     assert "nowhere" in rig.seen.of("navigation_failed")[0].payload["reason"]
+
+
+async def test_area_wait_and_yield_then_goal_reached(rig: Rig) -> None:
+    """R2 holds the corridor: R1 waits at its edge, is told to yield (back off to hall), and
+    reaches its goal once R2 has released the corridor."""
+    r2 = rig.bus.endpoint("R2")
+    r2.publish("request_area", {"robot": "R2", "area": "corridor"})
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: rig.seen.of("request_area")[1:])
+    assert rig.nav.state == "waiting_area"
+    rig.traffic.endpoint.publish(
+        "area_yield", {"robot": "R1", "area": "corridor", "go_to_node": "hall"}, destination="R1"
+    )
+    await rig.seen.wait_for(lambda: rig.nav.yields == 1 and rig.nav.node == "hall")
+    r2.publish("release_area", {"robot": "R2", "area": "corridor"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached"), timeout=30)
+    assert rig.nav.node == "gb1"
+    assert not rig.seen.of("navigation_failed")
