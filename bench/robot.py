@@ -5,7 +5,7 @@
   between: RG dispatch starts navigate_to_point, navigation asks the Traffic Manager for a path
   over the hub (a WebSocket round trip), plans, commands the base, the RoboCAN base entity
   sends the frame. The GuideBot paper's T8 -> T14, 772 ms on average. Real server on loopback,
-  real agent with simulated RoboCAN modules, time scale 1.
+  real agent with simulated RoboCAN modules, time scale 1; the server runs in its own process.
 - cpu_percent_idle / cpu_percent_touring / rss_mb: a separate ``guidebot robot --simulate``
   process connected to the same server: its CPU (percent of one core) while idle (waiting net
   running, state at 1 Hz, CAN watchdogs) and while giving a tour, and its resident memory.
@@ -16,11 +16,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import socket
 import sys
 import tempfile
 import threading
 import time
 import uuid
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -181,14 +184,54 @@ async def _footprint(server: Any, site: Path, seconds: float) -> dict[str, float
             await child.wait()
 
 
-async def _run(samples: int, seconds: float) -> dict[str, Any]:
-    from backend.settings import Settings
-    from backend.testing import running_server
+@dataclass
+class _Server:
+    url: str
+    admin_token: str
 
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@contextlib.asynccontextmanager
+async def _server_process(tmp: str, site: Path) -> AsyncIterator[_Server]:
+    """The central server in its own process, as deployed: its work never shares the robot's
+    event loop (a task's path request still crosses it, over loopback)."""
+    port = _free_port()
+    args = [sys.executable, "-m", "guidebot.cli", "server", "--port", str(port), "--site"]
+    args += [str(site), "--db", f"sqlite+aiosqlite:///{tmp}/bench.db", "--log-level", "warning"]
+    child = await asyncio.create_subprocess_exec(
+        *args, stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL
+    )
+    server = _Server(f"http://127.0.0.1:{port}", "dev-admin-token")
+    try:
+        async with httpx.AsyncClient(base_url=server.url) as http:
+            for _ in range(300):
+                with contextlib.suppress(httpx.HTTPError):
+                    if (await http.get("/api/health")).status_code == 200:
+                        break
+                if child.returncode is not None:
+                    raise RuntimeError("the server process exited at start-up")
+                await asyncio.sleep(0.1)
+            else:
+                raise RuntimeError("the server did not answer within 30 s")
+        yield server
+    finally:
+        child.terminate()
+        try:
+            await asyncio.wait_for(child.wait(), 15)
+        except TimeoutError:
+            child.kill()
+            await child.wait()
+
+
+async def _run(samples: int, seconds: float) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="guidebot-bench-robot-") as tmp:
         site = _bench_site(Path(tmp), ["R1", "R2"])
-        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp}/bench.db", site=site)
-        async with running_server(settings) as server:
+        async with _server_process(tmp, site) as server:
             latencies = await _latency(server, site, samples)
             footprint = await _footprint(server, site, seconds)
     return {
