@@ -102,6 +102,13 @@ def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> None:
 )
 @click.option("--db", default="sqlite+aiosqlite:///./guidebot-demo.db", show_default=True)
 @click.option("--no-can", is_flag=True, help="Robots without CAN (a bare simulated base): light.")
+@click.option(
+    "--visitors/--no-visitors",
+    default=True,
+    show_default=True,
+    help="Simulated visitors answer yes to 'continue the tour?' (else tours stop at the "
+    "first point unless someone answers on the touch screen).",
+)
 def demo(
     robots: int,
     time_scale: float,
@@ -110,6 +117,7 @@ def demo(
     gui_port: int,
     db: str,
     no_can: bool,
+    visitors: bool,
 ) -> None:
     """Run the server, the building simulator and N simulated robots until Ctrl-C."""
     from backend.site.yamlio import load_site_file
@@ -135,6 +143,7 @@ def demo(
             args = ["robot", "--name", robot.name, "--server", url, "--token", robot.token]
             args += ["--time-scale", scale, "--site", str(site)]
             args += ["--gui-port", str(gui_port + index)]
+            args += ["--visitor", "yes"] if visitors else []
             args += ["--no-can"] if no_can else ["--simulate", "--can", f"virtual:{robot.name}"]
             fleet.spawn(robot.name, *args)
             screens.append((robot.name, robot.token, f"http://127.0.0.1:{gui_port + index}"))

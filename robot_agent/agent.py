@@ -59,6 +59,8 @@ class AgentConfig:
     speech_engine: str | None = "auto"
     idle_net: str | None = "waiting"
     link_queue_size: int = 1000
+    auto_answer: str | None = None
+    """Demo: a simulated visitor answers "continue the tour?" with this (None: nobody does)."""
 
 
 def hub_ws_url(server: str) -> str:
@@ -237,6 +239,7 @@ class RobotAgent:
                 tours=tours,
                 pois=pois,
                 state=self.state.snapshot_view,
+                auto_answer=c.auto_answer,
             )
             self.screen.start()
             stack.callback(self.screen.stop)

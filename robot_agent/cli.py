@@ -51,6 +51,12 @@ async def run_agent(config: AgentConfig, *, ready: asyncio.Event | None = None) 
 @click.option("--site", type=click.Path(exists=True, path_type=Path), default=None)
 @click.option("--battery-level", type=click.FloatRange(0, 1), default=None)
 @click.option("--state-period", type=click.FloatRange(min=0.05), default=1.0, show_default=True)
+@click.option(
+    "--visitor",
+    type=click.Choice(["yes", "no"]),
+    default=None,
+    help="Demo: a simulated visitor answers the touch screen's question with this.",
+)
 @click.option("--log-level", default="info", show_default=True)
 def robot(
     name: str,
@@ -65,6 +71,7 @@ def robot(
     site: Path | None,
     battery_level: float | None,
     state_period: float,
+    visitor: str | None,
     log_level: str,
 ) -> None:
     """Run one robot agent (on-board bus, RoboCAN, RG dispatch, navigation, speech, link, GUI)."""
@@ -103,6 +110,7 @@ def robot(
         site=site,
         battery_level=battery_level,
         state_period_s=state_period,
+        auto_answer=visitor,
         **robot_params,  # type: ignore[arg-type]
     )
     try:

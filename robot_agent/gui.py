@@ -55,8 +55,11 @@ class OnboardScreen:
         tours: list[dict[str, Any]] | None = None,
         pois: list[dict[str, Any]] | None = None,
         state: Callable[[], dict[str, Any]] | None = None,
+        auto_answer: str | None = None,
     ) -> None:
         self.ep = endpoint
+        self.auto_answer = auto_answer
+        """Demo: a simulated visitor who answers this after 3 robot seconds (None: nobody)."""
         self.clock = clock
         self.robot = robot
         self.tours = tours or []
@@ -150,6 +153,15 @@ class OnboardScreen:
             self.clock.wall(timeout_s), self._close_question, "timeout"
         )
         self._push("ask_continue", self.question)
+        if self.auto_answer is not None:
+            question_id = message.id
+            loop.call_later(
+                self.clock.wall(min(3.0, timeout_s / 2)), self._simulated_visitor, question_id
+            )
+
+    def _simulated_visitor(self, question_id: str) -> None:
+        if self.question is not None and self.question["id"] == question_id:
+            self._close_question(self.auto_answer)
 
     def answer(self, answer: str) -> bool:
         """The visitor touched yes or no; False when no question is open."""

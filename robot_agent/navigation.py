@@ -324,6 +324,7 @@ class Navigator:
             return
         finally:
             self.goal = None
+        log.info("%s: reached %s", self.robot, node)
         if reply == "docked":
             await self.clock.sleep(self.docking_s)  # the final approach onto the contacts
         self.ep.publish(reply, {**extra, "node": node}, correlation_id=request_id)
@@ -351,6 +352,7 @@ class Navigator:
         self._check_fault()
         if node == self.node:
             return
+        log.info("%s: going from %s to %s", self.robot, self.node, node)
         self.state = NavState.PLANNING
         path = await self._get_path(node)
         await self.follow([PathStep.from_payload(s) for s in path.get("steps", [])])

@@ -77,6 +77,7 @@ class Speech:
 
     async def _say(self, text: str, lang: str, request_id: str) -> None:
         self.speaking = text
+        log.info("saying: %s", text[:120])
         self.ep.publish("speech_started", {"text": text}, correlation_id=request_id)
         outcome = "done"
         try:

@@ -151,6 +151,7 @@ class TaskRunner:
             {"net": net, "instance_id": task.instance_id, "params": task.params, "main": True},
         )
         task.move(TaskPhase.RUNNING)
+        log.info("%s: task %s started (%s)", self.robot, task_id, net)
         self._report("task_started", task_id)
 
     def _on_cancel(self, message: Message) -> None:
@@ -191,6 +192,7 @@ class TaskRunner:
         task.move(TaskPhase.ENDED)
         self.current = None
         self.finished.append(task)
+        log.info("%s: task %s %s %s", self.robot, task.task_id, outcome, task.reason)
         self._report("task_ended", task.task_id, outcome=outcome, reason=task.reason)
         self._start_waiting()
 
