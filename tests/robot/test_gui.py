@@ -86,3 +86,15 @@ async def test_continue_question_answer_and_timeout(screen: Screen) -> None:
         net.publish("ask_continue", {"question": "Still there?", "timeout_s": 2})
         await screen.seen.wait_for(lambda: len(screen.seen.of("continue_answer")) == 2)
         assert screen.seen.of("continue_answer")[1].payload == {"answer": "timeout"}
+
+
+async def test_demo_visitor_answers_by_itself(helpers: Any) -> None:
+    bus = Bus()
+    seen = helpers.Recorder(bus.endpoint("t"), "continue_answer")
+    onboard = OnboardScreen(bus.endpoint("screen"), Clock(20.0), "R1", auto_answer="yes")
+    onboard.start()
+    ask = bus.endpoint("net").publish("ask_continue", {"question": "Go on?", "timeout_s": 600})
+    await seen.wait_for(lambda: seen.of("continue_answer"))
+    [answer] = seen.of("continue_answer")
+    assert answer.payload == {"answer": "yes"} and answer.correlation_id == ask.id
+    onboard.stop()
