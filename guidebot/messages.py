@@ -7,6 +7,7 @@ the hub can refuse unknown types and validate known ones.
 
 from __future__ import annotations
 
+import builtins
 import itertools
 import os
 import time
@@ -50,7 +51,7 @@ class Message(BaseModel):
     version: int = ENVELOPE_VERSION
     payload: dict[str, Any] = Field(default_factory=dict)
 
-    def payload_as(self, model: type[M]) -> M:
+    def payload_as(self, model: builtins.type[M]) -> M:
         """Validate the payload against a payload model."""
         return model.model_validate(self.payload)
 

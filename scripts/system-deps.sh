@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian packages the tests use, only those missing (idempotent).
-# espeak-ng: the robots' speech. Chromium and its driver: browser tests of the web pages.
+# espeak-ng: the robots' speech (tests fall back to timed speech without it).
 set -euo pipefail
-wanted=(espeak-ng chromium chromium-driver)
+wanted=(espeak-ng)
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
