@@ -499,6 +499,12 @@ class TaskManager:
             self._set_current(robot, None)
         if task.kind == "charge" and state is TaskState.DONE:
             robot.needs_charge = False
+        if task.kind == "go_to" and state is TaskState.DONE:
+            # The robot is where it was sent; its next robot_state may come a second later
+            # and the idle policy must not send it there again meanwhile.
+            target = task.params.get("node")
+            if isinstance(target, str) and target in self.graph:
+                robot.node = target
         if state is TaskState.DONE and task.started_at and not task.internal:
             took = time.time() - task.started_at
             self._durations[task.kind] = 0.8 * self._durations[task.kind] + 0.2 * took

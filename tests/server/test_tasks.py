@@ -259,6 +259,22 @@ async def test_idle_robots_go_to_stations_or_the_wait_point(bus: Bus, manager: T
     assert task.robot is not None and task.state is TaskState.ASSIGNED
 
 
+async def test_a_robot_that_reached_the_wait_point_is_not_sent_there_again(
+    bus: Bus, manager: TaskManager
+) -> None:
+    """task_ended of a trip home comes before the robot's next robot_state: the Task Manager
+    must not take the stale node for the truth and send the robot home again and again."""
+    robots = [RobotStub(bus, name, "gc3") for name in ("R1", "R2", "R3")]
+    for robot in robots:
+        robot.state()
+    waiter = next(r for r in robots if assigned(r)[0].payload["net"] == "navigate_to_point")
+    trip = assigned(waiter)[0].payload["task_id"]
+    waiter.start(trip)
+    waiter.end(trip)
+    await asyncio.sleep(0.05)
+    assert len(assigned(waiter)) == 1, [m.payload for m in assigned(waiter)]
+
+
 async def test_restart_keeps_queued_and_reconciles_running(bus: Bus, manager: TaskManager) -> None:
     queued = Task("q1", "tour", {"tour": "ground"}, 5, "panel", 1)
     still = Task("r1", "tour", {"tour": "upstairs"}, 5, "panel", 2, TaskState.RUNNING, "R1")
