@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
 # Installs the Debian packages the tests use, only those missing (idempotent).
 # espeak-ng: the robots' speech (tests fall back to timed speech without it).
+# postgresql: the server's second database; tests run a private cluster on 127.0.0.1.
 set -euo pipefail
-wanted=(espeak-ng)
+wanted=(espeak-ng postgresql)
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
 done
 [ ${#missing[@]} -eq 0 ] && exit 0
 if ! command -v apt-get >/dev/null; then
-  echo "system-deps: no apt-get here; install ${missing[*]} by hand (tests that need them are skipped)" >&2
+  echo "system-deps: no apt-get here; install ${missing[*]} by hand (the PostgreSQL tests need it)" >&2
   exit 0
 fi
 sudo=""

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -13,15 +13,16 @@ from backend.settings import Settings, StaticToken
 from backend.testing import RunningServer, running_server
 
 from .helpers import DEMO
+from .postgres import PostgresServer, postgres_server
 
 PANEL_TOKEN = "panel-token-1234"
 OPERATOR_TOKEN = "operator-token-1234"
 GUI_TOKEN = "gui-token-12345678"
 
 
-def server_settings(tmp_path: Path) -> Settings:
+def server_settings(tmp_path: Path, db_url: str | None = None) -> Settings:
     return Settings(
-        db_url=f"sqlite+aiosqlite:///{tmp_path / 'guidebot.db'}",
+        db_url=db_url or f"sqlite+aiosqlite:///{tmp_path / 'guidebot.db'}",
         site=DEMO,
         tokens=[
             StaticToken(token=PANEL_TOKEN, name="panel-1", role=Role.PANEL),
@@ -29,6 +30,21 @@ def server_settings(tmp_path: Path) -> Settings:
             StaticToken(token=GUI_TOKEN, name="gui-1", role=Role.GUI),
         ],
     )
+
+
+@pytest.fixture(scope="session")
+def postgres() -> Iterator[PostgresServer]:
+    """One real PostgreSQL server on 127.0.0.1 for the session."""
+    with postgres_server() as pg:
+        yield pg
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """Both databases the server supports: a SQLite file, and an empty PostgreSQL database."""
+    if request.param == "sqlite":
+        return f"sqlite+aiosqlite:///{tmp_path / 'guidebot.db'}"
+    return str(request.getfixturevalue("postgres").database())
 
 
 @pytest.fixture

@@ -254,8 +254,8 @@ async def test_site_is_edited_while_running_and_broken_files_refused(
     assert (await admin.get("/api/pois/harp")).status_code == 200
 
 
-async def test_restart_keeps_queued_and_reconciles_running(tmp_path: Path) -> None:
-    settings = server_settings(tmp_path)
+async def test_restart_keeps_queued_and_reconciles_running(tmp_path: Path, db_url: str) -> None:
+    settings = server_settings(tmp_path, db_url)
     headers = {"Authorization": f"Bearer {OPERATOR_TOKEN}"}
     async with running_server(settings) as srv:
         async with httpx.AsyncClient(base_url=srv.url, headers=headers) as staff:

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from sqlalchemy import inspect
 
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.tasks.model import Task, TaskState
 
 
-async def test_migrations_build_the_schema_and_the_store_round_trips(tmp_path: Path) -> None:
-    engine = make_engine(f"sqlite+aiosqlite:///{tmp_path / 'm.db'}")
+async def test_migrations_build_the_schema_and_the_store_round_trips(db_url: str) -> None:
+    engine = make_engine(db_url)
     try:
         await migrate(engine)
         await migrate(engine)  # idempotent: already at head
