@@ -52,7 +52,7 @@ class PetriNetEvent(PayloadModel):
 
     instance_id: str
     net: str
-    kind: Literal["started", "fired", "marking", "ended"]
+    kind: Literal["started", "fired", "ended"]
     transition: str | None = None
     marking: dict[str, int] = Field(default_factory=dict)
     time: float
