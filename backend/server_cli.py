@@ -49,4 +49,7 @@ def server(
         f"GuideBot server on http://{settings.host}:{settings.port} "
         f"(docs /docs, hub ws://{settings.host}:{settings.port}/ws)"
     )
-    uvicorn.Server(uvicorn_config(app, settings.host, settings.port, settings.log_level)).run()
+    try:
+        uvicorn.Server(uvicorn_config(app, settings.host, settings.port, settings.log_level)).run()
+    except KeyboardInterrupt:
+        pass  # uvicorn re-raises the Ctrl-C it already handled with a clean shutdown
