@@ -33,8 +33,10 @@ QUEUE_PER_ID = 256  # frames buffered per CAN ID before the oldest is dropped
 DRAIN_BATCH = 16  # frames taken from one ID before moving to the next (fairness)
 QUERY_ATTEMPTS = 3
 RETRY_FAILED_S = 1.0
-SUPERVISE_S = 0.02  # time-out check period
+SUPERVISE_MAX_S = 0.1  # longest sleep of the time-out check (it wakes at the next deadline)
+DEADLINE_EPS_S = 0.001  # wake this much after a deadline, so that it has surely passed
 STALL_S = 0.05  # a supervisor tick this late means the process itself was not running
+RX_TIMEOUT_S = 0.25  # the reader thread's receive time-out: only how fast it notices a stop
 
 
 class ModuleState(enum.Enum):
@@ -164,6 +166,7 @@ class Master:
         self._queue_lock = threading.Lock()
         self._record_lock = threading.Lock()
         self._wake = asyncio.Event()
+        self._wake_pending = False  # a wake-up of the drain task is already on its way
         self._loop: asyncio.AbstractEventLoop | None = None
         self._notifier: can.Notifier | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -180,7 +183,7 @@ class Master:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self.running = True
-        self._notifier = can.Notifier(self.bus, [self._on_frame_thread], timeout=0.05)
+        self._notifier = can.Notifier(self.bus, [self._on_frame_thread], timeout=RX_TIMEOUT_S)
         self._tasks = [
             asyncio.create_task(self._drain(), name="robocan-drain"),
             asyncio.create_task(self._supervise(), name="robocan-supervise"),
@@ -201,7 +204,7 @@ class Master:
                 await task
         self._bring_up.clear()
         if self._notifier is not None:
-            await asyncio.to_thread(self._notifier.stop, 1.0)
+            await asyncio.to_thread(self._notifier.stop, RX_TIMEOUT_S * 4)
         for driver in self.drivers.values():
             driver.close()
 
@@ -313,6 +316,11 @@ class Master:
                 self.counters.overflow += 1
             queue.append(msg)
         self._record(msg)
+        # One wake-up of the event loop per burst, not per frame: the drain task clears the
+        # flag before it empties the queues, so a frame queued after that wakes it again.
+        if self._wake_pending:
+            return
+        self._wake_pending = True
         loop = self._loop
         if loop is not None and not loop.is_closed():
             with contextlib.suppress(RuntimeError):
@@ -323,6 +331,7 @@ class Master:
             await self._wake.wait()
             self._wake.clear()
             while True:
+                self._wake_pending = False
                 batch: list[can.Message] = []
                 with self._queue_lock:
                     for queue in self._queues.values():
@@ -550,17 +559,30 @@ class Master:
             self._publish_status(module)
         log.warning("robocan: module 0x%02X (%s) lost: %s", module.module_id, module.name, reason)
 
+    def _next_deadline(self, now: float) -> float:
+        """The earliest time a module can time out or a block receiver must ask again."""
+        deadline = now + SUPERVISE_MAX_S
+        arrivals = self._arrivals
+        for module in self.modules.values():
+            if module.state is not ModuleState.LOST:
+                seen = max(module.last_seen, arrivals.get(module.module_id, 0.0))
+                deadline = min(deadline, seen + module.lost_timeout_s)
+        for _, last in self._receivers.values():
+            deadline = min(deadline, last + p.BLOCK_TIMEOUT_S)
+        return deadline + DEADLINE_EPS_S
+
     async def _supervise(self) -> None:
-        """Time-outs. Time during which this process was not scheduled (a stalled event loop,
-        a loaded machine) does not count against the modules: the master cannot tell silence
-        from its own absence, so it credits the lag instead of declaring everyone lost."""
-        tick = SUPERVISE_S
-        last = time.monotonic()
+        """Time-outs. The task sleeps until the next deadline (at most SUPERVISE_MAX_S: a
+        module or block seen meanwhile only has later deadlines). Time during which this
+        process was not scheduled (a stalled event loop, a loaded machine) does not count
+        against the modules: the master cannot tell silence from its own absence, so it
+        credits the lag instead of declaring everyone lost."""
         while True:
+            start = time.monotonic()
+            tick = max(self._next_deadline(start) - start, DEADLINE_EPS_S)
             await asyncio.sleep(tick)
             now = time.monotonic()
-            lag = now - last - tick
-            last = now
+            lag = now - start - tick
             if lag > STALL_S:
                 self.counters.stalls += 1
                 for module in self.modules.values():

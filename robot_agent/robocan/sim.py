@@ -4,6 +4,15 @@ The BellBot set of the paper (motor controllers 0x02 and 0x04, sonar rings 0x10 
 head and I/O 0x40) plus a battery monitor 0x08. Physics (distance, servo travel, battery
 drain and charge) runs ``time_scale`` times faster than the wall clock; protocol timing
 (watchdogs, publishing periods, time-outs) does not.
+
+The modules of one simulated robot share a ``SimHost``: one connection to the virtual bus
+(one reader thread, software filtering on *M* + 1 and the broadcast ID, as each module's own
+filter would) and one scheduler task. The scheduler sleeps until the next frame some module
+owes (watchdog, ENCODER, SONAR, BATTERY) and runs the 50 Hz physics step only while something
+moves (a wheel, a servo); a received command wakes it at once. Periodic frames fall on a grid
+of their own period (multiples of it on the monotonic clock), so modules with the same period
+send in the same wake-up. The frames on the wire, their lengths and rates are those of
+docs/robocan.md.
 """
 
 from __future__ import annotations
@@ -11,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -26,6 +36,7 @@ __all__ = [
     "BatteryMonitor",
     "HeadIo",
     "MotorController",
+    "SimHost",
     "SimModule",
     "Simulator",
     "SonarRing",
@@ -33,7 +44,136 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-TICK_S = 0.02  # physics step of the simulated firmware
+TICK_S = 0.02  # physics step of the simulated firmware while something moves
+DUE_EPS_S = 0.001  # a frame due this close to now goes out in this wake-up
+RX_TIMEOUT_S = 0.25  # the reader thread's receive time-out: only how fast it notices a stop
+
+
+def next_slot(due: float, period: float, now: float) -> float:
+    """The next send time of a periodic frame that was due at ``due``: one period later, or
+    if that is already past (the first frame, a stalled process) the next multiple of the
+    period after ``now``. Frames of the same period thus share wake-ups across modules."""
+    following = due + period
+    if following > now + DUE_EPS_S:
+        return following
+    return (math.floor(now / period) + 1) * period
+
+
+class SimHost:
+    """One virtual-bus connection and one scheduler for several simulated modules."""
+
+    def __init__(self, bus_spec: str) -> None:
+        self.bus_spec = bus_spec
+        self.modules: dict[int, SimModule] = {}
+        self.wakeups = 0  # scheduler wake-ups (tests, profiling)
+        self._bus: can.BusABC | None = None
+        self._notifier: can.Notifier | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._waiter: asyncio.Future[None] | None = None
+        self._poked = False
+
+    @property
+    def running(self) -> bool:
+        return self._task is not None
+
+    async def start(self) -> None:
+        if self._task is not None:
+            return
+        bus = self._bus = open_bus(self.bus_spec)
+        # Slaves listen to M + 1 and the broadcast ID 0x001: odd standard IDs only.
+        bus.set_filters([{"can_id": 0x001, "can_mask": 0x001, "extended": False}])
+        loop = self._loop = asyncio.get_running_loop()
+        self._notifier = can.Notifier(bus, [self._on_can], timeout=RX_TIMEOUT_S, loop=loop)
+        self._task = asyncio.create_task(self._run(), name="sim-host")
+
+    async def stop(self) -> None:
+        task, self._task = self._task, None
+        if task is None:
+            return
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        if self._notifier is not None:
+            await asyncio.to_thread(self._notifier.stop, RX_TIMEOUT_S * 4)
+            self._notifier = None
+        if self._bus is not None:
+            self._bus.shutdown()
+            self._bus = None
+
+    def attach(self, module: SimModule) -> None:
+        self.modules[module.module_id] = module
+        self.poke()
+
+    def detach(self, module: SimModule) -> None:
+        if self.modules.get(module.module_id) is module:
+            del self.modules[module.module_id]
+
+    def send(self, can_id: int, data: bytes) -> bool:
+        if self._bus is None:
+            return False
+        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
+        try:
+            self._bus.send(msg)
+        except can.CanError as exc:
+            log.warning("sim 0x%02X: send failed: %s", can_id, exc)
+            return False
+        return True
+
+    def poke(self) -> None:
+        """Something changed (a command, a test hook): recompute the schedule now."""
+        self._poked = True
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    def _on_can(self, msg: can.Message) -> None:
+        can_id = msg.arbitration_id
+        if can_id == p.BROADCAST_ID:
+            for module in list(self.modules.values()):
+                module._on_can(msg)
+        else:
+            addressed = self.modules.get(can_id - 1)
+            if addressed is None:
+                return
+            addressed._on_can(msg)
+        self.poke()
+
+    async def _run(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            self.wakeups += 1
+            self._poked = False
+            now = time.monotonic()
+            due = math.inf
+            active = False
+            for module in list(self.modules.values()):
+                try:
+                    module.tick(now)
+                except Exception:
+                    log.exception("sim 0x%02X: tick failed", module.module_id)
+                due = min(due, module.next_due())
+                active = active or module.active
+            if active:
+                due = min(due, now + TICK_S)
+            if self._poked:
+                continue
+            waiter = self._waiter = loop.create_future()
+            timer = None
+            if due < math.inf:
+                # loop.time() is time.monotonic(); never a past deadline (no busy loop)
+                timer = loop.call_at(max(due, now + DUE_EPS_S), _wake, waiter)
+            try:
+                await waiter
+            finally:
+                self._waiter = None
+                if timer is not None:
+                    timer.cancel()
+
+
+def _wake(waiter: asyncio.Future[None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 class SimModule:
@@ -54,69 +194,77 @@ class SimModule:
         self.configs: dict[tuple[int, int], bytes] = {}
         self.frames_tx = 0
         self.drop_block_frames: set[int] = set()  # fault injection: data frames never sent
-        self._bus: can.BusABC | None = None
-        self._notifier: can.Notifier | None = None
-        self._tasks: list[asyncio.Task[None]] = []
+        self.host: SimHost | None = None
+        self._own_host = False
         self._sender: BlockSender | None = None
         self._receiver: BlockReceiver | None = None
+        self._last_step = 0.0
+        self.next_watchdog = 0.0
         self.running = False
 
     # --- life cycle -------------------------------------------------------------------
 
-    async def start(self) -> None:
-        """Power on: open the bus and start sending watchdog frames at once."""
-        bus = self._bus = open_bus(self.bus_spec)
-        bus.set_filters(
-            [
-                {"can_id": self.module_id + 1, "can_mask": 0x7FF, "extended": False},
-                {"can_id": p.BROADCAST_ID, "can_mask": 0x7FF, "extended": False},
-            ]
-        )
-        loop = asyncio.get_running_loop()
-        self._notifier = can.Notifier(bus, [self._on_can], timeout=0.05, loop=loop)
+    async def start(self, host: SimHost | None = None) -> None:
+        """Power on: join the bus (``host``'s, or a connection of its own) and send WATCHDOG
+        at once."""
+        if self.running:
+            return
+        if host is None:
+            host, self._own_host = SimHost(self.bus_spec), True
+        self.host = host
+        await host.start()
+        self._last_step = time.monotonic()
+        self.next_watchdog = 0.0  # at once
         self.running = True
-        self._tasks = [
-            asyncio.create_task(self._watchdog_loop(), name=f"sim-wd-{self.module_id:02x}"),
-            asyncio.create_task(self._physics_loop(), name=f"sim-phys-{self.module_id:02x}"),
-        ]
+        host.attach(self)
 
     async def stop(self) -> None:
         """Power off (unplug): silence at once."""
         if not self.running:
             return
         self.running = False
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        if self._notifier is not None:
-            await asyncio.to_thread(self._notifier.stop, 1.0)
-        if self._bus is not None:
-            self._bus.shutdown()
+        host = self.host
+        if host is not None:
+            host.detach(self)
+            if self._own_host:
+                await host.stop()
 
     def send(self, data: bytes) -> None:
-        if not self.running or self._bus is None:
+        if not self.running or self.host is None:
             return
-        msg = can.Message(arbitration_id=self.module_id, data=data, is_extended_id=False)
-        try:
-            self._bus.send(msg)
+        if self.host.send(self.module_id, data):
             self.frames_tx += 1
-        except can.CanError as exc:
-            log.warning("sim 0x%02X: send failed: %s", self.module_id, exc)
 
-    async def _watchdog_loop(self) -> None:
-        while True:
+    def poke(self) -> None:
+        """State changed outside a received frame (a test hook): reschedule at once."""
+        if self.running and self.host is not None:
+            self.host.poke()
+
+    # --- scheduling (called by the host) ----------------------------------------------
+
+    def tick(self, now: float) -> None:
+        """Send the watchdog if due, advance the physics to ``now`` and publish what is due."""
+        if now + DUE_EPS_S >= self.next_watchdog:
             self.send(p.watchdog(self.state))
-            await asyncio.sleep(self.watchdog_s)
+            self.next_watchdog = next_slot(self.next_watchdog, self.watchdog_s, now)
+        self.advance(now)
 
-    async def _physics_loop(self) -> None:
-        last = time.monotonic()
-        while True:
-            await asyncio.sleep(TICK_S)
-            now = time.monotonic()
-            self.step(now, (now - last) * self.time_scale)
-            last = now
+    def advance(self, now: float) -> None:
+        dt = now - self._last_step
+        self._last_step = now
+        self.step(now, max(0.0, dt) * self.time_scale)
+
+    def next_due(self) -> float:
+        """The monotonic time of the next frame this module owes without being asked."""
+        return self.next_watchdog
+
+    @property
+    def active(self) -> bool:
+        """Something moves: the physics must be stepped every TICK_S."""
+        return False
+
+    def due(self, deadline: float, now: float) -> bool:
+        return now + DUE_EPS_S >= deadline
 
     # --- what a concrete module does --------------------------------------------------
 
@@ -151,6 +299,7 @@ class SimModule:
         except p.ProtocolError:
             return  # firmware ignores what it cannot parse
         try:
+            self.advance(time.monotonic())  # the physics up to now, under the old command
             self._dispatch(op, data)
         except Exception:
             log.exception("sim 0x%02X: frame 0x%02X failed", self.module_id, op)
@@ -279,10 +428,18 @@ class MotorController(SimModule):
         limit = accel * dt_sim
         self.velocity += max(-limit, min(limit, change))
         self.distance += self.velocity * dt_sim
-        if self.enabled and now >= self.next_publish:
-            self.next_publish = now + self.publish_period(0, 100)
+        if self.enabled and self.due(self.next_publish, now):
+            self.next_publish = next_slot(self.next_publish, self.publish_period(0, 100), now)
             ticks = round(self.distance * self.ticks_per_m)
             self.send(p.encoder(0, ticks, self.velocity))
+
+    @property
+    def active(self) -> bool:
+        return bool(self.target or self.velocity)
+
+    def next_due(self) -> float:
+        due = super().next_due()
+        return min(due, self.next_publish) if self.enabled else due
 
     def press_bumper(self, index: int, pressed: bool = True) -> None:
         """A physical contact (tests): the bumper frame goes out on the change."""
@@ -309,11 +466,19 @@ class SonarRing(SimModule):
         self.bumpers = 0
         self.next_publish = 0.0
 
+    @property
+    def firing(self) -> bool:
+        return self.enabled and self.modes.get(1) == 1
+
     def step(self, now: float, dt_sim: float) -> None:
-        if self.enabled and self.modes.get(1) == 1 and now >= self.next_publish:
-            self.next_publish = now + self.publish_period(0, 500)
+        if self.firing and self.due(self.next_publish, now):
+            self.next_publish = next_slot(self.next_publish, self.publish_period(0, 500), now)
             self.send(p.sonar(0, 0, self.ranges[:5]))
             self.send(p.sonar(0, 5, self.ranges[5:]))
+
+    def next_due(self) -> float:
+        due = super().next_due()
+        return min(due, self.next_publish) if self.firing else due
 
     def press_bumper(self, index: int, pressed: bool = True) -> None:
         self.bumpers = self.bumpers | (1 << index) if pressed else self.bumpers & ~(1 << index)
@@ -383,6 +548,11 @@ class HeadIo(SimModule):
                 self.next_publish[i] = now + 0.1
                 self.send(p.servo(0, i, self.position[i], arrived))
 
+    @property
+    def active(self) -> bool:
+        moving = any(pos != target for pos, target in zip(self.position, self.target, strict=True))
+        return moving or (self.enabled and any(self.report))
+
     def touch(self, index: int, pressed: bool = True) -> None:
         self.touch_mask = (
             self.touch_mask | (1 << index) if pressed else self.touch_mask & ~(1 << index)
@@ -427,6 +597,7 @@ class BatteryMonitor(SimModule):
     def set_level(self, level: float) -> None:
         self.level = max(0.0, min(1.0, level))
         self.next_publish = 0.0
+        self.poke()
 
     def step(self, now: float, dt_sim: float) -> None:
         if self.charging:
@@ -435,9 +606,13 @@ class BatteryMonitor(SimModule):
             moving = self.motion() > 0.01
             drain = self.MOVING_DRAIN if moving else self.IDLE_DRAIN
             self.level = max(0.0, self.level - drain * dt_sim)
-        if self.enabled and now >= self.next_publish:
-            self.next_publish = now + self.publish_period(0, 1000)
+        if self.enabled and self.due(self.next_publish, now):
+            self.next_publish = next_slot(self.next_publish, self.publish_period(0, 1000), now)
             self.send(p.battery(self.level, 22.0 + 4.0 * self.level, self.charging))
+
+    def next_due(self) -> float:
+        due = super().next_due()
+        return min(due, self.next_publish) if self.enabled else due
 
 
 BELLBOT: dict[int, str] = {
@@ -451,7 +626,8 @@ BELLBOT: dict[int, str] = {
 
 
 class Simulator:
-    """The simulated robot: its modules on one virtual channel, plugged and unplugged at will."""
+    """The simulated robot: its modules on one virtual channel, plugged and unplugged at will.
+    They share one ``SimHost`` (bus connection and scheduler)."""
 
     def __init__(
         self,
@@ -465,6 +641,7 @@ class Simulator:
         self.layout = dict(BELLBOT if layout is None else layout)
         self.modules: dict[int, SimModule] = {}
         self.battery_level: float | None = None
+        self.host = SimHost(bus_spec)
 
     def _make(self, module_id: int) -> SimModule:
         kind = self.layout.get(module_id)
@@ -486,12 +663,14 @@ class Simulator:
         return sum(abs(m.velocity) for m in self.modules.values() if isinstance(m, MotorController))
 
     async def start(self) -> None:
+        await self.host.start()
         for module_id in self.layout:
             await self.plug(module_id)
 
     async def stop(self) -> None:
         for module_id in list(self.modules):
             await self.unplug(module_id)
+        await self.host.stop()
 
     async def plug(self, module_id: int) -> SimModule:
         """Power a module on (a fresh one: firmware state starts over). Idempotent."""
@@ -499,7 +678,7 @@ class Simulator:
         if module is not None:
             return module
         module = self._make(module_id)
-        await module.start()
+        await module.start(self.host)
         self.modules[module_id] = module
         return module
 
