@@ -19,8 +19,10 @@ The last line printed is one JSON object with the keys of issue 2.
 from __future__ import annotations
 
 import argparse
+import array
 import asyncio
 import contextlib
+import gc
 import json
 import os
 import subprocess
@@ -49,6 +51,82 @@ def _log(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
+class Probe:
+    """Health of one bench process: event-loop lag and garbage-collector pauses.
+
+    Lag: a task asks to wake every ``tick`` seconds and records how late it woke. A lagging robot
+    or GUI process adds its lag to the measured latency, so each process reports its own. GC:
+    collections per generation with their CPU time and longest wall-clock pause, the objects the
+    collector still tracks at the end and how long one full collection of them takes (timed
+    after the measured window).
+    """
+
+    def __init__(self, tick: float = 0.005) -> None:
+        self.tick = tick
+        self.lags: list[float] = []
+        self.gc_count = [0, 0, 0]
+        self.gc_cpu = [0.0, 0.0, 0.0]
+        self.gc_max = 0.0
+        self._gc_start = (0.0, 0.0)
+        self._task: asyncio.Task[None] | None = None
+
+    def _on_gc(self, phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            self._gc_start = (time.perf_counter(), time.thread_time())
+            return
+        wall, cpu = self._gc_start
+        generation = info["generation"]
+        self.gc_count[generation] += 1
+        self.gc_cpu[generation] += time.thread_time() - cpu
+        self.gc_max = max(self.gc_max, time.perf_counter() - wall)
+
+    def start(self, freeze: bool = False) -> None:
+        """Start sampling; ``freeze``: move everything alive now out of the collector's way.
+
+        A robot process of the bench holds hundreds of robots' connections in one heap (a real
+        robot holds one): a full collection there takes 100+ ms and would count as hub latency.
+        """
+        if freeze:
+            gc.collect()
+            gc.freeze()
+        gc.callbacks.append(self._on_gc)
+        self._task = asyncio.create_task(self._run())
+
+    async def _run(self) -> None:
+        while True:
+            due = time.perf_counter() + self.tick
+            await asyncio.sleep(self.tick)
+            self.lags.append(time.perf_counter() - due)
+
+    def reset(self) -> None:
+        self.lags.clear()
+        self.gc_count = [0, 0, 0]
+        self.gc_cpu = [0.0, 0.0, 0.0]
+        self.gc_max = 0.0
+
+    def report(self) -> dict[str, Any]:
+        if self._task is not None:
+            self._task.cancel()
+        with contextlib.suppress(ValueError):
+            gc.callbacks.remove(self._on_gc)
+        t0 = time.perf_counter()
+        gc.collect()
+        full = time.perf_counter() - t0
+        return {
+            "lag_ms": {
+                **percentiles([x * 1000 for x in self.lags], 1),
+                "max": round(1000 * max(self.lags, default=0.0), 1),
+            },
+            "gc": {
+                "collections": self.gc_count,
+                "cpu_ms": [round(1000 * c, 1) for c in self.gc_cpu],
+                "max_pause_ms": round(1000 * self.gc_max, 1),
+                "tracked_objects": len(gc.get_objects()),
+                "full_collection_ms": round(1000 * full, 1),
+            },
+        }
+
+
 # -- worker processes ----------------------------------------------------------------------------
 async def _serve(robots: int, full_app: bool) -> None:
     """Server process: print the bound port, then serve until killed."""
@@ -68,7 +146,17 @@ async def _serve(robots: int, full_app: bool) -> None:
         tokens=tokens, db_url=f"sqlite+aiosqlite:///{os.getcwd()}/.bench-hub-{os.getpid()}.db"
     )
     async with running_server(settings) as server:
+        if os.environ.get("BENCH_NO_GC_FREEZE"):  # measure the hub without its GC policy
+            server.app.state.hub.memory.enabled = False
         print(f"PORT {server.port}", flush=True)
+        probe = Probe()
+        probe.start()
+        start_at = await _read_start_time()
+        seconds = await _read_start_time()
+        await asyncio.sleep(max(0.0, start_at + WARMUP_S - time.time()))
+        probe.reset()
+        await asyncio.sleep(max(0.0, start_at + seconds - time.time()))
+        print(json.dumps(probe.report()), flush=True)
         await asyncio.Event().wait()
 
 
@@ -87,10 +175,13 @@ async def _robots(url: str, first: int, count: int, rate: float) -> None:
     ]
     for start in range(0, count, 50):  # connect in waves: the accept queue is finite
         await asyncio.gather(*(c.start() for c in clients[start : start + 50]))
+    probe = Probe()
+    probe.start(freeze=True)
     print("READY", flush=True)
     start_at = await _read_start_time()
     seconds = await _read_start_time()
     end_at = start_at + seconds
+    probe.reset()
     period = 1.0 / rate
     cpu0, t0 = time.process_time(), time.monotonic()
     published = [0] * count
@@ -113,11 +204,17 @@ async def _robots(url: str, first: int, count: int, rate: float) -> None:
 
     await asyncio.gather(*(run(k, c) for k, c in enumerate(clients)))
     cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
+    health = probe.report()
     await asyncio.gather(*(c.sync(timeout=30.0) for c in clients))
     dropped_here = sum(c.dropped for c in clients)
     for c in clients:
         await c.close(flush=False)
-    result = {"published": sum(published), "client_dropped": dropped_here, "cpu": cpu_percent}
+    result = {
+        "published": sum(published),
+        "client_dropped": dropped_here,
+        "cpu": cpu_percent,
+        **health,
+    }
     print(json.dumps(result), flush=True)
 
 
@@ -131,11 +228,13 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
     clients = [HubClient(url, GUI_TOKEN, heartbeat_interval=5.0) for _ in range(guis)]
     for c in clients:
         await c.start()
-    latencies: list[float] = []
+    # array, not list: a list of 500 000 floats would make every full GC of this process slow.
+    latencies = array.array("d")
     received = [0] * guis
     last_seq: list[dict[str, int]] = [{} for _ in range(guis)]
     gaps = [0] * guis
     window = [0.0, 0.0]
+    slow: dict[int, float] = {}  # second of the window -> worst latency over 100 ms in it
 
     def handler_for(g: int) -> Any:
         seqs = last_seq[g]
@@ -150,21 +249,29 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
                 gaps[g] += seq - previous - 1
             seqs[robot] = seq
             if window[0] <= message.timestamp <= window[1]:
-                latencies.append(now - message.timestamp)
+                latency = now - message.timestamp
+                latencies.append(latency)
+                if latency > 0.1:
+                    second = int(message.timestamp - window[0])
+                    slow[second] = max(slow.get(second, 0.0), latency)
 
         return handle
 
     for g, c in enumerate(clients):
         c.subscribe("robot_state", handler_for(g))
     await asyncio.gather(*(c.sync() for c in clients))
+    probe = Probe()
+    probe.start(freeze=True)
     print("READY", flush=True)
     start_at = await _read_start_time()
     seconds = await _read_start_time()
     window[0], window[1] = start_at + WARMUP_S, start_at + seconds
     await asyncio.sleep(max(0.0, window[0] - time.time()))
+    probe.reset()
     cpu0, t0 = time.process_time(), time.monotonic()
     await asyncio.sleep(max(0.0, window[1] - time.time()))
     cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
+    health = probe.report()
     done = await _read_start_time()  # the robots finished and synced: everything was routed
     del done
     await asyncio.gather(*(c.sync(timeout=30.0) for c in clients))
@@ -175,7 +282,7 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
     superseded = sum(c["superseded"] for c in stats["clients"] if c["name"].startswith("gui"))
     for c in clients:
         await c.close(flush=False)
-    in_window = sum(1 for _ in latencies)
+    in_window = len(latencies)
     print(
         json.dumps(
             {
@@ -185,6 +292,8 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
                 "latency_ms": percentiles([x * 1000 for x in latencies]),
                 "latency_samples": in_window,
                 "cpu_percent": round(cpu_percent, 1),
+                "slow_seconds": {k: round(v * 1000) for k, v in sorted(slow.items())},
+                **health,
             }
         ),
         flush=True,
@@ -259,8 +368,8 @@ def run_benchmark(
             _expect(proc, "READY")
         _log(f"{robots} robots and {guis} GUIs connected; running {seconds} s")
         start_at = time.time() + 0.5
-        _tell([gui_proc, *robot_workers], start_at)
-        _tell([gui_proc, *robot_workers], seconds)
+        _tell([server, gui_proc, *robot_workers], start_at)
+        _tell([server, gui_proc, *robot_workers], seconds)
         server_ps = psutil.Process(server.pid)
         time.sleep(max(0.0, start_at + WARMUP_S - time.time()))
         cpu_before = server_ps.cpu_times()
@@ -269,6 +378,7 @@ def run_benchmark(
         cpu_after = server_ps.cpu_times()
         elapsed = time.monotonic() - t0
         busy = (cpu_after.user - cpu_before.user) + (cpu_after.system - cpu_before.system)
+        server_health = json.loads(_expect(server, "{"))
         robot_results = [json.loads(_expect(proc, "{")) for proc in robot_workers]
         _tell([gui_proc], 0)
         gui_result = json.loads(_expect(gui_proc, "{"))
@@ -290,6 +400,14 @@ def run_benchmark(
         f"latency samples {gui_result['latency_samples']}; CPU % GUI process "
         f"{gui_result['cpu_percent']}, robot processes {[round(r['cpu']) for r in robot_results]}"
     )
+    if gui_result["slow_seconds"]:
+        _log(f"seconds with latency over 100 ms (worst ms): {gui_result['slow_seconds']}")
+    for who, health in [
+        ("server", server_health),
+        ("guis", gui_result),
+        *((f"robots{k}", r) for k, r in enumerate(robot_results)),
+    ]:
+        _log(f"{who}: loop lag ms {health['lag_ms']}, gc {health['gc']}")
     return {
         "robots": robots,
         "rate_hz": rate,

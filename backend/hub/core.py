@@ -26,6 +26,7 @@ from backend.auth import Role
 from guidebot.bus import Bus, Endpoint, is_wildcard
 from guidebot.messages import Message, known_types, payload_model
 
+from .memory import GcFreezer
 from .outbox import Outbox, OutboxOverflow
 
 __all__ = [
@@ -197,8 +198,10 @@ class Hub:
         batch_max: int = 512,
         linger: float = 0.005,
         max_message_bytes: int = 1 << 20,
+        gc_freeze: bool = True,
     ) -> None:
         self.bus = HubBus()
+        self.memory = GcFreezer(enabled=gc_freeze)
         self.queue_size = queue_size
         self.coalesce_after = coalesce_after
         self.batch_max = batch_max
@@ -310,6 +313,7 @@ class Hub:
             raise PermissionError(f"the name {name!r} belongs to an in-process module")
         client = RemoteClient(self, name, role, self.bus.endpoint(name))
         self.bus.remote[name] = client
+        self.memory.attached(len(self.bus.remote))
         client.send_direct(
             Message(
                 type="welcome",
@@ -325,6 +329,7 @@ class Hub:
         if self.bus.remote.get(client.name) is client:
             del self.bus.remote[client.name]
             client.endpoint.close()
+            self.memory.detached(len(self.bus.remote))
         for pattern in client.patterns:
             self._leave(client, pattern)
         client.patterns.clear()
@@ -334,6 +339,7 @@ class Hub:
 
     def close(self) -> None:
         """Server shutdown: every client is told why."""
+        self.memory.stop()
         for client in list(self.bus.remote.values()):
             client.request_close(CLOSE_SHUTDOWN, "server shutting down")
 
