@@ -109,9 +109,6 @@ class Probe:
             self._task.cancel()
         with contextlib.suppress(ValueError):
             gc.callbacks.remove(self._on_gc)
-        t0 = time.perf_counter()
-        gc.collect()
-        full = time.perf_counter() - t0
         return {
             "lag_ms": {
                 **percentiles([x * 1000 for x in self.lags], 1),
@@ -121,10 +118,18 @@ class Probe:
                 "collections": self.gc_count,
                 "cpu_ms": [round(1000 * c, 1) for c in self.gc_cpu],
                 "max_pause_ms": round(1000 * self.gc_max, 1),
-                "tracked_objects": len(gc.get_objects()),
-                "full_collection_ms": round(1000 * full, 1),
             },
         }
+
+    @staticmethod
+    def full_collection(report: dict[str, Any]) -> dict[str, Any]:
+        """Add the tracked objects and the time of one full collection (run it after the
+        measured window: it stalls the process)."""
+        t0 = time.perf_counter()
+        gc.collect()
+        report["gc"]["full_collection_ms"] = round(1000 * (time.perf_counter() - t0), 1)
+        report["gc"]["tracked_objects"] = len(gc.get_objects())
+        return report
 
 
 # -- worker processes ----------------------------------------------------------------------------
@@ -156,7 +161,9 @@ async def _serve(robots: int, full_app: bool) -> None:
         await asyncio.sleep(max(0.0, start_at + WARMUP_S - time.time()))
         probe.reset()
         await asyncio.sleep(max(0.0, start_at + seconds - time.time()))
-        print(json.dumps(probe.report()), flush=True)
+        health = probe.report()
+        await _read_start_time()  # the GUIs are done
+        print(json.dumps(Probe.full_collection(health)), flush=True)
         await asyncio.Event().wait()
 
 
@@ -206,6 +213,7 @@ async def _robots(url: str, first: int, count: int, rate: float) -> None:
     cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
     health = probe.report()
     await asyncio.gather(*(c.sync(timeout=30.0) for c in clients))
+    Probe.full_collection(health)
     dropped_here = sum(c.dropped for c in clients)
     for c in clients:
         await c.close(flush=False)
@@ -282,6 +290,7 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
     superseded = sum(c["superseded"] for c in stats["clients"] if c["name"].startswith("gui"))
     for c in clients:
         await c.close(flush=False)
+    Probe.full_collection(health)
     in_window = len(latencies)
     print(
         json.dumps(
@@ -378,10 +387,11 @@ def run_benchmark(
         cpu_after = server_ps.cpu_times()
         elapsed = time.monotonic() - t0
         busy = (cpu_after.user - cpu_before.user) + (cpu_after.system - cpu_before.system)
-        server_health = json.loads(_expect(server, "{"))
         robot_results = [json.loads(_expect(proc, "{")) for proc in robot_workers]
         _tell([gui_proc], 0)
         gui_result = json.loads(_expect(gui_proc, "{"))
+        _tell([server], 0)
+        server_health = json.loads(_expect(server, "{"))
     finally:
         for proc in [*workers, server]:
             with contextlib.suppress(ProcessLookupError):
