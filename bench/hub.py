@@ -13,6 +13,15 @@ Latency = publish (envelope timestamp) to receipt at a GUI, over the measured wi
 1 s warm-up). "dropped" counts states a GUI never received minus those the hub superseded on
 purpose (the overflow rule: newest robot_state replaces the queued one); it should be 0.
 
+On stderr, each process (server, GUIs, each robot process) reports its event-loop lag (p50,
+p99, max of a 5 ms ticker) and its garbage collections during the window, then the objects the
+collector tracks and what one full collection of them costs; the GUIs list the seconds of the
+window whose worst latency passed 100 ms. So a bad p99 says where it came from: the server, a
+starved bench process, or a collector pause. The robot and GUI processes freeze their start-up
+and connection objects (``gc.freeze``) once connected: one of them holds hundreds of robots'
+connections, a real robot holds one. ``BENCH_NO_GC_FREEZE=1`` runs the server without the
+hub's GC policy (backend/hub/memory.py), for comparison.
+
 The last line printed is one JSON object with the keys of issue 2.
 """
 

@@ -9,8 +9,10 @@ module written against the in-process bus runs unchanged against the hub::
         reply = await hub.request("get_path", {...}, timeout=2.0)
 
 Behaviour (docs/protocol.md, "Client library"):
-- heartbeats: a ``ping`` every ``heartbeat_interval``; no frame at all for ``heartbeat_timeout``
-  means the server is dead: the connection is dropped and re-established;
+- heartbeats: a ``ping`` every ``heartbeat_interval`` (the first one after a random half to
+  whole interval, so clients that connected together do not ping together); no frame at all
+  for ``heartbeat_timeout`` means the server is dead: the connection is dropped and
+  re-established;
 - reconnect with exponential back-off (``backoff_initial`` doubling up to ``backoff_max``, with
   jitter); subscriptions are sent again and ``on_connect`` callbacks run after every connection
   (resynchronise there);
@@ -492,8 +494,12 @@ class HubClient:
 
     async def _heartbeat(self, ws: ClientConnection) -> None:
         loop = asyncio.get_running_loop()
+        # The first ping comes after a random half to whole interval: clients that connected
+        # together (a fleet after a server restart) do not all ping in the same instant.
+        delay = self.heartbeat_interval * random.uniform(0.5, 1.0)
         while True:
-            await asyncio.sleep(self.heartbeat_interval)
+            await asyncio.sleep(delay)
+            delay = self.heartbeat_interval
             if loop.time() - self._last_seen > self.heartbeat_timeout:
                 log.warning(
                     "%s: no frame from the hub for %.1f s: dropping the connection",
