@@ -79,10 +79,8 @@ async def throughput(frames: int) -> float:
     async with RoboCanStack(endpoint, [channel], layout={0x02: "motor"}) as stack:
         await stack.wait_online()
         master = stack.masters[0]
-        notifier = master._notifier
-        assert notifier is not None
-        ids = {threading.main_thread().native_id or 0}
-        ids |= {r.native_id or 0 for r in notifier._readers if isinstance(r, threading.Thread)}
+        assert master.reader is not None
+        ids = {threading.main_thread().native_id or 0, master.reader.native_id or 0}
         flood = open_bus(channel)
         done = threading.Event()
 

@@ -92,6 +92,9 @@ class Upstream(Protocol):
 
     def on_connect(self, callback: Callable[[], Awaitable[None] | None]) -> Callable[[], None]: ...
 
+    # Optional (HubClient has it): ``on_disconnect(callback) -> unsubscribe``, called when an
+    # established connection is lost. Without it the link polls ``connected`` at 10 Hz.
+
 
 class Link:
     """Forwards messages both ways between ``onboard`` and ``upstream``."""
@@ -126,7 +129,11 @@ class Link:
         for type_ in DOWN_TYPES:
             self._unsubs.append(self.upstream.subscribe(type_, self._down))
         self._unsubs.append(self.upstream.on_connect(self._connected))
-        self._watch = asyncio.get_running_loop().create_task(self._watch_link(), name="link")
+        on_disconnect = getattr(self.upstream, "on_disconnect", None)
+        if callable(on_disconnect):
+            self._unsubs.append(on_disconnect(self._disconnected))
+        else:
+            self._watch = asyncio.get_running_loop().create_task(self._watch_link(), name="link")
 
     async def stop(self) -> None:
         for unsub in self._unsubs:
@@ -138,15 +145,18 @@ class Link:
                 await self._watch
 
     async def _watch_link(self) -> None:
-        """Notes when the link drops (the hub client only says when it is up again)."""
+        """Notes when the link drops, for an upstream without ``on_disconnect``."""
         while True:
             await self.upstream.connected.wait()
             # The hub client has no "disconnected" event: poll its flag (cheap, 10 Hz).
             while self.upstream.connected.is_set():  # noqa: ASYNC110
                 await asyncio.sleep(0.1)
-            if self._down_since is None:
-                self._down_since = time.monotonic()
-            log.warning("%s: link down; reports are queued until it is back", self.robot)
+            self._disconnected()
+
+    def _disconnected(self) -> None:
+        if self._down_since is None:
+            self._down_since = time.monotonic()
+        log.warning("%s: link down; reports are queued until it is back", self.robot)
 
     def _connected(self) -> None:
         self.connections += 1

@@ -1,9 +1,10 @@
 """The RoboCAN master: discovers modules from their frames, queries and configures them,
 loads their drivers, watches their time-outs and routes data frames (RoboCAN paper, section 6).
 
-Receiving is split in two so that no module can starve another: python-can's reader thread
-only sorts frames into one bounded queue per CAN ID (overflow rule: the oldest frame is dropped
-and counted), and one asyncio task drains the queues round-robin.
+Receiving is split in two so that no module can starve another: a reader thread
+(``busopen.BusReader``) only sorts frames into one bounded queue per CAN ID (overflow rule: the
+oldest frame is dropped and counted) and wakes the event loop once per batch, and one asyncio
+task drains the queues round-robin. The time-out check sleeps until the next deadline.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import can
 from guidebot.bus import BusEndpoint
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
+from robot_agent.robocan.busopen import BusReader
 from robot_agent.robocan.drivers import Driver, DriverConfig, DriverRegistry, UnknownDriver
 
 __all__ = ["CommandFailed", "IllegalTransition", "Master", "Module", "ModuleState"]
@@ -33,10 +35,9 @@ QUEUE_PER_ID = 256  # frames buffered per CAN ID before the oldest is dropped
 DRAIN_BATCH = 16  # frames taken from one ID before moving to the next (fairness)
 QUERY_ATTEMPTS = 3
 RETRY_FAILED_S = 1.0
-SUPERVISE_MAX_S = 0.1  # longest sleep of the time-out check (it wakes at the next deadline)
+SUPERVISE_MAX_S = 1.0  # longest sleep of the time-out check (it wakes at the next deadline)
 DEADLINE_EPS_S = 0.001  # wake this much after a deadline, so that it has surely passed
 STALL_S = 0.05  # a supervisor tick this late means the process itself was not running
-RX_TIMEOUT_S = 0.25  # the reader thread's receive time-out: only how fast it notices a stop
 
 
 class ModuleState(enum.Enum):
@@ -139,6 +140,11 @@ class Counters:
     stalls: int = 0
 
 
+def _set_done(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
+
+
 class Master:
     """One master per CAN bus. Start with ``await start()``, stop with ``await stop()``."""
 
@@ -167,8 +173,10 @@ class Master:
         self._record_lock = threading.Lock()
         self._wake = asyncio.Event()
         self._wake_pending = False  # a wake-up of the drain task is already on its way
+        self._supervise_at = 0.0  # when the supervisor plans to wake (monotonic)
+        self._supervisor: asyncio.Future[None] | None = None  # its sleep, to cut it short
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._notifier: can.Notifier | None = None
+        self.reader: BusReader | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._bring_up: dict[int, asyncio.Task[None]] = {}
         self._acks: dict[tuple[int, int, int], asyncio.Future[int]] = {}
@@ -183,7 +191,8 @@ class Master:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self.running = True
-        self._notifier = can.Notifier(self.bus, [self._on_frame_thread], timeout=RX_TIMEOUT_S)
+        self.reader = BusReader(self.bus, self._on_frames_thread, name="robocan-reader")
+        self.reader.start()
         self._tasks = [
             asyncio.create_task(self._drain(), name="robocan-drain"),
             asyncio.create_task(self._supervise(), name="robocan-supervise"),
@@ -203,8 +212,8 @@ class Master:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         self._bring_up.clear()
-        if self._notifier is not None:
-            await asyncio.to_thread(self._notifier.stop, RX_TIMEOUT_S * 4)
+        if self.reader is not None:
+            await asyncio.to_thread(self.reader.stop)
         for driver in self.drivers.values():
             driver.close()
 
@@ -268,6 +277,7 @@ class Master:
                 module = self.modules.get(module_id)
                 if module is not None and element == p.MODULE and param == p.Param.WATCHDOG_MS:
                     module.watchdog_s = value / 1000  # its time-out follows its new period
+                    self._reschedule()
             if status != p.AckStatus.OK:
                 raise CommandFailed(
                     f"module 0x{module_id:02X} refused 0x{data[0]:02X}: "
@@ -300,23 +310,28 @@ class Master:
 
     # --- receiving --------------------------------------------------------------------
 
-    def _on_frame_thread(self, msg: can.Message) -> None:
-        """python-can's reader thread: sort the frame into its ID's bounded queue, no more."""
-        key = (
-            -1
-            if (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame)
-            else (msg.arbitration_id)
-        )
-        self._arrivals[key] = time.monotonic()
+    def _on_frames_thread(self, batch: list[can.Message]) -> None:
+        """The reader thread: sort the frames into their ID's bounded queue, no more."""
+        now = time.monotonic()
+        arrivals = self._arrivals
         with self._queue_lock:
-            queue = self._queues.get(key)
-            if queue is None:
-                queue = self._queues[key] = collections.deque(maxlen=QUEUE_PER_ID)
-            if len(queue) == QUEUE_PER_ID:
-                self.counters.overflow += 1
-            queue.append(msg)
-        self._record(msg)
-        # One wake-up of the event loop per burst, not per frame: the drain task clears the
+            for msg in batch:
+                key = (
+                    -1
+                    if (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame)
+                    else msg.arbitration_id
+                )
+                arrivals[key] = now
+                queue = self._queues.get(key)
+                if queue is None:
+                    queue = self._queues[key] = collections.deque(maxlen=QUEUE_PER_ID)
+                if len(queue) == QUEUE_PER_ID:
+                    self.counters.overflow += 1
+                queue.append(msg)
+        if self.recorder is not None:
+            for msg in batch:
+                self._record(msg)
+        # One wake-up of the event loop per batch, not per frame: the drain task clears the
         # flag before it empties the queues, so a frame queued after that wakes it again.
         if self._wake_pending:
             return
@@ -372,6 +387,7 @@ class Master:
         if module is None:
             module = self.modules[can_id] = Module(can_id)
             self._start_bring_up(module)
+            self._reschedule()
         module.last_seen = now
         module.frames_rx += 1
         if module.state is ModuleState.LOST or (
@@ -379,6 +395,7 @@ class Master:
         ):
             self._transition(module, ModuleState.QUERYING)
             self._start_bring_up(module)
+            self._reschedule()
         if op == p.Op.WATCHDOG:
             self._on_watchdog(
                 module,
@@ -438,6 +455,7 @@ class Master:
             self._warn(f"blk{module.module_id}", f"module 0x{module.module_id:02X}: {exc}")
             return
         self._receivers[module.module_id] = (receiver, time.monotonic())
+        self._reschedule()
         self.send_to(module.module_id, receiver.first_reply())
         self._block_progress(module, receiver)
 
@@ -571,22 +589,36 @@ class Master:
             deadline = min(deadline, last + p.BLOCK_TIMEOUT_S)
         return deadline + DEADLINE_EPS_S
 
+    def _reschedule(self) -> None:
+        """A deadline may now come before the supervisor's planned wake-up: wake it."""
+        sleep = self._supervisor
+        if sleep is not None and not sleep.done():
+            if self._next_deadline(time.monotonic()) < self._supervise_at:
+                sleep.set_result(None)
+
     async def _supervise(self) -> None:
-        """Time-outs. The task sleeps until the next deadline (at most SUPERVISE_MAX_S: a
-        module or block seen meanwhile only has later deadlines). Time during which this
-        process was not scheduled (a stalled event loop, a loaded machine) does not count
-        against the modules: the master cannot tell silence from its own absence, so it
-        credits the lag instead of declaring everyone lost."""
+        """Time-outs. The task sleeps until the next deadline (a frame only moves deadlines
+        later; a new module, a module back from lost, a new block or a shorter watchdog period
+        wakes it earlier). Time during which this process was not scheduled (a stalled event
+        loop, a loaded machine) does not count against the modules: the master cannot tell
+        silence from its own absence, so when a wake-up comes more than STALL_S late the whole
+        sleep it overran is credited to every module instead of declaring everyone lost."""
+        loop = asyncio.get_running_loop()
         while True:
             start = time.monotonic()
-            tick = max(self._next_deadline(start) - start, DEADLINE_EPS_S)
-            await asyncio.sleep(tick)
+            self._supervise_at = max(self._next_deadline(start), start + DEADLINE_EPS_S)
+            sleep = self._supervisor = loop.create_future()
+            timer = loop.call_at(self._supervise_at, _set_done, sleep)  # loop.time: monotonic
+            try:
+                await sleep
+            finally:
+                timer.cancel()
+                self._supervisor = None
             now = time.monotonic()
-            lag = now - start - tick
-            if lag > STALL_S:
+            if now - self._supervise_at > STALL_S:
                 self.counters.stalls += 1
                 for module in self.modules.values():
-                    module.last_seen += lag
+                    module.last_seen = min(module.last_seen + (now - start), now)
             for module in list(self.modules.values()):
                 # a frame already received by the reader thread but not yet drained counts
                 seen = max(module.last_seen, self._arrivals.get(module.module_id, 0.0))

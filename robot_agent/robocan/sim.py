@@ -29,7 +29,7 @@ import can
 
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
-from robot_agent.robocan.busopen import open_bus
+from robot_agent.robocan.busopen import BusReader, open_bus
 
 __all__ = [
     "BELLBOT",
@@ -46,7 +46,6 @@ log = logging.getLogger(__name__)
 
 TICK_S = 0.02  # physics step of the simulated firmware while something moves
 DUE_EPS_S = 0.001  # a frame due this close to now goes out in this wake-up
-RX_TIMEOUT_S = 0.25  # the reader thread's receive time-out: only how fast it notices a stop
 
 
 def next_slot(due: float, period: float, now: float) -> float:
@@ -67,7 +66,7 @@ class SimHost:
         self.modules: dict[int, SimModule] = {}
         self.wakeups = 0  # scheduler wake-ups (tests, profiling)
         self._bus: can.BusABC | None = None
-        self._notifier: can.Notifier | None = None
+        self._reader: BusReader | None = None
         self._task: asyncio.Task[None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._waiter: asyncio.Future[None] | None = None
@@ -84,7 +83,8 @@ class SimHost:
         # Slaves listen to M + 1 and the broadcast ID 0x001: odd standard IDs only.
         bus.set_filters([{"can_id": 0x001, "can_mask": 0x001, "extended": False}])
         loop = self._loop = asyncio.get_running_loop()
-        self._notifier = can.Notifier(bus, [self._on_can], timeout=RX_TIMEOUT_S, loop=loop)
+        self._reader = BusReader(bus, self._on_frames, loop=loop, name="sim-reader")
+        self._reader.start()
         self._task = asyncio.create_task(self._run(), name="sim-host")
 
     async def stop(self) -> None:
@@ -94,9 +94,9 @@ class SimHost:
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
-        if self._notifier is not None:
-            await asyncio.to_thread(self._notifier.stop, RX_TIMEOUT_S * 4)
-            self._notifier = None
+        if self._reader is not None:
+            await asyncio.to_thread(self._reader.stop)
+            self._reader = None
         if self._bus is not None:
             self._bus.shutdown()
             self._bus = None
@@ -127,16 +127,16 @@ class SimHost:
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
 
-    def _on_can(self, msg: can.Message) -> None:
-        can_id = msg.arbitration_id
-        if can_id == p.BROADCAST_ID:
-            for module in list(self.modules.values()):
-                module._on_can(msg)
-        else:
-            addressed = self.modules.get(can_id - 1)
-            if addressed is None:
-                return
-            addressed._on_can(msg)
+    def _on_frames(self, batch: list[can.Message]) -> None:
+        for msg in batch:
+            can_id = msg.arbitration_id
+            if can_id == p.BROADCAST_ID:
+                for module in list(self.modules.values()):
+                    module._on_can(msg)
+            else:
+                addressed = self.modules.get(can_id - 1)
+                if addressed is not None:
+                    addressed._on_can(msg)
         self.poke()
 
     async def _run(self) -> None:

@@ -232,3 +232,40 @@ async def test_link_resends_reports_that_may_have_died_in_flight() -> None:
     assert len(ended) == 2 and ended[0].id == ended[1].id  # same id: receivers deduplicate
     assert states == [1]  # resynchronised (robot_state at once)
     await link.stop()
+
+
+class _FakeUpstreamWithDisconnect(_FakeUpstream):
+    """Like the hub client: says when an established connection is lost."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.on_disconnect_callbacks: list[Any] = []
+
+    def on_disconnect(self, callback: Any) -> Any:
+        self.on_disconnect_callbacks.append(callback)
+        return lambda: self.on_disconnect_callbacks.remove(callback)
+
+    def drop(self) -> None:
+        self.connected.clear()
+        for callback in list(self.on_disconnect_callbacks):
+            callback()
+
+
+async def test_link_told_of_a_drop_resends_without_polling() -> None:
+    bus = Bus()
+    up = _FakeUpstreamWithDisconnect()
+    up.connected.set()
+    link = Link(bus.endpoint("link"), up, "R1")
+    link.start()
+    assert link._watch is None  # nothing polls the connection
+    tasks = bus.endpoint("tasks")
+    tasks.publish("task_ended", {"task_id": "t1", "robot": "R1"})
+    up.drop()
+    tasks.publish("task_ended", {"task_id": "t2", "robot": "R1"})  # queued
+    up.connected.set()
+    for callback in up.on_connect_callbacks:
+        callback()
+    ended = [m.payload["task_id"] for m in up.sent if m.type == "task_ended"]
+    assert ended == ["t1", "t2", "t1"]  # t1 may have died in flight: sent again
+    await link.stop()
+    assert up.on_disconnect_callbacks == []
