@@ -119,7 +119,8 @@ class Link:
         self._requesters: OrderedDict[str, str] = OrderedDict()
         self.resent = 0
         self._unsubs: list[Callable[[], None]] = []
-        self._recent: deque[tuple[float, Message]] = deque(maxlen=MAX_RECENT_REPORTS)
+        # [time it went (or None while it waits in the hub client's offline queue), report]
+        self._recent: deque[list[Any]] = deque(maxlen=MAX_RECENT_REPORTS)
         self._down_since: float | None = None
         self._watch: asyncio.Task[None] | None = None
 
@@ -162,12 +163,17 @@ class Link:
         self.connections += 1
         log.info("%s: link up (connection %d)", self.robot, self.connections)
         down_since, self._down_since = self._down_since, None
-        if down_since is not None:
-            # Reports sent just before the drop may have died in flight: send them again.
-            for sent_at, message in list(self._recent):
-                if down_since - IN_FLIGHT_S <= sent_at <= down_since:
-                    self.resent += 1
-                    self.upstream.send(message)
+        now = time.monotonic()
+        for entry in list(self._recent):
+            sent_at, message = entry
+            if sent_at is None:
+                # Queued while offline: the hub client flushes it now, so from now on it is
+                # in flight like any other report (a second drop soon after resends it).
+                entry[0] = now
+            elif down_since is not None and down_since - IN_FLIGHT_S <= sent_at <= down_since:
+                # Sent just before the drop: it may have died in flight, send it again.
+                self.resent += 1
+                self.upstream.send(message)
         if self.on_connect_callback is not None:
             self.on_connect_callback()
 
@@ -179,8 +185,9 @@ class Link:
             if len(self._requesters) > MAX_PENDING_REPLIES:
                 self._requesters.popitem(last=False)
         self.sent_up += 1
-        if message.type in REPORT_TYPES and self.upstream.connected.is_set():
-            self._recent.append((time.monotonic(), message))
+        if message.type in REPORT_TYPES:
+            online = self.upstream.connected.is_set()
+            self._recent.append([time.monotonic() if online else None, message])
         self.upstream.send(message)
 
     def _down(self, message: Message) -> None:

@@ -269,3 +269,26 @@ async def test_link_told_of_a_drop_resends_without_polling() -> None:
     assert ended == ["t1", "t2", "t1"]  # t1 may have died in flight: sent again
     await link.stop()
     assert up.on_disconnect_callbacks == []
+
+
+async def test_link_resends_offline_reports_lost_in_a_second_drop() -> None:
+    """A report queued while offline is flushed at the reconnect; if the link drops again at
+    once, that flush may have died in flight too and the report goes again."""
+    bus = Bus()
+    up = _FakeUpstreamWithDisconnect()
+    up.connected.set()
+    link = Link(bus.endpoint("link"), up, "R1")
+    link.start()
+    up.drop()
+    bus.endpoint("tasks").publish("task_ended", {"task_id": "t1", "robot": "R1"})  # queued
+    for _ in range(2):  # back, then gone again at once, then back
+        up.connected.set()
+        for callback in up.on_connect_callbacks:
+            callback()
+        up.drop()
+    up.connected.set()
+    for callback in up.on_connect_callbacks:
+        callback()
+    ended = [m.payload["task_id"] for m in up.sent if m.type == "task_ended"]
+    assert ended == ["t1", "t1", "t1"]  # queued once, then sent again after each later drop
+    await link.stop()
