@@ -32,6 +32,7 @@ from backend.building.component import building_interface
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
+from backend.rgm import rgm
 from backend.settings import Settings
 
 __all__ = ["COMPONENTS", "ROUTERS", "create_app", "uvicorn_config"]
@@ -44,6 +45,7 @@ Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 COMPONENTS: list[Component] = [
     server_brain,
     building_interface,
+    rgm,
 ]
 
 # REST/WebSocket routers of the server modules. One line each.
