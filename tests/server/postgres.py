@@ -46,12 +46,15 @@ class PostgresServer:
         self.bin_dir, self.root, self.port, self._as_user = bin_dir, root, port, as_user
 
     def _run(self, tool: str, *args: str) -> None:
-        subprocess.run(
+        done = subprocess.run(
             [*self._as_user, str(self.bin_dir / tool), *args],
-            check=True,
             capture_output=True,
+            text=True,
             timeout=60,
+            cwd=self.root,  # readable by the postgres user
         )
+        if done.returncode != 0:
+            raise RuntimeError(f"{tool} failed ({done.returncode}): {done.stderr or done.stdout}")
 
     def database(self) -> str:
         """Create an empty database; its SQLAlchemy async URL."""
