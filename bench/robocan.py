@@ -146,7 +146,7 @@ async def command_latency(samples: int) -> list[float]:
 
 @click.command()
 @click.option("--cycles", type=click.IntRange(min=1), default=20, show_default=True)
-@click.option("--frames", type=click.IntRange(min=100), default=20000, show_default=True)
+@click.option("--frames", type=click.IntRange(min=100), default=50000, show_default=True)
 @click.option("--samples", type=click.IntRange(min=1), default=200, show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="Only the closing JSON line.")
 def main(cycles: int, frames: int, samples: int, as_json: bool) -> None:

@@ -51,7 +51,7 @@ def test_drivers_lists_the_entry_points() -> None:
 
 def test_bench_prints_the_issue_keys_last() -> None:
     result = CliRunner().invoke(
-        main, ["bench", "robocan", "--cycles", "1", "--frames", "12000", "--samples", "3", "--json"]
+        main, ["bench", "robocan", "--cycles", "1", "--frames", "40000", "--samples", "3", "--json"]
     )
     assert result.exit_code == 0, result.output
     last = json.loads(result.output.strip().splitlines()[-1])
