@@ -477,6 +477,7 @@ class Navigator:
         self._send_velocity(0.0, 0.0)
         self.ep.publish("request_area", {"robot": self.robot, "area": area})
         await self._wait_until(lambda: area in self._granted, f"area {area}")
+        log.info("%s: area %s granted", self.robot, area)
         self.held_areas.add(area)
         self.state = NavState.MOVING
 
@@ -485,6 +486,7 @@ class Navigator:
         for area in sorted(self.held_areas - keep):
             self.held_areas.discard(area)
             self._granted.discard(area)
+            log.info("%s: left area %s, released", self.robot, area)
             self.ep.publish("release_area", {"robot": self.robot, "area": area})
 
     async def _wait_door(self, door: str) -> None:
@@ -497,6 +499,7 @@ class Navigator:
             self.ep.publish("open_door", {"door": door})
 
         await self._wait_until(lambda: door in self._doors_open, f"door {door}", retry=resend)
+        log.info("%s: door %s open", self.robot, door)
         self.state = NavState.MOVING
 
     async def _wait_elevator(
@@ -523,6 +526,7 @@ class Navigator:
         self.state = NavState.RIDING
         self._send_velocity(0.0, 0.0, force=True)
         self._elevators.pop(cabin.elevator, None)
+        log.info("%s: riding elevator %s to floor %s", self.robot, cabin.elevator, exit_.floor)
         self.ep.publish("call_elevator", {"elevator": cabin.elevator, "floor": exit_.floor})
         elevator = cabin.elevator
 
