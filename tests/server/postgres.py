@@ -45,7 +45,8 @@ class PostgresServer:
     def __init__(self, bin_dir: Path, root: Path, port: int, as_user: list[str]) -> None:
         self.bin_dir, self.root, self.port, self._as_user = bin_dir, root, port, as_user
 
-    def _run(self, tool: str, *args: str) -> None:
+    def run(self, tool: str, *args: str) -> None:
+        """Run one PostgreSQL tool (as the postgres user when root); raise with its stderr."""
         done = subprocess.run(
             [*self._as_user, str(self.bin_dir / tool), *args],
             capture_output=True,
@@ -59,7 +60,7 @@ class PostgresServer:
     def database(self) -> str:
         """Create an empty database; its SQLAlchemy async URL."""
         name = f"t_{uuid.uuid4().hex[:12]}"
-        self._run("createdb", "-h", "127.0.0.1", "-p", str(self.port), "-U", "guidebot", name)
+        self.run("createdb", "-h", "127.0.0.1", "-p", str(self.port), "-U", "guidebot", name)
         return f"postgresql+asyncpg://guidebot@127.0.0.1:{self.port}/{name}"
 
 
@@ -74,12 +75,12 @@ def postgres_server() -> Iterator[PostgresServer]:
     server = PostgresServer(bin_dir, root, _free_port(), as_user)
     data, log = root / "data", root / "server.log"
     try:
-        server._run("initdb", "-D", str(data), "-U", "guidebot", "-A", "trust", "--no-sync")
+        server.run("initdb", "-D", str(data), "-U", "guidebot", "-A", "trust", "--no-sync")
         options = f"-h 127.0.0.1 -p {server.port} -k {root} -c fsync=off"
-        server._run("pg_ctl", "-D", str(data), "-l", str(log), "-o", options, "-w", "start")
+        server.run("pg_ctl", "-D", str(data), "-l", str(log), "-o", options, "-w", "start")
         yield server
     finally:
         if (data / "postmaster.pid").exists():
             with contextlib.suppress(subprocess.SubprocessError):
-                server._run("pg_ctl", "-D", str(data), "-m", "immediate", "-w", "stop")
+                server.run("pg_ctl", "-D", str(data), "-m", "immediate", "-w", "stop")
         shutil.rmtree(root, ignore_errors=True)
