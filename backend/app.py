@@ -26,12 +26,15 @@ from fastapi.staticfiles import StaticFiles
 import guidebot
 from backend.api import ROUTERS as api_routers
 from backend.api.component import server_brain
-from backend.auth import Role, TokenStore
+from backend.api.deps import ERRORS
+from backend.api.limits import BodyLimit, install_error_handlers
+from backend.auth import Authenticator, Role, TokenStore
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
+from backend.ratelimit import RateLimiter
 from backend.rgm import rgm
 from backend.settings import Settings
 
@@ -73,12 +76,23 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.settings = settings
         app.state.tokens = _load_tokens(settings)
+        app.state.auth = Authenticator(
+            app.state.tokens,
+            RateLimiter(
+                per_minute=settings.sign_in_failures_per_minute,
+                burst=settings.sign_in_failure_burst,
+            ),
+        )
+        app.state.task_limits = RateLimiter(
+            per_minute=settings.task_requests_per_minute, burst=settings.task_request_burst
+        )
         app.state.hub = Hub(
             queue_size=settings.hub_queue_size,
             coalesce_after=settings.hub_coalesce_after,
             batch_max=settings.hub_batch_max,
             linger=settings.hub_linger_ms / 1000,
             max_message_bytes=settings.hub_max_message_bytes,
+            task_requests=app.state.task_limits,
         )
         async with contextlib.AsyncExitStack() as stack:
             stack.callback(app.state.hub.close)
@@ -106,8 +120,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "published": hub.bus.published,
         }
 
+    install_error_handlers(app)
+    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     for router in ROUTERS:
-        app.include_router(router)
+        app.include_router(router, responses=ERRORS)
     if settings.web_dir.is_dir():
         app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
     else:

@@ -27,7 +27,7 @@ def server(
     import uvicorn
 
     from backend.app import create_app, uvicorn_config
-    from backend.settings import Settings
+    from backend.settings import Settings, describe_errors
 
     overrides: dict[str, Any] = {
         key: value
@@ -43,7 +43,7 @@ def server(
     try:
         settings = Settings(**overrides)
     except ValidationError as exc:
-        raise click.UsageError(str(exc)) from None
+        raise click.UsageError(describe_errors(exc)) from None
     app = create_app(settings)
     click.echo(
         f"GuideBot server on http://{settings.host}:{settings.port} "

@@ -2,24 +2,72 @@
 
 Nothing is read at import time: ``Settings()`` reads the environment when it is built, so tests
 pass their own instance to ``create_app(settings)``.
+
+Outside development (``GUIDEBOT_ENVIRONMENT`` anything but ``development``) the server refuses
+to start with a missing or default secret and names it (docs/security.md).
 """
 
 from __future__ import annotations
 
+from functools import cache
 from pathlib import Path
-from typing import Literal
 
-from pydantic import BaseModel, Field, model_validator
+import yaml
+from pydantic import BaseModel, Field, ValidationError, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from backend.auth import Role
 
-__all__ = ["DEFAULT_ADMIN_TOKEN", "Settings", "StaticToken"]
+__all__ = [
+    "DEFAULT_ADMIN_TOKEN",
+    "MIN_PRODUCTION_TOKEN_LENGTH",
+    "Settings",
+    "StaticToken",
+    "describe_errors",
+    "published_tokens",
+]
 
 # Good enough on a developer's laptop, refused anywhere else (see Settings._refuse_default_secrets).
 DEFAULT_ADMIN_TOKEN = "dev-admin-token"
+MIN_PRODUCTION_TOKEN_LENGTH = 16
 
-WEB_DIR = Path(__file__).resolve().parent.parent / "web"
+ROOT = Path(__file__).resolve().parent.parent
+WEB_DIR = ROOT / "web"
+
+
+@cache
+def published_tokens() -> frozenset[str]:
+    """Tokens anyone can read in this repository: the dev admin token and the shipped sites'."""
+    found = {DEFAULT_ADMIN_TOKEN}
+    for path in sorted((ROOT / "sites").glob("*.yaml")):
+        try:
+            data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except (OSError, yaml.YAMLError):
+            continue
+        robots = data.get("robots") if isinstance(data, dict) else None
+        for robot in robots if isinstance(robots, list) else []:
+            if isinstance(robot, dict) and isinstance(robot.get("token"), str):
+                found.add(robot["token"])
+    return frozenset(found)
+
+
+def weak_secret(token: str) -> str | None:
+    """Why ``token`` is not a production secret, or None if it is acceptable."""
+    if token in published_tokens():
+        return "is a default published with GuideBot"
+    if len(token) < MIN_PRODUCTION_TOKEN_LENGTH:
+        return f"is shorter than {MIN_PRODUCTION_TOKEN_LENGTH} characters"
+    return None
+
+
+def describe_errors(exc: ValidationError) -> str:
+    """A settings error for people, without the values (they may be secrets)."""
+    lines = []
+    for err in exc.errors(include_url=False, include_input=False, include_context=False):
+        where = ".".join(str(p) for p in err["loc"])
+        msg = err["msg"].removeprefix("Value error, ")
+        lines.append(f"{where}: {msg}" if where else msg)
+    return "\n".join(lines)
 
 
 class StaticToken(BaseModel):
@@ -39,7 +87,7 @@ class Settings(BaseSettings):
     port: int = Field(default=8000, ge=0, le=65535)
     db_url: str = "sqlite+aiosqlite:///./guidebot.db"
     site: Path | None = None
-    environment: Literal["development", "production"] = "development"
+    environment: str = Field(default="development", pattern=r"^[A-Za-z0-9_.-]{1,32}$")
     admin_token: str = DEFAULT_ADMIN_TOKEN
     tokens: list[StaticToken] = Field(default_factory=list)
     web_dir: Path = WEB_DIR
@@ -49,18 +97,42 @@ class Settings(BaseSettings):
     hub_batch_max: int = Field(default=512, ge=1)
     hub_linger_ms: float = Field(default=5.0, ge=0, le=100)
     hub_max_message_bytes: int = Field(default=1 << 20, ge=1024)
+    hub_send_timeout_s: float = Field(default=10.0, gt=0, le=300)
     log_level: str = "info"
     # BuildingInterface (docs/building.md): poll the site's Modbus modules; input filter.
     building_enabled: bool = True
     building_filter_ms: float = Field(default=200.0, ge=0, le=5000)
+    # Security (docs/security.md): rate limits and request sizes.
+    sign_in_failures_per_minute: float = Field(default=10.0, ge=0)
+    sign_in_failure_burst: int = Field(default=10, ge=1)
+    task_requests_per_minute: float = Field(default=10.0, ge=0)
+    task_request_burst: int = Field(default=5, ge=1)
+    max_body_bytes: int = Field(default=64 * 1024, ge=1024)
+    # Traffic Manager: release a lock whose holder went offline before entering its area.
+    lock_offline_grace_s: float = Field(default=30.0, gt=0)
+
+    @property
+    def development(self) -> bool:
+        return self.environment == "development"
 
     @model_validator(mode="after")
     def _refuse_default_secrets(self) -> Settings:
-        if self.environment != "development" and self.admin_token == DEFAULT_ADMIN_TOKEN:
-            raise ValueError(
-                "GUIDEBOT_ADMIN_TOKEN must be set to a secret outside development "
-                f"(environment={self.environment!r})"
-            )
         if len(self.admin_token) < 8:
             raise ValueError("GUIDEBOT_ADMIN_TOKEN must be at least 8 characters")
+        if self.development:
+            return self
+        problems = []
+        if self.admin_token == DEFAULT_ADMIN_TOKEN:
+            problems.append("GUIDEBOT_ADMIN_TOKEN is missing (the development default is set)")
+        elif why := weak_secret(self.admin_token):
+            problems.append(f"GUIDEBOT_ADMIN_TOKEN {why}")
+        for static in self.tokens:
+            if why := weak_secret(static.token):
+                problems.append(f"GUIDEBOT_TOKENS: the token of {static.name!r} {why}")
+        if problems:
+            raise ValueError(
+                f"refusing to start with environment={self.environment!r}: "
+                + "; ".join(problems)
+                + " (set real secrets, or GUIDEBOT_ENVIRONMENT=development)"
+            )
         return self

@@ -6,13 +6,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 from fastapi import FastAPI
 
-from backend.auth import Role, TokenStore
+from backend.alerts import AlertBoard
+from backend.auth import Role, TokenStore, is_digest, token_digest
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.settings import published_tokens, weak_secret
 from backend.site.schema import Site
 from backend.site.service import EMPTY_SITE, SiteService
 from backend.site.validate import validate_site
@@ -23,7 +25,13 @@ from backend.traffic.graph import SiteGraph
 from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
 
-__all__ = ["LOGGED_TYPES", "server_brain"]
+__all__ = [
+    "LOGGED_TYPES",
+    "InsecureSite",
+    "hash_robot_tokens",
+    "server_brain",
+    "weak_robot_tokens",
+]
 
 log = logging.getLogger(__name__)
 
@@ -38,54 +46,94 @@ LOGGED_TYPES = (
 """Hub messages copied into the event log (task changes and lock changes are logged directly)."""
 
 
+class InsecureSite(RuntimeError):
+    """A production start with robot tokens anyone can know."""
+
+
+def hash_robot_tokens(site: Site) -> Site:
+    """The site as stored and served: robot tokens replaced by their SHA-256 digests."""
+    if all(is_digest(r.token) for r in site.robots):
+        return site
+    robots = [r.model_copy(update={"token": token_digest(r.token)}) for r in site.robots]
+    return site.model_copy(update={"robots": robots})
+
+
+def weak_robot_tokens(site: Site) -> list[str]:
+    """Why robots' tokens are not production secrets (plain tokens: length and defaults;
+    digests: the digests of the tokens published with GuideBot)."""
+    published = {token_digest(t) for t in published_tokens()}
+    problems = []
+    for robot in site.robots:
+        if is_digest(robot.token):
+            if robot.token in published:
+                problems.append(
+                    f"robot {robot.name!r}: its token is a default published with GuideBot"
+                )
+        elif why := weak_secret(robot.token):
+            problems.append(f"robot {robot.name!r}: its token {why}")
+    return problems
+
+
 async def _initial_site(app: FastAPI, store: DbStore) -> tuple[Site, int]:
     """The database wins; a site file is imported only into an empty database."""
     stored = await store.load_site()
     if stored is not None:
         version, data = stored
-        return validate_site(data), version
+        site = validate_site(data)
+        hashed = hash_robot_tokens(site)
+        if hashed is not site:  # stored before tokens were hashed: store the digests now
+            version = await store.save_site(hashed.model_dump(mode="json"))
+        return hashed, version
     path = getattr(app.state.settings, "site", None)
     site = load_site_file(path) if path else validate_site(EMPTY_SITE)
+    site = hash_robot_tokens(site)
     version = await store.save_site(site.model_dump(mode="json"))
     return site, version
 
 
 def _sync_robot_tokens(tokens: TokenStore, site: Site, known: dict[str, str]) -> None:
-    """Robots' tokens come from the site: add new ones, drop removed or changed ones."""
-    wanted = {r.token: r.name for r in site.robots}
-    for token in list(known):
-        if wanted.get(token) != known[token]:
-            tokens.remove(token)
-            del known[token]
-    for token, name in wanted.items():
-        if token not in known:
-            tokens.add(token, name, Role.ROBOT)
-            known[token] = name
+    """Robots' token digests come from the site: add new ones, drop removed or changed ones."""
+    wanted = {token_digest(r.token): r.name for r in site.robots}
+    for digest in list(known):
+        if wanted.get(digest) != known[digest]:
+            tokens.remove(digest)
+            del known[digest]
+    for digest, name in wanted.items():
+        if digest not in known:
+            tokens.add(digest, name, Role.ROBOT)
+            known[digest] = name
 
 
-async def watch_robot_links(
-    hub: Any, sites: SiteService, tasks: TaskManager, period_s: float = 0.25
-) -> None:
-    """Tell the managers when a robot's WebSocket link comes up or drops.
-
-    A robot the Task Manager believes online but that has no hub link any more is announced
-    as disconnected, even if its whole connection fell between two looks.
-    """
+def announce_robot_links(hub: Any, sites: SiteService) -> Callable[[], None]:
+    """Publish robot_connected / robot_disconnected when a site robot's hub link comes up or
+    goes (a hub connection event, no polling). Returns the unsubscribe function."""
     endpoint = hub.endpoint("link_watcher")
-    connected: set[str] = set()
-    try:
-        while True:
-            robots = {r.name for r in sites.site.robots}
-            now = robots & set(hub.clients)
-            believed = {name for name, info in tasks.robots.items() if info.online}
-            for name in sorted(now - connected):
-                endpoint.publish("robot_connected", {"robot": name})
-            for name in sorted(((connected | believed) & robots) - now):
-                endpoint.publish("robot_disconnected", {"robot": name})
-            connected = now
-            await asyncio.sleep(period_s)
-    finally:
+
+    def changed(client: Any, connected: bool) -> None:
+        if client.role is not Role.ROBOT or sites.site.robot(client.name) is None:
+            return
+        kind = "robot_connected" if connected else "robot_disconnected"
+        endpoint.publish(kind, {"robot": client.name})
+
+    unsubscribe = hub.on_connection(changed)
+
+    def stop() -> None:
+        unsubscribe()
         endpoint.close()
+
+    return stop
+
+
+async def watch_offline_locks(
+    traffic: TrafficManager, grace_s: float, period_s: float = 1.0
+) -> None:
+    """Decide, once a second, about locks whose holder has been offline for ``grace_s``."""
+    while True:
+        await asyncio.sleep(period_s)
+        try:
+            traffic.check_offline_locks(grace_s)
+        except Exception:
+            log.exception("offline lock check failed")
 
 
 @contextlib.asynccontextmanager
@@ -99,14 +147,26 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
         store.start()
         try:
             site, version = await _initial_site(app, store)
+            if not settings.development and (problems := weak_robot_tokens(site)):
+                raise InsecureSite(
+                    f"refusing to start with environment={settings.environment!r}: "
+                    + "; ".join(problems)
+                    + " (give the robots real tokens in the site, or GUIDEBOT_ENVIRONMENT="
+                    "development)"
+                )
             sites = SiteService(site, version, store)
             graph = SiteGraph(site)
 
             def log_event(kind: str, data: dict[str, Any]) -> None:
                 store.record_event(kind, "traffic_manager", data)
 
+            alerts = AlertBoard(hub.endpoint("alerts"), on_event=log_event)
             traffic = TrafficManager(
-                hub.endpoint("traffic_manager"), site, graph=graph, on_event=log_event
+                hub.endpoint("traffic_manager"),
+                site,
+                graph=graph,
+                on_event=log_event,
+                alerts=alerts,
             )
             tasks = TaskManager(hub.endpoint("task_manager"), site, graph=graph, store=store)
             buttons = ButtonWatcher(hub.endpoint("buttons"), tasks, site)
@@ -136,15 +196,19 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
             app.state.sites = sites
             app.state.task_manager = tasks
             app.state.traffic = traffic
-            links = asyncio.get_running_loop().create_task(
-                watch_robot_links(hub, sites, tasks), name="robot-link-watcher"
+            app.state.alerts = alerts
+            stop_links = announce_robot_links(hub, sites)
+            locks = asyncio.get_running_loop().create_task(
+                watch_offline_locks(traffic, settings.lock_offline_grace_s),
+                name="offline-lock-watcher",
             )
             try:
                 yield
             finally:
-                links.cancel()
+                stop_links()
+                locks.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
-                    await links
+                    await locks
                 buttons.stop()
                 await tasks.stop()
                 traffic.stop()

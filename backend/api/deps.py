@@ -2,23 +2,26 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, HTTPException, Request, status
 
 from backend.auth import Principal, Role, require_roles
 from backend.db.store import DbStore
+from backend.ratelimit import RateLimited
 from backend.site.service import SiteService
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
 
 __all__ = [
+    "ERRORS",
     "Admin",
     "Anyone",
     "Requester",
     "Staff",
     "forbid",
     "not_found",
+    "rate_limited",
     "sites",
     "store",
     "task_manager",
@@ -58,3 +61,34 @@ def not_found(what: str) -> HTTPException:
 
 def forbid(reason: str) -> HTTPException:
     return HTTPException(status.HTTP_403_FORBIDDEN, reason)
+
+
+def rate_limited(exc: RateLimited) -> HTTPException:
+    """429 with a sentence a visitor panel can show, and Retry-After."""
+    return HTTPException(
+        status.HTTP_429_TOO_MANY_REQUESTS, str(exc), headers={"Retry-After": str(exc.retry_after)}
+    )
+
+
+def _error(description: str) -> dict[str, Any]:
+    return {
+        "description": description,
+        "content": {
+            "application/json": {
+                "schema": {"type": "object", "properties": {"detail": {}}, "required": ["detail"]}
+            }
+        },
+    }
+
+
+ERRORS: dict[int | str, dict[str, Any]] = {
+    401: _error("missing or unknown bearer token"),
+    403: _error("the token's role may not do this"),
+    404: _error("no such id in the path (or not yours to see)"),
+    409: _error("the thing cannot change any more (a finished task)"),
+    413: _error("request body too large"),
+    422: _error("bad input: each problem with its place"),
+    429: _error("too many requests or failed sign-ins; Retry-After says when to try again"),
+    503: _error("the task queue is full"),
+}
+"""Every error status the API answers, documented on every route (docs/server.md)."""

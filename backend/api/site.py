@@ -6,9 +6,11 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Query, Request, Response, status
 
+from backend.api.component import hash_robot_tokens, weak_robot_tokens
 from backend.api.deps import Admin, Requester, Staff, forbid, sites, traffic
 from backend.auth import Role
-from backend.site.validate import SiteInvalid
+from backend.site.schema import Site
+from backend.site.validate import SiteInvalid, SiteIssue, validate_site
 from backend.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
 from backend.traffic.graph import NoPath, UnknownNode
 
@@ -23,9 +25,16 @@ def invalid(exc: SiteInvalid) -> HTTPException:
     )
 
 
+def _secured(request: Request, site: Site) -> Site:
+    """Robot tokens hashed before the site is stored; outside development, weak ones refused."""
+    if not request.app.state.settings.development and (problems := weak_robot_tokens(site)):
+        raise SiteInvalid([SiteIssue("robots", p) for p in problems])
+    return hash_robot_tokens(site)
+
+
 @router.get("/site")
 async def get_site(request: Request, _: Admin) -> dict[str, Any]:
-    """The whole site document with its version (it holds robot tokens: admin only)."""
+    """The whole site document with its version (robot tokens as SHA-256 digests only)."""
     service = sites(request)
     return {"version": service.version, "site": service.site.model_dump(mode="json")}
 
@@ -37,7 +46,7 @@ async def put_site(
     """Replace the site while running; refused as a whole (422, every problem) if broken."""
     service = sites(request)
     try:
-        await service.replace(document)
+        await service.replace(_secured(request, validate_site(document)))
     except SiteInvalid as exc:
         raise invalid(exc) from None
     return {"version": service.version}
@@ -68,7 +77,7 @@ async def import_site(request: Request, _: Admin) -> dict[str, Any]:
     try:
         site = load_site_text(raw.decode("utf-8", errors="replace"))
         service = sites(request)
-        await service.replace(site)
+        await service.replace(_secured(request, site))
     except SiteInvalid as exc:
         raise invalid(exc) from None
     return {"version": service.version}

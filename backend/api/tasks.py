@@ -1,15 +1,40 @@
-"""Task routes: request, follow, list, cancel, re-prioritise, reassign."""
+"""Task routes: request, follow, list, cancel, re-prioritise, reassign.
+
+Status codes (docs/server.md, "Status codes"): a body naming something that does not exist or
+with bad parameters 422; an unknown task id in the path 404; a change a finished task cannot
+take 409; too many requests 429; the queue at its bound 503.
+"""
 
 from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, status
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from backend.api.deps import Requester, Staff, forbid, not_found, store, task_manager
+from backend.api.deps import (
+    Requester,
+    Staff,
+    forbid,
+    not_found,
+    rate_limited,
+    store,
+    task_manager,
+)
 from backend.auth import Principal, Role
-from backend.tasks.model import Task, TaskError, TaskNotFound, TaskState
+from backend.ratelimit import RateLimited
+from backend.tasks.model import (
+    FINAL_STATES,
+    IllegalTransition,
+    InvalidTask,
+    QueueFull,
+    Task,
+    TaskError,
+    TaskFinished,
+    TaskNotFound,
+    TaskState,
+)
+from backend.tasks.params import validate_params
 
 __all__ = ["router"]
 
@@ -18,15 +43,26 @@ router = APIRouter(prefix="/api/tasks", tags=["tasks"])
 TaskId = Annotated[str, Path(max_length=64)]
 PANEL_KINDS = frozenset({"tour", "go_to_poi"})
 PANEL_MAX_PRIORITY = 5
+RATE_LIMITED_ROLES = frozenset({Role.PANEL, Role.ROBOT})
+"""Visitor-facing requesters (kiosks, robot screens); staff are not limited."""
 
 
 class TaskCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
     kind: Literal["tour", "go_to_poi", "charge", "go_to"]
     params: dict[str, Any] = Field(default_factory=dict)
+    """tour: {tour}; go_to_poi: {poi}; charge: {station} (optional); go_to: {node}."""
     priority: int = Field(default=5, ge=0, le=100)
     robot: str | None = Field(default=None, max_length=64)
     """Staff only: the robot that must do it."""
+
+    @model_validator(mode="after")
+    def _strict_params(self) -> TaskCreate:
+        try:
+            self.params = validate_params(self.kind, self.params)
+        except InvalidTask as exc:
+            raise ValueError(str(exc)) from None
+        return self
 
 
 class Cancel(BaseModel):
@@ -67,30 +103,54 @@ class TaskStatus(BaseModel):
     """Estimated wait before a robot starts on it."""
 
 
-def _conflict(exc: TaskError) -> HTTPException:
+class TaskPage(BaseModel):
+    total: int
+    """Tasks matching the filters, over every page."""
+    tasks: list[TaskStatus]
+
+
+def task_error(exc: TaskError) -> HTTPException:
+    """One status per kind of mistake, the same on every route."""
     if isinstance(exc, TaskNotFound):
         return not_found("task")
-    return HTTPException(status.HTTP_409_CONFLICT, str(exc))
+    if isinstance(exc, TaskFinished | IllegalTransition):
+        return HTTPException(status.HTTP_409_CONFLICT, str(exc))
+    if isinstance(exc, QueueFull):
+        return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, str(exc))
+    return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc))
 
 
 def _status(request: Request, task: Task) -> TaskStatus:
     return TaskStatus.model_validate(task_manager(request).status(task))
 
 
-async def _find(request: Request, task_id: str) -> Task:
+async def _find(request: Request, who: Principal, task_id: str) -> Task:
+    """The live task, else the stored one; 404 also for a task this caller may not see."""
     try:
-        return task_manager(request).get(task_id)
+        task = task_manager(request).get(task_id)
     except TaskNotFound:
         old = await store(request).task(task_id)
         if old is None:
             raise not_found(f"task {task_id!r}") from None
-        return old
+        task = old
+    if not _may_see(who, task):
+        raise not_found(f"task {task_id!r}")
+    return task
 
 
 def _may_see(who: Principal, task: Task) -> bool:
+    """Panels see what they requested; robots that and what they run; staff everything."""
+    if who.role is Role.PANEL:
+        return task.requester == who.name
     if who.role is Role.ROBOT:
         return task.robot == who.name or task.requester == who.name
     return True
+
+
+def _refuse_finished(task: Task) -> None:
+    """A finished task (live or only in the database since a restart) answers 409 the same."""
+    if task.state in FINAL_STATES:
+        raise task_error(TaskFinished(f"task {task.id} is already {task.state.value}"))
 
 
 @router.post("", status_code=status.HTTP_201_CREATED)
@@ -98,7 +158,8 @@ async def create_task(
     request: Request, who: Requester, body: Annotated[TaskCreate, Body()]
 ) -> TaskStatus:
     """Request a task. Panels: tours and points of interest, priority up to 5. Robots: a
-    visitor at the robot's screen, so that robot takes it."""
+    visitor at the robot's screen, so that robot takes it. Panels and robots are rate-limited
+    per requester (429)."""
     robot = body.robot
     if who.role is Role.PANEL:
         if body.kind not in PANEL_KINDS or body.robot is not None:
@@ -109,55 +170,77 @@ async def create_task(
         if body.robot not in (None, who.name):
             raise forbid("a robot may request tasks only for itself")
         robot = who.name
+    if who.role in RATE_LIMITED_ROLES:
+        try:
+            request.app.state.task_limits.spend(who.name, f"too many task requests from {who.name}")
+        except RateLimited as exc:
+            raise rate_limited(exc) from None
     try:
         task = task_manager(request).request(
             body.kind, body.params, priority=body.priority, requester=who.name, robot=robot
         )
     except TaskError as exc:
-        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc)) from None
+        raise task_error(exc) from None
     return _status(request, task)
 
 
 @router.get("")
 async def list_tasks(
     request: Request,
-    _: Staff,
+    who: Requester,
     state: TaskState | None = None,
     robot: Annotated[str | None, Query(max_length=64)] = None,
     include_internal: bool = True,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
-) -> dict[str, Any]:
-    """Live tasks (queued first, in service order) and recently finished ones."""
+) -> TaskPage:
+    """Queued tasks first (in service order), then every other task, live or finished, newest
+    change first; finished ones survive restarts. Panels and robots see only their own."""
     manager = task_manager(request)
-    queued = list(manager.queue.ordered())
-    others = sorted(
-        (t for t in manager.tasks.values() if t.state is not TaskState.QUEUED),
-        key=lambda t: -t.updated_at,
-    )
-    selected = [
-        t
-        for t in (*queued, *others)
-        if (state is None or t.state is state)
-        and (robot is None or t.robot == robot)
-        and (include_internal or not t.internal)
-    ]
-    page = selected[offset : offset + limit]
-    return {"total": len(selected), "tasks": [_status(request, t) for t in page]}
+    owner: tuple[str | None, str | None] | None = None
+    if who.role is Role.PANEL:
+        owner = (who.name, None)
+    elif who.role is Role.ROBOT:
+        owner = (who.name, who.name)
+    queued: list[Task] = []
+    if state in (None, TaskState.QUEUED):
+        queued = [
+            t
+            for t in manager.queue.ordered()
+            if (robot is None or t.robot == robot)
+            and (include_internal or not t.internal)
+            and _may_see(who, t)
+        ]
+    page = queued[offset : offset + limit]
+    rest_offset = max(0, offset - len(queued))
+    rest_limit = limit - len(page)
+    total = len(queued)
+    if state is not TaskState.QUEUED:
+        counted, stored = await store(request).list_tasks(
+            states=[state.value] if state is not None else None,
+            exclude_states=[TaskState.QUEUED.value],
+            robot=robot,
+            include_internal=include_internal,
+            owner=owner,
+            offset=rest_offset,
+            limit=max(rest_limit, 1),
+        )
+        total += counted
+        if rest_limit > 0:
+            live = manager.tasks
+            page += [live.get(t.id, t) for t in stored]
+    return TaskPage(total=total, tasks=[_status(request, t) for t in page])
 
 
 @router.get("/{task_id}")
 async def get_task(request: Request, who: Requester, task_id: TaskId) -> TaskStatus:
     """A task's state, its robot, its queue position and estimated wait."""
-    task = await _find(request, task_id)
-    if not _may_see(who, task):
-        raise not_found(f"task {task_id!r}")
-    return _status(request, task)
+    return _status(request, await _find(request, who, task_id))
 
 
 @router.get("/{task_id}/history")
-async def task_history(request: Request, _: Staff, task_id: TaskId) -> list[dict[str, Any]]:
-    await _find(request, task_id)
+async def task_history(request: Request, who: Staff, task_id: TaskId) -> list[dict[str, Any]]:
+    await _find(request, who, task_id)
     return await store(request).history(task_id)
 
 
@@ -169,13 +252,14 @@ async def cancel_task(
     body: Annotated[Cancel | None, Body()] = None,
 ) -> TaskStatus:
     """Staff cancel any task; a panel or robot only what it requested."""
-    task = await _find(request, task_id)
+    task = await _find(request, who, task_id)
     if who.role in (Role.PANEL, Role.ROBOT) and task.requester != who.name:
         raise forbid("you may cancel only the tasks you requested")
+    _refuse_finished(task)
     try:
         task = task_manager(request).cancel(task_id, reason=(body or Cancel()).reason, by=who.name)
     except TaskError as exc:
-        raise _conflict(exc) from None
+        raise task_error(exc) from None
     return _status(request, task)
 
 
@@ -184,21 +268,21 @@ async def reassign_task(
     request: Request, who: Staff, task_id: TaskId, body: Annotated[Reassign, Body()]
 ) -> TaskStatus:
     """Move a task to another robot (or back to the queue), even off a broken-down robot."""
-    await _find(request, task_id)
+    _refuse_finished(await _find(request, who, task_id))
     try:
         task = task_manager(request).reassign(task_id, body.robot, by=who.name)
     except TaskError as exc:
-        raise _conflict(exc) from None
+        raise task_error(exc) from None
     return _status(request, task)
 
 
 @router.post("/{task_id}/priority")
 async def reprioritise_task(
-    request: Request, _: Staff, task_id: TaskId, body: Annotated[Priority, Body()]
+    request: Request, who: Staff, task_id: TaskId, body: Annotated[Priority, Body()]
 ) -> TaskStatus:
-    await _find(request, task_id)
+    _refuse_finished(await _find(request, who, task_id))
     try:
         task = task_manager(request).reprioritise(task_id, body.priority)
     except TaskError as exc:
-        raise _conflict(exc) from None
+        raise task_error(exc) from None
     return _status(request, task)

@@ -30,7 +30,7 @@ class TaskRow(Base):
     kind: Mapped[str] = mapped_column(String(32))
     params: Mapped[dict[str, Any]] = mapped_column(JSON)
     priority: Mapped[int] = mapped_column(Integer)
-    requester: Mapped[str] = mapped_column(String(64), default="")
+    requester: Mapped[str] = mapped_column(String(64), default="", index=True)
     seq: Mapped[int] = mapped_column(Integer)
     state: Mapped[str] = mapped_column(String(16), index=True)
     robot: Mapped[str | None] = mapped_column(String(64), nullable=True)
@@ -39,7 +39,7 @@ class TaskRow(Base):
     net: Mapped[str] = mapped_column(String(64), default="")
     reason: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[float] = mapped_column(Float)
-    updated_at: Mapped[float] = mapped_column(Float)
+    updated_at: Mapped[float] = mapped_column(Float, index=True)
     started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     ended_at: Mapped[float | None] = mapped_column(Float, nullable=True)
 

@@ -16,7 +16,7 @@ import time
 from collections import deque
 from typing import Any
 
-from sqlalchemy import Insert, func, insert, select
+from sqlalchemy import Insert, func, insert, or_, select
 from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.db.models import EventRow, SiteRow, TaskHistoryRow, TaskRow
@@ -157,6 +157,46 @@ class DbStore:
                 await session.execute(select(TaskRow).where(TaskRow.state.not_in(finals)))
             ).scalars()
             return [_task(row) for row in rows]
+
+    async def list_tasks(
+        self,
+        *,
+        states: list[str] | None = None,
+        exclude_states: list[str] | None = None,
+        robot: str | None = None,
+        include_internal: bool = True,
+        owner: tuple[str | None, str | None] | None = None,
+        offset: int = 0,
+        limit: int = 100,
+    ) -> tuple[int, list[Task]]:
+        """Stored tasks, newest change first, filtered; returns (total matching, page).
+
+        ``owner`` = (requester, robot): only tasks that one requested or that robot runs.
+        Pending changes are written first, so the page is as current as memory.
+        """
+        await self.flush()
+        query = select(TaskRow)
+        if states:
+            query = query.where(TaskRow.state.in_(states))
+        if exclude_states:
+            query = query.where(TaskRow.state.not_in(exclude_states))
+        if robot is not None:
+            query = query.where(TaskRow.robot == robot)
+        if not include_internal:
+            query = query.where(TaskRow.internal.is_(False))
+        if owner is not None:
+            requester, runs = owner
+            query = query.where(
+                or_(TaskRow.requester == (requester or ""), TaskRow.robot == runs)
+                if runs is not None
+                else TaskRow.requester == (requester or "")
+            )
+        counted = select(func.count()).select_from(query.subquery())
+        page = query.order_by(TaskRow.updated_at.desc(), TaskRow.seq.desc())
+        async with self.sessionmaker() as session:
+            total = int((await session.execute(counted)).scalar() or 0)
+            rows = (await session.execute(page.offset(offset).limit(limit))).scalars()
+            return total, [_task(row) for row in rows]
 
     async def max_seq(self) -> int:
         async with self.sessionmaker() as session:

@@ -12,10 +12,11 @@ drains ``RemoteClient.outbox``.
 
 from __future__ import annotations
 
+import asyncio
 import enum
 import fnmatch
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import orjson
@@ -23,22 +24,26 @@ from pydantic import BaseModel, ValidationError
 from pydantic_core import to_jsonable_python
 
 from backend.auth import Role
+from backend.ratelimit import RateLimited, RateLimiter
 from guidebot.bus import Bus, Endpoint, is_wildcard
 from guidebot.messages import Message, known_types, payload_model
 
 from .memory import GcFreezer
 from .outbox import Outbox, OutboxOverflow
+from .permissions import may_publish
 
 __all__ = [
     "CLOSE_NAME_IN_USE",
     "CLOSE_OVERFLOW",
     "CLOSE_REPLACED",
     "CLOSE_SHUTDOWN",
+    "CLOSE_TOO_MANY_FAILURES",
     "CLOSE_UNAUTHORIZED",
     "COALESCED_TYPES",
     "CONTROL_TYPES",
     "HUB_NAME",
     "ClientState",
+    "ConnectionCallback",
     "Hub",
     "HubBus",
     "RemoteClient",
@@ -56,12 +61,17 @@ CLOSE_UNAUTHORIZED = 4001
 CLOSE_FORBIDDEN = 4003
 CLOSE_OVERFLOW = 4008
 CLOSE_NAME_IN_USE = 4009
+CLOSE_TOO_MANY_FAILURES = 4029
 
 CONTROL_TYPES = frozenset({"subscribe", "unsubscribe", "ping"})
 """Types the hub answers itself instead of publishing (unless addressed to another client)."""
 
 COALESCED_TYPES = frozenset({"robot_state"})
 """Types whose newest message per source replaces the queued one in a slow client's queue."""
+
+
+ConnectionCallback = Callable[["RemoteClient", bool], None]
+"""Called with (client, True) once a client is attached and (client, False) once it is gone."""
 
 
 class ClientState(enum.Enum):
@@ -117,6 +127,8 @@ class RemoteClient:
         self.close_code: int | None = None
         self.close_reason = ""
         self.received = 0
+        self.closing = asyncio.Event()
+        """Set once the hub stops routing to this client (its transport should end)."""
 
     def _move(self, new: ClientState) -> None:
         if new not in _TRANSITIONS[self.state]:
@@ -170,6 +182,7 @@ class RemoteClient:
         if self.state is not ClientState.OPEN:
             return
         self._move(ClientState.CLOSING)
+        self.closing.set()
         self.close_code, self.close_reason = code, reason
         log.warning("hub: closing %s (%d): %s", self.name, code, reason)
         self.hub.detach(self)
@@ -199,6 +212,7 @@ class Hub:
         linger: float = 0.005,
         max_message_bytes: int = 1 << 20,
         gc_freeze: bool = True,
+        task_requests: RateLimiter | None = None,
     ) -> None:
         self.bus = HubBus()
         self.memory = GcFreezer(enabled=gc_freeze)
@@ -209,6 +223,9 @@ class Hub:
         self.max_message_bytes = max_message_bytes
         self.refused = 0
         self.overflow_disconnects = 0
+        self.task_requests = task_requests
+        """Rate limit on task_request per client name (shared with REST task creation)."""
+        self._on_connection: list[ConnectionCallback] = []
         self._known: frozenset[str] = frozenset()
         self._models: dict[str, type[BaseModel]] = {}
         self._encoded_message: Message | None = None
@@ -232,6 +249,18 @@ class Hub:
     @property
     def clients(self) -> dict[str, RemoteClient]:
         return self.bus.remote
+
+    def on_connection(self, callback: ConnectionCallback) -> Callable[[], None]:
+        """Be told when a WebSocket client is attached or gone; returns the unsubscribe."""
+        self._on_connection.append(callback)
+        return lambda: self._on_connection.remove(callback)
+
+    def _connection_changed(self, client: RemoteClient, connected: bool) -> None:
+        for callback in list(self._on_connection):
+            try:
+                callback(client, connected)
+            except Exception:
+                log.exception("hub: connection callback failed for %s", client.name)
 
     def encode(self, message: Message) -> bytes:
         """JSON bytes of a message, computed once however many clients receive it."""
@@ -322,20 +351,25 @@ class Hub:
                 payload={"name": name, "role": role.value},
             )
         )
+        self._connection_changed(client, True)
         return client
 
     def detach(self, client: RemoteClient) -> None:
         """Forget a client: no more routing to it. Safe to call twice."""
-        if self.bus.remote.get(client.name) is client:
+        gone = self.bus.remote.get(client.name) is client
+        if gone:
             del self.bus.remote[client.name]
             client.endpoint.close()
             self.memory.detached(len(self.bus.remote))
+        client.closing.set()
         for pattern in client.patterns:
             self._leave(client, pattern)
         client.patterns.clear()
         if client.state is not ClientState.CLOSED:
             client._move(ClientState.CLOSED)
             client.outbox.close()
+        if gone:
+            self._connection_changed(client, False)
 
     def close(self) -> None:
         """Server shutdown: every client is told why."""
@@ -378,6 +412,14 @@ class Hub:
             if type_ not in self._known:
                 client.error("unknown_type", f"unknown message type {type_!r}", message_id)
                 return
+        if not may_publish(client.role, type_):
+            client.error(
+                "forbidden_type",
+                f"a {client.role.value} may not publish {type_!r} (docs/protocol.md, "
+                "'Publish permissions')",
+                message_id,
+            )
+            return
         try:
             message = Message.model_validate(data)
         except ValidationError as exc:
@@ -417,6 +459,16 @@ class Hub:
         ):
             client.error("unknown_destination", f"no client named {destination!r}", message.id)
             return
+        if (
+            type_ == "task_request"
+            and self.task_requests is not None
+            and client.role is not Role.ADMIN
+        ):
+            try:
+                self.task_requests.spend(client.name, "too many task requests")
+            except RateLimited as exc:
+                client.error("rate_limited", str(exc), message.id)
+                return
         self.bus.publish(message)
 
     def _control(self, client: RemoteClient, message: Message) -> None:

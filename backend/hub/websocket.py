@@ -16,10 +16,12 @@ import logging
 from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect
 
-from backend.auth import TokenStore, bearer_token
+from backend.auth import Authenticator, SignInRefused, bearer_token, client_address
 
 from .core import (
     CLOSE_FORBIDDEN,
+    CLOSE_OVERFLOW,
+    CLOSE_TOO_MANY_FAILURES,
     CLOSE_UNAUTHORIZED,
     Hub,
     RemoteClient,
@@ -38,14 +40,16 @@ _CLOSE_SEND_TIMEOUT = 2.0
 async def hub_socket(websocket: WebSocket) -> None:
     """Token in ``Authorization: Bearer`` or ``?token=``; optional ``?name=`` (modules, admin)."""
     hub: Hub = websocket.app.state.hub
-    tokens: TokenStore = websocket.app.state.tokens
+    auth: Authenticator = websocket.app.state.auth
     token = bearer_token(
         websocket.headers.get("authorization"), websocket.query_params.get("token")
     )
-    principal = tokens.lookup(token)
     await websocket.accept()
-    if principal is None:
-        await websocket.close(CLOSE_UNAUTHORIZED, "missing or unknown bearer token")
+    try:
+        principal = auth.authenticate(token, client_address(websocket.client))
+    except SignInRefused as exc:
+        code = CLOSE_TOO_MANY_FAILURES if exc.status_code == 429 else CLOSE_UNAUTHORIZED
+        await websocket.close(code, exc.reason)
         return
     try:
         name = hub.resolve_name(principal.name, principal.role, websocket.query_params.get("name"))
@@ -54,11 +58,34 @@ async def hub_socket(websocket: WebSocket) -> None:
         await websocket.close(CLOSE_FORBIDDEN, str(exc))
         return
     writer = asyncio.create_task(_write(websocket, client), name=f"hub-writer-{name}")
+    reader = asyncio.create_task(_read(websocket, hub, client), name=f"hub-reader-{name}")
+    stall = websocket.app.state.settings.hub_send_timeout_s
+    watchdog = asyncio.create_task(_watch_stall(client, stall), name=f"hub-stall-{name}")
+    closing = asyncio.create_task(client.closing.wait(), name=f"hub-closing-{name}")
     try:
+        # Ends when the client goes, or when the hub stops routing to it (overflow, replaced,
+        # shutdown, not reading): a client that never reads is not kept until a keepalive.
+        await asyncio.wait({reader, closing, watchdog}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        hub.detach(client)
+        for task in (reader, closing, watchdog):
+            task.cancel()
+        await asyncio.gather(reader, closing, watchdog, return_exceptions=True)
+        with contextlib.suppress(asyncio.TimeoutError):
+            await asyncio.wait_for(asyncio.shield(writer), _CLOSE_SEND_TIMEOUT)
+        if not writer.done():
+            writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await writer
+
+
+async def _read(websocket: WebSocket, hub: Hub, client: RemoteClient) -> None:
+    """Hand every frame to the hub until the client disconnects."""
+    with contextlib.suppress(WebSocketDisconnect):
         while True:
             frame = await websocket.receive()
             if frame["type"] == "websocket.disconnect":
-                break
+                return
             raw = frame.get("text")
             if raw is None:
                 raw = frame.get("bytes") or b""
@@ -68,17 +95,32 @@ async def hub_socket(websocket: WebSocket) -> None:
                 log.exception("hub: frame from %s failed", client.name)
                 client.error("internal_error", "the server failed to handle this frame")
             if client.close_code is not None:
-                break
-    except WebSocketDisconnect:
-        pass
-    finally:
-        hub.detach(client)
-        with contextlib.suppress(asyncio.TimeoutError):
-            await asyncio.wait_for(writer, _CLOSE_SEND_TIMEOUT)
-        if not writer.done():
-            writer.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await writer
+                return
+            # Frames already received are handed over without suspending: give the other
+            # clients their turn after each one, so one client's flood cannot hog the loop.
+            await asyncio.sleep(0)
+
+
+async def _watch_stall(client: RemoteClient, timeout: float) -> None:
+    """Close a client whose queued messages have not moved for ``timeout`` seconds: it does
+    not read (its socket buffers are full), so nothing we queue will ever reach it."""
+    outbox = client.outbox
+    period = min(1.0, timeout / 4)
+    taken = outbox.queued - len(outbox)
+    still_since: float | None = None
+    loop = asyncio.get_running_loop()
+    while client.close_code is None:
+        await asyncio.sleep(period)
+        now_taken = outbox.queued - len(outbox)
+        if len(outbox) == 0 or now_taken != taken:
+            taken, still_since = now_taken, None
+            continue
+        if still_since is None:
+            still_since = loop.time()
+        elif loop.time() - still_since >= timeout:
+            client.hub.overflow_disconnects += 1
+            client.request_close(CLOSE_OVERFLOW, f"slow consumer: nothing read for {timeout:g} s")
+            return
 
 
 async def _write(websocket: WebSocket, client: RemoteClient) -> None:

@@ -1,8 +1,13 @@
-"""Building buttons ("press to get a robot"): a press becomes a task request; the button's
-LED is lit while that task waits and goes off when a robot takes it."""
+"""Building buttons ("press to get a robot"): a press becomes a task request.
+
+One live request per button: from the press until its task ends (done, failed or cancelled)
+the button's LED is lit, and pressing again adds nothing (the LED is lit again, to show the
+press was seen). After a server restart the live requests are found again from the tasks.
+"""
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 
 from backend.site.building import Button
@@ -14,25 +19,37 @@ from guidebot.messages import Message
 
 __all__ = ["ButtonWatcher"]
 
+log = logging.getLogger(__name__)
+
+REQUESTER_PREFIX = "button:"
+FINAL = frozenset({TaskState.DONE.value, TaskState.FAILED.value, TaskState.CANCELLED.value})
+
 
 class ButtonWatcher:
     def __init__(self, endpoint: BusEndpoint, tasks: TaskManager, site: Site) -> None:
         self.endpoint = endpoint
         self.tasks = tasks
         self._buttons: dict[tuple[str, str], Button] = {}
+        self._by_id: dict[str, Button] = {}
         self._lit: dict[str, Button] = {}  # task id -> button whose LED is on
-        self._waiting: dict[str, str] = {}  # button id -> task id, one live request per button
+        self._waiting: dict[str, str] = {}  # button id -> its live task id
         self._unsubscribe: list[Callable[[], None]] = []
+        self.presses_ignored = 0
         self.load_site(site)
 
     def load_site(self, site: Site) -> None:
         self._buttons = {(b.input.module, b.input.point): b for b in site.buttons}
+        self._by_id = {b.id: b for b in site.buttons}
 
     def start(self) -> None:
         self._unsubscribe = [
             self.endpoint.subscribe("building_input_changed", self._on_input),
             self.endpoint.subscribe("task_event", self._on_task_event),
         ]
+        for task in self.tasks.tasks.values():  # live requests restored after a restart
+            button = self._by_id.get(task.requester.removeprefix(REQUESTER_PREFIX))
+            if task.requester.startswith(REQUESTER_PREFIX) and button and not task.final:
+                self._track(button, task.id)
 
     def stop(self) -> None:
         for unsubscribe in self._unsubscribe:
@@ -46,25 +63,32 @@ class ButtonWatcher:
             return
         waiting = self._waiting.get(button.id)
         if waiting is not None:
-            return  # pressed again while its robot is still coming: one request per button
+            # Pressed again while its request is queued or running: acknowledge, add nothing.
+            self.presses_ignored += 1
+            self._set_led(button, True)
+            return
         try:
             task = self.tasks.request(
                 button.task.kind,
                 button.task.params,
                 priority=button.task.priority,
-                requester=f"button:{button.id}",
+                requester=f"{REQUESTER_PREFIX}{button.id}",
             )
-        except TaskError:
+        except TaskError as exc:
+            log.warning("button %s: request refused: %s", button.id, exc)
             return
-        if task.state is TaskState.QUEUED:
-            self._waiting[button.id] = task.id
-            self._set_led(button, True)
-            self._lit[task.id] = button
+        if not task.final:
+            self._track(button, task.id)
+
+    def _track(self, button: Button, task_id: str) -> None:
+        self._waiting[button.id] = task_id
+        self._lit[task_id] = button
+        self._set_led(button, True)
 
     def _on_task_event(self, msg: Message) -> None:
         task_id = str(msg.payload.get("task_id"))
         button = self._lit.get(task_id)
-        if button is None or msg.payload.get("state") == TaskState.QUEUED.value:
+        if button is None or msg.payload.get("state") not in FINAL:
             return
         del self._lit[task_id]
         self._waiting.pop(button.id, None)

@@ -20,7 +20,17 @@ from typing import Any, Protocol
 from pydantic import ValidationError
 
 from backend.site.schema import Site
-from backend.tasks.model import FINAL_STATES, Task, TaskError, TaskNotFound, TaskState
+from backend.tasks.model import (
+    FINAL_STATES,
+    InvalidTask,
+    QueueFull,
+    Task,
+    TaskError,
+    TaskFinished,
+    TaskNotFound,
+    TaskState,
+)
+from backend.tasks.params import validate_params
 from backend.tasks.queue import TaskQueue
 from backend.tasks.robots import RobotInfo
 from backend.traffic.graph import SiteGraph
@@ -83,6 +93,9 @@ class TaskManager:
         self._assigned_at: dict[str, float] = {}
         self._unconfirmed: set[str] = set()
         self._avoid: dict[str, set[str]] = {}
+        """Task -> robots it must not go to (staff reassigned it away from them)."""
+        self._rather_not: dict[str, set[str]] = {}
+        """Task -> robots it was taken from (lost, battery panic): used only if no other is free."""
         self._durations: dict[str, float] = dict(DEFAULT_DURATION_S)
         self._unsubscribe: list[Callable[[], None]] = []
         self._watchdog: asyncio.Task[None] | None = None
@@ -179,12 +192,12 @@ class TaskManager:
         internal: bool = False,
     ) -> Task:
         """Queue a task; raises TaskError if its parameters do not fit the site."""
-        params = dict(params or {})
-        self._target_node(kind, params)  # validates
+        params = validate_params(kind, params if params is not None else {})
+        self._target_node(kind, params)  # the references exist in the site
         if robot is not None and robot not in self.robots:
-            raise TaskError(f"unknown robot {robot!r}")
+            raise InvalidTask(f"unknown robot {robot!r}")
         if not internal and self.queue.full:
-            raise TaskError(f"the queue is full ({self.queue.maxsize} tasks waiting)")
+            raise QueueFull(f"the queue is full ({self.queue.maxsize} tasks waiting)")
         task = Task(
             id=uuid.uuid4().hex[:12],
             kind=kind,
@@ -210,7 +223,7 @@ class TaskManager:
     def cancel(self, task_id: str, *, reason: str = "cancelled", by: str = "") -> Task:
         task = self.get(task_id)
         if task.final:
-            raise TaskError(f"task {task_id} is already {task.state.value}")
+            raise TaskFinished(f"task {task_id} is already {task.state.value}")
         self._leave_robot(task, f"{reason} by {by}".strip())
         self.queue.remove(task.id)
         task.move(TaskState.CANCELLED, reason=f"{reason} ({by})" if by else reason)
@@ -221,7 +234,7 @@ class TaskManager:
     def reprioritise(self, task_id: str, priority: int) -> Task:
         task = self.get(task_id)
         if task.final:
-            raise TaskError(f"task {task_id} is already {task.state.value}")
+            raise TaskFinished(f"task {task_id} is already {task.state.value}")
         task.priority = priority
         task.version += 1
         if task.state is TaskState.QUEUED:
@@ -235,9 +248,9 @@ class TaskManager:
         next free robot but that one."""
         task = self.get(task_id)
         if task.final:
-            raise TaskError(f"task {task_id} is already {task.state.value}")
+            raise TaskFinished(f"task {task_id} is already {task.state.value}")
         if robot is not None and robot not in self.robots:
-            raise TaskError(f"unknown robot {robot!r}")
+            raise InvalidTask(f"unknown robot {robot!r}")
         old = task.robot
         if old is not None:
             self._avoid.setdefault(task.id, set()).add(old)
@@ -334,12 +347,15 @@ class TaskManager:
             robot = free.get(task.pinned_robot)
             return robot
         avoid = self._avoid.get(task.id, ())
+        rather_not = self._rather_not.get(task.id, ())
         dist = self.graph.distances_to(self._target_node(task.kind, task.params))
         best: RobotInfo | None = None
         best_cost = math.inf
+        best_is_fallback = True
         for robot in free.values():
             if robot.name in avoid:
                 continue
+            fallback = robot.name in rather_not
             metres = dist.get(robot.node) if robot.node is not None else None
             travel = (
                 metres / robot.config.max_speed_mps
@@ -347,8 +363,12 @@ class TaskManager:
                 else UNKNOWN_POSITION_COST_S
             )
             cost = travel + (1.0 - robot.battery) * BATTERY_WEIGHT_S
-            if cost < best_cost:
-                best, best_cost = robot, cost
+            # Another robot first; the one it was taken from only if no other is free now, so
+            # a visitor never waits for a busy robot while the returning one stands idle.
+            if (best_is_fallback and not fallback) or (
+                fallback == best_is_fallback and cost < best_cost
+            ):
+                best, best_cost, best_is_fallback = robot, cost, fallback
         return best
 
     def _assign(self, task: Task, robot: RobotInfo) -> None:
@@ -451,8 +471,9 @@ class TaskManager:
     def _on_task_request(self, msg: Message) -> None:
         try:
             req: TaskRequest = msg.payload_as(TaskRequest)
-            requester = req.requester or msg.source
             robot = msg.source if msg.source in self.robots else None
+            # A robot requests as itself; in-process modules (buttons, RGM) may name a requester.
+            requester = msg.source if robot is not None else (req.requester or msg.source)
             # A visitor at a robot's screen: that robot takes it.
             task = self.request(
                 req.kind, req.params, priority=req.priority, requester=requester, robot=robot
@@ -593,7 +614,7 @@ class TaskManager:
                 self._set_current(robot, None)
                 self._changed(current, "cancelled")
             else:
-                self._avoid.setdefault(current.id, set()).add(robot.name)
+                self._rather_not.setdefault(current.id, set()).add(robot.name)
                 self._requeue(current, "battery panic")
         self.dispatch()
 
@@ -632,7 +653,7 @@ class TaskManager:
                     robot.offline_since = now
                 if now - since > self.lost_grace_s:
                     lost = self.tasks[robot.current]
-                    self._avoid.setdefault(lost.id, set()).add(robot.name)
+                    self._rather_not.setdefault(lost.id, set()).add(robot.name)
                     self._requeue(lost, "robot lost")
         for task_id, at in list(self._assigned_at.items()):
             task = self.tasks.get(task_id)
@@ -702,19 +723,19 @@ class TaskManager:
         if kind == "tour":
             tour = site.tour(str(params.get("tour")))
             if tour is None:
-                raise TaskError(f"unknown tour {params.get('tour')!r}")
+                raise InvalidTask(f"unknown tour {params.get('tour')!r}")
             poi = site.poi(tour.points[0])
             assert poi is not None
             return poi.node
         if kind == "go_to_poi":
             poi = site.poi(str(params.get("poi")))
             if poi is None:
-                raise TaskError(f"unknown point of interest {params.get('poi')!r}")
+                raise InvalidTask(f"unknown point of interest {params.get('poi')!r}")
             return poi.node
         if kind == "go_to":
             node = params.get("node")
             if not isinstance(node, str) or node not in self.graph:
-                raise TaskError(f"unknown node {node!r}")
+                raise InvalidTask(f"unknown node {node!r}")
             return node
         if kind == "charge":
             stations = {s.id: s.node for s in site.charging_stations}
@@ -722,9 +743,9 @@ class TaskManager:
             if station is None and stations:
                 return next(iter(stations.values()))
             if station not in stations:
-                raise TaskError(f"unknown charging station {station!r}")
+                raise InvalidTask(f"unknown charging station {station!r}")
             return stations[str(station)]
-        raise TaskError(f"unknown task kind {kind!r} (expected one of {sorted(NETS)})")
+        raise InvalidTask(f"unknown task kind {kind!r} (expected one of {sorted(NETS)})")
 
     def _net_params(self, task: Task) -> dict[str, Any]:
         """Everything the robot's net needs, so it never asks back."""
@@ -766,6 +787,7 @@ class TaskManager:
         self.endpoint.publish("task_event", self._event_payload(task))
         if task.state in FINAL_STATES:
             self._avoid.pop(task.id, None)
+            self._rather_not.pop(task.id, None)
             self._finished.append(task.id)
             if len(self._finished) > MAX_FINISHED_IN_MEMORY:
                 old = self._finished.pop(0)

@@ -11,23 +11,40 @@ __all__ = [
     "FINAL_STATES",
     "TRANSITIONS",
     "IllegalTransition",
+    "InvalidTask",
+    "QueueFull",
     "Task",
     "TaskError",
+    "TaskFinished",
     "TaskNotFound",
     "TaskState",
 ]
 
 
 class TaskError(ValueError):
-    """A task operation refused (bad parameters, wrong state); the API maps it to 409/422."""
+    """A task operation refused. The API maps each subclass to one status (docs/server.md,
+    "Status codes"): InvalidTask 422, TaskNotFound 404, TaskFinished and IllegalTransition
+    409, QueueFull 503."""
+
+
+class InvalidTask(TaskError):
+    """The request names something that does not exist or has bad parameters (422)."""
 
 
 class TaskNotFound(TaskError, LookupError):
     """No task with that id (404)."""
 
 
+class TaskFinished(TaskError):
+    """The task is done, failed or cancelled: it cannot change any more (409)."""
+
+
+class QueueFull(TaskError):
+    """The queue is at its bound; nothing queued is dropped to make room (503)."""
+
+
 class IllegalTransition(TaskError):
-    """A state change the life cycle does not allow."""
+    """A state change the life cycle does not allow (409)."""
 
 
 class TaskState(StrEnum):

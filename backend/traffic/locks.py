@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 
-__all__ = ["AreaLocks", "Grant", "LockError", "LockState", "LockView", "Yield"]
+__all__ = ["AreaLocks", "Grant", "LockError", "LockState", "LockView", "OfflineLock", "Yield"]
 
 
 class LockError(ValueError):
@@ -61,6 +62,17 @@ class Yield:
 
 
 @dataclass(frozen=True, slots=True)
+class OfflineLock:
+    """A lock whose holder has been offline longer than the grace period."""
+
+    area: str
+    robot: str
+    offline_s: float
+    released: bool
+    """True: released (never seen inside); False: kept (it may be inside), staff alerted."""
+
+
+@dataclass(frozen=True, slots=True)
 class LockView:
     area: str
     state: LockState
@@ -77,6 +89,10 @@ class _Lock:
     holder: str | None = None
     since: float | None = None
     entered: bool = False
+    offline_since: float | None = None
+    """Monotonic time its holder dropped off the network (None while online)."""
+    alerted: bool = False
+    """Staff were told this offline holder keeps it (once per offline period)."""
 
     def move(self, new: LockState) -> None:
         if new not in TRANSITIONS[self.state]:
@@ -202,10 +218,12 @@ class AreaLocks:
             self._free(lock)
         return holder, self._grant_waiting()
 
-    def set_online(self, robot: str, online: bool) -> None:
-        """Offline holders keep their locks (they may be inside); the state shows it."""
+    def set_online(self, robot: str, online: bool, now: float | None = None) -> None:
+        """Offline holders keep their locks for now (they may be inside); the state shows it
+        and ``expire_offline`` decides after the grace period."""
         if online == (robot not in self._offline):
             return
+        now = time.monotonic() if now is None else now
         if online:
             self._offline.discard(robot)
         else:
@@ -216,6 +234,37 @@ class AreaLocks:
                 lock.move(LockState.HOLDER_OFFLINE)
             elif online and lock.state is LockState.HOLDER_OFFLINE:
                 lock.move(LockState.HELD)
+            lock.offline_since = None if online else now
+            lock.alerted = False
+
+    def is_online(self, robot: str) -> bool:
+        return robot not in self._offline
+
+    def expire_offline(
+        self, now: float, grace_s: float, may_be_inside: Callable[[str, str], bool]
+    ) -> tuple[list[OfflineLock], list[Grant]]:
+        """Locks whose holder has been offline for ``grace_s``: released when the holder was
+        never inside (``may_be_inside(robot, area)`` false), else kept and reported once.
+
+        Returns what was decided (for the staff alert and the log) and the grants now possible.
+        """
+        decided: list[OfflineLock] = []
+        for lock in self._locks.values():
+            since, robot = lock.offline_since, lock.holder
+            if since is None or robot is None or robot not in self._offline:
+                continue
+            offline_s = now - since
+            if offline_s < grace_s:
+                continue
+            if lock.entered or may_be_inside(robot, lock.area):
+                if not lock.alerted:
+                    lock.alerted = True
+                    decided.append(OfflineLock(lock.area, robot, offline_s, released=False))
+                continue
+            self._free(lock)
+            decided.append(OfflineLock(lock.area, robot, offline_s, released=True))
+        grants = self._grant_waiting() if any(d.released for d in decided) else []
+        return decided, grants
 
     def mark_entered(self, robot: str, area: str) -> None:
         lock = self._lock(area)
@@ -240,6 +289,8 @@ class AreaLocks:
         lock.holder = None
         lock.since = None
         lock.entered = False
+        lock.offline_since = None
+        lock.alerted = False
 
     def _grant_waiting(self) -> list[Grant]:
         """Grant waiting requests in arrival order; an earlier waiter's areas are claimed, so a
@@ -265,6 +316,7 @@ class AreaLocks:
                     lock.since = now
                     if wait.robot in self._offline:
                         lock.move(LockState.HOLDER_OFFLINE)
+                        lock.offline_since = time.monotonic()
                 grants.append(Grant(wait.robot, a, wait.request_id))
         return grants
 

@@ -6,11 +6,13 @@ A plain asyncio-free service over a bus endpoint: every handler runs inline and 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
 from pydantic import ValidationError
 
+from backend.alerts import AlertBoard
 from backend.site.schema import Site
 from backend.traffic.graph import NoPath, PathResult, SiteGraph, UnknownNode
 from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
@@ -36,9 +38,11 @@ class TrafficManager:
         *,
         graph: SiteGraph | None = None,
         on_event: EventSink | None = None,
+        alerts: AlertBoard | None = None,
     ) -> None:
         self.endpoint = endpoint
         self.on_event = on_event
+        self.alerts = alerts if alerts is not None else AlertBoard(endpoint, on_event)
         self._unsubscribe: list[Callable[[], None]] = []
         self._positions: dict[str, str] = {}
         self._paths: dict[str, PathResult] = {}
@@ -90,8 +94,41 @@ class TrafficManager:
         """Staff release of an area lock; returns the robot that held it."""
         holder, grants = self.locks.force_release(area)
         self._emit("area_force_released", {"area": area, "robot": holder, "by": by})
+        self.alerts.clear(f"lock:{area}", f"area {area} released by {by}")
         self._send_grants(grants)
         return holder
+
+    def check_offline_locks(self, grace_s: float, now: float | None = None) -> None:
+        """Locks of robots offline for ``grace_s``: released if the robot was never inside,
+        kept (it may be inside) with a staff alert otherwise (docs/server.md, "Lock policy")."""
+        now = time.monotonic() if now is None else now
+        decided, grants = self.locks.expire_offline(now, grace_s, self._may_be_inside)
+        for d in decided:
+            if d.released:
+                self.alerts.raise_(
+                    f"lock:{d.area}",
+                    "lock_released_offline",
+                    f"area {d.area} released: {d.robot} went offline {d.offline_s:.0f} s ago "
+                    "and was never seen inside it",
+                    robot=d.robot,
+                    area=d.area,
+                    sticky=False,
+                )
+                self._emit("area_released", {"robot": d.robot, "area": d.area, "offline": True})
+            else:
+                self.alerts.raise_(
+                    f"lock:{d.area}",
+                    "lock_holder_offline",
+                    f"area {d.area} stays locked: {d.robot} has been offline {d.offline_s:.0f} s "
+                    "and may be inside; check the area, then release it by hand",
+                    severity="critical",
+                    robot=d.robot,
+                    area=d.area,
+                )
+        self._send_grants(grants)
+
+    def _may_be_inside(self, robot: str, area: str) -> bool:
+        return self.graph.area_at.get(self._positions.get(robot, "")) == area
 
     # --- handlers ------------------------------------------------------------------------
     def _on_get_path(self, msg: Message) -> None:
@@ -137,6 +174,25 @@ class TrafficManager:
         self._emit("area_requested", {"robot": robot, "area": req.area, "chain": list(chain)})
         self._send_grants(grants)
         self._send_yields(yields)
+        self._log_wait(robot)
+
+    def _log_wait(self, robot: str) -> None:
+        """Say what a robot now waits for and who holds it (offline holders at warning)."""
+        waiting = self.locks.waiting_for(robot)
+        if not waiting:
+            return
+        holders = {a: self.locks.holder(a) for a in waiting}
+        offline = sorted(h for h in holders.values() if h and not self.locks.is_online(h))
+        what = ", ".join(
+            f"{a} (held by {h or 'nobody; an earlier waiter goes first'})"
+            for a, h in holders.items()
+        )
+        if offline:
+            log.warning(
+                "traffic: %s waits for %s; offline holder: %s", robot, what, ", ".join(offline)
+            )
+        else:
+            log.info("traffic: %s waits for %s", robot, what)
 
     def _on_release_area(self, msg: Message) -> None:
         try:
@@ -159,11 +215,16 @@ class TrafficManager:
         if not isinstance(robot, str) or self._robot_of(msg, robot) is None:
             return
         mode = msg.payload.get("mode")
-        self.locks.set_online(robot, mode != "offline")
+        online = mode != "offline"
+        if online and not self.locks.is_online(robot):
+            for area in self.locks.held_by(robot):
+                self.alerts.clear(f"lock:{area}", f"{robot} is back online; it holds {area}")
+        self.locks.set_online(robot, online)
         if not isinstance(node, str) or node not in self.graph:
             return
         self._positions[robot] = node
         here = self.graph.area_at.get(node)
+        self._check_conflict(robot, here)
         grants: list[Grant] = []
         for area in self.locks.held_by(robot):
             if area == here:
@@ -189,6 +250,23 @@ class TrafficManager:
             self.locks.set_online(robot, False)
 
     # --- helpers -------------------------------------------------------------------------
+    def _check_conflict(self, robot: str, here: str | None) -> None:
+        """A robot reporting itself inside an area another robot holds: tell staff at once."""
+        alert_id = f"conflict:{robot}"
+        holder = self.locks.holder(here) if here else None
+        if here is not None and holder is not None and holder != robot:
+            if alert_id not in self.alerts.active:
+                self.alerts.raise_(
+                    alert_id,
+                    "area_conflict",
+                    f"{robot} reports being in area {here}, which {holder} holds",
+                    severity="critical",
+                    robot=robot,
+                    area=here,
+                )
+        else:
+            self.alerts.clear(alert_id, f"{robot} is no longer in an area another robot holds")
+
     def _task_over(self, robot: str) -> None:
         """Task over: its locks go, except the area it is standing in (released on leaving)."""
         here = self.graph.area_at.get(self._positions.get(robot, ""))

@@ -3,4 +3,4 @@
 Importing this package registers every known type (see guidebot.messages.register_payload).
 """
 
-from guidebot.payloads import building, hub, petri, robot, tasks, traffic  # noqa: F401
+from guidebot.payloads import alerts, building, hub, petri, robot, tasks, traffic  # noqa: F401

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import socket
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
+import websockets
+from websockets.asyncio.client import ClientConnection
 
 import backend.app
 from backend.auth import Role
@@ -20,6 +23,7 @@ TOKENS = {
     "gui": StaticToken(token="token-gui-admin-page", name="gui", role=Role.GUI),
     "tm": StaticToken(token="token-module-tours", name="tour_module", role=Role.MODULE),
     "op": StaticToken(token="token-operator-ann", name="ann", role=Role.OPERATOR),
+    "panel": StaticToken(token="token-panel-kiosk", name="kiosk", role=Role.PANEL),
 }
 
 
@@ -58,3 +62,22 @@ async def connect(server: RunningServer) -> AsyncIterator[ClientFactory]:
     yield factory
     for client in reversed(clients):
         await client.close()
+
+
+async def never_reading_client(server: RunningServer, token: str) -> ClientConnection:
+    """A WebSocket client with a tiny receive buffer that stops reading once asked: after its
+    welcome, the kernel buffers between it and the server fill and the server's sends block."""
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", server.port))
+    client = await websockets.connect(
+        server.ws_url,
+        sock=sock,
+        additional_headers={"Authorization": f"Bearer {token}"},
+        proxy=None,
+        compression=None,
+        max_queue=1,
+        max_size=None,
+    )
+    await client.recv()  # welcome
+    return client

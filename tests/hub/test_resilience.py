@@ -10,7 +10,6 @@ from typing import Any
 
 import orjson
 import pytest
-import websockets
 from fastapi import FastAPI
 from websockets.exceptions import ConnectionClosed
 
@@ -19,7 +18,7 @@ from backend.testing import running_server
 from guidebot.client import HubClient
 from guidebot.messages import Message
 
-from .conftest import TOKENS, hub_settings
+from .conftest import TOKENS, hub_settings, never_reading_client
 from .test_routing import Inbox
 
 WAIT = 15.0
@@ -29,19 +28,7 @@ async def test_a_client_that_never_reads_does_not_slow_the_others() -> None:
     settings = hub_settings(hub_queue_size=64, hub_coalesce_after=16)
     async with running_server(settings) as server:
         # The slow client: a tiny receive buffer, and it never reads after subscribing.
-        sock = socket.socket()
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        sock.connect(("127.0.0.1", server.port))
-        slow = await websockets.connect(
-            server.ws_url,
-            sock=sock,
-            additional_headers={"Authorization": f"Bearer {TOKENS['op'].token}"},
-            proxy=None,
-            compression=None,
-            max_queue=1,
-            max_size=None,
-        )
-        await slow.recv()  # welcome
+        slow = await never_reading_client(server, TOKENS["op"].token)
         await slow.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["*"]}}))
         await slow.send(orjson.dumps({"type": "ping", "id": "p"}))
         assert orjson.loads(await asyncio.wait_for(slow.recv(), WAIT))["type"] == "pong"

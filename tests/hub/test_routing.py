@@ -69,10 +69,10 @@ async def test_unsubscribe_stops_delivery(connect: ClientFactory) -> None:
     assert (await inbox.next()).payload["text"] == "one"
     unsubscribe()
     marker = Inbox()
-    gui.subscribe("navigate_to", marker)
+    gui.subscribe("battery_low", marker)
     await gui.sync()
     r1.publish("say", {"text": "two"})
-    r1.publish("navigate_to", {"node": "N1"})
+    r1.publish("battery_low", {"robot": "R1", "level": 0.2})
     await marker.next()  # sent after "two" by the same publisher: "two" was not delivered
     assert inbox.queue.empty()
 

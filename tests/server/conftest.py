@@ -10,9 +10,12 @@ import pytest
 
 from backend.auth import Role
 from backend.settings import Settings, StaticToken
+from backend.tasks import TaskManager
 from backend.testing import RunningServer, running_server
+from guidebot.bus import Bus
+from guidebot.messages import Message
 
-from .helpers import DEMO
+from .helpers import DEMO, demo_site
 from .postgres import PostgresServer, postgres_server
 
 PANEL_TOKEN = "panel-token-1234"
@@ -69,3 +72,45 @@ async def http(server: RunningServer) -> AsyncIterator[Callable[[str | None], ht
     yield make
     for client in clients:
         await client.aclose()
+
+
+class Clock:
+    """A hand-moved monotonic clock for the Task Manager."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def bus() -> Bus:
+    return Bus()
+
+
+@pytest.fixture
+def clock() -> Clock:
+    return Clock()
+
+
+@pytest.fixture
+def events(bus: Bus) -> list[Message]:
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("task_event", seen.append)
+    return seen
+
+
+@pytest.fixture
+def manager(bus: Bus, clock: Clock) -> Iterator[TaskManager]:
+    """A Task Manager over a bare bus with the demo site and short time-outs."""
+    tm = TaskManager(
+        bus.endpoint("task_manager"),
+        demo_site(),
+        clock=clock,
+        robot_timeout_s=5,
+        lost_grace_s=20,
+        start_timeout_s=30,
+    )
+    tm.start()
+    yield tm

@@ -4,7 +4,7 @@ alarms, robot loss, reassignment, idle robots and reconciliation after a restart
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import pytest
@@ -15,46 +15,8 @@ from backend.tasks import Task, TaskError, TaskManager, TaskState
 from guidebot.bus import Bus
 from guidebot.messages import Message
 
+from .conftest import Clock
 from .helpers import RobotStub, demo_site
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
-@pytest.fixture
-def bus() -> Bus:
-    return Bus()
-
-
-@pytest.fixture
-def clock() -> Clock:
-    return Clock()
-
-
-@pytest.fixture
-def events(bus: Bus) -> list[Message]:
-    seen: list[Message] = []
-    bus.endpoint("monitor").subscribe("task_event", seen.append)
-    return seen
-
-
-@pytest.fixture
-def manager(bus: Bus, clock: Clock) -> Iterator[TaskManager]:
-    tm = TaskManager(
-        bus.endpoint("task_manager"),
-        demo_site(),
-        clock=clock,
-        robot_timeout_s=5,
-        lost_grace_s=20,
-        start_timeout_s=30,
-    )
-    tm.start()
-    yield tm
 
 
 def fleet(bus: Bus) -> tuple[RobotStub, RobotStub, RobotStub]:
@@ -341,9 +303,18 @@ async def test_button_press_requests_a_task_and_lights_its_led(
     robot = RobotStub(bus, "R1", "hall")
     robot.state()
     assert task.robot == "R1"
-    assert outputs[-1].payload["value"] == 0  # a robot is coming: LED off
+    assert outputs[-1].payload["value"] == 1  # a robot is coming: LED still lit
     building.publish("building_input_changed", {**press, "value": 0})  # release: nothing
+    robot.start(task.id)
+    lit = len(outputs)
+    building.publish("building_input_changed", press)  # pressed while running: no duplicate
     assert len(list(manager.queue.ordered())) == 0
+    assert len(manager.tasks) == 1 and watcher.presses_ignored == 2
+    assert len(outputs) == lit + 1 and outputs[-1].payload["value"] == 1  # acknowledged
+    robot.end(task.id)
+    assert outputs[-1].payload["value"] == 0  # the tour is over: LED off
+    building.publish("building_input_changed", press)  # a new press: a new request
+    assert len([t for t in manager.tasks.values() if not t.internal]) == 2
     watcher.stop()
 
 

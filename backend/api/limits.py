@@ -1,0 +1,110 @@
+"""Request body size limits and validation errors that never echo the input back.
+
+``BodyLimit`` is plain ASGI middleware: it refuses a body larger than its limit with 413 before
+the route reads it (Content-Length checked up front, a streamed body counted as it arrives), so
+a 20 MB ``params`` is never parsed, stored or served. Site uploads get the site file limit.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI, Request, status
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from backend.site.yamlio import MAX_SITE_BYTES
+
+__all__ = ["BodyLimit", "BodyTooLarge", "install_error_handlers", "limit_for"]
+
+LARGE_BODY_PATHS = ("/api/site",)
+"""Path prefixes that take a whole site document (up to the site file limit)."""
+
+
+def limit_for(path: str, default: int) -> int:
+    return MAX_SITE_BYTES if path.startswith(LARGE_BODY_PATHS) else default
+
+
+class BodyTooLarge(Exception):
+    def __init__(self, limit: int) -> None:
+        super().__init__(f"request body too large: the limit is {limit} bytes")
+        self.limit = limit
+
+
+class BodyLimit:
+    """Refuse request bodies over ``max_bytes`` (413) on every HTTP route."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = limit_for(scope.get("path", ""), self.max_bytes)
+        for name, value in scope.get("headers", ()):
+            if name == b"content-length":
+                try:
+                    declared = int(value)
+                except ValueError:
+                    declared = 0
+                if declared > limit:
+                    await _too_large(send, limit)
+                    return
+        seen = 0
+        started = False
+
+        async def counting_receive() -> Message:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > limit:
+                    raise BodyTooLarge(limit)
+            return message
+
+        async def tracking_send(message: Message) -> None:
+            nonlocal started
+            if message["type"] == "http.response.start":
+                started = True
+            await send(message)
+
+        try:
+            await self.app(scope, counting_receive, tracking_send)
+        except BodyTooLarge:
+            if not started:
+                await _too_large(send, limit)
+
+
+async def _too_large(send: Send, limit: int) -> None:
+    response = JSONResponse(
+        {"detail": f"request body too large: the limit is {limit} bytes"},
+        status_code=status.HTTP_413_CONTENT_TOO_LARGE,
+        headers={"Connection": "close"},
+    )
+    await response({"type": "http"}, _nothing, send)
+
+
+async def _nothing() -> Message:
+    return {"type": "http.disconnect"}
+
+
+def _clean(errors: Any) -> list[dict[str, Any]]:
+    """Validation errors as [{loc, msg, type}]: no ``input`` (it may be huge or a secret)."""
+    return [
+        {"loc": list(err.get("loc", ())), "msg": err.get("msg", ""), "type": err.get("type", "")}
+        for err in errors
+    ]
+
+
+async def _validation_error(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    return JSONResponse(
+        {"detail": _clean(exc.errors())}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT
+    )
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    app.add_exception_handler(RequestValidationError, _validation_error)
