@@ -13,6 +13,31 @@ from backend.site.validate import SiteInvalid, SiteIssue, validate_site
 __all__ = ["MAX_SITE_BYTES", "dump_site", "load_site_file", "load_site_text"]
 
 MAX_SITE_BYTES = 5_000_000
+MAX_ALIASES = 100
+"""Aliases (``*name``) a site may use: enough for shared settings, too few for an alias bomb
+(nested aliases that expand to billions of nodes once validated)."""
+MAX_DEPTH = 32
+"""Nesting of mappings and lists; a site needs about 6."""
+
+
+def _check_structure(text: str, loader_class: Any) -> None:
+    """Refuse alias bombs and absurd nesting before building any object (located errors)."""
+    aliases = depth = 0
+    for event in yaml.parse(text, Loader=loader_class):
+        problem = None
+        if isinstance(event, yaml.AliasEvent):
+            aliases += 1
+            problem = f"more than {MAX_ALIASES} aliases" if aliases > MAX_ALIASES else None
+        elif isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            problem = f"nested deeper than {MAX_DEPTH} levels" if depth > MAX_DEPTH else None
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+        if problem is not None:
+            mark = event.start_mark
+            raise SiteInvalid(
+                [SiteIssue("(document)", problem, mark.line + 1 if mark is not None else None)]
+            )
 
 
 def _line_finder(root: yaml.Node | None) -> Any:
@@ -49,6 +74,7 @@ def load_site_text(text: str) -> Site:
         raise SiteInvalid([SiteIssue("(document)", f"larger than {MAX_SITE_BYTES} bytes")])
     loader_class = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when present
     try:
+        _check_structure(text, loader_class)
         data = yaml.load(text, Loader=loader_class)  # a safe loader: plain data only
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)

@@ -99,3 +99,19 @@ def test_site_check_command_lists_problems_with_lines(tmp_path: Path) -> None:
     bad = runner.invoke(main, ["site", "check", str(broken)])
     assert bad.exit_code == 1
     assert f"{broken}:" in bad.output and "edges[17].b: unknown node 'nowhere'" in bad.output
+
+
+def test_alias_bombs_and_deep_nesting_are_refused_with_their_line() -> None:
+    bomb = "name: x\na: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n" + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join(['*' + chr(97 + i)] * 10)}]\n"
+        for i in range(12)
+    )
+    with pytest.raises(SiteInvalid) as refused:
+        load_site_text(bomb)
+    [issue] = refused.value.issues
+    assert issue.message == "more than 100 aliases" and issue.line == 13  # the 101st
+    deep = "name: x\nnodes: " + "[" * 40 + "]" * 40 + "\n"
+    with pytest.raises(SiteInvalid) as refused:
+        load_site_text(deep)
+    [issue] = refused.value.issues
+    assert issue.message == "nested deeper than 32 levels" and issue.line == 2
