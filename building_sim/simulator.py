@@ -23,7 +23,6 @@ from building_sim.devices import DoorSim, ElevatorSim
 
 __all__ = ["BuildingSimulator", "SimulatorError"]
 
-DEFAULT_DOOR_HOLD_S = 5.0
 DEFAULT_ELEVATOR_HOLD_S = 8.0
 
 
@@ -40,7 +39,7 @@ class BuildingSimulator:
         *,
         time_scale: float = 1.0,
         port_zero: bool = False,
-        door_hold_s: float = DEFAULT_DOOR_HOLD_S,
+        door_hold_s: float | None = None,
         elevator_hold_s: float = DEFAULT_ELEVATOR_HOLD_S,
     ) -> None:
         if time_scale <= 0:
@@ -177,6 +176,12 @@ class BuildingSimulator:
     def _release(self, button: str) -> None:
         self._releases.pop(button, None)
         self.write(self.buttons[button].input, 0)
+
+    def jam_door(self, door: str, jammed: bool = True) -> None:
+        """A jammed door ignores its open coil (a door that fails to open)."""
+        if door not in self.doors:
+            raise SimulatorError(f"no door {door!r}; known: {sorted(self.doors)}")
+        self.doors[door].jammed = jammed
 
     async def set_fault(
         self, module: str, kind: FaultKind | str, *, delay_ms: float = 0.0, code: int = 4

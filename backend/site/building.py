@@ -83,6 +83,9 @@ class Door(StrictModel):
     is_open: IORef | None = None
     """Input that reports the door fully open; without it, ``open_time_s`` is waited."""
     open_time_s: float = Field(default=2.0, ge=0, le=120)
+    max_hold_s: float = Field(default=120.0, gt=0, le=3600)
+    """A robot holding the door longer than this is dropped (a robot lost mid-door must not
+    keep it open for ever); the door closes when no holder is left."""
 
 
 class ElevatorStop(StrictModel):
