@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from backend.site.building import IORef, PointKind
 from backend.site.schema import Site
 
-__all__ = ["SiteInvalid", "SiteIssue", "check_references", "validate_site"]
+__all__ = ["SiteInvalid", "SiteIssue", "cabin_through_ways", "check_references", "validate_site"]
 
 
 @dataclass(frozen=True)
@@ -138,6 +138,38 @@ def _unique(items: list[Any], attr: str, section: str) -> list[Problem]:
     return out
 
 
+@dataclass(frozen=True)
+class ThroughWay:
+    """Edge ``edge`` (index in site.edges) joins ``cabin`` to a second landing ``other``."""
+
+    edge: int
+    elevator: str
+    cabin: str
+    landing: str
+    other: str
+
+
+def cabin_through_ways(site: Site) -> list[ThroughWay]:
+    """Edges that would let a path cross an elevator's cabin node without riding.
+
+    A cabin node has ONE landing on its floor (the first edge that joins it to a node that is
+    not a stop of its elevator); every further edge to another node makes the cabin a shortcut
+    between two landings. The site check refuses these edges and the planner never uses them.
+    """
+    cabin_of = {stop.node: el.id for el in site.elevators for stop in el.stops}
+    landing: dict[str, str] = {}
+    out: list[ThroughWay] = []
+    for i, e in enumerate(site.edges):
+        for cabin, other in ((e.a, e.b), (e.b, e.a)):
+            elevator = cabin_of.get(cabin)
+            if elevator is None or cabin_of.get(other) == elevator:
+                continue
+            first = landing.setdefault(cabin, other)
+            if first != other:
+                out.append(ThroughWay(i, elevator, cabin, first, other))
+    return out
+
+
 def check_references(site: Site) -> list[Problem]:
     """Every cross reference of the site; returns (loc, message) pairs, empty when sound."""
     p: list[Problem] = []
@@ -251,6 +283,15 @@ def check_references(site: Site) -> list[Problem]:
                 p.append((loc, f"node {stop.node!r} is on another floor"))
             io_ref(("elevators", i, "stops", j, "call"), stop.call, outputs)
             io_ref(("elevators", i, "stops", j, "in_position"), stop.in_position, inputs)
+    for way in cabin_through_ways(site):
+        p.append(
+            (
+                ("edges", way.edge),
+                f"makes cabin node {way.cabin!r} of elevator {way.elevator} a through-way:"
+                f" a cabin has one landing ({way.landing!r}); join {way.other!r} to"
+                f" {way.landing!r} instead",
+            )
+        )
     for i, b in enumerate(site.buttons):
         node_ref(("buttons", i, "node"), b.node)
         io_ref(("buttons", i, "input"), b.input, inputs)

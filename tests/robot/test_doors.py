@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
+import httpx
 import pytest
 
 from tests.robot.safety_rig import fleet
@@ -67,3 +68,17 @@ async def test_a_door_that_fails_to_open_stops_the_robot_before_it(tmp_path: Pat
         assert len(f.of("open_door", door="D0")) >= 2
         assert f.checker.counts["door"] == 1
         assert not f.checker.violations, f.checker.violations
+
+
+async def test_robots_report_their_floor_from_the_start(tmp_path: Path) -> None:
+    """At its charging station, before any move, GET /api/robots knows the robot's floor."""
+    async with fleet(tmp_path, ["R1"]) as f:
+        await f.wait_for(lambda: "R1" in f.states)
+        assert f.states["R1"]["node"] == "home1" and f.states["R1"]["floor"] == "F0"
+        async with httpx.AsyncClient(base_url=f.server.url) as http:
+            r = await http.get(
+                "/api/robots", headers={"Authorization": f"Bearer {f.server.admin_token}"}
+            )
+        [robot] = r.json()
+        assert robot["node"] == "home1" and robot["floor"] == "F0"
+        assert not f.of("node_reached")
