@@ -18,6 +18,7 @@ from typing import Any
 
 from backend.building.config import BuildingConfig
 from backend.site.building import IORef, PointKind
+from backend.site.io_rules import Role, allowed
 from building_sim._modbus import FaultKind, ModuleFault, ModuleServer, ModuleStore
 from building_sim.devices import DoorSim, ElevatorSim
 
@@ -62,8 +63,8 @@ class BuildingSimulator:
         for elevator in config.elevators:
             first = elevator.stops[0].call.module
             regs = (
-                self._optional(first, f"{elevator.id}_floor"),
-                self._optional(first, f"{elevator.id}_door"),
+                self._optional(first, f"{elevator.id}_floor", Role.elevator_floor),
+                self._optional(first, f"{elevator.id}_door", Role.elevator_door),
             )
             sim = ElevatorSim(
                 elevator, self.write, time_scale=time_scale, hold_s=elevator_hold_s, registers=regs
@@ -77,9 +78,9 @@ class BuildingSimulator:
         for module_id, store in self.stores.items():
             store.on_write = functools.partial(self._written, module_id)
 
-    def _optional(self, module_id: str, name: str) -> IORef | None:
+    def _optional(self, module_id: str, name: str, role: Role) -> IORef | None:
         point = self.config.module(module_id).point(name)
-        if point is None or point.kind != PointKind.input_register:
+        if point is None or not allowed(role, point.kind):
             return None
         return IORef(module=module_id, point=name)
 

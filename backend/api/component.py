@@ -13,6 +13,7 @@ from fastapi import FastAPI
 
 from backend.auth import Role, TokenStore
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.health import ComponentState
 from backend.site.schema import Site
 from backend.site.service import EMPTY_SITE, SiteService
 from backend.site.validate import validate_site
@@ -92,11 +93,17 @@ async def watch_robot_links(
 async def server_brain(app: FastAPI) -> AsyncIterator[None]:
     settings = app.state.settings
     hub = app.state.hub
+    health = app.state.health
     engine = make_engine(settings.db_url)
     try:
-        await migrate(engine)
+        try:
+            await migrate(engine)
+        except Exception as exc:
+            health.set("database", ComponentState.failed, f"{type(exc).__name__}: {exc}")
+            raise
         store = DbStore(make_sessionmaker(engine))
         store.start()
+        health.set("database", ComponentState.ok, engine.url.get_backend_name())
         try:
             site, version = await _initial_site(app, store)
             sites = SiteService(site, version, store)
@@ -130,7 +137,9 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
                 logger.subscribe(pattern, log_message, tap=True)
             tasks.restore(await store.load_open_tasks())
             traffic.start()
+            health.set("traffic_manager", ComponentState.ok)
             tasks.start()
+            health.set("task_manager", ComponentState.ok)
             buttons.start()
             app.state.store = store
             app.state.sites = sites
@@ -148,6 +157,8 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
                 buttons.stop()
                 await tasks.stop()
                 traffic.stop()
+                for name in ("task_manager", "traffic_manager", "database"):
+                    health.set(name, ComponentState.stopped)
                 logger.close()
         finally:
             await store.stop()

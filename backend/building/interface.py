@@ -27,11 +27,13 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.building._modbus import ModbusIOError
-from backend.building.config import WRITABLE, BuildingConfig
+from backend.building.config import BuildingConfig
 from backend.building.doors import DoorKeeper
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
+from backend.health import ComponentState
 from backend.site.building import Door, IOPoint, IORef, PointKind
+from backend.site.io_rules import Role, allowed
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.building import CallElevator, CloseDoor, OpenDoor, ReleaseDoor, SetOutput
@@ -148,6 +150,20 @@ class BuildingInterface:
     ) -> None:
         await self.stop()
 
+    def component_state(self) -> tuple[ComponentState, str]:
+        """For /api/health: degraded while any module does not answer normally."""
+        bad = [
+            f"{p.module.id} {p.health.state.value}"
+            for p in self.pollers.values()
+            if p.health.state != HealthState.online
+        ]
+        count = len(self.pollers)
+        if bad:
+            return ComponentState.degraded, f"{count - len(bad)}/{count} modules online; " + (
+                ", ".join(bad)
+            )
+        return ComponentState.ok, f"{count}/{count} modules online"
+
     def health(self) -> list[dict[str, object]]:
         """Every module's health, for the admin GUI and the REST API."""
         return [p.health.payload() | {"state": p.health.state.value} for p in self.pollers.values()]
@@ -156,7 +172,7 @@ class BuildingInterface:
 
     def _on_health(self, health: ModuleHealth) -> None:
         self.endpoint.publish("building_module_health", health.payload())
-        if not health.online:
+        if health.state != HealthState.online:
             # Unknown is closed: a door whose sensor cannot be read is not passable.
             now = time.monotonic()
             for (module, _), keeper in self._door_sensors.items():
@@ -409,7 +425,7 @@ class BuildingInterface:
             _, point = self.config.resolve(ref)
         except KeyError:
             raise CommandError(f"no point {command.point!r} on module {command.module!r}") from None
-        if point.kind not in WRITABLE:
+        if not allowed(Role.output, point.kind):
             raise CommandError(
                 f"{command.module}.{command.point} is a {point.kind.value}: read-only"
             )

@@ -6,10 +6,11 @@ the site validator (backend.site.validate) checks that every reference between t
 
 from __future__ import annotations
 
-from enum import StrEnum
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from backend.site.io_rules import PointKind
 
 __all__ = [
     "BuildingModule",
@@ -30,15 +31,6 @@ class StrictModel(BaseModel):
     """Unknown keys are refused so typos in a site file surface with their place."""
 
     model_config = ConfigDict(extra="forbid")
-
-
-class PointKind(StrEnum):
-    """The four Modbus data tables."""
-
-    discrete_input = "discrete_input"
-    coil = "coil"
-    input_register = "input_register"
-    holding_register = "holding_register"
 
 
 class IOPoint(StrictModel):

@@ -13,6 +13,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.site.building import IORef, PointKind
+from backend.site.io_rules import Role, kind_problem
 from backend.site.schema import Site
 
 __all__ = ["SiteInvalid", "SiteIssue", "cabin_through_ways", "check_references", "validate_site"]
@@ -41,6 +42,10 @@ class SiteInvalid(ValueError):
         self.issues = issues
         lines = "\n".join(f"  {issue}" for issue in issues)
         super().__init__(f"site refused, {len(issues)} problem(s):\n{lines}")
+
+    def file_lines(self, path: object) -> list[str]:
+        """One ``file:line: loc: message`` line per problem (what editors jump to)."""
+        return [f"{path}:{i.line or 0}: {i.loc}: {i.message}" for i in self.issues]
 
 
 def format_loc(parts: Iterable[str | int]) -> str:
@@ -236,18 +241,17 @@ def check_references(site: Site) -> list[Problem]:
             p.append((("areas", i, "passing_place"), "a passing place must lie outside its area"))
 
     points = {(m.id, pt.name): pt.kind for m in site.modules for pt in m.points}
-    inputs = {PointKind.discrete_input, PointKind.input_register}
-    outputs = {PointKind.coil, PointKind.holding_register}
 
-    def io_ref(loc: tuple[str | int, ...], ref: IORef | None, want: set[PointKind]) -> None:
+    def io_ref(loc: tuple[str | int, ...], ref: IORef | None, role: Role) -> None:
         if ref is None:
             return
         kind = points.get((ref.module, ref.point))
         if kind is None:
             p.append((loc, f"unknown building point {ref.module!r}/{ref.point!r}"))
-        elif kind not in want:
-            expected = "an input" if want is inputs else "an output"
-            p.append((loc, f"{ref.module}/{ref.point} is a {kind}, expected {expected}"))
+            return
+        problem = kind_problem(role, kind, f"{ref.module}/{ref.point}")
+        if problem is not None:
+            p.append((loc, problem))
 
     for i, m in enumerate(site.modules):
         p += [(("modules", i, *loc), msg) for loc, msg in _unique(m.points, "name", "points")]
@@ -267,8 +271,8 @@ def check_references(site: Site) -> list[Problem]:
             p.append((("modules", i, "port"), f"{m.host}:{m.port} used by another module"))
     for i, d in enumerate(site.doors):
         node_ref(("doors", i, "node"), d.node)
-        io_ref(("doors", i, "open"), d.open, outputs)
-        io_ref(("doors", i, "is_open"), d.is_open, inputs)
+        io_ref(("doors", i, "open"), d.open, Role.door_open)
+        io_ref(("doors", i, "is_open"), d.is_open, Role.door_is_open)
     for i, el in enumerate(site.elevators):
         seen_floors: set[str] = set()
         for j, stop in enumerate(el.stops):
@@ -281,8 +285,12 @@ def check_references(site: Site) -> list[Problem]:
             if stop.node in nodes and nodes[stop.node].floor != stop.floor:
                 loc = ("elevators", i, "stops", j, "node")
                 p.append((loc, f"node {stop.node!r} is on another floor"))
-            io_ref(("elevators", i, "stops", j, "call"), stop.call, outputs)
-            io_ref(("elevators", i, "stops", j, "in_position"), stop.in_position, inputs)
+            io_ref(("elevators", i, "stops", j, "call"), stop.call, Role.elevator_call)
+            io_ref(
+                ("elevators", i, "stops", j, "in_position"),
+                stop.in_position,
+                Role.elevator_in_position,
+            )
     for way in cabin_through_ways(site):
         p.append(
             (
@@ -294,8 +302,8 @@ def check_references(site: Site) -> list[Problem]:
         )
     for i, b in enumerate(site.buttons):
         node_ref(("buttons", i, "node"), b.node)
-        io_ref(("buttons", i, "input"), b.input, inputs)
-        io_ref(("buttons", i, "led"), b.led, outputs)
+        io_ref(("buttons", i, "input"), b.input, Role.button_input)
+        io_ref(("buttons", i, "led"), b.led, Role.button_led)
         params = b.task.params
         if b.task.kind == "tour" and params.get("tour") not in tours:
             p.append((("buttons", i, "task", "params", "tour"), "unknown tour"))

@@ -52,7 +52,8 @@ def test_references_are_checked_all_at_once() -> None:
     text = text.replace("points: [tapestries, globes, telescope]", "points: [tapestries, nothing]")
     text = text.replace("{a: gc2, b: gc3}", "{a: gc2, b: nowhere}")
     text = text.replace(
-        "point: lift_here}\n      - floor: F1", "point: led_entrance}\n      - floor: F1"
+        "call: {module: otb_ground, point: lift_call}",
+        "call: {module: otb_ground, point: lift_here}",
     )
     with pytest.raises(SiteInvalid) as info:
         load_site_text(text)
@@ -60,7 +61,7 @@ def test_references_are_checked_all_at_once() -> None:
     assert ("tours[1].points[1]", "unknown point of interest 'nothing'") in messages
     assert ("edges[16].b", "unknown node 'nowhere'") in messages
     assert any(
-        loc == "elevators[0].stops[0].in_position" and "expected an input" in msg
+        loc == "elevators[0].stops[0].call" and "is a discrete_input; it must be a coil" in msg
         for loc, msg in messages
     )
     assert len(info.value.issues) == 3
