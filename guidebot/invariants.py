@@ -8,6 +8,11 @@ Fed with the building's broadcasts (door_opened / door_closed, elevator_in_posit
 door_open), the robots' node_reached and the Traffic Manager's area_granted / area_released
 (or the robots' release_area). Used by the integration tests and ``guidebot bench soak``;
 it depends on nothing but the standard library, so any process can run it.
+
+Order matters. The server's event log (GET /api/events: area_granted / area_released from the
+Traffic Manager, the building's and robots' broadcasts) is in causal order. A monitor on the
+hub itself sees a reaction published inside its cause's handler (area_granted, in the handler of
+a release_area) *before* the cause: feed area_granted a moment later (``loop.call_soon``).
 """
 
 from __future__ import annotations
@@ -135,3 +140,4 @@ class InvariantChecker:
             del self.holders[area]
 
     _on_area_released = _on_release_area
+    _on_area_force_released = _on_release_area

@@ -24,7 +24,7 @@ from backend.traffic.graph import SiteGraph
 from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
 
-__all__ = ["LOGGED_TYPES", "server_brain"]
+__all__ = ["LOGGED_BROADCASTS", "LOGGED_TYPES", "server_brain"]
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +37,9 @@ LOGGED_TYPES = (
     "robot_disconnected",
 )
 """Hub messages copied into the event log (task changes and lock changes are logged directly)."""
+LOGGED_BROADCASTS = ("door_opened", "door_closed", "elevator_in_position", "node_reached")
+"""Also logged, broadcasts only (not the replies to one requester): the fleet's safety
+invariants are checked on them (guidebot/invariants.py, docs/server.md "Events")."""
 
 
 async def _initial_site(app: FastAPI, store: DbStore) -> tuple[Site, int]:
@@ -135,6 +138,8 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
 
             for pattern in LOGGED_TYPES:
                 logger.subscribe(pattern, log_message, tap=True)
+            for pattern in LOGGED_BROADCASTS:
+                logger.subscribe(pattern, log_message)
             tasks.restore(await store.load_open_tasks())
             traffic.start()
             health.set("traffic_manager", ComponentState.ok)

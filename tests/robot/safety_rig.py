@@ -212,7 +212,12 @@ async def fleet(
                 if message.type == "building_module_health":
                     return
                 seen.append(message)
-                checker.feed_message(message)
+                if message.type == "area_granted":
+                    # Published inside the handler of its cause (a release_area): this monitor
+                    # sees it before the cause, so it is checked once the cause is delivered.
+                    asyncio.get_running_loop().call_soon(checker.feed_message, message)
+                else:
+                    checker.feed_message(message)
                 f.changed.set()
 
             server.app.state.hub.endpoint("test-monitor").subscribe("*", record, tap=True)
