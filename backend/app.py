@@ -31,6 +31,7 @@ from backend.api.limits import BodyLimit, install_error_handlers
 from backend.auth import Authenticator, Role, TokenStore
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
+from backend.health import ComponentState, HealthBoard
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
@@ -75,6 +76,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.settings = settings
+        app.state.health = health_board = HealthBoard()
         app.state.tokens = _load_tokens(settings)
         app.state.auth = Authenticator(
             app.state.tokens,
@@ -94,8 +96,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             max_message_bytes=settings.hub_max_message_bytes,
             task_requests=app.state.task_limits,
         )
+        health_board.set("hub", ComponentState.ok)
         async with contextlib.AsyncExitStack() as stack:
             stack.callback(app.state.hub.close)
+            stack.callback(health_board.set, "hub", ComponentState.stopped)
             for component in COMPONENTS:
                 await stack.enter_async_context(component(app))
             log.info("GuideBot server ready (%d components)", len(COMPONENTS))
@@ -110,10 +114,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @app.get("/api/health", tags=["server"])
     async def health() -> dict[str, Any]:
-        """Liveness and a glance at the hub: for load balancers, tests and the admin page."""
+        """Each component's state ("degraded" when one failed) and a glance at the hub: for
+        load balancers, tests and the admin page. Always 200: read ``status``."""
         hub: Hub = app.state.hub
+        building = getattr(app.state, "building", None)
+        if building is not None:
+            app.state.health.set("building_interface", *building.component_state())
         return {
-            "status": "ok",
+            **app.state.health.report(),
             "environment": settings.environment,
             "clients": len(hub.clients),
             "endpoints": len(hub.bus.endpoint_names),

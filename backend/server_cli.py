@@ -2,11 +2,31 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
 import click
 from pydantic import ValidationError
+
+
+def refuse_broken_site(path: Path) -> None:
+    """A broken site file stops the start with every problem and its line (no traceback)."""
+    from backend.site.validate import SiteInvalid
+    from backend.site.yamlio import load_site_file
+
+    try:
+        load_site_file(path)
+    except OSError as exc:
+        click.echo(f"{path}: cannot read the site file: {exc.strerror}", err=True)
+        sys.exit(2)
+    except SiteInvalid as exc:
+        for line in exc.file_lines(path):
+            click.echo(line, err=True)
+        click.echo(
+            f"{path}: {len(exc.issues)} problem(s): site refused, server not started", err=True
+        )
+        sys.exit(2)
 
 
 @click.command()
@@ -44,6 +64,8 @@ def server(
         settings = Settings(**overrides)
     except ValidationError as exc:
         raise click.UsageError(describe_errors(exc)) from None
+    if settings.site is not None:
+        refuse_broken_site(settings.site)
     app = create_app(settings)
     click.echo(
         f"GuideBot server on http://{settings.host}:{settings.port} "

@@ -37,6 +37,11 @@ class Fault(BaseModel):
     code: int = Field(default=4, ge=1, le=11)
 
 
+class Jam(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    jammed: bool = True
+
+
 class PointValue(BaseModel):
     model_config = ConfigDict(extra="forbid")
     value: int = Field(ge=0, le=0xFFFF)
@@ -65,6 +70,15 @@ def control_app(sim: BuildingSimulator) -> FastAPI:
         except SimulatorError as exc:
             raise HTTPException(404, str(exc)) from None
         return {"module": module, **body.model_dump(mode="json")}
+
+    @app.post("/doors/{door}/jam")
+    async def jam(door: str, body: Jam | None = None) -> dict[str, Any]:
+        jammed = (body or Jam()).jammed
+        try:
+            sim.jam_door(door, jammed)
+        except SimulatorError as exc:
+            raise HTTPException(404, str(exc)) from None
+        return {"door": door, "jammed": jammed}
 
     @app.post("/points/{module}/{point}")
     async def set_point(module: str, point: str, body: PointValue) -> dict[str, Any]:

@@ -62,10 +62,14 @@ class _Timed:
 
 
 class DoorSim(_Timed):
-    """An automatic door: opens ``open_time_s`` after its coil is set, stays open ``hold_s``,
-    then clears its coil and closes by itself. Clearing the coil closes it at once."""
+    """An automatic door: opens ``open_time_s`` after its coil is set and stays open while the
+    coil stays set (the site's contract: "opens the door while set"); clearing the coil closes
+    it (sensor off at once). ``hold_s`` (None: never) models a building whose door closes by
+    itself after that long, clearing its coil; ``jammed`` doors never open."""
 
-    def __init__(self, door: Door, write: PointWriter, *, time_scale: float, hold_s: float) -> None:
+    def __init__(
+        self, door: Door, write: PointWriter, *, time_scale: float, hold_s: float | None = None
+    ) -> None:
         super().__init__()
         self.door = door
         self.write = write
@@ -73,6 +77,7 @@ class DoorSim(_Timed):
         self.hold_s = hold_s
         self.state = DoorState.closed
         self.openings = 0
+        self.jammed = False
 
     def _go(self, new: DoorState) -> None:
         if new not in DOOR_TRANSITIONS[self.state]:
@@ -87,11 +92,11 @@ class DoorSim(_Timed):
             self.write(self.door.is_open, value)
 
     def on_open_coil(self, value: int) -> None:
+        if value and self.jammed:
+            return
         if value and self.state in (DoorState.closed, DoorState.closing):
             self._go(DoorState.opening)
             self._after(self.door.open_time_s / self.scale, self._opened)
-        elif value and self.state == DoorState.open:
-            self._after(self.hold_s / self.scale, self._hold_over)
         elif not value and self.state in (DoorState.opening, DoorState.open):
             self._start_closing()
 
@@ -99,7 +104,8 @@ class DoorSim(_Timed):
         self._go(DoorState.open)
         self.openings += 1
         self._sensor(1)
-        self._after(self.hold_s / self.scale, self._hold_over)
+        if self.hold_s is not None:
+            self._after(self.hold_s / self.scale, self._hold_over)
 
     def _hold_over(self) -> None:
         self.write(self.door.open, 0)

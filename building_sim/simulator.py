@@ -18,12 +18,12 @@ from typing import Any
 
 from backend.building.config import BuildingConfig
 from backend.site.building import IORef, PointKind
+from backend.site.io_rules import Role, allowed
 from building_sim._modbus import FaultKind, ModuleFault, ModuleServer, ModuleStore
 from building_sim.devices import DoorSim, ElevatorSim
 
 __all__ = ["BuildingSimulator", "SimulatorError"]
 
-DEFAULT_DOOR_HOLD_S = 5.0
 DEFAULT_ELEVATOR_HOLD_S = 8.0
 
 
@@ -40,7 +40,7 @@ class BuildingSimulator:
         *,
         time_scale: float = 1.0,
         port_zero: bool = False,
-        door_hold_s: float = DEFAULT_DOOR_HOLD_S,
+        door_hold_s: float | None = None,
         elevator_hold_s: float = DEFAULT_ELEVATOR_HOLD_S,
     ) -> None:
         if time_scale <= 0:
@@ -63,8 +63,8 @@ class BuildingSimulator:
         for elevator in config.elevators:
             first = elevator.stops[0].call.module
             regs = (
-                self._optional(first, f"{elevator.id}_floor"),
-                self._optional(first, f"{elevator.id}_door"),
+                self._optional(first, f"{elevator.id}_floor", Role.elevator_floor),
+                self._optional(first, f"{elevator.id}_door", Role.elevator_door),
             )
             sim = ElevatorSim(
                 elevator, self.write, time_scale=time_scale, hold_s=elevator_hold_s, registers=regs
@@ -78,9 +78,9 @@ class BuildingSimulator:
         for module_id, store in self.stores.items():
             store.on_write = functools.partial(self._written, module_id)
 
-    def _optional(self, module_id: str, name: str) -> IORef | None:
+    def _optional(self, module_id: str, name: str, role: Role) -> IORef | None:
         point = self.config.module(module_id).point(name)
-        if point is None or point.kind != PointKind.input_register:
+        if point is None or not allowed(role, point.kind):
             return None
         return IORef(module=module_id, point=name)
 
@@ -177,6 +177,12 @@ class BuildingSimulator:
     def _release(self, button: str) -> None:
         self._releases.pop(button, None)
         self.write(self.buttons[button].input, 0)
+
+    def jam_door(self, door: str, jammed: bool = True) -> None:
+        """A jammed door ignores its open coil (a door that fails to open)."""
+        if door not in self.doors:
+            raise SimulatorError(f"no door {door!r}; known: {sorted(self.doors)}")
+        self.doors[door].jammed = jammed
 
     async def set_fault(
         self, module: str, kind: FaultKind | str, *, delay_ms: float = 0.0, code: int = 4

@@ -12,7 +12,7 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -82,12 +82,14 @@ class OnboardSite:
     tours: list[dict[str, Any]]
     pois: list[dict[str, Any]]
     planner: Callable[[str, str], dict[str, Any]] | None
+    floor_of: dict[str, str] = field(default_factory=dict)
+    """Node -> floor: the robot reports its floor from the start."""
 
 
 def load_onboard_site(path: Path | None) -> OnboardSite:
     """Parse the site file (slow: call it in a thread)."""
     if path is None:
-        return OnboardSite([], [], None)
+        return OnboardSite([], [], None, {})
     from backend.site.yamlio import load_site_file
     from backend.traffic.graph import SiteGraph
 
@@ -104,7 +106,7 @@ def load_onboard_site(path: Path | None) -> OnboardSite:
 
     tours = [{"id": t.id, "name": t.name, "points": t.points} for t in site.tours]
     pois = [{"id": p.id, "name": p.name, "node": p.node} for p in site.pois]
-    return OnboardSite(tours, pois, planner)
+    return OnboardSite(tours, pois, planner, {n.id: n.floor for n in site.nodes})
 
 
 class RobotAgent:
@@ -176,6 +178,7 @@ class RobotAgent:
             start_node=c.start_node,
             max_speed=c.max_speed,
             planner=onboard_site.planner,
+            floor_of=onboard_site.floor_of,
         )
         self.navigator.start()
         stack.push_async_callback(self.navigator.stop)

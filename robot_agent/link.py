@@ -41,7 +41,9 @@ UP_TYPES: tuple[str, ...] = (
     "request_area",
     "release_area",
     "open_door",
+    "release_door",
     "call_elevator",
+    "node_reached",
     "petri_net_ended",
 )
 """On-board message types sent to the hub."""

@@ -3,8 +3,14 @@
 One goal at a time (a new navigate_to pre-empts the old one). For each path the navigator
 - asks the Traffic Manager for each restricted area before entering it, releases it after
   leaving it;
-- asks doors to open ``lookahead_m`` ahead so it rarely waits, and waits for door_opened;
-- calls elevators ahead, waits for elevator_in_position on its floor, rides, gets out;
+- asks every door within ``lookahead_m`` ahead to open, on every pass, holds it until it has
+  passed it (release_door) and never drives onto a door node the building does not report open
+  (door_opened / door_closed follow the door's sensor); a door that fails to open stops it in
+  front (state door_blocked, robot_fault kind door_blocked) and it asks again every
+  ``door_retry_s`` until ``wait_timeout_s``;
+- calls elevators ahead, waits for elevator_in_position on its floor, rides, gets out; it never
+  drives into a cabin that is not at its floor with the door open;
+- reports every node it reaches (node_reached: what the fleet's invariants are checked on);
 - stops on bumper_hit, reports it as robot_fault, and goes on after ``bumper_pause_s``;
 - stops for good on base_fault (a critical module lost) and fails the goal.
 
@@ -19,7 +25,7 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
@@ -58,6 +64,7 @@ class NavState(StrEnum):
     WAITING_DOOR = "waiting_door"
     WAITING_ELEVATOR = "waiting_elevator"
     RIDING = "riding"
+    DOOR_BLOCKED = "door_blocked"
     BUMPED = "bumped"
     FAULT = "fault"
 
@@ -108,6 +115,8 @@ class Navigator:
         path_timeout_s: float = 5.0,
         docking_s: float = 5.0,
         planner: Callable[[str, str], dict[str, Any]] | None = None,
+        floor_of: Mapping[str, str] | None = None,
+        door_retry_s: float = 5.0,
     ) -> None:
         self.ep = endpoint
         self.clock = clock
@@ -120,11 +129,12 @@ class Navigator:
         self.wait_timeout_s = wait_timeout_s
         self.path_timeout_s = path_timeout_s
         self.docking_s = docking_s
+        self.door_retry_s = door_retry_s
         self.planner = planner
         """On-board map (the site graph): plans when the Traffic Manager cannot be reached."""
         # Map pose and where the robot is in the graph.
         self.node: str | None = start_node
-        self.floor: str | None = None
+        self.floor: str | None = (floor_of or {}).get(start_node or "")
         self.x = self.y = self.theta = 0.0
         self.speed = 0.0
         self.localized = False
@@ -143,6 +153,10 @@ class Navigator:
         self._odom_last = 0.0
         self._bumped_until = -1.0
         self._doors_open: set[str] = set()
+        self._held_doors: set[str] = set()
+        # id of our last open_door request -> door; the reason when the building refused it.
+        self._door_requests: dict[str, str] = {}
+        self._door_failed: dict[str, str] = {}
         self._elevators: dict[str, str] = {}
         self._granted: set[str] = set()
         self._news = asyncio.Event()
@@ -165,6 +179,7 @@ class Navigator:
             sub("module_status", self._on_module_status),
             sub("door_opened", self._on_door),
             sub("door_closed", self._on_door),
+            sub("command_failed", self._on_command_failed),
             sub("elevator_in_position", self._on_elevator),
             sub("area_granted", self._on_area_granted),
             sub("area_yield", self._on_area_yield),
@@ -186,6 +201,7 @@ class Navigator:
         if task is not None and not task.done():
             task.cancel()
         self._send_velocity(0.0, 0.0, force=True)
+        self._release_doors()
         if self.state is not NavState.FAULT:
             self.state = NavState.IDLE
         self.goal = None
@@ -279,12 +295,19 @@ class Navigator:
             self._doors_open.discard(door)
         self._news.set()
 
+    def _on_command_failed(self, message: Message) -> None:
+        door = self._door_requests.pop(message.correlation_id or "", None)
+        if door is not None:
+            self._door_failed[door] = str(message.payload.get("reason") or "refused")
+            self._news.set()
+
     def _on_elevator(self, message: Message) -> None:
         p = message.payload
+        elevator, floor = str(p.get("elevator")), str(p.get("floor"))
         if p.get("door_open", True):
-            self._elevators[str(p.get("elevator"))] = str(p.get("floor"))
-        else:
-            self._elevators.pop(str(p.get("elevator")), None)
+            self._elevators[elevator] = floor
+        elif self._elevators.get(elevator) == floor:
+            del self._elevators[elevator]
         self._news.set()
 
     def _on_area_granted(self, message: Message) -> None:
@@ -390,40 +413,99 @@ class Navigator:
         first = steps[0]
         if self.node in (None, first.node) or not self.localized:
             self.relocalize(first)
-        requested_doors: set[str] = set()
+        doors_ahead: dict[int, str] = {}  # step index -> door asked open for this pass
         called: set[tuple[str, str | None]] = set()
-        i = 1
-        while i < len(steps):
-            self._check_fault()
-            step = steps[i]
-            self._ask_ahead(steps, i, requested_doors, called)
-            if step.area is not None and step.area not in self.held_areas:
-                await self._acquire_area(step.area)
-            if step.door is not None:
-                await self._wait_door(step.door)
-            prev = steps[i - 1]
-            ride = (
-                step.elevator is not None
-                and prev.elevator == step.elevator
-                and prev.floor != step.floor
-            )
-            if ride:
-                await self._ride(prev, step)
-            else:
-                if step.elevator is not None and (
-                    i + 1 < len(steps)
-                    and steps[i + 1].elevator == step.elevator
-                    and steps[i + 1].floor != step.floor
-                ):
-                    # Entering the cabin: it must be here with its door open.
-                    await self._wait_elevator(step.elevator, step.floor, called)
-                await self.drive_to(step.x, step.y, stop=i == len(steps) - 1)
-            self.node = step.node
-            self.floor = step.floor
-            self._release_left(step, steps[i + 1] if i + 1 < len(steps) else None)
-            i += 1
+        try:
+            i = 1
+            while i < len(steps):
+                self._check_fault()
+                step = steps[i]
+                self._ask_ahead(steps, i, doors_ahead, called)
+                if step.area is not None and step.area not in self.held_areas:
+                    await self._acquire_area(step.area)
+                prev = steps[i - 1]
+                ride = (
+                    step.elevator is not None
+                    and prev.elevator == step.elevator
+                    and prev.floor != step.floor
+                )
+                if ride:
+                    await self._ride(prev, step)
+                else:
+                    await self._approach(steps, i, called)
+                self.node = step.node
+                self.floor = step.floor
+                self.ep.publish(
+                    "node_reached", {"robot": self.robot, "node": step.node, "floor": step.floor}
+                )
+                self._release_left(step, steps[i + 1] if i + 1 < len(steps) else None)
+                self._release_passed(i, doors_ahead)
+                i += 1
+        finally:
+            self._release_doors()
         self._send_velocity(0.0, 0.0, force=True)
         self.state = NavState.IDLE
+
+    async def _approach(
+        self, steps: list[PathStep], i: int, called: set[tuple[str, str | None]]
+    ) -> None:
+        """Drive to step ``i``, never onto a closed door or into a cabin that is not here."""
+        step = steps[i]
+        cabin = (
+            step.elevator is not None
+            and i + 1 < len(steps)
+            and steps[i + 1].elevator == step.elevator
+            and steps[i + 1].floor != step.floor
+        )
+        while True:
+            if step.door is not None:
+                await self._wait_door(step.door)
+            if cabin:
+                assert step.elevator is not None
+                await self._wait_elevator(step.elevator, step.floor, called)
+            if await self.drive_to(
+                step.x, step.y, stop=i == len(steps) - 1, clear=self._passable(step, cabin)
+            ):
+                return
+            log.warning("%s: %s closed in front of the robot, stopped", self.robot, step.node)
+            called.discard((step.elevator or "", step.floor))
+            if step.door is not None and step.door not in self._doors_open:
+                self._open_door(step.door)  # closed under our hold: ask again
+
+    def _passable(self, step: PathStep, cabin: bool) -> Callable[[], bool]:
+        door, elevator, floor = step.door, step.elevator, step.floor
+
+        def clear() -> bool:
+            if door is not None and door not in self._doors_open:
+                return False
+            return not cabin or self._elevators.get(elevator or "") == floor
+
+        return clear
+
+    def _release_passed(self, i: int, doors_ahead: dict[int, str]) -> None:
+        """Doors whose node is behind the robot are let go (unless asked again further on)."""
+        for index in [k for k in doors_ahead if k < i]:
+            door = doors_ahead.pop(index)
+            if door not in doors_ahead.values() and door in self._held_doors:
+                self._held_doors.discard(door)
+                log.info("%s: passed door %s, released", self.robot, door)
+                self.ep.publish("release_door", {"door": door})
+
+    def _release_doors(self) -> None:
+        for door in sorted(self._held_doors):
+            self.ep.publish("release_door", {"door": door})
+        self._held_doors.clear()
+        self._door_requests.clear()
+
+    def _open_door(self, door: str) -> None:
+        """Ask the building to open (and hold) ``door`` for this robot."""
+        self._held_doors.add(door)
+        self._door_failed.pop(door, None)
+        for request, known in list(self._door_requests.items()):
+            if known == door:
+                del self._door_requests[request]
+        message = self.ep.publish("open_door", {"door": door})
+        self._door_requests[message.id] = door
 
     def relocalize(self, step: PathStep, theta: float | None = None) -> None:
         """Anchor the map pose at a known node (path start, elevator exit)."""
@@ -441,7 +523,7 @@ class Navigator:
         self,
         steps: list[PathStep],
         i: int,
-        requested_doors: set[str],
+        doors_ahead: dict[int, str],
         called: set[tuple[str, str | None]],
     ) -> None:
         """Open doors and call elevators within ``lookahead_m`` of path ahead."""
@@ -449,10 +531,10 @@ class Navigator:
         j = i
         while j < len(steps) and (distance <= self.lookahead_m or j == i):
             s = steps[j]
-            if s.door is not None and s.door not in requested_doors:
-                requested_doors.add(s.door)
-                if s.door not in self._doors_open:
-                    self.ep.publish("open_door", {"door": s.door})
+            if s.door is not None and j not in doors_ahead:
+                # Every pass asks: the building holds the door for this robot until release.
+                doors_ahead[j] = s.door
+                self._open_door(s.door)
             nxt = steps[j + 1] if j + 1 < len(steps) else None
             if (
                 s.elevator is not None
@@ -490,15 +572,41 @@ class Navigator:
             self.ep.publish("release_area", {"robot": self.robot, "area": area})
 
     async def _wait_door(self, door: str) -> None:
+        """Stand still until the building reports ``door`` open; a refusal is an alert."""
         if door in self._doors_open:
             return
+        if door not in self._held_doors:
+            self._open_door(door)
         self.state = NavState.WAITING_DOOR
-        self._send_velocity(0.0, 0.0)
-
-        def resend() -> None:
-            self.ep.publish("open_door", {"door": door})
-
-        await self._wait_until(lambda: door in self._doors_open, f"door {door}", retry=resend)
+        self._send_velocity(0.0, 0.0, force=True)
+        deadline = self.clock.now() + self.wait_timeout_s
+        retry_at: float | None = None
+        alerted = False
+        while door not in self._doors_open:
+            self._news.clear()
+            self._check_fault()
+            now = self.clock.now()
+            reason = self._door_failed.get(door)
+            if reason is not None and retry_at is None:
+                self.state = NavState.DOOR_BLOCKED
+                self._send_velocity(0.0, 0.0, force=True)
+                log.warning("%s: door %s did not open: %s", self.robot, door, reason)
+                if not alerted:
+                    alerted = True
+                    fault = {"robot": self.robot, "kind": "door_blocked"}
+                    detail = f"door {door} did not open: {reason}"
+                    self.ep.publish("robot_fault", {**fault, "detail": detail})
+                retry_at = now + self.door_retry_s
+            if now >= deadline:
+                raise NavigationFailed(
+                    f"door {door} did not open within {self.wait_timeout_s:g} s"
+                    + (f": {reason}" if reason else "")
+                )
+            if retry_at is not None and now >= retry_at:
+                retry_at = None
+                self._open_door(door)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._news.wait(), self.clock.wall(1.0) + 0.05)
         log.info("%s: door %s open", self.robot, door)
         self.state = NavState.MOVING
 
@@ -570,8 +678,12 @@ class Navigator:
 
     # -- motion -------------------------------------------------------------------------------
 
-    async def drive_to(self, x: float, y: float, *, stop: bool = True) -> None:
-        """Closed loop on odometry: turn towards the target, then drive with steering."""
+    async def drive_to(
+        self, x: float, y: float, *, stop: bool = True, clear: Callable[[], bool] | None = None
+    ) -> bool:
+        """Closed loop on odometry: turn towards the target, then drive with steering.
+
+        Returns False (stopped) as soon as ``clear()`` says the way is no longer free."""
         self.state = NavState.MOVING
         distance = math.hypot(x - self.x, y - self.y)
         budget = self.clock.now() + 20.0 + 4.0 * distance / self.max_speed
@@ -591,6 +703,9 @@ class Navigator:
             dist = math.hypot(dx, dy)
             if dist < self.tolerance_m:
                 break
+            if clear is not None and not clear():
+                self._send_velocity(0.0, 0.0, force=True)
+                return False
             if self.clock.now() > budget:
                 raise NavigationFailed(f"stuck {dist:.2f} m from ({x:.1f}, {y:.1f})")
             err = _wrap(math.atan2(dy, dx) - self.theta)
@@ -600,6 +715,7 @@ class Navigator:
             self._send_velocity(v, w)
         if stop:
             self._send_velocity(0.0, 0.0, force=True)
+        return True
 
     async def turn_to(self, heading: float) -> None:
         budget = self.clock.now() + 20.0

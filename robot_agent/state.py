@@ -88,6 +88,7 @@ class StateReporter:
             "floor": self.nav.floor,
             "battery": 1.0 if level is None else round(level, 3),
             "mode": self.mode().value,
+            "navigation": self.nav.state.value,
             "task_id": self.tasks.task_id,
             "speed": round(self.nav.speed, 3),
             "nets": self.nets(),

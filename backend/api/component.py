@@ -14,6 +14,7 @@ from fastapi import FastAPI
 from backend.alerts import AlertBoard
 from backend.auth import Role, TokenStore, is_digest, token_digest
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.health import ComponentState
 from backend.settings import published_tokens, weak_secret
 from backend.site.schema import Site
 from backend.site.service import EMPTY_SITE, SiteService
@@ -26,6 +27,7 @@ from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
 
 __all__ = [
+    "LOGGED_BROADCASTS",
     "LOGGED_TYPES",
     "InsecureSite",
     "hash_robot_tokens",
@@ -44,6 +46,9 @@ LOGGED_TYPES = (
     "robot_disconnected",
 )
 """Hub messages copied into the event log (task changes and lock changes are logged directly)."""
+LOGGED_BROADCASTS = ("door_opened", "door_closed", "elevator_in_position", "node_reached")
+"""Also logged, broadcasts only (not the replies to one requester): the fleet's safety
+invariants are checked on them (guidebot/invariants.py, docs/server.md "Events")."""
 
 
 class InsecureSite(RuntimeError):
@@ -140,11 +145,17 @@ async def watch_offline_locks(
 async def server_brain(app: FastAPI) -> AsyncIterator[None]:
     settings = app.state.settings
     hub = app.state.hub
+    health = app.state.health
     engine = make_engine(settings.db_url)
     try:
-        await migrate(engine)
+        try:
+            await migrate(engine)
+        except Exception as exc:
+            health.set("database", ComponentState.failed, f"{type(exc).__name__}: {exc}")
+            raise
         store = DbStore(make_sessionmaker(engine))
         store.start()
+        health.set("database", ComponentState.ok, engine.url.get_backend_name())
         try:
             site, version = await _initial_site(app, store)
             if not settings.development and (problems := weak_robot_tokens(site)):
@@ -188,9 +199,13 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
 
             for pattern in LOGGED_TYPES:
                 logger.subscribe(pattern, log_message, tap=True)
+            for pattern in LOGGED_BROADCASTS:
+                logger.subscribe(pattern, log_message)
             tasks.restore(await store.load_open_tasks())
             traffic.start()
+            health.set("traffic_manager", ComponentState.ok)
             tasks.start()
+            health.set("task_manager", ComponentState.ok)
             buttons.start()
             app.state.store = store
             app.state.sites = sites
@@ -212,6 +227,8 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
                 buttons.stop()
                 await tasks.stop()
                 traffic.stop()
+                for name in ("task_manager", "traffic_manager", "database"):
+                    health.set(name, ComponentState.stopped)
                 logger.close()
         finally:
             await store.stop()

@@ -17,6 +17,7 @@ from fastapi import FastAPI
 
 from backend.building.config import BuildingConfigError, load_building
 from backend.building.interface import BuildingInterface
+from backend.health import ComponentState
 
 __all__ = ["building_interface"]
 
@@ -37,6 +38,8 @@ class _Runner:
     def _build(self, site: Any) -> BuildingInterface | None:
         data = site.model_dump(mode="json")
         config = load_building(data)
+        if self.settings.environment != "development":
+            config.check_production()
         if not config.modules:
             return None
         floors = {node.id: node.floor for node in getattr(site, "nodes", [])}
@@ -47,18 +50,34 @@ class _Runner:
             floor_of_node=floors,
         )
 
-    async def load(self, site: Any) -> None:
+    async def load(self, site: Any, *, startup: bool = False) -> None:
+        """Start the interface for ``site``; in production a building that cannot run is an
+        error (the server refuses to start), in development it is reported on /api/health."""
+        health = self.app.state.health
         async with self._lock:
             if self.current is not None:
                 await self.current.stop()
                 self.current = None
+            self.app.state.building = None
             try:
                 self.current = self._build(site)
-            except BuildingConfigError as exc:
+                if self.current is not None:
+                    await self.current.start()
+            except (BuildingConfigError, OSError) as exc:
                 log.error("building interface not started: %s", exc)
+                health.set("building_interface", ComponentState.failed, f"not started: {exc}")
                 self.current = None
-            if self.current is not None:
-                await self.current.start()
+                if startup and self.settings.environment != "development":
+                    raise RuntimeError(
+                        f"building interface not started: {exc}"
+                        f" (GUIDEBOT_ENVIRONMENT={self.settings.environment} refuses to run"
+                        " without it)"
+                    ) from None
+                return
+            if self.current is None:
+                health.set("building_interface", ComponentState.disabled, "site has no modules")
+            else:
+                health.set("building_interface", *self.current.component_state())
             self.app.state.building = self.current
 
     def on_site(self, site: Any) -> None:
@@ -82,13 +101,15 @@ async def building_interface(app: FastAPI) -> AsyncIterator[None]:
     """Component: poll the site's Modbus modules while the server runs."""
     app.state.building = None
     if not getattr(app.state.settings, "building_enabled", True):
+        app.state.health.set("building_interface", ComponentState.disabled, "building_enabled off")
         yield
         return
     runner = _Runner(app)
     sites = app.state.sites
-    await runner.load(sites.site)
+    await runner.load(sites.site, startup=True)
     sites.on_change(runner.on_site)
     try:
         yield
     finally:
         await runner.close()
+        app.state.health.set("building_interface", ComponentState.stopped)

@@ -23,6 +23,7 @@ from backend.site.building import (
     IORef,
     PointKind,
 )
+from backend.site.io_rules import Role, kind_problem
 
 __all__ = [
     "BuildingConfig",
@@ -32,8 +33,6 @@ __all__ = [
 ]
 
 BUILDING_KEYS = ("modules", "doors", "elevators", "buttons")
-WRITABLE = frozenset({PointKind.coil, PointKind.holding_register})
-READABLE_INPUTS = frozenset({PointKind.discrete_input, PointKind.coil})
 
 
 class BuildingConfigError(ValueError):
@@ -68,6 +67,16 @@ class BuildingConfig(BaseModel):
         _check(self)
         return self
 
+    def check_production(self) -> BuildingConfig:
+        """What a real venue needs beyond ``check``: real ports (0 is for simulators)."""
+        for module in self.modules:
+            if module.port == 0:
+                raise BuildingConfigError(
+                    f"module {module.id!r}: port 0 only suits a simulator (port_zero);"
+                    " a real module needs its Modbus/TCP port"
+                )
+        return self
+
 
 def _check(config: BuildingConfig) -> None:
     ids: set[str] = set()
@@ -91,21 +100,19 @@ def _check(config: BuildingConfig) -> None:
                 )
             addresses[(point.kind, point.address)] = point.name
 
-    def ref(owner: str, ref: IORef, kinds: frozenset[PointKind], role: str) -> None:
+    def ref(owner: str, ref: IORef, role: Role) -> None:
+        field = role.value.split(" ", 1)[1]  # "door open" -> "open": the owner says "door"
         if ref.module not in ids:
-            raise BuildingConfigError(f"{owner}: {role} names unknown module {ref.module!r}")
+            raise BuildingConfigError(f"{owner}: {field} names unknown module {ref.module!r}")
         point = config.module(ref.module).point(ref.point)
         if point is None:
             raise BuildingConfigError(
-                f"{owner}: {role} names unknown point {ref.point!r} of module {ref.module!r}"
+                f"{owner}: {field} names unknown point {ref.point!r} of module {ref.module!r}"
             )
-        if point.kind not in kinds:
-            wanted = " or ".join(sorted(k.value for k in kinds))
-            raise BuildingConfigError(
-                f"{owner}: {role} {ref.module}.{ref.point} is a {point.kind.value}, needs {wanted}"
-            )
+        problem = kind_problem(role, point.kind, f"{ref.module}.{ref.point}")
+        if problem is not None:
+            raise BuildingConfigError(f"{owner}: {problem}")
 
-    coil = frozenset({PointKind.coil})
     for kind_name, items in (
         ("door", config.doors),
         ("elevator", config.elevators),
@@ -117,9 +124,9 @@ def _check(config: BuildingConfig) -> None:
                 raise BuildingConfigError(f"{kind_name} {item.id!r} is defined twice")
             seen.add(item.id)
     for door in config.doors:
-        ref(f"door {door.id!r}", door.open, coil, "open")
+        ref(f"door {door.id!r}", door.open, Role.door_open)
         if door.is_open is not None:
-            ref(f"door {door.id!r}", door.is_open, READABLE_INPUTS, "is_open")
+            ref(f"door {door.id!r}", door.is_open, Role.door_is_open)
     for elevator in config.elevators:
         floors: set[str] = set()
         for stop in elevator.stops:
@@ -129,12 +136,12 @@ def _check(config: BuildingConfig) -> None:
                 )
             floors.add(stop.floor)
             owner = f"elevator {elevator.id!r} floor {stop.floor!r}"
-            ref(owner, stop.call, coil, "call")
-            ref(owner, stop.in_position, READABLE_INPUTS, "in_position")
+            ref(owner, stop.call, Role.elevator_call)
+            ref(owner, stop.in_position, Role.elevator_in_position)
     for button in config.buttons:
-        ref(f"button {button.id!r}", button.input, READABLE_INPUTS, "input")
+        ref(f"button {button.id!r}", button.input, Role.button_input)
         if button.led is not None:
-            ref(f"button {button.id!r}", button.led, coil, "led")
+            ref(f"button {button.id!r}", button.led, Role.button_led)
 
 
 def load_building(data: Mapping[str, Any]) -> BuildingConfig:

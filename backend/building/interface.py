@@ -3,8 +3,11 @@
 Generic (the paper's point): everything venue-specific comes from the site's building section.
 It polls every module (backend.building.poller), filters inputs (backend.building.filter),
 publishes ``building_input_changed`` (with the point's map node and floor) and
-``building_module_health`` on the hub, and executes ``open_door``, ``close_door``,
-``call_elevator`` and ``set_output``, confirming each or answering ``command_failed``.
+``building_module_health`` on the hub, and executes ``open_door``, ``release_door``,
+``close_door``, ``call_elevator`` and ``set_output``, confirming each or answering
+``command_failed``. Door and cabin states are broadcast on every change of their sensors
+(``door_opened``/``door_closed``, ``elevator_in_position`` with ``door_open``): the fleet and
+the invariant checker (guidebot.invariants) follow the building, not the commands.
 
 A button press is the paper's T1-T4: this module publishes the input change with its map
 position (T2-T3); the Task Manager's ButtonWatcher (backend.tasks.buttons) turns it into the
@@ -16,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import functools
 import logging
+import time
 from collections.abc import Awaitable, Callable, Mapping
 from types import TracebackType
 from typing import Any
@@ -23,13 +27,16 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.building._modbus import ModbusIOError
-from backend.building.config import WRITABLE, BuildingConfig
+from backend.building.config import BuildingConfig
+from backend.building.doors import DoorKeeper
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
-from backend.site.building import IOPoint, IORef, PointKind
+from backend.health import ComponentState
+from backend.site.building import Door, IOPoint, IORef, PointKind
+from backend.site.io_rules import Role, allowed
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.building import CallElevator, CloseDoor, OpenDoor, SetOutput
+from guidebot.payloads.building import CallElevator, CloseDoor, OpenDoor, ReleaseDoor, SetOutput
 
 __all__ = ["BuildingInterface", "CommandError"]
 
@@ -82,6 +89,21 @@ class BuildingInterface:
         for elevator in config.elevators:
             for stop in elevator.stops:
                 self._floors[(stop.in_position.module, stop.in_position.point)] = stop.floor
+        self.doors = {d.id: DoorKeeper(d, self._publish_door) for d in config.doors}
+        # (module, point) -> door keeper, for the doors' sensors and coils.
+        self._door_sensors = {
+            (d.is_open.module, d.is_open.point): self.doors[d.id]
+            for d in config.doors
+            if d.is_open is not None
+        }
+        self._door_coils = {(d.open.module, d.open.point): self.doors[d.id] for d in config.doors}
+        # (module, point) -> (elevator, floor) of each in_position input; its last state.
+        self._stops = {
+            (s.in_position.module, s.in_position.point): (e.id, s.floor)
+            for e in config.elevators
+            for s in e.stops
+        }
+        self._cabin: dict[tuple[str, str], bool] = {}
         self._commands: set[asyncio.Task[None]] = set()
         self._unsubscribe: list[Callable[[], None]] = []
         self.events = 0
@@ -91,6 +113,7 @@ class BuildingInterface:
     async def start(self) -> None:
         handlers: dict[str, Callable[[Message], Awaitable[dict[str, Any]]]] = {
             "open_door": self._open_door,
+            "release_door": self._release_door,
             "close_door": self._close_door,
             "call_elevator": self._call_elevator,
             "set_output": self._set_output,
@@ -112,6 +135,8 @@ class BuildingInterface:
             await asyncio.wait(pending, timeout=0.5)
         for poller in self.pollers.values():
             await poller.stop()
+        for keeper in self.doors.values():
+            keeper.release_all()
 
     async def __aenter__(self) -> BuildingInterface:
         await self.start()
@@ -125,6 +150,20 @@ class BuildingInterface:
     ) -> None:
         await self.stop()
 
+    def component_state(self) -> tuple[ComponentState, str]:
+        """For /api/health: degraded while any module does not answer normally."""
+        bad = [
+            f"{p.module.id} {p.health.state.value}"
+            for p in self.pollers.values()
+            if p.health.state != HealthState.online
+        ]
+        count = len(self.pollers)
+        if bad:
+            return ComponentState.degraded, f"{count - len(bad)}/{count} modules online; " + (
+                ", ".join(bad)
+            )
+        return ComponentState.ok, f"{count}/{count} modules online"
+
     def health(self) -> list[dict[str, object]]:
         """Every module's health, for the admin GUI and the REST API."""
         return [p.health.payload() | {"state": p.health.state.value} for p in self.pollers.values()]
@@ -133,6 +172,12 @@ class BuildingInterface:
 
     def _on_health(self, health: ModuleHealth) -> None:
         self.endpoint.publish("building_module_health", health.payload())
+        if health.state != HealthState.online:
+            # Unknown is closed: a door whose sensor cannot be read is not passable.
+            now = time.monotonic()
+            for (module, _), keeper in self._door_sensors.items():
+                if module == health.module:
+                    keeper.lost(now)
 
     def _on_sample(self, module_id: str, sample: Sample, t: float) -> None:
         points = self._points[module_id]
@@ -141,6 +186,29 @@ class BuildingInterface:
                 point = points.get((kind, first + offset))
                 if point is not None:
                     self._observe(module_id, point, raw, t)
+                    self._devices(module_id, point, t)
+
+    def _devices(self, module_id: str, point: IOPoint, t: float) -> None:
+        """Door and cabin states from their (filtered) inputs, on every sample."""
+        key = (module_id, point.name)
+        value = self.values[key]
+        keeper = self._door_sensors.get(key)
+        if keeper is not None:
+            keeper.sensor(value, t)
+        keeper = self._door_coils.get(key)
+        if keeper is not None:
+            keeper.coil(value, t)
+        stop = self._stops.get(key)
+        if stop is not None and self._cabin.get(key) != bool(value):
+            self._cabin[key] = bool(value)
+            elevator, floor = stop
+            self.endpoint.publish(
+                "elevator_in_position",
+                {"elevator": elevator, "floor": floor, "door_open": bool(value)},
+            )
+
+    def _publish_door(self, door: str, is_open: bool) -> None:
+        self.endpoint.publish("door_opened" if is_open else "door_closed", {"door": door})
 
     def _observe(self, module_id: str, point: IOPoint, raw: int, t: float) -> None:
         key = (module_id, point.name)
@@ -223,13 +291,12 @@ class BuildingInterface:
         except (CommandError, ModbusIOError) as exc:
             self._fail(message, str(exc))
 
-    def _confirm(self, request: Message, type_name: str, payload: dict[str, Any]) -> None:
-        """Reply to the requester (correlated) and tell everyone else."""
+    def _reply(self, request: Message, type_name: str, payload: dict[str, Any]) -> None:
+        """Confirm to the requester only: everyone else hears the device's own state change."""
         if request.source:
             self.endpoint.publish(
                 type_name, payload, destination=request.source, correlation_id=request.id
             )
-        self.endpoint.publish(type_name, payload)
 
     def _fail(self, request: Message, reason: str) -> None:
         log.info("%s from %s failed: %s", request.type, request.source, reason)
@@ -250,7 +317,7 @@ class BuildingInterface:
             )
         await poller.client.write(point.kind, point.address, value)
 
-    def _door(self, door_id: str) -> Any:
+    def _door(self, door_id: str) -> Door:
         door = next((d for d in self.config.doors if d.id == door_id), None)
         if door is None:
             known = ", ".join(d.id for d in self.config.doors) or "none"
@@ -258,27 +325,78 @@ class BuildingInterface:
         return door
 
     async def _open_door(self, message: Message) -> dict[str, Any]:
+        """Hold the door open for the requester until it sends release_door."""
         open_door: OpenDoor = message.payload_as(OpenDoor)
         door = self._door(open_door.door)
-        await self._write(door.open, 1)
-        if door.is_open is None:
-            await asyncio.sleep(door.open_time_s)
-        else:
+        keeper = self.doors[door.id]
+        holder = message.source or "anonymous"
+        keeper.hold(holder, functools.partial(self._hold_expired, door.id, holder))
+        try:
+            await self._write(door.open, 1)
+            keeper.coil_set(time.monotonic())
             timeout = door.open_time_s + self.command_margin_s
-            await self._wait_value(door.is_open, 1, timeout, f"door {door.id} open")
+            try:
+                await keeper.wait_open(timeout)
+            except TimeoutError:
+                health = self.pollers[door.open.module].health
+                why = f"; module {door.open.module} is {health.state.value}"
+                raise CommandError(
+                    f"door {door.id} not open within {timeout:g} s"
+                    + (why if not health.online else "")
+                ) from None
+        except BaseException:
+            if keeper.release(holder):
+                await self._close(keeper, best_effort=True)
+            raise
         payload = {"door": door.id}
-        self._confirm(message, "door_opened", payload)
+        self._reply(message, "door_opened", payload)
         return payload
 
+    async def _release_door(self, message: Message) -> dict[str, Any]:
+        release: ReleaseDoor = message.payload_as(ReleaseDoor)
+        door = self._door(release.door)
+        keeper = self.doors[door.id]
+        if keeper.release(message.source or "anonymous"):
+            await self._close(keeper)
+        return {"door": door.id}
+
+    def _hold_expired(self, door_id: str, holder: str) -> None:
+        keeper = self.doors[door_id]
+        log.warning(
+            "door %s: %s held it longer than %g s, hold dropped",
+            door_id,
+            holder,
+            keeper.door.max_hold_s,
+        )
+        if keeper.release(holder):
+            task = asyncio.get_running_loop().create_task(self._close(keeper, best_effort=True))
+            self._commands.add(task)
+            task.add_done_callback(self._commands.discard)
+
+    async def _close(self, keeper: DoorKeeper, *, best_effort: bool = False) -> None:
+        """Clear the open coil; the door counts as closed from this moment on."""
+        keeper.closing()
+        try:
+            await self._write(keeper.door.open, 0)
+        except (CommandError, ModbusIOError) as exc:
+            if not best_effort:
+                raise
+            log.warning("door %s: could not clear its coil: %s", keeper.door.id, exc)
+        finally:
+            keeper.cleared(time.monotonic())
+
     async def _close_door(self, message: Message) -> dict[str, Any]:
+        """Close now, whoever holds the door (staff)."""
         close_door: CloseDoor = message.payload_as(CloseDoor)
         door = self._door(close_door.door)
-        await self._write(door.open, 0)
+        keeper = self.doors[door.id]
+        keeper.release_all()
+        await self._close(keeper)
         if door.is_open is not None:
             timeout = door.open_time_s + self.command_margin_s
             await self._wait_value(door.is_open, 0, timeout, f"door {door.id} closing")
         payload = {"door": door.id}
-        self._confirm(message, "door_closed", payload)
+        self._reply(message, "door_closed", payload)
         return payload
 
     async def _call_elevator(self, message: Message) -> dict[str, Any]:
@@ -296,7 +414,7 @@ class BuildingInterface:
         what = f"elevator {elevator.id} at floor {stop.floor}"
         await self._wait_value(stop.in_position, 1, timeout, what)
         payload = {"elevator": elevator.id, "floor": stop.floor, "door_open": True}
-        self._confirm(message, "elevator_in_position", payload)
+        self._reply(message, "elevator_in_position", payload)
         return payload
 
     async def _set_output(self, message: Message) -> dict[str, Any]:
@@ -307,7 +425,7 @@ class BuildingInterface:
             _, point = self.config.resolve(ref)
         except KeyError:
             raise CommandError(f"no point {command.point!r} on module {command.module!r}") from None
-        if point.kind not in WRITABLE:
+        if not allowed(Role.output, point.kind):
             raise CommandError(
                 f"{command.module}.{command.point} is a {point.kind.value}: read-only"
             )

@@ -6,10 +6,11 @@ the site validator (backend.site.validate) checks that every reference between t
 
 from __future__ import annotations
 
-from enum import StrEnum
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from backend.site.io_rules import PointKind
 
 __all__ = [
     "BuildingModule",
@@ -30,15 +31,6 @@ class StrictModel(BaseModel):
     """Unknown keys are refused so typos in a site file surface with their place."""
 
     model_config = ConfigDict(extra="forbid")
-
-
-class PointKind(StrEnum):
-    """The four Modbus data tables."""
-
-    discrete_input = "discrete_input"
-    coil = "coil"
-    input_register = "input_register"
-    holding_register = "holding_register"
 
 
 class IOPoint(StrictModel):
@@ -83,6 +75,9 @@ class Door(StrictModel):
     is_open: IORef | None = None
     """Input that reports the door fully open; without it, ``open_time_s`` is waited."""
     open_time_s: float = Field(default=2.0, ge=0, le=120)
+    max_hold_s: float = Field(default=120.0, gt=0, le=3600)
+    """A robot holding the door longer than this is dropped (a robot lost mid-door must not
+    keep it open for ever); the door closes when no holder is left."""
 
 
 class ElevatorStop(StrictModel):

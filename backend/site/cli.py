@@ -25,8 +25,8 @@ def check(path: Path) -> None:
     try:
         loaded = load_site_file(path)
     except SiteInvalid as exc:
-        for issue in exc.issues:
-            click.echo(f"{path}:{issue.line or 0}: {issue.loc}: {issue.message}", err=True)
+        for line in exc.file_lines(path):
+            click.echo(line, err=True)
         click.echo(f"{len(exc.issues)} problem(s): site refused", err=True)
         sys.exit(1)
     click.echo(

@@ -57,6 +57,12 @@ def synthetic_site(
             module = {"id": f"m{e}", "port": 0, "points": points}
             stops = []
             for f in range(floors):
+                # The cabin is its own node with one landing (a cabin is never a through-way).
+                cabin = f"lift{e}_{f}"
+                doc_nodes.append(
+                    {"id": cabin, "floor": f"F{f}", "x": i * spacing_m + 1.0, "y": j * spacing_m}
+                )
+                edges.append({"a": f"n{f}_{i}_{j}", "b": cabin, "length_m": 1.0})
                 points += [
                     {"name": f"call{f}", "address": f + 1, "kind": "coil"},
                     {"name": f"here{f}", "address": f + 1, "kind": "discrete_input"},
@@ -64,7 +70,7 @@ def synthetic_site(
                 stops.append(
                     {
                         "floor": f"F{f}",
-                        "node": f"n{f}_{i}_{j}",
+                        "node": cabin,
                         "call": {"module": f"m{e}", "point": f"call{f}"},
                         "in_position": {"module": f"m{e}", "point": f"here{f}"},
                     }

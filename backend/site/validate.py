@@ -13,9 +13,10 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.site.building import IORef, PointKind
+from backend.site.io_rules import Role, kind_problem
 from backend.site.schema import Site
 
-__all__ = ["SiteInvalid", "SiteIssue", "check_references", "validate_site"]
+__all__ = ["SiteInvalid", "SiteIssue", "cabin_through_ways", "check_references", "validate_site"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,10 @@ class SiteInvalid(ValueError):
         self.issues = issues
         lines = "\n".join(f"  {issue}" for issue in issues)
         super().__init__(f"site refused, {len(issues)} problem(s):\n{lines}")
+
+    def file_lines(self, path: object) -> list[str]:
+        """One ``file:line: loc: message`` line per problem (what editors jump to)."""
+        return [f"{path}:{i.line or 0}: {i.loc}: {i.message}" for i in self.issues]
 
 
 def format_loc(parts: Iterable[str | int]) -> str:
@@ -138,6 +143,38 @@ def _unique(items: list[Any], attr: str, section: str) -> list[Problem]:
     return out
 
 
+@dataclass(frozen=True)
+class ThroughWay:
+    """Edge ``edge`` (index in site.edges) joins ``cabin`` to a second landing ``other``."""
+
+    edge: int
+    elevator: str
+    cabin: str
+    landing: str
+    other: str
+
+
+def cabin_through_ways(site: Site) -> list[ThroughWay]:
+    """Edges that would let a path cross an elevator's cabin node without riding.
+
+    A cabin node has ONE landing on its floor (the first edge that joins it to a node that is
+    not a stop of its elevator); every further edge to another node makes the cabin a shortcut
+    between two landings. The site check refuses these edges and the planner never uses them.
+    """
+    cabin_of = {stop.node: el.id for el in site.elevators for stop in el.stops}
+    landing: dict[str, str] = {}
+    out: list[ThroughWay] = []
+    for i, e in enumerate(site.edges):
+        for cabin, other in ((e.a, e.b), (e.b, e.a)):
+            elevator = cabin_of.get(cabin)
+            if elevator is None or cabin_of.get(other) == elevator:
+                continue
+            first = landing.setdefault(cabin, other)
+            if first != other:
+                out.append(ThroughWay(i, elevator, cabin, first, other))
+    return out
+
+
 def check_references(site: Site) -> list[Problem]:
     """Every cross reference of the site; returns (loc, message) pairs, empty when sound."""
     p: list[Problem] = []
@@ -204,18 +241,17 @@ def check_references(site: Site) -> list[Problem]:
             p.append((("areas", i, "passing_place"), "a passing place must lie outside its area"))
 
     points = {(m.id, pt.name): pt.kind for m in site.modules for pt in m.points}
-    inputs = {PointKind.discrete_input, PointKind.input_register}
-    outputs = {PointKind.coil, PointKind.holding_register}
 
-    def io_ref(loc: tuple[str | int, ...], ref: IORef | None, want: set[PointKind]) -> None:
+    def io_ref(loc: tuple[str | int, ...], ref: IORef | None, role: Role) -> None:
         if ref is None:
             return
         kind = points.get((ref.module, ref.point))
         if kind is None:
             p.append((loc, f"unknown building point {ref.module!r}/{ref.point!r}"))
-        elif kind not in want:
-            expected = "an input" if want is inputs else "an output"
-            p.append((loc, f"{ref.module}/{ref.point} is a {kind}, expected {expected}"))
+            return
+        problem = kind_problem(role, kind, f"{ref.module}/{ref.point}")
+        if problem is not None:
+            p.append((loc, problem))
 
     for i, m in enumerate(site.modules):
         p += [(("modules", i, *loc), msg) for loc, msg in _unique(m.points, "name", "points")]
@@ -235,8 +271,8 @@ def check_references(site: Site) -> list[Problem]:
             p.append((("modules", i, "port"), f"{m.host}:{m.port} used by another module"))
     for i, d in enumerate(site.doors):
         node_ref(("doors", i, "node"), d.node)
-        io_ref(("doors", i, "open"), d.open, outputs)
-        io_ref(("doors", i, "is_open"), d.is_open, inputs)
+        io_ref(("doors", i, "open"), d.open, Role.door_open)
+        io_ref(("doors", i, "is_open"), d.is_open, Role.door_is_open)
     for i, el in enumerate(site.elevators):
         seen_floors: set[str] = set()
         for j, stop in enumerate(el.stops):
@@ -249,12 +285,25 @@ def check_references(site: Site) -> list[Problem]:
             if stop.node in nodes and nodes[stop.node].floor != stop.floor:
                 loc = ("elevators", i, "stops", j, "node")
                 p.append((loc, f"node {stop.node!r} is on another floor"))
-            io_ref(("elevators", i, "stops", j, "call"), stop.call, outputs)
-            io_ref(("elevators", i, "stops", j, "in_position"), stop.in_position, inputs)
+            io_ref(("elevators", i, "stops", j, "call"), stop.call, Role.elevator_call)
+            io_ref(
+                ("elevators", i, "stops", j, "in_position"),
+                stop.in_position,
+                Role.elevator_in_position,
+            )
+    for way in cabin_through_ways(site):
+        p.append(
+            (
+                ("edges", way.edge),
+                f"makes cabin node {way.cabin!r} of elevator {way.elevator} a through-way:"
+                f" a cabin has one landing ({way.landing!r}); join {way.other!r} to"
+                f" {way.landing!r} instead",
+            )
+        )
     for i, b in enumerate(site.buttons):
         node_ref(("buttons", i, "node"), b.node)
-        io_ref(("buttons", i, "input"), b.input, inputs)
-        io_ref(("buttons", i, "led"), b.led, outputs)
+        io_ref(("buttons", i, "input"), b.input, Role.button_input)
+        io_ref(("buttons", i, "led"), b.led, Role.button_led)
         params = b.task.params
         if b.task.kind == "tour" and params.get("tour") not in tours:
             p.append((("buttons", i, "task", "params", "tour"), "unknown tour"))

@@ -549,7 +549,8 @@ class TaskManager:
         if isinstance(p.get("node"), str) and p["node"] in self.graph:
             moved = robot.node != p["node"]
             robot.node = p["node"]
-        robot.floor = p.get("floor") or robot.floor
+        # A robot that does not know its floor yet (no site on board) is on its node's floor.
+        robot.floor = p.get("floor") or self.graph.floor_of.get(robot.node or "") or robot.floor
         battery = p.get("battery")
         if isinstance(battery, int | float) and 0 <= battery <= 1:
             robot.battery = float(battery)

@@ -14,6 +14,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from backend.site.schema import Site
+from backend.site.validate import cabin_through_ways
 
 __all__ = ["NoPath", "PathResult", "PathStep", "SiteGraph", "UnknownNode"]
 
@@ -83,7 +84,11 @@ class SiteGraph:
         self.adj: dict[str, list[tuple[str, float]]] = {n: [] for n in self.floor_of}
         self.radj: dict[str, list[tuple[str, float]]] = {n: [] for n in self.floor_of}
         ratio = 1.0
-        for e in site.edges:
+        # A cabin node is entered only to ride: edges that make it a through-way are not used.
+        through = {way.edge for way in cabin_through_ways(site)}
+        for i, e in enumerate(site.edges):
+            if i in through:
+                continue
             straight = self._dist(e.a, e.b)
             length = e.length_m if e.length_m is not None else max(straight, 1e-6)
             if straight > 0:

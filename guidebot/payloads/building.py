@@ -21,6 +21,7 @@ __all__ = [
     "DoorOpened",
     "ElevatorInPosition",
     "OpenDoor",
+    "ReleaseDoor",
     "SetOutput",
 ]
 
@@ -32,6 +33,13 @@ class OpenDoor(PayloadModel):
 
 @register_payload("close_door")
 class CloseDoor(PayloadModel):
+    door: str = Field(min_length=1, max_length=64)
+
+
+@register_payload("release_door")
+class ReleaseDoor(PayloadModel):
+    """The requester no longer needs the door it opened (it has passed it)."""
+
     door: str = Field(min_length=1, max_length=64)
 
 

@@ -13,7 +13,7 @@ from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["BatteryAlarm", "RobotFault", "RobotMode", "RobotState"]
+__all__ = ["BatteryAlarm", "NodeReached", "RobotFault", "RobotMode", "RobotState"]
 
 
 class RobotMode(StrEnum):
@@ -36,6 +36,8 @@ class RobotState(PayloadModel):
     floor: str | None = None
     battery: float = Field(default=1.0, ge=0.0, le=1.0)
     mode: RobotMode = RobotMode.IDLE
+    navigation: str | None = None
+    """The navigator's state (moving, waiting_door, door_blocked, riding, ...)."""
     task_id: str | None = None
     speed: float = 0.0
     nets: list[str] = Field(default_factory=list)
@@ -57,3 +59,12 @@ class RobotFault(PayloadModel):
     robot: str
     kind: str = Field(min_length=1, max_length=64)
     detail: str = ""
+
+
+@register_payload("node_reached")
+class NodeReached(PayloadModel):
+    """The robot has reached a node of its path: what the fleet's invariants are checked on."""
+
+    robot: str
+    node: str
+    floor: str | None = None

@@ -41,7 +41,7 @@ def test_the_test_site_is_sound() -> None:
         ),
         (
             lambda b: b["doors"][0]["open"].update(point="d1_open"),
-            "door 'D1': open M1.d1_open is a discrete_input, needs coil",
+            "door 'D1': door open M1.d1_open is a discrete_input; it must be a coil",
         ),
         (
             lambda b: b["buttons"][0]["input"].update(module="M9"),
@@ -71,7 +71,7 @@ def test_interface_refuses_a_bad_building_too() -> None:
     config = load_building(site_dict())
     bad = config.model_copy(deep=True)
     bad.doors[0].open.point = "b1"
-    with pytest.raises(BuildingConfigError, match="needs coil"):
+    with pytest.raises(BuildingConfigError, match="it must be a coil"):
         BuildingInterface(Bus().endpoint("building"), bad)
 
 

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import asyncio
+
+from backend.building.config import BuildingConfig, load_building
 from backend.building.interface import BuildingInterface
 from building_sim.simulator import BuildingSimulator
 from guidebot.bus import Bus
 
-from .conftest import Recorder, wait_until
+from .conftest import TIME_SCALE, Recorder, site_dict, wait_until
 
 
 async def test_300ms_press_gives_one_event(
@@ -41,8 +44,76 @@ async def test_open_door_is_confirmed_to_the_requester_and_broadcast(
     assert reply.payload == {"door": "D1"}
     assert sim.doors["D1"].state == "open"
     await recorder.wait("door_opened", door="D1")
-    # The door closes by itself after its hold time; the sensor follows.
+    # This simulator's door closes by itself after its hold time: the fleet is told.
     await recorder.wait("building_input_changed", point="d1_open", value=False)
+    await recorder.wait("door_closed", door="D1")
+
+
+async def test_a_door_stays_open_until_its_last_holder_releases_it(
+    hub: Bus, building: BuildingConfig, recorder: Recorder
+) -> None:
+    async with (
+        BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
+        BuildingInterface(hub.endpoint("building"), sim.bound_config()) as bi,
+    ):
+        await wait_until(lambda: all(p.health.polls > 0 for p in bi.pollers.values()))
+        r1, r2 = hub.endpoint("R1"), hub.endpoint("R2")
+        assert (await r1.request("open_door", {"door": "D1"}, timeout=10)).type == "door_opened"
+        assert (await r2.request("open_door", {"door": "D1"}, timeout=10)).type == "door_opened"
+        assert sorted(bi.doors["D1"].holders) == ["R1", "R2"]
+        r1.publish("release_door", {"door": "D1"})
+        polls = bi.pollers["M1"].health.polls
+        await wait_until(lambda: bi.pollers["M1"].health.polls >= polls + 4)
+        assert sim.doors["D1"].state == "open" and bi.doors["D1"].is_open
+        r2.publish("release_door", {"door": "D1"})
+        await recorder.wait("door_closed", door="D1")
+        await wait_until(lambda: sim.doors["D1"].state == "closed")
+        # Closed means closed at once: no stale "open" sample brings it back.
+        await wait_until(lambda: bi.pollers["M1"].health.polls >= polls + 8)
+        assert bi.doors["D1"].is_open is False
+        assert [m.type for m in recorder.messages if m.type.startswith("door_")][-1] == (
+            "door_closed"
+        )
+
+
+async def test_a_door_without_sensor_counts_open_after_its_open_time(
+    hub: Bus, recorder: Recorder
+) -> None:
+    data = site_dict()
+    del data["building"]["doors"][0]["is_open"]
+    data["building"]["doors"][0]["open_time_s"] = 0.3
+    building = load_building(data)
+    async with (
+        BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
+        BuildingInterface(hub.endpoint("building"), sim.bound_config()) as bi,
+    ):
+        await wait_until(lambda: all(p.health.polls > 0 for p in bi.pollers.values()))
+        robot = hub.endpoint("R1")
+        loop = asyncio.get_running_loop()
+        asked = loop.time()
+        assert (await robot.request("open_door", {"door": "D1"}, timeout=10)).type == "door_opened"
+        assert loop.time() - asked >= 0.3
+        assert bi.doors["D1"].is_open
+        robot.publish("release_door", {"door": "D1"})
+        await recorder.wait("door_closed", door="D1")
+        await wait_until(lambda: sim.read_point("M1", "d1_cmd") == 0)
+
+
+async def test_a_jammed_door_fails_with_a_reason_and_is_not_left_energised(
+    hub: Bus, building: BuildingConfig, recorder: Recorder
+) -> None:
+    async with (
+        BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
+        BuildingInterface(hub.endpoint("building"), sim.bound_config(), command_margin_s=0.5) as bi,
+    ):
+        await wait_until(lambda: all(p.health.polls > 0 for p in bi.pollers.values()))
+        sim.jam_door("D1")
+        reply = await hub.endpoint("R1").request("open_door", {"door": "D1"}, timeout=15)
+        assert reply.type == "command_failed"
+        assert reply.payload["command"] == "open_door"
+        assert "door D1 not open within" in reply.payload["reason"]
+        assert bi.doors["D1"].holders == {}
+        await wait_until(lambda: sim.read_point("M1", "d1_cmd") == 0)
 
 
 async def test_close_door_is_confirmed(

@@ -52,15 +52,16 @@ def test_references_are_checked_all_at_once() -> None:
     text = text.replace("points: [tapestries, globes, telescope]", "points: [tapestries, nothing]")
     text = text.replace("{a: gc2, b: gc3}", "{a: gc2, b: nowhere}")
     text = text.replace(
-        "point: lift_here}\n      - floor: F1", "point: led_entrance}\n      - floor: F1"
+        "call: {module: otb_ground, point: lift_call}",
+        "call: {module: otb_ground, point: lift_here}",
     )
     with pytest.raises(SiteInvalid) as info:
         load_site_text(text)
     messages = {(i.loc, i.message) for i in info.value.issues}
     assert ("tours[1].points[1]", "unknown point of interest 'nothing'") in messages
-    assert ("edges[17].b", "unknown node 'nowhere'") in messages
+    assert ("edges[16].b", "unknown node 'nowhere'") in messages
     assert any(
-        loc == "elevators[0].stops[0].in_position" and "expected an input" in msg
+        loc == "elevators[0].stops[0].call" and "is a discrete_input; it must be a coil" in msg
         for loc, msg in messages
     )
     assert len(info.value.issues) == 3
@@ -83,7 +84,7 @@ def test_shape_and_reference_errors_are_reported_in_one_pass() -> None:
     with pytest.raises(SiteInvalid) as info:
         load_site_text(text)
     found = {(i.loc, i.message) for i in info.value.issues}
-    assert ("edges[17].b", "unknown node 'nowhere'") in found
+    assert ("edges[16].b", "unknown node 'nowhere'") in found
     assert any(loc == "nodes[11].y" for loc, _ in found)
     # gb2 exists (only its y is broken): edges and points naming it are not reported
     assert not any("'gb2'" in msg for _, msg in found)
@@ -98,7 +99,7 @@ def test_site_check_command_lists_problems_with_lines(tmp_path: Path) -> None:
     broken.write_text(DEMO.read_text().replace("{a: gc2, b: gc3}", "{a: gc2, b: nowhere}"))
     bad = runner.invoke(main, ["site", "check", str(broken)])
     assert bad.exit_code == 1
-    assert f"{broken}:" in bad.output and "edges[17].b: unknown node 'nowhere'" in bad.output
+    assert f"{broken}:" in bad.output and "edges[16].b: unknown node 'nowhere'" in bad.output
 
 
 def test_alias_bombs_and_deep_nesting_are_refused_with_their_line() -> None:
@@ -115,3 +116,15 @@ def test_alias_bombs_and_deep_nesting_are_refused_with_their_line() -> None:
         load_site_text(deep)
     [issue] = refused.value.issues
     assert issue.message == "nested deeper than 32 levels" and issue.line == 2
+
+
+def test_an_edge_making_a_cabin_a_through_way_is_refused() -> None:
+    text = DEMO.read_text().replace(
+        "  - {a: hall, b: lift0}\n", "  - {a: hall, b: lift0}\n  - {a: charge_b, b: lift0}\n"
+    )
+    with pytest.raises(SiteInvalid) as info:
+        load_site_text(text)
+    [issue] = info.value.issues
+    assert issue.loc == "edges[4]" and issue.line is not None
+    assert "cabin node 'lift0' of elevator lift a through-way" in issue.message
+    assert "join 'charge_b' to 'hall' instead" in issue.message

@@ -341,3 +341,16 @@ async def test_concurrent_site_edits_both_land() -> None:
     await asyncio.gather(service.edit(add("a")), service.edit(add("b")))
     ids = {p.id for p in service.site.pois}
     assert {"a", "b"} <= ids and service.version == 3
+
+
+async def test_a_robot_reporting_no_floor_is_on_its_nodes_floor() -> None:
+    bus = Bus()
+    site = demo_site()
+    tasks = TaskManager(bus.endpoint("task_manager"), site)
+    tasks.start()
+    try:
+        r1 = RobotStub(bus, "R1", "gc1")
+        r1.state()  # an agent without the site on board: node known, floor not
+        assert tasks.robots["R1"].as_dict()["floor"] == "F1"
+    finally:
+        await tasks.stop()

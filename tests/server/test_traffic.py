@@ -240,3 +240,16 @@ async def test_three_robots_in_a_circle_all_get_through(bus: Bus) -> None:
     r3.endpoint.publish("request_area", {"robot": "R3", "area": "A"})
     await r3.wait_for("area_granted", 2)
     assert traffic.locks.wait_for_graph() == {}
+
+
+def test_the_planner_never_crosses_a_cabin_without_riding() -> None:
+    """Even for a site that skipped the check, a cabin node is entered only to ride."""
+    data = demo_site().model_dump(mode="json")
+    # lift0 as a shortcut between charge_b and hall would save 2 m.
+    data["edges"].append({"a": "charge_b", "b": "lift0"})
+    site = Site.model_validate(data)
+    path = SiteGraph(site).shortest_path("charge_b", "hall")
+    assert "lift0" not in path.nodes
+    assert path.nodes == ["charge_b", "charge_a", "entrance", "hall"]
+    up = SiteGraph(site).shortest_path("hall", "gc1")
+    assert up.nodes[:3] == ["hall", "lift0", "lift1"]

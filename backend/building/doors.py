@@ -1,0 +1,126 @@
+"""What the BuildingInterface knows of each automatic door: its state and who holds it open.
+
+Safety rules (docs/building.md, "Doors"):
+- a door is **open** for the fleet only when its ``is_open`` sensor says so in a sample read
+  after the interface last cleared the open coil (a stale "open" can never survive a close);
+  without a sensor, ``open_time_s`` after the interface set the coil;
+- it is **closed** as soon as the interface clears the coil, when the sensor falls, when a
+  sensorless door's coil reads back cleared, or when the sensor's module goes offline;
+- robots hold a door from ``open_door`` until ``release_door``; the coil is cleared when the
+  last holder lets go, or when a holder has held it ``max_hold_s`` (a lost robot).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from backend.site.building import Door
+
+__all__ = ["STALE_MARGIN_S", "DoorKeeper"]
+
+STALE_MARGIN_S = 0.02
+"""A sample slotted within this of a close write may have been read before it (timers fire a
+little early): it does not count."""
+
+
+@dataclass
+class DoorKeeper:
+    """One door's state as published (door_opened / door_closed) and its holders."""
+
+    door: Door
+    publish: Callable[[str, bool], None]
+    """Called with (door id, open) on every change of the published state."""
+    is_open: bool | None = None
+    closed_at: float = -math.inf
+    """time.monotonic() of the last coil clear (inf while a clear is being written)."""
+    set_at: float = -math.inf
+    """time.monotonic() of the last coil set (sensorless doors)."""
+    holders: dict[str, asyncio.TimerHandle] = field(default_factory=dict)
+    _waiters: list[asyncio.Future[None]] = field(default_factory=list)
+    _open_timer: asyncio.TimerHandle | None = None
+
+    def state(self, is_open: bool) -> None:
+        """Set the published state; tells everyone on a change, wakes open waiters."""
+        if is_open == self.is_open:
+            return
+        self.is_open = is_open
+        self.publish(self.door.id, is_open)
+        if is_open:
+            for future in self._waiters:
+                if not future.done():
+                    future.set_result(None)
+
+    def sensor(self, value: int, t: float) -> None:
+        """A (filtered) sample of the is_open sensor slotted at ``t``."""
+        if t > self.closed_at + STALE_MARGIN_S:
+            self.state(value == 1)
+
+    def coil(self, value: int, t: float) -> None:
+        """A sample of the open coil: a sensorless door closes when it reads back cleared."""
+        if self.door.is_open is None and value == 0 and t > self.set_at + STALE_MARGIN_S:
+            self.state(False)
+
+    def coil_set(self, now: float) -> None:
+        """The interface set the coil; a sensorless door counts as open ``open_time_s`` later."""
+        self.set_at = now
+        if self.door.is_open is None and not self.is_open and self._open_timer is None:
+            self._open_timer = asyncio.get_running_loop().call_later(
+                self.door.open_time_s, self._sensorless_open
+            )
+
+    def _sensorless_open(self) -> None:
+        self._open_timer = None
+        if self.holders and self.closed_at != math.inf:
+            self.state(True)
+
+    def closing(self) -> None:
+        """The interface is about to clear the coil: closed from now on."""
+        if self._open_timer is not None:
+            self._open_timer.cancel()
+            self._open_timer = None
+        self.closed_at = math.inf
+        self.state(False)
+
+    def cleared(self, now: float) -> None:
+        """The coil clear was written: samples read from now on count again."""
+        self.closed_at = now
+
+    def lost(self, now: float) -> None:
+        """The sensor's module stopped answering: the door counts as closed."""
+        self.closed_at = max(self.closed_at, now) if self.closed_at != math.inf else math.inf
+        self.state(False)
+
+    async def wait_open(self, timeout_s: float) -> None:
+        if self.is_open:
+            return
+        future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._waiters.append(future)
+        try:
+            await asyncio.wait_for(future, timeout_s)
+        finally:
+            self._waiters.remove(future)
+
+    def hold(self, holder: str, expire: Callable[[], None]) -> None:
+        """(Re)start ``holder``'s hold; ``expire`` runs if it is not released in time."""
+        old = self.holders.pop(holder, None)
+        if old is not None:
+            old.cancel()
+        self.holders[holder] = asyncio.get_running_loop().call_later(self.door.max_hold_s, expire)
+
+    def release(self, holder: str) -> bool:
+        """Drop ``holder``; True when nobody holds the door any more."""
+        timer = self.holders.pop(holder, None)
+        if timer is not None:
+            timer.cancel()
+        return not self.holders
+
+    def release_all(self) -> None:
+        for timer in self.holders.values():
+            timer.cancel()
+        self.holders.clear()
+        if self._open_timer is not None:
+            self._open_timer.cancel()
+            self._open_timer = None

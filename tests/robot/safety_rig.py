@@ -1,0 +1,249 @@
+"""A safety test venue and a fleet running on it: real server, real Modbus/TCP, real links.
+
+The site (``safety_site``): two floors, doors D0 (ground) and D1 (first), two elevators
+(lift_a west, lift_b east), two corridors back to back (corr_a, corr_b) between passing places.
+
+    home1..3 ─ hall ─ door0 ─ west ─ ca1 ─ ca2 ─ cb1 ─ cb2 ─ east          (F0)
+                │              │    └─ corr_a ─┘└─ corr_b ─┘    │
+               la0           w_dock                            lb0
+    (F1)       la1 ─ up_w ─────── door1 ────────────── up_e ─ lb1
+
+``fleet(...)`` starts the building simulator, the server (its own BuildingInterface polls the
+simulator), and one robot agent per robot (bare simulated base, real WebSocket link); every hub
+message feeds an InvariantChecker.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+import yaml
+
+from backend.building.config import load_building
+from backend.settings import Settings
+from backend.site.validate import validate_site
+from backend.testing import RunningServer, running_server
+from building_sim.simulator import BuildingSimulator
+from guidebot.invariants import InvariantChecker
+from guidebot.messages import Message
+from robot_agent.agent import AgentConfig, RobotAgent
+
+ROBOT_SCALE = 10.0
+BUILDING_SCALE = 10.0
+
+
+def _node(id_: str, floor: str, x: float, y: float, **extra: Any) -> dict[str, Any]:
+    return {"id": id_, "floor": floor, "x": x, "y": y, **extra}
+
+
+def safety_site() -> dict[str, Any]:
+    f0 = [
+        _node("home1", "F0", 0, 0),
+        _node("home2", "F0", 0, 3),
+        _node("home3", "F0", 0, -3),
+        _node("hall", "F0", 5, 0, passing_place=True),
+        _node("door0", "F0", 9, 0),
+        _node("west", "F0", 13, 0, passing_place=True),
+        _node("w_dock", "F0", 13, 4),
+        _node("ca1", "F0", 17, 0),
+        _node("ca2", "F0", 21, 0),
+        _node("cb1", "F0", 25, 0),
+        _node("cb2", "F0", 29, 0),
+        _node("east", "F0", 33, 0, passing_place=True),
+        _node("la0", "F0", 5, 5),
+        _node("lb0", "F0", 33, 5),
+    ]
+    f1 = [
+        _node("la1", "F1", 5, 5),
+        _node("up_w", "F1", 5, 0, passing_place=True),
+        _node("door1", "F1", 19, 0),
+        _node("up_e", "F1", 33, 0, passing_place=True),
+        _node("lb1", "F1", 33, 5),
+    ]
+    chain = ["hall", "door0", "west", "ca1", "ca2", "cb1", "cb2", "east"]
+    edges = [{"a": a, "b": b} for a, b in itertools.pairwise(chain)]
+    edges += [{"a": h, "b": "hall"} for h in ("home1", "home2", "home3")]
+    edges += [
+        {"a": "west", "b": "w_dock"},
+        {"a": "hall", "b": "la0"},
+        {"a": "east", "b": "lb0"},
+        {"a": "la1", "b": "up_w"},
+        {"a": "up_w", "b": "door1"},
+        {"a": "door1", "b": "up_e"},
+        {"a": "up_e", "b": "lb1"},
+    ]
+
+    def points(m: str) -> list[dict[str, Any]]:
+        return [
+            {"name": f"d{m}_open", "address": 0, "kind": "coil"},
+            {"name": "la_call", "address": 1, "kind": "coil"},
+            {"name": "lb_call", "address": 2, "kind": "coil"},
+            {"name": f"d{m}_is_open", "address": 0, "kind": "discrete_input"},
+            {"name": "la_here", "address": 1, "kind": "discrete_input"},
+            {"name": "lb_here", "address": 2, "kind": "discrete_input"},
+        ]
+
+    def lift(id_: str, p: str, node: str) -> dict[str, Any]:
+        return {
+            "id": id_,
+            "travel_time_s": 6,
+            "stops": [
+                {
+                    "floor": f"F{i}",
+                    "node": f"{node}{i}",
+                    "call": {"module": f"M{i}", "point": f"{p}_call"},
+                    "in_position": {"module": f"M{i}", "point": f"{p}_here"},
+                }
+                for i in (0, 1)
+            ],
+        }
+
+    return {
+        "name": "Safety venue",
+        "floors": [{"id": "F0"}, {"id": "F1", "level": 1}],
+        "nodes": f0 + f1,
+        "edges": edges,
+        "charging_stations": [{"id": f"c{i}", "node": f"home{i}"} for i in (1, 2, 3)],
+        # Robots sent anywhere else would be sent back to charge by the idle policy.
+        "wait_points": [
+            {"id": f"wp_{n}", "node": n} for n in ("hall", "west", "w_dock", "east", "up_w", "up_e")
+        ],
+        "areas": [
+            {"id": "corr_a", "nodes": ["ca1", "ca2"], "passing_place": "west"},
+            {"id": "corr_b", "nodes": ["cb1", "cb2"], "passing_place": "east"},
+            {"id": "lift_a", "nodes": ["la0", "la1"], "passing_place": "hall"},
+            {"id": "lift_b", "nodes": ["lb0", "lb1"], "passing_place": "east"},
+        ],
+        "doors": [
+            {
+                "id": f"D{i}",
+                "node": f"door{i}",
+                "open": {"module": f"M{i}", "point": f"d{i}_open"},
+                "is_open": {"module": f"M{i}", "point": f"d{i}_is_open"},
+                "open_time_s": 2,
+            }
+            for i in (0, 1)
+        ],
+        "elevators": [lift("lift_a", "la", "la"), lift("lift_b", "lb", "lb")],
+        "modules": [{"id": f"M{i}", "points": points(str(i)), "port": 0} for i in (0, 1)],
+        "robots": [
+            {"name": f"R{i}", "token": f"robot-R{i}-safety-token", "start_node": f"home{i}"}
+            for i in (1, 2, 3)
+        ],
+    }
+
+
+@dataclass
+class Fleet:
+    server: RunningServer
+    building: BuildingSimulator
+    agents: dict[str, RobotAgent]
+    checker: InvariantChecker
+    seen: list[Message] = field(default_factory=list)
+    states: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """The last robot_state of each robot."""
+    changed: asyncio.Event = field(default_factory=asyncio.Event)
+
+    def of(self, type_: str, **fields: Any) -> list[Message]:
+        return [
+            m
+            for m in self.seen
+            if m.type == type_ and all(m.payload.get(k) == v for k, v in fields.items())
+        ]
+
+    async def wait_for(self, predicate: Callable[[], Any], timeout: float = 30.0) -> None:
+        async with asyncio.timeout(timeout):
+            while not predicate():
+                self.changed.clear()
+                await asyncio.wait({asyncio.ensure_future(self.changed.wait())}, timeout=0.25)
+
+    async def go(self, robot: str, node: str, timeout: float = 40.0) -> None:
+        """A go_to task for ``robot`` (POST /api/tasks), waited until the robot ends it."""
+        async with httpx.AsyncClient(base_url=self.server.url) as http:
+            r = await http.post(
+                "/api/tasks",
+                json={"kind": "go_to", "params": {"node": node}, "robot": robot},
+                headers={"Authorization": f"Bearer {self.server.admin_token}"},
+            )
+        assert r.status_code == 201, r.text
+        task_id = r.json()["id"]
+        await self.wait_for(lambda: self.of("task_ended", task_id=task_id), timeout)
+        ended = self.of("task_ended", task_id=task_id)[0].payload
+        assert ended["outcome"] == "done", f"{robot} to {node}: {ended}"
+
+
+@contextlib.asynccontextmanager
+async def fleet(
+    tmp_path: Path,
+    robots: list[str],
+    *,
+    start: dict[str, str] | None = None,
+    site: dict[str, Any] | None = None,
+) -> AsyncIterator[Fleet]:
+    data = site if site is not None else safety_site()
+    for robot in data["robots"]:
+        if start and robot["name"] in start:
+            robot["start_node"] = start[robot["name"]]
+    data["robots"] = [r for r in data["robots"] if r["name"] in robots]
+    building = BuildingSimulator(load_building(data), time_scale=BUILDING_SCALE, port_zero=True)
+    async with building:
+        for module in data["modules"]:
+            module["port"] = building.ports[module["id"]]
+        site_file = tmp_path / "site.yaml"
+        site_file.write_text(yaml.safe_dump(data))
+        checker = InvariantChecker.from_site(validate_site(data))
+        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp_path}/guidebot.db", site=site_file)
+        async with running_server(settings) as server, contextlib.AsyncExitStack() as stack:
+            seen: list[Message] = []
+            f = Fleet(server, building, {}, checker, seen)
+
+            def record(message: Message) -> None:
+                if message.type == "robot_state":
+                    f.states[str(message.payload.get("robot"))] = message.payload
+                    f.changed.set()
+                    return
+                if message.type == "building_module_health":
+                    return
+                seen.append(message)
+                if message.type == "area_granted":
+                    # Published inside the handler of its cause (a release_area): this monitor
+                    # sees it before the cause, so it is checked once the cause is delivered.
+                    asyncio.get_running_loop().call_soon(checker.feed_message, message)
+                else:
+                    checker.feed_message(message)
+                f.changed.set()
+
+            server.app.state.hub.endpoint("test-monitor").subscribe("*", record, tap=True)
+            await f.wait_for(lambda: server.app.state.building is not None, timeout=10)
+            for r in data["robots"]:
+                agent = RobotAgent(
+                    AgentConfig(
+                        name=r["name"],
+                        server=server.url,
+                        token=r["token"],
+                        can=None,
+                        time_scale=ROBOT_SCALE,
+                        start_node=r["start_node"],
+                        speech_engine=None,
+                        state_period_s=0.2,
+                        site=site_file,
+                        idle_net=None,
+                    )
+                )
+                await stack.enter_async_context(agent)
+                f.agents[r["name"]] = agent
+            hub = server.app.state.hub
+            await f.wait_for(lambda: set(f.agents) <= set(hub.clients))
+            # The building's doors and cabins are known (first samples) before anyone moves.
+            await f.wait_for(
+                lambda: f.of("door_closed", door="D0") and f.of("door_closed", door="D1")
+            )
+            await f.wait_for(lambda: len(f.of("elevator_in_position")) >= 4)
+            yield f

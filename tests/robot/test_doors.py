@@ -1,0 +1,84 @@
+"""Doors over real Modbus/TCP: every pass opens the door, the door is held while a robot passes,
+and a door that does not open stops the robot in front of it with an alert.
+
+Real server (Task and Traffic Managers, BuildingInterface polling the building simulator),
+robot agents on real WebSocket links; every hub message is checked by guidebot.invariants.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.robot.safety_rig import fleet
+
+pytestmark = pytest.mark.timeout(90)
+
+
+async def test_one_robot_through_one_door_many_times_opens_it_each_pass(tmp_path: Path) -> None:
+    async with fleet(tmp_path, ["R1"]) as f:
+        door = f.building.doors["D0"]
+        passes = 4
+        for n in range(passes):
+            await f.go("R1", "west" if n % 2 == 0 else "hall")
+            # Once past it, the robot lets go and the door closes.
+            await f.wait_for(lambda: door.state == "closed")
+        assert len(f.of("open_door", door="D0")) == passes
+        assert len(f.of("release_door", door="D0")) == passes
+        assert door.openings == passes
+        assert f.checker.counts["door"] == passes
+        assert not f.checker.violations, f.checker.violations
+
+
+async def test_two_robots_through_one_door_in_opposite_directions(tmp_path: Path) -> None:
+    async with fleet(tmp_path, ["R1", "R2"], start={"R2": "w_dock"}) as f:
+        await asyncio.gather(f.go("R1", "w_dock"), f.go("R2", "home2"))
+        await f.wait_for(lambda: f.building.doors["D0"].state == "closed")
+        for robot in ("R1", "R2"):
+            assert [m.source for m in f.of("open_door", door="D0")].count(robot) == 1
+            assert [m.source for m in f.of("release_door", door="D0")].count(robot) == 1
+        assert f.checker.counts["door"] == 2
+        assert not f.checker.violations, f.checker.violations
+
+
+async def test_a_door_that_fails_to_open_stops_the_robot_before_it(tmp_path: Path) -> None:
+    async with fleet(tmp_path, ["R1"]) as f:
+        f.building.jam_door("D0")
+        agent = f.agents["R1"]
+        assert agent.navigator is not None
+        nav = agent.navigator
+        going = asyncio.create_task(f.go("R1", "west", timeout=60))
+        await f.wait_for(lambda: f.of("robot_fault", kind="door_blocked"), timeout=30)
+        fault = f.of("robot_fault", kind="door_blocked")[0].payload
+        assert fault["robot"] == "R1" and "door D0 did not open" in fault["detail"]
+        assert f.of("command_failed", command="open_door")
+        # Stopped in front of the door, reported as such, and it stays there.
+        await f.wait_for(lambda: nav.speed == 0.0)
+        assert nav.node == "hall" and nav.state.value == "door_blocked"
+        await f.wait_for(lambda: f.states["R1"].get("navigation") == "door_blocked")
+        assert not going.done()
+        assert f.building.doors["D0"].state == "closed"
+        # The door is repaired: the robot's next request opens it and it goes through.
+        f.building.jam_door("D0", False)
+        await going
+        assert nav.node == "west"
+        assert len(f.of("open_door", door="D0")) >= 2
+        assert f.checker.counts["door"] == 1
+        assert not f.checker.violations, f.checker.violations
+
+
+async def test_robots_report_their_floor_from_the_start(tmp_path: Path) -> None:
+    """At its charging station, before any move, GET /api/robots knows the robot's floor."""
+    async with fleet(tmp_path, ["R1"]) as f:
+        await f.wait_for(lambda: "R1" in f.states)
+        assert f.states["R1"]["node"] == "home1" and f.states["R1"]["floor"] == "F0"
+        async with httpx.AsyncClient(base_url=f.server.url) as http:
+            r = await http.get(
+                "/api/robots", headers={"Authorization": f"Bearer {f.server.admin_token}"}
+            )
+        [robot] = r.json()
+        assert robot["node"] == "home1" and robot["floor"] == "F0"
+        assert not f.of("node_reached")

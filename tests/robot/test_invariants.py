@@ -1,0 +1,107 @@
+"""The fleet's safety invariants (guidebot.invariants) over a whole run of several robots
+through doors, two elevators and back-to-back corridors: checked live on the hub and again
+on the server's event log (GET /api/events), as the soak benchmark does."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from guidebot.invariants import InvariantChecker
+from guidebot.messages import Message
+from tests.robot.safety_rig import fleet, safety_site
+
+pytestmark = pytest.mark.timeout(90)
+
+
+async def _events(url: str, token: str) -> list[dict[str, Any]]:
+    out: list[dict[str, Any]] = []
+    after = 0
+    async with httpx.AsyncClient(base_url=url) as http:
+        while True:
+            r = await http.get(
+                "/api/events",
+                params={"after_id": after, "limit": 500},
+                headers={"Authorization": f"Bearer {token}"},
+            )
+            assert r.status_code == 200, r.text
+            page = r.json()
+            out += page["events"]
+            if not page["events"]:
+                return out
+            after = page["next_after_id"]
+
+
+async def test_several_robots_never_break_the_safety_invariants(tmp_path: Path) -> None:
+    routes = {
+        "R1": ["up_w", "up_e", "home1"],  # lift_a up, door D1, back down
+        "R2": ["east", "home2"],  # door D0, corr_a + corr_b, and back
+        "R3": ["up_e", "w_dock"],  # corr_a + corr_b, lift_b, and back
+    }
+    async with fleet(tmp_path, list(routes), start={"R3": "w_dock"}) as f:
+
+        async def run(robot: str) -> None:
+            for node in routes[robot]:
+                await f.go(robot, node, timeout=60)
+
+        await asyncio.gather(*(run(robot) for robot in routes))
+        await f.wait_for(lambda: all(d.state == "closed" for d in f.building.doors.values()))
+        live = f.checker
+        assert not live.violations, [str(v) for v in live.violations]
+        reached = {m.payload["node"] for m in f.of("node_reached")}
+        assert {"door0", "door1", "la0", "la1", "lb0", "lb1", "ca2", "cb1"} <= reached
+        assert live.counts["door"] >= 4 and live.counts["cabin"] >= 6, live.counts
+        assert live.counts["area"] >= 10, live.counts
+        # The same run, replayed from the server's event log.
+        replay = InvariantChecker.from_site(f.server.app.state.sites.site)
+        replay.feed_events(await _events(f.server.url, f.server.admin_token))
+        assert not replay.violations, [str(v) for v in replay.violations]
+        assert replay.counts["door"] == live.counts["door"]
+        assert replay.counts["cabin"] == live.counts["cabin"]
+
+
+def _msg(type_: str, **payload: Any) -> Message:
+    return Message(type=type_, source="test", payload=payload)
+
+
+def test_the_checker_catches_each_kind_of_violation() -> None:
+    from backend.site.validate import validate_site
+
+    checker = InvariantChecker.from_site(validate_site(safety_site()))
+    feed = checker.feed_message
+    feed(_msg("door_closed", door="D0"))
+    feed(_msg("node_reached", robot="R1", node="door0", floor="F0"))
+    # A reply to one requester is not the door's state.
+    feed(Message(type="door_opened", source="b", destination="R2", payload={"door": "D0"}))
+    feed(_msg("node_reached", robot="R2", node="door0", floor="F0"))
+    feed(_msg("elevator_in_position", elevator="lift_a", floor="F1", door_open=True))
+    feed(_msg("node_reached", robot="R3", node="la0", floor="F0"))
+    feed(_msg("node_reached", robot="R1", node="ca1", floor="F0"))
+    feed(_msg("node_reached", robot="R2", node="ca2", floor="F0"))
+    feed(_msg("area_granted", robot="R1", area="corr_b"))
+    feed(_msg("area_granted", robot="R2", area="corr_b"))
+    assert [(v.invariant, v.robot) for v in checker.violations] == [
+        ("door", "R1"),
+        ("door", "R2"),
+        ("cabin", "R3"),
+        ("area", "R2"),
+        ("area", "R2"),
+    ]
+    assert "while lift_a was open at F1" in str(checker.violations[2])
+    # And the legal sequence is clean.
+    clean = InvariantChecker.from_site(validate_site(safety_site()))
+    for message in (
+        _msg("door_opened", door="D0"),
+        _msg("node_reached", robot="R1", node="door0"),
+        _msg("elevator_in_position", elevator="lift_a", floor="F0", door_open=True),
+        _msg("node_reached", robot="R1", node="la0"),
+        _msg("area_granted", robot="R1", area="corr_a"),
+        _msg("release_area", robot="R1", area="corr_a"),
+        _msg("area_granted", robot="R2", area="corr_a"),
+    ):
+        clean.feed_message(message)
+    assert clean.violations == [] and clean.counts["door"] == 1 and clean.counts["cabin"] == 1
