@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 import struct
+from collections.abc import Collection
 
 from robot_agent.robocan.protocol import (
     BLOCK_RETRIES,
@@ -92,8 +93,16 @@ class BlockSender:
 class BlockReceiver:
     """Receives one block announced by a start frame; detects lost and repeated frames."""
 
-    def __init__(self, start: bytes, *, block_size: int = BLOCK_SIZE) -> None:
-        if len(start) < 5 or start[0] != Op.BLOCK_START:
+    def __init__(
+        self,
+        start: bytes,
+        *,
+        block_size: int = BLOCK_SIZE,
+        types: Collection[int] | None = None,
+    ) -> None:
+        """``types``: the block types this receiver takes (None = any); another is refused
+        with BLOCK_END UNKNOWN_TYPE."""
+        if len(start) < 4 or start[0] != Op.BLOCK_START:
             raise ProtocolError("not a block start frame")
         _, self.block_type, self.length = struct.unpack("<BBH", start[:4])
         self.block_size = block_size
@@ -105,7 +114,9 @@ class BlockReceiver:
         self.error: EndStatus | None = None
         self.window_end = 0
         self.resync = False  # a resend was asked for: drop frames until the missing one comes
-        if self.length > MAX_BLOCK:
+        if types is not None and self.block_type not in types:
+            self._fail(EndStatus.UNKNOWN_TYPE)
+        elif self.length > MAX_BLOCK:
             self._fail(EndStatus.TOO_LONG)
         elif len(start) - 4 != min(FIRST_BYTES, self.length):
             raise ProtocolError("block start frame length does not match the block length")

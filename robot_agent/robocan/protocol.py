@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 __all__ = [
     "BROADCAST_ID",
+    "DATA_KINDS",
+    "MASTER_OPS",
     "MAX_BLOCK",
     "MAX_MODULE_ID",
     "Description",
@@ -95,11 +97,16 @@ FRAME_LENGTH: dict[int, tuple[int, int]] = {
     Op.SET_OUTPUT: (4, 4),
     Op.SET_CHARGING: (2, 2),
     Op.STOP: (1, 1),
-    Op.BLOCK_START: (5, 8),
+    Op.BLOCK_START: (4, 8),
     Op.BLOCK_DATA: (3, 8),
     Op.BLOCK_FLOW: (4, 4),
     Op.BLOCK_END: (3, 3),
 }
+
+
+MASTER_OPS = frozenset(range(0x80, 0xF0))
+"""Opcodes only a master sends (0x80-0xEF). On a slave's even ID they are bad frames: counted,
+dropped, and never the first frame of a module entry."""
 
 
 class SlaveState(enum.IntEnum):
@@ -157,6 +164,19 @@ class ElementKind(enum.IntEnum):
     TOUCH = 7  # component: capacitive touch inputs
     LED = 8  # component: outputs (eye LEDs)
     BATTERY = 9  # component: battery monitor and charger contact
+
+
+DATA_KINDS: dict[int, frozenset[int]] = {
+    Op.ENCODER: frozenset({ElementKind.MOTOR}),
+    Op.BUMPERS: frozenset({ElementKind.BUMPER}),
+    Op.SONAR: frozenset({ElementKind.SONAR}),
+    Op.SERVO: frozenset({ElementKind.SERVO}),
+    Op.INPUTS: frozenset({ElementKind.TOUCH}),
+    Op.BATTERY: frozenset({ElementKind.BATTERY}),
+    Op.FAULT: frozenset(ElementKind),
+}
+"""Data frames and the element kinds they may name. Byte 1 is the element number, except in
+BATTERY, which belongs to the module's first battery element."""
 
 
 class Param(enum.IntEnum):
@@ -339,6 +359,28 @@ class Description:
     name: str
     firmware: tuple[int, int] = (1, 0)
     elements: tuple[Element, ...] = field(default_factory=tuple)
+
+    def numbering(self, kind: int) -> dict[int, tuple[int, int]]:
+        """Element number -> (first, count) of its instances when the module's instances of
+        ``kind`` are numbered across its elements of that kind, in element order (a second
+        touch element's first input follows the first element's last)."""
+        out, total = {}, 0
+        for number, element in enumerate(self.elements):
+            if element.kind == kind:
+                out[number] = (total, element.count)
+                total += element.count
+        return out
+
+    def data_element(self, op: int, data: bytes) -> int | None:
+        """The element a data frame belongs to, or None when it names no element of a kind
+        that sends it (a bad frame)."""
+        kinds = DATA_KINDS[op]
+        if op == Op.BATTERY:
+            return next((i for i, e in enumerate(self.elements) if e.kind in kinds), None)
+        number = data[1]
+        if number < len(self.elements) and self.elements[number].kind in kinds:
+            return number
+        return None
 
     def encode(self) -> bytes:
         name = self.name.encode("ascii")

@@ -316,7 +316,7 @@ class SimModule:
                         continue
                     self.send(frame)
         elif op == p.Op.BLOCK_START:
-            self._receiver = BlockReceiver(data)
+            self._receiver = BlockReceiver(data, types=(p.BlockType.CONFIG,))
             self.send(self._receiver.first_reply())
             self._finish_block()
         elif op == p.Op.BLOCK_DATA:

@@ -5,13 +5,15 @@ from __future__ import annotations
 import asyncio
 import itertools
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 
 import pytest
 
 from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message
 from robot_agent.robocan.stack import RoboCanStack
+
+from .rawslave import Tap
 
 _channels = itertools.count()
 
@@ -83,3 +85,11 @@ async def stack(onboard: Bus, channel: str, watch: Watch) -> AsyncIterator[RoboC
     async with RoboCanStack(onboard.endpoint("robocan"), [channel], time_scale=10.0) as s:
         await s.wait_online()
         yield s
+
+
+@pytest.fixture
+def tap(channel: str) -> Iterator[Tap]:
+    """Every frame on the test's channel (the ``stack`` fixture's bus)."""
+    t = Tap(channel)
+    yield t
+    t.close()
