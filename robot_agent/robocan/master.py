@@ -39,6 +39,7 @@ SUPERVISE_MAX_S = 1.0  # longest sleep of the time-out check (it wakes at the ne
 DEADLINE_EPS_S = 0.001  # wake this much after a deadline, so that it has surely passed
 STALL_S = 0.05  # a supervisor tick this late means the process itself was not running
 SLAVE_BLOCK_TYPES = frozenset({p.BlockType.DESCRIPTION})  # blocks a master takes from a slave
+REFUSALS = frozenset({p.EndStatus.REFUSED, p.EndStatus.UNKNOWN_TYPE, p.EndStatus.TOO_LONG})
 
 
 class ModuleState(enum.Enum):
@@ -306,6 +307,11 @@ class Master:
                         break
                 if sender.state is BlockState.DONE:
                     return
+                if sender.end_status in REFUSALS:  # sending it again cannot help
+                    raise CommandFailed(
+                        f"module 0x{module_id:02X} refused block type {block_type}: "
+                        f"{sender.end_status.name}"
+                    )
                 sender = BlockSender(block_type, data)
                 self._senders[module_id] = (sender, done)
             raise CommandFailed(f"block transfer to 0x{module_id:02X} failed")

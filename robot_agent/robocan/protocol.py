@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 __all__ = [
     "BROADCAST_ID",
+    "BROADCAST_OPS",
     "DATA_KINDS",
     "MASTER_OPS",
     "MAX_BLOCK",
@@ -109,6 +110,9 @@ MASTER_OPS = frozenset(range(0x80, 0xF0))
 dropped, and never the first frame of a module entry."""
 
 
+BROADCAST_OPS = frozenset({Op.MASTER_START, Op.STOP})  # the only opcodes on ID 0x001
+
+
 class SlaveState(enum.IntEnum):
     """Announced in the low nibble of every watchdog frame."""
 
@@ -137,6 +141,7 @@ class EndStatus(enum.IntEnum):
     TOO_LONG = 3
     BUSY = 4  # a block is already in transfer
     UNKNOWN_TYPE = 5
+    REFUSED = 6  # arrived whole, but its content is not acceptable (a bad CONFIG)
 
 
 class BlockType(enum.IntEnum):
@@ -193,6 +198,42 @@ class Param(enum.IntEnum):
 
 
 MODULE = 0xFF  # element number meaning "the whole module"
+
+PARAM_RANGES: dict[int, tuple[int, int]] = {
+    Param.WATCHDOG_MS: (10, 10_000),
+    Param.PUBLISH_MS: (10, 60_000),
+    Param.COMMAND_TIMEOUT_MS: (50, 10_000),  # the motor safety cannot be switched off
+    Param.TICKS_PER_M: (1, 10_000_000),
+    Param.KP: (0, 1_000_000),  # gains x 1000: 0 .. 1000
+    Param.KI: (0, 1_000_000),
+    Param.KD: (0, 1_000_000),
+    Param.MAX_ACCEL: (1, 20_000),  # mm/s^2
+}
+"""Values a slave accepts (inclusive); outside them it answers BAD_VALUE."""
+
+ELEMENT_PARAMS: dict[int, frozenset[int]] = {
+    ElementKind.MOTOR: frozenset({Param.PUBLISH_MS, Param.TICKS_PER_M}),
+    ElementKind.PID_VELOCITY: frozenset(
+        {Param.COMMAND_TIMEOUT_MS, Param.KP, Param.KI, Param.KD, Param.MAX_ACCEL}
+    ),
+    ElementKind.SONAR: frozenset({Param.PUBLISH_MS}),
+    ElementKind.BATTERY: frozenset({Param.PUBLISH_MS}),
+}
+"""Parameters each element kind has; any other is answered BAD_PARAM. Module-wide (element
+0xFF): WATCHDOG_MS only."""
+
+DEFAULT_PUBLISH_MS: dict[int, int] = {
+    ElementKind.MOTOR: 100,
+    ElementKind.SONAR: 500,
+    ElementKind.BATTERY: 1000,
+}
+"""Publishing period of the periodic data elements until the master sets PUBLISH_MS."""
+
+PARAM_DEFAULTS: dict[int, int] = {
+    Param.COMMAND_TIMEOUT_MS: 1000,
+    Param.TICKS_PER_M: 20000,
+    Param.MAX_ACCEL: 2000,
+}
 
 
 class Role(enum.IntEnum):
@@ -283,18 +324,30 @@ def parse_mask(data: bytes) -> tuple[int, int]:
     return element, mask
 
 
-SONAR_UNIT_M = 0.02  # one range byte = 2 cm, 255 = nothing in range (>= 5.1 m)
+SONAR_UNIT_M = 0.02  # one range byte = 2 cm: 0 .. 254 = 0 .. 5.08 m
+SONAR_NOTHING = 255  # no echo: nothing in range (None on board)
 
 
-def sonar(element: int, first: int, ranges_m: list[float]) -> bytes:
+def sonar(element: int, first: int, ranges_m: list[float | None]) -> bytes:
+    """``None``, or a range beyond 5.08 m, is sent as 255 = nothing in range."""
     if not 1 <= len(ranges_m) <= 5:
         raise ProtocolError("a sonar frame carries 1..5 ranges")
-    raw = [max(0, min(255, round(r / SONAR_UNIT_M))) for r in ranges_m]
+    raw = [
+        SONAR_NOTHING
+        if r is None or round(r / SONAR_UNIT_M) >= SONAR_NOTHING
+        else max(0, round(r / SONAR_UNIT_M))
+        for r in ranges_m
+    ]
     return bytes([Op.SONAR, element, first, *raw])
 
 
-def parse_sonar(data: bytes) -> tuple[int, int, list[float]]:
-    return data[1], data[2], [b * SONAR_UNIT_M for b in data[3:]]
+def parse_sonar(data: bytes) -> tuple[int, int, list[float | None]]:
+    """Ranges in metres; 255 = nothing in range = None (not 5.1 m)."""
+    return (
+        data[1],
+        data[2],
+        [None if b == SONAR_NOTHING else b * SONAR_UNIT_M for b in data[3:]],
+    )
 
 
 def servo(element: int, index: int, position_deg: float, in_position: bool) -> bytes:

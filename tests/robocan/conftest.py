@@ -6,16 +6,19 @@ import asyncio
 import itertools
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
+from typing import TypeVar
 
 import pytest
 
 from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message
+from robot_agent.robocan.sim import SimModule
 from robot_agent.robocan.stack import RoboCanStack
 
 from .rawslave import Tap
 
 _channels = itertools.count()
+M = TypeVar("M", bound=SimModule)
 
 
 class Watch:
@@ -54,6 +57,14 @@ class Watch:
 
     def status(self, module_id: int, state: str) -> Callable[[Message], bool]:
         return lambda m: m.payload["module_id"] == module_id and m.payload["state"] == state
+
+
+def sim_module(stack: RoboCanStack, module_id: int, cls: type[M]) -> M:
+    """The simulated module behind an ID, as its class."""
+    assert stack.simulator is not None
+    module = stack.simulator.modules[module_id]
+    assert isinstance(module, cls)
+    return module
 
 
 async def wait_until(condition: Callable[[], bool], timeout: float = 10.0) -> None:
