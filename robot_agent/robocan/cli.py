@@ -7,6 +7,7 @@ import asyncio
 import json
 import logging
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -108,7 +109,8 @@ def run(
     move: float,
     record: Path | None,
 ) -> None:
-    """Run the master (and the simulated BellBot) for a while; print the module table."""
+    """Run the master (and the simulated BellBot) for a while; print its counters and module
+    table (kind, firmware, state, counters), then the same as one JSON line."""
     import can
 
     from guidebot.bus import Bus
@@ -131,12 +133,31 @@ def run(
                 operator.publish("set_velocity", {"v": move, "w": 0.0})
             await asyncio.sleep(seconds)
             operator.publish("set_velocity", {"v": 0.0, "w": 0.0})
-            click.echo(json.dumps(stack.module_table(), indent=1))
+            status = stack.status()
+            for line in status_lines(status):
+                click.echo(line)
+            click.echo(json.dumps(status))
 
     try:
         asyncio.run(main())
     except (BusSpecError, ValueError, OSError, can.CanError) as exc:
         raise click.ClickException(str(exc)) from None
+
+
+def status_lines(status: dict[str, Any]) -> list[str]:
+    """The master's public face as text: per bus its counters, then one line per module."""
+    lines = []
+    for bus in status["buses"]:
+        counters = ", ".join(f"{k} {v}" for k, v in bus["counters"].items())
+        lines.append(f"bus {bus['bus']}: {counters}")
+        for m in bus["modules"]:
+            lines.append(
+                f"  0x{m['module_id']:02X} {m['name']:<22} {m['kind'] or '?':<16} "
+                f"fw {m['firmware'] or '?':<5} {m['state']:<11} rx {m['frames_rx']} "
+                f"tx {m['frames_tx']} errors {m['errors']} faults {m['faults']} "
+                f"lost {m['lost']} requeried {m['requeried']}"
+            )
+    return lines
 
 
 @robocan.command()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import dataclasses
 import enum
 import logging
 import threading
@@ -27,7 +28,15 @@ from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
 from robot_agent.robocan.busopen import BusReader
 from robot_agent.robocan.drivers import Driver, DriverConfig, DriverRegistry, UnknownDriver
 
-__all__ = ["CommandFailed", "IllegalTransition", "Master", "Module", "ModuleState"]
+__all__ = [
+    "CommandFailed",
+    "Counters",
+    "IllegalTransition",
+    "Master",
+    "Module",
+    "ModuleState",
+    "module_kind_name",
+]
 
 log = logging.getLogger(__name__)
 
@@ -91,8 +100,10 @@ class Module:
     slave_state: p.SlaveState | None = None
     frames_rx: int = 0
     frames_tx: int = 0
-    errors: int = 0
-    faults: int = 0
+    errors: int = 0  # bad frames from it, failed bring-ups
+    faults: int = 0  # FAULT frames
+    lost: int = 0  # times it was lost (time-out or reset)
+    requeried: int = 0  # times it was queried again after its first bring-up
     drivers: list[Driver] = field(default_factory=list)
     element_drivers: dict[int, Driver] = field(default_factory=dict)  # element number -> driver
     watchdog_s: float = p.WATCHDOG_PERIOD_S
@@ -114,18 +125,30 @@ class Module:
         return self.watchdog_s * p.LOST_TIMEOUT_FACTOR
 
     def to_dict(self) -> dict[str, Any]:
+        """The public row of the module table (docs/robocan.md, section 8)."""
+        d = self.description
         return {
             "module_id": self.module_id,
             "name": self.name,
+            "kind": module_kind_name(d.kind) if d else None,
+            "firmware": f"{d.firmware[0]}.{d.firmware[1]}" if d else None,
             "state": self.state.value,
             "critical": self.critical,
-            "elements": [e.kind_name for e in self.description.elements]
-            if self.description
-            else [],
+            "elements": [e.kind_name for e in d.elements] if d else [],
             "frames_rx": self.frames_rx,
             "frames_tx": self.frames_tx,
             "errors": self.errors,
+            "faults": self.faults,
+            "lost": self.lost,
+            "requeried": self.requeried,
         }
+
+
+def module_kind_name(kind: int) -> str:
+    try:
+        return p.ModuleKind(kind).name.lower()
+    except ValueError:
+        return f"kind_{kind}"
 
 
 @dataclass
@@ -143,6 +166,8 @@ class Counters:
     record_errors: int = 0
     stalls: int = 0
     not_online: int = 0  # data frames from a module that is not online (dropped)
+    modules_lost: int = 0
+    modules_requeried: int = 0
 
 
 def _set_done(future: asyncio.Future[None]) -> None:
@@ -162,8 +187,10 @@ class Master:
         registry: DriverRegistry | None = None,
         recorder: can.Listener | None = None,
         announce: bool = True,
+        name: str | None = None,
     ) -> None:
         self.bus = bus
+        self.name = name or str(bus.channel_info)
         self.endpoint = endpoint
         self.config = config or DriverConfig()
         self.registry = registry or DriverRegistry()
@@ -405,8 +432,7 @@ class Master:
         if module.state is ModuleState.LOST or (
             module.state is ModuleState.FAILED and now >= module.retry_at
         ):
-            self._transition(module, ModuleState.QUERYING)
-            self._start_bring_up(module)
+            self._requery(module)
             self._reschedule()
         if op == p.Op.WATCHDOG:
             self._on_watchdog(
@@ -493,8 +519,7 @@ class Master:
         ):
             # It rebooted faster than its time-out: treat as lost and configure it again.
             self._lose(module, "module reset")
-            self._transition(module, ModuleState.QUERYING)
-            self._start_bring_up(module)
+            self._requery(module)
 
     def _on_block_start(self, module: Module, data: bytes) -> None:
         try:
@@ -542,6 +567,13 @@ class Master:
         if target not in TRANSITIONS[module.state]:
             raise IllegalTransition(module.module_id, module.state, target)
         module.state = target
+
+    def _requery(self, module: Module) -> None:
+        """Back to QUERYING (a lost, reset or failed module) and a new bring-up."""
+        self._transition(module, ModuleState.QUERYING)
+        module.requeried += 1
+        self.counters.modules_requeried += 1
+        self._start_bring_up(module)
 
     def _start_bring_up(self, module: Module) -> None:
         old = self._bring_up.get(module.module_id)
@@ -631,6 +663,8 @@ class Master:
             task.cancel()
         was_online = module.state is ModuleState.ONLINE
         self._transition(module, ModuleState.LOST)
+        module.lost += 1
+        self.counters.modules_lost += 1
         module.online_since = None
         if was_online:
             for driver in module.drivers:
@@ -748,7 +782,16 @@ class Master:
     # --- queries for the agent and tests ----------------------------------------------
 
     def module_table(self) -> list[dict[str, Any]]:
+        """One row per module: ID, name, kind, firmware, state and its counters."""
         return [m.to_dict() for m in sorted(self.modules.values(), key=lambda m: m.module_id)]
+
+    def status(self) -> dict[str, Any]:
+        """What this master knows, for people: its bus, counters and module table."""
+        return {
+            "bus": self.name,
+            "counters": dataclasses.asdict(self.counters),
+            "modules": self.module_table(),
+        }
 
     def online(self) -> set[int]:
         return {m.module_id for m in self.modules.values() if m.state is ModuleState.ONLINE}
