@@ -33,6 +33,7 @@ from robot_agent.robocan.busopen import BusReader, open_bus
 
 __all__ = [
     "BELLBOT",
+    "FLAWS",
     "BatteryMonitor",
     "HeadIo",
     "MotorController",
@@ -45,6 +46,15 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 TICK_S = 0.02  # physics step of the simulated firmware while something moves
+BLOCK_OPS = frozenset({p.Op.BLOCK_START, p.Op.BLOCK_DATA, p.Op.BLOCK_FLOW, p.Op.BLOCK_END})
+FLAWS: dict[str, str] = {
+    "accepts_any_value": "SET_PARAM takes values outside their range (no BAD_VALUE)",
+    "no_command_timeout": "a motor keeps its last velocity when the commands stop",
+    "answers_broadcast": "acts on any opcode sent to the broadcast ID 0x001",
+    "no_state_on_enable": "no BUMPERS / INPUTS frame after the ACK to ENABLE",
+}
+"""Deliberate defects a simulated module can be built with (``flaws=``), to prove that the
+conformance checks catch them."""
 DUE_EPS_S = 0.001  # a frame due this close to now goes out in this wake-up
 
 
@@ -131,10 +141,8 @@ class SimHost:
         for msg in batch:
             can_id = msg.arbitration_id
             if can_id == p.BROADCAST_ID:
-                # only MASTER_START and STOP are broadcast; anything else there is ignored
-                if msg.data and msg.data[0] in p.BROADCAST_OPS:
-                    for module in list(self.modules.values()):
-                        module._on_can(msg)
+                for module in list(self.modules.values()):
+                    module._on_can(msg, broadcast=True)
             else:
                 addressed = self.modules.get(can_id - 1)
                 if addressed is not None:
@@ -183,9 +191,20 @@ class SimModule:
 
     description: p.Description
 
-    def __init__(self, bus_spec: str, module_id: int, *, time_scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        bus_spec: str,
+        module_id: int,
+        *,
+        time_scale: float = 1.0,
+        flaws: frozenset[str] = frozenset(),
+    ) -> None:
         if not p.is_module_id(module_id):
             raise ValueError(f"module id 0x{module_id:X} is not an even ID in 0x02..0x7FE")
+        unknown = set(flaws) - set(FLAWS)
+        if unknown:
+            raise ValueError(f"unknown flaws {sorted(unknown)}; known: {', '.join(FLAWS)}")
+        self.flaws = frozenset(flaws)
         self.bus_spec = bus_spec
         self.module_id = module_id
         self.time_scale = time_scale
@@ -200,6 +219,7 @@ class SimModule:
         self._own_host = False
         self._sender: BlockSender | None = None
         self._receiver: BlockReceiver | None = None
+        self._receiver_seen = 0.0  # last frame of the block being received (its time-out)
         self._last_step = 0.0
         self.next_watchdog = 0.0
         self.running = False
@@ -249,6 +269,12 @@ class SimModule:
         if now + DUE_EPS_S >= self.next_watchdog:
             self.send(p.watchdog(self.state))
             self.next_watchdog = next_slot(self.next_watchdog, self.watchdog_s, now)
+        receiver = self._receiver
+        if receiver is not None and now + DUE_EPS_S >= self._receiver_seen + p.BLOCK_TIMEOUT_S:
+            self._receiver_seen = now  # no data frame for 250 ms: ask again, or give up
+            for frame in receiver.on_timeout():
+                self.send(frame)
+            self._finish_block()
         self.advance(now)
 
     def advance(self, now: float) -> None:
@@ -258,6 +284,8 @@ class SimModule:
 
     def next_due(self) -> float:
         """The monotonic time of the next frame this module owes without being asked."""
+        if self._receiver is not None:
+            return min(self.next_watchdog, self._receiver_seen + p.BLOCK_TIMEOUT_S)
         return self.next_watchdog
 
     @property
@@ -308,7 +336,7 @@ class SimModule:
 
     # --- receive path -----------------------------------------------------------------
 
-    def _on_can(self, msg: can.Message) -> None:
+    def _on_can(self, msg: can.Message, broadcast: bool = False) -> None:
         if not self.running or msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
             return
         data = bytes(msg.data)
@@ -316,6 +344,10 @@ class SimModule:
             op = p.check_length(data)
         except p.ProtocolError:
             return  # firmware ignores what it cannot parse
+        if op not in p.MASTER_OPS and op not in BLOCK_OPS:
+            return  # a slave opcode sent to a slave
+        if broadcast and op not in p.BROADCAST_OPS and "answers_broadcast" not in self.flaws:
+            return  # only MASTER_START and STOP are broadcast; anything else there is ignored
         try:
             self.advance(time.monotonic())  # the physics up to now, under the old command
             self._dispatch(op, data)
@@ -337,10 +369,12 @@ class SimModule:
             self._receiver = BlockReceiver(
                 data, types=(p.BlockType.CONFIG,), accept=self._accept_block
             )
+            self._receiver_seen = time.monotonic()
             self.send(self._receiver.first_reply())
             self._finish_block()
         elif op == p.Op.BLOCK_DATA:
             if self._receiver is not None:
+                self._receiver_seen = time.monotonic()
                 for frame in self._receiver.on_data(data):
                     self.send(frame)
                 self._finish_block()
@@ -362,7 +396,8 @@ class SimModule:
         elif op == p.Op.STOP:
             self.on_stop()
         elif op == p.Op.SET_CHARGING:
-            self.send(p.ack(op, p.MODULE, self.on_command(op, data) or p.AckStatus.UNSUPPORTED))
+            reply = self.on_command(op, data)
+            self.send(p.ack(op, p.MODULE, p.AckStatus.UNSUPPORTED if reply is None else reply))
         else:
             self.on_command(op, data)  # actuator commands are not acknowledged
 
@@ -377,7 +412,7 @@ class SimModule:
         if not on:
             self.on_stop()
         self.send(p.ack(p.Op.ENABLE, element))
-        if on:
+        if on and "no_state_on_enable" not in self.flaws:
             self.on_enabled()
 
     def _set_mode(self, element: int, mode: int) -> p.AckStatus:
@@ -402,7 +437,7 @@ class SimModule:
         if param not in p.ELEMENT_PARAMS.get(self.description.elements[element].kind, ()):
             return p.AckStatus.BAD_PARAM
         low, high = p.PARAM_RANGES[param]
-        if not low <= value <= high:
+        if not low <= value <= high and "accepts_any_value" not in self.flaws:
             return p.AckStatus.BAD_VALUE
         status = self.on_param(element, param, value)
         if status is p.AckStatus.OK:
@@ -426,11 +461,12 @@ class SimModule:
 class MotorController(SimModule):
     """Motor + encoder, a velocity PID agent and four bumpers (the paper's dsPIC module)."""
 
-    def __init__(self, bus_spec: str, module_id: int, *, time_scale: float = 1.0) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """As ``SimModule`` (bus_spec, module_id, time_scale=, flaws=)."""
+        super().__init__(*args, **kwargs)
         self.description = p.Description(
             kind=p.ModuleKind.MOTOR_CONTROLLER,
-            name=f"motor_controller_{module_id:02x}",
+            name=f"motor_controller_{self.module_id:02x}",
             firmware=(2, 1),
             elements=(
                 p.Element(p.ElementKind.MOTOR, p.Role.COMPONENT),
@@ -465,7 +501,8 @@ class MotorController(SimModule):
 
     def step(self, now: float, dt_sim: float) -> None:
         timeout = self.param(1, p.Param.COMMAND_TIMEOUT_MS) / 1000
-        if self.target and now - self.last_command > timeout:
+        timed_out = now - self.last_command > timeout and "no_command_timeout" not in self.flaws
+        if self.target and timed_out:
             self.target = 0.0  # the agent's own safety time-out
         accel = self.param(1, p.Param.MAX_ACCEL) / 1000
         change = self.target - self.velocity
@@ -504,9 +541,15 @@ class SonarRing(SimModule):
     the master sends one); a sonar it does not fire reports 255, nothing in range."""
 
     def __init__(
-        self, bus_spec: str, module_id: int, *, time_scale: float = 1.0, sonars: int = 8
+        self,
+        bus_spec: str,
+        module_id: int,
+        *,
+        time_scale: float = 1.0,
+        sonars: int = 8,
+        flaws: frozenset[str] = frozenset(),
     ) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+        super().__init__(bus_spec, module_id, time_scale=time_scale, flaws=flaws)
         self.description = p.Description(
             kind=p.ModuleKind.SONAR_RING,
             name=f"sonar_ring_{module_id:02x}",
@@ -567,11 +610,12 @@ class HeadIo(SimModule):
     SERVOS = 10
     TOP_SPEED = 360.0  # degrees/s: what SET_SERVO speed 0 means on this module
 
-    def __init__(self, bus_spec: str, module_id: int, *, time_scale: float = 1.0) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """As ``SimModule`` (bus_spec, module_id, time_scale=, flaws=)."""
+        super().__init__(*args, **kwargs)
         self.description = p.Description(
             kind=p.ModuleKind.HEAD_IO,
-            name=f"head_io_{module_id:02x}",
+            name=f"head_io_{self.module_id:02x}",
             elements=(
                 p.Element(p.ElementKind.SERVO, p.Role.COMPONENT, self.SERVOS),
                 p.Element(p.ElementKind.TOUCH, p.Role.COMPONENT, 6),
@@ -650,8 +694,9 @@ class BatteryMonitor(SimModule):
         *,
         time_scale: float = 1.0,
         motion: Callable[[], float] = lambda: 0.0,
+        flaws: frozenset[str] = frozenset(),
     ) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+        super().__init__(bus_spec, module_id, time_scale=time_scale, flaws=flaws)
         self.description = p.Description(
             kind=p.ModuleKind.BATTERY_MONITOR,
             name=f"battery_{module_id:02x}",
@@ -710,17 +755,22 @@ class Simulator:
         *,
         time_scale: float = 1.0,
         layout: dict[int, str] | None = None,
+        flaws: dict[int, frozenset[str]] | None = None,
     ) -> None:
         self.bus_spec = bus_spec
         self.time_scale = time_scale
         self.layout = dict(BELLBOT if layout is None else layout)
+        self.flaws = dict(flaws or {})
         self.modules: dict[int, SimModule] = {}
         self.battery_level: float | None = None
         self.host = SimHost(bus_spec)
 
     def _make(self, module_id: int) -> SimModule:
         kind = self.layout.get(module_id)
-        kwargs: dict[str, Any] = {"time_scale": self.time_scale}
+        kwargs: dict[str, Any] = {
+            "time_scale": self.time_scale,
+            "flaws": self.flaws.get(module_id, frozenset()),
+        }
         if kind == "motor":
             return MotorController(self.bus_spec, module_id, **kwargs)
         if kind == "sonar":
