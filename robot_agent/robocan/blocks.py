@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import enum
 import struct
+from collections.abc import Callable, Collection
 
 from robot_agent.robocan.protocol import (
     BLOCK_RETRIES,
@@ -92,8 +93,19 @@ class BlockSender:
 class BlockReceiver:
     """Receives one block announced by a start frame; detects lost and repeated frames."""
 
-    def __init__(self, start: bytes, *, block_size: int = BLOCK_SIZE) -> None:
-        if len(start) < 5 or start[0] != Op.BLOCK_START:
+    def __init__(
+        self,
+        start: bytes,
+        *,
+        block_size: int = BLOCK_SIZE,
+        types: Collection[int] | None = None,
+        accept: Callable[[int, bytes], bool] | None = None,
+    ) -> None:
+        """``types``: the block types this receiver takes (None = any); another is refused
+        with BLOCK_END UNKNOWN_TYPE. ``accept(type, data)`` judges a block that arrived whole:
+        False = BLOCK_END REFUSED instead of OK (bad content)."""
+        self.accept = accept
+        if len(start) < 4 or start[0] != Op.BLOCK_START:
             raise ProtocolError("not a block start frame")
         _, self.block_type, self.length = struct.unpack("<BBH", start[:4])
         self.block_size = block_size
@@ -105,7 +117,9 @@ class BlockReceiver:
         self.error: EndStatus | None = None
         self.window_end = 0
         self.resync = False  # a resend was asked for: drop frames until the missing one comes
-        if self.length > MAX_BLOCK:
+        if types is not None and self.block_type not in types:
+            self._fail(EndStatus.UNKNOWN_TYPE)
+        elif self.length > MAX_BLOCK:
             self._fail(EndStatus.TOO_LONG)
         elif len(start) - 4 != min(FIRST_BYTES, self.length):
             raise ProtocolError("block start frame length does not match the block length")
@@ -120,9 +134,15 @@ class BlockReceiver:
         if self.state is BlockState.FAILED:
             return end(self.error or EndStatus.TOO_LONG, self.block_type)
         if self.frames == 0:
-            self.state = BlockState.DONE
-            return end(EndStatus.OK, self.block_type)
+            return self._complete()
         return self._continue()
+
+    def _complete(self) -> bytes:
+        """Every byte is here: OK, or REFUSED when the content is not acceptable."""
+        if self.accept is not None and not self.accept(self.block_type, bytes(self.buffer)):
+            return self._fail(EndStatus.REFUSED)
+        self.state = BlockState.DONE
+        return end(EndStatus.OK, self.block_type)
 
     def _continue(self) -> bytes:
         self.window_end = (
@@ -151,23 +171,25 @@ class BlockReceiver:
         self.buffer += payload
         self.expected += 1
         if self.expected > self.frames:
-            self.state = BlockState.DONE
-            return [end(EndStatus.OK, self.block_type)]
+            return [self._complete()]
         if seq == self.window_end:
             return [self._continue()]
         return []
 
-    def _retry(self) -> list[bytes]:
+    def _retry(self, give_up: EndStatus = EndStatus.SEQUENCE) -> list[bytes]:
+        """Ask again from the missing frame. The count is per block: the fourth request in
+        one block (gap or time-out) ends it instead, with ``give_up`` as the status."""
         self.retries += 1
         if self.retries > BLOCK_RETRIES:
-            return [self._fail(EndStatus.SEQUENCE)]
+            return [self._fail(give_up)]
         return [self._continue()]
 
     def on_timeout(self) -> list[bytes]:
-        """No data frame for BLOCK_TIMEOUT_S: ask again from the missing frame, or give up."""
+        """No data frame for BLOCK_TIMEOUT_S: ask again from the missing frame, or give up
+        with BLOCK_END TIMEOUT."""
         if self.state is not BlockState.ACTIVE:
             return []
-        return self._retry()
+        return self._retry(EndStatus.TIMEOUT)
 
     @property
     def data(self) -> bytes:

@@ -7,6 +7,7 @@ import asyncio
 import json
 import logging
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -108,7 +109,8 @@ def run(
     move: float,
     record: Path | None,
 ) -> None:
-    """Run the master (and the simulated BellBot) for a while; print the module table."""
+    """Run the master (and the simulated BellBot) for a while; print its counters and module
+    table (kind, firmware, state, counters), then the same as one JSON line."""
     import can
 
     from guidebot.bus import Bus
@@ -131,12 +133,101 @@ def run(
                 operator.publish("set_velocity", {"v": move, "w": 0.0})
             await asyncio.sleep(seconds)
             operator.publish("set_velocity", {"v": 0.0, "w": 0.0})
-            click.echo(json.dumps(stack.module_table(), indent=1))
+            status = stack.status()
+            for line in status_lines(status):
+                click.echo(line)
+            click.echo(json.dumps(status))
 
     try:
         asyncio.run(main())
     except (BusSpecError, ValueError, OSError, can.CanError) as exc:
         raise click.ClickException(str(exc)) from None
+
+
+@robocan.command()
+@click.option("--can", "bus", required=True, help="The module's bus: socketcan:can0, virtual:X...")
+@click.option("--id", "module_id", required=True, help="The module's ID (even), e.g. 0x40.")
+@click.option("--json", "as_json", is_flag=True, help="Also print the checks as one JSON line.")
+@click.option(
+    "--simulate",
+    is_flag=True,
+    help="Check our own simulated module of that ID (BellBot set) on a virtual bus.",
+)
+@click.option(
+    "--flaw",
+    "flaws",
+    multiple=True,
+    help="With --simulate: build the module with this deliberate defect (repeatable).",
+)
+def conformance(
+    bus: str, module_id: str, as_json: bool, simulate: bool, flaws: tuple[str, ...]
+) -> None:
+    """Check a module against docs/robocan.md: a table of checks with the spec section of
+    each, then the JSON line {"checks", "passed", "failed": [names]}. Exit status 1 when a
+    check fails."""
+    from robot_agent.robocan.busopen import BusOpenError, BusSpecError, parse_bus_spec
+    from robot_agent.robocan.conformance import run_conformance, summary
+    from robot_agent.robocan.sim import BELLBOT, FLAWS, Simulator
+
+    try:
+        number = int(module_id, 0)
+    except ValueError:
+        raise click.BadParameter(f"{module_id!r} is not a number", param_hint="--id") from None
+    unknown = set(flaws) - set(FLAWS)
+    if unknown:
+        known = ", ".join(f"{k} ({v})" for k, v in FLAWS.items())
+        raise click.BadParameter(f"unknown {sorted(unknown)}; known: {known}", param_hint="--flaw")
+    if flaws and not simulate:
+        raise click.UsageError("--flaw needs --simulate")
+
+    async def main() -> list[Any]:
+        simulator = None
+        if simulate:
+            if parse_bus_spec(bus)[0] != "virtual":
+                raise click.UsageError("--simulate needs a virtual bus, e.g. --can virtual:conf")
+            if number not in BELLBOT:
+                ids = ", ".join(f"0x{i:02X}" for i in BELLBOT)
+                raise click.UsageError(f"no simulated module 0x{number:02X}; BellBot has {ids}")
+            simulator = Simulator(
+                bus, layout={number: BELLBOT[number]}, flaws={number: frozenset(flaws)}
+            )
+            await simulator.start()
+        try:
+            return await run_conformance(bus, number)
+        finally:
+            if simulator is not None:
+                await simulator.stop()
+
+    try:
+        results = asyncio.run(main())
+    except (BusSpecError, BusOpenError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+    width = max(len(r.name) for r in results)
+    for r in results:
+        verdict = "pass" if r.passed else "FAIL"
+        click.echo(f"{r.name:<{width}}  §{r.section:<24} {verdict}  {r.detail}")
+    if as_json:
+        click.echo(json.dumps([r.__dict__ for r in results]))
+    result = summary(results)
+    click.echo(json.dumps(result))
+    if result["failed"]:
+        raise SystemExit(1)
+
+
+def status_lines(status: dict[str, Any]) -> list[str]:
+    """The master's public face as text: per bus its counters, then one line per module."""
+    lines = []
+    for bus in status["buses"]:
+        counters = ", ".join(f"{k} {v}" for k, v in bus["counters"].items())
+        lines.append(f"bus {bus['bus']}: {counters}")
+        for m in bus["modules"]:
+            lines.append(
+                f"  0x{m['module_id']:02X} {m['name']:<22} {m['kind'] or '?':<16} "
+                f"fw {m['firmware'] or '?':<5} {m['state']:<11} rx {m['frames_rx']} "
+                f"tx {m['frames_tx']} errors {m['errors']} faults {m['faults']} "
+                f"lost {m['lost']} requeried {m['requeried']}"
+            )
+    return lines
 
 
 @robocan.command()

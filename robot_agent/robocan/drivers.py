@@ -73,10 +73,9 @@ class DriverConfig:
 
 
 class Driver:
-    """Base class of drivers. Subclasses set ``kinds``, ``opcodes`` and maybe ``critical``."""
+    """Base class of drivers. Subclasses set ``kinds`` and maybe ``critical``."""
 
     kinds: ClassVar[tuple[str, ...]] = ()
-    opcodes: ClassVar[frozenset[int]] = frozenset()
     critical: ClassVar[bool] = False
 
     def __init__(self, master: Master, endpoint: BusEndpoint, config: DriverConfig) -> None:
@@ -102,8 +101,10 @@ class Driver:
     def on_lost(self, module: Module, reason: str) -> None:
         """The module fell silent (or rebooted): forget its state, stop what depends on it."""
 
-    def on_frame(self, module: Module, data: bytes) -> None:
-        """A data frame with one of ``opcodes`` from an online module."""
+    def on_frame(self, module: Module, element: int, data: bytes) -> None:
+        """A data frame from an online module for ``element``, one of this driver's kinds (the
+        master checked that). Raise ``ProtocolError`` for content that cannot be (a servo
+        index beyond the element's count): the master counts it as a bad frame."""
 
 
 class DriverRegistry:

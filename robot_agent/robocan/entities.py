@@ -43,8 +43,7 @@ def _number(payload: dict[str, Any], key: str, default: float = 0.0) -> float:
 @dataclass
 class Wheel:
     side: str
-    pid_element: int = 0
-    motor_element: int = 0
+    pid_element: int | None = None
     last_ticks: int | None = None
     delta_m: float = 0.0
     velocity: float = 0.0
@@ -53,7 +52,12 @@ class Wheel:
 
 
 class BaseDriver(Driver):
-    """Differential base over two motor controllers (PID velocity agent + motor/encoder).
+    """Differential base: two wheels, each a motor element (motor + encoder) driven by a PID
+    velocity agent. The n-th PID agent of a module drives its n-th motor.
+
+    Which wheel is which (docs/robocan.md, section 8): ``DriverConfig.wheel_sides`` names the
+    side of a module's first motor (0x02 left, 0x04 right); a module it does not name that has
+    two motors drives both, its first motor the left wheel. Any other motor is not a wheel.
 
     Critical: losing a motor controller stops the base and publishes ``base_fault``. While
     the base moves the last command is repeated every ``command_period_s`` (8 Hz); while it is
@@ -61,12 +65,11 @@ class BaseDriver(Driver):
     """
 
     kinds = ("pid_velocity", "motor")
-    opcodes = frozenset({p.Op.ENCODER})
     critical = True
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.wheels: dict[int, Wheel] = {}
+        self.wheels: dict[tuple[int, int], Wheel] = {}  # (module id, motor element) -> wheel
         self.target = (0.0, 0.0)
         self.x = self.y = self.theta = 0.0
         self.faults: set[int] = set()
@@ -80,21 +83,39 @@ class BaseDriver(Driver):
         if self._repeat is not None:
             self._repeat.cancel()
 
-    def _wheel(self, module: Module) -> Wheel:
-        wheel = self.wheels.get(module.module_id)
-        if wheel is None:
-            side = self.config.wheel_sides.get(module.module_id)
-            if side is None:
-                taken = {w.side for w in self.wheels.values()}
-                side = "left" if "left" not in taken else "right"
-            wheel = self.wheels[module.module_id] = Wheel(side)
-        return wheel
+    def _side(self, module: Module, nth: int, motors: int) -> str | None:
+        side = self.config.wheel_sides.get(module.module_id)
+        if side is not None:
+            return side if nth == 0 else None
+        if motors == 2:
+            return ("left", "right")[nth]
+        return None
 
     async def configure(self, module: Module, index: int, element: p.Element) -> None:
-        wheel = self._wheel(module)
         mid = module.module_id
+        assert module.description is not None
         if element.kind == p.ElementKind.MOTOR:
-            wheel.motor_element = index
+            motors = list(module.description.numbering(p.ElementKind.MOTOR))
+            pids = list(module.description.numbering(p.ElementKind.PID_VELOCITY))
+            nth = motors.index(index)
+            side = self._side(module, nth, len(motors))
+            taken = [
+                key
+                for key, w in self.wheels.items()
+                if w.side == side and key[0] != mid and w.online
+            ]
+            if side is None or taken:
+                log.warning(
+                    "robocan: motor element %d of 0x%02X is not a wheel (%s)",
+                    index,
+                    mid,
+                    "its side is taken" if taken else "no side in wheel_sides",
+                )
+            else:
+                for key in [k for k, w in self.wheels.items() if w.side == side]:
+                    del self.wheels[key]
+                pid = pids[nth] if nth < len(pids) else None
+                self.wheels[(mid, index)] = Wheel(side, pid)
             await self.master.command(
                 mid, p.set_param(index, p.Param.PUBLISH_MS, self.config.encoder_period_ms)
             )
@@ -102,18 +123,23 @@ class BaseDriver(Driver):
                 mid, p.set_param(index, p.Param.TICKS_PER_M, self.config.ticks_per_m)
             )
         else:
-            wheel.pid_element = index
-            await self.master.command(mid, p.set_param(index, p.Param.COMMAND_TIMEOUT_MS, 1000))
+            timeout_ms = round(p.MOTOR_COMMAND_TIMEOUT_S * 1000)
+            await self.master.command(
+                mid, p.set_param(index, p.Param.COMMAND_TIMEOUT_MS, timeout_ms)
+            )
             await self.master.command(mid, p.set_mode(index, 1))  # 1 = velocity control
 
+    def _wheels_of(self, module: Module) -> list[Wheel]:
+        return [w for (mid, _), w in self.wheels.items() if mid == module.module_id]
+
     def on_online(self, module: Module) -> None:
-        wheel = self._wheel(module)
-        wheel.online, wheel.last_ticks, wheel.fresh = True, None, False
+        for wheel in self._wheels_of(module):
+            wheel.online, wheel.last_ticks, wheel.fresh = True, None, False
         self.faults.discard(module.module_id)
 
     def on_lost(self, module: Module, reason: str) -> None:
-        wheel = self._wheel(module)
-        wheel.online = False
+        for wheel in self._wheels_of(module):
+            wheel.online = False
         self.faults.add(module.module_id)
         self.stop()
         self.endpoint.publish(
@@ -147,11 +173,11 @@ class BaseDriver(Driver):
             self._repeat = None
 
     def send_velocity(self) -> None:
-        """One velocity frame per motor controller, from the current (v, w)."""
+        """One velocity frame per wheel, from the current (v, w)."""
         v, w = self.target
         half = w * self.config.wheel_base_m / 2
-        for mid, wheel in self.wheels.items():
-            if wheel.online:
+        for (mid, _), wheel in self.wheels.items():
+            if wheel.online and wheel.pid_element is not None:
                 speed = v - half if wheel.side == "left" else v + half
                 self.master.send_to(mid, p.set_velocity(wheel.pid_element, speed))
 
@@ -177,9 +203,11 @@ class BaseDriver(Driver):
 
     # --- odometry ---------------------------------------------------------------------
 
-    def on_frame(self, module: Module, data: bytes) -> None:
+    def on_frame(self, module: Module, element: int, data: bytes) -> None:
+        wheel = self.wheels.get((module.module_id, element))
+        if wheel is None:
+            return  # a motor that is not a wheel
         _, ticks, velocity = p.parse_encoder(data)
-        wheel = self._wheel(module)
         if wheel.last_ticks is not None:
             delta = ((ticks - wheel.last_ticks + 2**31) % 2**32) - 2**31
             wheel.delta_m += delta / self.config.ticks_per_m
@@ -210,81 +238,122 @@ class BaseDriver(Driver):
         )
 
 
+def _instance(module: Module, kind: int, element: int, index: int) -> int:
+    """The module-wide number of instance ``index`` of ``element`` (instances of one kind are
+    numbered across the module's elements of that kind); ProtocolError when out of range."""
+    assert module.description is not None
+    first, count = module.description.numbering(kind)[element]
+    if index >= count:
+        raise p.ProtocolError(f"element {element} has {count} instances, frame names {index}")
+    return first + index
+
+
+def _new_bits(module: Module, kind: int, element: int, mask: int, old: int) -> list[int]:
+    """Module-wide numbers of the bits set in ``mask`` and not in ``old``; a mask with a bit
+    beyond the element's count is a ProtocolError (a bad frame)."""
+    assert module.description is not None
+    first, count = module.description.numbering(kind)[element]
+    if mask >> count:
+        raise p.ProtocolError(f"element {element} has {count} inputs, mask 0x{mask:04X}")
+    pressed = mask & ~old
+    return [first + bit for bit in range(count) if pressed & (1 << bit)]
+
+
 class BumperDriver(Driver):
     """Bumpers on the sonar rings and motor controllers: a new contact stops the base."""
 
     kinds = ("bumper",)
-    opcodes = frozenset({p.Op.BUMPERS})
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.masks: dict[int, int] = {}
+        self.masks: dict[tuple[int, int], int] = {}  # (module id, element) -> mask
 
     def on_online(self, module: Module) -> None:
-        self.masks[module.module_id] = 0
+        for key in [k for k in self.masks if k[0] == module.module_id]:
+            del self.masks[key]
 
-    def on_frame(self, module: Module, data: bytes) -> None:
+    def on_frame(self, module: Module, element: int, data: bytes) -> None:
         _, mask = p.parse_mask(data)
-        pressed = mask & ~self.masks.get(module.module_id, 0)
-        self.masks[module.module_id] = mask
-        if not pressed:
+        key = (module.module_id, element)
+        hits = _new_bits(module, p.ElementKind.BUMPER, element, mask, self.masks.get(key, 0))
+        self.masks[key] = mask
+        if not hits:
             return
         for base in self.master.drivers_of(BaseDriver):
             assert isinstance(base, BaseDriver)
             base.stop()
         ring = self.config.bumper_rings.get(module.module_id, module.module_id)
-        for index in range(16):
-            if pressed & (1 << index):
-                self.endpoint.publish("bumper_hit", {"ring": ring, "index": index})
+        for index in hits:
+            self.endpoint.publish("bumper_hit", {"ring": ring, "index": index})
 
 
 class SonarDriver(Driver):
-    """Sonar rings: sets the firing sequence (a block transfer) and publishes whole rings."""
+    """Sonar rings: sets the firing order (a CONFIG block) and publishes whole rings.
+
+    A module's sonars are numbered across its sonar elements. The firing order sent is the
+    configured one restricted to the module's sonars, then the sonars it does not list in index
+    order: every sonar is fired. ``sonar_ranges`` goes out each time the frame holding the
+    module's last sonar arrives, once every sonar has reported; ``None`` = nothing in range.
+    """
 
     kinds = ("sonar", "firing_sequence")
-    opcodes = frozenset({p.Op.SONAR})
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.ranges: dict[int, list[float | None]] = {}
+        self.seen: dict[int, set[int]] = {}
+
+    def firing_order(self, count: int) -> bytes:
+        listed = [i for i in dict.fromkeys(self.config.firing_sequence) if 0 <= i < count]
+        return bytes(listed + [i for i in range(count) if i not in listed])
+
+    def _count(self, module: Module) -> int:
+        assert module.description is not None
+        return sum(c for _, c in module.description.numbering(p.ElementKind.SONAR).values())
 
     async def configure(self, module: Module, index: int, element: p.Element) -> None:
         mid = module.module_id
         if element.kind == p.ElementKind.SONAR:
-            self.ranges[mid] = [None] * element.count
+            self.ranges[mid] = [None] * self._count(module)
+            self.seen[mid] = set()
             await self.master.command(
                 mid, p.set_param(index, p.Param.PUBLISH_MS, self.config.sonar_period_ms)
             )
         else:
-            sequence = bytes([index, 0, *self.config.firing_sequence])  # element, param 0
-            await self.master.send_block(mid, p.BlockType.CONFIG, sequence)
-            await self.master.command(mid, p.set_mode(index, 1))  # 1 = fire in sequence
+            order = self.firing_order(self._count(module))
+            await self.master.send_block(mid, p.BlockType.CONFIG, bytes([index, 0]) + order)
+            await self.master.command(mid, p.set_mode(index, 1))  # 1 = fire in that order
 
-    def on_frame(self, module: Module, data: bytes) -> None:
+    def on_online(self, module: Module) -> None:
+        self.seen[module.module_id] = set()
+
+    def on_frame(self, module: Module, element: int, data: bytes) -> None:
         _, first, values = p.parse_sonar(data)
-        ring = self.ranges.setdefault(module.module_id, [None] * 8)
-        for offset, value in enumerate(values):
-            if first + offset < len(ring):
-                ring[first + offset] = value
-        if first + len(values) >= len(ring) and all(r is not None for r in ring):
+        mid = module.module_id
+        numbers = [
+            _instance(module, p.ElementKind.SONAR, element, first + k) for k in range(len(values))
+        ]
+        ring = self.ranges.setdefault(mid, [None] * self._count(module))
+        seen = self.seen.setdefault(mid, set())
+        for number, value in zip(numbers, values, strict=True):
+            ring[number] = value
+            seen.add(number)
+        if numbers[-1] == len(ring) - 1 and len(seen) == len(ring):
             self.endpoint.publish(
                 "sonar_ranges",
-                {
-                    "ring": self.config.sonar_rings.get(module.module_id, module.module_id),
-                    "ranges": list(ring),
-                },
+                {"ring": self.config.sonar_rings.get(mid, mid), "ranges": list(ring)},
             )
 
 
 class HeadDriver(Driver):
-    """Head and arm servos: ``move_servos`` in, one ``servo_in_position`` per servo out."""
+    """Head and arm servos: ``move_servos`` in, one ``servo_in_position`` per servo out.
+    ``DriverConfig.servo_names`` name a module's servos numbered across its servo elements."""
 
     kinds = ("servo",)
-    opcodes = frozenset({p.Op.SERVO})
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.modules: dict[int, int] = {}  # module id -> servo element
+        self.modules: dict[int, Module] = {}
         self.positions: dict[str, float] = {}
         self.moving: set[str] = set()
 
@@ -292,7 +361,7 @@ class HeadDriver(Driver):
         self._unsubscribe.append(self.endpoint.subscribe("move_servos", self._on_move))
 
     async def configure(self, module: Module, index: int, element: p.Element) -> None:
-        self.modules[module.module_id] = index
+        self.modules[module.module_id] = module
 
     def on_lost(self, module: Module, reason: str) -> None:
         self.moving.clear()
@@ -315,18 +384,24 @@ class HeadDriver(Driver):
             log.warning("robocan: move_servos refused: %s", exc)
             return
         online = self.master.online()
-        for module_id, element in self.modules.items():
-            if module_id not in online:
+        for module_id, module in self.modules.items():
+            if module_id not in online or module.description is None:
                 continue
+            numbering = module.description.numbering(p.ElementKind.SERVO)
             for index, position in frames:
-                self.moving.add(self.config.servo_names[index])
-                self.master.send_to(module_id, p.set_servo(element, index, position, speed))
+                for element, (first, count) in numbering.items():
+                    if first <= index < first + count:
+                        self.moving.add(self.config.servo_names[index])
+                        self.master.send_to(
+                            module_id, p.set_servo(element, index - first, position, speed)
+                        )
 
-    def on_frame(self, module: Module, data: bytes) -> None:
+    def on_frame(self, module: Module, element: int, data: bytes) -> None:
         _, index, position, in_position = p.parse_servo(data)
-        if index >= len(self.config.servo_names):
+        number = _instance(module, p.ElementKind.SERVO, element, index)
+        if number >= len(self.config.servo_names):
             return
-        name = self.config.servo_names[index]
+        name = self.config.servo_names[number]
         self.positions[name] = position
         if in_position and name in self.moving:
             self.moving.discard(name)
@@ -334,24 +409,26 @@ class HeadDriver(Driver):
 
 
 class IoDriver(Driver):
-    """Capacitive touch inputs (``button_pressed``) and outputs such as eye LEDs (``set_leds``)."""
+    """Capacitive touch inputs (``button_pressed``) and outputs such as eye LEDs (``set_leds``).
+    Inputs and outputs of a module are numbered across its touch / LED elements."""
 
     kinds = ("touch", "led")
-    opcodes = frozenset({p.Op.INPUTS})
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.masks: dict[int, int] = {}
-        self.led_modules: dict[int, int] = {}
+        self.masks: dict[tuple[int, int], int] = {}  # (module id, touch element) -> mask
+        self.led_modules: dict[int, Module] = {}
 
     def start(self) -> None:
         self._unsubscribe.append(self.endpoint.subscribe("set_leds", self._on_set_leds))
 
     async def configure(self, module: Module, index: int, element: p.Element) -> None:
         if element.kind == p.ElementKind.LED:
-            self.led_modules[module.module_id] = index
-        else:
-            self.masks[module.module_id] = 0
+            self.led_modules[module.module_id] = module
+
+    def on_online(self, module: Module) -> None:
+        for key in [k for k in self.masks if k[0] == module.module_id]:
+            del self.masks[key]
 
     def _on_set_leds(self, message: Message) -> None:
         leds = message.payload.get("leds")
@@ -368,17 +445,24 @@ class IoDriver(Driver):
                 log.warning("robocan: set_leds: bad value %r for %s", value, name)
                 continue
             index = self.config.led_names.index(name)
-            for module_id, element in self.led_modules.items():
-                if module_id in online:
-                    self.master.send_to(module_id, p.set_output(element, index, int(level)))
+            for module_id, module in self.led_modules.items():
+                if module_id not in online or module.description is None:
+                    continue
+                for element, (first, count) in module.description.numbering(
+                    p.ElementKind.LED
+                ).items():
+                    if first <= index < first + count:
+                        frame = p.set_output(element, index - first, int(level))
+                        self.master.send_to(module_id, frame)
 
-    def on_frame(self, module: Module, data: bytes) -> None:
+    def on_frame(self, module: Module, element: int, data: bytes) -> None:
         _, mask = p.parse_mask(data)
-        pressed = mask & ~self.masks.get(module.module_id, 0)
-        self.masks[module.module_id] = mask
-        for index, name in enumerate(self.config.touch_names):
-            if pressed & (1 << index):
-                self.endpoint.publish("button_pressed", {"button": name})
+        key = (module.module_id, element)
+        numbers = _new_bits(module, p.ElementKind.TOUCH, element, mask, self.masks.get(key, 0))
+        self.masks[key] = mask
+        for number in numbers:
+            if number < len(self.config.touch_names):
+                self.endpoint.publish("button_pressed", {"button": self.config.touch_names[number]})
 
 
 class BatteryDriver(Driver):
@@ -387,7 +471,6 @@ class BatteryDriver(Driver):
     contact (the dock)."""
 
     kinds = ("battery",)
-    opcodes = frozenset({p.Op.BATTERY})
     REARM = 0.05
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -407,7 +490,7 @@ class BatteryDriver(Driver):
         for module_id in self.modules & self.master.online():
             self.master.send_to(module_id, bytes([p.Op.SET_CHARGING, 1 if on else 0]))
 
-    def on_frame(self, module: Module, data: bytes) -> None:
+    def on_frame(self, module: Module, element: int, data: bytes) -> None:
         level, voltage, charging = p.parse_battery(data)
         self.level = level
         self.endpoint.publish(

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import dataclasses
 import enum
 import logging
 import threading
@@ -27,7 +28,15 @@ from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
 from robot_agent.robocan.busopen import BusReader
 from robot_agent.robocan.drivers import Driver, DriverConfig, DriverRegistry, UnknownDriver
 
-__all__ = ["CommandFailed", "IllegalTransition", "Master", "Module", "ModuleState"]
+__all__ = [
+    "CommandFailed",
+    "Counters",
+    "IllegalTransition",
+    "Master",
+    "Module",
+    "ModuleState",
+    "module_kind_name",
+]
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +47,8 @@ RETRY_FAILED_S = 1.0
 SUPERVISE_MAX_S = 1.0  # longest sleep of the time-out check (it wakes at the next deadline)
 DEADLINE_EPS_S = 0.001  # wake this much after a deadline, so that it has surely passed
 STALL_S = 0.05  # a supervisor tick this late means the process itself was not running
+SLAVE_BLOCK_TYPES = frozenset({p.BlockType.DESCRIPTION})  # blocks a master takes from a slave
+REFUSALS = frozenset({p.EndStatus.REFUSED, p.EndStatus.UNKNOWN_TYPE, p.EndStatus.TOO_LONG})
 
 
 class ModuleState(enum.Enum):
@@ -89,13 +100,17 @@ class Module:
     slave_state: p.SlaveState | None = None
     frames_rx: int = 0
     frames_tx: int = 0
-    errors: int = 0
+    errors: int = 0  # bad frames from it, failed bring-ups
+    faults: int = 0  # FAULT frames
+    lost: int = 0  # times it was lost (time-out or reset)
+    requeried: int = 0  # times it was queried again after its first bring-up
     drivers: list[Driver] = field(default_factory=list)
-    routes: dict[int, list[Driver]] = field(default_factory=dict)
+    element_drivers: dict[int, Driver] = field(default_factory=dict)  # element number -> driver
     watchdog_s: float = p.WATCHDOG_PERIOD_S
     retry_at: float = 0.0
     announced: bool = False
     disabling: bool = False  # the master disabled it: a DISABLED watchdog is no reset
+    enabling: bool = False  # ENABLE on is on its way: its ACK makes the module ONLINE
 
     @property
     def name(self) -> str:
@@ -110,18 +125,30 @@ class Module:
         return self.watchdog_s * p.LOST_TIMEOUT_FACTOR
 
     def to_dict(self) -> dict[str, Any]:
+        """The public row of the module table (docs/robocan.md, section 8)."""
+        d = self.description
         return {
             "module_id": self.module_id,
             "name": self.name,
+            "kind": module_kind_name(d.kind) if d else None,
+            "firmware": f"{d.firmware[0]}.{d.firmware[1]}" if d else None,
             "state": self.state.value,
             "critical": self.critical,
-            "elements": [e.kind_name for e in self.description.elements]
-            if self.description
-            else [],
+            "elements": [e.kind_name for e in d.elements] if d else [],
             "frames_rx": self.frames_rx,
             "frames_tx": self.frames_tx,
             "errors": self.errors,
+            "faults": self.faults,
+            "lost": self.lost,
+            "requeried": self.requeried,
         }
+
+
+def module_kind_name(kind: int) -> str:
+    try:
+        return p.ModuleKind(kind).name.lower()
+    except ValueError:
+        return f"kind_{kind}"
 
 
 @dataclass
@@ -138,6 +165,9 @@ class Counters:
     driver_errors: int = 0
     record_errors: int = 0
     stalls: int = 0
+    not_online: int = 0  # data frames from a module that is not online (dropped)
+    modules_lost: int = 0
+    modules_requeried: int = 0
 
 
 def _set_done(future: asyncio.Future[None]) -> None:
@@ -157,8 +187,10 @@ class Master:
         registry: DriverRegistry | None = None,
         recorder: can.Listener | None = None,
         announce: bool = True,
+        name: str | None = None,
     ) -> None:
         self.bus = bus
+        self.name = name or str(bus.channel_info)
         self.endpoint = endpoint
         self.config = config or DriverConfig()
         self.registry = registry or DriverRegistry()
@@ -302,6 +334,11 @@ class Master:
                         break
                 if sender.state is BlockState.DONE:
                     return
+                if sender.end_status in REFUSALS:  # sending it again cannot help
+                    raise CommandFailed(
+                        f"module 0x{module_id:02X} refused block type {block_type}: "
+                        f"{sender.end_status.name}"
+                    )
                 sender = BlockSender(block_type, data)
                 self._senders[module_id] = (sender, done)
             raise CommandFailed(f"block transfer to 0x{module_id:02X} failed")
@@ -379,10 +416,12 @@ class Master:
         try:
             op = p.check_length(data)
         except p.ProtocolError as exc:
-            self.counters.bad_frame += 1
-            if module is not None:
-                module.errors += 1
-            self._warn(f"bad{can_id}", f"module 0x{can_id:02X}: {exc}")
+            self._bad(module, f"0x{can_id:02X}: {exc}" if module is None else str(exc))
+            return
+        if op in p.MASTER_OPS:
+            # Only a master sends these: another master, or a module echoing commands. It
+            # creates no module entry and refreshes none.
+            self._bad(module, f"master opcode 0x{op:02X} from slave ID 0x{can_id:03X}")
             return
         if module is None:
             module = self.modules[can_id] = Module(can_id)
@@ -393,8 +432,7 @@ class Master:
         if module.state is ModuleState.LOST or (
             module.state is ModuleState.FAILED and now >= module.retry_at
         ):
-            self._transition(module, ModuleState.QUERYING)
-            self._start_bring_up(module)
+            self._requery(module)
             self._reschedule()
         if op == p.Op.WATCHDOG:
             self._on_watchdog(
@@ -407,6 +445,10 @@ class Master:
             future = self._acks.get((can_id, data[1], data[2]))
             if future is not None and not future.done():
                 future.set_result(data[3])
+                if data[1] == p.Op.ENABLE and data[2] == p.MODULE and data[3] == p.AckStatus.OK:
+                    # ONLINE with the ACK itself (section 4.5), not a loop turn later when the
+                    # bring-up resumes: a frame the module sends right after it is routed.
+                    self._go_online(module)
         elif op == p.Op.BLOCK_START:
             self._on_block_start(module, data)
         elif op == p.Op.BLOCK_DATA:
@@ -426,13 +468,46 @@ class Master:
             for frame in frames:
                 self.send_to(can_id, frame)
             done.set()
-        elif module.state is ModuleState.ONLINE:
-            for driver in module.routes.get(op, ()):
-                try:
-                    driver.on_frame(module, data)
-                except Exception:
-                    self.counters.driver_errors += 1
-                    log.exception("robocan: driver %s failed on a frame", type(driver).__name__)
+        else:
+            self._on_data(module, op, data)
+
+    def _on_data(self, module: Module, op: int, data: bytes) -> None:
+        """A data frame: to the driver of the element it names (section 5). A frame naming an
+        element that does not exist or is of another kind is a bad frame."""
+        if module.state is not ModuleState.ONLINE:
+            self.counters.not_online += 1
+            return
+        assert module.description is not None
+        element = module.description.data_element(op, data)
+        if element is None:
+            self._bad(module, f"0x{op:02X} frame names no element of a kind that sends it")
+            return
+        if op == p.Op.FAULT:
+            module.faults += 1
+            self._warn(
+                f"fault{module.module_id}",
+                f"module 0x{module.module_id:02X} element {element}: fault code {data[2]}",
+            )
+            return
+        driver = module.element_drivers.get(element)
+        if driver is None:
+            return  # a kind without a driver: logged when the module came up
+        try:
+            driver.on_frame(module, element, data)
+        except p.ProtocolError as exc:
+            self._bad(module, str(exc))
+        except Exception:
+            self.counters.driver_errors += 1
+            log.exception("robocan: driver %s failed on a frame", type(driver).__name__)
+
+    def _bad(self, module: Module | None, text: str) -> None:
+        self.counters.bad_frame += 1
+        key = "bad"
+        if module is not None:
+            module.errors += 1
+            key = f"bad{module.module_id}"
+            text = f"module 0x{module.module_id:02X}: {text}"
+        self._warn(key, text)
 
     def _on_watchdog(self, module: Module, state: p.SlaveState) -> None:
         previous, module.slave_state = module.slave_state, state
@@ -444,15 +519,18 @@ class Master:
         ):
             # It rebooted faster than its time-out: treat as lost and configure it again.
             self._lose(module, "module reset")
-            self._transition(module, ModuleState.QUERYING)
-            self._start_bring_up(module)
+            self._requery(module)
 
     def _on_block_start(self, module: Module, data: bytes) -> None:
         try:
-            receiver = BlockReceiver(data)
+            receiver = BlockReceiver(data, types=SLAVE_BLOCK_TYPES)
         except p.ProtocolError as exc:
             self.counters.block_errors += 1
             self._warn(f"blk{module.module_id}", f"module 0x{module.module_id:02X}: {exc}")
+            return
+        if receiver.state is BlockState.FAILED:  # refused at once: unknown type, too long
+            self.send_to(module.module_id, receiver.first_reply())
+            self._block_progress(module, receiver)
             return
         self._receivers[module.module_id] = (receiver, time.monotonic())
         self._reschedule()
@@ -489,6 +567,13 @@ class Master:
         if target not in TRANSITIONS[module.state]:
             raise IllegalTransition(module.module_id, module.state, target)
         module.state = target
+
+    def _requery(self, module: Module) -> None:
+        """Back to QUERYING (a lost, reset or failed module) and a new bring-up."""
+        self._transition(module, ModuleState.QUERYING)
+        module.requeried += 1
+        self.counters.modules_requeried += 1
+        self._start_bring_up(module)
 
     def _start_bring_up(self, module: Module) -> None:
         old = self._bring_up.get(module.module_id)
@@ -528,23 +613,36 @@ class Master:
             raise CommandFailed("no description")
         module.description = p.Description.decode(raw)
         self._transition(module, ModuleState.CONFIGURING)
-        module.drivers, module.routes = [], {}
+        module.drivers, module.element_drivers = [], {}
         for index, element in enumerate(module.description.elements):
             driver = self._driver_for(element.kind_name)
             if driver is None:
                 continue
             if driver not in module.drivers:
                 module.drivers.append(driver)
-                for op in driver.opcodes:
-                    module.routes.setdefault(op, []).append(driver)
+            module.element_drivers[index] = driver
             await driver.configure(module, index, element)
-        module.disabling = False
+        module.disabling, module.enabling = False, True
         await self.command(module.module_id, p.enable(p.MODULE, True))
+        # the ACK made it ONLINE already (_go_online)
+
+    def _go_online(self, module: Module) -> None:
+        """The module acknowledged ENABLE: ONLINE now, drivers told, status published."""
+        if not module.enabling or module.state not in (
+            ModuleState.CONFIGURING,
+            ModuleState.DISABLED,
+        ):
+            return
+        module.enabling = False
         self._transition(module, ModuleState.ONLINE)
         module.online_since = time.monotonic()
         module.announced = True
         for driver in module.drivers:
-            driver.on_online(module)
+            try:
+                driver.on_online(module)
+            except Exception:
+                self.counters.driver_errors += 1
+                log.exception("robocan: driver %s failed going online", type(driver).__name__)
         self._publish_status(module)
 
     def _driver_for(self, kind: str) -> Driver | None:
@@ -565,6 +663,8 @@ class Master:
             task.cancel()
         was_online = module.state is ModuleState.ONLINE
         self._transition(module, ModuleState.LOST)
+        module.lost += 1
+        self.counters.modules_lost += 1
         module.online_since = None
         if was_online:
             for driver in module.drivers:
@@ -663,15 +763,17 @@ class Master:
         target = ModuleState.ONLINE if on else ModuleState.DISABLED
         if target not in TRANSITIONS[module.state]:
             raise IllegalTransition(module_id, module.state, target)
-        module.disabling = not on
-        await self.command(module_id, p.enable(p.MODULE, on))
+        module.disabling, module.enabling = not on, on
+        try:
+            await self.command(module_id, p.enable(p.MODULE, on))
+        finally:
+            module.enabling = False
+        if on:
+            return  # the ACK made it ONLINE (_go_online)
         self._transition(module, target)
         for driver in module.drivers:
             try:
-                if on:
-                    driver.on_online(module)
-                else:
-                    driver.on_lost(module, "disabled by the master")
+                driver.on_lost(module, "disabled by the master")
             except Exception:
                 self.counters.driver_errors += 1
                 log.exception("robocan: driver %s failed", type(driver).__name__)
@@ -680,7 +782,16 @@ class Master:
     # --- queries for the agent and tests ----------------------------------------------
 
     def module_table(self) -> list[dict[str, Any]]:
+        """One row per module: ID, name, kind, firmware, state and its counters."""
         return [m.to_dict() for m in sorted(self.modules.values(), key=lambda m: m.module_id)]
+
+    def status(self) -> dict[str, Any]:
+        """What this master knows, for people: its bus, counters and module table."""
+        return {
+            "bus": self.name,
+            "counters": dataclasses.asdict(self.counters),
+            "modules": self.module_table(),
+        }
 
     def online(self) -> set[int]:
         return {m.module_id for m in self.modules.values() if m.state is ModuleState.ONLINE}

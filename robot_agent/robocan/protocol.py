@@ -12,6 +12,9 @@ from dataclasses import dataclass, field
 
 __all__ = [
     "BROADCAST_ID",
+    "BROADCAST_OPS",
+    "DATA_KINDS",
+    "MASTER_OPS",
     "MAX_BLOCK",
     "MAX_MODULE_ID",
     "Description",
@@ -95,11 +98,19 @@ FRAME_LENGTH: dict[int, tuple[int, int]] = {
     Op.SET_OUTPUT: (4, 4),
     Op.SET_CHARGING: (2, 2),
     Op.STOP: (1, 1),
-    Op.BLOCK_START: (5, 8),
+    Op.BLOCK_START: (4, 8),
     Op.BLOCK_DATA: (3, 8),
     Op.BLOCK_FLOW: (4, 4),
     Op.BLOCK_END: (3, 3),
 }
+
+
+MASTER_OPS = frozenset(range(0x80, 0xF0))
+"""Opcodes only a master sends (0x80-0xEF). On a slave's even ID they are bad frames: counted,
+dropped, and never the first frame of a module entry."""
+
+
+BROADCAST_OPS = frozenset({Op.MASTER_START, Op.STOP})  # the only opcodes on ID 0x001
 
 
 class SlaveState(enum.IntEnum):
@@ -130,6 +141,7 @@ class EndStatus(enum.IntEnum):
     TOO_LONG = 3
     BUSY = 4  # a block is already in transfer
     UNKNOWN_TYPE = 5
+    REFUSED = 6  # arrived whole, but its content is not acceptable (a bad CONFIG)
 
 
 class BlockType(enum.IntEnum):
@@ -159,6 +171,19 @@ class ElementKind(enum.IntEnum):
     BATTERY = 9  # component: battery monitor and charger contact
 
 
+DATA_KINDS: dict[int, frozenset[int]] = {
+    Op.ENCODER: frozenset({ElementKind.MOTOR}),
+    Op.BUMPERS: frozenset({ElementKind.BUMPER}),
+    Op.SONAR: frozenset({ElementKind.SONAR}),
+    Op.SERVO: frozenset({ElementKind.SERVO}),
+    Op.INPUTS: frozenset({ElementKind.TOUCH}),
+    Op.BATTERY: frozenset({ElementKind.BATTERY}),
+    Op.FAULT: frozenset(ElementKind),
+}
+"""Data frames and the element kinds they may name. Byte 1 is the element number, except in
+BATTERY, which belongs to the module's first battery element."""
+
+
 class Param(enum.IntEnum):
     """SET_PARAM parameter numbers (value: int32)."""
 
@@ -173,6 +198,42 @@ class Param(enum.IntEnum):
 
 
 MODULE = 0xFF  # element number meaning "the whole module"
+
+PARAM_RANGES: dict[int, tuple[int, int]] = {
+    Param.WATCHDOG_MS: (10, 10_000),
+    Param.PUBLISH_MS: (10, 60_000),
+    Param.COMMAND_TIMEOUT_MS: (50, 10_000),  # the motor safety cannot be switched off
+    Param.TICKS_PER_M: (1, 10_000_000),
+    Param.KP: (0, 1_000_000),  # gains x 1000: 0 .. 1000
+    Param.KI: (0, 1_000_000),
+    Param.KD: (0, 1_000_000),
+    Param.MAX_ACCEL: (1, 20_000),  # mm/s^2
+}
+"""Values a slave accepts (inclusive); outside them it answers BAD_VALUE."""
+
+ELEMENT_PARAMS: dict[int, frozenset[int]] = {
+    ElementKind.MOTOR: frozenset({Param.PUBLISH_MS, Param.TICKS_PER_M}),
+    ElementKind.PID_VELOCITY: frozenset(
+        {Param.COMMAND_TIMEOUT_MS, Param.KP, Param.KI, Param.KD, Param.MAX_ACCEL}
+    ),
+    ElementKind.SONAR: frozenset({Param.PUBLISH_MS}),
+    ElementKind.BATTERY: frozenset({Param.PUBLISH_MS}),
+}
+"""Parameters each element kind has; any other is answered BAD_PARAM. Module-wide (element
+0xFF): WATCHDOG_MS only."""
+
+DEFAULT_PUBLISH_MS: dict[int, int] = {
+    ElementKind.MOTOR: 100,
+    ElementKind.SONAR: 500,
+    ElementKind.BATTERY: 1000,
+}
+"""Publishing period of the periodic data elements until the master sets PUBLISH_MS."""
+
+PARAM_DEFAULTS: dict[int, int] = {
+    Param.COMMAND_TIMEOUT_MS: 1000,
+    Param.TICKS_PER_M: 20000,
+    Param.MAX_ACCEL: 2000,
+}
 
 
 class Role(enum.IntEnum):
@@ -263,18 +324,30 @@ def parse_mask(data: bytes) -> tuple[int, int]:
     return element, mask
 
 
-SONAR_UNIT_M = 0.02  # one range byte = 2 cm, 255 = nothing in range (>= 5.1 m)
+SONAR_UNIT_M = 0.02  # one range byte = 2 cm: 0 .. 254 = 0 .. 5.08 m
+SONAR_NOTHING = 255  # no echo: nothing in range (None on board)
 
 
-def sonar(element: int, first: int, ranges_m: list[float]) -> bytes:
+def sonar(element: int, first: int, ranges_m: list[float | None]) -> bytes:
+    """``None``, or a range beyond 5.08 m, is sent as 255 = nothing in range."""
     if not 1 <= len(ranges_m) <= 5:
         raise ProtocolError("a sonar frame carries 1..5 ranges")
-    raw = [max(0, min(255, round(r / SONAR_UNIT_M))) for r in ranges_m]
+    raw = [
+        SONAR_NOTHING
+        if r is None or round(r / SONAR_UNIT_M) >= SONAR_NOTHING
+        else max(0, round(r / SONAR_UNIT_M))
+        for r in ranges_m
+    ]
     return bytes([Op.SONAR, element, first, *raw])
 
 
-def parse_sonar(data: bytes) -> tuple[int, int, list[float]]:
-    return data[1], data[2], [b * SONAR_UNIT_M for b in data[3:]]
+def parse_sonar(data: bytes) -> tuple[int, int, list[float | None]]:
+    """Ranges in metres; 255 = nothing in range = None (not 5.1 m)."""
+    return (
+        data[1],
+        data[2],
+        [None if b == SONAR_NOTHING else b * SONAR_UNIT_M for b in data[3:]],
+    )
 
 
 def servo(element: int, index: int, position_deg: float, in_position: bool) -> bytes:
@@ -339,6 +412,28 @@ class Description:
     name: str
     firmware: tuple[int, int] = (1, 0)
     elements: tuple[Element, ...] = field(default_factory=tuple)
+
+    def numbering(self, kind: int) -> dict[int, tuple[int, int]]:
+        """Element number -> (first, count) of its instances when the module's instances of
+        ``kind`` are numbered across its elements of that kind, in element order (a second
+        touch element's first input follows the first element's last)."""
+        out, total = {}, 0
+        for number, element in enumerate(self.elements):
+            if element.kind == kind:
+                out[number] = (total, element.count)
+                total += element.count
+        return out
+
+    def data_element(self, op: int, data: bytes) -> int | None:
+        """The element a data frame belongs to, or None when it names no element of a kind
+        that sends it (a bad frame)."""
+        kinds = DATA_KINDS[op]
+        if op == Op.BATTERY:
+            return next((i for i, e in enumerate(self.elements) if e.kind in kinds), None)
+        number = data[1]
+        if number < len(self.elements) and self.elements[number].kind in kinds:
+            return number
+        return None
 
     def encode(self) -> bytes:
         name = self.name.encode("ascii")

@@ -33,6 +33,7 @@ from robot_agent.robocan.busopen import BusReader, open_bus
 
 __all__ = [
     "BELLBOT",
+    "FLAWS",
     "BatteryMonitor",
     "HeadIo",
     "MotorController",
@@ -45,6 +46,15 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 TICK_S = 0.02  # physics step of the simulated firmware while something moves
+BLOCK_OPS = frozenset({p.Op.BLOCK_START, p.Op.BLOCK_DATA, p.Op.BLOCK_FLOW, p.Op.BLOCK_END})
+FLAWS: dict[str, str] = {
+    "accepts_any_value": "SET_PARAM takes values outside their range (no BAD_VALUE)",
+    "no_command_timeout": "a motor keeps its last velocity when the commands stop",
+    "answers_broadcast": "acts on any opcode sent to the broadcast ID 0x001",
+    "no_state_on_enable": "no BUMPERS / INPUTS frame after the ACK to ENABLE",
+}
+"""Deliberate defects a simulated module can be built with (``flaws=``), to prove that the
+conformance checks catch them."""
 DUE_EPS_S = 0.001  # a frame due this close to now goes out in this wake-up
 
 
@@ -132,7 +142,7 @@ class SimHost:
             can_id = msg.arbitration_id
             if can_id == p.BROADCAST_ID:
                 for module in list(self.modules.values()):
-                    module._on_can(msg)
+                    module._on_can(msg, broadcast=True)
             else:
                 addressed = self.modules.get(can_id - 1)
                 if addressed is not None:
@@ -181,9 +191,20 @@ class SimModule:
 
     description: p.Description
 
-    def __init__(self, bus_spec: str, module_id: int, *, time_scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        bus_spec: str,
+        module_id: int,
+        *,
+        time_scale: float = 1.0,
+        flaws: frozenset[str] = frozenset(),
+    ) -> None:
         if not p.is_module_id(module_id):
             raise ValueError(f"module id 0x{module_id:X} is not an even ID in 0x02..0x7FE")
+        unknown = set(flaws) - set(FLAWS)
+        if unknown:
+            raise ValueError(f"unknown flaws {sorted(unknown)}; known: {', '.join(FLAWS)}")
+        self.flaws = frozenset(flaws)
         self.bus_spec = bus_spec
         self.module_id = module_id
         self.time_scale = time_scale
@@ -198,6 +219,7 @@ class SimModule:
         self._own_host = False
         self._sender: BlockSender | None = None
         self._receiver: BlockReceiver | None = None
+        self._receiver_seen = 0.0  # last frame of the block being received (its time-out)
         self._last_step = 0.0
         self.next_watchdog = 0.0
         self.running = False
@@ -247,6 +269,12 @@ class SimModule:
         if now + DUE_EPS_S >= self.next_watchdog:
             self.send(p.watchdog(self.state))
             self.next_watchdog = next_slot(self.next_watchdog, self.watchdog_s, now)
+        receiver = self._receiver
+        if receiver is not None and now + DUE_EPS_S >= self._receiver_seen + p.BLOCK_TIMEOUT_S:
+            self._receiver_seen = now  # no data frame for 250 ms: ask again, or give up
+            for frame in receiver.on_timeout():
+                self.send(frame)
+            self._finish_block()
         self.advance(now)
 
     def advance(self, now: float) -> None:
@@ -256,6 +284,8 @@ class SimModule:
 
     def next_due(self) -> float:
         """The monotonic time of the next frame this module owes without being asked."""
+        if self._receiver is not None:
+            return min(self.next_watchdog, self._receiver_seen + p.BLOCK_TIMEOUT_S)
         return self.next_watchdog
 
     @property
@@ -281,8 +311,24 @@ class SimModule:
     def on_stop(self) -> None:
         """Broadcast STOP or MASTER_START: stop every actuator."""
 
-    def publish_period(self, element: int, default_ms: int) -> float:
-        return self.params.get((element, p.Param.PUBLISH_MS), default_ms) / 1000
+    def on_enabled(self) -> None:
+        """Just enabled (after the ACK): report the state of BUMPERS / INPUTS elements."""
+
+    def accept_config(self, element: int, number: int, data: bytes) -> bool:
+        """Judge a CONFIG block that arrived whole (False = BLOCK_END REFUSED)."""
+        return False
+
+    def param(self, element: int, param: int) -> int:
+        """A parameter's value: set by the master, or its power-on default."""
+        value = self.params.get((element, param))
+        if value is not None:
+            return value
+        if param == p.Param.PUBLISH_MS:
+            return p.DEFAULT_PUBLISH_MS[self.description.elements[element].kind]
+        return p.PARAM_DEFAULTS.get(param, 0)
+
+    def publish_period(self, element: int) -> float:
+        return self.param(element, p.Param.PUBLISH_MS) / 1000
 
     @property
     def enabled(self) -> bool:
@@ -290,7 +336,7 @@ class SimModule:
 
     # --- receive path -----------------------------------------------------------------
 
-    def _on_can(self, msg: can.Message) -> None:
+    def _on_can(self, msg: can.Message, broadcast: bool = False) -> None:
         if not self.running or msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
             return
         data = bytes(msg.data)
@@ -298,6 +344,10 @@ class SimModule:
             op = p.check_length(data)
         except p.ProtocolError:
             return  # firmware ignores what it cannot parse
+        if op not in p.MASTER_OPS and op not in BLOCK_OPS:
+            return  # a slave opcode sent to a slave
+        if broadcast and op not in p.BROADCAST_OPS and "answers_broadcast" not in self.flaws:
+            return  # only MASTER_START and STOP are broadcast; anything else there is ignored
         try:
             self.advance(time.monotonic())  # the physics up to now, under the old command
             self._dispatch(op, data)
@@ -316,11 +366,15 @@ class SimModule:
                         continue
                     self.send(frame)
         elif op == p.Op.BLOCK_START:
-            self._receiver = BlockReceiver(data)
+            self._receiver = BlockReceiver(
+                data, types=(p.BlockType.CONFIG,), accept=self._accept_block
+            )
+            self._receiver_seen = time.monotonic()
             self.send(self._receiver.first_reply())
             self._finish_block()
         elif op == p.Op.BLOCK_DATA:
             if self._receiver is not None:
+                self._receiver_seen = time.monotonic()
                 for frame in self._receiver.on_data(data):
                     self.send(frame)
                 self._finish_block()
@@ -330,43 +384,68 @@ class SimModule:
             self.send(p.ack(op, element, status))
         elif op == p.Op.SET_MODE:
             element, mode = data[1], data[2]
-            ok = element < len(self.description.elements) and (
-                self.description.elements[element].modes & (1 << mode)
-            )
-            if ok:
+            status = self._set_mode(element, mode)
+            if status is p.AckStatus.OK:
                 self.modes[element] = mode
-            self.send(p.ack(op, element, p.AckStatus.OK if ok else p.AckStatus.BAD_VALUE))
+            self.send(p.ack(op, element, status))
         elif op == p.Op.ENABLE:
-            if data[1] == p.MODULE:
-                self.state = p.SlaveState.ENABLED if data[2] else p.SlaveState.DISABLED
-                if not data[2]:
-                    self.on_stop()
-            self.send(p.ack(op, data[1]))
+            self._enable(data[1], data[2])
         elif op == p.Op.MASTER_START:
             self.state = p.SlaveState.DISABLED
             self.on_stop()
         elif op == p.Op.STOP:
             self.on_stop()
-        else:
+        elif op == p.Op.SET_CHARGING:
             reply = self.on_command(op, data)
-            if reply is not None:
-                element = data[1] if len(data) > 1 and op != p.Op.SET_CHARGING else p.MODULE
-                self.send(p.ack(op, element, reply))
+            self.send(p.ack(op, p.MODULE, p.AckStatus.UNSUPPORTED if reply is None else reply))
+        else:
+            self.on_command(op, data)  # actuator commands are not acknowledged
+
+    def _enable(self, element: int, on: int) -> None:
+        """ENABLE of the module; one element alone is not supported by our firmware."""
+        if element != p.MODULE:
+            known = element < len(self.description.elements)
+            status = p.AckStatus.UNSUPPORTED if known else p.AckStatus.UNKNOWN_ELEMENT
+            self.send(p.ack(p.Op.ENABLE, element, status))
+            return
+        self.state = p.SlaveState.ENABLED if on else p.SlaveState.DISABLED
+        if not on:
+            self.on_stop()
+        self.send(p.ack(p.Op.ENABLE, element))
+        if on and "no_state_on_enable" not in self.flaws:
+            self.on_enabled()
+
+    def _set_mode(self, element: int, mode: int) -> p.AckStatus:
+        if element >= len(self.description.elements):
+            return p.AckStatus.UNKNOWN_ELEMENT
+        modes = self.description.elements[element].modes
+        if not modes:
+            return p.AckStatus.UNSUPPORTED
+        return p.AckStatus.OK if mode < 8 and modes & (1 << mode) else p.AckStatus.BAD_VALUE
 
     def _set_param(self, element: int, param: int, value: int) -> p.AckStatus:
         if element == p.MODULE:
-            if param == p.Param.WATCHDOG_MS and 10 <= value <= 10000:
-                self.watchdog_s = value / 1000
-                return p.AckStatus.OK
-            return p.AckStatus.BAD_PARAM
+            if param != p.Param.WATCHDOG_MS:
+                return p.AckStatus.BAD_PARAM
+            low, high = p.PARAM_RANGES[param]
+            if not low <= value <= high:
+                return p.AckStatus.BAD_VALUE
+            self.watchdog_s = value / 1000
+            return p.AckStatus.OK
         if element >= len(self.description.elements):
             return p.AckStatus.UNKNOWN_ELEMENT
-        if param == p.Param.PUBLISH_MS and not 10 <= value <= 60000:
+        if param not in p.ELEMENT_PARAMS.get(self.description.elements[element].kind, ()):
+            return p.AckStatus.BAD_PARAM
+        low, high = p.PARAM_RANGES[param]
+        if not low <= value <= high and "accepts_any_value" not in self.flaws:
             return p.AckStatus.BAD_VALUE
         status = self.on_param(element, param, value)
         if status is p.AckStatus.OK:
             self.params[(element, param)] = value
         return status
+
+    def _accept_block(self, block_type: int, data: bytes) -> bool:
+        return len(data) >= 2 and self.accept_config(data[0], data[1], data[2:])
 
     def _finish_block(self) -> None:
         receiver = self._receiver
@@ -382,11 +461,12 @@ class SimModule:
 class MotorController(SimModule):
     """Motor + encoder, a velocity PID agent and four bumpers (the paper's dsPIC module)."""
 
-    def __init__(self, bus_spec: str, module_id: int, *, time_scale: float = 1.0) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """As ``SimModule`` (bus_spec, module_id, time_scale=, flaws=)."""
+        super().__init__(*args, **kwargs)
         self.description = p.Description(
             kind=p.ModuleKind.MOTOR_CONTROLLER,
-            name=f"motor_controller_{module_id:02x}",
+            name=f"motor_controller_{self.module_id:02x}",
             firmware=(2, 1),
             elements=(
                 p.Element(p.ElementKind.MOTOR, p.Role.COMPONENT),
@@ -404,7 +484,7 @@ class MotorController(SimModule):
 
     @property
     def ticks_per_m(self) -> int:
-        return self.params.get((0, p.Param.TICKS_PER_M), 20000)
+        return self.param(0, p.Param.TICKS_PER_M)
 
     def on_command(self, op: int, data: bytes) -> p.AckStatus | None:
         if op == p.Op.SET_VELOCITY:
@@ -420,16 +500,17 @@ class MotorController(SimModule):
         self.velocity = 0.0
 
     def step(self, now: float, dt_sim: float) -> None:
-        timeout = self.params.get((1, p.Param.COMMAND_TIMEOUT_MS), 1000) / 1000
-        if self.target and now - self.last_command > timeout:
+        timeout = self.param(1, p.Param.COMMAND_TIMEOUT_MS) / 1000
+        timed_out = now - self.last_command > timeout and "no_command_timeout" not in self.flaws
+        if self.target and timed_out:
             self.target = 0.0  # the agent's own safety time-out
-        accel = self.params.get((1, p.Param.MAX_ACCEL), 2000) / 1000
+        accel = self.param(1, p.Param.MAX_ACCEL) / 1000
         change = self.target - self.velocity
         limit = accel * dt_sim
         self.velocity += max(-limit, min(limit, change))
         self.distance += self.velocity * dt_sim
         if self.enabled and self.due(self.next_publish, now):
-            self.next_publish = next_slot(self.next_publish, self.publish_period(0, 100), now)
+            self.next_publish = next_slot(self.next_publish, self.publish_period(0), now)
             ticks = round(self.distance * self.ticks_per_m)
             self.send(p.encoder(0, ticks, self.velocity))
 
@@ -442,27 +523,43 @@ class MotorController(SimModule):
         return min(due, self.next_publish) if self.enabled else due
 
     def press_bumper(self, index: int, pressed: bool = True) -> None:
-        """A physical contact (tests): the bumper frame goes out on the change."""
+        """A physical contact (tests): the bumper frame goes out on the change, and a new
+        contact stops this controller's motor by itself (it does not wait for the master)."""
+        if pressed and not self.bumpers & (1 << index):
+            self.target = 0.0
         self.bumpers = self.bumpers | (1 << index) if pressed else self.bumpers & ~(1 << index)
         if self.enabled:
             self.send(p.mask_frame(p.Op.BUMPERS, 2, self.bumpers))
 
+    def on_enabled(self) -> None:
+        self.send(p.mask_frame(p.Op.BUMPERS, 2, self.bumpers))
+
 
 class SonarRing(SimModule):
-    """Eight sonars with a firing-sequence agent and eight bumpers (the PIC18 module)."""
+    """Sonars (eight by default) with a firing-sequence agent and eight bumpers (the PIC18
+    module). It fires the sonars its firing order lists (all of them, in index order, until
+    the master sends one); a sonar it does not fire reports 255, nothing in range."""
 
-    def __init__(self, bus_spec: str, module_id: int, *, time_scale: float = 1.0) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+    def __init__(
+        self,
+        bus_spec: str,
+        module_id: int,
+        *,
+        time_scale: float = 1.0,
+        sonars: int = 8,
+        flaws: frozenset[str] = frozenset(),
+    ) -> None:
+        super().__init__(bus_spec, module_id, time_scale=time_scale, flaws=flaws)
         self.description = p.Description(
             kind=p.ModuleKind.SONAR_RING,
             name=f"sonar_ring_{module_id:02x}",
             elements=(
-                p.Element(p.ElementKind.SONAR, p.Role.COMPONENT, 8),
+                p.Element(p.ElementKind.SONAR, p.Role.COMPONENT, sonars),
                 p.Element(p.ElementKind.FIRING_SEQUENCE, p.Role.AGENT, 1, 0b11),
                 p.Element(p.ElementKind.BUMPER, p.Role.COMPONENT, 8),
             ),
         )
-        self.ranges = [3.0] * 8
+        self.ranges: list[float | None] = [3.0] * sonars
         self.bumpers = 0
         self.next_publish = 0.0
 
@@ -470,11 +567,25 @@ class SonarRing(SimModule):
     def firing(self) -> bool:
         return self.enabled and self.modes.get(1) == 1
 
+    def accept_config(self, element: int, number: int, data: bytes) -> bool:
+        """Config 0 of the firing agent: each sonar index at most once, all of them real."""
+        count = len(self.ranges)
+        return (
+            element == 1
+            and number == 0
+            and 1 <= len(data) <= count
+            and len(set(data)) == len(data)
+            and max(data) < count
+        )
+
     def step(self, now: float, dt_sim: float) -> None:
         if self.firing and self.due(self.next_publish, now):
-            self.next_publish = next_slot(self.next_publish, self.publish_period(0, 500), now)
-            self.send(p.sonar(0, 0, self.ranges[:5]))
-            self.send(p.sonar(0, 5, self.ranges[5:]))
+            self.next_publish = next_slot(self.next_publish, self.publish_period(0), now)
+            order = self.firing_sequence
+            fired = set(order) if order is not None else set(range(len(self.ranges)))
+            values = [r if i in fired else None for i, r in enumerate(self.ranges)]
+            for first in range(0, len(values), 5):
+                self.send(p.sonar(0, first, values[first : first + 5]))
 
     def next_due(self) -> float:
         due = super().next_due()
@@ -485,6 +596,9 @@ class SonarRing(SimModule):
         if self.enabled:
             self.send(p.mask_frame(p.Op.BUMPERS, 2, self.bumpers))
 
+    def on_enabled(self) -> None:
+        self.send(p.mask_frame(p.Op.BUMPERS, 2, self.bumpers))
+
     @property
     def firing_sequence(self) -> bytes | None:
         return self.configs.get((1, 0))
@@ -494,12 +608,14 @@ class HeadIo(SimModule):
     """Ten RC servos, six capacitive touch inputs and four outputs (eye LEDs...)."""
 
     SERVOS = 10
+    TOP_SPEED = 360.0  # degrees/s: what SET_SERVO speed 0 means on this module
 
-    def __init__(self, bus_spec: str, module_id: int, *, time_scale: float = 1.0) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """As ``SimModule`` (bus_spec, module_id, time_scale=, flaws=)."""
+        super().__init__(*args, **kwargs)
         self.description = p.Description(
             kind=p.ModuleKind.HEAD_IO,
-            name=f"head_io_{module_id:02x}",
+            name=f"head_io_{self.module_id:02x}",
             elements=(
                 p.Element(p.ElementKind.SERVO, p.Role.COMPONENT, self.SERVOS),
                 p.Element(p.ElementKind.TOUCH, p.Role.COMPONENT, 6),
@@ -519,7 +635,7 @@ class HeadIo(SimModule):
             _, index, position, speed = p.parse_set_servo(data)
             if index < self.SERVOS:
                 self.target[index] = position
-                self.speed[index] = speed or 90.0
+                self.speed[index] = speed or self.TOP_SPEED  # 0 = as fast as it goes
                 self.next_publish[index] = 0.0
                 self.report[index] = True  # confirmed even when it is already there
         elif op == p.Op.SET_OUTPUT and self.enabled:
@@ -553,6 +669,9 @@ class HeadIo(SimModule):
         moving = any(pos != target for pos, target in zip(self.position, self.target, strict=True))
         return moving or (self.enabled and any(self.report))
 
+    def on_enabled(self) -> None:
+        self.send(p.mask_frame(p.Op.INPUTS, 1, self.touch_mask))
+
     def touch(self, index: int, pressed: bool = True) -> None:
         self.touch_mask = (
             self.touch_mask | (1 << index) if pressed else self.touch_mask & ~(1 << index)
@@ -575,8 +694,9 @@ class BatteryMonitor(SimModule):
         *,
         time_scale: float = 1.0,
         motion: Callable[[], float] = lambda: 0.0,
+        flaws: frozenset[str] = frozenset(),
     ) -> None:
-        super().__init__(bus_spec, module_id, time_scale=time_scale)
+        super().__init__(bus_spec, module_id, time_scale=time_scale, flaws=flaws)
         self.description = p.Description(
             kind=p.ModuleKind.BATTERY_MONITOR,
             name=f"battery_{module_id:02x}",
@@ -607,7 +727,7 @@ class BatteryMonitor(SimModule):
             drain = self.MOVING_DRAIN if moving else self.IDLE_DRAIN
             self.level = max(0.0, self.level - drain * dt_sim)
         if self.enabled and self.due(self.next_publish, now):
-            self.next_publish = next_slot(self.next_publish, self.publish_period(0, 1000), now)
+            self.next_publish = next_slot(self.next_publish, self.publish_period(0), now)
             self.send(p.battery(self.level, 22.0 + 4.0 * self.level, self.charging))
 
     def next_due(self) -> float:
@@ -635,17 +755,22 @@ class Simulator:
         *,
         time_scale: float = 1.0,
         layout: dict[int, str] | None = None,
+        flaws: dict[int, frozenset[str]] | None = None,
     ) -> None:
         self.bus_spec = bus_spec
         self.time_scale = time_scale
         self.layout = dict(BELLBOT if layout is None else layout)
+        self.flaws = dict(flaws or {})
         self.modules: dict[int, SimModule] = {}
         self.battery_level: float | None = None
         self.host = SimHost(bus_spec)
 
     def _make(self, module_id: int) -> SimModule:
         kind = self.layout.get(module_id)
-        kwargs: dict[str, Any] = {"time_scale": self.time_scale}
+        kwargs: dict[str, Any] = {
+            "time_scale": self.time_scale,
+            "flaws": self.flaws.get(module_id, frozenset()),
+        }
         if kind == "motor":
             return MotorController(self.bus_spec, module_id, **kwargs)
         if kind == "sonar":

@@ -8,6 +8,7 @@ and, when simulating, the simulated modules on the first (virtual) bus in this p
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import copy
 import time
 from pathlib import Path
@@ -23,7 +24,9 @@ from robot_agent.robocan.drivers import DriverConfig, DriverRegistry
 from robot_agent.robocan.master import Master
 from robot_agent.robocan.sim import BELLBOT, Simulator
 
-__all__ = ["RoboCanStack", "start_master"]
+__all__ = ["STATUS_PERIOD_S", "RoboCanStack", "start_master"]
+
+STATUS_PERIOD_S = 1.0  # robocan_status on the on-board bus
 
 
 class _LockedLogger(can.Listener):
@@ -61,6 +64,7 @@ class RoboCanStack:
         registry: DriverRegistry | None = None,
         record: str | Path | None = None,
         layout: dict[int, str] | None = None,
+        status_period_s: float = STATUS_PERIOD_S,
     ) -> None:
         self.endpoint = endpoint
         self.bus_specs = list(buses or ["virtual:R1"])
@@ -82,6 +86,8 @@ class RoboCanStack:
         self._buses: list[can.BusABC] = []
         self._recorder: _LockedLogger | None = None
         self._unsubscribe: list[Any] = []
+        self.status_period_s = status_period_s
+        self._status_task: asyncio.Task[None] | None = None
 
     async def __aenter__(self) -> RoboCanStack:
         await self.start()
@@ -101,6 +107,7 @@ class RoboCanStack:
                 self._recorder = _LockedLogger(self.record)
             for spec in self.bus_specs:
                 await self.start_master(spec)
+            self._status_task = asyncio.create_task(self._publish_status(), name="robocan-status")
             if self.simulator is not None:
                 await self.simulator.start()
                 self._unsubscribe.append(self.endpoint.subscribe("module_plug", self._on_plug))
@@ -115,7 +122,12 @@ class RoboCanStack:
         bus = open_bus(spec)
         self._buses.append(bus)
         master = Master(
-            bus, self.endpoint, config=self.config, registry=self.registry, recorder=self._recorder
+            bus,
+            self.endpoint,
+            config=self.config,
+            registry=self.registry,
+            recorder=self._recorder,
+            name=spec,
         )
         self.masters.append(master)
         await master.start()
@@ -133,6 +145,11 @@ class RoboCanStack:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
+        if self._status_task is not None:
+            self._status_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._status_task
+            self._status_task = None
         # Masters first: a robot shutting down must not report every module lost and a base
         # fault on its way out.
         for master in self.masters:
@@ -193,6 +210,18 @@ class RoboCanStack:
 
     def module_table(self) -> list[dict[str, Any]]:
         return [row for master in self.masters for row in master.module_table()]
+
+    def status(self) -> dict[str, Any]:
+        """The payload of ``robocan_status``: per bus, the master's counters and its module
+        table (kind, firmware, state, per-module counters). docs/messages.md."""
+        return {"robot": self.config.robot, "buses": [m.status() for m in self.masters]}
+
+    async def _publish_status(self) -> None:
+        """``robocan_status`` on the on-board bus every ``status_period_s`` (for the staff
+        console); a period, not a reaction: nothing waits on it."""
+        while True:
+            await asyncio.sleep(self.status_period_s)
+            self.endpoint.publish("robocan_status", self.status())
 
     def online(self) -> set[int]:
         return set().union(*(m.online() for m in self.masters)) if self.masters else set()

@@ -5,15 +5,20 @@ from __future__ import annotations
 import asyncio
 import itertools
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
+from typing import TypeVar
 
 import pytest
 
 from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message
+from robot_agent.robocan.sim import SimModule
 from robot_agent.robocan.stack import RoboCanStack
 
+from .rawslave import Tap
+
 _channels = itertools.count()
+M = TypeVar("M", bound=SimModule)
 
 
 class Watch:
@@ -54,6 +59,14 @@ class Watch:
         return lambda m: m.payload["module_id"] == module_id and m.payload["state"] == state
 
 
+def sim_module(stack: RoboCanStack, module_id: int, cls: type[M]) -> M:
+    """The simulated module behind an ID, as its class."""
+    assert stack.simulator is not None
+    module = stack.simulator.modules[module_id]
+    assert isinstance(module, cls)
+    return module
+
+
 async def wait_until(condition: Callable[[], bool], timeout: float = 10.0) -> None:
     """Poll a condition that no message announces (state inside a simulated module)."""
     deadline = time.monotonic() + timeout
@@ -83,3 +96,11 @@ async def stack(onboard: Bus, channel: str, watch: Watch) -> AsyncIterator[RoboC
     async with RoboCanStack(onboard.endpoint("robocan"), [channel], time_scale=10.0) as s:
         await s.wait_online()
         yield s
+
+
+@pytest.fixture
+def tap(channel: str) -> Iterator[Tap]:
+    """Every frame on the test's channel (the ``stack`` fixture's bus)."""
+    t = Tap(channel)
+    yield t
+    t.close()

@@ -61,7 +61,7 @@ def test_too_many_losses_abort_the_block() -> None:
     sender.on_frame(receiver.first_reply())
     for _ in range(4):
         replies = receiver.on_timeout()
-    assert replies[0][0] == Op.BLOCK_END and replies[0][1] == EndStatus.SEQUENCE
+    assert replies[0][0] == Op.BLOCK_END and replies[0][1] == EndStatus.TIMEOUT
     assert receiver.state is BlockState.FAILED
     sender.on_frame(replies[0])
     assert sender.state is BlockState.FAILED
@@ -73,3 +73,38 @@ def test_too_long_blocks_are_refused_on_both_sides() -> None:
     start = bytes([Op.BLOCK_START, 2, 0xFF, 0xFF, 0, 0, 0, 0])
     receiver = BlockReceiver(start)
     assert receiver.first_reply() == bytes([Op.BLOCK_END, EndStatus.TOO_LONG, 2])
+
+
+def test_re_requests_count_per_block_not_per_gap() -> None:
+    """Three re-requests in one block, whatever their cause; the fourth gap ends it."""
+    sender = BlockSender(0x02, bytes(200))
+    receiver = BlockReceiver(sender.start())
+    frames = sender.on_frame(receiver.first_reply())
+    replies: list[bytes] = []
+    for gap in (2, 4, 6, 8):  # four separate gaps, each frame lost once
+        frames = [f for f in frames if f[1] != gap]
+        replies = []
+        for frame in frames:
+            replies += receiver.on_data(frame)
+        frames = [f for r in replies for f in sender.on_frame(r)]
+        if receiver.state is not BlockState.ACTIVE:
+            break
+    assert receiver.retries == 4 and receiver.state is BlockState.FAILED
+    assert replies[-1] == bytes([Op.BLOCK_END, EndStatus.SEQUENCE, 0x02])
+
+
+def test_an_empty_block_and_a_refused_block_end_at_once() -> None:
+    empty = BlockSender(0x02, b"")
+    assert len(empty.start()) == 4
+    receiver = BlockReceiver(empty.start())
+    assert receiver.first_reply() == bytes([Op.BLOCK_END, EndStatus.OK, 0x02])
+    assert receiver.state is BlockState.DONE and receiver.data == b""
+    # content judged once the block is whole: REFUSED instead of OK, and nothing kept
+    sender = BlockSender(0x02, bytes(30))
+    receiver = BlockReceiver(sender.start(), accept=lambda kind, data: data[0] != 0)
+    replies = [receiver.first_reply()]
+    while receiver.state is BlockState.ACTIVE:
+        replies = [r for f in sender.on_frame(replies[-1]) for r in receiver.on_data(f)] or replies
+    assert replies[-1] == bytes([Op.BLOCK_END, EndStatus.REFUSED, 0x02])
+    sender.on_frame(replies[-1])
+    assert sender.state is BlockState.FAILED and sender.end_status is EndStatus.REFUSED

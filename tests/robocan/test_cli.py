@@ -30,8 +30,13 @@ def test_run_records_a_log_that_analyze_reads(tmp_path: Path) -> None:
         ],
     )
     assert result.exit_code == 0, result.output
-    table = json.loads(result.output[result.output.index("[") :])
-    assert {row["module_id"] for row in table} == {0x02, 0x04, 0x08, 0x10, 0x20, 0x40}
+    status = json.loads(result.output.strip().splitlines()[-1])
+    (bus,) = status["buses"]
+    table = {row["module_id"]: row for row in bus["modules"]}
+    assert set(table) == {0x02, 0x04, 0x08, 0x10, 0x20, 0x40}
+    assert table[0x02]["kind"] == "motor_controller" and table[0x02]["firmware"] == "2.1"
+    assert bus["counters"]["bad_frame"] == 0 and bus["counters"]["frames_rx"] > 0
+    assert "0x10 sonar_ring_10" in result.output and "requeried 0" in result.output
     analysed = runner.invoke(main, ["robocan", "analyze", str(log), "--json"])
     assert analysed.exit_code == 0, analysed.output
     modules = json.loads(analysed.output.strip().splitlines()[-1])["modules"]

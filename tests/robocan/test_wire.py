@@ -6,52 +6,20 @@ from __future__ import annotations
 import asyncio
 import contextlib
 
-import can
-
 from guidebot.bus import Bus
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.blocks import BlockSender
-from robot_agent.robocan.busopen import open_bus
 from robot_agent.robocan.stack import RoboCanStack
 
 from .conftest import Watch
+from .rawslave import RawSlave
 
 MODULE = 0x60
 
 
-class RawSlave:
-    def __init__(self, channel: str) -> None:
-        self.bus = open_bus(channel)
-        self.bus.set_filters(
-            [
-                {"can_id": MODULE + 1, "can_mask": 0x7FF, "extended": False},
-                {"can_id": p.BROADCAST_ID, "can_mask": 0x7FF, "extended": False},
-            ]
-        )
-        self.reader = can.AsyncBufferedReader()
-        self.notifier = can.Notifier(
-            self.bus, [self.reader], timeout=0.05, loop=asyncio.get_running_loop()
-        )
-
-    def send(self, data: bytes) -> None:
-        self.bus.send(can.Message(arbitration_id=MODULE, data=data, is_extended_id=False))
-
-    async def expect(self, op: int, timeout: float = 5.0) -> bytes:
-        """The next frame to us with this opcode (others, e.g. MASTER_START, are skipped)."""
-        async with asyncio.timeout(timeout):
-            while True:
-                msg = await self.reader.get_message()
-                if msg.data[0] == op:
-                    return bytes(msg.data)
-
-    async def close(self) -> None:
-        await asyncio.to_thread(self.notifier.stop, 1.0)
-        self.bus.shutdown()
-
-
 async def test_spec_slave_with_a_lost_block_frame(onboard: Bus, channel: str, watch: Watch) -> None:
     async with RoboCanStack(onboard.endpoint("robocan"), [channel], simulate=False) as stack:
-        slave = RawSlave(channel)
+        slave = RawSlave(channel, MODULE)
         try:
             slave.send(p.watchdog(p.SlaveState.DISABLED))
             await slave.expect(p.Op.QUERY)
@@ -98,7 +66,7 @@ async def test_a_module_that_never_describes_itself_fails_and_is_retried(
     onboard: Bus, channel: str, watch: Watch
 ) -> None:
     async with RoboCanStack(onboard.endpoint("robocan"), [channel], simulate=False) as stack:
-        slave = RawSlave(channel)
+        slave = RawSlave(channel, MODULE)
 
         async def watchdogs() -> None:
             while True:
