@@ -59,7 +59,9 @@ _ROBOT = frozenset(
         "release_area",
         "open_door",
         "close_door",
+        "release_door",
         "call_elevator",
+        "node_reached",
         "say",  # what it says, for consoles; nothing on the server acts on it
         # answers to on-board requests a server module or tool may send it
         "goal_reached",

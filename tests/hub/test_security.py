@@ -16,10 +16,13 @@ from pydantic import ValidationError
 from websockets.asyncio.client import ClientConnection
 from websockets.exceptions import ConnectionClosed
 
+from backend.auth import Role
+from backend.hub.permissions import may_publish
 from backend.settings import Settings
 from backend.testing import RunningServer
 from guidebot.client import HubClient, HubRefused
 from guidebot.messages import Message
+from robot_agent.link import UP_TYPES
 
 from .conftest import TOKENS, ClientFactory
 
@@ -196,3 +199,11 @@ async def test_tokens_in_query_strings_are_not_logged(
     logged = "\n".join(r.getMessage() for r in caplog.records)
     assert "token=***" in logged
     assert TOKENS["gui"].token not in logged
+
+
+def test_a_robot_may_publish_every_type_its_link_sends_up() -> None:
+    """The robot's link forwards UP_TYPES to the hub; one missing from the robot's publish
+    permissions would be refused with forbidden_type (a door never released, a node never
+    reported)."""
+    refused = [t for t in UP_TYPES if not may_publish(Role.ROBOT, t)]
+    assert refused == []
