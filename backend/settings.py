@@ -95,7 +95,7 @@ class Settings(BaseSettings):
     hub_queue_size: int = Field(default=4096, ge=8)
     hub_coalesce_after: int = Field(default=256, ge=0)
     hub_batch_max: int = Field(default=512, ge=1)
-    hub_linger_ms: float = Field(default=5.0, ge=0, le=100)
+    hub_linger_ms: float = Field(default=0.0, ge=0, le=100)
     hub_max_message_bytes: int = Field(default=1 << 20, ge=1024)
     hub_send_timeout_s: float = Field(default=10.0, gt=0, le=300)
     log_level: str = "info"

@@ -34,6 +34,7 @@ import contextlib
 import gc
 import json
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -41,10 +42,12 @@ from collections.abc import Sequence
 from typing import Any
 
 import click
+import orjson
 
 from guidebot.benchutil import percentiles, print_result
 
 GUI_TOKEN = "bench-gui-token"
+SLOW_GUI = "slowgui"
 WARMUP_S = 1.0
 
 
@@ -142,12 +145,15 @@ class Probe:
 
 
 # -- worker processes ----------------------------------------------------------------------------
-async def _serve(robots: int, full_app: bool) -> None:
-    """Server process: print the bound port, then serve until killed."""
+async def _serve(robots: int, full_app: bool, peer: bool) -> None:
+    """Server process (the hub, or with ``peer`` the plain broadcast): print the bound port,
+    then serve until killed."""
     import backend.app
     from backend.auth import Role
     from backend.settings import Settings, StaticToken
     from backend.testing import running_server
+
+    from .hub_peer import create_peer_app
 
     if not full_app:
         backend.app.COMPONENTS = []
@@ -159,8 +165,9 @@ async def _serve(robots: int, full_app: bool) -> None:
     settings = Settings(
         tokens=tokens, db_url=f"sqlite+aiosqlite:///{os.getcwd()}/.bench-hub-{os.getpid()}.db"
     )
-    async with running_server(settings) as server:
-        if os.environ.get("BENCH_NO_GC_FREEZE"):  # measure the hub without its GC policy
+    app = create_peer_app() if peer else None
+    async with running_server(settings, app=app) as server:
+        if os.environ.get("BENCH_NO_GC_FREEZE") and not peer:  # the hub without its GC policy
             server.app.state.hub.memory.enabled = False
         print(f"PORT {server.port}", flush=True)
         probe = Probe()
@@ -181,16 +188,41 @@ async def _read_start_time() -> float:
     return float(line)
 
 
-async def _robots(url: str, first: int, count: int, rate: float) -> None:
-    """Robot process: connect ``count`` robots, wait for the start time, publish, report."""
-    from guidebot.client import HubClient
+def _encode(message: Any) -> str:
+    """A message as HubClient puts it on the wire."""
+    from pydantic_core import to_jsonable_python
 
-    clients = [
-        HubClient(url, robot_token(i), heartbeat_interval=5.0, connect_timeout=60.0)
-        for i in range(first, first + count)
-    ]
-    for start in range(0, count, 50):  # connect in waves: the accept queue is finite
-        await asyncio.gather(*(c.start() for c in clients[start : start + 50]))
+    return orjson.dumps(message.__dict__, default=to_jsonable_python).decode()
+
+
+async def _drain(ws: Any, errors: list[int]) -> None:
+    """Read what the server sends a robot (welcome, errors) so its buffers never fill."""
+    with contextlib.suppress(Exception):
+        async for frame in ws:
+            if b'"error"' in (frame if isinstance(frame, bytes) else frame.encode()):
+                errors[0] += 1
+
+
+async def _robots(url: str, first: int, count: int, rate: float, peer: bool) -> None:
+    """Robot process: connect ``count`` robots, wait for the start time, publish, report.
+
+    The same plain ``websockets`` client against both servers: one connection per robot, each
+    robot_state sent as HubClient sends it (one frame, the JSON envelope).
+    """
+    from websockets.asyncio.client import connect
+
+    from guidebot.messages import Message
+
+    async def open_one(i: int) -> Any:
+        headers = None if peer else {"Authorization": f"Bearer {robot_token(i)}"}
+        return await connect(url, additional_headers=headers, open_timeout=60, ping_interval=None)
+
+    sockets: list[Any] = []
+    for start in range(first, first + count, 50):  # in waves: the accept queue is finite
+        end = min(first + count, start + 50)
+        sockets += await asyncio.gather(*(open_one(i) for i in range(start, end)))
+    errors = [0]
+    drains = [asyncio.create_task(_drain(ws, errors)) for ws in sockets]
     probe = Probe()
     probe.start(freeze=True)
     print("READY", flush=True)
@@ -202,81 +234,110 @@ async def _robots(url: str, first: int, count: int, rate: float) -> None:
     cpu0, t0 = time.process_time(), time.monotonic()
     published = [0] * count
 
-    async def run(k: int, client: HubClient) -> None:
+    async def run(k: int, ws: Any) -> None:
         next_at = start_at + period * k / count
         seq = 0
-        name = client.name
+        name = robot_name(first + k)
         while next_at < end_at:
             delay = next_at - time.time()
             if delay > 0:
                 await asyncio.sleep(delay)
             seq += 1
-            client.publish(
-                "robot_state",
-                {"robot": name, "x": 1.0, "y": 2.0, "theta": 0.5, "battery": 0.8, "seq": seq},
-            )
+            payload = {"robot": name, "x": 1.0, "y": 2.0, "theta": 0.5, "battery": 0.8, "seq": seq}
+            await ws.send(_encode(Message(type="robot_state", source=name, payload=payload)))
             next_at += period
         published[k] = seq
 
-    await asyncio.gather(*(run(k, c) for k, c in enumerate(clients)))
+    await asyncio.gather(*(run(k, ws) for k, ws in enumerate(sockets)))
     cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
     health = probe.report()
-    await asyncio.gather(*(c.sync(timeout=30.0) for c in clients))
     Probe.full_collection(health)
-    dropped_here = sum(c.dropped for c in clients)
-    for c in clients:
-        await c.close(flush=False)
-    result = {
-        "published": sum(published),
-        "client_dropped": dropped_here,
-        "cpu": cpu_percent,
-        **health,
-    }
+    await asyncio.gather(*(ws.close() for ws in sockets), return_exceptions=True)
+    for task in drains:
+        task.cancel()
+    result = {"published": sum(published), "errors": errors[0], "cpu": cpu_percent, **health}
     print(json.dumps(result), flush=True)
 
 
-async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
-    """GUI process: subscribe to robot_state, measure latency and gaps per robot."""
-    import httpx
+class _Gui:
+    """One GUI connection: frames and robot_state receipts, latency, sequence gaps."""
 
-    from guidebot.client import HubClient
+    def __init__(self, window: list[float], latencies: array.array[float], slow_s: float) -> None:
+        self.window = window
+        self.latencies = latencies
+        self.slow_s = slow_s
+        self.frames = 0
+        self.received = 0
+        self.gaps = 0
+        self.last_frame = time.monotonic()
+        self.seqs: dict[str, int] = {}
+        self.slow: dict[int, float] = {}  # second of the window -> worst latency over 100 ms
+
+    async def read(self, ws: Any) -> None:
+        window, latencies, seqs = self.window, self.latencies, self.seqs
+        with contextlib.suppress(Exception):
+            async for frame in ws:
+                now = time.time()
+                self.last_frame = time.monotonic()
+                self.frames += 1
+                data = orjson.loads(frame)
+                for message in data if isinstance(data, list) else (data,):
+                    if message.get("type") != "robot_state":
+                        continue
+                    self.received += 1
+                    payload = message["payload"]
+                    robot, seq = payload["robot"], payload["seq"]
+                    previous = seqs.get(robot, 0)
+                    if seq > previous + 1:
+                        self.gaps += seq - previous - 1
+                    seqs[robot] = seq
+                    stamp = message["timestamp"]
+                    if window[0] <= stamp <= window[1]:
+                        latency = now - stamp
+                        latencies.append(latency)
+                        if latency > 0.1:
+                            second = int(stamp - window[0])
+                            self.slow[second] = max(self.slow.get(second, 0.0), latency)
+                if self.slow_s and now < window[1]:
+                    await asyncio.sleep(self.slow_s)  # the deliberately slow GUI
+
+
+async def _open_gui(url: str, peer: bool, token: str, name: str | None = None) -> Any:
+    """Connect a GUI; on the hub, subscribe to robot_state and wait until it is applied."""
+    from websockets.asyncio.client import connect
+
     from guidebot.messages import Message
 
-    clients = [HubClient(url, GUI_TOKEN, heartbeat_interval=5.0) for _ in range(guis)]
-    for c in clients:
-        await c.start()
-    # array, not list: a list of 500 000 floats would make every full GC of this process slow.
-    latencies = array.array("d")
-    received = [0] * guis
-    last_seq: list[dict[str, int]] = [{} for _ in range(guis)]
-    gaps = [0] * guis
+    if peer:
+        return await connect(f"{url}/gui", ping_interval=None)
+    query = f"?name={name}" if name else ""
+    ws = await connect(
+        url + query, additional_headers={"Authorization": f"Bearer {token}"}, ping_interval=None
+    )
+    await ws.send(_encode(Message(type="subscribe", payload={"patterns": ["robot_state"]})))
+    ping = Message(type="ping")
+    await ws.send(_encode(ping))
+    async with asyncio.timeout(30):
+        while ping.id.encode() not in (await ws.recv(decode=False)):
+            pass
+    return ws
+
+
+async def _guis(
+    url: str, guis: int, admin_url: str, admin_token: str, peer: bool, slow_ms: float
+) -> None:
+    """GUI process: ``guis`` GUIs (and one slow GUI when ``slow_ms``) read every robot_state."""
+    import httpx
+
     window = [0.0, 0.0]
-    slow: dict[int, float] = {}  # second of the window -> worst latency over 100 ms in it
-
-    def handler_for(g: int) -> Any:
-        seqs = last_seq[g]
-
-        def handle(message: Message) -> None:
-            now = time.time()
-            received[g] += 1
-            payload = message.payload
-            robot, seq = payload["robot"], payload["seq"]
-            previous = seqs.get(robot, 0)
-            if seq > previous + 1:
-                gaps[g] += seq - previous - 1
-            seqs[robot] = seq
-            if window[0] <= message.timestamp <= window[1]:
-                latency = now - message.timestamp
-                latencies.append(latency)
-                if latency > 0.1:
-                    second = int(message.timestamp - window[0])
-                    slow[second] = max(slow.get(second, 0.0), latency)
-
-        return handle
-
-    for g, c in enumerate(clients):
-        c.subscribe("robot_state", handler_for(g))
-    await asyncio.gather(*(c.sync() for c in clients))
+    latencies: array.array[float] = array.array("d")  # not a list: keeps full GCs cheap
+    readers = [_Gui(window, latencies, 0.0) for _ in range(guis)]
+    sockets = [await _open_gui(url, peer, GUI_TOKEN) for _ in range(guis)]
+    slow_latencies: array.array[float] = array.array("d")
+    if slow_ms > 0:
+        readers.append(_Gui(window, slow_latencies, slow_ms / 1000))
+        sockets.append(await _open_gui(url, peer, admin_token, SLOW_GUI))
+    tasks = [asyncio.create_task(g.read(ws)) for g, ws in zip(readers, sockets, strict=True)]
     probe = Probe()
     probe.start(freeze=True)
     print("READY", flush=True)
@@ -285,37 +346,56 @@ async def _guis(url: str, guis: int, admin_url: str, admin_token: str) -> None:
     window[0], window[1] = start_at + WARMUP_S, start_at + seconds
     await asyncio.sleep(max(0.0, window[0] - time.time()))
     probe.reset()
+    for g in readers:
+        g.frames = 0
+    received0 = [g.received for g in readers]
     cpu0, t0 = time.process_time(), time.monotonic()
     await asyncio.sleep(max(0.0, window[1] - time.time()))
     cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
+    frames = [g.frames for g in readers]
+    window_received = [g.received - r0 for g, r0 in zip(readers, received0, strict=True)]
     health = probe.report()
-    done = await _read_start_time()  # the robots finished and synced: everything was routed
-    del done
-    await asyncio.gather(*(c.sync(timeout=30.0) for c in clients))
-    async with httpx.AsyncClient() as http:
-        stats = (
-            await http.get(f"{admin_url}/api/hub/clients", params={"token": admin_token})
-        ).json()
-    superseded = sum(c["superseded"] for c in stats["clients"] if c["name"].startswith("gui"))
-    for c in clients:
-        await c.close(flush=False)
+    await _read_start_time()  # the robots are done
+    for _ in range(300):  # until every GUI has had a quiet second (all delivered), max 60 s
+        if all(time.monotonic() - g.last_frame >= 1.0 for g in readers):
+            break
+        await asyncio.sleep(0.2)
+    superseded = {"gui": 0, SLOW_GUI: 0}
+    if not peer:
+        async with httpx.AsyncClient() as http:
+            reply = await http.get(f"{admin_url}/api/hub/clients", params={"token": admin_token})
+        for c in reply.json()["clients"]:
+            who = SLOW_GUI if c["name"] == SLOW_GUI else "gui"
+            if c["name"].startswith("gui") or c["name"] == SLOW_GUI:
+                superseded[who] += c["superseded"]
+    for ws in sockets:
+        await ws.close()
+    for task in tasks:
+        task.cancel()
     Probe.full_collection(health)
-    in_window = len(latencies)
-    print(
-        json.dumps(
-            {
-                "received": sum(received),
-                "gaps": sum(gaps),
-                "superseded": superseded,
-                "latency_ms": percentiles([x * 1000 for x in latencies]),
-                "latency_samples": in_window,
-                "cpu_percent": round(cpu_percent, 1),
-                "slow_seconds": {k: round(v * 1000) for k, v in sorted(slow.items())},
-                **health,
-            }
-        ),
-        flush=True,
-    )
+    normal = readers[:guis]
+    result: dict[str, Any] = {
+        "received": sum(g.received for g in normal),
+        "window_received": sum(window_received[:guis]),
+        "frames": sum(frames[:guis]),
+        "gaps": sum(g.gaps for g in normal),
+        "superseded": superseded["gui"],
+        "latency_ms": percentiles([x * 1000 for x in latencies]),
+        "latency_samples": len(latencies),
+        "cpu_percent": round(cpu_percent, 1),
+        "slow_seconds": {k: round(v * 1000) for g in normal for k, v in sorted(g.slow.items())},
+        **health,
+    }
+    if slow_ms > 0:
+        slow = readers[-1]
+        result["slow_gui"] = {
+            "read_delay_ms": slow_ms,
+            "received": slow.received,
+            "superseded": superseded[SLOW_GUI],
+            "frames": frames[-1],
+            "latency_ms": percentiles([x * 1000 for x in slow_latencies]),
+        }
+    print(json.dumps(result), flush=True)
 
 
 # -- orchestration -------------------------------------------------------------------------------
@@ -347,44 +427,57 @@ def _tell(procs: Sequence[subprocess.Popen[str]], value: float) -> None:
 
 
 def run_benchmark(
-    robots: int, rate: float, guis: int, seconds: float, robot_procs: int, full_app: bool
+    robots: int,
+    rate: float,
+    guis: int,
+    seconds: float,
+    robot_procs: int,
+    full_app: bool,
+    peer: bool = False,
+    slow_gui_ms: float = 0.0,
 ) -> dict[str, Any]:
+    """One run against the hub, or with ``peer`` against the plain FastAPI broadcast."""
     import psutil
 
-    server = _spawn(["server", "--robots", str(robots)] + (["--full-app"] if full_app else []))
+    who = "peer" if peer else "hub"
+    flags = (["--full-app"] if full_app else []) + (["--peer"] if peer else [])
+    server = _spawn(["server", "--robots", str(robots), *flags])
     workers: list[subprocess.Popen[str]] = []
     try:
         port = int(_expect(server, "PORT").split()[1])
         url = f"ws://127.0.0.1:{port}/ws"
-        _log(f"server pid {server.pid} on port {port}")
+        _log(f"{who}: server pid {server.pid} on port {port}")
         from backend.settings import DEFAULT_ADMIN_TOKEN
 
+        peer_flag = ["--peer"] if peer else []
         gui_proc = _spawn(
             [
                 "guis",
-                *("--url", url, "--guis", str(guis)),
+                *("--url", url, "--guis", str(guis), "--slow-ms", str(slow_gui_ms)),
                 *("--admin-url", f"http://127.0.0.1:{port}", "--admin-token", DEFAULT_ADMIN_TOKEN),
+                *peer_flag,
             ]
         )
         workers.append(gui_proc)
         _expect(gui_proc, "READY")
         procs = max(1, min(robot_procs, robots))
         robot_workers = []
+        robot_url = f"{url}/robot" if peer else url
         for p in range(procs):
             first = robots * p // procs
             count = robots * (p + 1) // procs - first
             proc = _spawn(
                 [
                     "robots",
-                    *("--url", url, "--first", str(first)),
-                    *("--count", str(count), "--rate", str(rate)),
+                    *("--url", robot_url, "--first", str(first)),
+                    *("--count", str(count), "--rate", str(rate), *peer_flag),
                 ]
             )
             robot_workers.append(proc)
             workers.append(proc)
         for proc in robot_workers:
             _expect(proc, "READY")
-        _log(f"{robots} robots and {guis} GUIs connected; running {seconds} s")
+        _log(f"{who}: {robots} robots and {guis} GUIs connected; running {seconds} s")
         start_at = time.time() + 0.5
         _tell([server, gui_proc, *robot_workers], start_at)
         _tell([server, gui_proc, *robot_workers], seconds)
@@ -412,31 +505,80 @@ def run_benchmark(
     published = sum(r["published"] for r in robot_results)
     expected = published * guis
     dropped = max(0, expected - gui_result["received"] - gui_result["superseded"])
+    window = seconds - WARMUP_S
     _log(
-        f"published {published}, GUI receipts {gui_result['received']} of {expected}, "
+        f"{who}: published {published}, GUI receipts {gui_result['received']} of {expected}, "
         f"superseded {gui_result['superseded']}, seq gaps {gui_result['gaps']}, "
-        f"client-side dropped {sum(r['client_dropped'] for r in robot_results)}, "
-        f"latency samples {gui_result['latency_samples']}; CPU % GUI process "
-        f"{gui_result['cpu_percent']}, robot processes {[round(r['cpu']) for r in robot_results]}"
+        f"refused {sum(r['errors'] for r in robot_results)}, frames to GUIs "
+        f"{gui_result['frames']}, latency samples {gui_result['latency_samples']}; CPU % GUI "
+        f"process {gui_result['cpu_percent']}, robot processes "
+        f"{[round(r['cpu']) for r in robot_results]}"
     )
     if gui_result["slow_seconds"]:
-        _log(f"seconds with latency over 100 ms (worst ms): {gui_result['slow_seconds']}")
-    for who, health in [
+        _log(f"{who}: seconds with latency over 100 ms (worst ms): {gui_result['slow_seconds']}")
+    for part, health in [
         ("server", server_health),
         ("guis", gui_result),
         *((f"robots{k}", r) for k, r in enumerate(robot_results)),
     ]:
-        _log(f"{who}: loop lag ms {health['lag_ms']}, gc {health['gc']}")
-    return {
+        _log(f"{who} {part}: loop lag ms {health['lag_ms']}, gc {health['gc']}")
+    result: dict[str, Any] = {
         "robots": robots,
         "rate_hz": rate,
         "guis": guis,
         "msgs_in_per_s": round(published / seconds, 1),
         "msgs_out_per_s": round(gui_result["received"] / seconds, 1),
+        "frames_out_per_s": round(gui_result["frames"] / window, 1),
+        "msgs_per_frame": round(gui_result["window_received"] / max(1, gui_result["frames"]), 2),
         "latency_ms": gui_result["latency_ms"],
         "dropped": dropped,
+        "refused": sum(r["errors"] for r in robot_results),
         "server_cpu_percent": round(100.0 * busy / elapsed, 1),
     }
+    if "slow_gui" in gui_result:
+        result["slow_gui"] = gui_result["slow_gui"]
+    return result
+
+
+RATIO_KEYS = {
+    "latency_p50": ("latency_ms", "p50"),
+    "latency_p99": ("latency_ms", "p99"),
+    "server_cpu_percent": ("server_cpu_percent",),
+    "frames_out_per_s": ("frames_out_per_s",),
+}
+"""Ratios hub / peer reported with ``--peer`` (below 1: the hub needs less)."""
+
+
+def _dig(result: dict[str, Any], path: tuple[str, ...]) -> Any:
+    value: Any = result
+    for key in path:
+        value = value[key]
+    return value
+
+
+def median_of_runs(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """One result whose numbers are the medians over ``runs`` (same keys as one run)."""
+
+    def merge(values: list[Any]) -> Any:
+        first = values[0]
+        if isinstance(first, dict):
+            return {k: merge([v[k] for v in values]) for k in first}
+        if isinstance(first, int | float) and not isinstance(first, bool):
+            present = [v for v in values if v is not None]
+            return round(statistics.median(present), 3) if present else None
+        return first
+
+    return merge(runs) if len(runs) > 1 else runs[0]
+
+
+def compare(ours: dict[str, Any], peer: dict[str, Any]) -> dict[str, Any]:
+    """The {"peer", "ratio", "agree"} part of the JSON: answers agree when both delivered
+    every published message to every GUI (or superseded it under the overflow rule)."""
+    ratio = {}
+    for name, path in RATIO_KEYS.items():
+        a, b = _dig(ours, path), _dig(peer, path)
+        ratio[name] = round(a / b, 3) if a is not None and b else None
+    return {"peer": peer, "ratio": ratio, "agree": ours["dropped"] == 0 == peer["dropped"]}
 
 
 @click.command("hub")
@@ -446,6 +588,24 @@ def run_benchmark(
 @click.option("--seconds", default=10.0, show_default=True, help="Measured duration.")
 @click.option("--robot-procs", default=2, show_default=True, help="Processes for the robots.")
 @click.option("--full-app", is_flag=True, help="Run every server component, not the hub alone.")
+@click.option(
+    "--peer", is_flag=True, help="Also run FastAPI's plain broadcast, interleaved with the hub."
+)
+@click.option(
+    "--rounds",
+    default=1,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Runs of each contender (medians reported; with --peer: hub, peer, hub, peer, ...).",
+)
+@click.option(
+    "--slow-gui",
+    "slow_gui_ms",
+    default=0.0,
+    show_default=True,
+    type=click.FloatRange(min=0),
+    help="Add one GUI that pauses this many ms after each frame it reads (0: none).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print only the JSON line on stdout.")
 def hub(
     robots: int,
@@ -454,18 +614,34 @@ def hub(
     seconds: float,
     robot_procs: int,
     full_app: bool,
+    peer: bool,
+    rounds: int,
+    slow_gui_ms: float,
     as_json: bool,
 ) -> None:
     """Hub throughput and publish-to-GUI latency over real WebSockets."""
     if robots < 1 or guis < 1 or rate <= 0 or seconds <= WARMUP_S:
         raise click.UsageError(f"need robots >= 1, guis >= 1, rate > 0, seconds > {WARMUP_S}")
-    result = run_benchmark(robots, rate, guis, seconds, robot_procs, full_app)
+    args = (robots, rate, guis, seconds, robot_procs, full_app)
+    ours: list[dict[str, Any]] = []
+    theirs: list[dict[str, Any]] = []
+    for _ in range(rounds):
+        ours.append(run_benchmark(*args, slow_gui_ms=slow_gui_ms))
+        if peer:
+            theirs.append(run_benchmark(*args, peer=True, slow_gui_ms=slow_gui_ms))
+    result = median_of_runs(ours)
+    if rounds > 1:
+        result["rounds"] = rounds
+    if peer:
+        result.update(compare(result, median_of_runs(theirs)))
     if not as_json:
-        click.echo(
-            f"{robots} robots x {rate} Hz -> {guis} GUIs: in {result['msgs_in_per_s']}/s, "
-            f"out {result['msgs_out_per_s']}/s, latency {result['latency_ms']}, "
-            f"dropped {result['dropped']}, server CPU {result['server_cpu_percent']}%"
-        )
+        for who, r in [("hub", result), *([("peer", result["peer"])] if peer else [])]:
+            click.echo(
+                f"{who}: {robots} robots x {rate} Hz -> {guis} GUIs: in {r['msgs_in_per_s']}/s, "
+                f"out {r['msgs_out_per_s']}/s in {r['frames_out_per_s']} frames/s, latency "
+                f"{r['latency_ms']}, dropped {r['dropped']}, server CPU "
+                f"{r['server_cpu_percent']}%"
+            )
     print_result(result)
 
 
@@ -475,16 +651,20 @@ def _worker_main(argv: Sequence[str]) -> None:
     s = sub.add_parser("server")
     s.add_argument("--robots", type=int, required=True)
     s.add_argument("--full-app", action="store_true")
+    s.add_argument("--peer", action="store_true")
     r = sub.add_parser("robots")
     r.add_argument("--url", required=True)
     r.add_argument("--first", type=int, required=True)
     r.add_argument("--count", type=int, required=True)
     r.add_argument("--rate", type=float, required=True)
+    r.add_argument("--peer", action="store_true")
     g = sub.add_parser("guis")
     g.add_argument("--url", required=True)
     g.add_argument("--guis", type=int, required=True)
     g.add_argument("--admin-url", required=True)
     g.add_argument("--admin-token", required=True)
+    g.add_argument("--slow-ms", type=float, default=0.0)
+    g.add_argument("--peer", action="store_true")
     args = parser.parse_args(argv)
     try:
         import uvloop
@@ -493,11 +673,13 @@ def _worker_main(argv: Sequence[str]) -> None:
     except ImportError:  # pragma: no cover - uvloop comes with uvicorn[standard]
         runner = asyncio.run
     if args.role == "server":
-        runner(_serve(args.robots, args.full_app))
+        runner(_serve(args.robots, args.full_app, args.peer))
     elif args.role == "robots":
-        runner(_robots(args.url, args.first, args.count, args.rate))
+        runner(_robots(args.url, args.first, args.count, args.rate, args.peer))
     else:
-        runner(_guis(args.url, args.guis, args.admin_url, args.admin_token))
+        runner(
+            _guis(args.url, args.guis, args.admin_url, args.admin_token, args.peer, args.slow_ms)
+        )
 
 
 if __name__ == "__main__":

@@ -3,9 +3,15 @@ hub while many robots ask at once.
 
     guidebot bench traffic --nodes 10000 --robots 1000 --json
 
-Last line: {"path_ms": {"p50", "p99"}, "lock_rtt_ms": {"p50", "p99"}}.
-path_ms: a robot's position (any node) to a site destination (point of interest, charging
-station, wait point), the queries robots make. lock_rtt_ms: request_area sent by a robot
+Last line: {"destination_lookup_ms", "any_pair_path_ms", "build_s", "lock_rtt_ms", and with
+``--peer`` "peer", "ratio", "agree"}.
+destination_lookup_ms: a robot's position (any node) to a site destination (point of interest,
+charging station, wait point), the queries robots make: a walk down a distance field
+precomputed when the site is built (a table lookup, not a search). any_pair_path_ms: between
+two random nodes, the A* search (landmark heuristic). build_s: SiteGraph construction (ALT
+landmarks + the destinations' distance fields). With ``--peer``, networkx (building its
+DiGraph, bidirectional Dijkstra per query) runs the same queries interleaved with ours, and
+the path lengths must agree. lock_rtt_ms: request_area sent by a robot
 endpoint of the JCentral hub of a running server until its area_granted arrives (the
 ``--ws-robots`` WebSocket robots are printed apart), all robots asking concurrently,
 each for its own area (no waiting behind another robot: the round trip itself), each robot
@@ -21,6 +27,7 @@ import random
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -58,6 +65,39 @@ def bench_any_pair(graph: SiteGraph, nodes: list[str], queries: int) -> list[flo
         graph.shortest_path(start, goal)
         samples.append((time.perf_counter() - t0) * 1000)
     return samples
+
+
+def peer_graph(graph: SiteGraph) -> tuple[Any, float]:
+    """The same weighted directed graph in networkx, and the seconds it took to build."""
+    import networkx as nx
+
+    t0 = time.perf_counter()
+    g = nx.DiGraph()
+    g.add_nodes_from(graph.names)
+    g.add_weighted_edges_from((a, b, c) for a, out in graph.adj.items() for b, c in out)
+    return g, time.perf_counter() - t0
+
+
+def bench_peer(
+    graph: SiteGraph, peer: Any, pairs: list[tuple[str, str]]
+) -> tuple[list[float], list[float], int]:
+    """Each pair with both, alternating which goes first; returns (ours ms, networkx ms,
+    pairs whose lengths differ by more than 1e-9 relative)."""
+    import networkx as nx
+
+    ours, theirs, disagree = [], [], 0
+    for k, (start, goal) in enumerate(pairs):
+        for turn in (0, 1) if k % 2 == 0 else (1, 0):
+            t0 = time.perf_counter()
+            if turn == 0:
+                mine = graph.shortest_path(start, goal).length_m
+                ours.append((time.perf_counter() - t0) * 1000)
+            else:
+                length, _ = nx.bidirectional_dijkstra(peer, start, goal)
+                theirs.append((time.perf_counter() - t0) * 1000)
+        if abs(mine - length) > 1e-9 * max(1.0, length):
+            disagree += 1
+    return ours, theirs, disagree
 
 
 async def bench_locks(
@@ -150,6 +190,8 @@ async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
 @click.option(
     "--ws-robots", default=20, show_default=True, help="Robots that are WebSocket clients."
 )
+@click.option("--destinations", default=200, show_default=True, help="Points of interest.")
+@click.option("--peer", is_flag=True, help="Also run networkx on the same queries, interleaved.")
 @click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
 def main(
     nodes: int,
@@ -158,12 +200,19 @@ def main(
     rate: float,
     seconds: float,
     ws_robots: int,
+    destinations: int,
+    peer: bool,
     as_json: bool,
 ) -> None:
     """Path and lock latency of the Traffic Manager."""
     if nodes < 4 or robots < 1 or queries < 1 or rate <= 0 or seconds <= 0:
         raise click.UsageError("need nodes >= 4, robots and queries >= 1, rate and seconds > 0")
-    site = synthetic_site(nodes=nodes, robots=robots, areas=robots, pois=100)
+    if peer:
+        try:
+            import networkx  # noqa: F401
+        except ImportError:
+            raise click.UsageError("--peer needs networkx: pip install -e '.[peers]'") from None
+    site = synthetic_site(nodes=nodes, robots=robots, areas=robots, pois=destinations)
     t0 = time.perf_counter()
     graph = SiteGraph(site)
     warm_s = time.perf_counter() - t0
@@ -172,7 +221,34 @@ def main(
     names = [n.id for n in site.nodes]
     goals = [p.node for p in site.pois] + [c.node for c in site.charging_stations]
     paths = bench_paths(graph, names, goals, queries)
-    any_pair = bench_any_pair(SiteGraph(site, warm=False), names, max(50, queries // 20))
+    any_pair_queries = max(200, queries // 5)
+    any_pair = bench_any_pair(graph, names, any_pair_queries)
+    comparison: dict[str, Any] = {}
+    if peer:
+        nx_graph, nx_build_s = peer_graph(graph)
+        rng = random.Random(9)
+        pairs = [tuple(rng.sample(names, 2)) for _ in range(any_pair_queries)]
+        dest_pairs = [(rng.choice(names), rng.choice(goals)) for _ in range(any_pair_queries)]
+        ours_any, nx_any, bad_any = bench_peer(graph, nx_graph, pairs)  # type: ignore[arg-type]
+        ours_dest, nx_dest, bad_dest = bench_peer(graph, nx_graph, dest_pairs)
+        mine_p, theirs_p = percentiles(ours_any), percentiles(nx_any)
+        comparison = {
+            "peer": {
+                "name": "networkx",
+                "destination_path_ms": percentiles(nx_dest),
+                "any_pair_path_ms": theirs_p,
+                "build_s": round(nx_build_s, 3),
+            },
+            "ratio": {
+                "destination_p50": _ratio(
+                    percentiles(ours_dest)["p50"], percentiles(nx_dest)["p50"]
+                ),
+                "any_pair_p50": _ratio(mine_p["p50"], theirs_p["p50"]),
+                "any_pair_p99": _ratio(mine_p["p99"], theirs_p["p99"]),
+                "build_s": _ratio(warm_s, nx_build_s),
+            },
+            "agree": bad_any == 0 and bad_dest == 0,
+        }
     with tempfile.TemporaryDirectory(prefix="guidebot-bench-") as tmp:
         locks, ws_locks, asked = asyncio.run(
             bench_locks(site, robots, rate, seconds, ws_robots, Path(tmp))
@@ -183,8 +259,11 @@ def main(
             f"site: {len(site.nodes)} nodes, {len(site.edges)} edges, {len(site.floors)} floors; "
             f"distance fields for {len(goals) + 1} destinations built in {warm_s:.2f} s"
         )
-        click.echo(f"path to a destination: {percentiles(paths)} ms over {queries} queries")
-        click.echo(f"path between any two nodes (A*): {percentiles(any_pair)} ms")
+        click.echo(
+            f"path to a destination (distance-field walk): {percentiles(paths)} ms over "
+            f"{queries} queries"
+        )
+        click.echo(f"path between any two nodes (A*, landmarks): {percentiles(any_pair)} ms")
         click.echo(
             f"locks: {robots} robots asking {rate}/s each ({robots * rate:.0f}/s offered), "
             f"{len(locks) + len(ws_locks)} round trips measured of {asked}; saturation (all "
@@ -194,4 +273,16 @@ def main(
         ws_count = min(ws_robots, robots)
         click.echo(f"lock round trip, {ws_count} WebSocket robots: {percentiles(ws_locks)} ms")
         click.echo("goals: path p99 < 2 ms, lock round trip p99 < 10 ms")
-    print_result({"path_ms": percentiles(paths), "lock_rtt_ms": percentiles(locks)})
+    print_result(
+        {
+            "destination_lookup_ms": percentiles(paths),
+            "any_pair_path_ms": percentiles(any_pair),
+            "build_s": round(warm_s, 3),
+            "lock_rtt_ms": percentiles(locks),
+            **comparison,
+        }
+    )
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return round(a / b, 3) if a is not None and b else None

@@ -193,7 +193,10 @@ class Endpoint:
         self._pending[message.id] = future
         try:
             self.bus.publish(message)
-            return await asyncio.wait_for(future, timeout)
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for returns a reply that
+            # arrives in the same loop pass as a cancellation, and the caller never sees it.
+            async with asyncio.timeout(timeout):
+                return await future
         except TimeoutError:
             raise RequestTimeout(f"no reply to {type!r} within {timeout} s") from None
         finally:

@@ -292,7 +292,8 @@ class HubClient:
         self._pending[message.id] = future
         try:
             self._enqueue(message)
-            reply = await asyncio.wait_for(future, timeout)
+            async with asyncio.timeout(timeout):  # not wait_for: see guidebot/bus.py request
+                reply = await future
         except TimeoutError:
             raise RequestTimeout(f"no reply to {type!r} within {timeout} s") from None
         finally:

@@ -667,8 +667,11 @@ class Navigator:
             if retry is not None and now >= next_retry:
                 retry()
                 next_retry = now + retry_every
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for swallows a cancellation
+            # that coincides with the wake-up, and the cancelled goal would drive on.
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._news.wait(), self.clock.wall(1.0) + 0.05)
+                async with asyncio.timeout(self.clock.wall(1.0) + 0.05):
+                    await self._news.wait()
 
     def _check_fault(self) -> None:
         if self.fault is not None:
@@ -732,7 +735,8 @@ class Navigator:
     async def _next_odometry(self) -> None:
         self._odom_event.clear()
         try:
-            await asyncio.wait_for(self._odom_event.wait(), 2.0)
+            async with asyncio.timeout(2.0):  # not wait_for: see _wait_until
+                await self._odom_event.wait()
         except TimeoutError:
             raise NavigationFailed("no odometry from the base") from None
 

@@ -166,7 +166,8 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
                     "development)"
                 )
             sites = SiteService(site, version, store)
-            graph = SiteGraph(site)
+            # Seconds on a large site: built in a thread so the event loop keeps serving.
+            graph = await asyncio.to_thread(SiteGraph, site)
 
             def log_event(kind: str, data: dict[str, Any]) -> None:
                 store.record_event(kind, "traffic_manager", data)
@@ -184,8 +185,9 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
             known_tokens: dict[str, str] = {}
             _sync_robot_tokens(app.state.tokens, site, known_tokens)
 
-            def on_site(new: Site) -> None:
-                new_graph = SiteGraph(new)
+            async def on_site(new: Site) -> None:
+                new_graph = await asyncio.to_thread(SiteGraph, new)
+                # One synchronous block: every module switches to the new site at once.
                 traffic.load_site(new, new_graph)
                 tasks.load_site(new, new_graph)
                 buttons.load_site(new)

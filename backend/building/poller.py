@@ -35,6 +35,11 @@ BACKOFF_FIRST_S = 0.1
 BACKOFF_MAX_S = 5.0
 SLOT_STAMP_MAX_LATE_S = 0.010
 JITTER_SAMPLES = 20_000  # ring buffer: the oldest jitter samples are dropped
+PHASE_GROUPS = 4
+"""Modules start their polls at one of this many phases of the period. Each wake-up of the
+event loop costs more CPU than the request it sends (epoll, timers, cold caches): 50 modules
+spread over 50 phases cost 2.5x the CPU of the same modules woken together (bench modbus),
+while 4 phases keep each group small enough that its last request leaves well within 1 ms."""
 
 
 class HealthState(StrEnum):
@@ -88,6 +93,10 @@ class ModulePoller:
     jitter_s: collections.deque[float] = field(
         default_factory=lambda: collections.deque(maxlen=JITTER_SAMPLES)
     )
+    interval_s: collections.deque[float] = field(
+        default_factory=lambda: collections.deque(maxlen=JITTER_SAMPLES)
+    )
+    """Time between the starts of consecutive polls (none across a reconnect)."""
 
     def __post_init__(self) -> None:
         self.client = ModuleClient(
@@ -140,11 +149,13 @@ class ModulePoller:
         # time.monotonic, not loop.time: uvloop's loop clock has 1 ms steps.
         clock = time.monotonic
         backoff = BACKOFF_FIRST_S
-        await asyncio.sleep(self.phase * self.period_s)
+        await asyncio.sleep(math.floor(self.phase * PHASE_GROUPS) / PHASE_GROUPS * self.period_s)
         due = clock()
         me = asyncio.current_task()
+        last_woke: float | None = None
         while me is None or not me.cancelling():
             if not self.client.connected:
+                last_woke = None
                 try:
                     await self.client.connect()
                 except ModuleUnreachable as exc:
@@ -159,6 +170,9 @@ class ModulePoller:
                 await asyncio.sleep(due - now)
             woke = clock()
             self.jitter_s.append(abs(woke - due))  # timers may also fire a little early
+            if last_woke is not None:
+                self.interval_s.append(woke - last_woke)
+            last_woke = woke
             try:
                 sample: Sample = {}
                 for kind, (first, count) in self.ranges.items():

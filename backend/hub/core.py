@@ -129,6 +129,7 @@ class RemoteClient:
         self.received = 0
         self.closing = asyncio.Event()
         """Set once the hub stops routing to this client (its transport should end)."""
+        self.frames_sent = 0
 
     def _move(self, new: ClientState) -> None:
         if new not in _TRANSITIONS[self.state]:
@@ -197,6 +198,7 @@ class RemoteClient:
             "queued": len(self.outbox),
             "superseded": self.outbox.superseded,
             "received": self.received,
+            "frames_sent": self.frames_sent,
         }
 
 
@@ -209,7 +211,7 @@ class Hub:
         queue_size: int = 4096,
         coalesce_after: int = 256,
         batch_max: int = 512,
-        linger: float = 0.005,
+        linger: float = 0.0,
         max_message_bytes: int = 1 << 20,
         gc_freeze: bool = True,
         task_requests: RateLimiter | None = None,

@@ -1,10 +1,12 @@
 """The hub's WebSocket endpoint (/ws): authenticate, then one reader and one writer per client.
 
 The reader hands every frame to ``Hub.receive``. The writer drains the client's outbox and sends
-what is queued as one frame: a single message as a JSON object, several as a JSON array. While a
-client streams (its last frame went out less than ``linger`` ago) the writer waits out the rest
-of ``linger`` so that one frame carries everything of that interval: a GUI watching 1000 robots
-at 5 Hz gets 200 frames a second, not 5000. An idle client's message goes out at once.
+what is queued as one frame: a single message as a JSON object, several as a JSON array. It
+batches only what is already there: a message for an idle client leaves at once; messages that
+arrive while the writer waits for its turn on the event loop, or while a send is held up by the
+socket's flow control, queue up and leave together in the next frame. So the busier the server,
+the more each frame carries, and a quiet server adds no delay. ``hub_linger_ms`` > 0 (default 0)
+adds a wait of up to that long for a streaming client (fewer, larger frames, at that latency).
 """
 
 from __future__ import annotations
@@ -134,11 +136,12 @@ async def _write(websocket: WebSocket, client: RemoteClient) -> None:
     try:
         while True:
             await outbox.wait()
-            since = loop.time() - last_send
-            if since < linger:
-                # Streaming: gather what arrives within ``linger`` of the last frame into one
-                # frame, unless a full batch (or a quarter of the queue) is already waiting.
-                await outbox.linger(linger - since, enough)
+            if linger > 0:
+                since = loop.time() - last_send
+                if since < linger:
+                    # Streaming: gather what arrives within ``linger`` of the last frame into one
+                    # frame, unless a full batch (or a quarter of the queue) is already waiting.
+                    await outbox.linger(linger - since, enough)
             batch = outbox.take(batch_max)
             if not batch or client.close_code is not None:
                 break
@@ -147,7 +150,9 @@ async def _write(websocket: WebSocket, client: RemoteClient) -> None:
             else:
                 data = b"[" + b",".join(batch) + b"]"
             await websocket.send_text(data.decode())
-            last_send = loop.time()
+            client.frames_sent += 1
+            if linger > 0:
+                last_send = loop.time()
     except (WebSocketDisconnect, RuntimeError, OSError) as exc:
         log.debug("hub: writer of %s stopped: %r", client.name, exc)
         return

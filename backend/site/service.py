@@ -21,7 +21,9 @@ EMPTY_SITE: dict[str, Any] = {
     "nodes": [{"id": "origin", "floor": "F0", "x": 0, "y": 0}],
 }
 
-Listener = Callable[[Site], None]
+Listener = Callable[[Site], Awaitable[None] | None]
+"""Called with each new site; an async listener (one that builds its tables off the event loop)
+is awaited before the next listener runs and before the edit returns."""
 
 
 class SiteStore(Protocol):
@@ -64,5 +66,7 @@ class SiteService:
             self.version += 1
         self.site = site
         for listener in self._listeners:
-            listener(site)
+            result = listener(site)
+            if result is not None:
+                await result
         return site

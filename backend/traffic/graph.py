@@ -1,8 +1,13 @@
 """The site's topological map as a routing graph: shortest paths across floors.
 
 Edges come from the site (two-way unless one-way); each elevator adds edges between its stops
-costing its travel time at a nominal speed. Paths are found with A* (straight-line heuristic,
-made admissible by scaling it to the shortest edge-length/straight-line ratio of the map).
+costing its travel time at a nominal speed. Paths to the site's usual destinations walk down a
+precomputed distance field; paths between any two nodes are found with A* whose heuristic is the
+larger of the straight-line bound (scaled to the shortest edge-length/straight-line ratio of
+the map) and the ALT landmark bound (triangle inequality over distances to and from a few far
+apart landmarks, Goldberg and Harrelson 2005), which cuts the nodes A* visits by an order of
+magnitude on large sites. Lengths are exact sums of edge costs; round them only for display.
+Building takes seconds on a 10 000-node site: the server builds in a thread and swaps.
 """
 
 from __future__ import annotations
@@ -19,6 +24,10 @@ from backend.site.validate import cabin_through_ways
 __all__ = ["NoPath", "PathResult", "PathStep", "SiteGraph", "UnknownNode"]
 
 NOMINAL_SPEED_MPS = 0.7
+LANDMARKS = 12
+"""Landmarks of the ALT heuristic (each costs two Dijkstra searches at build time)."""
+ACTIVE_LANDMARKS = 4
+"""Landmarks used per query: those giving the best bound at the start."""
 
 
 class NoPath(LookupError):
@@ -71,7 +80,12 @@ class SiteGraph:
     """Built once per site version; read-only afterwards (rebuild on site change)."""
 
     def __init__(
-        self, site: Site, *, nominal_speed_mps: float = NOMINAL_SPEED_MPS, warm: bool = True
+        self,
+        site: Site,
+        *,
+        nominal_speed_mps: float = NOMINAL_SPEED_MPS,
+        warm: bool = True,
+        landmarks: int = LANDMARKS,
     ) -> None:
         self.floor_of: dict[str, str] = {}
         self.xy: dict[str, tuple[float, float]] = {}
@@ -129,6 +143,10 @@ class SiteGraph:
         self._fields: dict[str, array[float]] = {}
         self._pinned: set[str] = set()
         self.field_cache_size = 256
+        # ALT: distance from each landmark to every node, and from every node to it.
+        self._lm_from: list[array[float]] = []
+        self._lm_to: list[array[float]] = []
+        self._choose_landmarks(landmarks)
         if warm:
             self.warm(
                 [p.node for p in site.pois]
@@ -162,18 +180,89 @@ class SiteGraph:
             return self._descend(start, goal, field)
         return self._astar(self.index[start], self.index[goal])
 
+    def _dijkstra(self, source: int, adj: list[list[tuple[int, float]]]) -> array[float]:
+        """Costs from ``source`` over ``adj`` (or, given the reverse lists, to ``source``)."""
+        dist = [math.inf] * len(self.names)
+        dist[source] = 0.0
+        heap = [(0.0, source)]
+        pop, push = heapq.heappop, heapq.heappush
+        while heap:
+            d, node = pop(heap)
+            if d > dist[node]:
+                continue
+            for nxt, cost in adj[node]:
+                nd = d + cost
+                if nd < dist[nxt]:
+                    dist[nxt] = nd
+                    push(heap, (nd, nxt))
+        return array("d", dist)
+
+    def _choose_landmarks(self, count: int) -> None:
+        """Farthest-point landmarks: each new one is the node farthest (by path cost, among
+        those reachable) from the landmarks already chosen, so they sit on the map's rim."""
+        n = len(self.names)
+        if n < 3 or count < 1:
+            return
+        nearest = [math.inf] * n
+        landmark = max(range(n), key=lambda i: self._xs[i] + self._ys[i])
+        for _ in range(min(count, n)):
+            from_lm = self._dijkstra(landmark, self._adj_i)
+            self._lm_from.append(from_lm)
+            self._lm_to.append(self._dijkstra(landmark, self._radj_i))
+            best, landmark = -1.0, -1
+            for i in range(n):
+                d = from_lm[i]
+                if d < nearest[i]:
+                    nearest[i] = d
+                if nearest[i] != math.inf and nearest[i] > best:
+                    best, landmark = nearest[i], i
+            if best <= 0.0:
+                break
+
+    def _alt_bounds(self, s: int, g: int) -> list[tuple[array[float], array[float], float, float]]:
+        """The ACTIVE_LANDMARKS landmarks with the best lower bound from ``s`` to ``g``, as
+        (from landmark, to landmark, cost landmark->g, cost g->landmark)."""
+        scored = []
+        for from_lm, to_lm in zip(self._lm_from, self._lm_to, strict=True):
+            lg, gl = from_lm[g], to_lm[g]
+            bound = 0.0
+            if lg != math.inf and from_lm[s] != math.inf:
+                bound = lg - from_lm[s]
+            if to_lm[s] != math.inf and gl != math.inf:
+                bound = max(bound, to_lm[s] - gl)
+            scored.append((bound, from_lm, to_lm, lg, gl))
+        scored.sort(key=lambda t: t[0], reverse=True)
+        return [(f, t, lg, gl) for _, f, t, lg, gl in scored[:ACTIVE_LANDMARKS]]
+
     def _astar(self, s: int, g: int) -> PathResult:
         """A* over integer node indexes (targets without a precomputed distance field)."""
         xs, ys, adj = self._xs, self._ys, self._adj_i
         gx, gy = xs[g], ys[g]
         scale, shift = self._h_scale, self._h_shift
         hypot, pop, push = math.hypot, heapq.heappop, heapq.heappush
-        best = [math.inf] * len(xs)
+        inf = math.inf
+        active = self._alt_bounds(s, g)
+
+        def bound(v: int) -> float:
+            h = hypot(xs[v] - gx, ys[v] - gy) * scale - shift
+            for from_lm, to_lm, lg, gl in active:
+                lv = from_lm[v]
+                if lv != inf and lg != inf and lg - lv > h:
+                    h = lg - lv
+                vl = to_lm[v]
+                if vl != inf and gl != inf and vl - gl > h:
+                    h = vl - gl
+            return h if h > 0 else 0.0
+
+        best = [inf] * len(xs)
         came = [-1] * len(xs)
         best[s] = 0.0
-        heap = [(max(0.0, hypot(xs[s] - gx, ys[s] - gy) * scale - shift), 0.0, s)]
+        # Ties on f go to the node farther along (-g first): on grid-like maps many nodes
+        # share an f, and taking the deepest first walks straight to the goal.
+        heap = [(bound(s), -0.0, s)]
         while heap:
-            _, cost_here, node = pop(heap)
+            _, neg_cost, node = pop(heap)
+            cost_here = -neg_cost
             if node == g:
                 break
             if cost_here > best[node]:
@@ -183,15 +272,14 @@ class SiteGraph:
                 if ng < best[nxt]:
                     best[nxt] = ng
                     came[nxt] = node
-                    h = hypot(xs[nxt] - gx, ys[nxt] - gy) * scale - shift
-                    push(heap, (ng + (h if h > 0 else 0.0), ng, nxt))
+                    push(heap, (ng + bound(nxt), -ng, nxt))
         else:
             raise NoPath(f"no path from {self.names[s]} to {self.names[g]}")
         path = [g]
         while path[-1] != s:
             path.append(came[path[-1]])
         nodes = [self.names[i] for i in reversed(path)]
-        return PathResult(nodes, round(best[g], 3), [self.step(n) for n in nodes])
+        return PathResult(nodes, best[g], [self.step(n) for n in nodes])
 
     def step(self, node: str) -> PathStep:
         x, y = self.xy[node]
@@ -219,23 +307,7 @@ class SiteGraph:
         if field is not None:
             return field
         self.check(goal)
-        inf = math.inf
-        dist = [inf] * len(self.names)
-        g = self.index[goal]
-        dist[g] = 0.0
-        heap = [(0.0, g)]
-        radj = self._radj_i
-        pop, push = heapq.heappop, heapq.heappush
-        while heap:
-            d, node = pop(heap)
-            if d > dist[node]:
-                continue
-            for prev, cost in radj[node]:
-                nd = d + cost
-                if nd < dist[prev]:
-                    dist[prev] = nd
-                    push(heap, (nd, prev))
-        field = array("d", dist)
+        field = self._dijkstra(self.index[goal], self._radj_i)
         unpinned = [k for k in self._fields if k not in self._pinned]
         if len(unpinned) >= self.field_cache_size:
             del self._fields[unpinned[0]]
@@ -263,7 +335,7 @@ class SiteGraph:
             path.append(best)
             node = best
         nodes = [names[i] for i in path]
-        return PathResult(nodes, round(total, 3), [self.step(n) for n in nodes])
+        return PathResult(nodes, total, [self.step(n) for n in nodes])
 
     def distances_to(self, goal: str) -> _FieldView:
         """Path cost from every node to ``goal`` (mapping node -> metres; cached per goal).

@@ -10,6 +10,7 @@ from typing import Any
 
 import orjson
 import pytest
+import websockets
 from fastapi import FastAPI
 from websockets.exceptions import ConnectionClosed
 
@@ -220,3 +221,28 @@ async def test_offline_queue_keeps_the_newest_state_and_drops_the_oldest(
             assert server.app.state.recorded[-1].payload == {"robot": "R1", "seq": 9}
     finally:
         await client.close()
+
+
+async def test_frames_carry_what_is_queued_and_a_lone_message_leaves_alone() -> None:
+    """No linger by default: what queued while the writer waited for its turn leaves in one
+    array frame; a message to an idle client leaves at once as a plain object."""
+    async with running_server(hub_settings()) as server:
+        headers = {"Authorization": f"Bearer {TOKENS['gui'].token}"}
+        async with websockets.connect(server.ws_url, additional_headers=headers) as gui:
+            assert orjson.loads(await gui.recv())["type"] == "welcome"
+            await gui.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["say"]}}))
+            await gui.send(orjson.dumps({"type": "ping", "id": "p"}))
+            assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["type"] == "pong"
+            robot = {"Authorization": f"Bearer {TOKENS['R1'].token}"}
+            async with websockets.connect(server.ws_url, additional_headers=robot) as r1:
+                await r1.recv()  # welcome
+                burst = [{"type": "say", "payload": {"text": str(i)}} for i in range(50)]
+                await r1.send(orjson.dumps(burst))  # one frame in: 50 messages queued at once
+                frame = orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))
+                assert isinstance(frame, list)
+                assert [m["payload"]["text"] for m in frame] == [str(i) for i in range(50)]
+                await r1.send(orjson.dumps({"type": "say", "payload": {"text": "alone"}}))
+                lone = orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))
+                assert isinstance(lone, dict) and lone["payload"]["text"] == "alone"
+                # welcome, pong, the burst, the lone message: counted in /api/hub/clients
+                assert server.app.state.hub.clients["gui"].stats()["frames_sent"] == 4
