@@ -10,8 +10,12 @@ Rules (docs/petri-nets.md has the long form):
   sub-net's end) fires at most one transition: the first in rank that is enabled and matches.
 - Events arriving while the instance is busy (a reply published inline by an action) wait in a
   bounded inbox and are handled right after the current step.
-- The net ends when no place holds a mark or every mark is in a final place; outcome "failed"
-  if a marked final place says so, else "done". Ending (or kill) kills all sub-nets.
+- A GuideBot task net ends when no place holds a mark or every mark is in a final place;
+  outcome "failed" if a marked final place says so, else "done". A plain net (another tool's
+  PNML) ends when no transition is enabled: "done" in a declared final marking (or when it
+  declares none), else "stuck". Ending (or kill) kills all sub-nets.
+- Monitoring costs one list append per firing: the firings of a step are reported together,
+  in order, with the new counts of the places they changed, when the step is over.
 """
 
 from __future__ import annotations
@@ -71,8 +75,17 @@ class Host(Protocol):
 
     def start_child(self, parent: Instance, net: str, params: dict[str, Any]) -> Instance: ...
 
+    monitor: bool
+    """Report firings (``event(..., "fired", ...)``); read once when an instance is created."""
+    step_budget: int
+    """Firings in one step before yielding to the event loop."""
+
     def event(
-        self, instance: Instance, kind: str, transition: str | None, marking: dict[str, int]
+        self,
+        instance: Instance,
+        kind: str,
+        transitions: list[str] | None,
+        marking: dict[str, int],
     ) -> None: ...
 
     def ended(self, instance: Instance) -> None: ...
@@ -105,6 +118,7 @@ class Instance:
         "_held",
         "_inbox",
         "_nonfinal",
+        "_trail",
         "children",
         "cursors",
         "env",
@@ -145,6 +159,7 @@ class Instance:
         self._heap: list[int] = []
         self._inbox: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._busy = False
+        self._trail: list[int] | None = [] if host.monitor else None
         self.children: dict[str, Instance] = {}
         self.cursors: dict[str, int] = {}
         self.state = InstanceState.CREATED
@@ -189,6 +204,7 @@ class Instance:
             self._end("killed")
 
     def _end(self, outcome: str) -> None:
+        self._report_firings()
         self._move(InstanceState.ENDED)
         self.outcome = outcome
         for timers in self._held.values():
@@ -229,6 +245,25 @@ class Instance:
                 self._end("failed")
         finally:
             self._busy = False
+            if self._trail:
+                self._report_firings()
+
+    def _report_firings(self) -> None:
+        """One monitoring event for the firings of the step: in order, with new counts."""
+        trail = self._trail
+        if not trail:
+            return
+        self._trail = []
+        net = self.net
+        marks = self.marks
+        changed: dict[str, int] = {}
+        for t in dict.fromkeys(trail):
+            for p, _ in net.inputs[t]:
+                changed[net.place_ids[p]] = marks[p]
+            for p, _ in net.outputs[t]:
+                changed[net.place_ids[p]] = marks[p]
+        ids = net.trans_ids
+        self.host.event(self, "fired", [ids[t] for t in trail], changed)
 
     def on_message(self, message: Message) -> None:
         self._post(self._message, message)
@@ -299,7 +334,7 @@ class Instance:
     def _settle(self) -> None:
         """Fire enabled immediate transitions, lowest rank first, then check for the end."""
         heap = self._heap
-        budget = STEP_BUDGET
+        budget = self.host.step_budget
         while heap and self.state is InstanceState.RUNNING:
             t = heapq.heappop(heap)
             while heap and heap[0] == t:
@@ -312,16 +347,22 @@ class Instance:
                 if budget == 0:
                     self.host.clock.call_soon(lambda: self._post(_nothing))
                     return
-        if self.state is InstanceState.RUNNING and self._nonfinal == 0:
-            failed = any(m and f for m, f in zip(self.marks, self.net.failed, strict=True))
+        if self.state is not InstanceState.RUNNING:
+            return
+        net = self.net
+        if net.plain:  # nothing is enabled: a place/transition net is over
+            finals = net.final_markings
+            self._end("done" if not finals or tuple(self.marks) in finals else "stuck")
+        elif self._nonfinal == 0:
+            failed = any(m and f for m, f in zip(self.marks, net.failed, strict=True))
             self._end("failed" if failed else "done")
 
     def _fire(self, t: int) -> None:
         net = self.net
         marks = self.marks
         final = net.final
-        changed: dict[str, int] = {}
         held_map = self._held
+        nonfinal = self._nonfinal
         for p, w in net.inputs[t]:
             if held_map:
                 held = held_map.get(p)
@@ -334,15 +375,15 @@ class Instance:
                         del held_map[p]
             marks[p] -= w
             if not final[p]:
-                self._nonfinal -= w
-            changed[net.place_ids[p]] = marks[p]
+                nonfinal -= w
         outputs = net.outputs[t]
         for p, w in outputs:
             marks[p] += w
             if not final[p]:
-                self._nonfinal += w
-            changed[net.place_ids[p]] = marks[p]
-        self.host.event(self, "fired", net.trans_ids[t], changed)
+                nonfinal += w
+        self._nonfinal = nonfinal
+        if self._trail is not None:
+            self._trail.append(t)
         heap = self._heap
         for p, w in outputs:
             if net.actions[p] is not None:

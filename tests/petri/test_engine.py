@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from petri_nets import engine
 from petri_nets.builder import (
     NetBuilder,
     guard,
@@ -201,14 +200,12 @@ def test_monitoring_events_replay_to_the_live_marking(tmp_path: Path) -> None:
     assert {k: v for k, v in replayed.items() if v} == instance.marking() == {"wait": 1}
 
 
-def test_a_loop_of_immediate_transitions_yields_and_stays_killable(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.setattr(engine, "STEP_BUDGET", 50)
+def test_a_loop_of_immediate_transitions_yields_and_stays_killable(tmp_path: Path) -> None:
     b = NetBuilder("spin", endless=True)
     b.place("a", initial=1).place("b")
     b.transition("ab", ["a"], ["b"]).transition("ba", ["b"], ["a"])
     rig = rig_with(tmp_path, b.build())
+    rig.dispatch.step_budget = 50
     iid = rig.dispatch.start("spin")
     assert len(rig.fired(iid)) == 50
     assert rig.clock.run_ready() == 1  # the engine gave the loop back, then went on
