@@ -29,6 +29,8 @@ MAX_CALLBACKS = 1_000_000
 """Clock callbacks a dry run may take: a net that spins without letting time pass stops here."""
 MAX_FIRINGS = 10_000
 """Default firing guard of a dry run: a net still firing after this many is reported running."""
+MAX_LISTED = 1000
+"""Firings listed in the result (``firings`` counts them all)."""
 
 
 @click.group()
@@ -100,7 +102,7 @@ def run_net(
     fired: list[str] = []
     published: list[str] = []
     marking: dict[str, int] = {}
-    top: dict[str, Any] = {"id": None, "outcome": None}
+    top: dict[str, Any] = {"id": None, "outcome": None, "firings": 0}
 
     def watch(message: Message) -> None:
         payload = message.payload
@@ -113,7 +115,8 @@ def run_net(
             if payload["instance_id"] == top["id"] or top["id"] is None:
                 if payload["kind"] in ("started", "ended"):
                     marking.clear()
-                fired.extend(steps)
+                fired.extend(steps[: MAX_LISTED - len(fired)])
+                top["firings"] += len(steps)
                 marking.update(payload["marking"])
         elif message.type == "petri_net_ended":
             if payload["instance_id"] == top["id"]:
@@ -151,6 +154,7 @@ def run_net(
         "net": name,
         "outcome": outcome,
         "fired": fired,
+        "firings": top["firings"],
         "published": published,
         "final_marking": final,
     }

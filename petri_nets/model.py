@@ -160,6 +160,8 @@ class FinalMarking:
 
     counts: dict[str, int]
     line: int
+    lines: dict[str, int] = field(default_factory=dict)
+    """Line of each place's entry."""
 
 
 @dataclass

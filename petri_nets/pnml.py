@@ -147,6 +147,7 @@ class _Reader:
         """ProM's ``<finalmarkings><marking><place idref><text>n``: the markings it ends in."""
         for marking in node.findall("marking"):
             counts: dict[str, int] = {}
+            lines: dict[str, int] = {}
             for place in marking.findall("place"):
                 ref = place.attrib.get("idref", "")
                 value = label(place, "text")
@@ -157,7 +158,8 @@ class _Reader:
                     )
                     continue
                 counts[ref] = counts.get(ref, 0) + count
-            net.final_markings.append(FinalMarking(counts, marking.line))
+                lines.setdefault(ref, place.line)
+            net.final_markings.append(FinalMarking(counts, marking.line, lines))
 
     def read_page(
         self, net: NetDoc, node: Node, parent: str | None, refs: dict[str, tuple[str, int]]
@@ -229,7 +231,7 @@ class _Reader:
         capacity = label_value(node, "capacity")  # PIPE: 0 = unbounded
         if capacity not in (None, "", "0"):
             self.problem(
-                node.line,
+                node.find("capacity").line,  # type: ignore[union-attr]
                 f"place {place.id}: capacity {capacity!r} is not supported "
                 "(place/transition nets here are unbounded; set it to 0)",
             )
@@ -344,12 +346,13 @@ class _Reader:
         )
         arc.weight = self.count(node, "inscription", f"arc {arc.id}", 1) or 1
         # PIPE and TINA: <type value="inhibitor"/>; ProM: <arctype><text>reset</text></arctype>
-        kind_node = node.find("type")
-        kind = kind_node.attrib.get("value", "") if kind_node is not None else ""
-        kind = kind or label_value(node, "arctype") or "normal"
-        if kind.strip().lower() not in ("normal", "regular", ""):
+        kind_node = node.find("type") or node.find("arctype")
+        kind = "normal"
+        if kind_node is not None:
+            kind = kind_node.attrib.get("value") or label_value(node, kind_node.tag) or kind
+        if kind_node is not None and kind.strip().lower() not in ("normal", "regular", ""):
             self.problem(
-                node.line,
+                kind_node.line,
                 f"arc {arc.id}: {kind} arcs are not supported (only normal arcs of "
                 "place/transition nets)",
             )

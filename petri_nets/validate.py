@@ -154,7 +154,8 @@ def validate(net: NetDoc) -> list[Problem]:
     for marking in net.final_markings:
         for place_id in marking.counts:
             if place_id not in places:
-                problem(marking.line, f"final marking: no place {place_id!r}")
+                line = marking.lines.get(place_id, marking.line)
+                problem(line, f"final marking: no place {place_id!r}")
     if not net.task:
         # a plain net from another tool: it runs until nothing is enabled, whatever its
         # shape (dead transitions, no marks, a transition without input are its author's call)
