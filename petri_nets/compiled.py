@@ -71,6 +71,8 @@ class CompiledNet:
     by_child: dict[str, tuple[int, ...]]
     guards: tuple[int, ...]
     initial_places: tuple[int, ...]
+    sources: tuple[int, ...]
+    """Transitions without input place (plain nets only): always enabled."""
     plain: bool
     """A plain place/transition net (no guidebot parts): ends when nothing is enabled."""
     final_markings: frozenset[tuple[int, ...]]
@@ -211,6 +213,7 @@ def compile_net(doc: NetDoc, name: str | None = None) -> CompiledNet:
         by_child={k: tuple(v) for k, v in by_child.items()},
         guards=tuple(i for i, c in enumerate(conditions) if c.kind == "guard"),
         initial_places=tuple(i for i, n in enumerate(p.initial for p in places) if n),
+        sources=tuple(i for i, x in enumerate(ins) if not x),
         plain=not doc.task,
         final_markings=frozenset(
             tuple(m.counts.get(p.id, 0) for p in places) for m in doc.final_markings

@@ -188,6 +188,8 @@ class Instance:
 
     def _begin(self) -> None:
         net = self.net
+        for t in net.sources:
+            heapq.heappush(self._heap, t)
         for p in net.initial_places:
             action = net.actions[p]
             if action is not None:

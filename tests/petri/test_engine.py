@@ -200,6 +200,38 @@ def test_monitoring_events_replay_to_the_live_marking(tmp_path: Path) -> None:
     assert {k: v for k, v in replayed.items() if v} == instance.marking() == {"wait": 1}
 
 
+def test_a_step_is_one_monitoring_event_with_its_firings_in_order(tmp_path: Path) -> None:
+    b = NetBuilder("steps")
+    b.place("p0", initial=2).place("p1").place("p2").place("wait").place("end", final=True)
+    b.transition("t0", {"p0": 2}, ["p1", "wait"]).transition("t1", ["p1"], ["p2"])
+    b.transition("t2", ["wait", "p2"], ["end"], message("go"))
+    rig = rig_with(tmp_path, b.build())
+    iid = rig.dispatch.start("steps")
+    rig.say("go")
+    events = [
+        (m.payload["kind"], m.payload.get("transitions"), m.payload["marking"])
+        for m in rig.log
+        if m.type == "petri_net_event" and m.payload["instance_id"] == iid
+    ]
+    assert events == [
+        ("started", None, {"p0": 2}),
+        ("fired", ["t0", "t1"], {"p0": 0, "p1": 0, "wait": 1, "p2": 1}),
+        ("fired", ["t2"], {"wait": 0, "p2": 0, "end": 1}),
+        ("ended", None, {"end": 1}),
+    ]
+    fired = [m.payload for m in rig.log if m.type == "petri_net_event"][1]
+    assert fired["transition"] == "t1"  # the last of the step, for one-firing monitors
+    assert rig.ended(iid) == "done"
+
+
+def test_without_monitoring_nothing_is_published_but_the_net_runs(tmp_path: Path) -> None:
+    rig = rig_with(tmp_path, choice())
+    rig.dispatch.monitor = False
+    iid = rig.dispatch.start("choice")
+    assert [m.type for m in rig.log] == ["petri_net_ended"]
+    assert rig.ended(iid) == "done"
+
+
 def test_a_loop_of_immediate_transitions_yields_and_stays_killable(tmp_path: Path) -> None:
     b = NetBuilder("spin", endless=True)
     b.place("a", initial=1).place("b")

@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from guidebot.cli import main
 from petri_nets.cli import check_files, run_net
+from petri_nets.describe import describe
 from petri_nets.library import load_net
 from petri_nets.pnml import read_pnml, read_pnml_file, write_pnml
 from petri_nets.xmlsafe import Node, parse_xml
@@ -204,3 +205,27 @@ def test_a_final_marking_of_an_unknown_place_is_reported(tmp_path: Path) -> None
     assert [str(p).removeprefix(str(path)) for p in check_files([path])] == [
         ":179: final marking: no place 'n44'"
     ]
+
+
+def test_a_transition_without_input_place_is_always_enabled(tmp_path: Path) -> None:
+    # PIPE models arrivals this way: the net never ends, the guard stops the dry run
+    text = (FOREIGN / "pipe_producer.xml").read_bytes().decode("iso-8859-1")
+    arrivals = text.replace(
+        '<arc id="P0 to T0" source="P0" target="T0">', '<arc id="x" source="P2" target="T1">'
+    )
+    path = tmp_path / "arrivals.xml"
+    path.write_bytes(arrivals.encode("iso-8859-1"))
+    assert check_files([path]) == []
+    result = run_net(path, {}, {}, max_firings=30)
+    assert result["outcome"] == "running" and result["firings"] == 30
+    assert result["fired"][:2] == ["T0", "T0"]
+
+
+def test_a_monitor_is_told_a_foreign_net_is_plain_and_where_it_should_end() -> None:
+    net, problems = load_net(FOREIGN / "prom_order.pnml")
+    assert net is not None and problems == []
+    described = describe(net)
+    assert described["plain"] is True
+    assert described["final_markings"] == [{"n1": 0, "n2": 1, "n3": 0, "n4": 0}]
+    assert [t["name"] for t in described["transitions"]][1] == "Bonität prüfen"
+    assert described["places"][0]["position"] == {"x": 11.25, "y": 11.25}
