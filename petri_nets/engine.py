@@ -15,7 +15,8 @@ Rules (docs/petri-nets.md has the long form):
   PNML) ends when no transition is enabled: "done" in a declared final marking (or when it
   declares none), else "stuck". Ending (or kill) kills all sub-nets.
 - Monitoring costs one list append per firing: the firings of a step are reported together,
-  in order, with the new counts of the places they changed, when the step is over.
+  in order, with the new counts of the places they changed, when the step is over or before
+  an action runs (so monitors hear of firings before the messages they cause).
 """
 
 from __future__ import annotations
@@ -405,6 +406,8 @@ class Instance:
     def _act(self, p: int) -> None:
         action = self.net.actions[p]
         assert action is not None
+        if self._trail:  # monitors hear of the firings before the messages they cause
+            self._report_firings()
         kind = action.kind
         if kind == "publish":
             self.host.publish_action(

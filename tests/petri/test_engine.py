@@ -281,3 +281,19 @@ def test_killed_inline_by_a_listener_publishes_nothing_more(tmp_path: Path) -> N
     iid = rig.dispatch.start("two_steps")
     assert rig.ended(iid) == "killed"
     assert rig.action_types() == ["first"]
+
+
+def test_monitors_hear_of_a_firing_before_the_messages_it_causes(tmp_path: Path) -> None:
+    b = NetBuilder("causal")
+    b.place("p0", initial=1).place("p1").place("said", action=publish("hello"))
+    b.place("end", final=True)
+    b.transition("t0", ["p0"], ["p1"]).transition("t1", ["p1"], ["said"])
+    b.transition("t2", ["said"], ["end"])
+    rig = rig_with(tmp_path, b.build())
+    rig.dispatch.start("causal")
+    seen = [
+        m.payload.get("transitions") or m.payload.get("kind") if m.type != "hello" else "hello"
+        for m in rig.log
+        if m.type in ("petri_net_event", "hello")
+    ]
+    assert seen == ["started", ["t0", "t1"], "hello", ["t2"], "ended"]
