@@ -36,13 +36,24 @@ if TYPE_CHECKING:
     from guidebot.messages import Message
     from petri_nets.clock import Clock, TimerHandle
 
-__all__ = ["INBOX_LIMIT", "STEP_BUDGET", "Host", "Instance", "InstanceState", "StateError"]
+__all__ = [
+    "INBOX_LIMIT",
+    "REPORT_EVERY",
+    "STEP_BUDGET",
+    "Host",
+    "Instance",
+    "InstanceState",
+    "StateError",
+]
 
 log = logging.getLogger(__name__)
 _random = random.Random()
 
 INBOX_LIMIT = 1000
 """Events queued while an instance is busy; on overflow the oldest is dropped and logged."""
+REPORT_EVERY = 1000
+"""Firings in one monitoring event at most: a long step is reported in parts, so an event stays
+small enough for a WebSocket frame (about 10-20 kB)."""
 STEP_BUDGET = 100_000
 """Firings in one step before the engine yields to the event loop (a loop of immediate
 transitions must not freeze the robot)."""
@@ -385,8 +396,11 @@ class Instance:
             if not final[p]:
                 nonfinal += w
         self._nonfinal = nonfinal
-        if self._trail is not None:
-            self._trail.append(t)
+        trail = self._trail
+        if trail is not None:
+            trail.append(t)
+            if len(trail) >= REPORT_EVERY:
+                self._report_firings()
         heap = self._heap
         for p, w in outputs:
             if net.actions[p] is not None:

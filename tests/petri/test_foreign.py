@@ -229,3 +229,32 @@ def test_a_monitor_is_told_a_foreign_net_is_plain_and_where_it_should_end() -> N
     assert described["final_markings"] == [{"n1": 0, "n2": 1, "n3": 0, "n4": 0}]
     assert [t["name"] for t in described["transitions"]][1] == "Bonität prüfen"
     assert described["places"][0]["position"] == {"x": 11.25, "y": 11.25}
+
+
+def test_a_file_in_its_own_namespace_goes_back_in_it() -> None:
+    text = (
+        (FOREIGN / "woped_claim.pnml")
+        .read_text()
+        .replace("<pnml>", '<pnml xmlns="pnml.woped.org">')
+    )
+    doc, problems = read_pnml(text, "claim.pnml")
+    assert doc is not None and problems == []
+    written = write_pnml(doc)
+    assert b'<pnml xmlns="pnml.woped.org">' in written
+    assert shape(parse_xml(written)) == shape(parse_xml(text))
+    assert parse_xml(written).children[0].ns == "pnml.woped.org"
+
+
+def test_a_long_step_is_reported_in_parts_and_every_firing_is_told(tmp_path: Path) -> None:
+    (tmp_path / "ring.pnml").write_bytes((FOREIGN / "mcc_tokenring.pnml").read_bytes())
+    rig = make_rig(tmp_path)
+    rig.dispatch.step_budget = 2500
+    iid = rig.dispatch.start("ring")
+    sizes = [
+        len(m.payload["transitions"])
+        for m in rig.log
+        if m.type == "petri_net_event" and m.payload["kind"] == "fired"
+    ]
+    assert sizes == [1000, 1000, 500]
+    assert rig.fired(iid)[:3] == ["pass0", "pass1", "pass0"]
+    rig.dispatch.kill(iid)
