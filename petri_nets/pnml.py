@@ -31,9 +31,9 @@ from petri_nets.pnml_dialects import (
     TOOL,
     TOOL_VERSION,
     is_pt_type,
-    label,
     label_value,
     parse_count,
+    text_of,
 )
 from petri_nets.pnml_writer import write_pnml
 from petri_nets.templates import parse_literal
@@ -150,8 +150,7 @@ class _Reader:
             lines: dict[str, int] = {}
             for place in marking.findall("place"):
                 ref = place.attrib.get("idref", "")
-                value = label(place, "text")
-                count = parse_count(value.text if value is not None else place.text)
+                count = parse_count(text_of(place))
                 if not ref or count is None:
                     self.problem(
                         place.line, "a final marking's <place> needs idref and a natural number"

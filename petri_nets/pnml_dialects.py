@@ -16,9 +16,9 @@ __all__ = [
     "TOOL",
     "TOOL_VERSION",
     "is_pt_type",
-    "label",
     "label_value",
     "parse_count",
+    "text_of",
 ]
 
 PNML_NS = "http://www.pnml.org/version-2009/grammar/pnml"
@@ -40,19 +40,17 @@ def is_pt_type(net_type: str) -> bool:
     return squeezed.rstrip("/").rsplit("/", 1)[-1].removesuffix(".pntd") in _PT_TYPES
 
 
-def label(node: Node, tag: str) -> Node | None:
-    """The element holding a label's value: ``<tag><text>`` (standard) or ``<tag><value>``
-    (PIPE); the label itself when it has neither (text written directly inside)."""
-    holder = node.find(tag)
-    if holder is None:
-        return None
-    return holder.find("text") or holder.find("value") or holder
+def text_of(holder: Node) -> str:
+    """A label element's stripped value: ``<text>`` (standard), ``<value>`` (PIPE), or the text
+    written directly inside."""
+    inner = holder.find("text") or holder.find("value") or holder
+    return inner.text.strip()
 
 
 def label_value(node: Node, tag: str) -> str | None:
-    """The stripped text of a label, None when the element has no such label."""
-    inner = label(node, tag)
-    return None if inner is None else inner.text.strip()
+    """The value of ``node``'s label ``tag``, None when it has no such label."""
+    holder = node.find(tag)
+    return None if holder is None else text_of(holder)
 
 
 def parse_count(text: str) -> int | None:

@@ -24,7 +24,14 @@ from petri_nets.model import (
     PlaceSpec,
     TransitionSpec,
 )
-from petri_nets.pnml_dialects import PNML_NS, PTNET_TYPE, TOOL, TOOL_VERSION, parse_count
+from petri_nets.pnml_dialects import (
+    PNML_NS,
+    PTNET_TYPE,
+    TOOL,
+    TOOL_VERSION,
+    parse_count,
+    text_of,
+)
 from petri_nets.xmlsafe import Node
 
 __all__ = ["write_pnml"]
@@ -33,11 +40,6 @@ __all__ = ["write_pnml"]
 def write_pnml(net: NetDoc) -> bytes:
     """The net as a PNML document (UTF-8)."""
     return _Writer(net).write()
-
-
-def _text_of(label: Node) -> str:
-    inner = label.find("text") or label.find("value") or label
-    return inner.text.strip()
 
 
 def _ours(node: Node) -> bool:
@@ -87,7 +89,7 @@ class _Writer:
         """A text label: the original element when the value is unchanged, else anew."""
         if value is None:
             return
-        if original is not None and _text_of(original) == value:
+        if original is not None and text_of(original) == value:
             self.copy(original, parent)
         else:
             self.text_label(parent, tag, value, graphics)
@@ -96,7 +98,7 @@ class _Writer:
         self, parent: ET.Element, tag: str, value: int, original: Node | None, default: int
     ) -> None:
         """A marking or weight: the original element (``Default,2`` stays) when unchanged."""
-        if original is not None and parse_count(_text_of(original)) == value:
+        if original is not None and parse_count(text_of(original)) == value:
             self.copy(original, parent)
         elif value != default:
             self.text_label(parent, tag, str(value))
