@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from guidebot.cli import main
+from petri_nets.builder import NetBuilder, net_ended, run
 from petri_nets.cli import check_files, run_net
 from petri_nets.describe import describe
 from petri_nets.library import load_net
@@ -258,3 +259,17 @@ def test_a_long_step_is_reported_in_parts_and_every_firing_is_told(tmp_path: Pat
     assert sizes == [1000, 1000, 500]
     assert rig.fired(iid)[:3] == ["pass0", "pass1", "pass0"]
     rig.dispatch.kill(iid)
+
+
+def test_a_task_net_runs_a_foreign_net_and_hears_how_it_ended(tmp_path: Path) -> None:
+    (tmp_path / "order.pnml").write_bytes((FOREIGN / "prom_stuck.pnml").read_bytes())
+    b = NetBuilder("supervise")
+    b.place("go", initial=1, action=run("order")).place("ok", final=True)
+    b.place("escalate", final=True, outcome="failed")
+    b.transition("order_done", ["go"], ["ok"], net_ended("order", "done"))
+    b.transition("order_stuck", ["go"], ["escalate"], net_ended("order", "stuck"))
+    (tmp_path / "supervise.pnml").write_bytes(write_pnml(b.build()))
+    rig = make_rig(tmp_path)
+    assert rig.dispatch.library.problems() == []
+    iid = rig.dispatch.start("supervise")
+    assert rig.fired(iid) == ["order_stuck"] and rig.ended(iid) == "failed"
