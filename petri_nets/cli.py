@@ -14,6 +14,7 @@ from guidebot.bus import Bus
 from guidebot.messages import Message
 from petri_nets.clock import VirtualClock
 from petri_nets.dispatch import Dispatch, DispatchError
+from petri_nets.engine import STEP_BUDGET
 from petri_nets.library import DEFAULT_LIBRARY, NetLibrary
 from petri_nets.model import Problem
 from petri_nets.pnml import read_pnml_file, write_pnml
@@ -26,6 +27,10 @@ __all__ = ["check_files", "petri", "run_net"]
 
 MAX_CALLBACKS = 1_000_000
 """Clock callbacks a dry run may take: a net that spins without letting time pass stops here."""
+MAX_FIRINGS = 10_000
+"""Default firing guard of a dry run: a net still firing after this many is reported running."""
+MAX_LISTED = 1000
+"""Firings listed in the result (``firings`` counts them all)."""
 
 
 @click.group()
@@ -68,10 +73,15 @@ def run_net(
     *,
     library_folder: Path | None = None,
     max_time: float = 3600.0,
+    max_firings: int = MAX_FIRINGS,
     echo: Any = None,
     trace: IO[str] | None = None,
 ) -> dict[str, Any]:
-    """Run one net on a virtual clock against scripted replies; the result of ``petri run``."""
+    """Run one net on a virtual clock against scripted replies; the result of ``petri run``.
+
+    It stops at ``max_time`` virtual seconds or after ``max_firings`` firings of the net and
+    its sub-nets (a plain net may loop forever without letting time pass): outcome "running".
+    """
     library = NetLibrary(library_folder or path.parent, watch=False)
     name = library.add_file(path)
     problems = library.problems_of(name)
@@ -80,25 +90,33 @@ def run_net(
     bus = Bus()
     clock = VirtualClock()
     environment = ScriptedEnvironment(bus, clock, replies)
-    dispatch = Dispatch(bus.endpoint("dispatch"), library, clock, idle_net=None)
+    # steps no longer than the guard, so a looping net stops at it exactly
+    dispatch = Dispatch(
+        bus.endpoint("dispatch"),
+        library,
+        clock,
+        idle_net=None,
+        step_budget=max(1, min(max_firings, STEP_BUDGET)),
+    )
+    firings = [0]
     fired: list[str] = []
     published: list[str] = []
     marking: dict[str, int] = {}
-    top: dict[str, Any] = {"id": None, "outcome": None}
+    top: dict[str, Any] = {"id": None, "outcome": None, "firings": 0}
 
     def watch(message: Message) -> None:
         payload = message.payload
         if message.type == "petri_net_event":
-            if echo is not None and payload["kind"] == "fired":
-                echo(
-                    f"{clock.now():10.3f} s  {payload['instance_id']:<24} fired "
-                    f"{payload['transition']}"
-                )
+            steps = payload.get("transitions") or []
+            firings[0] += len(steps)
+            if echo is not None:
+                for transition in steps:
+                    echo(f"{clock.now():10.3f} s  {payload['instance_id']:<24} fired {transition}")
             if payload["instance_id"] == top["id"] or top["id"] is None:
                 if payload["kind"] in ("started", "ended"):
                     marking.clear()
-                if payload["kind"] == "fired":
-                    fired.append(payload["transition"])
+                fired.extend(steps[: MAX_LISTED - len(fired)])
+                top["firings"] += len(steps)
                 marking.update(payload["marking"])
         elif message.type == "petri_net_ended":
             if payload["instance_id"] == top["id"]:
@@ -120,7 +138,9 @@ def run_net(
         top["id"] = f"{name}#run"
         dispatch.start(name, params, instance_id=top["id"])
         clock.run(
-            until=max_time, stop=lambda: top["outcome"] is not None, max_callbacks=MAX_CALLBACKS
+            until=max_time,
+            stop=lambda: top["outcome"] is not None or firings[0] >= max_firings,
+            max_callbacks=MAX_CALLBACKS,
         )
         outcome = top["outcome"] or ("running" if clock.next_time() is not None else "stuck")
         final = {k: v for k, v in marking.items() if v}
@@ -134,6 +154,7 @@ def run_net(
         "net": name,
         "outcome": outcome,
         "fired": fired,
+        "firings": top["firings"],
         "published": published,
         "final_marking": final,
     }
@@ -164,6 +185,13 @@ def run_net(
 )
 @click.option("--max-time", default=3600.0, show_default=True, help="Virtual seconds to run.")
 @click.option(
+    "--max-firings",
+    default=MAX_FIRINGS,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Stop after this many firings (a looping net): outcome running.",
+)
+@click.option(
     "--trace",
     "trace_file",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -177,6 +205,7 @@ def run_command(
     no_default_replies: bool,
     library_folder: Path | None,
     max_time: float,
+    max_firings: int,
     trace_file: Path | None,
     as_json: bool,
 ) -> None:
@@ -205,6 +234,7 @@ def run_command(
             script,
             library_folder=folder,
             max_time=max_time,
+            max_firings=max_firings,
             echo=click.echo,
             trace=trace,
         )

@@ -3,6 +3,10 @@ of strings: places and transitions are numbers, templates are compiled closures.
 
 Transitions are numbered in firing rank: higher ``priority`` first, then document order. That
 number is the conflict rule (docs/petri-nets.md): among enabled transitions the lowest fires.
+
+The version is a hash of what the net does and what a monitor draws (ids, names, positions,
+markings, arcs, actions, conditions, parameters), taken from the model directly: writing the
+net out as PNML to hash it cost most of a compile.
 """
 
 from __future__ import annotations
@@ -12,10 +16,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from petri_nets.model import REQUIRED, NetDoc
-from petri_nets.pnml import write_pnml
 from petri_nets.templates import Render, compile_json, compile_value
 
-__all__ = ["Action", "CompiledNet", "Condition", "compile_net"]
+__all__ = ["Action", "CompiledNet", "Condition", "compile_net", "fingerprint"]
 
 IMMEDIATE = "immediate"
 
@@ -68,6 +71,12 @@ class CompiledNet:
     by_child: dict[str, tuple[int, ...]]
     guards: tuple[int, ...]
     initial_places: tuple[int, ...]
+    sources: tuple[int, ...]
+    """Transitions without input place (plain nets only): always enabled."""
+    plain: bool
+    """A plain place/transition net (no guidebot parts): ends when nothing is enabled."""
+    final_markings: frozenset[tuple[int, ...]]
+    """Declared final markings of a plain net (full marking vectors); empty when none."""
 
 
 def _condition(spec: Any) -> Condition:
@@ -84,6 +93,55 @@ def _condition(spec: Any) -> Condition:
         test=spec.test,
         value=compile_value(spec.value) if spec.value is not None else None,
     )
+
+
+def _position(node: Any) -> tuple[str, str] | None:
+    position = node.find("position") if node is not None else None
+    return None if position is None else (position.attrib.get("x"), position.attrib.get("y"))
+
+
+def _fields(spec: Any, names: tuple[str, ...]) -> tuple[Any, ...]:
+    return tuple(getattr(spec, name) for name in names) if spec is not None else ()
+
+
+def fingerprint(doc: NetDoc) -> str:
+    """The net's version: a hash of everything that changes its behaviour or its drawing."""
+    action = ("kind", "type", "destination", "body", "net", "seconds", "list", "var", "order")
+    condition = ("kind", "type", "net", "outcome", "var", "test", "value", "binds")
+    content = (
+        doc.id,
+        doc.name,
+        doc.task,
+        doc.description,
+        doc.endless,
+        tuple((p.name, repr(p.default)) for p in doc.params),
+        tuple(
+            (
+                p.id,
+                p.name,
+                p.initial,
+                p.final,
+                p.outcome,
+                _fields(p.action, action),
+                _position(p.graphics),
+            )
+            for p in doc.places
+        ),
+        tuple(
+            (
+                t.id,
+                t.name,
+                t.priority,
+                _fields(t.condition, condition),
+                tuple((m.field, m.value) for m in t.condition.matches) if t.condition else (),
+                _position(t.graphics),
+            )
+            for t in doc.transitions
+        ),
+        tuple((a.id, a.source, a.target, a.weight) for a in doc.arcs),
+        tuple(tuple(sorted(m.counts.items())) for m in doc.final_markings),
+    )
+    return hashlib.sha256(repr(content).encode()).hexdigest()[:16]
 
 
 def compile_net(doc: NetDoc, name: str | None = None) -> CompiledNet:
@@ -137,7 +195,7 @@ def compile_net(doc: NetDoc, name: str | None = None) -> CompiledNet:
     return CompiledNet(
         name=name or doc.id,
         doc=doc,
-        version=hashlib.sha256(write_pnml(doc)).hexdigest()[:16],
+        version=fingerprint(doc),
         params={p.name: p.default for p in doc.params},
         place_ids=tuple(p.id for p in places),
         initial=tuple(p.initial for p in places),
@@ -155,6 +213,11 @@ def compile_net(doc: NetDoc, name: str | None = None) -> CompiledNet:
         by_child={k: tuple(v) for k, v in by_child.items()},
         guards=tuple(i for i, c in enumerate(conditions) if c.kind == "guard"),
         initial_places=tuple(i for i, n in enumerate(p.initial for p in places) if n),
+        sources=tuple(i for i, x in enumerate(ins) if not x),
+        plain=not doc.task,
+        final_markings=frozenset(
+            tuple(m.counts.get(p.id, 0) for p in places) for m in doc.final_markings
+        ),
     )
 
 

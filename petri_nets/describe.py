@@ -59,6 +59,8 @@ def describe(net: CompiledNet) -> dict[str, Any]:
     return {
         "net": net.name,
         "version": net.version,
+        "plain": net.plain,  # another tool's net: no actions or conditions, ends when dead
+        "final_markings": [m.counts for m in doc.final_markings],
         "description": doc.description,
         "params": {k: (None if v is REQUIRED else v) for k, v in net.params.items()},
         "required": [k for k, v in net.params.items() if v is REQUIRED],

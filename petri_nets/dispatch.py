@@ -21,7 +21,7 @@ from guidebot.messages import Message
 from guidebot.payloads.petri import KillPetriNet, RunPetriNet
 from petri_nets.clock import Clock
 from petri_nets.compiled import missing_params
-from petri_nets.engine import Instance
+from petri_nets.engine import STEP_BUDGET, Instance
 from petri_nets.library import NetLibrary, UnknownNet
 
 __all__ = ["Dispatch", "DispatchError", "MainTaskBusy"]
@@ -50,6 +50,7 @@ class Dispatch:
         idle_params: dict[str, Any] | None = None,
         monitor: bool = True,
         max_instances: int = 100_000,
+        step_budget: int = STEP_BUDGET,
     ) -> None:
         self.bus = bus
         self.library = library
@@ -58,6 +59,7 @@ class Dispatch:
         self.idle_params = idle_params or {}
         self.monitor = monitor
         self.max_instances = max_instances
+        self.step_budget = step_budget
         self._instances: dict[str, Instance] = {}
         self._waiting: dict[str, dict[Instance, None]] = {}
         self._unsubscribe: dict[str, Callable[[], None]] = {}
@@ -270,20 +272,25 @@ class Dispatch:
         self.bus.publish(type, payload, destination=destination)
 
     def event(
-        self, instance: Instance, kind: str, transition: str | None, marking: dict[str, int]
+        self,
+        instance: Instance,
+        kind: str,
+        transitions: list[str] | None,
+        marking: dict[str, int],
     ) -> None:
+        """Monitoring: ``fired`` lists a step's firings in order (``transition`` is the last)."""
         if self.monitor:
-            self.bus.publish(
-                "petri_net_event",
-                {
-                    "instance_id": instance.id,
-                    "net": instance.net.name,
-                    "kind": kind,
-                    "transition": transition,
-                    "marking": marking,
-                    "time": self.clock.now(),
-                },
-            )
+            payload: dict[str, Any] = {
+                "instance_id": instance.id,
+                "net": instance.net.name,
+                "kind": kind,
+                "transition": transitions[-1] if transitions else None,
+                "marking": marking,
+                "time": self.clock.now(),
+            }
+            if transitions is not None:
+                payload["transitions"] = transitions
+            self.bus.publish("petri_net_event", payload)
 
     def ended(self, instance: Instance) -> None:
         self._instances.pop(instance.id, None)

@@ -10,8 +10,13 @@ Rules (docs/petri-nets.md has the long form):
   sub-net's end) fires at most one transition: the first in rank that is enabled and matches.
 - Events arriving while the instance is busy (a reply published inline by an action) wait in a
   bounded inbox and are handled right after the current step.
-- The net ends when no place holds a mark or every mark is in a final place; outcome "failed"
-  if a marked final place says so, else "done". Ending (or kill) kills all sub-nets.
+- A GuideBot task net ends when no place holds a mark or every mark is in a final place;
+  outcome "failed" if a marked final place says so, else "done". A plain net (another tool's
+  PNML) ends when no transition is enabled: "done" in a declared final marking (or when it
+  declares none), else "stuck". Ending (or kill) kills all sub-nets.
+- Monitoring costs one list append per firing: the firings of a step are reported together,
+  in order, with the new counts of the places they changed, when the step is over or before
+  an action runs (so monitors hear of firings before the messages they cause).
 """
 
 from __future__ import annotations
@@ -31,13 +36,24 @@ if TYPE_CHECKING:
     from guidebot.messages import Message
     from petri_nets.clock import Clock, TimerHandle
 
-__all__ = ["INBOX_LIMIT", "STEP_BUDGET", "Host", "Instance", "InstanceState", "StateError"]
+__all__ = [
+    "INBOX_LIMIT",
+    "REPORT_EVERY",
+    "STEP_BUDGET",
+    "Host",
+    "Instance",
+    "InstanceState",
+    "StateError",
+]
 
 log = logging.getLogger(__name__)
 _random = random.Random()
 
 INBOX_LIMIT = 1000
 """Events queued while an instance is busy; on overflow the oldest is dropped and logged."""
+REPORT_EVERY = 1000
+"""Firings in one monitoring event at most: a long step is reported in parts, so an event stays
+small enough for a WebSocket frame (about 10-20 kB)."""
 STEP_BUDGET = 100_000
 """Firings in one step before the engine yields to the event loop (a loop of immediate
 transitions must not freeze the robot)."""
@@ -71,8 +87,17 @@ class Host(Protocol):
 
     def start_child(self, parent: Instance, net: str, params: dict[str, Any]) -> Instance: ...
 
+    monitor: bool
+    """Report firings (``event(..., "fired", ...)``); read once when an instance is created."""
+    step_budget: int
+    """Firings in one step before yielding to the event loop."""
+
     def event(
-        self, instance: Instance, kind: str, transition: str | None, marking: dict[str, int]
+        self,
+        instance: Instance,
+        kind: str,
+        transitions: list[str] | None,
+        marking: dict[str, int],
     ) -> None: ...
 
     def ended(self, instance: Instance) -> None: ...
@@ -105,6 +130,7 @@ class Instance:
         "_held",
         "_inbox",
         "_nonfinal",
+        "_trail",
         "children",
         "cursors",
         "env",
@@ -145,6 +171,7 @@ class Instance:
         self._heap: list[int] = []
         self._inbox: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
         self._busy = False
+        self._trail: list[int] | None = [] if host.monitor else None
         self.children: dict[str, Instance] = {}
         self.cursors: dict[str, int] = {}
         self.state = InstanceState.CREATED
@@ -173,6 +200,8 @@ class Instance:
 
     def _begin(self) -> None:
         net = self.net
+        for t in net.sources:
+            heapq.heappush(self._heap, t)
         for p in net.initial_places:
             action = net.actions[p]
             if action is not None:
@@ -189,6 +218,7 @@ class Instance:
             self._end("killed")
 
     def _end(self, outcome: str) -> None:
+        self._report_firings()
         self._move(InstanceState.ENDED)
         self.outcome = outcome
         for timers in self._held.values():
@@ -229,6 +259,25 @@ class Instance:
                 self._end("failed")
         finally:
             self._busy = False
+            if self._trail:
+                self._report_firings()
+
+    def _report_firings(self) -> None:
+        """One monitoring event for the firings of the step: in order, with new counts."""
+        trail = self._trail
+        if not trail:
+            return
+        self._trail = []
+        net = self.net
+        marks = self.marks
+        changed: dict[str, int] = {}
+        for t in dict.fromkeys(trail):
+            for p, _ in net.inputs[t]:
+                changed[net.place_ids[p]] = marks[p]
+            for p, _ in net.outputs[t]:
+                changed[net.place_ids[p]] = marks[p]
+        ids = net.trans_ids
+        self.host.event(self, "fired", [ids[t] for t in trail], changed)
 
     def on_message(self, message: Message) -> None:
         self._post(self._message, message)
@@ -299,7 +348,7 @@ class Instance:
     def _settle(self) -> None:
         """Fire enabled immediate transitions, lowest rank first, then check for the end."""
         heap = self._heap
-        budget = STEP_BUDGET
+        budget = self.host.step_budget
         while heap and self.state is InstanceState.RUNNING:
             t = heapq.heappop(heap)
             while heap and heap[0] == t:
@@ -312,16 +361,22 @@ class Instance:
                 if budget == 0:
                     self.host.clock.call_soon(lambda: self._post(_nothing))
                     return
-        if self.state is InstanceState.RUNNING and self._nonfinal == 0:
-            failed = any(m and f for m, f in zip(self.marks, self.net.failed, strict=True))
+        if self.state is not InstanceState.RUNNING:
+            return
+        net = self.net
+        if net.plain:  # nothing is enabled: a place/transition net is over
+            finals = net.final_markings
+            self._end("done" if not finals or tuple(self.marks) in finals else "stuck")
+        elif self._nonfinal == 0:
+            failed = any(m and f for m, f in zip(self.marks, net.failed, strict=True))
             self._end("failed" if failed else "done")
 
     def _fire(self, t: int) -> None:
         net = self.net
         marks = self.marks
         final = net.final
-        changed: dict[str, int] = {}
         held_map = self._held
+        nonfinal = self._nonfinal
         for p, w in net.inputs[t]:
             if held_map:
                 held = held_map.get(p)
@@ -334,15 +389,18 @@ class Instance:
                         del held_map[p]
             marks[p] -= w
             if not final[p]:
-                self._nonfinal -= w
-            changed[net.place_ids[p]] = marks[p]
+                nonfinal -= w
         outputs = net.outputs[t]
         for p, w in outputs:
             marks[p] += w
             if not final[p]:
-                self._nonfinal += w
-            changed[net.place_ids[p]] = marks[p]
-        self.host.event(self, "fired", net.trans_ids[t], changed)
+                nonfinal += w
+        self._nonfinal = nonfinal
+        trail = self._trail
+        if trail is not None:
+            trail.append(t)
+            if len(trail) >= REPORT_EVERY:
+                self._report_firings()
         heap = self._heap
         for p, w in outputs:
             if net.actions[p] is not None:
@@ -362,6 +420,8 @@ class Instance:
     def _act(self, p: int) -> None:
         action = self.net.actions[p]
         assert action is not None
+        if self._trail:  # monitors hear of the firings before the messages they cause
+            self._report_firings()
         kind = action.kind
         if kind == "publish":
             self.host.publish_action(

@@ -19,6 +19,7 @@ __all__ = [
     "ActionSpec",
     "ArcSpec",
     "ConditionSpec",
+    "FinalMarking",
     "MatchSpec",
     "NetDoc",
     "PageSpec",
@@ -110,6 +111,7 @@ class PlaceSpec:
     graphics: Node | None = None
     name_graphics: Node | None = None
     foreign: list[Node] = field(default_factory=list)
+    element: Node | None = None
 
 
 @dataclass
@@ -123,6 +125,7 @@ class TransitionSpec:
     graphics: Node | None = None
     name_graphics: Node | None = None
     foreign: list[Node] = field(default_factory=list)
+    element: Node | None = None
 
 
 @dataclass
@@ -135,6 +138,9 @@ class ArcSpec:
     weight: int = 1
     graphics: Node | None = None
     foreign: list[Node] = field(default_factory=list)
+    element: Node | None = None
+    written: tuple[str, str] | None = None
+    """Source and target as the file wrote them, when one is a reference node."""
 
 
 @dataclass
@@ -143,16 +149,35 @@ class PageSpec:
     parent: str | None
     line: int
     graphics: Node | None = None
+    element: Node | None = None
+    implicit: bool = False
+    """Nodes written directly under ``<net>`` (older PNML, WoPeD, PIPE): no ``<page>`` element."""
+
+
+@dataclass
+class FinalMarking:
+    """A final marking another tool declared (ProM's ``<finalmarkings>``); unlisted places 0."""
+
+    counts: dict[str, int]
+    line: int
+    lines: dict[str, int] = field(default_factory=dict)
+    """Line of each place's entry."""
 
 
 @dataclass
 class NetDoc:
-    """One net as read from a file."""
+    """One net as read from a file.
+
+    ``task`` tells the two dialects apart: a GuideBot task net has at least one
+    ``<toolspecific tool="guidebot">`` element (nets built in Python are task nets); a plain net
+    (any other tool's PNML) runs as a bare place/transition net (docs/petri-nets.md).
+    """
 
     id: str
     file: str
     line: int
     type: str = ""
+    task: bool = True
     name: str | None = None
     description: str = ""
     params: list[ParamSpec] = field(default_factory=list)
@@ -162,6 +187,11 @@ class NetDoc:
     arcs: list[ArcSpec] = field(default_factory=list)
     pages: list[PageSpec] = field(default_factory=list)
     foreign: list[Node] = field(default_factory=list)
+    final_markings: list[FinalMarking] = field(default_factory=list)
+    element: Node | None = None
+    """The ``<net>`` element read; with ``root`` (``<pnml>``) it is how a file is written back
+    as it came: unknown elements, other tools' data and the namespace kept."""
+    root: Node | None = None
 
     @property
     def label(self) -> str:

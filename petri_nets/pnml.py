@@ -1,14 +1,14 @@
-"""PNML (ISO/IEC 15909-2, place/transition nets) reader and writer.
+"""PNML (ISO/IEC 15909-2, place/transition nets) reader.
 
-Plain PNML from other tools is read as is (names, graphics, nested pages, reference nodes,
-arc weights); what PNML cannot say lives in ``<toolspecific tool="guidebot" version="1">``
-(see docs/petri-nets.md). Other tools' toolspecific data and graphics are kept and written back.
-Reading never raises on content problems: it returns the net and the list of problems found.
+Plain PNML from other tools is read as is (names, graphics, nested pages or none, reference
+nodes, arc weights, ProM's final markings, PIPE's ``<value>`` labels); what PNML cannot say
+lives in ``<toolspecific tool="guidebot" version="1">`` (see docs/petri-nets.md). Every element
+read is kept on the model so ``write_pnml`` gives the file back with nothing lost. Reading never
+raises on content problems: it returns the net and the list of problems found.
 """
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from petri_nets.model import (
@@ -16,6 +16,7 @@ from petri_nets.model import (
     ActionSpec,
     ArcSpec,
     ConditionSpec,
+    FinalMarking,
     MatchSpec,
     NetDoc,
     PageSpec,
@@ -24,6 +25,17 @@ from petri_nets.model import (
     Problem,
     TransitionSpec,
 )
+from petri_nets.pnml_dialects import (
+    PNML_NS,
+    PTNET_TYPE,
+    TOOL,
+    TOOL_VERSION,
+    is_pt_type,
+    label_value,
+    parse_count,
+    text_of,
+)
+from petri_nets.pnml_writer import write_pnml
 from petri_nets.templates import parse_literal
 from petri_nets.xmlsafe import Node, XmlError, parse_xml
 
@@ -37,16 +49,14 @@ __all__ = [
     "write_pnml",
 ]
 
-PNML_NS = "http://www.pnml.org/version-2009/grammar/pnml"
-PTNET_TYPE = "http://www.pnml.org/version-2009/grammar/ptnet"
-TOOL = "guidebot"
-TOOL_VERSION = "1"
+_NODES = ("place", "transition", "arc", "referencePlace", "referenceTransition")
 
 
 class _Reader:
     def __init__(self, file: str) -> None:
         self.file = file
         self.problems: list[Problem] = []
+        self.task = False
 
     def problem(self, line: int, message: str) -> None:
         self.problems.append(Problem(self.file, line, message))
@@ -68,25 +78,34 @@ class _Reader:
             self.problem(
                 extra.line, "only one <net> per file is supported; move it to its own file"
             )
-        return self.read_net(nets[0])
+        net = self.read_net(nets[0])
+        net.root = root
+        net.task = self.task
+        return net
 
     def read_net(self, node: Node) -> NetDoc:
-        net = NetDoc(id=node.attrib.get("id", ""), file=self.file, line=node.line)
+        net = NetDoc(id=node.attrib.get("id", ""), file=self.file, line=node.line, element=node)
         if not net.id:
             self.problem(node.line, "<net> has no id")
         net.type = node.attrib.get("type", "")
-        if net.type and net.type != PTNET_TYPE:
+        if not is_pt_type(net.type):
             self.problem(node.line, f"net type {net.type!r} is not a place/transition net")
-        net.name = node.text_of("name")
+        net.name = label_value(node, "name")
         for tool in node.findall("toolspecific"):
             if self.ours(tool):
                 self.read_net_tool(net, tool)
             else:
                 net.foreign.append(tool)
-        pages = node.findall("page")
-        if not pages:
-            self.problem(node.line, "<net> has no <page>")
+        for marks in node.findall("finalmarkings"):
+            self.read_final_markings(net, marks)
         refs: dict[str, tuple[str, int]] = {}
+        pages = node.findall("page")
+        if any(child.tag in _NODES for child in node.children):
+            # older PNML (WoPeD, PIPE): nodes straight under <net>, no page
+            implicit = PageSpec("", None, node.line, element=node, implicit=True)
+            self.read_page_content(net, implicit, node, refs)
+        elif not pages:
+            self.problem(node.line, "<net> has no <page>")
         for page in pages:
             self.read_page(net, page, None, refs)
         self.resolve_references(net, refs)
@@ -95,6 +114,7 @@ class _Reader:
     def ours(self, tool: Node) -> bool:
         if tool.attrib.get("tool") != TOOL:
             return False
+        self.task = True
         if tool.attrib.get("version", TOOL_VERSION) != TOOL_VERSION:
             self.problem(
                 tool.line,
@@ -123,20 +143,48 @@ class _Reader:
             else:
                 self.problem(child.line, f"unknown net setting <{child.tag}>")
 
+    def read_final_markings(self, net: NetDoc, node: Node) -> None:
+        """ProM's ``<finalmarkings><marking><place idref><text>n``: the markings it ends in."""
+        for marking in node.findall("marking"):
+            counts: dict[str, int] = {}
+            lines: dict[str, int] = {}
+            for place in marking.findall("place"):
+                ref = place.attrib.get("idref", "")
+                count = parse_count(text_of(place))
+                if not ref or count is None:
+                    self.problem(
+                        place.line, "a final marking's <place> needs idref and a natural number"
+                    )
+                    continue
+                counts[ref] = counts.get(ref, 0) + count
+                lines.setdefault(ref, place.line)
+            net.final_markings.append(FinalMarking(counts, marking.line, lines))
+
     def read_page(
         self, net: NetDoc, node: Node, parent: str | None, refs: dict[str, tuple[str, int]]
     ) -> None:
-        page_id = node.attrib.get("id", f"page{len(net.pages) + 1}")
-        net.pages.append(PageSpec(page_id, parent, node.line, node.find("graphics")))
+        page = PageSpec(
+            node.attrib.get("id", f"page{len(net.pages) + 1}"),
+            parent,
+            node.line,
+            node.find("graphics"),
+            element=node,
+        )
+        self.read_page_content(net, page, node, refs)
+
+    def read_page_content(
+        self, net: NetDoc, page: PageSpec, node: Node, refs: dict[str, tuple[str, int]]
+    ) -> None:
+        net.pages.append(page)
         for child in node.children:
             if child.tag == "place":
-                net.places.append(self.read_place(child, page_id))
+                net.places.append(self.read_place(child, page.id))
             elif child.tag == "transition":
-                net.transitions.append(self.read_transition(child, page_id))
+                net.transitions.append(self.read_transition(child, page.id))
             elif child.tag == "arc":
-                net.arcs.append(self.read_arc(child, page_id))
-            elif child.tag == "page":
-                self.read_page(net, child, page_id, refs)
+                net.arcs.append(self.read_arc(child, page.id))
+            elif child.tag == "page" and not page.implicit:
+                self.read_page(net, child, page.id, refs)
             elif child.tag in ("referencePlace", "referenceTransition"):
                 ref_id, target = child.attrib.get("id", ""), child.attrib.get("ref", "")
                 if not ref_id or not target:
@@ -154,24 +202,38 @@ class _Reader:
         name = node.find("name")
         return name.find("graphics") if name is not None else None
 
+    def count(self, node: Node, tag: str, what: str, minimum: int) -> int | None:
+        """A marking or weight label, checked; None when absent or bad (a problem is said)."""
+        value = label_value(node, tag)
+        if value is None:
+            return None
+        count = parse_count(value)
+        if count is None or count < minimum:
+            holder = node.find(tag)
+            line = holder.line if holder is not None else node.line
+            kind = "a natural number" if minimum == 0 else "a positive integer"
+            self.problem(line, f"{what}: {tag} {value!r} is not {kind}")
+            return None
+        return count
+
     def read_place(self, node: Node, page: str) -> PlaceSpec:
         place = PlaceSpec(
             self.node_id(node),
             node.line,
             page,
-            name=node.text_of("name"),
+            name=label_value(node, "name"),
             graphics=node.find("graphics"),
             name_graphics=self.name_graphics(node),
+            element=node,
         )
-        marking = node.text_of("initialMarking")
-        if marking:
-            if marking.isdigit():
-                place.initial = int(marking)
-            else:
-                line = node.find("initialMarking").line  # type: ignore[union-attr]
-                self.problem(
-                    line, f"place {place.id}: initialMarking {marking!r} is not a natural number"
-                )
+        place.initial = self.count(node, "initialMarking", f"place {place.id}", 0) or 0
+        capacity = label_value(node, "capacity")  # PIPE: 0 = unbounded
+        if capacity not in (None, "", "0"):
+            self.problem(
+                node.find("capacity").line,  # type: ignore[union-attr]
+                f"place {place.id}: capacity {capacity!r} is not supported "
+                "(place/transition nets here are unbounded; set it to 0)",
+            )
         for tool in node.findall("toolspecific"):
             if not self.ours(tool):
                 place.foreign.append(tool)
@@ -214,9 +276,10 @@ class _Reader:
             self.node_id(node),
             node.line,
             page,
-            name=node.text_of("name"),
+            name=label_value(node, "name"),
             graphics=node.find("graphics"),
             name_graphics=self.name_graphics(node),
+            element=node,
         )
         for tool in node.findall("toolspecific"):
             if not self.ours(tool):
@@ -278,21 +341,30 @@ class _Reader:
             node.line,
             page,
             graphics=node.find("graphics"),
+            element=node,
         )
-        weight = node.text_of("inscription")
-        if weight is not None:
-            if weight.isdigit() and int(weight) > 0:
-                arc.weight = int(weight)
-            else:
-                self.problem(
-                    node.line, f"arc {arc.id}: inscription {weight!r} is not a positive integer"
-                )
+        arc.weight = self.count(node, "inscription", f"arc {arc.id}", 1) or 1
+        # PIPE and TINA: <type value="inhibitor"/>; ProM: <arctype><text>reset</text></arctype>
+        kind_node = node.find("type") or node.find("arctype")
+        kind = "normal"
+        if kind_node is not None:
+            kind = kind_node.attrib.get("value") or label_value(node, kind_node.tag) or kind
+        if kind_node is not None and kind.strip().lower() not in ("normal", "regular", ""):
+            self.problem(
+                kind_node.line,
+                f"arc {arc.id}: {kind} arcs are not supported (only normal arcs of "
+                "place/transition nets)",
+            )
         arc.foreign = node.findall("toolspecific")
+        for tool in arc.foreign:
+            self.ours(tool)  # kept as is, but it makes the net a task net
         return arc
 
     def resolve_references(self, net: NetDoc, refs: dict[str, tuple[str, int]]) -> None:
-        """Arcs to a reference node go to the node it stands for (following chains)."""
+        """Arcs to a reference node go to the node it stands for (following chains); the ids
+        the file wrote are kept for writing back."""
         for arc in net.arcs:
+            ends = []
             for attr in ("source", "target"):
                 seen: set[str] = set()
                 target = getattr(arc, attr)
@@ -301,7 +373,10 @@ class _Reader:
                     target = refs[target][0]
                 if target in seen:
                     self.problem(arc.line, f"arc {arc.id}: reference cycle through {target!r}")
-                setattr(arc, attr, target)
+                ends.append(target)
+            if (arc.source, arc.target) != tuple(ends):
+                arc.written = (arc.source, arc.target)
+                arc.source, arc.target = ends
 
 
 def read_pnml(data: bytes | str, file: str = "<string>") -> tuple[NetDoc | None, list[Problem]]:
@@ -318,129 +393,3 @@ def read_pnml_file(path: str | Path) -> tuple[NetDoc | None, list[Problem]]:
     except OSError as exc:
         return None, [Problem(str(path), 0, f"cannot read: {exc.strerror}")]
     return read_pnml(data, str(path))
-
-
-# ---------------------------------------------------------------- writer
-
-
-def _q(tag: str) -> str:
-    return f"{{{PNML_NS}}}{tag}"
-
-
-def _copy(node: Node, parent: ET.Element) -> None:
-    """Write a kept element (graphics, other tools' data) back, in the PNML namespace."""
-    element = ET.SubElement(parent, _q(node.tag), node.attrib)
-    element.text = node.text.strip() or None
-    for child in node.children:
-        _copy(child, element)
-
-
-def _text(parent: ET.Element, tag: str, value: str, graphics: Node | None = None) -> None:
-    holder = ET.SubElement(parent, _q(tag))
-    ET.SubElement(holder, _q("text")).text = value
-    if graphics is not None:
-        _copy(graphics, holder)
-
-
-def _tool(parent: ET.Element) -> ET.Element:
-    return ET.SubElement(parent, _q("toolspecific"), {"tool": TOOL, "version": TOOL_VERSION})
-
-
-def _write_action(parent: ET.Element, action: ActionSpec) -> None:
-    attrs = {"kind": action.kind}
-    for key in ("type", "destination", "net", "seconds", "list", "var", "order"):
-        value = getattr(action, key)
-        if value is not None:
-            attrs[key] = value
-    element = ET.SubElement(parent, _q("action"), attrs)
-    if action.body.strip():
-        element.text = action.body.strip()
-
-
-def _write_condition(parent: ET.Element, cond: ConditionSpec) -> None:
-    attrs = {"kind": cond.kind}
-    for key in ("type", "net", "outcome", "var", "test", "value"):
-        value = getattr(cond, key)
-        if value is not None:
-            attrs[key] = value
-    element = ET.SubElement(parent, _q("condition"), attrs)
-    for match in cond.matches:
-        ET.SubElement(element, _q("match"), {"field": match.field, "value": match.value})
-    for var, field_name in cond.binds:
-        ET.SubElement(element, _q("bind"), {"var": var, "field": field_name})
-
-
-def write_pnml(net: NetDoc) -> bytes:
-    """Standard PNML: our data only inside guidebot toolspecific elements."""
-    import json
-
-    ET.register_namespace("", PNML_NS)
-    root = ET.Element(_q("pnml"))
-    net_el = ET.SubElement(root, _q("net"), {"id": net.id, "type": PTNET_TYPE})
-    if net.name:
-        _text(net_el, "name", net.name)
-    if net.description or net.params or net.endless:
-        tool = _tool(net_el)
-        if net.description:
-            ET.SubElement(tool, _q("description")).text = net.description
-        for param in net.params:
-            attrs = {"name": param.name}
-            if param.default is not REQUIRED:
-                default = param.default
-                attrs["default"] = default if isinstance(default, str) else json.dumps(default)
-            ET.SubElement(tool, _q("param"), attrs)
-        if net.endless:
-            ET.SubElement(tool, _q("endless"))
-    for foreign in net.foreign:
-        _copy(foreign, net_el)
-    pages: dict[str, ET.Element] = {}
-    for page in net.pages or [PageSpec("page1", None, 0)]:
-        parent = pages.get(page.parent or "", net_el)
-        pages[page.id] = ET.SubElement(parent, _q("page"), {"id": page.id})
-        if page.graphics is not None:
-            _copy(page.graphics, pages[page.id])
-    first = next(iter(pages.values()))
-    for place in net.places:
-        el = ET.SubElement(pages.get(place.page, first), _q("place"), {"id": place.id})
-        if place.name:
-            _text(el, "name", place.name, place.name_graphics)
-        if place.graphics is not None:
-            _copy(place.graphics, el)
-        if place.initial:
-            _text(el, "initialMarking", str(place.initial))
-        if place.action is not None or place.final:
-            tool = _tool(el)
-            if place.action is not None:
-                _write_action(tool, place.action)
-            if place.final:
-                ET.SubElement(tool, _q("final"), {"outcome": place.outcome})
-        for foreign in place.foreign:
-            _copy(foreign, el)
-    for trans in net.transitions:
-        el = ET.SubElement(pages.get(trans.page, first), _q("transition"), {"id": trans.id})
-        if trans.name:
-            _text(el, "name", trans.name, trans.name_graphics)
-        if trans.graphics is not None:
-            _copy(trans.graphics, el)
-        if trans.condition is not None or trans.priority:
-            tool = _tool(el)
-            if trans.condition is not None:
-                _write_condition(tool, trans.condition)
-            if trans.priority:
-                ET.SubElement(tool, _q("priority"), {"value": str(trans.priority)})
-        for foreign in trans.foreign:
-            _copy(foreign, el)
-    for arc in net.arcs:
-        el = ET.SubElement(
-            pages.get(arc.page, first),
-            _q("arc"),
-            {"id": arc.id, "source": arc.source, "target": arc.target},
-        )
-        if arc.graphics is not None:
-            _copy(arc.graphics, el)
-        if arc.weight != 1:
-            _text(el, "inscription", str(arc.weight))
-        for foreign in arc.foreign:
-            _copy(foreign, el)
-    ET.indent(root)
-    return ET.tostring(root, encoding="utf-8", xml_declaration=True)

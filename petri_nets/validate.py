@@ -2,7 +2,9 @@
 
 Reading (petri_nets.pnml) reports malformed XML and malformed elements; this module reports
 what makes a well-formed net wrong: dangling arcs, unknown action or condition kinds, missing or
-undeclared parameters, transitions that can never be enabled, no reachable end.
+undeclared parameters, transitions that can never be enabled, no reachable end. The last group
+holds for GuideBot task nets only: a plain net from another tool is checked for structure and
+runs until no transition is enabled (docs/petri-nets.md, "Nets from other tools").
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ __all__ = ["BUILTIN_NAMES", "MESSAGE_TYPE", "declared_names", "validate"]
 
 BUILTIN_NAMES = frozenset({"instance_id", "net", "parent"})
 MESSAGE_TYPE = re.compile(r"^[a-z][a-z0-9_.]*$")
-NET_OUTCOMES = ("done", "failed", "killed")
+NET_OUTCOMES = ("done", "failed", "killed", "stuck")
 
 
 def declared_names(net: NetDoc) -> set[str]:
@@ -148,6 +150,16 @@ def validate(net: NetDoc) -> list[Problem]:
                 problem(action.line, f"{where}: order {action.order!r} is not sequence or random")
             elif action.list not in names:
                 problem(action.line, f"{where}: parameter {action.list!r} is used but not declared")
+
+    for marking in net.final_markings:
+        for place_id in marking.counts:
+            if place_id not in places:
+                line = marking.lines.get(place_id, marking.line)
+                problem(line, f"final marking: no place {place_id!r}")
+    if not net.task:
+        # a plain net from another tool: it runs until nothing is enabled, whatever its
+        # shape (dead transitions, no marks, a transition without input are its author's call)
+        return sorted(out, key=lambda p: p.line)
 
     blocked: set[str] = set()
     for trans in net.transitions:

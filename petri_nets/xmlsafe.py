@@ -32,7 +32,8 @@ class UnsafeXml(XmlError):
 
 @dataclass(eq=False)
 class Node:
-    """One element: local tag name (namespace dropped), attributes, text, children, line."""
+    """One element: local tag name, attributes (local names), text, children, line, and the
+    namespace URI it was in ("" when none), so a writer can give a file back as it came."""
 
     tag: str
     attrib: dict[str, str]
@@ -40,6 +41,7 @@ class Node:
     children: list[Node] = field(default_factory=list)
     text: str = ""
     tail: str = ""
+    ns: str = ""
 
     def find(self, tag: str) -> Node | None:
         for child in self.children:
@@ -63,16 +65,32 @@ def _local(name: str) -> str:
     return name.rsplit(" ", 1)[-1]
 
 
+def _namespace(name: str) -> str:
+    return name.rsplit(" ", 1)[0] if " " in name else ""
+
+
 def parse_xml(data: bytes | str, *, max_bytes: int = MAX_BYTES) -> Node:
-    """Parse a document into Nodes; raises XmlError / UnsafeXml with the line of the problem."""
+    """Parse a document into Nodes; raises XmlError / UnsafeXml with the line of the problem.
+
+    Bytes are decoded by the XML declaration's encoding (UTF-8, UTF-16, ISO-8859-1, other
+    single-byte code pages), as other Petri-net tools write them.
+    """
     raw = data.encode("utf-8") if isinstance(data, str) else data
     if len(raw) > max_bytes:
         raise UnsafeXml(f"document is {len(raw)} bytes, the limit is {max_bytes}")
     parser = expat.ParserCreate(namespace_separator=" ")
     parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    parser.buffer_text = True  # one text callback per run of text, not per line
     stack: list[Node] = []
     root: list[Node] = []
     count = 0
+    names: dict[str, tuple[str, str]] = {}  # "uri local" -> (local, uri); tags repeat a lot
+
+    def split(name: str) -> tuple[str, str]:
+        parts = names.get(name)
+        if parts is None:
+            parts = names[name] = (_local(name), _namespace(name))
+        return parts
 
     def refuse(what: str) -> None:
         raise UnsafeXml(f"{what} is not allowed", parser.CurrentLineNumber)
@@ -84,8 +102,12 @@ def parse_xml(data: bytes | str, *, max_bytes: int = MAX_BYTES) -> Node:
             refuse(f"more than {MAX_ELEMENTS} elements")
         if len(stack) >= MAX_DEPTH:
             refuse(f"nesting deeper than {MAX_DEPTH}")
+        tag, ns = split(name)
         node = Node(
-            _local(name), {_local(k): v for k, v in attrs.items()}, parser.CurrentLineNumber
+            tag,
+            {split(k)[0]: v for k, v in attrs.items()} if attrs else {},
+            parser.CurrentLineNumber,
+            ns=ns,
         )
         if stack:
             stack[-1].children.append(node)

@@ -42,18 +42,21 @@ class KillPetriNet(PayloadModel):
 class PetriNetEnded(PayloadModel):
     net: str
     instance_id: str
-    outcome: Literal["done", "killed", "failed"]
+    outcome: Literal["done", "killed", "failed", "stuck"]
     parent: str | None = None
 
 
 @register_payload("petri_net_event")
 class PetriNetEvent(PayloadModel):
-    """Monitoring: "started" carries the whole marking, "fired" the places it changed."""
+    """Monitoring: "started" carries the whole marking; "fired" the firings of one step in
+    order (``transitions``; ``transition`` is the last) and the new counts of the places they
+    changed."""
 
     instance_id: str
     net: str
     kind: Literal["started", "fired", "ended"]
     transition: str | None = None
+    transitions: list[str] = Field(default_factory=list)
     marking: dict[str, int] = Field(default_factory=dict)
     time: float
 

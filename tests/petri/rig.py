@@ -40,11 +40,12 @@ class Rig:
 
     def fired(self, instance_id: str) -> list[str]:
         return [
-            m.payload["transition"]
+            transition
             for m in self.log
             if m.type == "petri_net_event"
             and m.payload["kind"] == "fired"
             and m.payload["instance_id"] == instance_id
+            for transition in m.payload["transitions"]
         ]
 
     def say(self, type: str, **payload: Any) -> None:

@@ -49,7 +49,7 @@ def test_run_prints_the_trace_and_a_json_result_last() -> None:
     )
     assert code == 0, lines
     result = json.loads(lines[-1])
-    assert set(result) == {"net", "outcome", "fired", "published", "final_marking"}
+    assert set(result) == {"net", "outcome", "fired", "firings", "published", "final_marking"}
     assert result["net"] == "give_tour" and result["outcome"] == "done"
     assert result["fired"] == [
         "has_first",

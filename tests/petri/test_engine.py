@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from petri_nets import engine
 from petri_nets.builder import (
     NetBuilder,
     guard,
@@ -201,14 +200,44 @@ def test_monitoring_events_replay_to_the_live_marking(tmp_path: Path) -> None:
     assert {k: v for k, v in replayed.items() if v} == instance.marking() == {"wait": 1}
 
 
-def test_a_loop_of_immediate_transitions_yields_and_stays_killable(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.setattr(engine, "STEP_BUDGET", 50)
+def test_a_step_is_one_monitoring_event_with_its_firings_in_order(tmp_path: Path) -> None:
+    b = NetBuilder("steps")
+    b.place("p0", initial=2).place("p1").place("p2").place("wait").place("end", final=True)
+    b.transition("t0", {"p0": 2}, ["p1", "wait"]).transition("t1", ["p1"], ["p2"])
+    b.transition("t2", ["wait", "p2"], ["end"], message("go"))
+    rig = rig_with(tmp_path, b.build())
+    iid = rig.dispatch.start("steps")
+    rig.say("go")
+    events = [
+        (m.payload["kind"], m.payload.get("transitions"), m.payload["marking"])
+        for m in rig.log
+        if m.type == "petri_net_event" and m.payload["instance_id"] == iid
+    ]
+    assert events == [
+        ("started", None, {"p0": 2}),
+        ("fired", ["t0", "t1"], {"p0": 0, "p1": 0, "wait": 1, "p2": 1}),
+        ("fired", ["t2"], {"wait": 0, "p2": 0, "end": 1}),
+        ("ended", None, {"end": 1}),
+    ]
+    fired = [m.payload for m in rig.log if m.type == "petri_net_event"][1]
+    assert fired["transition"] == "t1"  # the last of the step, for one-firing monitors
+    assert rig.ended(iid) == "done"
+
+
+def test_without_monitoring_nothing_is_published_but_the_net_runs(tmp_path: Path) -> None:
+    rig = rig_with(tmp_path, choice())
+    rig.dispatch.monitor = False
+    iid = rig.dispatch.start("choice")
+    assert [m.type for m in rig.log] == ["petri_net_ended"]
+    assert rig.ended(iid) == "done"
+
+
+def test_a_loop_of_immediate_transitions_yields_and_stays_killable(tmp_path: Path) -> None:
     b = NetBuilder("spin", endless=True)
     b.place("a", initial=1).place("b")
     b.transition("ab", ["a"], ["b"]).transition("ba", ["b"], ["a"])
     rig = rig_with(tmp_path, b.build())
+    rig.dispatch.step_budget = 50
     iid = rig.dispatch.start("spin")
     assert len(rig.fired(iid)) == 50
     assert rig.clock.run_ready() == 1  # the engine gave the loop back, then went on
@@ -252,3 +281,19 @@ def test_killed_inline_by_a_listener_publishes_nothing_more(tmp_path: Path) -> N
     iid = rig.dispatch.start("two_steps")
     assert rig.ended(iid) == "killed"
     assert rig.action_types() == ["first"]
+
+
+def test_monitors_hear_of_a_firing_before_the_messages_it_causes(tmp_path: Path) -> None:
+    b = NetBuilder("causal")
+    b.place("p0", initial=1).place("p1").place("said", action=publish("hello"))
+    b.place("end", final=True)
+    b.transition("t0", ["p0"], ["p1"]).transition("t1", ["p1"], ["said"])
+    b.transition("t2", ["said"], ["end"])
+    rig = rig_with(tmp_path, b.build())
+    rig.dispatch.start("causal")
+    seen = [
+        m.payload.get("transitions") or m.payload.get("kind") if m.type != "hello" else "hello"
+        for m in rig.log
+        if m.type in ("petri_net_event", "hello")
+    ]
+    assert seen == ["started", ["t0", "t1"], "hello", ["t2"], "ended"]
