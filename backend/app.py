@@ -36,6 +36,7 @@ from backend.hub import websocket as hub_websocket
 from backend.ratelimit import RateLimiter
 from backend.rgm import rgm
 from backend.settings import Settings
+from backend.site.component import site_editor
 from backend.webpages import WebFiles
 
 __all__ = ["COMPONENTS", "ROUTERS", "create_app", "uvicorn_config"]
@@ -49,6 +50,7 @@ COMPONENTS: list[Component] = [
     server_brain,
     building_interface,
     rgm,
+    site_editor,
 ]
 
 # REST/WebSocket routers of the server modules. One line each.

@@ -43,6 +43,7 @@ UP_TYPES: tuple[str, ...] = (
     "open_door",
     "call_elevator",
     "petri_net_ended",
+    "site_loaded",
 )
 """On-board message types sent to the hub."""
 
@@ -56,6 +57,7 @@ DOWN_TYPES: tuple[str, ...] = (
     "door_closed",
     "elevator_in_position",
     "command_failed",
+    "site_changed",
     "error",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
