@@ -29,6 +29,8 @@ export class EditMap extends EventTarget {
     this.planSize = null; // [w, h] px of the current floor's image
     this.images = new Map(); // url -> {url, size}
     this.fitted = new Set();
+    // The toolbar above grows and shrinks (calibration form): keep Leaflet's size right.
+    new ResizeObserver(() => this.map.invalidateSize({ pan: false })).observe(element);
     this.map.on("click", (e) => this.#emit("mapclick", { x: e.latlng.lng, y: e.latlng.lat }));
   }
 

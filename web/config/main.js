@@ -186,7 +186,6 @@ async function start(me) {
     } catch (err) {
       if (err instanceof ApiError && err.status === 422) say(`Publish refused: ${err.detail.length} problem(s), see the list.`, true);
       else say(`Publish refused: ${err.detail?.msg ?? err.message}`, true);
-      if (err.status === 422) await model.load();
     }
   }
 
