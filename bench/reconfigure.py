@@ -213,7 +213,7 @@ def in_order(seen: list[str], expected: list[str]) -> bool:
     return all(any(s == e for s in it) for e in expected)
 
 
-async def _run(robots: int, time_scale: float) -> dict[str, Any]:
+async def _run(robots: int, time_scale: float, screenshots: Path | None = None) -> dict[str, Any]:
     from playwright.async_api import async_playwright
 
     with tempfile.TemporaryDirectory(prefix="guidebot-reconfigure-") as tmp:
@@ -230,7 +230,12 @@ async def _run(robots: int, time_scale: float) -> dict[str, Any]:
                     await page.goto(f"{f.url}/config/")
                     await sign_in(actions, f.admin_token)
                     await move_stand(actions)
+                    if screenshots is not None:
+                        await page.screenshot(path=str(screenshots / "config-fair-tour.png"))
                     await publish(actions)
+                    if screenshots is not None:
+                        await page.get_by_role("button", name="Changes in version 2").click()
+                        await page.screenshot(path=str(screenshots / "config-fair-published.png"))
                 except Exception as exc:
                     raise RuntimeError(f"in the browser: {exc}; page errors: {errors}") from exc
                 browser_s = time.perf_counter() - start
@@ -255,10 +260,16 @@ async def _run(robots: int, time_scale: float) -> dict[str, Any]:
 @click.command("reconfigure")
 @click.option("--robots", default=3, show_default=True, help="Simulated robots connected.")
 @click.option("--time-scale", default=20.0, show_default=True, help="Robots' simulated speed-up.")
+@click.option(
+    "--screenshots",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Write the docs' screenshots of the scenario here (docs/screenshots).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Only the JSON line.")
-def main(robots: int, time_scale: float, as_json: bool) -> None:
+def main(robots: int, time_scale: float, screenshots: Path | None, as_json: bool) -> None:
     """Move a stand and change a tour in /config, publish, follow the new tour."""
-    result = asyncio.run(_run(robots, time_scale))
+    result = asyncio.run(_run(robots, time_scale, screenshots))
     if not as_json:
         click.echo(
             f"{result['browser_actions']} browser actions in {result['browser_seconds']} s; "
