@@ -25,6 +25,7 @@ from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
 from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
 from robot_agent.navigation import Navigator
+from robot_agent.site_sync import SiteFollower
 from robot_agent.speech import Speech
 from robot_agent.state import StateReporter
 from robot_agent.tasks import TaskRunner
@@ -91,9 +92,14 @@ def load_onboard_site(path: Path | None) -> OnboardSite:
     if path is None:
         return OnboardSite([], [], None, {})
     from backend.site.yamlio import load_site_file
+
+    return onboard_site(load_site_file(path))
+
+
+def onboard_site(site: Any) -> OnboardSite:
+    """The on-board view of a ``Site``: menu entries and a planner over its graph."""
     from backend.traffic.graph import SiteGraph
 
-    site = load_site_file(path)
     graph = SiteGraph(site)
 
     def planner(start: str, goal: str) -> dict[str, Any]:
@@ -125,6 +131,7 @@ class RobotAgent:
         self.hub: Any = None
         self.link: Link | None = None
         self.screen: OnboardScreen | None = None
+        self.site_follower: SiteFollower | None = None
         self.screen_server: ScreenServer | None = None
         self._stack = contextlib.AsyncExitStack()
 
@@ -292,11 +299,28 @@ class RobotAgent:
         )
         state = self.state
         assert state is not None
-        self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=state.publish_now)
+        follower = SiteFollower(self.bus.endpoint("site"), c.name, self._use_site)
+        follower.start()
+        self._stack.callback(follower.stop)
+        self.site_follower = follower
+
+        def connected() -> None:
+            state.publish_now()
+            follower.announce()
+
+        self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=connected)
         self.link.start()
         self._stack.push_async_callback(self.link.stop)
         await self.hub.start()
         self._stack.push_async_callback(self.hub.close)
+
+    def _use_site(self, site: Any) -> None:
+        """A new live site: the fallback planner and the screen's menu follow it."""
+        view = onboard_site(site)
+        if self.navigator is not None:
+            self.navigator.planner = view.planner
+        if self.screen is not None:
+            self.screen.tours, self.screen.pois = view.tours, view.pois
 
     async def stop(self) -> None:
         await self._stack.aclose()

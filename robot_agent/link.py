@@ -45,6 +45,7 @@ UP_TYPES: tuple[str, ...] = (
     "call_elevator",
     "node_reached",
     "petri_net_ended",
+    "site_loaded",
 )
 """On-board message types sent to the hub."""
 
@@ -58,6 +59,7 @@ DOWN_TYPES: tuple[str, ...] = (
     "door_closed",
     "elevator_in_position",
     "command_failed",
+    "site_changed",
     "error",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""

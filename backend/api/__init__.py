@@ -1,16 +1,18 @@
 """REST API of the server brain (site, robots, tasks, tours, points of interest, locks,
 events) and the component that runs the services behind it."""
 
-from backend.api import events, locks, robots, session, site, tasks, tours
+from backend.api import events, locks, robots, session, site, site_editor, tasks, tours, web
 
 ROUTERS = [
     site.router,
+    site_editor.router,
     tours.router,
     tasks.router,
     robots.router,
     locks.router,
     events.router,
     session.router,
+    web.router,
 ]
 
 __all__ = ["ROUTERS"]

@@ -1,4 +1,4 @@
-"""Who am I (a console's sign-in check) and the staff alerts active now."""
+"""The staff alerts active now (a page's sign-in check is GET /api/me, backend/api/web.py)."""
 
 from __future__ import annotations
 
@@ -6,18 +6,11 @@ from typing import Any
 
 from fastapi import APIRouter, Request
 
-from backend.api.deps import Anyone, Staff
+from backend.api.deps import Staff
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/api", tags=["session"])
-
-
-@router.get("/whoami")
-async def whoami(who: Anyone) -> dict[str, str]:
-    """The name and role of the token: a page signs in by calling this (failed attempts are
-    limited per address: 429 with Retry-After)."""
-    return {"name": who.name, "role": who.role.value}
 
 
 @router.get("/alerts")

@@ -55,7 +55,11 @@ async def put_site(
 @router.get("/site/export", response_class=Response)
 async def export_site(request: Request, _: Admin) -> Response:
     """The site as a YAML file."""
-    text = dump_site(sites(request).site)
+    return yaml_download(dump_site(sites(request).site))
+
+
+def yaml_download(text: str) -> Response:
+    """A site YAML as a file to save (the site export and the editor's draft export)."""
     return Response(
         text,
         media_type="application/yaml",

@@ -7,7 +7,15 @@ from typing import Any
 from sqlalchemy import JSON, Boolean, Float, Index, Integer, String, Text
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-__all__ = ["Base", "EventRow", "SiteRow", "TaskHistoryRow", "TaskRow"]
+__all__ = [
+    "Base",
+    "EventRow",
+    "SiteDraftRow",
+    "SiteRow",
+    "SiteVersionRow",
+    "TaskHistoryRow",
+    "TaskRow",
+]
 
 
 class Base(DeclarativeBase):
@@ -21,6 +29,29 @@ class SiteRow(Base):
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     version: Mapped[int] = mapped_column(Integer, default=1)
     data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    updated_at: Mapped[float] = mapped_column(Float)
+
+
+class SiteVersionRow(Base):
+    """Every published site version, kept: who published it, when, and the whole document."""
+
+    __tablename__ = "site_versions"
+    version: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
+    data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    published_by: Mapped[str] = mapped_column(String(64), default="")
+    published_at: Mapped[float] = mapped_column(Float)
+    note: Mapped[str] = mapped_column(Text, default="")
+
+
+class SiteDraftRow(Base):
+    """The editors' shared draft (one row, id 1): ``revision`` is its optimistic-lock tag."""
+
+    __tablename__ = "site_draft"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    revision: Mapped[int] = mapped_column(Integer)
+    base_version: Mapped[int] = mapped_column(Integer)
+    data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    updated_by: Mapped[str] = mapped_column(String(64), default="")
     updated_at: Mapped[float] = mapped_column(Float)
 
 

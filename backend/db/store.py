@@ -19,7 +19,14 @@ from typing import Any
 from sqlalchemy import Insert, func, insert, or_, select
 from sqlalchemy.dialects import postgresql, sqlite
 
-from backend.db.models import EventRow, SiteRow, TaskHistoryRow, TaskRow
+from backend.db.models import (
+    EventRow,
+    SiteDraftRow,
+    SiteRow,
+    SiteVersionRow,
+    TaskHistoryRow,
+    TaskRow,
+)
 from backend.tasks.model import FINAL_STATES, Task, TaskState
 
 __all__ = ["DbStore"]
@@ -247,18 +254,66 @@ class DbStore:
             row = await session.get(SiteRow, 1)
             return (row.version, row.data) if row is not None else None
 
-    async def save_site(self, data: dict[str, Any]) -> int:
-        """Store a new site document; returns its version."""
+    async def save_site(self, data: dict[str, Any], *, by: str = "", note: str = "") -> int:
+        """Store a new site document and keep it in the history; returns its version."""
+        now = time.time()
         async with self.sessionmaker() as session, session.begin():
             row = await session.get(SiteRow, 1)
             if row is None:
-                row = SiteRow(id=1, version=1, data=data, updated_at=time.time())
+                row = SiteRow(id=1, version=1, data=data, updated_at=now)
                 session.add(row)
             else:
                 row.version += 1
                 row.data = data
-                row.updated_at = time.time()
-            return row.version
+                row.updated_at = now
+            version = row.version
+            session.add(
+                SiteVersionRow(
+                    version=version, data=data, published_by=by, published_at=now, note=note
+                )
+            )
+            return version
+
+    async def site_versions(self) -> list[dict[str, Any]]:
+        """Every kept version, newest first, without the documents."""
+        async with self.sessionmaker() as session:
+            rows = await session.execute(
+                select(
+                    SiteVersionRow.version,
+                    SiteVersionRow.published_by,
+                    SiteVersionRow.published_at,
+                    SiteVersionRow.note,
+                ).order_by(SiteVersionRow.version.desc())
+            )
+            return [
+                {"version": v, "published_by": by, "published_at": at, "note": note}
+                for v, by, at, note in rows
+            ]
+
+    async def site_version(self, version: int) -> dict[str, Any] | None:
+        """One kept version's document, or None."""
+        async with self.sessionmaker() as session:
+            row = await session.get(SiteVersionRow, version)
+            return row.data if row is not None else None
+
+    async def load_draft(self) -> SiteDraftRow | None:
+        async with self.sessionmaker() as session:
+            return await session.get(SiteDraftRow, 1)
+
+    async def save_draft(
+        self, data: dict[str, Any], *, revision: int, base_version: int, by: str
+    ) -> None:
+        """Store the draft as ``revision`` (the caller checked the previous one)."""
+        async with self.sessionmaker() as session, session.begin():
+            row = await session.get(SiteDraftRow, 1)
+            if row is None:
+                row = SiteDraftRow(id=1)
+                session.add(row)
+            row.revision = revision
+            row.base_version = base_version
+            row.data = data
+            row.updated_by = by
+            row.updated_at = time.time()
 
 
 def _upsert(session: Any, rows: list[dict[str, Any]]) -> Insert:

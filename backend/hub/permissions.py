@@ -29,6 +29,9 @@ SERVER_ONLY = frozenset(
         "area_granted",
         "area_yield",
         "staff_alert",
+        # site: a published version and how far it reached the robots
+        "site_changed",
+        "site_rollout",
         # building: what the BuildingInterface saw or did
         "door_opened",
         "door_closed",
@@ -54,6 +57,7 @@ _ROBOT = frozenset(
         "task_started",
         "task_ended",
         "petri_net_ended",
+        "site_loaded",
         "get_path",
         "request_area",
         "release_area",

@@ -7,6 +7,7 @@ An accepted edit is validated as a whole, stored (new version), then handed to e
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
@@ -27,7 +28,7 @@ is awaited before the next listener runs and before the edit returns."""
 
 
 class SiteStore(Protocol):
-    async def save_site(self, data: dict[str, Any]) -> int: ...
+    async def save_site(self, data: dict[str, Any], *, by: str = "", note: str = "") -> int: ...
 
 
 class SiteService:
@@ -35,17 +36,19 @@ class SiteService:
         self.site = site
         self.version = version
         self.store = store
+        self.published_by = ""
+        self.published_at = 0.0
         self._listeners: list[Listener] = []
         self._lock = asyncio.Lock()
 
     def on_change(self, listener: Listener) -> None:
         self._listeners.append(listener)
 
-    async def replace(self, data: dict[str, Any] | Site) -> Site:
-        """Validate (raises SiteInvalid with every problem), store, apply."""
+    async def replace(self, data: dict[str, Any] | Site, *, by: str = "", note: str = "") -> Site:
+        """Validate (raises SiteInvalid with every problem), store (a new kept version), apply."""
         site = data if isinstance(data, Site) else validate_site(data)
         async with self._lock:
-            return await self._apply(site)
+            return await self._apply(site, by=by, note=note)
 
     async def edit(self, change: Callable[[dict[str, Any]], Awaitable[None] | None]) -> Site:
         """Apply ``change`` to a copy of the current document, then replace it as a whole.
@@ -58,13 +61,16 @@ class SiteService:
                 await result
             return await self._apply(validate_site(doc))
 
-    async def _apply(self, site: Site) -> Site:
+    async def _apply(self, site: Site, *, by: str = "", note: str = "") -> Site:
         """Store and hand to the listeners; the caller holds the lock."""
         if self.store is not None:
-            self.version = await self.store.save_site(site.model_dump(mode="json"))
+            data = site.model_dump(mode="json")
+            self.version = await self.store.save_site(data, by=by, note=note)
         else:
             self.version += 1
         self.site = site
+        self.published_by = by
+        self.published_at = time.time()
         for listener in self._listeners:
             result = listener(site)
             if result is not None:

@@ -3,4 +3,13 @@
 Importing this package registers every known type (see guidebot.messages.register_payload).
 """
 
-from guidebot.payloads import alerts, building, hub, petri, robot, tasks, traffic  # noqa: F401
+from guidebot.payloads import (  # noqa: F401
+    alerts,
+    building,
+    hub,
+    petri,
+    robot,
+    site,
+    tasks,
+    traffic,
+)

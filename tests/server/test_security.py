@@ -122,14 +122,14 @@ async def test_failed_sign_ins_are_limited_per_address(tmp_path: Path) -> None:
         update={"sign_in_failures_per_minute": 1.0, "sign_in_failure_burst": 3}
     )
     async with running_server(settings) as srv, httpx.AsyncClient(base_url=srv.url) as http:
-        assert (await http.get("/api/whoami", headers=bearer(PANEL_TOKEN))).json() == {
+        assert (await http.get("/api/me", headers=bearer(PANEL_TOKEN))).json() == {
             "name": "panel-1",
             "role": "panel",
         }
         for i in range(3):
-            wrong = await http.get("/api/whoami", headers=bearer(f"guess-number-{i}"))
+            wrong = await http.get("/api/me", headers=bearer(f"guess-number-{i}"))
             assert wrong.status_code == 401
-        locked = await http.get("/api/whoami", headers=bearer(PANEL_TOKEN))  # even the right one
+        locked = await http.get("/api/me", headers=bearer(PANEL_TOKEN))  # even the right one
         assert locked.status_code == 429 and "too many failed sign-in" in locked.json()["detail"]
         assert int(locked.headers["Retry-After"]) > 0
         url = f"{srv.ws_url}?token={PANEL_TOKEN}"

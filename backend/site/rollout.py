@@ -1,0 +1,100 @@
+"""A published site reaching the robots: ``site_changed`` out, ``site_loaded`` back, timed.
+
+Each version is sent once to every robot (broadcast); a robot that connects later says which
+version it runs (``site_loaded`` on connect) and gets the current one if it is behind. Staff
+pages see ``site_rollout``: which of the robots connected at publish time run the new version
+and how many milliseconds each took.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from backend.site.schema import Site
+from backend.site.service import SiteService
+from guidebot.bus import Endpoint
+from guidebot.messages import Message
+
+__all__ = ["SiteRollout", "robot_view"]
+
+
+def robot_view(site: Site) -> dict[str, Any]:
+    """The site as robots get it: without the robots' token digests."""
+    data = site.model_dump(mode="json")
+    data["robots"] = [{k: v for k, v in r.items() if k != "token"} for r in data["robots"]]
+    return data
+
+
+class SiteRollout:
+    def __init__(
+        self,
+        endpoint: Endpoint,
+        sites: SiteService,
+        connected_robots: Callable[[], set[str]],
+    ) -> None:
+        self.ep = endpoint
+        self.sites = sites
+        self.connected_robots = connected_robots
+        self.version = 0
+        self.expected: list[str] = []
+        self.loaded_ms: dict[str, float] = {}
+        self.ms: float | None = None
+        self._t0 = 0.0
+        self._payload: dict[str, Any] = {}
+        self._unsub: Callable[[], None] | None = None
+
+    def start(self) -> None:
+        self._payload = self._make_payload(self.sites.site)
+        self.version = self.sites.version
+        self._unsub = self.ep.subscribe("site_loaded", self._on_loaded)
+
+    def stop(self) -> None:
+        if self._unsub is not None:
+            self._unsub()
+            self._unsub = None
+
+    def _make_payload(self, site: Site) -> dict[str, Any]:
+        return {
+            "version": self.sites.version,
+            "published_by": self.sites.published_by,
+            "site": robot_view(site),
+        }
+
+    def on_site(self, site: Site) -> None:
+        """SiteService listener: send the new version to every robot and start the clock."""
+        self._t0 = time.perf_counter()
+        known = {r.name for r in site.robots}
+        self.version = self.sites.version
+        self.expected = sorted(self.connected_robots() & known)
+        self.loaded_ms = {}
+        self.ms = None
+        self._payload = self._make_payload(site)
+        self.ep.publish("site_changed", self._payload)
+        self._report()
+
+    def _on_loaded(self, message: Message) -> None:
+        robot = message.source
+        version = int(message.payload.get("version", 0))
+        if version != self.version:
+            # A robot behind (it just connected, or missed the broadcast): send it the current.
+            self.ep.publish("site_changed", self._payload, destination=robot)
+            return
+        if robot in self.expected and robot not in self.loaded_ms:
+            self.loaded_ms[robot] = round((time.perf_counter() - self._t0) * 1000, 2)
+            if len(self.loaded_ms) == len(self.expected):
+                self.ms = max(self.loaded_ms.values())
+            self._report()
+
+    def status(self) -> dict[str, Any]:
+        return {
+            "version": self.version,
+            "expected": self.expected,
+            "loaded_ms": self.loaded_ms,
+            "complete": set(self.loaded_ms) == set(self.expected),
+            "ms": self.ms if self.expected else 0.0,
+        }
+
+    def _report(self) -> None:
+        self.ep.publish("site_rollout", self.status())
