@@ -28,6 +28,8 @@ from backend.api.component import server_brain
 from backend.auth import Role, TokenStore
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
+from backend.console import routes as console_routes
+from backend.console.component import console
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
@@ -46,6 +48,7 @@ COMPONENTS: list[Component] = [
     server_brain,
     building_interface,
     rgm,
+    console,
 ]
 
 # REST/WebSocket routers of the server modules. One line each.
@@ -54,6 +57,7 @@ ROUTERS: list[APIRouter] = [
     hub_routes.router,
     *api_routers,
     building_routes.router,
+    console_routes.router,
 ]
 
 

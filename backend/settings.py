@@ -53,6 +53,8 @@ class Settings(BaseSettings):
     # BuildingInterface (docs/building.md): poll the site's Modbus modules; input filter.
     building_enabled: bool = True
     building_filter_ms: float = Field(default=200.0, ge=0, le=5000)
+    # Staff console: the building simulator's control API (demo/tests), for "press a button".
+    building_sim_url: str | None = None
 
     @model_validator(mode="after")
     def _refuse_default_secrets(self) -> Settings:

@@ -43,8 +43,9 @@ UP_TYPES: tuple[str, ...] = (
     "open_door",
     "call_elevator",
     "petri_net_ended",
+    "petri_net_event",
 )
-"""On-board message types sent to the hub."""
+"""On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor)."""
 
 DOWN_TYPES: tuple[str, ...] = (
     "task_assigned",
@@ -57,8 +58,12 @@ DOWN_TYPES: tuple[str, ...] = (
     "elevator_in_position",
     "command_failed",
     "error",
+    "kill_petri_net",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
+
+ADDRESSED_ONLY = frozenset({"kill_petri_net"})
+"""Down types taken only when addressed to this robot (staff kill one robot's net)."""
 
 MAX_PENDING_REPLIES = 1000
 
@@ -193,6 +198,8 @@ class Link:
     def _down(self, message: Message) -> None:
         if message.destination not in (None, self.upstream.name, self.robot):
             return
+        if message.type in ADDRESSED_ONLY and message.destination is None:
+            return  # a kill meant for the server's RGM (or anyone) is not for this robot
         requester = self._requesters.get(message.correlation_id or "")
         local = Message(
             type=message.type,

@@ -26,6 +26,7 @@ from backend.settings import Settings, StaticToken
 from backend.site.schema import Site
 from backend.site.yamlio import load_site_file
 from backend.testing import RunningServer, running_server
+from building_sim.control import serve_control
 from building_sim.simulator import BuildingSimulator
 from robot_agent.agent import AgentConfig, RobotAgent
 
@@ -151,6 +152,7 @@ class WebFleet:
     building: BuildingSimulator
     agents: dict[str, RobotAgent]
     site_file: Path
+    simulator_url: str
 
     @property
     def admin_url(self) -> str:
@@ -162,6 +164,11 @@ class WebFleet:
             base_url=self.server.url, headers={"Authorization": f"Bearer {token}"}, timeout=10
         )
 
+    async def kill(self, name: str) -> None:
+        """The robot's process dies: its link drops without a goodbye."""
+        agent = self.agents.pop(name)
+        await agent.__aexit__(None, None, None)
+
 
 @pytest.fixture(scope="session")
 def demo_site() -> Site:
@@ -170,10 +177,17 @@ def demo_site() -> Site:
 
 @contextlib.asynccontextmanager
 async def web_fleet(
-    tmp_path: Path, demo_site: Site, *, robots: int = 1, **settings: Any
+    tmp_path: Path,
+    demo_site: Site,
+    *,
+    robots: int = 1,
+    time_scale: float = ROBOT_TIME_SCALE,
+    edit: Callable[[dict[str, Any]], None] | None = None,
+    **settings: Any,
 ) -> AsyncIterator[WebFleet]:
-    """Start the building simulator, the server and ``robots`` robot agents (bare simulated
-    bases, no CAN: light) on loopback; the plan images are copied next to the site file."""
+    """Start the building simulator (with its control API), the server and ``robots`` robot
+    agents (bare simulated bases, no CAN: light) on loopback; ``edit`` may change the site
+    document first. The plan images are copied next to the site file."""
     config = BuildingConfig(
         modules=demo_site.modules,
         doors=demo_site.doors,
@@ -187,10 +201,12 @@ async def web_fleet(
         door_hold_s=2.0 * BUILDING_TIME_SCALE,
         elevator_hold_s=2.0 * BUILDING_TIME_SCALE,
     )
-    async with simulator as building:
+    async with simulator as building, serve_control(building) as control_url:
         data = demo_site.model_dump(mode="json")
         for module in data["modules"]:
             module["port"] = building.ports[module["id"]]
+        if edit is not None:
+            edit(data)
         plans = tmp_path / "demo_museum"
         plans.mkdir(exist_ok=True)
         for svg in (DEMO_SITE.parent / "demo_museum").glob("*.svg"):
@@ -201,28 +217,33 @@ async def web_fleet(
             db_url=f"sqlite+aiosqlite:///{tmp_path}/guidebot.db",
             site=site_file,
             tokens=[StaticToken(token=OPERATOR_TOKEN, name="desk", role="operator")],
+            building_sim_url=control_url,
             **settings,
         )
-        async with running_server(server_settings) as server, contextlib.AsyncExitStack() as stack:
-            agents: dict[str, RobotAgent] = {}
-            for robot in demo_site.robots[:robots]:
-                agent = RobotAgent(
-                    AgentConfig(
-                        name=robot.name,
-                        server=server.url,
-                        token=robot.token,
-                        can=None,
-                        time_scale=ROBOT_TIME_SCALE,
-                        start_node=robot.start_node,
-                        speech_engine=None,
-                        state_period_s=0.2,
-                        site=site_file,
-                        auto_answer="yes",
+        async with running_server(server_settings) as server:
+            fleet = WebFleet(server, building, {}, site_file, control_url)
+            try:
+                for robot in demo_site.robots[:robots]:
+                    agent = RobotAgent(
+                        AgentConfig(
+                            name=robot.name,
+                            server=server.url,
+                            token=robot.token,
+                            can=None,
+                            time_scale=time_scale,
+                            start_node=robot.start_node,
+                            speech_engine=None,
+                            state_period_s=0.2,
+                            site=site_file,
+                            auto_answer="yes",
+                        )
                     )
-                )
-                await stack.enter_async_context(agent)
-                agents[robot.name] = agent
-            yield WebFleet(server, building, agents, site_file)
+                    await agent.__aenter__()
+                    fleet.agents[robot.name] = agent
+                yield fleet
+            finally:
+                for name in list(fleet.agents):
+                    await fleet.kill(name)
 
 
 @pytest.fixture
@@ -235,6 +256,11 @@ def fleet_factory(
         return web_fleet(tmp_path, demo_site, **kwargs)
 
     return make
+
+
+async def open_view(page: Any, name: str) -> None:
+    """Click a view's tab."""
+    await page.locator("#tabs").get_by_role("button", name=name).click()
 
 
 async def sign_in(watch: PageWatch, token: str) -> None:
@@ -252,5 +278,6 @@ def web() -> SimpleNamespace:
         axe_check=axe_check,
         screenshot=screenshot,
         sign_in=sign_in,
+        open_view=open_view,
         operator_token=OPERATOR_TOKEN,
     )
