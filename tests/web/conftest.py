@@ -26,25 +26,16 @@ from backend.settings import Settings, StaticToken
 from backend.site.schema import Site
 from backend.site.yamlio import load_site_file
 from backend.testing import RunningServer, running_server
+from bench.console import CHROMIUM as BENCH_CHROMIUM
+from bench.console import CHROMIUM_ARGS
 from building_sim.control import serve_control
 from building_sim.simulator import BuildingSimulator
 from robot_agent.agent import AgentConfig, RobotAgent
 
-pytestmark = pytest.mark.browser
-
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
 SCREENSHOTS = ROOT / "docs" / "screenshots"
-CHROMIUM = Path(os.environ.get("GUIDEBOT_CHROMIUM", "/usr/bin/chromium"))
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--headless",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
+CHROMIUM = Path(os.environ.get("GUIDEBOT_CHROMIUM", BENCH_CHROMIUM))
 OPERATOR_TOKEN = "operator-desk-token"
 ROBOT_TIME_SCALE = 20.0
 BUILDING_TIME_SCALE = 10.0
@@ -57,7 +48,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         reason=f"{CHROMIUM} not found: install Debian's chromium (scripts/system-deps.sh)"
     )
     for item in items:
-        if "tests/web/" in str(item.fspath).replace(os.sep, "/"):
+        if item.get_closest_marker("browser") is not None:
             item.add_marker(skip)
 
 

@@ -74,7 +74,7 @@ async def test_every_view_and_what_each_role_may_do(
 async def test_tour_requested_from_the_console_runs_to_the_end(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
-    async with fleet_factory(robots=1, edit=short_tours) as fleet:
+    async with fleet_factory(robots=1, time_scale=8, edit=short_tours) as fleet:
         watch = await open_page(fleet.admin_url)
         page = watch.page
         await web.sign_in(watch, web.operator_token)
@@ -88,6 +88,11 @@ async def test_tour_requested_from_the_console_runs_to_the_end(
         ).to_be_visible()
         running = page.get_by_role("table", name="Running tasks")
         await expect(running).to_contain_text("tour short", timeout=20_000)
+        # On the map, the selected robot's planned path is drawn.
+        await web.open_view(page, "Map")
+        await page.get_by_role("button", name="robot R1").click()
+        await expect(page.locator("#details")).to_contain_text("Robot R1")
+        await expect(page.locator("#map path.map-path")).to_have_count(1)
         # The monitor shows the tour's net and its marking changing.
         await web.open_view(page, "RoboGraph monitor")
         await page.get_by_label("Show the nets of").select_option("R1")

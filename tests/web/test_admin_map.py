@@ -48,3 +48,14 @@ async def test_wrong_token_says_why_and_stays_on_sign_in(
         await expect(watch.page.get_by_role("alert")).to_contain_text("not accepted")
         await expect(watch.page.get_by_role("heading", name="Sign in")).to_be_visible()
         assert await watch.page.evaluate("sessionStorage.length") == 0
+
+
+async def test_a_kiosk_signs_in_with_the_token_in_the_fragment(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """#token=... is never sent to the server; the page uses it and stores nothing."""
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_page(f"{fleet.admin_url}#token={web.operator_token}")
+        await expect(watch.page.locator("#who")).to_contain_text("desk")
+        await expect(watch.page.get_by_role("heading", name="Sign in")).to_be_hidden()
+        assert await watch.page.evaluate("sessionStorage.getItem('guidebot.token')") is None

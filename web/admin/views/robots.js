@@ -41,14 +41,18 @@ export function robotsView(ui) {
       const s = robot.state ?? {};
       const info = robot.info ?? {};
       const modules = Object.entries(s.modules ?? {});
+      const seen = robot.online || robot.state || robot.info?.last_seen;
+      const link = robot.online ? ["ok", "online"] : seen ? ["bad", "lost"] : ["warn", "never connected"];
+      const node = s.node ?? info.node;
+      const floor = s.floor ?? info.floor ?? ui.store.site.nodes.find((n) => n.id === node)?.floor;
       return html`<section class="robot-card" aria-labelledby=${`robot-${robot.name}`}>
         <h3 id=${`robot-${robot.name}`}>${robot.name}
-          <span class=${`badge ${robot.online ? "ok" : "bad"}`}>${robot.online ? "online" : "lost"}</span>
+          <span class=${`badge ${link[0]}`}>${link[1]}</span>
           ${info.out_of_service ? html`<span class="badge warn">out of service</span>` : ""}</h3>
         <dl class="facts">
           <dt>Mode</dt><dd>${s.mode ?? info.mode ?? "—"}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
-          <dt>Pose</dt><dd>${s.node ?? info.node ?? "—"}, floor ${s.floor ?? info.floor ?? "—"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
+          <dt>Pose</dt><dd>${node ?? "—"}, floor ${floor ?? "—"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
           <dt>Task</dt><dd>${s.task_id ?? info.task_id ?? "none"}${tourStep(ui, robot) ? `, at ${tourStep(ui, robot)}` : ""}</dd>
           <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
           <dt>RoboCAN modules</dt><dd>${modules.length ? modules.map(([m, st]) => html`<span class=${`badge ${st === "ok" ? "ok" : "bad"}`}>${m}: ${st}</span> `) : "none reported"}</dd>
