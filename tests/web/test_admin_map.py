@@ -22,7 +22,7 @@ async def test_sign_in_shows_the_plan_and_live_robots(
         await web.axe_check(page)
         await web.sign_in(watch, fleet.server.admin_token)
         # The plan image of the ground floor lies under the graph.
-        await expect(page.locator("#map img.leaflet-image-layer")).to_have_count(1)
+        await expect(page.locator("#map img.leaflet-image-layer")).to_have_count(1, timeout=15_000)
         # Robot markers come from robot_state messages over the hub, not from REST.
         r1 = page.get_by_role("button", name="robot R1")
         await expect(r1).to_be_visible(timeout=20_000)

@@ -154,7 +154,7 @@ async function start() {
     if (view === "monitor") ui.monitor.open();
     else ui.monitor.close();
     draw();
-    if (view === "map") ui.map.map.invalidateSize();
+    if (view === "map") ui.map.shown();
   };
 
   render(
@@ -233,15 +233,16 @@ async function start() {
   store.addEventListener("change", draw);
   try {
     await store.start();
+    ui.go(ui.view);
+    await map.setSite(store.site);
+    await store.reload();
   } catch (err) {
     render(html`<p class="notice error" role="alert">${err.message}</p>`, $("details"));
     return;
   }
-  await map.setSite(store.site);
   for (const view of store.locks.values()) map.setAreaState(view);
   for (const [id, open] of store.doors) map.setDoor(id, open);
   for (const [id, lift] of store.lifts) map.setElevator(id, lift.floor, lift.door_open);
-  ui.go(ui.view);
 }
 
 /** The node a task is heading for (a tour: the point it shows now, else its first point). */

@@ -44,7 +44,7 @@ export class Store extends EventTarget {
     return robot;
   }
 
-  /** Subscribe and load the snapshot; the hub's connect events reload it. */
+  /** Subscribe and load the site; then call reload() (the hub's connect events do too). */
   async start() {
     const on = (type, fn) => this.hub.on(type, (m) => {
       fn(m);
@@ -75,13 +75,16 @@ export class Store extends EventTarget {
       this.locks.set(m.payload.area, m.payload);
       this.emit("lock", m.payload);
     });
-    on("task_event", (m) => this.#taskEvent(m.payload));
+    on("task_event", (m) => this.#taskEvent(m.payload, m.timestamp));
     on("alert_raised", (m) => {
       this.alerts.set(m.payload.id, m.payload);
       this.emit("alert", m.payload);
     });
     on("alert_acked", (m) => this.alerts.set(m.payload.id, m.payload));
-    on("event_logged", (m) => this.#addEvents([m.payload]));
+    on("event_logged", (m) => {
+      this.#addEvents([m.payload]);
+      this.inFlight?.push(m.payload);
+    });
     on("building_input_changed", (m) => this.#point(m.payload.module, m.payload.point, m.payload.value));
     on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
     on("door_opened", (m) => this.#door(m.payload.door, true));
@@ -97,13 +100,17 @@ export class Store extends EventTarget {
       "elevator_in_position",
     );
     this.hub.addEventListener("connect", () => this.reload().catch(() => {}));
-    this.site = (await this.api.get("/api/site/map")).site;
-    this.simulator = (await this.api.get("/api/building/simulator")).configured;
-    await this.reload();
+    const [site, simulator] = await Promise.all([
+      this.api.get("/api/site/map"),
+      this.api.get("/api/building/simulator"),
+    ]);
+    this.site = site.site;
+    this.simulator = simulator.configured;
   }
 
   /** The REST snapshot: what happened while the page was not connected. */
   async reload() {
+    this.inFlight = []; // events logged while the snapshot is fetched
     const [robots, locks, tasks, alerts, events, building] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
@@ -121,10 +128,20 @@ export class Store extends EventTarget {
       this.locks.set(view.area, view);
       this.emit("lock", view);
     }
-    this.tasks = new Map(tasks.tasks.map((t) => [t.id, t]));
-    this.alerts = new Map(alerts.map((a) => [a.id, a]));
+    // Merge, never replace: hub messages that arrived while these requests were in flight
+    // are newer than the snapshot.
+    for (const task of tasks.tasks) {
+      const known = this.tasks.get(task.id);
+      if (!known || (known.updated_at ?? 0) <= task.updated_at) this.tasks.set(task.id, task);
+    }
+    for (const alert of alerts) {
+      const known = this.alerts.get(alert.id);
+      if (!known || !known.acked_at) this.alerts.set(alert.id, alert);
+    }
+    const last = events.events.length ? events.events[events.events.length - 1].at : 0;
     this.events = [];
-    this.#addEvents(events.events);
+    this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);
+    this.inFlight = null;
     this.building.enabled = building.enabled;
     for (const m of building.modules) this.building.modules.set(m.module, m);
     for (const p of building.points) this.#point(p.module, p.point, p.value);
@@ -144,10 +161,10 @@ export class Store extends EventTarget {
     }
   }
 
-  async #taskEvent(p) {
+  async #taskEvent(p, timestamp) {
     const task = this.tasks.get(p.task_id);
     if (task) {
-      Object.assign(task, { state: p.state, robot: p.robot, queue_position: p.queue_position, eta_s: p.eta_s, updated_at: Date.now() / 1000 });
+      Object.assign(task, { state: p.state, robot: p.robot, queue_position: p.queue_position, eta_s: p.eta_s, updated_at: timestamp });
     } else {
       try {
         this.tasks.set(p.task_id, await this.api.get(`/api/tasks/${encodeURIComponent(p.task_id)}`));
