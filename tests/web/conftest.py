@@ -82,13 +82,19 @@ class PageWatch:
         return [e for e in self.errors if not any(p.search(e) for p in self.expected)]
 
 
-@pytest.fixture
-async def open_page(browser: Any) -> AsyncIterator[Callable[..., Any]]:
-    """``await open_page(url)`` -> PageWatch; each page in its own context (own session)."""
-    watches: list[PageWatch] = []
+class Pages:
+    """The pages a test opened: ``await pages(url)`` opens one (a PageWatch, in its own
+    browser context); ``close()`` closes them and keeps their unexpected errors."""
 
-    async def open_(url: str, *, viewport: tuple[int, int] = (1280, 800)) -> PageWatch:
-        context = await browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    def __init__(self, browser: Any) -> None:
+        self.browser = browser
+        self.watches: list[PageWatch] = []
+        self.problems: list[str] = []
+
+    async def __call__(self, url: str, *, viewport: tuple[int, int] = (1280, 800)) -> PageWatch:
+        context = await self.browser.new_context(
+            viewport={"width": viewport[0], "height": viewport[1]}
+        )
         page = await context.new_page()
         watch = PageWatch(page)
         page.on(
@@ -100,18 +106,29 @@ async def open_page(browser: Any) -> AsyncIterator[Callable[..., Any]]:
             "response",
             lambda r: watch.failed.append(f"{r.status} {r.url}") if r.status >= 400 else None,
         )
-        watches.append(watch)
+        self.watches.append(watch)
         if url:
             await page.goto(url)
         return watch
 
-    yield open_
-    problems = [e for w in watches for e in w.unexpected()]
-    if problems:
-        problems += [f"(HTTP {f})" for w in watches for f in w.failed]
-    for w in watches:
-        await w.page.context.close()
-    assert not problems, "JavaScript errors on the page:\n" + "\n".join(problems)
+    async def close(self) -> None:
+        """Close every page (before its server stops: a page whose server went away reports
+        connection errors that are not the test's)."""
+        for watch in self.watches:
+            problems = watch.unexpected()
+            if problems:
+                self.problems += problems + [f"(HTTP {f})" for f in watch.failed]
+            await watch.page.context.close()
+        self.watches.clear()
+
+
+@pytest.fixture
+async def open_page(browser: Any) -> AsyncIterator[Pages]:
+    """``await open_page(url)`` -> PageWatch; any console error fails the test."""
+    pages = Pages(browser)
+    yield pages
+    await pages.close()
+    assert not pages.problems, "JavaScript errors on the page:\n" + "\n".join(pages.problems)
 
 
 async def axe_check(page: Any) -> None:
@@ -239,12 +256,18 @@ async def web_fleet(
 
 @pytest.fixture
 def fleet_factory(
-    tmp_path: Path, demo_site: Site
+    tmp_path: Path, demo_site: Site, open_page: Pages
 ) -> Callable[..., contextlib.AbstractAsyncContextManager[WebFleet]]:
-    """``async with fleet_factory(robots=3) as fleet``."""
+    """``async with fleet_factory(robots=3) as fleet``; the test's pages close before the
+    fleet stops."""
 
-    def make(**kwargs: Any) -> contextlib.AbstractAsyncContextManager[WebFleet]:
-        return web_fleet(tmp_path, demo_site, **kwargs)
+    @contextlib.asynccontextmanager
+    async def make(**kwargs: Any) -> AsyncIterator[WebFleet]:
+        async with web_fleet(tmp_path, demo_site, **kwargs) as fleet:
+            try:
+                yield fleet
+            finally:
+                await open_page.close()
 
     return make
 
