@@ -92,7 +92,7 @@ async def test_tour_requested_from_the_console_runs_to_the_end(
         await web.open_view(page, "Map")
         await page.get_by_role("button", name="robot R1").click()
         await expect(page.locator("#details")).to_contain_text("Robot R1")
-        await expect(page.locator("#map path.map-path")).to_have_count(1)
+        await expect(page.locator("#map path.map-path")).to_have_count(1, timeout=20_000)
         # The monitor shows the tour's net and its marking changing.
         await web.open_view(page, "RoboGraph monitor")
         await page.get_by_label("Show the nets of").select_option("R1")

@@ -168,7 +168,18 @@ async function start() {
   const map = new FloorMap($("map"), (url) => api.get(url));
   ui.map = map;
   ui.monitor = new Monitor(ui);
-  store.addEventListener("robot_state", (e) => map.updateRobot(e.detail));
+  let pathKey = "";
+  store.addEventListener("robot_state", (e) => {
+    map.updateRobot(e.detail);
+    const s = e.detail.payload;
+    if (ui.selected?.kind === "robot" && ui.selected.id === s.robot) {
+      const key = `${s.node}|${s.task_id}|${s.poi}`;
+      if (key !== pathKey) {
+        pathKey = key;
+        showPath(s.robot);
+      }
+    }
+  });
   store.addEventListener("robot_offline", (e) => map.robotOffline(e.detail));
   store.addEventListener("lock", (e) => map.setAreaState(e.detail));
   store.addEventListener("door", (e) => map.setDoor(e.detail, store.doors.get(e.detail)));
@@ -196,7 +207,7 @@ async function start() {
   async function showPath(name) {
     const robot = store.robots.get(name);
     const task = robot?.state?.task_id ? store.tasks.get(robot.state.task_id) : null;
-    const goal = task ? goalNode(store.site, task, robot.state.poi) : null;
+    const goal = task ? goalNode(store.site, task, robot.state.poi, robot.state.node) : null;
     if (!goal || !robot.state.node) return map.setPath([]);
     try {
       const path = await api.get(`/api/paths?from_node=${encodeURIComponent(robot.state.node)}&to_node=${encodeURIComponent(goal)}`);
@@ -245,8 +256,9 @@ async function start() {
   for (const [id, lift] of store.lifts) map.setElevator(id, lift.floor, lift.door_open);
 }
 
-/** The node a task is heading for (a tour: the point it shows now, else its first point). */
-export function goalNode(site, task, poi) {
+/** The node a task is heading for (a tour: the point after the one it showed last, or the
+ * one after that when the robot already stands there). */
+export function goalNode(site, task, poi, here = null) {
   const p = task.params ?? {};
   if (p.node) return p.node;
   const poiNode = (id) => site.pois.find((x) => x.id === id)?.node;
@@ -255,8 +267,9 @@ export function goalNode(site, task, poi) {
   if (p.tour) {
     const tour = site.tours.find((t) => t.id === p.tour);
     if (!tour) return null;
-    const at = poi ? tour.points.indexOf(poi) : -1;
-    return poiNode(tour.points[Math.min(at + 1, tour.points.length - 1)]);
+    let next = Math.min((poi ? tour.points.indexOf(poi) : -1) + 1, tour.points.length - 1);
+    if (poiNode(tour.points[next]) === here) next = Math.min(next + 1, tour.points.length - 1);
+    return poiNode(tour.points[next]);
   }
   return null;
 }
