@@ -30,6 +30,8 @@ from backend.api.limits import BodyLimit, install_error_handlers
 from backend.auth import Authenticator, Role, TokenStore
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
+from backend.console import routes as console_routes
+from backend.console.component import console
 from backend.health import ComponentState, HealthBoard
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
@@ -52,6 +54,7 @@ COMPONENTS: list[Component] = [
     building_interface,
     rgm,
     site_editor,
+    console,
 ]
 
 # REST/WebSocket routers of the server modules. One line each.
@@ -60,6 +63,7 @@ ROUTERS: list[APIRouter] = [
     hub_routes.router,
     *api_routers,
     building_routes.router,
+    console_routes.router,
 ]
 
 

@@ -27,7 +27,7 @@ async def rgm(app: FastAPI) -> AsyncIterator[None]:
     """Run the dispatch while the server runs; `app.state.rgm` is the `Dispatch`."""
     library = await asyncio.to_thread(NetLibrary)  # parse off the loop; re-read when edited
     dispatch = Dispatch(
-        app.state.hub.endpoint("rgm"), library, AsyncioClock(), idle_net=None, monitor=False
+        app.state.hub.endpoint("rgm"), library, AsyncioClock(), idle_net=None, monitor=True
     )
     dispatch.open()
     app.state.rgm = dispatch

@@ -115,6 +115,9 @@ class Settings(BaseSettings):
     def development(self) -> bool:
         return self.environment == "development"
 
+    # Staff console: the building simulator's control API (demo/tests), for "press a button".
+    building_sim_url: str | None = None
+
     @model_validator(mode="after")
     def _refuse_default_secrets(self) -> Settings:
         if len(self.admin_token) < 8:

@@ -31,6 +31,7 @@ BENCHMARKS: dict[str, str] = {
     "tasks": "bench.tasks:main",
     "modbus": "bench.modbus:main",
     "reconfigure": "bench.reconfigure:main",
+    "console": "bench.console:main",
 }
 
 

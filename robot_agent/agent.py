@@ -85,6 +85,8 @@ class OnboardSite:
     planner: Callable[[str, str], dict[str, Any]] | None
     floor_of: dict[str, str] = field(default_factory=dict)
     """Node -> floor: the robot reports its floor from the start."""
+    position_of: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Node -> (x, y): the robot reports its start node's position before it first moves."""
 
 
 def load_onboard_site(path: Path | None) -> OnboardSite:
@@ -112,7 +114,13 @@ def onboard_site(site: Any) -> OnboardSite:
 
     tours = [{"id": t.id, "name": t.name, "points": t.points} for t in site.tours]
     pois = [{"id": p.id, "name": p.name, "node": p.node} for p in site.pois]
-    return OnboardSite(tours, pois, planner, {n.id: n.floor for n in site.nodes})
+    return OnboardSite(
+        tours,
+        pois,
+        planner,
+        {n.id: n.floor for n in site.nodes},
+        {n.id: (n.x, n.y) for n in site.nodes},
+    )
 
 
 class RobotAgent:
@@ -186,6 +194,7 @@ class RobotAgent:
             max_speed=c.max_speed,
             planner=onboard_site.planner,
             floor_of=onboard_site.floor_of,
+            position_of=onboard_site.position_of,
         )
         self.navigator.start()
         stack.push_async_callback(self.navigator.stop)

@@ -46,8 +46,9 @@ UP_TYPES: tuple[str, ...] = (
     "node_reached",
     "petri_net_ended",
     "site_loaded",
+    "petri_net_event",
 )
-"""On-board message types sent to the hub."""
+"""On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor)."""
 
 DOWN_TYPES: tuple[str, ...] = (
     "task_assigned",
@@ -61,8 +62,12 @@ DOWN_TYPES: tuple[str, ...] = (
     "command_failed",
     "site_changed",
     "error",
+    "kill_petri_net",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
+
+ADDRESSED_ONLY = frozenset({"kill_petri_net"})
+"""Down types taken only when addressed to this robot (staff kill one robot's net)."""
 
 MAX_PENDING_REPLIES = 1000
 
@@ -197,6 +202,8 @@ class Link:
     def _down(self, message: Message) -> None:
         if message.destination not in (None, self.upstream.name, self.robot):
             return
+        if message.type in ADDRESSED_ONLY and message.destination is None:
+            return  # a kill meant for the server's RGM (or anyone) is not for this robot
         requester = self._requesters.get(message.correlation_id or "")
         local = Message(
             type=message.type,

@@ -116,6 +116,7 @@ class Navigator:
         docking_s: float = 5.0,
         planner: Callable[[str, str], dict[str, Any]] | None = None,
         floor_of: Mapping[str, str] | None = None,
+        position_of: Mapping[str, tuple[float, float]] | None = None,
         door_retry_s: float = 5.0,
     ) -> None:
         self.ep = endpoint
@@ -151,6 +152,10 @@ class Navigator:
         self._tx = self._ty = 0.0
         self._odom_dt = 0.05
         self._odom_last = 0.0
+        if (start := (position_of or {}).get(start_node or "")) is not None:
+            # Odometry starts at (0, 0): anchor it at the start node until the first path.
+            self._tx, self._ty = start
+            self.x, self.y = start
         self._bumped_until = -1.0
         self._doors_open: set[str] = set()
         self._held_doors: set[str] = set()

@@ -41,17 +41,22 @@ class StateReporter:
         self.nets = nets or (lambda: sorted(set(tasks.running_nets.values())))
         self.period_s = period_s
         self.modules: dict[str, str] = {}
+        self.poi: tuple[str | None, str] | None = None
+        """(task id, point) of the last show_point: the tour's current step."""
         self.seq = 0
         self._task: asyncio.Task[None] | None = None
-        self._unsub: Callable[[], None] | None = None
+        self._unsubs: list[Callable[[], None]] = []
 
     def start(self) -> None:
-        self._unsub = self.ep.subscribe("module_status", self._on_module_status)
+        self._unsubs = [
+            self.ep.subscribe("module_status", self._on_module_status),
+            self.ep.subscribe("show_point", self._on_show_point),
+        ]
         self._task = asyncio.get_running_loop().create_task(self._run(), name="robot-state")
 
     async def stop(self) -> None:
-        if self._unsub is not None:
-            self._unsub()
+        for unsub in self._unsubs:
+            unsub()
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -61,6 +66,9 @@ class StateReporter:
         p = message.payload
         name = str(p.get("name") or p.get("module_id"))
         self.modules[name] = "ok" if p.get("state") == "online" else "lost"
+
+    def _on_show_point(self, message: Message) -> None:
+        self.poi = (self.tasks.task_id, str(message.payload.get("poi")))
 
     def mode(self) -> RobotMode:
         if self.nav.fault is not None:
@@ -93,6 +101,7 @@ class StateReporter:
             "speed": round(self.nav.speed, 3),
             "nets": self.nets(),
             "modules": dict(self.modules),
+            "poi": self.poi[1] if self.poi and self.poi[0] == self.tasks.task_id else None,
             "seq": self.seq,
         }
 

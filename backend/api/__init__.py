@@ -1,7 +1,7 @@
 """REST API of the server brain (site, robots, tasks, tours, points of interest, locks,
 events) and the component that runs the services behind it."""
 
-from backend.api import events, locks, robots, session, site, site_editor, tasks, tours, web
+from backend.api import events, locks, robots, site, site_editor, tasks, tours, web
 
 ROUTERS = [
     site.router,
@@ -11,7 +11,6 @@ ROUTERS = [
     robots.router,
     locks.router,
     events.router,
-    session.router,
     web.router,
 ]
 

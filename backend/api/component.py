@@ -213,7 +213,7 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
             app.state.sites = sites
             app.state.task_manager = tasks
             app.state.traffic = traffic
-            app.state.alerts = alerts
+            app.state.staff_alerts = alerts
             stop_links = announce_robot_links(hub, sites)
             locks = asyncio.get_running_loop().create_task(
                 watch_offline_locks(traffic, settings.lock_offline_grace_s),

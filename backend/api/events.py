@@ -20,7 +20,9 @@ async def list_events(
     after_id: Annotated[int, Query(ge=0, le=2**62)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     kind: Annotated[str | None, Query(max_length=64)] = None,
+    latest: bool = False,
 ) -> dict[str, Any]:
-    """Events with id greater than ``after_id``; pass ``next_after_id`` to get the next page."""
-    events = await store(request).events(after_id=after_id, limit=limit, kind=kind)
+    """Events with id greater than ``after_id``; pass ``next_after_id`` to get the next page.
+    ``latest=true``: the last ``limit`` events instead of the first (still in id order)."""
+    events = await store(request).events(after_id=after_id, limit=limit, kind=kind, latest=latest)
     return {"events": events, "next_after_id": events[-1]["id"] if events else after_id}

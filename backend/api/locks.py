@@ -6,7 +6,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 
-from backend.api.deps import Staff, not_found, traffic
+from backend.api.deps import Staff, forbid, not_found, traffic
+from backend.auth import Role
 
 __all__ = ["router"]
 
@@ -33,9 +34,18 @@ async def list_locks(request: Request, _: Staff) -> list[dict[str, Any]]:
 async def force_release(
     request: Request, who: Staff, area: Annotated[str, Path(max_length=64)]
 ) -> dict[str, Any]:
-    """Release an area by hand, e.g. its robot is offline and staff saw it is outside."""
+    """Release an area by hand, e.g. its robot is offline and staff saw it is outside.
+
+    Operators may release only a lock whose holder is offline; admins any lock."""
     manager = traffic(request)
     if area not in manager.locks.areas:
         raise not_found(f"area {area!r}")
+    view = next(v for v in manager.lock_views() if v.area == area)
+    if who.role is Role.OPERATOR and view.state.value != "holder_offline":
+        raise forbid(
+            f"area {area!r} is {view.state.value}: operators may release only a lock whose "
+            "holder is offline (admins may release any)"
+        )
     holder = manager.force_release(area, by=who.name)
+    request.app.state.console.schedule_lock_diff()
     return {"area": area, "released_from": holder}

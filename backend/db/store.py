@@ -14,6 +14,7 @@ import contextlib
 import logging
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from sqlalchemy import Insert, func, insert, or_, select
@@ -66,6 +67,8 @@ class DbStore:
         self._flush_lock = asyncio.Lock()
         self.dropped = 0
         self.written = 0
+        self.listeners: list[Callable[[dict[str, Any]], None]] = []
+        """Called with every event row as it is recorded (the console's live event log)."""
 
     # --- write-behind --------------------------------------------------------------------
     def record(self, task: Task, event: str) -> None:
@@ -92,9 +95,10 @@ class DbStore:
         )
 
     def record_event(self, kind: str, source: str, data: dict[str, Any]) -> None:
-        self._append(
-            self._events, {"at": time.time(), "kind": kind[:64], "source": source, "data": data}
-        )
+        row = {"at": time.time(), "kind": kind[:64], "source": source, "data": data}
+        self._append(self._events, row)
+        for listener in self.listeners:
+            listener(row)
 
     def _append(self, rows: deque[dict[str, Any]], row: dict[str, Any]) -> None:
         if len(rows) >= self.max_pending:
@@ -236,14 +240,18 @@ class DbStore:
             ]
 
     async def events(
-        self, *, after_id: int = 0, limit: int = 100, kind: str | None = None
+        self, *, after_id: int = 0, limit: int = 100, kind: str | None = None, latest: bool = False
     ) -> list[dict[str, Any]]:
+        """Events after ``after_id`` in id order; ``latest``: the last ``limit`` of them."""
         await self.flush()
         query = select(EventRow).where(EventRow.id > after_id)
         if kind:
             query = query.where(EventRow.kind == kind)
+        order = EventRow.id.desc() if latest else EventRow.id
         async with self.sessionmaker() as session:
-            rows = (await session.execute(query.order_by(EventRow.id).limit(limit))).scalars()
+            rows = list((await session.execute(query.order_by(order).limit(limit))).scalars())
+            if latest:
+                rows.reverse()
             return [
                 {"id": r.id, "at": r.at, "kind": r.kind, "source": r.source, "data": r.data}
                 for r in rows

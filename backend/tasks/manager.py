@@ -49,6 +49,8 @@ NETS = {
     "go_to": "navigate_to_point",
 }
 DEFAULT_DURATION_S = {"tour": 600.0, "go_to_poi": 120.0, "go_to": 60.0, "charge": 1800.0}
+MANUAL_KINDS = frozenset({"go_to", "charge"})
+"""What staff may still send an out-of-service robot (pinned to it): moving it by hand."""
 BATTERY_WEIGHT_S = 120.0
 """Cost in seconds of an empty battery when ranking robots (a full one costs nothing)."""
 UNKNOWN_POSITION_COST_S = 3600.0
@@ -266,6 +268,26 @@ class TaskManager:
         self.dispatch()
         return task
 
+    def set_out_of_service(self, name: str, out: bool, *, by: str = "") -> RobotInfo:
+        """Take a robot out of service (its task goes back to the queue for another robot)
+        or put it back. Out of service it gets no tasks, not even going home, except the
+        go_to and charge tasks staff pin to it (moving it by hand)."""
+        robot = self.robots.get(name)
+        if robot is None:
+            raise TaskNotFound(f"no robot {name!r}")
+        if robot.out_of_service == out:
+            return robot
+        robot.out_of_service = out
+        current = self.tasks.get(robot.current) if robot.current else None
+        if out and current is not None and not current.final:
+            if current.internal:
+                self.cancel(current.id, reason="robot out of service", by=by)
+            else:
+                self.reassign(current.id, None, by=by)
+        self.endpoint.publish("robot_service", {"robot": name, "out_of_service": out, "by": by})
+        self.dispatch()
+        return robot
+
     def queue_position(self, task: Task) -> int | None:
         return self.queue.position(task) if task.state is TaskState.QUEUED else None
 
@@ -345,6 +367,8 @@ class TaskManager:
     def _best_robot(self, task: Task, free: dict[str, RobotInfo]) -> RobotInfo | None:
         if task.pinned_robot is not None:
             robot = free.get(task.pinned_robot)
+            if robot is not None and robot.out_of_service and task.kind not in MANUAL_KINDS:
+                return None
             return robot
         avoid = self._avoid.get(task.id, ())
         rather_not = self._rather_not.get(task.id, ())
@@ -353,7 +377,7 @@ class TaskManager:
         best_cost = math.inf
         best_is_fallback = True
         for robot in free.values():
-            if robot.name in avoid:
+            if robot.name in avoid or robot.out_of_service:
                 continue
             fallback = robot.name in rather_not
             metres = dist.get(robot.node) if robot.node is not None else None
@@ -404,7 +428,10 @@ class TaskManager:
         idle = [
             r
             for n in self._idle
-            if (r := self.robots[n]).current is None and r.online and not r.fault
+            if (r := self.robots[n]).current is None
+            and r.online
+            and not r.fault
+            and not r.out_of_service
         ]
         if not idle:
             return

@@ -25,6 +25,8 @@ class RobotInfo:
     """The task the Task Manager gave it and considers live."""
     needs_charge: bool = False
     fault: bool = False
+    out_of_service: bool = False
+    """Taken out of service by staff: gets no tasks but the go_to/charge staff pin to it."""
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -38,5 +40,6 @@ class RobotInfo:
             "reported_task_id": self.reported_task,
             "needs_charge": self.needs_charge,
             "fault": self.fault,
+            "out_of_service": self.out_of_service,
             "last_seen": self.last_seen,
         }

@@ -42,6 +42,8 @@ class RobotState(PayloadModel):
     speed: float = 0.0
     nets: list[str] = Field(default_factory=list)
     modules: dict[str, str] = Field(default_factory=dict)
+    poi: str | None = None
+    """The point of interest the current task last showed (a tour's current step)."""
     seq: int = 0
 
 

@@ -71,14 +71,17 @@ async def test_a_door_that_fails_to_open_stops_the_robot_before_it(tmp_path: Pat
 
 
 async def test_robots_report_their_floor_from_the_start(tmp_path: Path) -> None:
-    """At its charging station, before any move, GET /api/robots knows the robot's floor."""
-    async with fleet(tmp_path, ["R1"]) as f:
+    """At its charging station, before any move, GET /api/robots knows the robot's floor
+    and its robot_state its position (the console draws it there)."""
+    async with fleet(tmp_path, ["R1"], start={"R1": "home2"}) as f:
         await f.wait_for(lambda: "R1" in f.states)
-        assert f.states["R1"]["node"] == "home1" and f.states["R1"]["floor"] == "F0"
+        assert f.states["R1"]["node"] == "home2" and f.states["R1"]["floor"] == "F0"
         async with httpx.AsyncClient(base_url=f.server.url) as http:
             r = await http.get(
                 "/api/robots", headers={"Authorization": f"Bearer {f.server.admin_token}"}
             )
         [robot] = r.json()
-        assert robot["node"] == "home1" and robot["floor"] == "F0"
+        assert robot["node"] == "home2" and robot["floor"] == "F0"
+        # robot_state places it at home2, not at the odometry's origin (0, 0)
+        assert (f.states["R1"]["x"], f.states["R1"]["y"]) == (0.0, 3.0)
         assert not f.of("node_reached")

@@ -179,6 +179,31 @@ class _FakeUpstream:
         self.handlers[message.type](message)
 
 
+async def test_link_takes_a_kill_only_when_addressed_and_forwards_net_events() -> None:
+    """Staff kill one robot's net (addressed); a broadcast kill is for the server's RGM. The
+    console's monitor follows petri_net_event on the hub."""
+    bus = Bus()
+    up = _FakeUpstream()
+    up.connected.set()
+    link = Link(bus.endpoint("link"), up, "R1")
+    link.start()
+    kills: list[Message] = []
+    dispatch = bus.endpoint("dispatch")
+    dispatch.subscribe("kill_petri_net", kills.append)
+    up.deliver(Message(type="kill_petri_net", source="gui", payload={"net": "give_tour"}))
+    assert kills == []
+    up.deliver(
+        Message(
+            type="kill_petri_net", source="console", destination="R1", payload={"instance_id": "i"}
+        )
+    )
+    assert [m.payload for m in kills] == [{"instance_id": "i"}]
+    event = {"instance_id": "i", "net": "waiting", "kind": "fired", "time": 1.0}
+    dispatch.publish("petri_net_event", event)
+    assert [m.type for m in up.sent] == ["petri_net_event"]
+    await link.stop()
+
+
 async def test_link_routes_replies_to_the_requester_and_never_echoes() -> None:
     bus = Bus()
     up = _FakeUpstream()

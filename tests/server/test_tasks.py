@@ -354,3 +354,35 @@ async def test_a_robot_reporting_no_floor_is_on_its_nodes_floor() -> None:
         assert tasks.robots["R1"].as_dict()["floor"] == "F1"
     finally:
         await tasks.stop()
+
+
+async def test_out_of_service_robot_gets_no_tasks_but_manual_moves(
+    bus: Bus, manager: TaskManager
+) -> None:
+    """Staff take R1 out of service: its tour goes to R2, it is not sent home, new tours skip
+    it even when pinned to it, but a go_to pinned to it still reaches it; back in service it
+    works again."""
+    r1, r2 = RobotStub(bus, "R1", "hall"), RobotStub(bus, "R2", "charge_b")
+    tour = manager.request("tour", {"tour": "ground"})
+    r1.state()
+    r2.state()
+    first = await r1.wait_for("task_assigned")  # R1 is nearest to the hall
+    assert first.payload["task_id"] == tour.id
+    r1.start(tour.id)
+    manager.set_out_of_service("R1", True, by="desk")
+    assert (await r2.wait_for("task_assigned")).payload["task_id"] == tour.id
+    assert manager.robots["R1"].as_dict()["out_of_service"] is True
+    pinned_tour = manager.request("tour", {"tour": "highlights"}, robot="R1")
+    moved = manager.request("go_to", {"node": "entrance"}, robot="R1")
+    order = await r1.wait_for("task_assigned", 2)
+    assert order.payload["task_id"] == moved.id
+    assert pinned_tour.state is TaskState.QUEUED
+    r1.start(moved.id)
+    r1.end(moved.id)
+    await asyncio.sleep(0)
+    assert len(r1.of_type("task_assigned")) == 2  # nothing else, not even "go home"
+    manager.set_out_of_service("R1", False, by="desk")
+    back = await r1.wait_for("task_assigned", 3)
+    assert back.payload["task_id"] == pinned_tour.id
+    with pytest.raises(TaskError):
+        manager.set_out_of_service("R9", True)

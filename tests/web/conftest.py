@@ -26,24 +26,16 @@ from backend.settings import Settings, StaticToken
 from backend.site.schema import Site
 from backend.site.yamlio import load_site_file
 from backend.testing import RunningServer, running_server
+from bench.console import CHROMIUM as BENCH_CHROMIUM
+from bench.console import CHROMIUM_ARGS
+from building_sim.control import serve_control
 from building_sim.simulator import BuildingSimulator
 from robot_agent.agent import AgentConfig, RobotAgent
-
-pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
 SCREENSHOTS = ROOT / "docs" / "screenshots"
-CHROMIUM = Path(os.environ.get("GUIDEBOT_CHROMIUM", "/usr/bin/chromium"))
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--headless",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
+CHROMIUM = Path(os.environ.get("GUIDEBOT_CHROMIUM", BENCH_CHROMIUM))
 OPERATOR_TOKEN = "operator-desk-token"
 ROBOT_TIME_SCALE = 20.0
 BUILDING_TIME_SCALE = 10.0
@@ -56,7 +48,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         reason=f"{CHROMIUM} not found: install Debian's chromium (scripts/system-deps.sh)"
     )
     for item in items:
-        if "tests/web/" in str(item.fspath).replace(os.sep, "/"):
+        if item.get_closest_marker("browser") is not None:
             item.add_marker(skip)
 
 
@@ -90,13 +82,19 @@ class PageWatch:
         return [e for e in self.errors if not any(p.search(e) for p in self.expected)]
 
 
-@pytest.fixture
-async def open_page(browser: Any) -> AsyncIterator[Callable[..., Any]]:
-    """``await open_page(url)`` -> PageWatch; each page in its own context (own session)."""
-    watches: list[PageWatch] = []
+class Pages:
+    """The pages a test opened: ``await pages(url)`` opens one (a PageWatch, in its own
+    browser context); ``close()`` closes them and keeps their unexpected errors."""
 
-    async def open_(url: str, *, viewport: tuple[int, int] = (1280, 800)) -> PageWatch:
-        context = await browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    def __init__(self, browser: Any) -> None:
+        self.browser = browser
+        self.watches: list[PageWatch] = []
+        self.problems: list[str] = []
+
+    async def __call__(self, url: str, *, viewport: tuple[int, int] = (1280, 800)) -> PageWatch:
+        context = await self.browser.new_context(
+            viewport={"width": viewport[0], "height": viewport[1]}
+        )
         page = await context.new_page()
         watch = PageWatch(page)
         page.on(
@@ -108,18 +106,29 @@ async def open_page(browser: Any) -> AsyncIterator[Callable[..., Any]]:
             "response",
             lambda r: watch.failed.append(f"{r.status} {r.url}") if r.status >= 400 else None,
         )
-        watches.append(watch)
+        self.watches.append(watch)
         if url:
             await page.goto(url)
         return watch
 
-    yield open_
-    problems = [e for w in watches for e in w.unexpected()]
-    if problems:
-        problems += [f"(HTTP {f})" for w in watches for f in w.failed]
-    for w in watches:
-        await w.page.context.close()
-    assert not problems, "JavaScript errors on the page:\n" + "\n".join(problems)
+    async def close(self) -> None:
+        """Close every page (before its server stops: a page whose server went away reports
+        connection errors that are not the test's)."""
+        for watch in self.watches:
+            problems = watch.unexpected()
+            if problems:
+                self.problems += problems + [f"(HTTP {f})" for f in watch.failed]
+            await watch.page.context.close()
+        self.watches.clear()
+
+
+@pytest.fixture
+async def open_page(browser: Any) -> AsyncIterator[Pages]:
+    """``await open_page(url)`` -> PageWatch; any console error fails the test."""
+    pages = Pages(browser)
+    yield pages
+    await pages.close()
+    assert not pages.problems, "JavaScript errors on the page:\n" + "\n".join(pages.problems)
 
 
 async def axe_check(page: Any) -> None:
@@ -151,6 +160,7 @@ class WebFleet:
     building: BuildingSimulator
     agents: dict[str, RobotAgent]
     site_file: Path
+    simulator_url: str
 
     @property
     def admin_url(self) -> str:
@@ -162,6 +172,11 @@ class WebFleet:
             base_url=self.server.url, headers={"Authorization": f"Bearer {token}"}, timeout=10
         )
 
+    async def kill(self, name: str) -> None:
+        """The robot's process dies: its link drops without a goodbye."""
+        agent = self.agents.pop(name)
+        await agent.__aexit__(None, None, None)
+
 
 @pytest.fixture(scope="session")
 def demo_site() -> Site:
@@ -170,10 +185,17 @@ def demo_site() -> Site:
 
 @contextlib.asynccontextmanager
 async def web_fleet(
-    tmp_path: Path, demo_site: Site, *, robots: int = 1, **settings: Any
+    tmp_path: Path,
+    demo_site: Site,
+    *,
+    robots: int = 1,
+    time_scale: float = ROBOT_TIME_SCALE,
+    edit: Callable[[dict[str, Any]], None] | None = None,
+    **settings: Any,
 ) -> AsyncIterator[WebFleet]:
-    """Start the building simulator, the server and ``robots`` robot agents (bare simulated
-    bases, no CAN: light) on loopback; the plan images are copied next to the site file."""
+    """Start the building simulator (with its control API), the server and ``robots`` robot
+    agents (bare simulated bases, no CAN: light) on loopback; ``edit`` may change the site
+    document first. The plan images are copied next to the site file."""
     config = BuildingConfig(
         modules=demo_site.modules,
         doors=demo_site.doors,
@@ -187,10 +209,12 @@ async def web_fleet(
         door_hold_s=2.0 * BUILDING_TIME_SCALE,
         elevator_hold_s=2.0 * BUILDING_TIME_SCALE,
     )
-    async with simulator as building:
+    async with simulator as building, serve_control(building) as control_url:
         data = demo_site.model_dump(mode="json")
         for module in data["modules"]:
             module["port"] = building.ports[module["id"]]
+        if edit is not None:
+            edit(data)
         plans = tmp_path / "demo_museum"
         plans.mkdir(exist_ok=True)
         for svg in (DEMO_SITE.parent / "demo_museum").glob("*.svg"):
@@ -201,40 +225,56 @@ async def web_fleet(
             db_url=f"sqlite+aiosqlite:///{tmp_path}/guidebot.db",
             site=site_file,
             tokens=[StaticToken(token=OPERATOR_TOKEN, name="desk", role="operator")],
+            building_sim_url=control_url,
             **settings,
         )
-        async with running_server(server_settings) as server, contextlib.AsyncExitStack() as stack:
-            agents: dict[str, RobotAgent] = {}
-            for robot in demo_site.robots[:robots]:
-                agent = RobotAgent(
-                    AgentConfig(
-                        name=robot.name,
-                        server=server.url,
-                        token=robot.token,
-                        can=None,
-                        time_scale=ROBOT_TIME_SCALE,
-                        start_node=robot.start_node,
-                        speech_engine=None,
-                        state_period_s=0.2,
-                        site=site_file,
-                        auto_answer="yes",
+        async with running_server(server_settings) as server:
+            fleet = WebFleet(server, building, {}, site_file, control_url)
+            try:
+                for robot in demo_site.robots[:robots]:
+                    agent = RobotAgent(
+                        AgentConfig(
+                            name=robot.name,
+                            server=server.url,
+                            token=robot.token,
+                            can=None,
+                            time_scale=time_scale,
+                            start_node=robot.start_node,
+                            speech_engine=None,
+                            state_period_s=0.2,
+                            site=site_file,
+                            auto_answer="yes",
+                        )
                     )
-                )
-                await stack.enter_async_context(agent)
-                agents[robot.name] = agent
-            yield WebFleet(server, building, agents, site_file)
+                    await agent.__aenter__()
+                    fleet.agents[robot.name] = agent
+                yield fleet
+            finally:
+                for name in list(fleet.agents):
+                    await fleet.kill(name)
 
 
 @pytest.fixture
 def fleet_factory(
-    tmp_path: Path, demo_site: Site
+    tmp_path: Path, demo_site: Site, open_page: Pages
 ) -> Callable[..., contextlib.AbstractAsyncContextManager[WebFleet]]:
-    """``async with fleet_factory(robots=3) as fleet``."""
+    """``async with fleet_factory(robots=3) as fleet``; the test's pages close before the
+    fleet stops."""
 
-    def make(**kwargs: Any) -> contextlib.AbstractAsyncContextManager[WebFleet]:
-        return web_fleet(tmp_path, demo_site, **kwargs)
+    @contextlib.asynccontextmanager
+    async def make(**kwargs: Any) -> AsyncIterator[WebFleet]:
+        async with web_fleet(tmp_path, demo_site, **kwargs) as fleet:
+            try:
+                yield fleet
+            finally:
+                await open_page.close()
 
     return make
+
+
+async def open_view(page: Any, name: str) -> None:
+    """Click a view's tab."""
+    await page.locator("#tabs").get_by_role("button", name=name).click()
 
 
 async def sign_in(watch: PageWatch, token: str) -> None:
@@ -252,5 +292,6 @@ def web() -> SimpleNamespace:
         axe_check=axe_check,
         screenshot=screenshot,
         sign_in=sign_in,
+        open_view=open_view,
         operator_token=OPERATOR_TOKEN,
     )

@@ -22,7 +22,7 @@ async def test_sign_in_shows_the_plan_and_live_robots(
         await web.axe_check(page)
         await web.sign_in(watch, fleet.server.admin_token)
         # The plan image of the ground floor lies under the graph.
-        await expect(page.locator("#map img.leaflet-image-layer")).to_have_count(1)
+        await expect(page.locator("#map img.leaflet-image-layer")).to_have_count(1, timeout=15_000)
         # Robot markers come from robot_state messages over the hub, not from REST.
         r1 = page.get_by_role("button", name="robot R1")
         await expect(r1).to_be_visible(timeout=20_000)
@@ -48,3 +48,14 @@ async def test_wrong_token_says_why_and_stays_on_sign_in(
         await expect(watch.page.get_by_role("alert")).to_contain_text("not accepted")
         await expect(watch.page.get_by_role("heading", name="Sign in")).to_be_visible()
         assert await watch.page.evaluate("sessionStorage.length") == 0
+
+
+async def test_a_kiosk_signs_in_with_the_token_in_the_fragment(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """#token=... is never sent to the server; the page uses it and stores nothing."""
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_page(f"{fleet.admin_url}#token={web.operator_token}")
+        await expect(watch.page.locator("#who")).to_contain_text("desk")
+        await expect(watch.page.get_by_role("heading", name="Sign in")).to_be_hidden()
+        assert await watch.page.evaluate("sessionStorage.getItem('guidebot.token')") is None

@@ -1,4 +1,4 @@
-// The staff console (/admin): sign-in, then the live map and the fleet views.
+// The staff console (/admin/): sign-in, then the live map and the fleet views.
 import { html, render } from "lit-html";
 import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
 import { connectionBanner } from "/lib/dom.js";
@@ -6,9 +6,35 @@ import { HubClient } from "/lib/hub.js";
 import { FloorMap } from "/lib/map.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { Store } from "/admin/store.js";
+import { alertBar, alertsView } from "/admin/views/alerts.js";
+import { buildingView } from "/admin/views/building.js";
+import { eventsView } from "/admin/views/events.js";
+import { locksView } from "/admin/views/locks.js";
 import { detailsView, toolbarView } from "/admin/views/map.js";
+import { Monitor, monitorView } from "/admin/views/monitor.js";
+import { robotsView } from "/admin/views/robots.js";
+import { tasksView } from "/admin/views/tasks.js";
 
 const STAFF_ROLES = new Set(["admin", "operator"]);
+const VIEWS = [
+  ["map", "Map"],
+  ["robots", "Robots"],
+  ["tasks", "Tasks"],
+  ["locks", "Locks"],
+  ["building", "Building"],
+  ["monitor", "RoboGraph monitor"],
+  ["alerts", "Alerts"],
+  ["events", "Event log"],
+];
+const RENDER = {
+  robots: robotsView,
+  tasks: tasksView,
+  locks: locksView,
+  building: buildingView,
+  monitor: monitorView,
+  alerts: alertsView,
+  events: eventsView,
+};
 const $ = (id) => document.getElementById(id);
 
 let token = currentToken();
@@ -18,6 +44,7 @@ function showSignIn(message = "") {
   $("tabs").hidden = true;
   $("map-view").hidden = true;
   $("view").hidden = true;
+  render("", $("alert-bar"));
   const section = $("signin");
   section.hidden = false;
   const submit = async (event) => {
@@ -59,6 +86,19 @@ async function whoAmI() {
   }
 }
 
+function beep() {
+  try {
+    const audio = new AudioContext();
+    const tone = audio.createOscillator();
+    tone.frequency.value = 880;
+    tone.connect(audio.destination);
+    tone.start();
+    tone.stop(audio.currentTime + 0.25);
+  } catch {
+    // no audio device: the banner and the title still say it
+  }
+}
+
 async function start() {
   if (!token) return showSignIn();
   const me = await whoAmI();
@@ -83,8 +123,39 @@ async function start() {
     }
   });
   const store = new Store(api, hub);
-  const ui = { me, store, api, hub, selected: null, notice: null };
+  const ui = {
+    me,
+    store,
+    api,
+    hub,
+    admin: me.role === "admin",
+    view: sessionStorage.getItem("guidebot.view") ?? "map",
+    selected: null,
+    notice: null,
+    sound: false,
+    draw: () => draw(),
+  };
   window.guidebotConsole = ui; // for the browser tests and the benchmark
+
+  /** Run a REST action; its outcome (or the reason it failed) is shown on the page. */
+  ui.act = async (label, fn) => {
+    try {
+      await fn();
+      ui.notice = { ok: true, text: `${label}: done.` };
+    } catch (err) {
+      ui.notice = { ok: false, text: `${label}: ${err.message}` };
+    }
+    draw();
+  };
+  ui.go = (view) => {
+    ui.view = view;
+    ui.notice = null;
+    sessionStorage.setItem("guidebot.view", view);
+    if (view === "monitor") ui.monitor.open();
+    else ui.monitor.close();
+    draw();
+    if (view === "map") ui.map.shown();
+  };
 
   render(
     html`<span>${me.name} <span class="badge">${me.role}</span></span>
@@ -92,35 +163,115 @@ async function start() {
     $("who"),
   );
   $("signin").hidden = true;
-  $("map-view").hidden = false;
+  $("tabs").hidden = false;
 
   const map = new FloorMap($("map"), (url) => api.get(url));
   ui.map = map;
-  store.addEventListener("robot_state", (e) => map.updateRobot(e.detail));
+  ui.monitor = new Monitor(ui);
+  let pathKey = "";
+  store.addEventListener("robot_state", (e) => {
+    map.updateRobot(e.detail);
+    const s = e.detail.payload;
+    if (ui.selected?.kind === "robot" && ui.selected.id === s.robot) {
+      const key = `${s.node}|${s.task_id}|${s.poi}`;
+      if (key !== pathKey) {
+        pathKey = key;
+        showPath(s.robot);
+      }
+    }
+  });
   store.addEventListener("robot_offline", (e) => map.robotOffline(e.detail));
   store.addEventListener("lock", (e) => map.setAreaState(e.detail));
-  map.addEventListener("select", (e) => {
+  store.addEventListener("door", (e) => map.setDoor(e.detail, store.doors.get(e.detail)));
+  store.addEventListener("lift", (e) => {
+    const lift = store.lifts.get(e.detail);
+    map.setElevator(e.detail, lift.floor, lift.door_open);
+  });
+  store.addEventListener("alert", () => {
+    if (ui.sound) beep();
+  });
+  map.addEventListener("select", async (e) => {
     ui.selected = e.detail;
-    if (e.detail.kind === "robot") map.selectRobot(e.detail.id);
+    if (e.detail.kind === "robot") {
+      map.selectRobot(e.detail.id);
+      await showPath(e.detail.id);
+    } else {
+      map.selectRobot(null);
+      map.setPath([]);
+    }
     draw();
   });
   map.addEventListener("floor", () => draw());
 
+  /** The selected robot's planned path: from where it is to its task's goal. */
+  async function showPath(name) {
+    const robot = store.robots.get(name);
+    const task = robot?.state?.task_id ? store.tasks.get(robot.state.task_id) : null;
+    const goal = task ? goalNode(store.site, task, robot.state.poi, robot.state.node) : null;
+    if (!goal || !robot.state.node) return map.setPath([]);
+    try {
+      const path = await api.get(`/api/paths?from_node=${encodeURIComponent(robot.state.node)}&to_node=${encodeURIComponent(goal)}`);
+      map.setPath(path.nodes);
+    } catch {
+      map.setPath([]);
+    }
+  }
+
   function draw() {
     if (!store.site) return;
-    render(toolbarView(ui), $("map-toolbar"));
-    render(detailsView(ui), $("details"));
+    const open = store.openAlerts();
+    document.title = open.length ? `(${open.length}) GuideBot console` : "GuideBot console";
+    render(alertBar(ui, open), $("alert-bar"));
+    render(
+      VIEWS.map(
+        ([id, label]) => html`<button type="button" class="secondary" aria-current=${ui.view === id ? "page" : "false"}
+            @click=${() => ui.go(id)}>${label}${id === "alerts" && open.length ? html`<span class="count" aria-label=${`${open.length} open`}>${open.length}</span>` : ""}</button>`,
+      ),
+      $("tabs"),
+    );
+    $("map-view").hidden = ui.view !== "map";
+    $("view").hidden = ui.view === "map";
+    if (ui.view === "map") {
+      render(toolbarView(ui), $("map-toolbar"));
+      render(detailsView(ui), $("details"));
+    } else {
+      const notice = ui.notice
+        ? html`<p class=${`notice ${ui.notice.ok ? "ok" : "error"}`} role=${ui.notice.ok ? "status" : "alert"}>${ui.notice.text}</p>`
+        : "";
+      render(html`${notice}${RENDER[ui.view](ui)}`, $("view"));
+    }
   }
   store.addEventListener("change", draw);
   try {
     await store.start();
+    ui.go(ui.view);
+    await map.setSite(store.site);
+    await store.reload();
   } catch (err) {
     render(html`<p class="notice error" role="alert">${err.message}</p>`, $("details"));
     return;
   }
-  await map.setSite(store.site);
   for (const view of store.locks.values()) map.setAreaState(view);
-  draw();
+  for (const [id, open] of store.doors) map.setDoor(id, open);
+  for (const [id, lift] of store.lifts) map.setElevator(id, lift.floor, lift.door_open);
+}
+
+/** The node a task is heading for (a tour: the point after the one it showed last, or the
+ * one after that when the robot already stands there). */
+export function goalNode(site, task, poi, here = null) {
+  const p = task.params ?? {};
+  if (p.node) return p.node;
+  const poiNode = (id) => site.pois.find((x) => x.id === id)?.node;
+  if (p.poi) return poiNode(p.poi);
+  if (p.station) return site.charging_stations.find((s) => s.id === p.station)?.node;
+  if (p.tour) {
+    const tour = site.tours.find((t) => t.id === p.tour);
+    if (!tour) return null;
+    let next = Math.min((poi ? tour.points.indexOf(poi) : -1) + 1, tour.points.length - 1);
+    if (poiNode(tour.points[next]) === here) next = Math.min(next + 1, tour.points.length - 1);
+    return poiNode(tour.points[next]);
+  }
+  return null;
 }
 
 start();

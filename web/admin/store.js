@@ -1,14 +1,24 @@
 // The console's live state: a REST snapshot at start (and after every reconnect), then hub
 // messages. Views read it; "change" events (at most one per animation frame) re-render them.
 
+const MAX_EVENTS = 1000;
+const MAX_FINISHED_TASKS = 200;
+
 export class Store extends EventTarget {
   constructor(api, hub) {
     super();
     this.api = api;
     this.hub = hub;
     this.site = null;
-    this.robots = new Map(); // name -> {name, info (GET /api/robots), state (robot_state), online}
+    this.robots = new Map(); // name -> {name, info (GET /api/robots), state (robot_state), online, faults}
     this.locks = new Map(); // area -> lock view
+    this.tasks = new Map(); // id -> task status (GET /api/tasks)
+    this.alerts = new Map(); // id -> alert
+    this.events = []; // newest last, at most MAX_EVENTS
+    this.building = { enabled: false, modules: new Map(), points: new Map() };
+    this.doors = new Map(); // door id -> open (bool)
+    this.lifts = new Map(); // elevator id -> {floor, door_open}
+    this.simulator = false;
     this.frame = 0;
   }
 
@@ -21,50 +31,93 @@ export class Store extends EventTarget {
     }
   }
 
+  emit(type, detail) {
+    this.dispatchEvent(new CustomEvent(type, { detail }));
+  }
+
   robot(name) {
     let robot = this.robots.get(name);
     if (!robot) {
-      robot = { name, info: null, state: null, online: false };
+      robot = { name, info: null, state: null, online: false, faults: [] };
       this.robots.set(name, robot);
     }
     return robot;
   }
 
-  /** Subscribe and load the snapshot; called once, then the hub's connect events reload it. */
+  /** Subscribe and load the site; then call reload() (the hub's connect events do too). */
   async start() {
-    const hub = this.hub;
-    hub.on("robot_state", (m) => {
+    const on = (type, fn) => this.hub.on(type, (m) => {
+      fn(m);
+      this.changed();
+    });
+    on("robot_state", (m) => {
       const robot = this.robot(m.payload.robot);
       robot.state = m.payload;
       robot.online = m.payload.mode !== "offline";
-      this.dispatchEvent(new CustomEvent("robot_state", { detail: m }));
-      this.changed();
+      this.emit("robot_state", m);
     });
-    hub.on("robot_connected", (m) => {
+    on("robot_connected", (m) => {
       this.robot(m.payload.robot).online = true;
-      this.changed();
     });
-    hub.on("robot_disconnected", (m) => {
+    on("robot_disconnected", (m) => {
       this.robot(m.payload.robot).online = false;
-      this.dispatchEvent(new CustomEvent("robot_offline", { detail: m.payload.robot }));
-      this.changed();
+      this.emit("robot_offline", m.payload.robot);
     });
-    hub.on("lock_changed", (m) => {
+    on("robot_service", (m) => {
+      const robot = this.robot(m.payload.robot);
+      robot.info = { ...(robot.info ?? {}), out_of_service: m.payload.out_of_service };
+    });
+    on("robot_fault", (m) => {
+      const robot = this.robot(m.payload.robot);
+      robot.faults = [{ at: m.timestamp, kind: m.payload.kind, detail: m.payload.detail }, ...robot.faults].slice(0, 5);
+    });
+    on("lock_changed", (m) => {
       this.locks.set(m.payload.area, m.payload);
-      this.dispatchEvent(new CustomEvent("lock", { detail: m.payload }));
-      this.changed();
+      this.emit("lock", m.payload);
     });
-    hub.subscribe("robot_state", "robot_connected", "robot_disconnected", "lock_changed");
-    hub.addEventListener("connect", () => this.reload());
-    this.site = (await this.api.get("/api/site/map")).site;
-    await this.reload();
+    on("task_event", (m) => this.#taskEvent(m.payload, m.timestamp));
+    on("alert_raised", (m) => {
+      this.alerts.set(m.payload.id, m.payload);
+      this.emit("alert", m.payload);
+    });
+    on("alert_acked", (m) => this.alerts.set(m.payload.id, m.payload));
+    on("event_logged", (m) => {
+      this.#addEvents([m.payload]);
+      this.inFlight?.push(m.payload);
+    });
+    on("building_input_changed", (m) => this.#point(m.payload.module, m.payload.point, m.payload.value));
+    on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
+    on("door_opened", (m) => this.#door(m.payload.door, true));
+    on("door_closed", (m) => this.#door(m.payload.door, false));
+    on("elevator_in_position", (m) => {
+      this.lifts.set(m.payload.elevator, { floor: m.payload.floor, door_open: m.payload.door_open });
+      this.emit("lift", m.payload.elevator);
+    });
+    this.hub.subscribe(
+      "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault",
+      "lock_changed", "task_event", "alert_raised", "alert_acked", "event_logged",
+      "building_input_changed", "building_module_health", "door_opened", "door_closed",
+      "elevator_in_position",
+    );
+    this.hub.addEventListener("connect", () => this.reload().catch(() => {}));
+    const [site, simulator] = await Promise.all([
+      this.api.get("/api/site/map"),
+      this.api.get("/api/building/simulator"),
+    ]);
+    this.site = site.site;
+    this.simulator = simulator.configured;
   }
 
   /** The REST snapshot: what happened while the page was not connected. */
   async reload() {
-    const [robots, locks] = await Promise.all([
+    this.inFlight = []; // events logged while the snapshot is fetched
+    const [robots, locks, tasks, alerts, events, building] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
+      this.api.get("/api/tasks?limit=300"),
+      this.api.get("/api/alerts?include_acked=true"),
+      this.api.get(`/api/events?latest=true&limit=${MAX_EVENTS}`),
+      this.api.get("/api/building"),
     ]);
     for (const info of robots) {
       const robot = this.robot(info.name);
@@ -73,8 +126,82 @@ export class Store extends EventTarget {
     }
     for (const view of locks) {
       this.locks.set(view.area, view);
-      this.dispatchEvent(new CustomEvent("lock", { detail: view }));
+      this.emit("lock", view);
+    }
+    // Merge, never replace: hub messages that arrived while these requests were in flight
+    // are newer than the snapshot.
+    for (const task of tasks.tasks) {
+      const known = this.tasks.get(task.id);
+      if (!known || (known.updated_at ?? 0) <= task.updated_at) this.tasks.set(task.id, task);
+    }
+    for (const alert of alerts) {
+      const known = this.alerts.get(alert.id);
+      if (!known || !known.acked_at) this.alerts.set(alert.id, alert);
+    }
+    const last = events.events.length ? events.events[events.events.length - 1].at : 0;
+    this.events = [];
+    this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);
+    this.inFlight = null;
+    this.building.enabled = building.enabled;
+    for (const m of building.modules) this.building.modules.set(m.module, m);
+    for (const p of building.points) this.#point(p.module, p.point, p.value);
+    this.changed();
+  }
+
+  #addEvents(rows) {
+    this.events.push(...rows);
+    if (this.events.length > MAX_EVENTS) this.events.splice(0, this.events.length - MAX_EVENTS);
+    for (const row of rows) {
+      if (row.kind === "robot_fault" && row.data?.robot) {
+        const robot = this.robot(row.data.robot);
+        if (!robot.faults.some((f) => f.at === row.at)) {
+          robot.faults = [{ at: row.at, kind: row.data.kind, detail: row.data.detail }, ...robot.faults].slice(0, 5);
+        }
+      }
+    }
+  }
+
+  async #taskEvent(p, timestamp) {
+    const task = this.tasks.get(p.task_id);
+    if (task) {
+      Object.assign(task, { state: p.state, robot: p.robot, queue_position: p.queue_position, eta_s: p.eta_s, updated_at: timestamp });
+    } else {
+      try {
+        this.tasks.set(p.task_id, await this.api.get(`/api/tasks/${encodeURIComponent(p.task_id)}`));
+      } catch {
+        return;
+      }
+    }
+    const finished = [...this.tasks.values()].filter((t) => ["done", "failed", "cancelled"].includes(t.state));
+    if (finished.length > MAX_FINISHED_TASKS) {
+      finished.sort((a, b) => a.updated_at - b.updated_at);
+      for (const t of finished.slice(0, finished.length - MAX_FINISHED_TASKS)) this.tasks.delete(t.id);
     }
     this.changed();
+  }
+
+  #point(module, point, value) {
+    this.building.points.set(`${module}/${point}`, value);
+    for (const door of this.site?.doors ?? []) {
+      if (door.is_open && door.is_open.module === module && door.is_open.point === point) this.#door(door.id, Boolean(value));
+    }
+    for (const lift of this.site?.elevators ?? []) {
+      for (const stop of lift.stops) {
+        const ref = stop.in_position;
+        if (ref && ref.module === module && ref.point === point && value) {
+          this.lifts.set(lift.id, { floor: stop.floor, door_open: true });
+          this.emit("lift", lift.id);
+        }
+      }
+    }
+  }
+
+  #door(id, open) {
+    this.doors.set(id, open);
+    this.emit("door", id);
+  }
+
+  openAlerts() {
+    return [...this.alerts.values()].filter((a) => !a.acked_at).sort((a, b) => b.raised_at - a.raised_at);
   }
 }

@@ -83,7 +83,17 @@ export class FloorMap extends EventTarget {
     }
   }
 
+  /** Call when the map's container becomes visible: Leaflet measures it again, and the floor
+   * is fitted if it could not be while the container was hidden. */
+  shown() {
+    this.map.invalidateSize();
+    if (!this.fitted && this.site) this.#fit();
+  }
+
   #fit() {
+    const size = this.map.getSize();
+    this.fitted = size.x > 0 && size.y > 0;
+    if (!this.fitted) return;
     const points = this.site.nodes.filter((n) => n.floor === this.floor).map((n) => [n.y, n.x]);
     const plan = this.planBounds?.get(this.floor);
     let bounds = points.length ? L.latLngBounds(points) : null;

@@ -1,0 +1,176 @@
+"""REST routes of the staff console: alerts, robots in or out of service, Petri nets (library,
+running instances, kill) and the building simulator's inputs."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+import httpx
+from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, status
+from pydantic import BaseModel, ConfigDict, Field
+
+from backend.api.deps import Admin, Staff, not_found, task_manager
+from backend.console.alerts import AlertBook, AlertNotFound
+from backend.console.feed import ConsoleFeed
+from backend.tasks.model import TaskNotFound
+from petri_nets.library import UnknownNet
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api", tags=["console"])
+
+Name = Annotated[str, Path(max_length=64)]
+
+
+class Service(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    out_of_service: bool
+
+
+class Kill(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    target: str = Field(min_length=1, max_length=64)
+    """A robot name, or "rgm" for the server's own nets."""
+    instance_id: str = Field(min_length=1, max_length=64)
+
+
+class Press(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    button: str = Field(min_length=1, max_length=64)
+    ms: float = Field(default=300.0, gt=0, le=10_000)
+
+
+def _alerts(request: Request) -> AlertBook:
+    return request.app.state.alerts  # type: ignore[no-any-return]
+
+
+def _feed(request: Request) -> ConsoleFeed:
+    return request.app.state.console  # type: ignore[no-any-return]
+
+
+@router.get("/alerts")
+async def list_alerts(
+    request: Request, _: Staff, include_acked: bool = False
+) -> list[dict[str, Any]]:
+    """Open alerts, newest first (with ``include_acked``: the acknowledged ones too)."""
+    return _alerts(request).listing(include_acked=include_acked)
+
+
+@router.post("/alerts/{alert_id}/ack")
+async def acknowledge_alert(request: Request, who: Staff, alert_id: Name) -> dict[str, Any]:
+    """Acknowledge an alert: who and when are recorded (idempotent)."""
+    try:
+        return _alerts(request).acknowledge(alert_id, who.name).as_dict()
+    except AlertNotFound:
+        raise not_found(f"alert {alert_id!r}") from None
+
+
+@router.post("/robots/{name}/service")
+async def set_service(
+    request: Request, who: Staff, name: Name, body: Annotated[Service, Body()]
+) -> dict[str, Any]:
+    """Take a robot out of service (its task goes to another robot; it gets no more tasks
+    but go_to and charge pinned to it) or put it back."""
+    try:
+        robot = task_manager(request).set_out_of_service(name, body.out_of_service, by=who.name)
+    except TaskNotFound:
+        raise not_found(f"robot {name!r}") from None
+    return robot.as_dict()
+
+
+def _library(request: Request) -> Any:
+    return request.app.state.rgm.library
+
+
+@router.get("/nets")
+async def list_nets(request: Request, _: Staff) -> list[str]:
+    return list(_library(request).names())
+
+
+def _position(graphics: Any) -> tuple[float, float] | None:
+    position = graphics.find("position") if graphics is not None else None
+    if position is None:
+        return None
+    try:
+        return float(position.attrib["x"]), float(position.attrib["y"])
+    except (KeyError, ValueError):
+        return None
+
+
+@router.get("/nets/{net}/structure")
+async def net_structure(request: Request, _: Staff, net: Name) -> dict[str, Any]:
+    """Places, transitions and arcs of a library net, with PNML positions where it has them
+    (``x``/``y`` null otherwise: the page lays the net out itself)."""
+    try:
+        doc = _library(request).get(net).doc
+    except UnknownNet:
+        raise not_found(f"net {net!r}") from None
+
+    def node(item: Any, **extra: Any) -> dict[str, Any]:
+        xy = _position(item.graphics)
+        return {
+            "id": item.id,
+            "name": item.name or item.id,
+            "x": xy[0] if xy else None,
+            "y": xy[1] if xy else None,
+            **extra,
+        }
+
+    return {
+        "net": net,
+        "description": doc.description,
+        "places": [node(p, initial=p.initial, final=p.final) for p in doc.places],
+        "transitions": [node(t) for t in doc.transitions],
+        "arcs": [{"source": a.source, "target": a.target, "weight": a.weight} for a in doc.arcs],
+    }
+
+
+@router.get("/nets/running")
+async def running_nets(
+    request: Request, _: Staff, target: Annotated[str, Query(min_length=1, max_length=64)]
+) -> list[dict[str, Any]]:
+    """The nets running on a robot (or on the server, target "rgm") with their marking."""
+    return _feed(request).running_nets(target)
+
+
+@router.post("/nets/kill")
+async def kill_net(request: Request, who: Admin, body: Annotated[Kill, Body()]) -> dict[str, Any]:
+    """Admin only: stop one running net instance on a robot or on the server."""
+    known = {n["instance_id"] for n in _feed(request).running_nets(body.target)}
+    if body.instance_id not in known:
+        raise not_found(f"net instance {body.instance_id!r} on {body.target!r}")
+    if body.target == "rgm":
+        killed = request.app.state.rgm.kill(body.instance_id)
+        return {"target": "rgm", "instance_id": body.instance_id, "killed": bool(killed)}
+    _feed(request).endpoint.publish(
+        "kill_petri_net", {"instance_id": body.instance_id}, destination=body.target
+    )
+    return {"target": body.target, "instance_id": body.instance_id, "killed": True, "by": who.name}
+
+
+@router.get("/building/simulator")
+async def simulator_config(request: Request, _: Staff) -> dict[str, bool]:
+    """Whether a building simulator is configured (the console then offers its buttons)."""
+    return {"configured": bool(request.app.state.settings.building_sim_url)}
+
+
+@router.post("/building/simulator/press")
+async def press_simulated(
+    request: Request, _: Staff, body: Annotated[Press, Body()]
+) -> dict[str, Any]:
+    """Press a building button on the building simulator (a demo or test installation)."""
+    url = request.app.state.settings.building_sim_url
+    if not url:
+        raise HTTPException(status.HTTP_409_CONFLICT, "no building simulator is configured")
+    try:
+        async with httpx.AsyncClient(timeout=5.0) as http:
+            reply = await http.post(
+                f"{url.rstrip('/')}/buttons/{body.button}/press", json={"ms": body.ms}
+            )
+    except httpx.HTTPError as exc:
+        raise HTTPException(status.HTTP_502_BAD_GATEWAY, f"building simulator: {exc}") from None
+    if reply.status_code == 404:
+        raise not_found(f"button {body.button!r}")
+    if reply.status_code >= 400:
+        raise HTTPException(status.HTTP_502_BAD_GATEWAY, f"building simulator: {reply.text}")
+    return {"button": body.button, "ms": body.ms}

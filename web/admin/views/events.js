@@ -1,0 +1,67 @@
+// Event log: live, filtered by robot, type and severity, downloadable as JSON lines.
+import { html } from "lit-html";
+import { clock } from "/lib/dom.js";
+
+const ERRORS = new Set(["robot_fault", "battery_panic", "task_failed", "robot_disconnected", "area_force_released", "alert_raised"]);
+const WARNINGS = new Set(["battery_low", "area_yield", "deadlock_resolved", "task_cancelled", "alert_acked"]);
+
+export function severity(row) {
+  if (ERRORS.has(row.kind)) return "error";
+  if (WARNINGS.has(row.kind)) return "warning";
+  return "info";
+}
+
+function robotOf(row) {
+  return row.data?.robot ?? (row.source && row.source.match(/^R\d+$/) ? row.source : null);
+}
+
+function filtered(ui) {
+  const f = ui.eventFilter ?? {};
+  return ui.store.events.filter(
+    (row) => (!f.robot || robotOf(row) === f.robot) && (!f.kind || row.kind === f.kind) && (!f.severity || severity(row) === f.severity),
+  );
+}
+
+function download(rows) {
+  const text = rows.map((r) => JSON.stringify(r)).join("\n") + "\n";
+  const url = URL.createObjectURL(new Blob([text], { type: "application/x-ndjson" }));
+  const link = document.createElement("a");
+  link.href = url;
+  link.download = `guidebot-events-${new Date().toISOString().slice(0, 19).replace(/:/g, "")}.jsonl`;
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 1000);
+}
+
+function summary(row) {
+  const d = row.data ?? {};
+  return Object.entries(d)
+    .filter(([, v]) => v !== null && typeof v !== "object")
+    .map(([k, v]) => `${k}=${v}`)
+    .join(" ");
+}
+
+export function eventsView(ui) {
+  ui.eventFilter ??= {};
+  const f = ui.eventFilter;
+  const set = (key) => (e) => { f[key] = e.target.value; ui.draw(); };
+  const kinds = [...new Set(ui.store.events.map((r) => r.kind))].sort();
+  const rows = filtered(ui);
+  const shown = rows.slice(-200).reverse();
+  return html`<h2>Event log</h2>
+    <form class="inline" aria-label="Filter events" @submit=${(e) => e.preventDefault()}>
+      <label>Robot <select @change=${set("robot")}><option value="">all</option>
+        ${[...ui.store.robots.keys()].sort().map((r) => html`<option value=${r} ?selected=${f.robot === r}>${r}</option>`)}</select></label>
+      <label>Type <select @change=${set("kind")}><option value="">all</option>
+        ${kinds.map((k) => html`<option value=${k} ?selected=${f.kind === k}>${k}</option>`)}</select></label>
+      <label>Severity <select @change=${set("severity")}><option value="">all</option>
+        ${["info", "warning", "error"].map((s) => html`<option value=${s} ?selected=${f.severity === s}>${s}</option>`)}</select></label>
+      <button type="button" @click=${() => download(rows)}>Download JSON lines</button>
+    </form>
+    <p class="muted">${rows.length} events (the newest 200 shown; the download has all ${rows.length}).</p>
+    <table aria-label="Events">
+      <thead><tr><th scope="col">Time</th><th scope="col">Severity</th><th scope="col">Type</th><th scope="col">Source</th><th scope="col">Details</th></tr></thead>
+      <tbody>${shown.map((r) => html`<tr><td>${clock(r.at)}</td><td>${severity(r)}</td><td>${r.kind}</td><td>${r.source}</td><td>${summary(r)}</td></tr>`)}</tbody>
+    </table>`;
+}

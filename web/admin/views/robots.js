@@ -1,0 +1,64 @@
+// Robots: connection, battery, pose, task and tour step, nets, RoboCAN modules, last errors;
+// actions: charge, send to a node, out of service and back, cancel the task.
+import { html } from "lit-html";
+import { clock, percent } from "/lib/dom.js";
+
+export function tourStep(ui, robot) {
+  const s = robot.state;
+  const task = s?.task_id ? ui.store.tasks.get(s.task_id) : null;
+  if (!task || task.kind !== "tour" || !s.poi) return "";
+  const tour = ui.store.site.tours.find((t) => t.id === task.params.tour);
+  const at = tour ? tour.points.indexOf(s.poi) + 1 : 0;
+  return tour ? `${s.poi} (${at}/${tour.points.length})` : s.poi;
+}
+
+function actions(ui, robot) {
+  const name = robot.name;
+  const out = Boolean(robot.info?.out_of_service);
+  const taskId = robot.state?.task_id ?? robot.info?.task_id;
+  const send = (kind, params) => ui.act(`${kind} ${name}`, () => ui.api.post("/api/tasks", { kind, params, robot: name, priority: 10 }));
+  const nodeSelect = `node-${name}`;
+  return html`<div class="actions">
+    <button type="button" @click=${() => send("charge", {})}>Send ${name} to charge</button>
+    <label for=${nodeSelect} class="sr-only">Node for ${name}</label>
+    <select id=${nodeSelect}>
+      ${ui.store.site.nodes.map((n) => html`<option value=${n.id}>${n.id}</option>`)}
+    </select>
+    <button type="button" @click=${() => send("go_to", { node: document.getElementById(nodeSelect).value })}>Send ${name} to node</button>
+    <button type="button" class=${out ? "" : "secondary"}
+      @click=${() => ui.act(out ? `Put ${name} back in service` : `Take ${name} out of service`, () => ui.api.post(`/api/robots/${encodeURIComponent(name)}/service`, { out_of_service: !out }))}>
+      ${out ? `Put ${name} back in service` : `Take ${name} out of service`}</button>
+    ${taskId
+      ? html`<button type="button" class="danger" @click=${() => ui.act(`Cancel task of ${name}`, () => ui.api.post(`/api/tasks/${encodeURIComponent(taskId)}/cancel`, { reason: "cancelled from the console" }))}>Cancel ${name}'s task</button>`
+      : ""}
+  </div>`;
+}
+
+export function robotsView(ui) {
+  const robots = [...ui.store.robots.values()].sort((a, b) => a.name.localeCompare(b.name));
+  return html`<h2>Robots</h2>
+    ${robots.map((robot) => {
+      const s = robot.state ?? {};
+      const info = robot.info ?? {};
+      const modules = Object.entries(s.modules ?? {});
+      const seen = robot.online || robot.state || robot.info?.last_seen;
+      const link = robot.online ? ["ok", "online"] : seen ? ["bad", "lost"] : ["warn", "never connected"];
+      const node = s.node ?? info.node;
+      const floor = s.floor ?? info.floor ?? ui.store.site.nodes.find((n) => n.id === node)?.floor;
+      return html`<section class="robot-card" aria-labelledby=${`robot-${robot.name}`}>
+        <h3 id=${`robot-${robot.name}`}>${robot.name}
+          <span class=${`badge ${link[0]}`}>${link[1]}</span>
+          ${info.out_of_service ? html`<span class="badge warn">out of service</span>` : ""}</h3>
+        <dl class="facts">
+          <dt>Mode</dt><dd>${s.mode ?? info.mode ?? "—"}</dd>
+          <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
+          <dt>Pose</dt><dd>${node ?? "—"}, floor ${floor ?? "—"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
+          <dt>Task</dt><dd>${s.task_id ?? info.task_id ?? "none"}${tourStep(ui, robot) ? `, at ${tourStep(ui, robot)}` : ""}</dd>
+          <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
+          <dt>RoboCAN modules</dt><dd>${modules.length ? modules.map(([m, st]) => html`<span class=${`badge ${st === "ok" ? "ok" : "bad"}`}>${m}: ${st}</span> `) : "none reported"}</dd>
+          <dt>Last errors</dt><dd>${robot.faults.length ? robot.faults.map((f) => html`<div>${clock(f.at)} ${f.kind} ${f.detail ?? ""}</div>`) : "none"}</dd>
+        </dl>
+        ${actions(ui, robot)}
+      </section>`;
+    })}`;
+}

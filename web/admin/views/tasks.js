@@ -1,0 +1,110 @@
+// Tasks: create, the queue (position, ETA), running tasks (progress), recent history; cancel,
+// re-prioritise, reassign; a task's event history.
+import { html } from "lit-html";
+import { clock, duration } from "/lib/dom.js";
+
+const FINAL = new Set(["done", "failed", "cancelled"]);
+const KINDS = [["tour", "Tour"], ["go_to_poi", "Point of interest"], ["go_to", "Go to node"], ["charge", "Charge"]];
+
+function describe(task) {
+  const p = task.params ?? {};
+  return [task.kind, p.tour ?? p.poi ?? p.node ?? p.station ?? ""].join(" ").trim();
+}
+
+async function create(ui, event) {
+  event.preventDefault();
+  const form = new FormData(event.target);
+  const kind = form.get("kind");
+  const target = form.get("target");
+  const params = kind === "tour" ? { tour: target } : kind === "go_to_poi" ? { poi: target } : kind === "go_to" ? { node: target } : {};
+  const body = { kind, params, priority: Number(form.get("priority")) };
+  if (form.get("robot")) body.robot = form.get("robot");
+  await ui.act(`Request ${kind}`, () => ui.api.post("/api/tasks", body));
+}
+
+function targets(ui, kind) {
+  const site = ui.store.site;
+  if (kind === "tour") return site.tours.map((t) => [t.id, t.name || t.id]);
+  if (kind === "go_to_poi") return site.pois.map((p) => [p.id, p.name || p.id]);
+  if (kind === "go_to") return site.nodes.map((n) => [n.id, n.id]);
+  return [];
+}
+
+function createForm(ui) {
+  const kind = ui.taskKind ?? "tour";
+  const options = targets(ui, kind);
+  return html`<form class="inline" @submit=${(e) => create(ui, e)} aria-label="New task">
+    <label>Kind <select name="kind" @change=${(e) => { ui.taskKind = e.target.value; ui.draw(); }}>
+      ${KINDS.map(([k, label]) => html`<option value=${k} ?selected=${k === kind}>${label}</option>`)}</select></label>
+    ${options.length
+      ? html`<label>Target <select name="target">${options.map(([id, label]) => html`<option value=${id}>${label}</option>`)}</select></label>`
+      : ""}
+    <label>Priority <input name="priority" type="number" min="0" max="100" value="5" size="4"></label>
+    <label>Robot <select name="robot"><option value="">any</option>
+      ${[...ui.store.robots.keys()].sort().map((r) => html`<option value=${r}>${r}</option>`)}</select></label>
+    <button type="submit">Request task</button>
+  </form>`;
+}
+
+function taskActions(ui, task) {
+  const id = encodeURIComponent(task.id);
+  const label = describe(task);
+  const reassignId = `reassign-${task.id}`;
+  const priorityId = `priority-${task.id}`;
+  return html`<div class="actions">
+    <button type="button" class="danger" @click=${() => ui.act(`Cancel ${label}`, () => ui.api.post(`/api/tasks/${id}/cancel`, { reason: "cancelled from the console" }))}>Cancel <span class="sr-only">${label}</span></button>
+    <label for=${priorityId} class="sr-only">Priority of ${label}</label>
+    <input id=${priorityId} type="number" min="0" max="100" size="3" .value=${String(task.priority)}>
+    <button type="button" class="secondary" @click=${() => ui.act(`Priority of ${label}`, () => ui.api.post(`/api/tasks/${id}/priority`, { priority: Number(document.getElementById(priorityId).value) }))}>Set priority</button>
+    <label for=${reassignId} class="sr-only">Reassign ${label} to</label>
+    <select id=${reassignId}><option value="">next free robot</option>
+      ${[...ui.store.robots.keys()].sort().map((r) => html`<option value=${r}>${r}</option>`)}</select>
+    <button type="button" class="secondary" @click=${() => ui.act(`Reassign ${label}`, () => ui.api.post(`/api/tasks/${id}/reassign`, { robot: document.getElementById(reassignId).value || null }))}>Reassign</button>
+    <button type="button" class="secondary" @click=${() => showHistory(ui, task)}>History</button>
+  </div>`;
+}
+
+async function showHistory(ui, task) {
+  await ui.act(`History of ${describe(task)}`, async () => {
+    ui.history = { task, rows: await ui.api.get(`/api/tasks/${encodeURIComponent(task.id)}/history`) };
+  });
+}
+
+function progress(ui, task) {
+  const robot = task.robot ? ui.store.robots.get(task.robot) : null;
+  const s = robot?.state;
+  if (task.kind === "tour" && s?.poi) {
+    const tour = ui.store.site.tours.find((t) => t.id === task.params.tour);
+    if (tour) return `${tour.points.indexOf(s.poi) + 1} of ${tour.points.length} (${s.poi})`;
+  }
+  return s?.node ? `at ${s.node}` : "—";
+}
+
+export function tasksView(ui) {
+  const tasks = [...ui.store.tasks.values()];
+  const queued = tasks.filter((t) => t.state === "queued").sort((a, b) => (a.queue_position ?? 1e9) - (b.queue_position ?? 1e9));
+  const running = tasks.filter((t) => t.state !== "queued" && !FINAL.has(t.state));
+  const history = tasks.filter((t) => FINAL.has(t.state)).sort((a, b) => b.updated_at - a.updated_at).slice(0, 50);
+  return html`<h2>Tasks</h2>
+    ${createForm(ui)}
+    <h3>Queue</h3>
+    <table aria-label="Queued tasks">
+      <thead><tr><th scope="col">#</th><th scope="col">Task</th><th scope="col">Priority</th><th scope="col">Robot</th><th scope="col">ETA</th><th scope="col">Requested by</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
+      <tbody>${queued.map((t) => html`<tr><td>${t.queue_position ?? "—"}</td><td>${describe(t)}</td><td>${t.priority}</td><td>${t.pinned_robot ?? "any"}</td><td>${duration(t.eta_s)}</td><td>${t.requester}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
+    </table>
+    ${queued.length ? "" : html`<p class="muted">The queue is empty.</p>`}
+    <h3>Running</h3>
+    <table aria-label="Running tasks">
+      <thead><tr><th scope="col">Task</th><th scope="col">Robot</th><th scope="col">State</th><th scope="col">Progress</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
+      <tbody>${running.map((t) => html`<tr><td>${describe(t)}${t.internal ? html` <span class="muted">(automatic)</span>` : ""}</td><td>${t.robot ?? "—"}</td><td>${t.state}</td><td>${progress(ui, t)}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
+    </table>
+    <h3>History</h3>
+    <table aria-label="Finished tasks">
+      <thead><tr><th scope="col">Task</th><th scope="col">Robot</th><th scope="col">Outcome</th><th scope="col">Ended</th><th scope="col">Reason</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
+      <tbody>${history.map((t) => html`<tr><td>${describe(t)}</td><td>${t.robot ?? "—"}</td><td class=${`state-${t.state}`}>${t.state}</td><td>${clock(t.ended_at ?? t.updated_at)}</td><td>${t.reason ?? ""}</td><td><button type="button" class="secondary" @click=${() => showHistory(ui, t)}>History <span class="sr-only">of ${describe(t)}</span></button></td></tr>`)}</tbody>
+    </table>
+    ${ui.history
+      ? html`<section aria-labelledby="history-title"><h3 id="history-title">History of ${describe(ui.history.task)} (${ui.history.task.id})</h3>
+          <ol>${ui.history.rows.map((r) => html`<li>${clock(r.at)} ${r.event}: ${r.state}${r.robot ? ` (${r.robot})` : ""}${r.reason ? ` — ${r.reason}` : ""}</li>`)}</ol></section>`
+      : ""}`;
+}
