@@ -1,8 +1,16 @@
 """REST API of the server brain (site, robots, tasks, tours, points of interest, locks,
 events) and the component that runs the services behind it."""
 
-from backend.api import events, locks, robots, site, tasks, tours
+from backend.api import events, locks, robots, site, tasks, tours, visitor
 
-ROUTERS = [site.router, tours.router, tasks.router, robots.router, locks.router, events.router]
+ROUTERS = [
+    site.router,
+    tours.router,
+    tasks.router,
+    robots.router,
+    locks.router,
+    events.router,
+    visitor.router,
+]
 
 __all__ = ["ROUTERS"]
