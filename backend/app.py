@@ -21,7 +21,6 @@ from typing import Any
 
 import uvicorn
 from fastapi import APIRouter, FastAPI
-from fastapi.staticfiles import StaticFiles
 
 import guidebot
 from backend.api import ROUTERS as api_routers
@@ -34,6 +33,7 @@ from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
 from backend.rgm import rgm
 from backend.settings import Settings
+from backend.webpages import WebFiles
 
 __all__ = ["COMPONENTS", "ROUTERS", "create_app", "uvicorn_config"]
 
@@ -109,7 +109,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in ROUTERS:
         app.include_router(router)
     if settings.web_dir.is_dir():
-        app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+        app.mount("/", WebFiles(directory=settings.web_dir, html=True), name="web")
     else:
         log.warning("web directory %s not found: no static pages", settings.web_dir)
     return app

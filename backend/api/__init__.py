@@ -1,7 +1,7 @@
 """REST API of the server brain (site, robots, tasks, tours, points of interest, locks,
 events) and the component that runs the services behind it."""
 
-from backend.api import events, locks, robots, site, tasks, tours, visitor
+from backend.api import events, locks, robots, site, tasks, tours, visitor, web
 
 ROUTERS = [
     site.router,
@@ -10,6 +10,7 @@ ROUTERS = [
     robots.router,
     locks.router,
     events.router,
+    web.router,
     visitor.router,
 ]
 

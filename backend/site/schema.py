@@ -46,7 +46,10 @@ class Floor(StrictModel):
     name: str = ""
     level: int = 0
     plan_image: str | None = None
+    """Floor-plan image (SVG or PNG), relative to the site file's folder."""
     scale_px_per_m: float = Field(default=20.0, gt=0)
+    plan_origin: tuple[float, float] = (0.0, 0.0)
+    """Site coordinates (metres) of the plan image's bottom-left corner."""
 
 
 class Node(StrictModel):

@@ -1,0 +1,60 @@
+// The map view's toolbar (floor switch, legend) and details panel (what was clicked).
+import { html } from "lit-html";
+import { duration, percent } from "/lib/dom.js";
+
+export function toolbarView(ui) {
+  const { store, map } = ui;
+  const floors = store.site.floors;
+  return html`<label for="floor-select">Floor</label>
+      <select id="floor-select" @change=${(e) => map.showFloor(e.target.value)}>
+        ${floors.map((f) => html`<option value=${f.id} ?selected=${f.id === map.floor}>${f.name || f.id}</option>`)}
+      </select>
+    <span class="legend" aria-label="Battery colours">
+      <span><span class="badge ok">≥ 50 %</span></span>
+      <span><span class="badge warn">20–50 %</span></span>
+      <span><span class="badge bad">&lt; 20 %</span></span>
+    </span>
+    <span class="muted">${[...store.robots.values()].filter((r) => r.online).length} robots online</span>`;
+}
+
+function robotDetails(ui, name) {
+  const robot = ui.store.robots.get(name);
+  if (!robot) return html`<p>Robot ${name} is unknown.</p>`;
+  const s = robot.state ?? {};
+  return html`<h3>Robot ${name}</h3>
+    <dl>
+      <dt>Connection</dt><dd>${robot.online ? "online" : "offline"}</dd>
+      <dt>Mode</dt><dd>${s.mode ?? robot.info?.mode ?? "—"}</dd>
+      <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>
+      <dt>Where</dt><dd>${s.node ?? "—"} (${s.floor ?? "—"}) ${s.x !== undefined ? `x ${s.x.toFixed(1)} m, y ${s.y.toFixed(1)} m` : ""}</dd>
+      <dt>Task</dt><dd>${s.task_id ?? robot.info?.task_id ?? "none"}</dd>
+      <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
+    </dl>`;
+}
+
+function plainDetails(ui, kind, id) {
+  const site = ui.store.site;
+  const lists = { node: site.nodes, poi: site.pois, door: site.doors, elevator: site.elevators, button: site.buttons, area: site.areas };
+  const item = (lists[kind] ?? []).find((x) => x.id === id);
+  const lock = kind === "area" ? ui.store.locks.get(id) : null;
+  return html`<h3>${kind} ${id}</h3>
+    ${item?.name ? html`<p>${item.name}</p>` : ""}
+    ${item?.text ? html`<p class="muted">${item.text}</p>` : ""}
+    ${item?.node ? html`<p>At node ${item.node}</p>` : ""}
+    ${kind === "node" ? html`<p>Floor ${item.floor}, x ${item.x} m, y ${item.y} m${item.passing_place ? ", passing place" : ""}</p>` : ""}
+    ${lock
+      ? html`<dl><dt>State</dt><dd class=${`state-${lock.state}`}>${lock.state.replace("_", " ")}</dd>
+          <dt>Holder</dt><dd>${lock.holder ?? "—"}</dd>
+          <dt>Held for</dt><dd>${lock.since ? duration(Date.now() / 1000 - lock.since) : "—"}</dd>
+          <dt>Waiting</dt><dd>${lock.waiting.join(", ") || "nobody"}</dd></dl>`
+      : ""}`;
+}
+
+export function detailsView(ui) {
+  const selected = ui.selected;
+  if (!selected) {
+    return html`<h3>Details</h3><p class="muted">Select a robot, area, door, elevator, point or node on the map.</p>`;
+  }
+  if (selected.kind === "robot") return robotDetails(ui, selected.id);
+  return plainDetails(ui, selected.kind, selected.id);
+}

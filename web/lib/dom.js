@@ -1,0 +1,38 @@
+// Small helpers shared by the pages: formatting and the hub connection banner.
+
+/** "12 s", "3 min", "1 h 5 min" from seconds. */
+export function duration(seconds) {
+  if (seconds === null || seconds === undefined || Number.isNaN(seconds)) return "—";
+  const s = Math.max(0, Math.round(seconds));
+  if (s < 60) return `${s} s`;
+  if (s < 3600) return `${Math.round(s / 60)} min`;
+  return `${Math.floor(s / 3600)} h ${Math.round((s % 3600) / 60)} min`;
+}
+
+/** Local clock time of a Unix timestamp (seconds). */
+export function clock(ts) {
+  return ts ? new Date(ts * 1000).toLocaleTimeString() : "—";
+}
+
+export function percent(level) {
+  return level === null || level === undefined ? "—" : `${Math.round(level * 100)} %`;
+}
+
+const STATUS_TEXT = {
+  connecting: "Connecting to the server…",
+  open: "Connected",
+  reconnecting: "Connection lost, reconnecting…",
+  refused: "Disconnected",
+  stopped: "Disconnected",
+};
+
+/** Keep `element` (a role=status banner) in step with the hub client's connection state. */
+export function connectionBanner(hub, element) {
+  const show = () => {
+    element.dataset.status = hub.status;
+    const reason = hub.reason ? ` (${hub.reason})` : "";
+    element.textContent = `${STATUS_TEXT[hub.status] ?? hub.status}${hub.status === "open" ? "" : reason}`;
+  };
+  hub.addEventListener("status", show);
+  show();
+}

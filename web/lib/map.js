@@ -1,0 +1,366 @@
+// The floor map of a site: Leaflet with L.CRS.Simple, one map unit = one metre (latitude = y,
+// longitude = x, so north is up as in the site file). A floor's plan image is laid under the
+// graph at its origin and scale; a floor without an image shows the graph alone. Robots are
+// markers with heading, name, state and battery colour, updated at most once per frame.
+import * as L from "leaflet";
+
+const AREA_MARGIN_M = 1.2;
+const STATE_COLOURS = { free: "#1b7a3a", held: "#b35900", holder_offline: "#b00020", yielding: "#6a3d9a" };
+
+export function batteryClass(level) {
+  if (level >= 0.5) return "battery-ok";
+  if (level >= 0.2) return "battery-low";
+  return "battery-panic";
+}
+
+function el(tag, className, text) {
+  const node = document.createElement(tag);
+  if (className) node.className = className;
+  if (text !== undefined) node.textContent = text;
+  return node;
+}
+
+export class FloorMap extends EventTarget {
+  /**
+   * @param {HTMLElement} element where the map goes
+   * @param {(url: string) => Promise<Blob>} loadImage fetches a plan image with the token
+   */
+  constructor(element, loadImage) {
+    super();
+    this.loadImage = loadImage;
+    this.map = L.map(element, {
+      crs: L.CRS.Simple,
+      minZoom: 1,
+      maxZoom: 7,
+      zoomSnap: 0.25,
+      attributionControl: false,
+      keyboard: true,
+    });
+    this.map.setView([0, 0], 3);
+    this.site = null;
+    this.floor = null;
+    this.floorLayers = new Map(); // floor id -> L.LayerGroup (plan + graph + fixtures)
+    this.areaShapes = new Map(); // area id -> [L.Rectangle]
+    this.doorMarks = new Map(); // door id -> L.CircleMarker
+    this.liftMarks = new Map(); // elevator id -> [{floor, mark}]
+    this.robots = new Map(); // name -> {marker, state, parts}
+    this.pending = new Map(); // name -> robot_state message waiting for the next frame
+    this.frame = 0;
+    this.pathLine = L.layerGroup().addTo(this.map);
+    this.robotLayer = L.layerGroup().addTo(this.map);
+    this.latencies = new Float64Array(8192); // ms from robot_state timestamp to drawn
+    this.latencyCount = 0;
+    this.nodes = new Map();
+  }
+
+  /** Draw a site (the document of GET /api/site/map) and show its first floor. */
+  async setSite(site) {
+    this.site = site;
+    this.nodes = new Map(site.nodes.map((n) => [n.id, n]));
+    for (const layer of this.floorLayers.values()) layer.remove();
+    this.floorLayers.clear();
+    this.areaShapes.clear();
+    this.doorMarks.clear();
+    this.liftMarks.clear();
+    for (const floor of site.floors) this.floorLayers.set(floor.id, L.layerGroup());
+    await Promise.all(site.floors.map((f) => this.#drawPlan(f)));
+    this.#drawGraph(site);
+    this.#drawFixtures(site);
+    this.showFloor(this.floor && this.floorLayers.has(this.floor) ? this.floor : site.floors[0].id);
+  }
+
+  showFloor(floorId) {
+    for (const [id, layer] of this.floorLayers) {
+      if (id === floorId) layer.addTo(this.map);
+      else layer.remove();
+    }
+    const changed = this.floor !== floorId;
+    this.floor = floorId;
+    for (const [name, robot] of this.robots) this.#placeRobot(name, robot);
+    if (changed) {
+      this.#fit();
+      this.dispatchEvent(new CustomEvent("floor", { detail: floorId }));
+    }
+  }
+
+  #fit() {
+    const points = this.site.nodes.filter((n) => n.floor === this.floor).map((n) => [n.y, n.x]);
+    const plan = this.planBounds?.get(this.floor);
+    let bounds = points.length ? L.latLngBounds(points) : null;
+    if (plan) bounds = bounds ? bounds.extend(plan) : plan;
+    if (bounds) this.map.fitBounds(bounds.pad(0.08));
+  }
+
+  async #drawPlan(floor) {
+    if (!floor.plan_url) return;
+    let blob;
+    try {
+      blob = await this.loadImage(floor.plan_url);
+    } catch {
+      return; // no plan image: the graph alone is the map
+    }
+    const url = URL.createObjectURL(blob);
+    const size = await new Promise((resolve) => {
+      const img = new Image();
+      img.onload = () => resolve([img.naturalWidth, img.naturalHeight]);
+      img.onerror = () => resolve(null);
+      img.src = url;
+    });
+    if (!size) return;
+    const [ox, oy] = floor.plan_origin ?? [0, 0];
+    const scale = floor.scale_px_per_m || 20;
+    const bounds = L.latLngBounds([oy, ox], [oy + size[1] / scale, ox + size[0] / scale]);
+    this.planBounds ??= new Map();
+    this.planBounds.set(floor.id, bounds);
+    L.imageOverlay(url, bounds, { alt: `Plan of ${floor.name || floor.id}` })
+      .addTo(this.floorLayers.get(floor.id))
+      .bringToBack();
+  }
+
+  #drawGraph(site) {
+    for (const edge of site.edges) {
+      const a = this.nodes.get(edge.a);
+      const b = this.nodes.get(edge.b);
+      if (!a || !b || a.floor !== b.floor) continue;
+      L.polyline([[a.y, a.x], [b.y, b.x]], {
+        className: edge.one_way ? "map-edge one-way" : "map-edge",
+        interactive: false,
+      }).addTo(this.floorLayers.get(a.floor));
+    }
+    for (const node of site.nodes) {
+      const mark = L.circleMarker([node.y, node.x], {
+        radius: node.passing_place ? 5 : 4,
+        className: "map-node",
+      });
+      mark.bindTooltip(node.id, { direction: "top" });
+      mark.on("click", () => this.#select("node", node.id));
+      mark.addTo(this.floorLayers.get(node.floor));
+    }
+  }
+
+  #drawFixtures(site) {
+    const at = (nodeId) => this.nodes.get(nodeId);
+    for (const area of site.areas) {
+      const byFloor = new Map();
+      for (const id of area.nodes) {
+        const n = at(id);
+        if (n) byFloor.set(n.floor, [...(byFloor.get(n.floor) ?? []), n]);
+      }
+      const shapes = [];
+      for (const [floorId, nodes] of byFloor) {
+        const xs = nodes.map((n) => n.x);
+        const ys = nodes.map((n) => n.y);
+        const rect = L.rectangle(
+          [
+            [Math.min(...ys) - AREA_MARGIN_M, Math.min(...xs) - AREA_MARGIN_M],
+            [Math.max(...ys) + AREA_MARGIN_M, Math.max(...xs) + AREA_MARGIN_M],
+          ],
+          { className: "map-area", color: STATE_COLOURS.free, weight: 2, fillOpacity: 0.15 },
+        );
+        rect.bindTooltip(`area ${area.id}: free`, { sticky: true });
+        rect.on("click", () => this.#select("area", area.id));
+        rect.addTo(this.floorLayers.get(floorId));
+        shapes.push(rect);
+      }
+      this.areaShapes.set(area.id, shapes);
+    }
+    for (const poi of site.pois) {
+      const n = at(poi.node);
+      if (!n) continue;
+      const mark = L.circleMarker([n.y + 0.6, n.x + 0.6], { radius: 6, className: "map-poi" });
+      mark.bindTooltip(poi.name || poi.id, { direction: "right" });
+      mark.on("click", () => this.#select("poi", poi.id));
+      mark.addTo(this.floorLayers.get(n.floor));
+    }
+    for (const station of site.charging_stations ?? []) {
+      const n = at(station.node);
+      if (!n) continue;
+      const mark = L.circleMarker([n.y, n.x - 0.7], { radius: 5, className: "map-station" });
+      mark.bindTooltip(`charger ${station.id}`, { direction: "left" });
+      mark.addTo(this.floorLayers.get(n.floor));
+    }
+    for (const door of site.doors) {
+      const n = at(door.node);
+      if (!n) continue;
+      const mark = L.circleMarker([n.y, n.x], { radius: 8, className: "map-door closed" });
+      mark.bindTooltip(`door ${door.id}: closed`, { direction: "bottom" });
+      mark.on("click", () => this.#select("door", door.id));
+      mark.addTo(this.floorLayers.get(n.floor));
+      this.doorMarks.set(door.id, mark);
+    }
+    for (const lift of site.elevators) {
+      const marks = [];
+      for (const stop of lift.stops) {
+        const n = at(stop.node);
+        if (!n) continue;
+        const mark = L.rectangle([[n.y - 0.8, n.x - 0.8], [n.y + 0.8, n.x + 0.8]], {
+          className: "map-lift away",
+        });
+        mark.bindTooltip(`elevator ${lift.id}`, { direction: "right" });
+        mark.on("click", () => this.#select("elevator", lift.id));
+        mark.addTo(this.floorLayers.get(n.floor));
+        marks.push({ floor: stop.floor, mark });
+      }
+      this.liftMarks.set(lift.id, marks);
+    }
+    for (const button of site.buttons ?? []) {
+      const n = at(button.node);
+      if (!n) continue;
+      const mark = L.circleMarker([n.y - 0.7, n.x + 0.7], { radius: 5, className: "map-button" });
+      mark.bindTooltip(`button ${button.id}`, { direction: "bottom" });
+      mark.on("click", () => this.#select("button", button.id));
+      mark.addTo(this.floorLayers.get(n.floor));
+    }
+  }
+
+  #select(kind, id) {
+    this.dispatchEvent(new CustomEvent("select", { detail: { kind, id } }));
+  }
+
+  /** Lock views of GET /api/locks (or built from traffic events): colour and label areas. */
+  setAreaState(view) {
+    for (const shape of this.areaShapes.get(view.area) ?? []) {
+      shape.setStyle({ color: STATE_COLOURS[view.state] ?? "#555" });
+      const who = view.holder ? ` by ${view.holder}` : "";
+      const waiting = view.waiting?.length ? `, ${view.waiting.length} waiting` : "";
+      shape.setTooltipContent(`area ${view.area}: ${view.state.replace("_", " ")}${who}${waiting}`);
+    }
+  }
+
+  setDoor(doorId, open) {
+    const mark = this.doorMarks.get(doorId);
+    if (!mark) return;
+    const element = mark.getElement?.();
+    mark.options.className = `map-door ${open ? "open" : "closed"}`;
+    if (element) element.setAttribute("class", `${mark.options.className} leaflet-interactive`);
+    mark.setTooltipContent(`door ${doorId}: ${open ? "open" : "closed"}`);
+  }
+
+  setElevator(liftId, floorId, doorOpen) {
+    for (const { floor, mark } of this.liftMarks.get(liftId) ?? []) {
+      const here = floor === floorId;
+      const cls = `map-lift ${here ? (doorOpen ? "here open" : "here") : "away"}`;
+      mark.options.className = cls;
+      mark.getElement?.()?.setAttribute("class", `${cls} leaflet-interactive`);
+      mark.setTooltipContent(`elevator ${liftId}: ${here ? `here${doorOpen ? ", door open" : ""}` : `at ${floorId}`}`);
+    }
+  }
+
+  /** The planned path of the selected robot (node ids), drawn on the floors it crosses. */
+  setPath(nodeIds) {
+    this.pathLine.clearLayers();
+    this.pathNodes = nodeIds ?? [];
+    this.#drawPath();
+  }
+
+  #drawPath() {
+    this.pathLine.clearLayers();
+    const points = (this.pathNodes ?? []).map((id) => this.nodes.get(id)).filter((n) => n && n.floor === this.floor);
+    if (points.length > 1) {
+      L.polyline(points.map((n) => [n.y, n.x]), { className: "map-path", interactive: false }).addTo(this.pathLine);
+    }
+  }
+
+  /** A robot_state message: drawn on the next animation frame (several states, one frame). */
+  updateRobot(message) {
+    this.pending.set(message.payload.robot, message);
+    if (!this.frame) this.frame = requestAnimationFrame(() => this.#drawPending());
+  }
+
+  #drawPending() {
+    this.frame = 0;
+    const now = Date.now();
+    for (const [name, message] of this.pending) {
+      let robot = this.robots.get(name);
+      if (!robot) robot = this.#newRobot(name);
+      robot.state = message.payload;
+      this.#placeRobot(name, robot);
+      this.latencies[this.latencyCount % this.latencies.length] = now - message.timestamp * 1000;
+      this.latencyCount += 1;
+    }
+    this.pending.clear();
+    if (this.pathNodes?.length) this.#drawPath();
+  }
+
+  #newRobot(name) {
+    const icon = L.divIcon({ className: "robot-marker", iconSize: [30, 30], iconAnchor: [15, 15], html: "" });
+    const marker = L.marker([0, 0], { icon, keyboard: true, title: `robot ${name}`, riseOnHover: true });
+    marker.on("click", () => this.#select("robot", name));
+    const parts = { body: el("span", "robot-body"), arrow: el("span", "robot-arrow"), label: el("span", "robot-label", name) };
+    parts.body.append(parts.arrow, parts.label);
+    const robot = { marker, state: null, parts, shown: false, cls: "" };
+    marker.on("add", () => {
+      const element = marker.getElement();
+      element.replaceChildren(parts.body);
+      element.setAttribute("aria-label", `robot ${name}`);
+      robot.cls = "";
+      this.#style(robot);
+    });
+    this.robots.set(name, robot);
+    return robot;
+  }
+
+  #style(robot) {
+    const s = robot.state;
+    if (!s) return;
+    const element = robot.marker.getElement();
+    if (!element) return;
+    const cls = `robot-body mode-${s.mode} ${batteryClass(s.battery)}${robot.selected ? " selected" : ""}`;
+    if (cls !== robot.cls) {
+      robot.parts.body.className = cls;
+      robot.cls = cls;
+    }
+    robot.parts.arrow.style.transform = `rotate(${(-s.theta * 180) / Math.PI}deg)`;
+    element.title = `${s.robot}: ${s.mode}, battery ${Math.round(s.battery * 100)} %`;
+  }
+
+  /** Where to draw a robot: its pose, or its node's place while it has no floor yet (a robot
+   * that has not moved since start-up reports its node only). */
+  pose(s) {
+    if (s.floor) return { floor: s.floor, x: s.x, y: s.y };
+    const node = this.nodes.get(s.node);
+    return node ? { floor: node.floor, x: node.x, y: node.y } : { floor: null, x: s.x, y: s.y };
+  }
+
+  #placeRobot(name, robot) {
+    const s = robot.state;
+    if (!s) return;
+    const pose = this.pose(s);
+    const visible = pose.floor === this.floor && s.mode !== "offline";
+    if (visible) {
+      robot.marker.setLatLng([pose.y, pose.x]);
+      if (!robot.shown) {
+        robot.marker.addTo(this.robotLayer);
+        robot.shown = true;
+      }
+      this.#style(robot);
+    } else if (robot.shown) {
+      robot.marker.remove();
+      robot.shown = false;
+    }
+  }
+
+  /** Show a robot as offline (removed from the map until it reports again). */
+  robotOffline(name) {
+    const robot = this.robots.get(name);
+    if (robot?.state) {
+      robot.state = { ...robot.state, mode: "offline" };
+      this.#placeRobot(name, robot);
+    }
+  }
+
+  selectRobot(name) {
+    for (const [n, robot] of this.robots) {
+      robot.selected = n === name;
+      this.#style(robot);
+    }
+  }
+
+  /** Latencies (ms) from robot_state timestamp to drawn since the last call; for the bench. */
+  takeLatencies() {
+    const n = Math.min(this.latencyCount, this.latencies.length);
+    const out = Array.from(this.latencies.subarray(0, n));
+    this.latencyCount = 0;
+    return out;
+  }
+}
