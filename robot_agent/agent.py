@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Literal
 
 from guidebot.bus import Bus
 from robot_agent.battery import BatteryMonitor
@@ -61,6 +61,8 @@ class AgentConfig:
     link_queue_size: int = 1000
     auto_answer: str | None = None
     """Demo: a simulated visitor answers "continue the tour?" with this (None: nobody does)."""
+    offline_requests: Literal["queue", "refuse"] = "queue"
+    """Touch-screen requests while the link is down: kept and sent later, or refused."""
 
 
 def hub_ws_url(server: str) -> str:
@@ -82,6 +84,8 @@ class OnboardSite:
     tours: list[dict[str, Any]]
     pois: list[dict[str, Any]]
     planner: Callable[[str, str], dict[str, Any]] | None
+    site: Any = None
+    """The parsed site (backend.site.schema.Site): the touch screen's texts per language."""
 
 
 def load_onboard_site(path: Path | None) -> OnboardSite:
@@ -104,7 +108,7 @@ def load_onboard_site(path: Path | None) -> OnboardSite:
 
     tours = [{"id": t.id, "name": t.name, "points": t.points} for t in site.tours]
     pois = [{"id": p.id, "name": p.name, "node": p.node} for p in site.pois]
-    return OnboardSite(tours, pois, planner)
+    return OnboardSite(tours, pois, planner, site)
 
 
 class RobotAgent:
@@ -240,6 +244,10 @@ class RobotAgent:
                 pois=pois,
                 state=self.state.snapshot_view,
                 auto_answer=c.auto_answer,
+                site=onboard_site.site,
+                site_file=c.site,
+                link_up=self._link_up if c.server else None,
+                offline_requests=c.offline_requests,
             )
             self.screen.start()
             stack.callback(self.screen.stop)
@@ -256,6 +264,9 @@ class RobotAgent:
             c.server or "none",
             self.screen_server.url if self.screen_server else "none",
         )
+
+    def _link_up(self) -> bool:
+        return self.link is not None and self.link.upstream.connected.is_set()
 
     async def _make_dispatch(self) -> Any:
         try:

@@ -20,7 +20,8 @@ from backend.auth import Role
 from backend.settings import Settings, StaticToken
 from backend.testing import RunningServer, running_server
 from guidebot.messages import Message
-from robot_agent.agent import AgentConfig, RobotAgent
+from robot_agent.agent import RobotAgent
+from robot_agent.testing import light_robot
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -120,20 +121,13 @@ async def corridor(tmp_path: Path, robots: int = 1) -> AsyncIterator[Corridor]:
         tap.subscribe("robot_disconnected", record, tap=True)
         agents: dict[str, RobotAgent] = {}
         for i in range(1, robots + 1):
-            agent = RobotAgent(
-                AgentConfig(
-                    name=f"R{i}",
-                    server=server.url,
-                    token=f"robot-R{i}-eta-token",
-                    can=None,
-                    time_scale=TIME_SCALE,
-                    start_node="home",
-                    speech_engine=None,
-                    state_period_s=0.2,
-                    site=site_file,
-                    auto_answer="yes",
-                    gui_port=0,
-                )
+            agent = light_robot(
+                server.url,
+                f"R{i}",
+                f"robot-R{i}-eta-token",
+                site=site_file,
+                start_node="home",
+                time_scale=TIME_SCALE,
             )
             await stack.enter_async_context(agent)
             agents[f"R{i}"] = agent
