@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck system-deps bench clean
+.PHONY: demo test lint typecheck system-deps bench clean screenshots
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit("GuideBot needs Python 3.11 or newer, found " + sys.version.split()[0]) if sys.version_info < (3, 11) else None'
@@ -28,6 +28,10 @@ typecheck: $(STAMP)
 
 test: $(STAMP) system-deps lint typecheck
 	$(BIN)/python -m pytest
+
+# The docs' screenshots (docs/screenshots/) come from the browser tests' scenarios.
+screenshots: $(STAMP) system-deps
+	GUIDEBOT_SCREENSHOTS=1 $(BIN)/python -m pytest tests/web -q
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
