@@ -38,9 +38,10 @@ def resolve_language(site: Site, lang: str | None) -> str:
 
 def poi_texts(site: Site, poi: PointOfInterest, lang: str | None) -> dict[str, Any]:
     """name, description, text, media in ``lang``; ``lang`` in the answer is the language
-    the spoken text is really in (the fallback's when the translation lacks it)."""
+    the spoken text is really in (the fallback's when the translation lacks it). A language
+    without translations gets the point's own texts."""
     own = poi.lang or site.default_language
-    want = resolve_language(site, lang)
+    want = lang or site.default_language
     extra = poi.translations.get(want) if want != own else None
     text = extra.text if extra is not None and extra.text else poi.text
     description = (
@@ -57,7 +58,7 @@ def poi_texts(site: Site, poi: PointOfInterest, lang: str | None) -> dict[str, A
 
 def tour_texts(site: Site, tour: Tour, lang: str | None) -> dict[str, str]:
     """A tour's name and description in ``lang``, field by field falling back."""
-    want = resolve_language(site, lang)
+    want = lang or site.default_language
     extra = tour.translations.get(want) if want != site.default_language else None
     return {
         "name": (extra.name if extra is not None and extra.name else None) or tour.name or tour.id,

@@ -140,6 +140,8 @@ class EtaEstimator:
         self.charge_s = CHARGE_S
         self._running: dict[str, _Progress] = {}
         self._schedule: _Schedule | None = None
+        self._mean_speed: tuple[int, float] | None = None
+        """(number of robots, their mean speed): for tasks not yet on a robot."""
 
     # --- hooks from the Task Manager -----------------------------------------------------------
     def changed(self, task: Task, event: str) -> None:
@@ -198,10 +200,10 @@ class EtaEstimator:
     def service(self) -> Service:
         """available: a robot could start now; busy: all working robots are busy;
         unavailable: no robot is in service (offline or in fault)."""
-        working = [r for r in self.tm.robots.values() if r.online and not r.fault]
-        if not working:
+        robots = self.tm.robots
+        if not any(r.online and not r.fault for r in robots.values()):
             return "unavailable"
-        if any(self.tm._available(r) for r in working):
+        if any(self.tm._available(robots[n]) for n in self.tm._idle if n in robots):
             return "available"
         return "busy"
 
@@ -209,14 +211,15 @@ class EtaEstimator:
         if task.final:
             gone = task.state is TaskState.CANCELLED and "the site changed" in task.reason
             return Estimate("withdrawn" if gone else "ended", None, None, 0.0, None)
-        duration = self._real(self.segments(task, None)[1:]) if task.kind != "charge" else None
         if task.state is not TaskState.QUEUED:
             run = self._running.get(task.id)
             if run is None:
-                return Estimate("available", 0.0, None, None, duration)
+                return Estimate("available", 0.0, None, None, None)
+            duration = self._real(run.segments[1:])
             remaining = self._remaining(run)
             first = self._remaining(run, upto=1) if run.done == 0 else 0.0
             return Estimate("available", 0.0, first, remaining, duration)
+        duration = self._real(self.segments(task, None)[1:])
         service = self.service()
         if service == "unavailable":
             return Estimate("unavailable", None, None, None, duration)
@@ -300,8 +303,11 @@ class EtaEstimator:
         info = self.tm.robots.get(robot) if robot else None
         if info is not None:
             return info.config.max_speed_mps
-        speeds = [r.config.max_speed_mps for r in self.tm.robots.values()]
-        return sum(speeds) / len(speeds) if speeds else 0.7
+        robots = self.tm.robots
+        if self._mean_speed is None or self._mean_speed[0] != len(robots):
+            speeds = [r.config.max_speed_mps for r in robots.values()]
+            self._mean_speed = (len(robots), sum(speeds) / len(speeds) if speeds else 0.7)
+        return self._mean_speed[1]
 
     def _real(self, segments: list[Segment]) -> float:
         move, talk = self.move.value, self.talk.value

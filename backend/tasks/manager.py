@@ -186,8 +186,7 @@ class TaskManager:
         """Queue a task; raises TaskError if its parameters do not fit the site."""
         params = dict(params or {})
         self._target_node(kind, params)  # validates
-        offered = site_languages(self.site)
-        if "lang" in params and params["lang"] not in offered:
+        if "lang" in params and params["lang"] not in (offered := site_languages(self.site)):
             raise TaskError(f"language {params['lang']!r} not offered (offered: {offered})")
         if robot is not None and robot not in self.robots:
             raise TaskError(f"unknown robot {robot!r}")
