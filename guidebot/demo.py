@@ -8,6 +8,7 @@ SIGTERM first and SIGKILL only if it does not exit within the grace period: no o
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -67,6 +68,19 @@ class Fleet:
                 )
                 process.kill()
                 process.wait()
+
+
+def _panel_token() -> str:
+    """The demo's visitor-panel token: GUIDEBOT_PANEL_TOKEN (default dev-panel-token), added
+    to GUIDEBOT_TOKENS for the server process unless a panel token is already there."""
+    token = os.environ.get("GUIDEBOT_PANEL_TOKEN", "dev-panel-token")
+    tokens = json.loads(os.environ.get("GUIDEBOT_TOKENS") or "[]")
+    panels = [t["token"] for t in tokens if t.get("role") == "panel"]
+    if panels:
+        return str(panels[0])
+    tokens.append({"token": token, "name": "panel-entrance", "role": "panel"})
+    os.environ["GUIDEBOT_TOKENS"] = json.dumps(tokens)
+    return token
 
 
 def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> None:
@@ -133,6 +147,7 @@ def demo(
     signal.signal(signal.SIGTERM, on_signal)
     url = f"http://127.0.0.1:{port}"
     admin = os.environ.get("GUIDEBOT_ADMIN_TOKEN", "dev-admin-token")
+    panel = _panel_token()
     scale = f"{time_scale:g}"
     try:
         fleet.spawn("server", "server", "--port", str(port), "--site", str(site), "--db", db)
@@ -154,6 +169,8 @@ def demo(
                     "GuideBot demo is running (Ctrl-C stops everything).",
                     f"  server      {url}   (API docs {url}/docs)",
                     f"  admin token {admin}",
+                    f"  visitor panel (phone) {url}/visitor/#token={panel}",
+                    f"  visitor panel (kiosk) {url}/visitor/#token={panel}&kiosk=1",
                     *(f"  robot {n:<5} token {t}   touch screen {s}" for n, t, s in screens),
                     "  request a tour:",
                     f"    curl -X POST {url}/api/tasks -H 'Authorization: Bearer {admin}' "

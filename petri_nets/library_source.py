@@ -308,15 +308,28 @@ def give_tour() -> NetDoc:
             "question": "Shall we continue the tour?",
             "answer_timeout_s": 20.0,
             "patience_s": 30.0,
+            "lang": "en",
         },
         required=("tour", "points"),
     )
     b.place("first_point", initial=1, action=next_item("points", "point"))
     b.place("navigate_to_point", action=run("navigate_to_point", {"node": "${point.node}"}))
     b.place(
-        "show_point", action=publish("show_point", {"poi": "${point.poi}", "text": "${point.text}"})
+        "show_point",
+        action=publish(
+            "show_point",
+            {
+                "poi": "${point.poi}",
+                "text": "${point.text}",
+                "point": "${point}",
+                "lang": "${lang}",
+            },
+        ),
     )
-    b.place("explain_point", action=run("explain_point", {"text": "${point.text}"}))
+    b.place(
+        "explain_point", action=run("explain_point", {"text": "${point.text}", "lang": "${lang}"})
+    )
+    b.place("point_explained", action=publish("point_explained", {"point": "${point}"}))
     b.place("next_point", action=next_item("points", "point"))
     b.place(
         "ask_continue",
@@ -337,7 +350,8 @@ def give_tour() -> NetDoc:
         "not_arrived", ["navigate_to_point"], ["navigation_failed"], net_ended("navigate_to_point")
     )
     b.transition("shown", ["show_point"], ["explain_point"])
-    b.transition("explained", ["explain_point"], ["next_point"], net_ended("explain_point"))
+    b.transition("explained", ["explain_point"], ["point_explained"], net_ended("explain_point"))
+    b.transition("reported", ["point_explained"], ["next_point"])
     b.transition(
         "more_points", ["next_point"], ["ask_continue", "answer_wait"], guard("point", "set")
     )

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Literal
 
 from guidebot.bus import Bus
 from robot_agent.battery import BatteryMonitor
@@ -62,6 +62,8 @@ class AgentConfig:
     link_queue_size: int = 1000
     auto_answer: str | None = None
     """Demo: a simulated visitor answers "continue the tour?" with this (None: nobody does)."""
+    offline_requests: Literal["queue", "refuse"] = "queue"
+    """Touch-screen requests while the link is down: kept and sent later, or refused."""
 
 
 def hub_ws_url(server: str) -> str:
@@ -87,6 +89,8 @@ class OnboardSite:
     """Node -> floor: the robot reports its floor from the start."""
     position_of: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Node -> (x, y): the robot reports its start node's position before it first moves."""
+    site: Any = None
+    """The parsed site (backend.site.schema.Site): the touch screen's texts per language."""
 
 
 def load_onboard_site(path: Path | None) -> OnboardSite:
@@ -120,6 +124,7 @@ def onboard_site(site: Any) -> OnboardSite:
         planner,
         {n.id: n.floor for n in site.nodes},
         {n.id: (n.x, n.y) for n in site.nodes},
+        site,
     )
 
 
@@ -259,6 +264,10 @@ class RobotAgent:
                 pois=pois,
                 state=self.state.snapshot_view,
                 auto_answer=c.auto_answer,
+                site=onboard_site.site,
+                site_file=c.site,
+                link_up=self._link_up if c.server else None,
+                offline_requests=c.offline_requests,
             )
             self.screen.start()
             stack.callback(self.screen.stop)
@@ -275,6 +284,9 @@ class RobotAgent:
             c.server or "none",
             self.screen_server.url if self.screen_server else "none",
         )
+
+    def _link_up(self) -> bool:
+        return self.link is not None and self.link.upstream.connected.is_set()
 
     async def _make_dispatch(self) -> Any:
         try:

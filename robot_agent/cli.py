@@ -57,6 +57,14 @@ async def run_agent(config: AgentConfig, *, ready: asyncio.Event | None = None) 
     default=None,
     help="Demo: a simulated visitor answers the touch screen's question with this.",
 )
+@click.option(
+    "--offline-requests",
+    type=click.Choice(["queue", "refuse"]),
+    default="queue",
+    show_default=True,
+    help="Touch-screen requests while the link to the server is down: kept and sent when it "
+    "is back, or refused at once.",
+)
 @click.option("--log-level", default="info", show_default=True)
 def robot(
     name: str,
@@ -72,6 +80,7 @@ def robot(
     battery_level: float | None,
     state_period: float,
     visitor: str | None,
+    offline_requests: str,
     log_level: str,
 ) -> None:
     """Run one robot agent (on-board bus, RoboCAN, RG dispatch, navigation, speech, link, GUI)."""
@@ -111,6 +120,7 @@ def robot(
         battery_level=battery_level,
         state_period_s=state_period,
         auto_answer=visitor,
+        offline_requests="refuse" if offline_requests == "refuse" else "queue",
         **robot_params,  # type: ignore[arg-type]
     )
     try:

@@ -1,11 +1,15 @@
-"""The on-board touch screen: tours and points of interest to request, the current explanation,
-and the "continue the tour?" question with its time-out.
+"""The on-board touch screen: tours and points of interest to request, the current explanation
+with its picture, the "continue the tour?" question with its time-out, and the robot's state
+(charging, going to the next point, link to the server lost).
 
 A small FastAPI app served by uvicorn in the agent's own event loop at ``--gui-port``:
-``GET /`` the page, ``GET /api/screen`` what the screen shows (JSON), ``POST /api/request``
-(a tour or a point of interest: a task_request to the Task Manager), ``POST /api/answer`` (the
-visitor's answer) and ``WS /ws`` (every change, pushed). The question module lives here too:
-ask_continue shows the question; the first answer, or the time-out, sends continue_answer.
+``GET /`` the page, ``GET /api/screen?lang=`` what the screen shows (JSON, texts in that
+language), ``POST /api/request`` (a tour or a point of interest: a task_request to the Task
+Manager), ``POST /api/answer`` (the visitor's answer) and ``WS /ws`` (every change, pushed). The
+page shares the visitor panel's look and language files (``web/lib``, ``web/lang``,
+``web/visitor/visitor.css``, served from the same web folder) and the site's pictures. The
+question module lives here too: ask_continue shows the question; the first answer, or the
+time-out, sends continue_answer.
 """
 
 from __future__ import annotations
@@ -13,15 +17,22 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import Callable, Generator
 from importlib import resources
+from pathlib import Path
 from typing import Any, Literal
 
 import uvicorn
-from fastapi import FastAPI, HTTPException, WebSocket, WebSocketDisconnect
-from fastapi.responses import HTMLResponse
+from fastapi import FastAPI, HTTPException, Query, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse, HTMLResponse, Response
+from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
+from backend.settings import WEB_DIR
+from backend.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
+from backend.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from backend.site.schema import Site
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from robot_agent.clock import Clock
@@ -31,12 +42,25 @@ __all__ = ["OnboardScreen", "ScreenServer"]
 log = logging.getLogger(__name__)
 
 WATCHER_QUEUE = 100
+PAGE_POLICY = (
+    "default-src 'self'; script-src 'self'; img-src 'self' data:; style-src 'self'; "
+    "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
+)
+VISITOR_NETS = frozenset({"give_tour", "go_to_poi"})
+"""Main tasks a visitor follows on the screen (the others keep the menu up)."""
+SHARED_FOLDERS = ("lib", "lang", "vendor", "visitor")
+"""Folders of the server's web/ the touch screen serves too: one look, one set of texts."""
+
+
+class LinkDown(RuntimeError):
+    """A request while the link to the server is down and requests are refused."""
 
 
 class TourRequest(BaseModel):
     kind: Literal["tour", "go_to_poi"]
     tour: str | None = Field(default=None, max_length=64)
     poi: str | None = Field(default=None, max_length=64)
+    lang: str | None = Field(default=None, max_length=16)
 
 
 class Answer(BaseModel):
@@ -56,6 +80,10 @@ class OnboardScreen:
         pois: list[dict[str, Any]] | None = None,
         state: Callable[[], dict[str, Any]] | None = None,
         auto_answer: str | None = None,
+        site: Site | None = None,
+        site_file: Path | None = None,
+        link_up: Callable[[], bool] | None = None,
+        offline_requests: Literal["queue", "refuse"] = "queue",
     ) -> None:
         self.ep = endpoint
         self.auto_answer = auto_answer
@@ -65,6 +93,17 @@ class OnboardScreen:
         self.tours = tours or []
         self.pois = pois or []
         self.state = state or (lambda: {})
+        self.site = site
+        """With a site, tours and points come in every language it offers."""
+        self.site_file = site_file
+        self.link_up = link_up
+        """None: the robot has no link to a server (standalone)."""
+        self.offline_requests = offline_requests
+        """Link down: "queue" sends requests when it is back, "refuse" says no at once."""
+        self.lang: str | None = None
+        """The language of the tour running now (the screen follows it)."""
+        self.task: dict[str, Any] | None = None
+        self.going = False
         self.explanation: dict[str, Any] | None = None
         self.speaking: str | None = None
         self.question: dict[str, Any] | None = None
@@ -81,6 +120,11 @@ class OnboardScreen:
             sub("speech_started", self._on_speech),
             sub("speech_ended", self._on_speech),
             sub("task_ended", self._on_task_ended),
+            sub("task_assigned", self._on_task_assigned),
+            sub("navigate_to", self._on_going),
+            sub("goal_reached", self._on_going),
+            sub("navigation_failed", self._on_going),
+            sub("robot_state", self._on_robot_state),
         ]
 
     def stop(self) -> None:
@@ -92,16 +136,52 @@ class OnboardScreen:
 
     # -- what is shown ------------------------------------------------------------------------
 
-    def screen(self) -> dict[str, Any]:
+    def screen(self, lang: str | None = None) -> dict[str, Any]:
+        """What the screen shows; tours and points in ``lang`` (else the running tour's)."""
+        site = self.site
+        chosen = resolve_language(site, lang or self.lang) if site else (lang or "en")
         return {
             "robot": self.robot,
-            "tours": self.tours,
-            "pois": self.pois,
+            "lang": chosen,
+            "tour_lang": self.lang,
+            "languages": site_languages(site) if site else [chosen],
+            "tours": self._tours(chosen),
+            "pois": self._pois(chosen),
+            "task": self.task,
+            "going": self.going,
             "explanation": self.explanation,
             "speaking": self.speaking,
             "question": self.question,
             "state": self.state(),
+            "link": {
+                "up": None if self.link_up is None else self.link_up(),
+                "offline_requests": self.offline_requests,
+            },
         }
+
+    def _tours(self, lang: str) -> list[dict[str, Any]]:
+        site = self.site
+        if site is None:
+            return self.tours
+        return [{"id": t.id, "points": t.points, **tour_texts(site, t, lang)} for t in site.tours]
+
+    def _pois(self, lang: str) -> list[dict[str, Any]]:
+        site = self.site
+        if site is None:
+            return self.pois
+        out = []
+        for p in site.pois:
+            texts = poi_texts(site, p, lang)
+            out.append(
+                {
+                    "id": p.id,
+                    "node": p.node,
+                    "name": texts["name"],
+                    "description": texts["description"],
+                    "media": [media_link(m) for m in texts["media"]],
+                }
+            )
+        return out
 
     def _push(self, kind: str, data: Any) -> None:
         event = {"kind": kind, "data": data}
@@ -119,11 +199,34 @@ class OnboardScreen:
         finally:
             self._watchers.discard(queue)
 
+    def _on_task_assigned(self, message: Message) -> None:
+        if message.payload.get("net") not in VISITOR_NETS:
+            return  # charging, going to a wait point: the menu stays
+        params = message.payload.get("params") or {}
+        lang = params.get("lang")
+        self.lang = lang if isinstance(lang, str) else None
+        self.task = {"id": message.payload.get("task_id"), "tour": params.get("tour")}
+        self._push("task_assigned", {"task": self.task, "lang": self.lang})
+
+    def _on_robot_state(self, message: Message) -> None:
+        if self._watchers:  # battery, mode and the link change without other events
+            self._push("state", {})
+
+    def _on_going(self, message: Message) -> None:
+        self.going = message.type == "navigate_to" and self.task is not None
+        self._push("going", {"going": self.going})
+
     def _on_show_point(self, message: Message) -> None:
+        point = message.payload.get("point")
+        point = point if isinstance(point, dict) else {}
         self.explanation = {
             "poi": message.payload.get("poi"),
+            "name": point.get("name") or message.payload.get("poi"),
             "text": message.payload.get("text", ""),
-            "media": message.payload.get("media", []),
+            "media": [media_link(m) for m in point.get("media") or []],
+            "index": point.get("index"),
+            "total": point.get("total"),
+            "lang": message.payload.get("lang"),
         }
         self._push("show_point", self.explanation)
 
@@ -134,6 +237,9 @@ class OnboardScreen:
 
     def _on_task_ended(self, message: Message) -> None:
         self.explanation = None
+        self.task = None
+        self.lang = None
+        self.going = False
         self._close_question(None)
         self._push("task_ended", message.payload)
 
@@ -147,6 +253,8 @@ class OnboardScreen:
             "question": message.payload.get("question") or "Shall we go on with the tour?",
             "timeout_s": timeout_s,
             "deadline_wall_s": self.clock.wall(timeout_s),
+            # Unix time the question closes: the page counts down to it.
+            "deadline_at": time.time() + self.clock.wall(timeout_s),
         }
         loop = asyncio.get_running_loop()
         self._question_timer = loop.call_later(
@@ -184,7 +292,10 @@ class OnboardScreen:
     # -- requests from the screen -------------------------------------------------------------
 
     def request(self, req: TourRequest) -> Message:
-        """A visitor asks for a tour or a point: a task_request for the Task Manager."""
+        """A visitor asks for a tour or a point: a task_request for the Task Manager.
+        Raises LinkDown when the server cannot be reached and requests are refused."""
+        if self.link_up is not None and not self.link_up() and self.offline_requests == "refuse":
+            raise LinkDown("no connection to the server: requests are refused until it is back")
         if req.kind == "tour":
             known = {t["id"] for t in self.tours}
             if not req.tour or (known and req.tour not in known):
@@ -195,31 +306,67 @@ class OnboardScreen:
             if not req.poi or (known and req.poi not in known):
                 raise ValueError(f"unknown point of interest {req.poi!r}; known: {sorted(known)}")
             params = {"poi": req.poi}
+        if req.lang:
+            params["lang"] = req.lang
         return self.ep.publish(
             "task_request",
             {"kind": req.kind, "params": params, "priority": 5, "requester": self.robot},
         )
 
 
-def create_screen_app(screen: OnboardScreen) -> FastAPI:
+def media_link(name: str) -> dict[str, str | None]:
+    """A media item as the pages take it: its name and, for a picture, where to load it."""
+    suffix = Path(name).suffix.lower()
+    return {"name": name, "url": f"/media/{name}" if suffix in MEDIA_TYPES else None}
+
+
+def create_screen_app(screen: OnboardScreen, web_dir: Path = WEB_DIR) -> FastAPI:
     app = FastAPI(title=f"GuideBot {screen.robot} touch screen", docs_url=None, redoc_url=None)
-    page = resources.files("robot_agent").joinpath("gui_page.html").read_text(encoding="utf-8")
+    files = resources.files("robot_agent")
+    page = files.joinpath("gui_page.html").read_text(encoding="utf-8")
+    script = files.joinpath("gui_page.js").read_text(encoding="utf-8")
+    headers = {"Content-Security-Policy": PAGE_POLICY, "X-Content-Type-Options": "nosniff"}
 
     @app.get("/", response_class=HTMLResponse)
-    async def index() -> str:
-        return page
+    async def index() -> HTMLResponse:
+        return HTMLResponse(page, headers=headers)
+
+    @app.get("/gui_page.js")
+    async def page_script() -> Response:
+        return Response(script, media_type="text/javascript", headers=headers)
 
     @app.get("/api/screen")
-    async def get_screen() -> dict[str, Any]:
-        return screen.screen()
+    async def get_screen(lang: str | None = Query(default=None, max_length=16)) -> dict[str, Any]:
+        return screen.screen(lang)
 
     @app.post("/api/request", status_code=202)
     async def post_request(req: TourRequest) -> dict[str, Any]:
         try:
             message = screen.request(req)
+        except LinkDown as exc:
+            raise HTTPException(status_code=503, detail=str(exc)) from None
         except ValueError as exc:
             raise HTTPException(status_code=422, detail=str(exc)) from None
-        return {"request_id": message.id, "kind": req.kind, **message.payload["params"]}
+        queued = screen.link_up is not None and not screen.link_up()
+        return {
+            "request_id": message.id,
+            "kind": req.kind,
+            "queued_offline": queued,
+            **message.payload["params"],
+        }
+
+    @app.get("/media/{name:path}")
+    async def media(name: str) -> FileResponse:
+        path = media_file(screen.site_file, name)
+        if path is None:
+            raise HTTPException(status_code=404, detail=f"media {name!r} not found")
+        return FileResponse(
+            path, media_type=MEDIA_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS
+        )
+
+    for folder in SHARED_FOLDERS:
+        if (web_dir / folder).is_dir():
+            app.mount(f"/{folder}", StaticFiles(directory=web_dir / folder), name=folder)
 
     @app.post("/api/answer")
     async def post_answer(body: Answer) -> dict[str, Any]:
@@ -231,7 +378,8 @@ def create_screen_app(screen: OnboardScreen) -> FastAPI:
     async def ws(websocket: WebSocket) -> None:
         await websocket.accept()
         with screen.watch() as queue:
-            await websocket.send_json({"kind": "screen", "data": screen.screen()})
+            lang = websocket.query_params.get("lang")
+            await websocket.send_json({"kind": "screen", "data": screen.screen(lang)})
 
             async def push() -> None:
                 while True:

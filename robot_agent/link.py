@@ -37,6 +37,7 @@ UP_TYPES: tuple[str, ...] = (
     "task_started",
     "task_ended",
     "task_request",
+    "tour_progress",
     "get_path",
     "request_area",
     "release_area",

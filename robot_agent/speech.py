@@ -4,6 +4,11 @@ With espeak-ng installed the text is synthesised to a WAV file (never to the spe
 server: ``playback=False``) and the robot waits the audio's duration; without it the duration
 is simulated from the text length. Either way the wait is robot time, scaled by the clock.
 One utterance at a time: a new ``say`` interrupts the current one (ended with interrupted).
+
+``say`` carries the text's language (``lang``, a tag like ``es`` or ``pt-BR``): espeak-ng speaks
+it with the voice of that name, else of its base language (``pt``); a language espeak-ng has no
+voice for is simulated (timed) and logged. speech_started / speech_ended carry ``lang`` and
+``voice`` (None when simulated) so screens and tests know what was heard.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ import asyncio
 import contextlib
 import logging
 import shutil
+import subprocess
 import tempfile
 import wave
 from collections.abc import Callable
@@ -21,12 +27,32 @@ from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from robot_agent.clock import Clock
 
-__all__ = ["Speech", "simulated_duration"]
+__all__ = ["Speech", "espeak_voices", "simulated_duration", "voice_for"]
 
 log = logging.getLogger(__name__)
 
 WORDS_PER_SECOND = 2.6
 MAX_TEXT = 5000
+
+
+def espeak_voices(engine: str) -> frozenset[str]:
+    """Language tags espeak-ng has voices for (``espeak-ng --voices``), lower case."""
+    try:
+        out = subprocess.run(
+            [engine, "--voices"], capture_output=True, text=True, timeout=10, check=False
+        ).stdout
+    except (OSError, subprocess.SubprocessError):
+        return frozenset()
+    return frozenset(line.split()[1].lower() for line in out.splitlines()[1:] if line.split())
+
+
+def voice_for(lang: str, voices: frozenset[str]) -> str | None:
+    """The espeak-ng voice for ``lang``: itself, else its base language, else None."""
+    tag = lang.lower()
+    if tag in voices:
+        return tag
+    base = tag.split("-")[0]
+    return base if base in voices else None
 
 
 def simulated_duration(text: str) -> float:
@@ -51,6 +77,7 @@ class Speech:
         self.playback = playback
         self.speaking: str | None = None
         self.spoken = 0
+        self._voices: frozenset[str] | None = None
         self._task: asyncio.Task[None] | None = None
         self._unsubs: list[Callable[[], None]] = []
 
@@ -75,13 +102,25 @@ class Speech:
             self._say(text, lang, message.id), name="speech"
         )
 
+    async def _voice(self, lang: str) -> str | None:
+        if not self.engine:
+            return None
+        if self._voices is None:
+            self._voices = await asyncio.to_thread(espeak_voices, self.engine)
+        voice = voice_for(lang, self._voices)
+        if voice is None:
+            log.warning("espeak-ng has no voice for %r: simulating speech", lang)
+        return voice
+
     async def _say(self, text: str, lang: str, request_id: str) -> None:
         self.speaking = text
-        log.info("saying: %s", text[:120])
-        self.ep.publish("speech_started", {"text": text}, correlation_id=request_id)
+        voice = await self._voice(lang)
+        log.info("saying (%s): %s", voice or f"{lang}, timed", text[:120])
+        said = {"text": text, "lang": lang, "voice": voice}
+        self.ep.publish("speech_started", said, correlation_id=request_id)
         outcome = "done"
         try:
-            duration = await self._duration(text, lang)
+            duration = await self._duration(text, voice)
             await self.clock.sleep(duration)
         except asyncio.CancelledError:
             outcome = "interrupted"
@@ -89,16 +128,14 @@ class Speech:
         finally:
             self.speaking = None
             self.spoken += 1
-            self.ep.publish(
-                "speech_ended", {"text": text, "outcome": outcome}, correlation_id=request_id
-            )
+            self.ep.publish("speech_ended", {**said, "outcome": outcome}, correlation_id=request_id)
 
-    async def _duration(self, text: str, lang: str) -> float:
-        if not self.engine or not text.strip():
+    async def _duration(self, text: str, voice: str | None) -> float:
+        if not self.engine or voice is None or not text.strip():
             return simulated_duration(text) if text.strip() else 0.0
         with tempfile.TemporaryDirectory(prefix="guidebot-speech-") as tmp:
             wav = Path(tmp) / "say.wav"
-            args = [self.engine, "-v", lang, "-w", str(wav), "--", text]
+            args = [self.engine, "-v", voice, "-w", str(wav), "--", text]
             try:
                 proc = await asyncio.create_subprocess_exec(
                     *args,

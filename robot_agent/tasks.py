@@ -94,6 +94,8 @@ class TaskRunner:
             sub("task_cancel", self._on_cancel),
             sub("petri_net_ended", self._on_net_ended),
             sub("petri_net_event", self._on_net_event),
+            sub("show_point", self._on_point),
+            sub("point_explained", self._on_point),
         ]
         self._start_waiting()
 
@@ -195,6 +197,27 @@ class TaskRunner:
         log.info("%s: task %s %s %s", self.robot, task.task_id, outcome, task.reason)
         self._report("task_ended", task.task_id, outcome=outcome, reason=task.reason)
         self._start_waiting()
+
+    def _on_point(self, message: Message) -> None:
+        """give_tour reached or explained a point: tour_progress for the Task Manager."""
+        point = message.payload.get("point")
+        if self.current is None or not isinstance(point, dict):
+            return
+        index, total = point.get("index"), point.get("total")
+        if not isinstance(index, int) or not isinstance(total, int):
+            return  # points without their place in the tour (not from the Task Manager)
+        stage = "arrived" if message.type == "show_point" else "explained"
+        self.ep.publish(
+            "tour_progress",
+            {
+                "task_id": self.current.task_id,
+                "robot": self.robot,
+                "index": index,
+                "total": total,
+                "poi": point.get("poi"),
+                "stage": stage,
+            },
+        )
 
     def _report(self, type_: str, task_id: str, **extra: Any) -> None:
         self.ep.publish(type_, {"task_id": task_id, "robot": self.robot, **extra})

@@ -1,7 +1,7 @@
 """REST API of the server brain (site, robots, tasks, tours, points of interest, locks,
 events) and the component that runs the services behind it."""
 
-from backend.api import events, locks, robots, site, site_editor, tasks, tours, web
+from backend.api import events, locks, robots, site, site_editor, tasks, tours, visitor, web
 
 ROUTERS = [
     site.router,
@@ -12,6 +12,7 @@ ROUTERS = [
     locks.router,
     events.router,
     web.router,
+    visitor.router,
 ]
 
 __all__ = ["ROUTERS"]

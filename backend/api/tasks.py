@@ -100,7 +100,16 @@ class TaskStatus(BaseModel):
     queue_position: int | None
     """1 = next to be served; None unless queued."""
     eta_s: float | None
-    """Estimated wait before a robot starts on it."""
+    """Estimated wait before a robot starts on it (None: no robot can serve it now)."""
+    service: str
+    """available | busy | unavailable | ended | withdrawn (docs/visitor.md, "The wait")."""
+    arrival_s: float | None
+    """Estimated seconds until the robot is at the first point."""
+    remaining_s: float | None
+    duration_s: float | None
+    """The task's own length from its first point."""
+    progress: dict[str, Any] | None
+    """Tours on their robot: {index, total, poi, stage: arrived | explained}."""
 
 
 class TaskPage(BaseModel):

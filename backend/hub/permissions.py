@@ -57,6 +57,7 @@ _ROBOT = frozenset(
         "task_started",
         "task_ended",
         "petri_net_ended",
+        "tour_progress",
         "petri_net_event",  # markings for the console's RoboGraph monitor
         "site_loaded",
         "get_path",

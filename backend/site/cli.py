@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from backend.site.i18n import missing_translations
 from backend.site.validate import SiteInvalid
 from backend.site.yamlio import dump_site, load_site_file
 
@@ -21,7 +22,8 @@ def site() -> None:
 @site.command("check")
 @click.argument("path", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 def check(path: Path) -> None:
-    """Validate PATH; exit 1 listing every problem with its line."""
+    """Validate PATH; exit 1 listing every problem with its line. Texts missing in a
+    declared language are warnings (exit 0)."""
     try:
         loaded = load_site_file(path)
     except SiteInvalid as exc:
@@ -29,10 +31,14 @@ def check(path: Path) -> None:
             click.echo(line, err=True)
         click.echo(f"{len(exc.issues)} problem(s): site refused", err=True)
         sys.exit(1)
+    warnings = missing_translations(loaded)
+    for issue in warnings:
+        click.echo(f"{path}: warning: {issue.loc}: {issue.message}", err=True)
     click.echo(
         f"{path}: ok: {len(loaded.floors)} floors, {len(loaded.nodes)} nodes, "
         f"{len(loaded.pois)} points of interest, {len(loaded.tours)} tours, "
         f"{len(loaded.areas)} restricted areas, {len(loaded.robots)} robots"
+        + (f", {len(warnings)} warning(s)" if warnings else "")
     )
 
 

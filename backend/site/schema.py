@@ -7,7 +7,7 @@ A site is a plain pydantic document. ``Site.model_validate`` checks shapes; cros
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -18,11 +18,13 @@ __all__ = [
     "Edge",
     "Floor",
     "Node",
+    "PoiText",
     "PointOfInterest",
     "RestrictedArea",
     "RobotConfig",
     "Site",
     "Tour",
+    "TourText",
     "WaitPoint",
 ]
 
@@ -71,14 +73,41 @@ class Edge(StrictModel):
     """Only from ``a`` to ``b``."""
 
 
+LANG_PATTERN = r"^[a-z]{2,3}(-[A-Za-z0-9]{2,8})?$"
+"""A BCP 47 language tag, short form: ``en``, ``es``, ``pt-BR``."""
+Lang = Annotated[str, Field(pattern=LANG_PATTERN)]
+
+
+class PoiText(StrictModel):
+    """A point's texts in one more language; what is left out falls back to the default."""
+
+    name: str | None = None
+    description: str | None = None
+    text: str | None = None
+    media: list[str] | None = None
+
+
+class TourText(StrictModel):
+    """A tour's texts in one more language."""
+
+    name: str | None = None
+    description: str | None = None
+
+
 class PointOfInterest(StrictModel):
     id: Id = _id()
     name: str = ""
     node: Id
+    description: str = ""
+    """One or two lines for the visitor panel (the spoken ``text`` when empty)."""
     text: str = ""
     """What the robot says there."""
     media: list[str] = Field(default_factory=list)
-    lang: str = "en"
+    """File names in the site's media folder (served at /media/<name>)."""
+    lang: str | None = Field(default=None, pattern=LANG_PATTERN)
+    """Language of name/description/text above; None: the site's ``default_language``."""
+    translations: dict[Lang, PoiText] = Field(default_factory=dict)
+    """Per language tag: the same texts in that language (docs/visitor.md, "Languages")."""
 
 
 class Tour(StrictModel):
@@ -86,6 +115,7 @@ class Tour(StrictModel):
     name: str = ""
     description: str = ""
     points: list[Id] = Field(min_length=1)
+    translations: dict[Lang, TourText] = Field(default_factory=dict)
 
 
 class ChargingStation(StrictModel):
@@ -122,6 +152,10 @@ class Site(StrictModel):
 
     name: str = Field(min_length=1, max_length=200)
     version: int = Field(default=1, ge=1)
+    default_language: str = Field(default="en", pattern=LANG_PATTERN)
+    """The language of the texts given without a translation, and the fallback."""
+    languages: list[Lang] = Field(default_factory=list)
+    """Languages offered to visitors besides the default (``site check`` warns of gaps)."""
     floors: list[Floor] = Field(min_length=1)
     nodes: list[Node] = Field(min_length=1)
     edges: list[Edge] = Field(default_factory=list)

@@ -19,7 +19,9 @@ from typing import Any, Protocol
 
 from pydantic import ValidationError
 
+from backend.site.i18n import poi_texts, resolve_language, site_languages
 from backend.site.schema import Site
+from backend.tasks.eta import EtaEstimator
 from backend.tasks.model import (
     FINAL_STATES,
     InvalidTask,
@@ -36,7 +38,7 @@ from backend.tasks.robots import RobotInfo
 from backend.traffic.graph import SiteGraph
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.tasks import TaskRequest
+from guidebot.payloads.tasks import TaskRequest, TourProgress
 
 __all__ = ["TaskManager", "TaskStore"]
 
@@ -108,6 +110,8 @@ class TaskManager:
         self.assign_times_ms: list[float] | None = None
         self.site = site
         self.graph = graph or SiteGraph(site)
+        self.estimator = EtaEstimator(self)
+        """Waits, arrivals and durations told to visitors (backend/tasks/eta.py)."""
         self.load_site(site, self.graph)
 
     # --- life cycle ----------------------------------------------------------------------
@@ -121,6 +125,7 @@ class TaskManager:
             sub("battery_low", self._on_battery_low),
             sub("battery_panic", self._on_battery_panic),
             sub("robot_disconnected", self._on_robot_disconnected),
+            sub("tour_progress", self._on_tour_progress),
         ]
         with contextlib.suppress(RuntimeError):
             self._watchdog = asyncio.get_running_loop().create_task(
@@ -196,6 +201,8 @@ class TaskManager:
         """Queue a task; raises TaskError if its parameters do not fit the site."""
         params = validate_params(kind, params if params is not None else {})
         self._target_node(kind, params)  # the references exist in the site
+        if "lang" in params and params["lang"] not in (offered := site_languages(self.site)):
+            raise InvalidTask(f"language {params['lang']!r} not offered (offered: {offered})")
         if robot is not None and robot not in self.robots:
             raise InvalidTask(f"unknown robot {robot!r}")
         if not internal and self.queue.full:
@@ -292,25 +299,15 @@ class TaskManager:
         return self.queue.position(task) if task.state is TaskState.QUEUED else None
 
     def eta_s(self, task: Task) -> float | None:
-        """Estimated wait before a robot starts on it: robots work the queue in waves."""
-        if task.state is not TaskState.QUEUED:
-            return 0.0 if task.state in (TaskState.ASSIGNED, TaskState.RUNNING) else None
-        position = self.queue.position(task) or 1
-        working = [r for r in self.robots.values() if r.online and not r.fault]
-        free = sum(1 for r in working if self._available(r))
-        if not working:
-            return None
-        avg = sum(self._durations[k] for k in ("tour", "go_to_poi")) / 2
-        if position <= free:
-            return 0.0
-        waves = (position - free - 1) // len(working)
-        return round((waves + 0.5) * avg, 1)
+        """Estimated wait before a robot starts on it (backend/tasks/eta.py)."""
+        return self.estimator.estimate(task).wait_s
 
     def status(self, task: Task) -> dict[str, Any]:
         return {
             **task.as_dict(),
             "queue_position": self.queue_position(task),
-            "eta_s": self.eta_s(task),
+            **self.estimator.estimate(task).as_dict(),
+            "progress": self.estimator.progress_view(task),
         }
 
     # --- assignment ----------------------------------------------------------------------
@@ -556,8 +553,25 @@ class TaskManager:
         if state is TaskState.DONE and task.started_at and not task.internal:
             took = time.time() - task.started_at
             self._durations[task.kind] = 0.8 * self._durations[task.kind] + 0.2 * took
+        if state is TaskState.DONE and task.started_at:
+            self.estimator.ended(task, time.time() - task.started_at)
         self._changed(task, state.value)
         self.dispatch()
+
+    def _on_tour_progress(self, msg: Message) -> None:
+        """A point reached or explained: into the task's history, refined estimate to all."""
+        robot = self._robot_msg(msg)
+        task = self.tasks.get(str(msg.payload.get("task_id")))
+        if robot is None or task is None or task.robot != robot.name or task.final:
+            return
+        try:
+            p = msg.payload_as(TourProgress)
+        except ValidationError:
+            return
+        self.estimator.progress(task, p.index, p.stage, p.poi)
+        if self.store is not None:
+            self.store.record(task, f"point {p.index}/{p.total} {p.stage}")
+        self.endpoint.publish("task_event", self._event_payload(task))
 
     def _on_robot_state(self, msg: Message) -> None:
         robot = self._robot_msg(msg)
@@ -778,21 +792,22 @@ class TaskManager:
     def _net_params(self, task: Task) -> dict[str, Any]:
         """Everything the robot's net needs, so it never asks back."""
         site, p = self.site, task.params
+        lang = resolve_language(site, p.get("lang"))
         if task.kind == "tour":
             tour = site.tour(p["tour"])
             assert tour is not None
-            points = []
-            for poi_id in tour.points:
-                poi = site.poi(poi_id)
-                assert poi is not None
-                points.append(
-                    {"poi": poi.id, "node": poi.node, "text": poi.text, "media": poi.media}
-                )
-            return {"tour": tour.id, "points": points}
+            pois = [q for q in (site.poi(i) for i in tour.points) if q is not None]
+            points = [
+                {"poi": q.id, "node": q.node, "index": i, "total": len(pois)}
+                | poi_texts(site, q, lang)
+                for i, q in enumerate(pois, start=1)
+            ]
+            return {"tour": tour.id, "points": points, "lang": lang}
         if task.kind == "go_to_poi":
             poi = site.poi(p["poi"])
             assert poi is not None
-            return {"poi": poi.id, "node": poi.node, "text": poi.text}
+            texts = poi_texts(site, poi, lang)
+            return {"poi": poi.id, "node": poi.node, "text": texts["text"], "lang": texts["lang"]}
         if task.kind == "charge":
             station = p.get("station") or site.charging_stations[0].id
             node = next(s.node for s in site.charging_stations if s.id == station)
@@ -805,11 +820,14 @@ class TaskManager:
             "state": task.state.value,
             "robot": task.robot,
             "queue_position": self.queue_position(task),
-            "eta_s": self.eta_s(task),
+            **self.estimator.estimate(task).as_dict(),
+            "progress": self.estimator.progress_view(task),
+            "reason": task.reason,
         }
 
     def _changed(self, task: Task, event: str) -> None:
         """Every state change: an event on the hub and a row in the task's history."""
+        self.estimator.changed(task, event)
         if self.store is not None:
             self.store.record(task, event)
         self.endpoint.publish("task_event", self._event_payload(task))

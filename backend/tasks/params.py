@@ -21,12 +21,21 @@ class _Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+Lang = Annotated[
+    str, Field(min_length=2, max_length=16, pattern=r"^[A-Za-z]{2,3}([-_][A-Za-z0-9]+)?$")
+]
+"""A language code the site offers (checked against the site by the Task Manager)."""
+
+
 class TourParams(_Params):
     tour: Ref
+    lang: Lang | None = None
+    """The language the tour is explained in; None: the site's default language."""
 
 
 class PoiParams(_Params):
     poi: Ref
+    lang: Lang | None = None
 
 
 class ChargeParams(_Params):

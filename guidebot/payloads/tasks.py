@@ -16,6 +16,7 @@ __all__ = [
     "TaskEvent",
     "TaskRequest",
     "TaskStarted",
+    "TourProgress",
 ]
 
 TaskKind = Literal["tour", "go_to_poi", "charge", "go_to"]
@@ -71,6 +72,29 @@ class TaskEvent(PayloadModel):
     robot: str | None = None
     queue_position: int | None = None
     eta_s: float | None = None
+    """Estimated wait before a robot starts on it (None: no robot can serve it now)."""
+    service: str | None = None
+    """available | busy | unavailable | ended | withdrawn (docs/visitor.md, "The wait")."""
+    arrival_s: float | None = None
+    """Estimated seconds until the robot is at the first point."""
+    remaining_s: float | None = None
+    duration_s: float | None = None
+    progress: dict[str, Any] | None = None
+    """Tours: {index, total, poi, stage: arrived | explained}."""
+    reason: str = ""
+
+
+@register_payload("tour_progress")
+class TourProgress(PayloadModel):
+    """A robot reached (arrived) or finished explaining (explained) point ``index`` (1-based)
+    of its tour; the Task Manager records it and tells the panels."""
+
+    task_id: str = Field(max_length=64)
+    robot: str = Field(max_length=64)
+    index: int = Field(ge=1, le=10_000)
+    total: int = Field(ge=1, le=10_000)
+    poi: str | None = Field(default=None, max_length=64)
+    stage: Literal["arrived", "explained"]
 
 
 @register_payload("robot_connected")

@@ -56,6 +56,7 @@ def test_run_prints_the_trace_and_a_json_result_last() -> None:
         "arrived",
         "shown",
         "explained",
+        "reported",
         "more_points",
         "answer_no",
     ]

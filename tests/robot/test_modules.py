@@ -63,7 +63,7 @@ async def test_a_new_say_interrupts_the_current_one(helpers: Any) -> None:
     await seen.wait_for(lambda: len(seen.of("speech_ended")) == 2)
     first, second = seen.of("speech_ended")
     assert first.payload["outcome"] == "interrupted"
-    assert second.payload == {"text": "Short.", "outcome": "done"}
+    assert second.payload == {"text": "Short.", "lang": "en", "voice": None, "outcome": "done"}
     await speech.stop()
 
 

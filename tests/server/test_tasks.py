@@ -53,7 +53,9 @@ async def test_full_life_of_a_tour(bus: Bus, manager: TaskManager, events: list[
         "sword",
         "loom",
     ]
-    assert params["points"][2]["media"] == ["amphorae.jpg"] and params["points"][0]["text"]
+    assert (
+        params["points"][2]["media"] == ["demo_museum/amphorae.svg"] and params["points"][0]["text"]
+    )
     r3.start(task.id)
     assert task.state is TaskState.RUNNING
     r3.end(task.id)

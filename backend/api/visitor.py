@@ -1,0 +1,99 @@
+"""What the visitor panel and the robots' touch screens read: tours and points in a language with
+their duration and the wait a request would get now, a panel's own requests, and the site's
+pictures (docs/visitor.md)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Path, Query, Request
+from fastapi.responses import FileResponse
+
+from backend.api.deps import Anyone, Requester, not_found, sites, task_manager
+from backend.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
+from backend.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from backend.site.schema import Site
+
+__all__ = ["media_url", "router"]
+
+router = APIRouter(tags=["visitor"])
+
+Lang = Annotated[str | None, Query(max_length=16)]
+
+
+def media_url(name: str) -> str | None:
+    """Where a page loads a media item from; None for what is not a picture (video)."""
+    suffix = name[name.rfind(".") :].lower() if "." in name else ""
+    return f"/media/{name}" if suffix in MEDIA_TYPES else None
+
+
+def _pictures(names: list[str]) -> list[dict[str, Any]]:
+    return [{"name": n, "url": media_url(n)} for n in names]
+
+
+def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
+    poi = site.poi(poi_id)
+    if poi is None:
+        return None
+    texts = poi_texts(site, poi, lang)
+    return {
+        "id": poi.id,
+        "name": texts["name"],
+        "description": texts["description"],
+        "media": _pictures(texts["media"]),
+    }
+
+
+@router.get("/api/visitor")
+async def visitor_menu(request: Request, _: Anyone, lang: Lang = None) -> dict[str, Any]:
+    """Tours and points in ``lang`` (the site's default when not offered), each with its
+    length and what a request would be told now: available, busy (with the wait), or
+    unavailable (no robot in service)."""
+    site = sites(request).site
+    manager = task_manager(request)
+    estimator = manager.estimator
+    chosen = resolve_language(site, lang)
+    tours = []
+    for tour in site.tours:
+        stops = [v for v in (_poi_view(site, p, chosen) for p in tour.points) if v is not None]
+        told = estimator.preview("tour", {"tour": tour.id, "lang": chosen}).as_dict()
+        tours.append(
+            {"id": tour.id, **tour_texts(site, tour, chosen), "stops": stops, "estimate": told}
+        )
+    pois = []
+    for poi in site.pois:
+        view = _poi_view(site, poi.id, chosen)
+        assert view is not None
+        told = estimator.preview("go_to_poi", {"poi": poi.id, "lang": chosen}).as_dict()
+        pois.append({**view, "estimate": told})
+    return {
+        "site": site.name,
+        "languages": site_languages(site),
+        "default_language": site.default_language,
+        "lang": chosen,
+        "service": estimator.service(),
+        "tours": tours,
+        "pois": pois,
+    }
+
+
+@router.get("/api/visitor/requests")
+async def my_requests(request: Request, who: Requester) -> list[dict[str, Any]]:
+    """The caller's own tasks that are not finished (a panel never sees another's)."""
+    manager = task_manager(request)
+    mine = [
+        t
+        for t in manager.tasks.values()
+        if t.requester == who.name and not t.final and not t.internal
+    ]
+    return [manager.status(t) for t in sorted(mine, key=lambda t: t.seq)]
+
+
+@router.get("/media/{name:path}", response_class=FileResponse, include_in_schema=True)
+async def media(request: Request, name: Annotated[str, Path(max_length=300)]) -> FileResponse:
+    """A picture of the site (public, like the museum's own leaflets); 404 when missing,
+    and the pages show a placeholder."""
+    path = media_file(request.app.state.settings.site, name)
+    if path is None:
+        raise not_found(f"media {name!r}")
+    return FileResponse(path, media_type=MEDIA_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS)

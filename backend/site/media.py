@@ -1,0 +1,37 @@
+"""The site's media files (pictures of points of interest): names in the site file are paths
+relative to the site file's folder, like floor plans; nothing outside that folder is served."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["MEDIA_HEADERS", "MEDIA_TYPES", "media_file"]
+
+MEDIA_TYPES = {
+    ".svg": "image/svg+xml",
+    ".png": "image/png",
+    ".jpg": "image/jpeg",
+    ".jpeg": "image/jpeg",
+    ".webp": "image/webp",
+    ".gif": "image/gif",
+}
+"""Pictures the pages show; other media (video) are listed but not served."""
+
+MEDIA_HEADERS = {
+    # A picture: nothing in it may run or load anything (an SVG could carry script).
+    "Content-Security-Policy": "default-src 'none'; style-src 'unsafe-inline'",
+    "X-Content-Type-Options": "nosniff",
+    "Cache-Control": "max-age=300",
+}
+
+
+def media_file(site_file: Path | None, name: str) -> Path | None:
+    """The file of media ``name``, or None when there is no site file, the name leaves the
+    site's folder, is not a picture, or the file is missing (pages then show a placeholder)."""
+    if site_file is None or not name or "\x00" in name:
+        return None
+    folder = site_file.resolve().parent
+    path = (folder / name).resolve()
+    if not path.is_relative_to(folder) or path.suffix.lower() not in MEDIA_TYPES:
+        return None
+    return path if path.is_file() else None

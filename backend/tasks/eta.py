@@ -1,0 +1,402 @@
+"""Wait and duration estimates for visitors: when a robot will start on a task, when it will be
+at the tour's first point, how long a running tour still takes, and whether any robot can serve
+at all (docs/visitor.md, "The wait").
+
+A task is a list of segments, each predicted in nominal robot seconds: legs (path length from
+the site graph, elevator rides included, at the robot's speed, plus the continue question before
+every leg but the first) and explanations (the spoken text at ~2.6 words/s plus facing people).
+Two learned factors turn nominal into real seconds: one for legs, one for explanations, each the
+running ratio real/predicted over the segments robots reported (``tour_progress``) and over
+whole tasks that ended. So a fleet at another time scale, slower robots or chatty visitors are
+learned from the first tour.
+
+The wait of a queued task comes from simulating the queue in order over the working robots:
+each robot is free after what it still has to do (its running task's remaining segments), at
+the node where that ends; the next task in line goes to the robot free first. The simulation is
+cached and extended when a request joins the tail; any other change rebuilds it on the next
+question, and it is never older than ``refresh_s``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
+
+from backend.site.i18n import poi_texts
+from backend.tasks.model import Task, TaskState
+
+if TYPE_CHECKING:
+    from backend.tasks.manager import TaskManager
+    from backend.tasks.robots import RobotInfo
+
+__all__ = ["Estimate", "EtaEstimator", "Service", "speech_s"]
+
+WORDS_PER_SECOND = 2.6
+"""Speaking rate of robot_agent.speech's timed fallback (espeak-ng's default is close)."""
+FACE_AND_REST_S = 2.0
+"""Facing people and the rest expression around each explanation (nominal)."""
+QUESTION_S = 3.0
+"""Waiting for the answer to "continue the tour?" before each next point (nominal)."""
+CHARGE_S = 1800.0
+"""A robot sent to charge comes back after this (until a charge has been timed)."""
+UNKNOWN_TRAVEL_M = 50.0
+"""A robot whose node is unknown is assumed this far from the target."""
+
+Service = Literal["available", "busy", "unavailable", "ended", "withdrawn"]
+
+
+def speech_s(text: str) -> float:
+    """Nominal seconds to say ``text`` (the same rule as the robot's timed speech)."""
+    return 0.3 + len(text.split()) / WORDS_PER_SECOND if text.strip() else 0.0
+
+
+@dataclass(slots=True)
+class Segment:
+    kind: Literal["move", "talk"]
+    nominal_s: float
+    index: int
+    """1-based point of the tour this segment reaches (move) or explains (talk)."""
+
+
+@dataclass(slots=True)
+class Estimate:
+    """What a visitor is told about one task."""
+
+    service: Service
+    wait_s: float | None
+    """Until a robot starts on it (0 once assigned); None when no robot can serve."""
+    arrival_s: float | None
+    """Until the robot is at the first point; 0 once there; None when unknown."""
+    remaining_s: float | None
+    """Until the task ends (for a running task), None when unknown."""
+    duration_s: float | None
+    """The whole task from its first point (what the panel shows as the tour's length)."""
+
+    def as_dict(self) -> dict[str, Any]:
+        def r(v: float | None) -> float | None:
+            return None if v is None else round(v, 1)
+
+        return {
+            "service": self.service,
+            "eta_s": r(self.wait_s),
+            "arrival_s": r(self.arrival_s),
+            "remaining_s": r(self.remaining_s),
+            "duration_s": r(self.duration_s),
+        }
+
+
+@dataclass(slots=True)
+class _Factor:
+    """A running ratio real/predicted: the first sample replaces the prior, later ones blend."""
+
+    value: float = 1.0
+    samples: int = 0
+
+    def learn(self, real: float, predicted: float) -> None:
+        if predicted <= 0.05 or real <= 0 or not math.isfinite(real):
+            return
+        ratio = min(max(real / predicted, 0.01), 100.0)
+        alpha = max(0.3, 1.0 / (self.samples + 1))
+        self.value = (1 - alpha) * self.value + alpha * ratio
+        self.samples += 1
+
+
+@dataclass(slots=True)
+class _Progress:
+    """A task on its robot: its predicted segments and the last mark the robot reported."""
+
+    segments: list[Segment]
+    mark_at: float
+    done: int = 0
+    """Segments finished (reported)."""
+    index: int = 0
+    total: int = 0
+    poi: str | None = None
+    stage: str = "assigned"
+    learned: bool = False
+
+
+@dataclass
+class _Schedule:
+    built_at: float
+    waits: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """task id -> (wait, arrival) in real seconds from ``built_at``."""
+    heap: list[tuple[float, int, str, str | None]] = field(default_factory=list)
+    """(free at, tie, robot, node) after the last scheduled task."""
+    last: str | None = None
+    """Id of the last queued task simulated (extension only after it)."""
+
+
+class EtaEstimator:
+    """Owned by the Task Manager, which calls ``changed``, ``progress`` and ``ended``."""
+
+    def __init__(self, manager: TaskManager, *, refresh_s: float = 1.0) -> None:
+        self.tm = manager
+        self.refresh_s = refresh_s
+        self.move = _Factor()
+        self.talk = _Factor()
+        self.charge_s = CHARGE_S
+        self._running: dict[str, _Progress] = {}
+        self._schedule: _Schedule | None = None
+        self._mean_speed: tuple[int, float] | None = None
+        """(number of robots, their mean speed): for tasks not yet on a robot."""
+
+    # --- hooks from the Task Manager -----------------------------------------------------------
+    def changed(self, task: Task, event: str) -> None:
+        """A task changed: keep the schedule only when a request joined the tail."""
+        if task.state is TaskState.ASSIGNED and task.robot is not None:
+            robot = self.tm.robots.get(task.robot)
+            start = robot.node if robot is not None else None
+            self._running[task.id] = _Progress(
+                self.segments(task, start), self.tm.clock(), total=self._total(task)
+            )
+        elif task.state is TaskState.QUEUED or task.final:
+            self._running.pop(task.id, None)
+        sched = self._schedule
+        if sched is None or task.internal:
+            return
+        if event == "created" and task.state is TaskState.QUEUED and self._extend(sched, task):
+            return
+        self._schedule = None
+
+    def progress(self, task: Task, index: int, stage: str, poi: str | None) -> dict[str, Any]:
+        """A robot reached (``arrived``) or explained (``explained``) point ``index`` of its
+        task: learn the real time of the segment just ended and refine what is left."""
+        run = self._running.get(task.id)
+        if run is None:
+            run = _Progress(self.segments(task, None), self.tm.clock(), total=self._total(task))
+            self._running[task.id] = run
+        now = self.tm.clock()
+        done = 2 * index - 1 if stage == "arrived" else 2 * index
+        if done == run.done + 1 and done <= len(run.segments):
+            seg = run.segments[done - 1]
+            (self.move if seg.kind == "move" else self.talk).learn(now - run.mark_at, seg.nominal_s)
+            run.learned = True
+        run.done = max(run.done, min(done, len(run.segments)))
+        run.mark_at = now
+        run.index, run.stage, run.poi = index, stage, poi
+        self._schedule = None
+        return self.progress_view(task) or {}
+
+    def ended(self, task: Task, took_s: float | None) -> None:
+        """Learn from a task that ended done: the whole, when no segment was reported."""
+        run = self._running.pop(task.id, None)
+        if task.kind == "charge" and took_s:
+            self.charge_s = took_s
+            return
+        if run is None or run.learned or not took_s:
+            return
+        moves = sum(s.nominal_s for s in run.segments if s.kind == "move")
+        talks = sum(s.nominal_s for s in run.segments if s.kind == "talk")
+        predicted = moves * self.move.value + talks * self.talk.value
+        if predicted > 0:
+            scale = took_s / predicted  # spread the surprise over both kinds of segment
+            self.move.learn(moves * self.move.value * scale, moves)
+            self.talk.learn(talks * self.talk.value * scale, talks)
+
+    # --- what the visitor sees ----------------------------------------------------------------
+    def service(self) -> Service:
+        """available: a robot could start now; busy: all working robots are busy;
+        unavailable: no robot is in service (offline or in fault)."""
+        robots = self.tm.robots
+        if not any(r.online and not r.fault for r in robots.values()):
+            return "unavailable"
+        if any(self.tm._available(robots[n]) for n in self.tm._idle if n in robots):
+            return "available"
+        return "busy"
+
+    def estimate(self, task: Task) -> Estimate:
+        if task.final:
+            gone = task.state is TaskState.CANCELLED and "the site changed" in task.reason
+            return Estimate("withdrawn" if gone else "ended", None, None, 0.0, None)
+        if task.state is not TaskState.QUEUED:
+            run = self._running.get(task.id)
+            if run is None:
+                return Estimate("available", 0.0, None, None, None)
+            duration = self._real(run.segments[1:])
+            remaining = self._remaining(run)
+            first = self._remaining(run, upto=1) if run.done == 0 else 0.0
+            return Estimate("available", 0.0, first, remaining, duration)
+        duration = self._real(self.segments(task, None)[1:])
+        service = self.service()
+        if service == "unavailable":
+            return Estimate("unavailable", None, None, None, duration)
+        sched = self._current()
+        found = sched.waits.get(task.id)
+        if found is None:
+            return Estimate(service, None, None, None, duration)
+        return self._told(sched, found[0], found[1], duration)
+
+    def preview(self, kind: str, params: dict[str, Any]) -> Estimate:
+        """What a new request would be told now (the panel shows it before the visitor asks)."""
+        probe = Task(id="~preview", kind=kind, params=params, priority=5, requester="", seq=0)
+        duration = self._real(self.segments(probe, None)[1:])
+        if self.service() == "unavailable":
+            return Estimate("unavailable", None, None, None, duration)
+        sched = self._current()
+        heap = list(sched.heap)
+        wait, arrival, _ = self._place(heap, probe)
+        return self._told(sched, wait, arrival, duration)
+
+    def _told(
+        self, sched: _Schedule, wait: float, arrival: float, duration: float | None
+    ) -> Estimate:
+        if not math.isfinite(wait):
+            return Estimate("busy", None, None, None, duration)
+        age = self.tm.clock() - sched.built_at
+        wait, arrival = max(0.0, wait - age), max(0.0, arrival - age)
+        return Estimate("available" if wait <= 0 else "busy", wait, arrival, None, duration)
+
+    def progress_view(self, task: Task) -> dict[str, Any] | None:
+        run = self._running.get(task.id)
+        if run is None or task.kind != "tour":
+            return None
+        return {"index": run.index, "total": run.total, "poi": run.poi, "stage": run.stage}
+
+    # --- the model ------------------------------------------------------------------------------
+    def segments(self, task: Task, start: str | None) -> list[Segment]:
+        """Nominal segments of ``task`` when its robot starts at node ``start`` (unknown:
+        ``UNKNOWN_TRAVEL_M`` to the first point)."""
+        points = self._points(task)
+        speed = self._speed(task.robot)
+        out: list[Segment] = []
+        here = start
+        for i, (node, text) in enumerate(points, start=1):
+            metres = self._metres(here, node)
+            out.append(Segment("move", metres / speed + (QUESTION_S if i > 1 else 0.0), i))
+            if text is not None:
+                out.append(Segment("talk", FACE_AND_REST_S + speech_s(text), i))
+            here = node
+        return out
+
+    def _points(self, task: Task) -> list[tuple[str, str | None]]:
+        """(node, spoken text or None) of each place the task visits."""
+        sent = task.assigned_params.get("points") if task.assigned_params else None
+        if isinstance(sent, list) and sent:
+            return [(str(p.get("node")), str(p.get("text") or "")) for p in sent]
+        site, p = self.tm.site, task.params
+        lang = p.get("lang") if isinstance(p.get("lang"), str) else None
+        if task.kind == "tour":
+            tour = site.tour(str(p.get("tour")))
+            pois = [site.poi(i) for i in (tour.points if tour else [])]
+            return [(q.node, poi_texts(site, q, lang)["text"]) for q in pois if q is not None]
+        if task.kind == "go_to_poi":
+            poi = site.poi(str(p.get("poi")))
+            return [(poi.node, poi_texts(site, poi, lang)["text"])] if poi else []
+        try:
+            return [(self.tm._target_node(task.kind, p), None)]
+        except ValueError:
+            return []
+
+    def _total(self, task: Task) -> int:
+        return sum(1 for _, text in self._points(task) if text is not None)
+
+    def _metres(self, start: str | None, goal: str) -> float:
+        if start is None or start not in self.tm.graph or goal not in self.tm.graph:
+            return UNKNOWN_TRAVEL_M if start != goal else 0.0
+        found = self.tm.graph.distances_to(goal).get(start)
+        return UNKNOWN_TRAVEL_M if found is None or math.isinf(found) else found
+
+    def _speed(self, robot: str | None) -> float:
+        info = self.tm.robots.get(robot) if robot else None
+        if info is not None:
+            return info.config.max_speed_mps
+        robots = self.tm.robots
+        if self._mean_speed is None or self._mean_speed[0] != len(robots):
+            speeds = [r.config.max_speed_mps for r in robots.values()]
+            self._mean_speed = (len(robots), sum(speeds) / len(speeds) if speeds else 0.7)
+        return self._mean_speed[1]
+
+    def _real(self, segments: list[Segment]) -> float:
+        move, talk = self.move.value, self.talk.value
+        return sum(s.nominal_s * (move if s.kind == "move" else talk) for s in segments)
+
+    def _remaining(self, run: _Progress, upto: int | None = None) -> float:
+        """Real seconds left of a running task (or of its first ``upto`` segments)."""
+        segs = run.segments[: upto if upto is not None else len(run.segments)]
+        if run.done >= len(segs):
+            return 0.0
+        elapsed = self.tm.clock() - run.mark_at
+        current = self._real(segs[run.done : run.done + 1])
+        return max(0.0, current - elapsed) + self._real(segs[run.done + 1 :])
+
+    # --- the queue simulation -------------------------------------------------------------------
+    def _current(self) -> _Schedule:
+        sched = self._schedule
+        if sched is None or self.tm.clock() - sched.built_at > self.refresh_s:
+            sched = self._schedule = self._build()
+        return sched
+
+    def _build(self) -> _Schedule:
+        sched = _Schedule(built_at=self.tm.clock())
+        for tie, robot in enumerate(self._pool()):
+            free_at, node = self._free(robot)
+            sched.heap.append((free_at, tie, robot.name, node))
+        heapq.heapify(sched.heap)
+        for task in self.tm.queue.ordered():
+            if task.internal:
+                continue
+            wait, arrival, _ = self._place(sched.heap, task)
+            sched.waits[task.id] = (wait, arrival)
+            sched.last = task.id
+        return sched
+
+    def _extend(self, sched: _Schedule, task: Task) -> bool:
+        """A request joined the queue: simulate it after the others, if it is really last."""
+        position = self.tm.queue.position(task)
+        if position is None or position != len(self.tm.queue) or task.pinned_robot is not None:
+            return False
+        if len(sched.waits) != position - 1:
+            return False
+        wait, arrival, _ = self._place(sched.heap, task)
+        sched.waits[task.id] = (wait, arrival)
+        sched.last = task.id
+        return True
+
+    def _pool(self) -> list[RobotInfo]:
+        working = [r for r in self.tm.robots.values() if r.online and not r.fault]
+        fit = [r for r in working if not r.needs_charge and r.battery > r.config.battery_low]
+        return fit or working
+
+    def _free(self, robot: RobotInfo) -> tuple[float, str | None]:
+        """When (real seconds from now) and where ``robot`` is free for the next task."""
+        current = self.tm.tasks.get(robot.current) if robot.current else None
+        free_at, node = 0.0, robot.node
+        if current is not None and not current.internal and not current.final:
+            run = self._running.get(current.id)
+            if run is not None:
+                free_at = self._remaining(run)
+            else:
+                free_at = self._real(self.segments(current, robot.node))
+            points = self._points(current)
+            node = points[-1][0] if points else node
+        if robot.needs_charge or robot.battery <= robot.config.battery_low:
+            free_at += self.charge_s
+        return free_at, node
+
+    def _place(
+        self, heap: list[tuple[float, int, str, str | None]], task: Task
+    ) -> tuple[float, float, str | None]:
+        """Give ``task`` to the robot free first (its pinned one if any); returns wait,
+        arrival and the robot, and books the robot until the task ends."""
+        if not heap:
+            return math.inf, math.inf, None
+        if task.pinned_robot is not None:
+            entry = next((e for e in heap if e[2] == task.pinned_robot), None)
+            if entry is None:
+                return math.inf, math.inf, None
+            heap.remove(entry)
+            heapq.heapify(heap)
+        else:
+            entry = heapq.heappop(heap)
+        free_at, tie, name, node = entry
+        segs = self.segments(task, node)
+        first = self._real(segs[:1])
+        heapq.heappush(heap, (free_at + self._real(segs), tie, name, self._end_node(task, node)))
+        return free_at, free_at + first, name
+
+    def _end_node(self, task: Task, start: str | None) -> str | None:
+        points = self._points(task)
+        return points[-1][0] if points else start

@@ -1,0 +1,153 @@
+// The robot's touch screen: the visitor panel's look and language files (/lib, /lang, /visitor
+// served by the robot itself), tours and points to request, the current explanation with its
+// picture, "continue the tour?" with a visible countdown, and the robot's state.
+import { html, render } from "/vendor/lit-html/lit-html.js";
+import { loadTexts } from "/lib/i18n.js";
+
+const app = document.getElementById("app");
+const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now() };
+const t = (key, vars) => state.texts.t(key, vars);
+
+async function post(path, body) {
+  const r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  let data = {};
+  try {
+    data = await r.json();
+  } catch {
+    data = {};
+  }
+  return { ok: r.ok, status: r.status, data };
+}
+
+async function refresh() {
+  const lang = state.chosen ? `?lang=${encodeURIComponent(state.chosen)}` : "";
+  const r = await fetch(`/api/screen${lang}`);
+  const screen = await r.json();
+  // A running tour speaks its visitor's language: the screen follows it.
+  if (screen.tour_lang && screen.tour_lang !== screen.lang) {
+    state.chosen = screen.tour_lang;
+    return refresh();
+  }
+  if (screen.task && !state.screen?.task) state.message = ""; // the request became a tour
+  state.screen = screen;
+  if (!state.texts || state.texts.lang !== screen.lang) state.texts = await loadTexts(screen.lang);
+  document.documentElement.lang = screen.lang;
+  draw();
+}
+
+async function ask(kind, item) {
+  const body = kind === "tour" ? { kind, tour: item.id } : { kind, poi: item.id };
+  body.lang = state.screen.lang;
+  const r = await post("/api/request", body);
+  if (r.ok) state.message = r.data.queued_offline ? t("request_queued_offline") : t("requested");
+  else state.message = r.status === 503 ? t("link_down_refuse") : t("error_server", { detail: r.data.detail ?? r.status });
+  draw();
+}
+
+async function answer(value) {
+  await post("/api/answer", { answer: value });
+}
+
+function picture(media, name) {
+  const first = (media ?? []).find((m) => m.url && !state.broken.has(m.url));
+  if (!first) return html`<div class="picture placeholder" role="img" aria-label=${t("picture_missing")}><span aria-hidden="true">🖼</span></div>`;
+  return html`<img class="picture" src=${first.url} alt=${name} @error=${() => { state.broken.add(first.url); draw(); }}>`;
+}
+
+function questionView(q) {
+  if (!q) return "";
+  const left = Math.max(0, Math.ceil(q.deadline_at - state.now / 1000));
+  return html`<section class="touch-question" role="alertdialog" aria-labelledby="question-text" aria-describedby="countdown">
+    <h2 id="question-text">${t("question")}</h2>
+    <p class="countdown" id="countdown" role="timer">${t("time_left", { s: left })}</p>
+    <div class="actions">
+      <button class="big" @click=${() => answer("yes")}>${t("yes")}</button>
+      <button class="big danger" @click=${() => answer("no")}>${t("no")}</button>
+    </div>
+  </section>`;
+}
+
+function stateView(s) {
+  const robot = s.state ?? {};
+  const mode = robot.mode ?? "idle";
+  const link = s.link ?? {};
+  const battery = robot.battery === undefined ? "" : `${Math.round(robot.battery * 100)} %`;
+  return html`${link.up === false
+      ? html`<p class="link-down" role="alert">${t(link.offline_requests === "refuse" ? "link_down_refuse" : "link_down_queue")}</p>`
+      : ""}
+    <p class="touch-state" role="status">
+      <span>${t(`mode_${mode}`)}</span>
+      ${s.going && !s.question ? html`<span>${t("going_next")}</span>` : ""}
+      ${battery ? html`<span>${t("battery", { p: battery })}</span>` : ""}
+    </p>`;
+}
+
+function nowView(s) {
+  const e = s.explanation;
+  if (!e) return html`<p>${t("touch_idle")}</p>`;
+  return html`<div class="touch-now">
+    ${picture(e.media, e.name)}
+    <div>
+      ${e.index ? html`<p class="muted">${t("state_progress", { i: e.index, n: e.total, place: e.name })}</p>` : html`<h3>${e.name}</h3>`}
+      <p class="explanation" aria-live="polite">${e.text}</p>
+    </div>
+  </div>`;
+}
+
+function draw() {
+  const s = state.screen;
+  if (!s || !state.texts) return;
+  app.setAttribute("aria-busy", "false");
+  if (!app.dataset.drawn) {
+    app.textContent = ""; // the "Loading…" placeholder, before lit-html owns the container
+    app.dataset.drawn = "1";
+  }
+  const refused = s.link?.up === false && s.link?.offline_requests === "refuse";
+  render(html`<header class="visitor-top">
+      <h1>${t("touch_title", { robot: s.robot })}</h1>
+      ${s.languages.length > 1 ? html`<div class="languages" role="group" aria-label=${t("choose_language")}>
+        ${s.languages.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === s.lang)}
+          @click=${() => { state.chosen = lang; refresh(); }}>${names.get(lang) ?? lang}</button>`)}</div>` : ""}
+    </header>
+    ${stateView(s)}
+    ${questionView(s.question)}
+    <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>
+    ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}
+    ${s.task ? "" : html`<section aria-labelledby="tours-title"><h2 id="tours-title">${t("tours")}</h2>
+      <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
+    </section>
+    <section aria-labelledby="points-title"><h2 id="points-title">${t("points")}</h2>
+      <div class="actions">${s.pois.map((poi) => html`<button class="big secondary" ?disabled=${refused} @click=${() => ask("go_to_poi", poi)}>${poi.name}</button>`)}</div>
+    </section>`}`, app);
+}
+
+const names = new Map();
+
+function connect() {
+  const scheme = location.protocol === "https:" ? "wss:" : "ws:";
+  const ws = new WebSocket(`${scheme}//${location.host}/ws`);
+  let pending = false;
+  ws.onmessage = () => {
+    // Every change: read the whole screen again (local to the robot, a few kB).
+    if (pending) return;
+    pending = true;
+    requestAnimationFrame(async () => {
+      pending = false;
+      await refresh();
+    });
+  };
+  ws.onclose = () => setTimeout(connect, 1000);
+}
+
+document.addEventListener("contextmenu", (e) => e.preventDefault());
+setInterval(() => {
+  state.now = Date.now();
+  if (state.screen?.question) draw();
+}, 250);
+
+(async () => {
+  await refresh();
+  for (const lang of state.screen.languages) names.set(lang, (await loadTexts(lang)).name);
+  draw();
+  connect();
+})();

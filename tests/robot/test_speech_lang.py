@@ -1,0 +1,44 @@
+"""Speech in the visitor's language: espeak-ng's voice for the tag (or its base language), the
+timed fallback for a language it has no voice for, and the language on the speech events."""
+
+from __future__ import annotations
+
+import shutil
+from typing import Any
+
+import pytest
+
+from guidebot.bus import Bus
+from robot_agent.clock import Clock
+from robot_agent.speech import Speech, voice_for
+
+pytestmark = pytest.mark.timeout(30)
+
+
+def test_voice_for_takes_the_tag_then_its_base_language() -> None:
+    voices = frozenset({"en", "en-us", "es", "es-419"})
+    assert voice_for("es", voices) == "es"
+    assert voice_for("en-US", voices) == "en-us"
+    assert voice_for("es-MX", voices) == "es"
+    assert voice_for("xx", voices) is None
+
+
+async def test_spanish_is_spoken_with_the_spanish_voice_and_unknown_languages_are_timed(
+    helpers: Any,
+) -> None:
+    if shutil.which("espeak-ng") is None:
+        pytest.skip("espeak-ng not installed (make system-deps)")
+    bus = Bus()
+    speech = Speech(bus.endpoint("speech"), Clock(100.0))
+    speech.start()
+    seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
+    net = bus.endpoint("net")
+    net.publish("say", {"text": "Bienvenidos al museo.", "lang": "es"})
+    await seen.wait_for(lambda: seen.of("speech_ended"))
+    started = seen.of("speech_started")[0].payload
+    assert started == {"text": "Bienvenidos al museo.", "lang": "es", "voice": "es"}
+    net.publish("say", {"text": "Klaatu barada nikto.", "lang": "xx"})
+    await seen.wait_for(lambda: len(seen.of("speech_ended")) == 2)
+    ended = seen.of("speech_ended")[1].payload
+    assert ended["lang"] == "xx" and ended["voice"] is None and ended["outcome"] == "done"
+    await speech.stop()

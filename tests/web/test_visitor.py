@@ -1,0 +1,233 @@
+"""The visitor panel (/visitor/) and the robot's touch screen in a real browser, against a real
+server, the building simulator and simulated robots (each with its touch screen).
+
+A visitor on a phone follows a tour from the request to its end; a Spanish visitor gets Spanish
+pages and Spanish speech; a visitor cancels; a second panel can neither see nor cancel the
+first one's request; "no" on the touch screen ends the tour early. Screenshots for the docs
+come from these scenarios (GUIDEBOT_SCREENSHOTS=1).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+from playwright.async_api import expect
+
+from guidebot.messages import Message
+from robot_agent.agent import RobotAgent
+from robot_agent.testing import light_robot
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
+
+PANEL_A = "panel-entrance-token"
+PANEL_B = "panel-shop-token"
+PHONE = (360, 740)
+KIOSK = (1280, 900)
+TIME_SCALE = 40.0
+LONG = 60_000
+
+
+@dataclass
+class VisitorFleet:
+    fleet: Any
+    agents: dict[str, RobotAgent]
+    speech: list[Message] = field(default_factory=list)
+    """speech_started on the robots' on-board buses."""
+
+    @property
+    def url(self) -> str:
+        return self.fleet.server.url
+
+    def panel_url(self, token: str = PANEL_A, extra: str = "") -> str:
+        return f"{self.url}/visitor/#token={token}{extra}"
+
+    def screen_url(self, robot: str = "R1") -> str:
+        server = self.agents[robot].screen_server
+        assert server is not None
+        return server.url
+
+    def task(self, task_id: str) -> Any:
+        return self.fleet.server.app.state.task_manager.tasks[task_id]
+
+
+@pytest.fixture
+def visitor_fleet(
+    fleet_factory: Callable[..., Any], tmp_path: Any
+) -> Callable[..., contextlib.AbstractAsyncContextManager[VisitorFleet]]:
+    """The web harness's server and building, plus robots with touch screens and panels."""
+
+    @contextlib.asynccontextmanager
+    async def make(
+        robots: int = 1, visitor: str | None = "yes", time_scale: float = TIME_SCALE
+    ) -> AsyncIterator[VisitorFleet]:
+        async with fleet_factory(robots=0) as fleet, contextlib.AsyncExitStack() as stack:
+            tokens = fleet.server.app.state.tokens
+            tokens.add(PANEL_A, "panel-entrance", "panel")
+            tokens.add(PANEL_B, "panel-shop", "panel")
+            site = fleet.server.app.state.sites.site
+            vf = VisitorFleet(fleet, {})
+            for robot in site.robots[:robots]:
+                agent = light_robot(
+                    fleet.server.url,
+                    robot.name,
+                    robot.token,
+                    site=fleet.site_file,
+                    start_node=robot.start_node,
+                    time_scale=time_scale,
+                    visitor=visitor,
+                )
+                await stack.enter_async_context(agent)
+                agent.bus.endpoint("test-speech").subscribe(
+                    "speech_started", vf.speech.append, tap=True
+                )
+                vf.agents[robot.name] = agent
+            yield vf
+
+    return make
+
+
+async def request_from(page: Any, tour_name: str, button: str = "Take this tour") -> None:
+    card = page.get_by_role("article", name=tour_name)
+    await card.get_by_role("button", name=button).click()
+
+
+async def test_a_phone_visitor_follows_a_tour_from_request_to_end(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with visitor_fleet() as vf:
+        watch = await open_page(vf.panel_url(), viewport=PHONE)
+        page = watch.page
+        await expect(page.get_by_role("heading", name="Tours")).to_be_visible()
+        await expect(page.get_by_role("status").first).to_contain_text("A robot is free now")
+        # Pictures come from the site's media; a missing one is a placeholder, never broken.
+        await expect(page.locator("img.picture").first).to_be_visible()
+        await expect(page.get_by_role("img", name="No picture").first).to_be_visible()
+        broken = await page.evaluate(
+            "[...document.images].filter(i => i.complete && i.naturalWidth === 0).length"
+        )
+        assert broken == 0
+        assert await page.evaluate("document.documentElement.scrollWidth") <= PHONE[0]
+        await web.axe_check(page)
+        await web.screenshot(page, "visitor-phone-en")
+        # Keep the robot busy with a staff tour, so the visitor waits in line first.
+        async with vf.fleet.http() as staff:
+            r = await staff.post(
+                "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "sword"}}
+            )
+            assert r.status_code == 201, r.text
+        await expect(page.get_by_role("status").first).to_contain_text(
+            "Every robot is busy", timeout=LONG
+        )
+        await request_from(page, "Highlights")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("You are number 1 in line")
+        await expect(state).to_contain_text("A robot will start for you in about")
+        await web.axe_check(page)
+        await web.screenshot(page, "visitor-phone-waiting")
+        await expect(page.get_by_text("Robot R1", exact=True)).to_be_visible(timeout=LONG)
+        await expect(state).to_contain_text("Stop 2 of 3", timeout=LONG)
+        await expect(page.get_by_role("progressbar", name="Tour progress")).to_be_visible()
+        await web.screenshot(page, "visitor-phone-progress")
+        await expect(state).to_contain_text("The tour has ended", timeout=LONG)
+        await page.get_by_role("button", name="Ask for another tour").click()
+        await expect(page.get_by_role("heading", name="Tours")).to_be_visible()
+
+
+async def test_a_spanish_visitor_gets_spanish_pages_speech_and_touch_screen(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with visitor_fleet() as vf:
+        watch = await open_page(vf.panel_url(extra="&kiosk=1"), viewport=KIOSK)
+        page = watch.page
+        await web.screenshot(page, "visitor-kiosk-en")
+        await page.get_by_role("button", name="Español").click()
+        await expect(page.get_by_role("heading", name="Visitas")).to_be_visible()
+        assert await page.evaluate("document.documentElement.lang") == "es"
+        await expect(page.get_by_role("article", name="Visita de la planta baja")).to_be_visible()
+        await web.axe_check(page)
+        await web.screenshot(page, "visitor-kiosk-es")
+        screen = await open_page(vf.screen_url(), viewport=(1024, 600))
+        await request_from(page, "Lo imprescindible", "Hacer esta visita")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("Parada 1 de 3", timeout=LONG)
+        # The robot's screen follows the tour's language, with the point's picture.
+        await expect(screen.page.get_by_role("heading", name="Hola, soy R1")).to_be_visible(
+            timeout=LONG
+        )
+        await expect(screen.page.locator(".explanation")).to_contain_text("mosaicos", timeout=LONG)
+        await web.axe_check(screen.page)
+        await web.screenshot(screen.page, "touch-screen-es")
+        await expect(state).to_contain_text("La visita ha terminado", timeout=LONG)
+        spoken = [m.payload for m in vf.speech]
+        assert spoken and all(p["lang"] == "es" for p in spoken)
+        assert any("mosaicos" in p["text"] for p in spoken)
+
+
+async def test_a_visitor_cancels_and_a_second_panel_cannot_see_or_cancel_it(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with visitor_fleet(robots=0) as vf:
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        await expect(page.get_by_role("status").first).to_contain_text("No robot is in service")
+        await expect(page.get_by_role("button", name="Take this tour").first).to_be_disabled()
+        # Staff bring a robot in later; the request waits for it meanwhile.
+        async with vf.fleet.http(PANEL_A) as panel_a:
+            r = await panel_a.post(
+                "/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}
+            )
+            assert r.status_code == 201, r.text
+            mine = r.json()["id"]
+        other = (await open_page(vf.panel_url(PANEL_B), viewport=PHONE)).page
+        await expect(other.get_by_role("heading", name="Tours")).to_be_visible()
+        await expect(other.get_by_role("button", name="Your request: ")).to_have_count(0)
+        async with vf.fleet.http(PANEL_B) as panel_b:
+            assert (await panel_b.get(f"/api/tasks/{mine}")).status_code == 404
+            assert (await panel_b.post(f"/api/tasks/{mine}/cancel")).status_code in (403, 404)
+            assert (await panel_b.get("/api/visitor/requests")).json() == []
+            assert (await panel_b.get("/api/tasks")).status_code == 403
+        assert vf.task(mine).state.value == "queued"
+        # The visitor's own request, on the page: refused as "no robot", then cancelled.
+        await page.reload()
+        await page.get_by_role("button", name="Your request: ").click()
+        await expect(page.locator(".request-state")).to_contain_text("No robot is in service")
+        await page.get_by_role("button", name="Cancel my request").click()
+        await page.get_by_role("button", name="Yes, cancel it").click()
+        await expect(page.locator(".request-state")).to_contain_text("was cancelled")
+        assert vf.task(mine).state.value == "cancelled"
+        await web.axe_check(page)
+
+
+async def test_no_on_the_touch_screen_ends_the_tour_early(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    # Robot time only 4x faster: the question stays open 20 robot seconds, 5 s for the test.
+    async with visitor_fleet(visitor=None, time_scale=4.0) as vf:
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        screen = (await open_page(vf.screen_url(), viewport=(1024, 600))).page
+        await expect(screen.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
+        await web.screenshot(screen, "touch-screen-en")
+        await request_from(page, "Ground floor tour")
+        question = screen.get_by_role("alertdialog", name="Shall we continue the tour?")
+        await expect(question).to_be_visible(timeout=LONG)
+        await expect(question.get_by_role("timer")).to_contain_text("s left to answer")
+        await web.axe_check(screen)
+        await web.screenshot(screen, "touch-screen-question")
+        await question.get_by_role("button", name="No, thanks").click()
+        await expect(page.locator(".request-state")).to_contain_text(
+            "The tour has ended", timeout=LONG
+        )
+        ended = next(
+            iter(
+                t for t in vf.fleet.server.app.state.task_manager.tasks.values() if t.kind == "tour"
+            )
+        )
+        async with vf.fleet.http() as staff:
+            history = (await staff.get(f"/api/tasks/{ended.id}/history")).json()
+        events = [h["event"] for h in history]
+        assert "point 1/5 explained" in events and "point 2/5 arrived" not in events
+        await expect(screen.get_by_role("button", name="Ground floor tour")).to_be_visible()
