@@ -32,6 +32,8 @@ from backend.building.component import building_interface
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
+from backend.metrics import routes as metrics_routes
+from backend.metrics.component import metrics
 from backend.rgm import rgm
 from backend.settings import Settings
 
@@ -43,6 +45,7 @@ Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 
 # Server modules started in this order after the hub (and stopped in reverse). One line each.
 COMPONENTS: list[Component] = [
+    metrics,
     server_brain,
     building_interface,
     rgm,
@@ -54,6 +57,7 @@ ROUTERS: list[APIRouter] = [
     hub_routes.router,
     *api_routers,
     building_routes.router,
+    metrics_routes.router,
 ]
 
 

@@ -25,6 +25,7 @@ from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
 from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
 from robot_agent.navigation import Navigator
+from robot_agent.reaction import ReactionTracker
 from robot_agent.speech import Speech
 from robot_agent.state import StateReporter
 from robot_agent.tasks import TaskRunner
@@ -124,6 +125,7 @@ class RobotAgent:
         self.link: Link | None = None
         self.screen: OnboardScreen | None = None
         self.screen_server: ScreenServer | None = None
+        self.reaction: ReactionTracker | None = None
         self._stack = contextlib.AsyncExitStack()
 
     async def __aenter__(self) -> RobotAgent:
@@ -206,6 +208,9 @@ class RobotAgent:
                 return sorted({i["net"] for i in dispatch.running()})
 
         navigator, battery = self.navigator, self.battery
+        self.reaction = ReactionTracker(bus.endpoint("reaction"), name)
+        self.reaction.start()  # before the task runner: see robot_agent/reaction.py
+        stack.callback(self.reaction.stop)
         self.tasks = TaskRunner(
             bus.endpoint("tasks"),
             name,

@@ -36,6 +36,7 @@ UP_TYPES: tuple[str, ...] = (
     "robot_fault",
     "task_started",
     "task_ended",
+    "task_reaction",
     "task_request",
     "get_path",
     "request_area",
