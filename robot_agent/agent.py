@@ -24,6 +24,7 @@ from robot_agent.gui import OnboardScreen, ScreenServer
 from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
 from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
+from robot_agent.metrics import RobotMetrics
 from robot_agent.navigation import Navigator
 from robot_agent.reaction import ReactionTracker
 from robot_agent.speech import Speech
@@ -126,6 +127,7 @@ class RobotAgent:
         self.screen: OnboardScreen | None = None
         self.screen_server: ScreenServer | None = None
         self.reaction: ReactionTracker | None = None
+        self.metrics: RobotMetrics | None = None
         self._stack = contextlib.AsyncExitStack()
 
     async def __aenter__(self) -> RobotAgent:
@@ -248,7 +250,12 @@ class RobotAgent:
             )
             self.screen.start()
             stack.callback(self.screen.stop)
-            self.screen_server = ScreenServer(self.screen, port=c.gui_port)
+            self.metrics = RobotMetrics(bus.endpoint("metrics"), name, self._masters)
+            self.metrics.start()
+            stack.push_async_callback(self.metrics.stop)
+            self.screen_server = ScreenServer(
+                self.screen, port=c.gui_port, metrics=self.metrics.render
+            )
             await self.screen_server.start()
             stack.push_async_callback(self.screen_server.stop)
         # Hardware last: its watchdogs run from here on, with every module ready to listen.
@@ -261,6 +268,11 @@ class RobotAgent:
             c.server or "none",
             self.screen_server.url if self.screen_server else "none",
         )
+
+    def _masters(self) -> list[Any]:
+        """The RoboCAN masters (none without CAN or before the hardware started)."""
+        stack = getattr(self.hardware, "stack", None)
+        return list(getattr(stack, "masters", ()))
 
     async def _make_dispatch(self) -> Any:
         try:

@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import uvicorn
 from fastapi import FastAPI, HTTPException, WebSocket, WebSocketDisconnect
-from fastapi.responses import HTMLResponse
+from fastapi.responses import HTMLResponse, Response
 from pydantic import BaseModel, Field
 
 from guidebot.bus import BusEndpoint
@@ -201,8 +201,16 @@ class OnboardScreen:
         )
 
 
-def create_screen_app(screen: OnboardScreen) -> FastAPI:
+def create_screen_app(screen: OnboardScreen, metrics: Callable[[], bytes] | None = None) -> FastAPI:
     app = FastAPI(title=f"GuideBot {screen.robot} touch screen", docs_url=None, redoc_url=None)
+    if metrics is not None:
+        render = metrics
+
+        @app.get("/metrics", response_class=Response)
+        async def get_metrics() -> Response:
+            """Prometheus text format (docs/metrics.md)."""
+            return Response(render(), media_type="text/plain; version=0.0.4; charset=utf-8")
+
     page = resources.files("robot_agent").joinpath("gui_page.html").read_text(encoding="utf-8")
 
     @app.get("/", response_class=HTMLResponse)
@@ -264,8 +272,16 @@ class _QuietServer(uvicorn.Server):
 class ScreenServer:
     """uvicorn serving the screen app on 127.0.0.1 (port 0: any free port, read back)."""
 
-    def __init__(self, screen: OnboardScreen, *, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(
+        self,
+        screen: OnboardScreen,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        metrics: Callable[[], bytes] | None = None,
+    ) -> None:
         self.screen = screen
+        self.metrics = metrics
         self.host = host
         self.port = port
         self._server: _QuietServer | None = None
@@ -277,7 +293,7 @@ class ScreenServer:
 
     async def start(self) -> None:
         config = uvicorn.Config(
-            create_screen_app(self.screen),
+            create_screen_app(self.screen, self.metrics),
             host=self.host,
             port=self.port,
             log_level="warning",

@@ -4,6 +4,8 @@ press on building_sim (a WebSocket client plays the robot and reports its half).
 from __future__ import annotations
 
 import asyncio
+import json
+import re
 import time
 from pathlib import Path
 
@@ -120,3 +122,25 @@ async def test_metrics_of_a_live_button_press(tmp_path: Path) -> None:
             assert values[("guidebot_modbus_online", (("module", "otb"),))] == 1
             assert values[("guidebot_tasks", (("state", "running"),))] == 1
             assert values[("guidebot_hub_delivery_latency_seconds_count", ())] > 0
+            # Docs are the contract: every family the server exposes is in docs/metrics.md.
+            documented = DOCS.read_text(encoding="utf-8")
+            for family in text_string_to_metric_families(by_token.text):
+                if family.name.startswith("guidebot_") and not family.name.endswith("_created"):
+                    assert family.name in documented, family.name
+
+
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "metrics.md"
+DASHBOARD = DOCS.with_name("grafana-dashboard.json")
+
+
+def test_dashboard_queries_only_documented_metrics() -> None:
+    documented = DOCS.read_text(encoding="utf-8")
+    dashboard = json.loads(DASHBOARD.read_text(encoding="utf-8"))
+    names = set()
+    for panel in dashboard["panels"]:
+        for target in panel["targets"]:
+            names |= set(re.findall(r"guidebot_[a-z_]+", target["expr"]))
+    assert names
+    for name in names:
+        base = re.sub(r"_(bucket|total|count|sum)$", "", name)
+        assert base in documented, name
