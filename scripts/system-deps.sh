@@ -2,8 +2,9 @@
 # Installs the Debian packages the tests use, only those missing (idempotent).
 # espeak-ng: the robots' speech (tests fall back to timed speech without it).
 # postgresql: the server's second database; tests run a private cluster on 127.0.0.1.
+# docker.io, debootstrap: tests/test_compose_engine.py runs docker-compose.yml on a private engine.
 set -euo pipefail
-wanted=(espeak-ng postgresql)
+wanted=(espeak-ng postgresql docker.io debootstrap)
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
