@@ -8,6 +8,7 @@ import json
 import re
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import httpx
 import yaml
@@ -15,6 +16,8 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from backend.auth import Role
 from backend.building.config import load_building
+from backend.hub import Hub
+from backend.metrics.server import ServerMetrics
 from backend.settings import Settings, StaticToken
 from backend.testing import running_server
 from bench.reaction import bench_site
@@ -144,3 +147,28 @@ def test_dashboard_queries_only_documented_metrics() -> None:
     for name in names:
         base = re.sub(r"_(bucket|total|count|sum)$", "", name)
         assert base in documented, name
+
+
+def test_lock_waits_are_per_area_and_only_the_reply_counts() -> None:
+    hub = Hub(gc_freeze=False)
+    metrics = ServerMetrics(SimpleNamespace(hub=hub))
+    asked = Message(type="request_area", source="R1", payload={"robot": "R1", "area": "corridor"})
+    asked.timestamp = 100.0
+    metrics.observe(asked)
+    broadcast = Message(type="area_granted", payload={"robot": "R1", "area": "corridor"})
+    metrics.observe(broadcast)  # everyone's copy: no correlation, not counted
+    reply = Message(
+        type="area_granted",
+        destination="R1",
+        correlation_id=asked.id,
+        payload={"robot": "R1", "area": "corridor"},
+    )
+    reply.timestamp = 102.5
+    metrics.observe(reply)
+    metrics.observe(reply)  # a duplicate reply finds no open request
+    values = samples(metrics.render().decode())
+    assert values[("guidebot_lock_wait_seconds_count", (("area", "corridor"),))] == 1
+    assert values[("guidebot_lock_wait_seconds_sum", (("area", "corridor"),))] == 2.5
+    assert values[("guidebot_hub_messages_in_total", (("type", "area_granted"),))] == 3
+    # No services yet (a server starting): the scrape still answers.
+    assert ("guidebot_hub_clients", (("role", "robot"),)) in values
