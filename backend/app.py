@@ -36,6 +36,8 @@ from backend.health import ComponentState, HealthBoard
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
+from backend.metrics import routes as metrics_routes
+from backend.metrics.component import metrics
 from backend.ratelimit import RateLimiter
 from backend.rgm import rgm
 from backend.settings import Settings
@@ -50,6 +52,7 @@ Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 
 # Server modules started in this order after the hub (and stopped in reverse). One line each.
 COMPONENTS: list[Component] = [
+    metrics,
     server_brain,
     building_interface,
     rgm,
@@ -64,6 +67,7 @@ ROUTERS: list[APIRouter] = [
     *api_routers,
     building_routes.router,
     console_routes.router,
+    metrics_routes.router,
 ]
 
 

@@ -90,6 +90,8 @@ class Settings(BaseSettings):
     environment: str = Field(default="development", pattern=r"^[A-Za-z0-9_.-]{1,32}$")
     admin_token: str = DEFAULT_ADMIN_TOKEN
     tokens: list[StaticToken] = Field(default_factory=list)
+    metrics_token: str | None = Field(default=None, min_length=8)
+    """Bearer token that may only read GET /metrics (docs/metrics.md)."""
     web_dir: Path = WEB_DIR
     # Hub (docs/protocol.md): per-client outbound queue, batching and limits.
     hub_queue_size: int = Field(default=4096, ge=8)

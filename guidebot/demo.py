@@ -1,31 +1,45 @@
 """``guidebot demo``: the whole fleet on one machine, as separate processes.
 
-The central server (SQLite, the demo site), the building simulator (the site's Modbus modules on
-127.0.0.1) and N robot agents with simulated RoboCAN hardware. It prints the URLs and tokens to
-use; Ctrl-C or SIGTERM stops every process in order (robots, building, server), each with
-SIGTERM first and SIGKILL only if it does not exit within the grace period: no orphans.
+The building simulator (the site's Modbus modules on free ports of 127.0.0.1, its control API
+on ``--sim-control-port``), the central server (SQLite, a copy of the site with the simulator's
+ports) and N robot agents with simulated RoboCAN hardware. It prints the URLs and tokens of
+every page in one block. With ``--scenario busy`` (the default) seeded simulated visitors press
+buttons, ask for tours at the visitor panel and answer "continue the tour?" (demo_visitors.py).
+
+A supervisor: a robot process that dies is reported and restarted (back-off 1, 2, 4 ... 30 s);
+the server or the building simulator dying ends the demo. Ctrl-C or SIGTERM stops every process
+in order (robots, server, building), each with SIGTERM first and SIGKILL only if it does not
+exit within the grace period: no orphans.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import select
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
+from typing import IO, Any
 
 import click
 import httpx
+import yaml
 
 __all__ = ["Fleet", "demo"]
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_SITE = ROOT / "sites" / "demo_museum.yaml"
 GRACE_S = 10.0
+RESTART_MAX_S = 30.0
+HEALTHY_RUN_S = 60.0  # a robot that ran this long before dying restarts at once again
+DEFAULT_CONTROL_PORT = 15080
 
 
 @dataclass
@@ -33,27 +47,58 @@ class Child:
     name: str
     args: list[str]
     process: subprocess.Popen[bytes] | None = None
+    started: float = 0.0
+    restarts: int = 0
+    restart_at: float | None = None
 
 
 class Fleet:
-    """Starts, watches and stops the demo's processes."""
+    """Starts, watches, restarts and stops the demo's processes."""
 
-    def __init__(self) -> None:
+    def __init__(self, env: dict[str, str] | None = None) -> None:
         self.children: list[Child] = []
         self.stopping = False
+        self.env = env
 
-    def spawn(self, name: str, *args: str) -> Child:
+    def spawn(self, name: str, *args: str, stdout: int | None = None) -> Child:
         child = Child(name, [sys.executable, "-m", "guidebot.cli", *args])
-        # A session of its own: Ctrl-C reaches only the launcher, which stops children in order.
-        child.process = subprocess.Popen(child.args, start_new_session=True)
+        self._start(child, stdout)
         self.children.append(child)
         return child
+
+    def _start(self, child: Child, stdout: int | None = None) -> None:
+        # A session of its own: Ctrl-C reaches only the launcher, which stops children in order.
+        child.process = subprocess.Popen(
+            child.args, start_new_session=True, stdout=stdout, env=self.env
+        )
+        child.started = time.monotonic()
 
     def dead(self) -> list[Child]:
         return [c for c in self.children if c.process is not None and c.process.poll() is not None]
 
+    def supervise(self, child: Child, now: float) -> str | None:
+        """A dead robot: schedule its restart, or restart it when due; returns what to say."""
+        process = child.process
+        assert process is not None
+        if child.restart_at is None:
+            if now - child.started >= HEALTHY_RUN_S:
+                child.restarts = 0
+            delay = min(RESTART_MAX_S, 2.0**child.restarts)
+            child.restarts += 1
+            child.restart_at = now + delay
+            return (
+                f"demo: robot {child.name} exited (code {process.returncode}); "
+                f"restarting it in {delay:g} s (restart {child.restarts})"
+            )
+        if now < child.restart_at:
+            return None
+        child.restart_at = None
+        self._start(child)
+        assert child.process is not None
+        return f"demo: robot {child.name} restarted (pid {child.process.pid})"
+
     def stop_all(self) -> None:
-        """Robots first (they report their last state), then the building, then the server."""
+        """Robots first (they report their last state), then the server, then the building."""
         self.stopping = True
         for child in reversed(self.children):
             process = child.process
@@ -70,19 +115,6 @@ class Fleet:
                 process.wait()
 
 
-def _panel_token() -> str:
-    """The demo's visitor-panel token: GUIDEBOT_PANEL_TOKEN (default dev-panel-token), added
-    to GUIDEBOT_TOKENS for the server process unless a panel token is already there."""
-    token = os.environ.get("GUIDEBOT_PANEL_TOKEN", "dev-panel-token")
-    tokens = json.loads(os.environ.get("GUIDEBOT_TOKENS") or "[]")
-    panels = [t["token"] for t in tokens if t.get("role") == "panel"]
-    if panels:
-        return str(panels[0])
-    tokens.append({"token": token, "name": "panel-entrance", "role": "panel"})
-    os.environ["GUIDEBOT_TOKENS"] = json.dumps(tokens)
-    return token
-
-
 def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -95,6 +127,80 @@ def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> None:
             pass
         time.sleep(0.2)
     raise click.ClickException(f"the server at {url} did not answer within {timeout_s:g} s")
+
+
+def _read_ready(child: Child, timeout_s: float = 60.0) -> dict[str, Any]:
+    """The building simulator's first line: {"ready": true, "control": URL, "modules": {...}}."""
+    assert child.process is not None and child.process.stdout is not None
+    stream: IO[bytes] = child.process.stdout
+    ready, _, _ = select.select([stream], [], [], timeout_s)
+    line = stream.readline() if ready else b""
+    try:
+        info: dict[str, Any] = json.loads(line)
+    except ValueError:
+        code = child.process.poll()
+        raise click.ClickException(
+            f"the building simulator did not start (exit code {code}); is its control port "
+            "taken? choose another with --sim-control-port (0: any free port)"
+        ) from None
+    return info
+
+
+def _site_with_ports(site: Path, ports: dict[str, int], folder: Path) -> Path:
+    """A copy of the site whose modules are where the simulator listens."""
+    data = yaml.safe_load(site.read_text(encoding="utf-8"))
+    for module in data.get("modules") or []:
+        module["port"] = ports.get(module["id"], module.get("port"))
+    path = folder / site.name
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    return path
+
+
+def _server_env(panel_token: str, control: str) -> dict[str, str]:
+    """The environment with the demo's visitor-panel token added to GUIDEBOT_TOKENS, and the
+    building simulator's control API for the console's "press a button"."""
+    env = dict(os.environ)
+    env.setdefault("GUIDEBOT_BUILDING_SIM_URL", control)
+    tokens = json.loads(env.get("GUIDEBOT_TOKENS") or "[]")
+    if not any(t.get("token") == panel_token for t in tokens):
+        tokens.append({"token": panel_token, "name": "visitor-panel", "role": "panel"})
+    env["GUIDEBOT_TOKENS"] = json.dumps(tokens)
+    return env
+
+
+def url_block(
+    url: str,
+    admin: str,
+    panel: str,
+    screens: list[tuple[str, str, str]],
+    control: str,
+    scenario: str,
+    seed: int,
+) -> str:
+    """Every page's URL and token, in one short block."""
+    lines = [
+        "",
+        "GuideBot demo is running (Ctrl-C stops everything).",
+        f"  staff console  {url}/admin/          admin token {admin}",
+        f"  visitor panel  {url}/visitor/#token={panel}   (kiosk: add &kiosk=1)",
+        f"  site editor    {url}/config/         admin token {admin}",
+        *(f"  robot {n:<8} {s}   touch screen (robot token {t})" for n, t, s in screens),
+        f"  API docs       {url}/docs   metrics {url}/metrics (admin token)",
+        f"  building sim   {control}/state",
+    ]
+    if scenario == "busy":
+        lines.append(
+            f"  scenario busy (seed {seed}): visitors press buttons, ask for tours at the "
+            "panel and answer 'continue the tour?'"
+        )
+    lines += [
+        "  request a tour:",
+        f"    curl -X POST {url}/api/tasks -H 'Authorization: Bearer {admin}' "
+        "-H 'Content-Type: application/json' "
+        '-d \'{"kind": "tour", "params": {"tour": "ground"}}\'',
+        "",
+    ]
+    return "\n".join(lines)
 
 
 @click.command()
@@ -114,14 +220,45 @@ def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> None:
     show_default=True,
     help="Touch screen of the first robot; the next robots take the next ports.",
 )
+@click.option(
+    "--sim-control-port",
+    type=click.IntRange(0, 65535),
+    default=DEFAULT_CONTROL_PORT,
+    show_default=True,
+    help="The building simulator's control API (0: any free port). Its Modbus modules always "
+    "take free ports, so two demos can run on one machine.",
+)
 @click.option("--db", default="sqlite+aiosqlite:///./guidebot-demo.db", show_default=True)
 @click.option("--no-can", is_flag=True, help="Robots without CAN (a bare simulated base): light.")
+@click.option(
+    "--scenario",
+    type=click.Choice(["busy", "quiet"]),
+    default="busy",
+    show_default=True,
+    help="busy: simulated visitors press buttons, ask for tours and answer the robots; "
+    "quiet: nothing happens until you ask.",
+)
+@click.option("--seed", type=int, default=1, show_default=True, help="The visitors' dice.")
+@click.option(
+    "--visitor-every",
+    type=click.FloatRange(min=0.1),
+    default=8.0,
+    show_default=True,
+    help="busy: mean wall seconds between two visitors' actions.",
+)
+@click.option(
+    "--panel-token",
+    default="dev-panel-token",
+    show_default=True,
+    envvar="GUIDEBOT_DEMO_PANEL_TOKEN",
+    help="Token of the visitor panel (role panel) the demo adds to the server's tokens.",
+)
 @click.option(
     "--visitors/--no-visitors",
     default=True,
     show_default=True,
-    help="Simulated visitors answer yes to 'continue the tour?' (else tours stop at the "
-    "first point unless someone answers on the touch screen).",
+    help="quiet: a simulated visitor on each robot answers yes to 'continue the tour?' (else "
+    "tours stop at the first point unless someone answers on the touch screen).",
 )
 def demo(
     robots: int,
@@ -129,16 +266,25 @@ def demo(
     site: Path,
     port: int,
     gui_port: int,
+    sim_control_port: int,
     db: str,
     no_can: bool,
+    scenario: str,
+    seed: int,
+    visitor_every: float,
+    panel_token: str,
     visitors: bool,
 ) -> None:
-    """Run the server, the building simulator and N simulated robots until Ctrl-C."""
+    """Run the building simulator, the server and N simulated robots until Ctrl-C."""
     from backend.site.yamlio import load_site_file
+    from guidebot.demo_visitors import Visitors
 
-    known = load_site_file(site).robots
+    loaded = load_site_file(site)
+    known = loaded.robots
     if robots > len(known):
         raise click.UsageError(f"{site} lists {len(known)} robots; --robots {robots} is too many")
+    if len(panel_token) < 8:
+        raise click.UsageError("--panel-token must be at least 8 characters")
     fleet = Fleet()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
@@ -147,48 +293,74 @@ def demo(
     signal.signal(signal.SIGTERM, on_signal)
     url = f"http://127.0.0.1:{port}"
     admin = os.environ.get("GUIDEBOT_ADMIN_TOKEN", "dev-admin-token")
-    panel = _panel_token()
     scale = f"{time_scale:g}"
+    folder = Path(tempfile.mkdtemp(prefix="guidebot-demo-"))
     try:
-        fleet.spawn("server", "server", "--port", str(port), "--site", str(site), "--db", db)
+        building = fleet.spawn(
+            "building-sim",
+            "building-sim",
+            "--site",
+            str(site),
+            "--time-scale",
+            scale,
+            "--control-port",
+            str(sim_control_port),
+            "--port-zero",
+            stdout=subprocess.PIPE,
+        )
+        ready = _read_ready(building)
+        control = str(ready["control"])
+        served = _site_with_ports(site, dict(ready["modules"]), folder)
+        fleet.env = _server_env(panel_token, control)
+        fleet.spawn("server", "server", "--port", str(port), "--site", str(served), "--db", db)
+        fleet.env = None
         _wait_healthy(url, fleet)
-        fleet.spawn("building-sim", "building-sim", "--site", str(site), "--time-scale", scale)
         screens = []
+        robot_children = set()
         for index, robot in enumerate(known[:robots]):
             args = ["robot", "--name", robot.name, "--server", url, "--token", robot.token]
-            args += ["--time-scale", scale, "--site", str(site)]
+            args += ["--time-scale", scale, "--site", str(served)]
             args += ["--gui-port", str(gui_port + index)]
-            args += ["--visitor", "yes"] if visitors else []
+            args += ["--visitor", "yes"] if visitors and scenario == "quiet" else []
             args += ["--no-can"] if no_can else ["--simulate", "--can", f"virtual:{robot.name}"]
+            robot_children.add(robot.name)
             fleet.spawn(robot.name, *args)
             screens.append((robot.name, robot.token, f"http://127.0.0.1:{gui_port + index}"))
-        click.echo(
-            "\n".join(
-                [
-                    "",
-                    "GuideBot demo is running (Ctrl-C stops everything).",
-                    f"  server      {url}   (API docs {url}/docs)",
-                    f"  admin token {admin}",
-                    f"  visitor panel (phone) {url}/visitor/#token={panel}",
-                    f"  visitor panel (kiosk) {url}/visitor/#token={panel}&kiosk=1",
-                    *(f"  robot {n:<5} token {t}   touch screen {s}" for n, t, s in screens),
-                    "  request a tour:",
-                    f"    curl -X POST {url}/api/tasks -H 'Authorization: Bearer {admin}' "
-                    "-H 'Content-Type: application/json' "
-                    '-d \'{"kind": "tour", "params": {"tour": "ground"}}\'',
-                    f"  follow it:  curl -H 'Authorization: Bearer {admin}' {url}/api/tasks",
-                    "",
-                ]
+        click.echo(url_block(url, admin, panel_token, screens, control, scenario, seed))
+        crowd = None
+        if scenario == "busy":
+            crowd = Visitors(
+                server=url,
+                panel_token=panel_token,
+                admin_token=admin,
+                building=control,
+                buttons=[b.id for b in loaded.buttons],
+                tours=[t.id for t in loaded.tours],
+                screens=[s for _, _, s in screens],
+                seed=seed,
+                every_s=visitor_every,
             )
-        )
-        while True:
-            dead = fleet.dead()
-            if dead:
-                code = dead[0].process.returncode if dead[0].process else None
-                raise click.ClickException(f"{dead[0].name} exited (code {code}): stopping")
-            time.sleep(0.5)
+        with httpx.Client(timeout=2.0) as http:
+            while True:
+                now = time.monotonic()
+                for child in fleet.dead():
+                    if child.name not in robot_children:
+                        code = child.process.returncode if child.process else None
+                        raise click.ClickException(f"{child.name} exited (code {code}): stopping")
+                for child in fleet.children:
+                    if child.name in robot_children and (
+                        child.restart_at is not None or child in fleet.dead()
+                    ):
+                        said = fleet.supervise(child, now)
+                        if said:
+                            click.echo(said, err=True)
+                if crowd is not None:
+                    for action in crowd.tick(http, now):
+                        click.echo(f"demo: {action}")
+                time.sleep(0.5)
     except KeyboardInterrupt:
-        click.echo("\ndemo: stopping robots, building simulator and server ...")
+        click.echo("\ndemo: stopping robots, server and building simulator ...")
     finally:
         fleet.stop_all()
+        shutil.rmtree(folder, ignore_errors=True)
         click.echo("demo: every process stopped")

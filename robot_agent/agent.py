@@ -24,7 +24,9 @@ from robot_agent.gui import OnboardScreen, ScreenServer
 from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
 from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
+from robot_agent.metrics import RobotMetrics
 from robot_agent.navigation import Navigator
+from robot_agent.reaction import ReactionTracker
 from robot_agent.site_sync import SiteFollower
 from robot_agent.speech import Speech
 from robot_agent.state import StateReporter
@@ -146,6 +148,8 @@ class RobotAgent:
         self.screen: OnboardScreen | None = None
         self.site_follower: SiteFollower | None = None
         self.screen_server: ScreenServer | None = None
+        self.reaction: ReactionTracker | None = None
+        self.metrics: RobotMetrics | None = None
         self._stack = contextlib.AsyncExitStack()
 
     async def __aenter__(self) -> RobotAgent:
@@ -230,6 +234,9 @@ class RobotAgent:
                 return sorted({i["net"] for i in dispatch.running()})
 
         navigator, battery = self.navigator, self.battery
+        self.reaction = ReactionTracker(bus.endpoint("reaction"), name)
+        self.reaction.start()  # before the task runner: see robot_agent/reaction.py
+        stack.callback(self.reaction.stop)
         self.tasks = TaskRunner(
             bus.endpoint("tasks"),
             name,
@@ -271,7 +278,12 @@ class RobotAgent:
             )
             self.screen.start()
             stack.callback(self.screen.stop)
-            self.screen_server = ScreenServer(self.screen, port=c.gui_port)
+            self.metrics = RobotMetrics(bus.endpoint("metrics"), name, self._masters)
+            self.metrics.start()
+            stack.push_async_callback(self.metrics.stop)
+            self.screen_server = ScreenServer(
+                self.screen, port=c.gui_port, metrics=self.metrics.render
+            )
             await self.screen_server.start()
             stack.push_async_callback(self.screen_server.stop)
         # Hardware last: its watchdogs run from here on, with every module ready to listen.
@@ -287,6 +299,11 @@ class RobotAgent:
 
     def _link_up(self) -> bool:
         return self.link is not None and self.link.upstream.connected.is_set()
+
+    def _masters(self) -> list[Any]:
+        """The RoboCAN masters (none without CAN or before the hardware started)."""
+        stack = getattr(self.hardware, "stack", None)
+        return list(getattr(stack, "masters", ()))
 
     async def _make_dispatch(self) -> Any:
         try:

@@ -320,8 +320,20 @@ def media_link(name: str) -> dict[str, str | None]:
     return {"name": name, "url": f"/media/{name}" if suffix in MEDIA_TYPES else None}
 
 
-def create_screen_app(screen: OnboardScreen, web_dir: Path = WEB_DIR) -> FastAPI:
+def create_screen_app(
+    screen: OnboardScreen,
+    web_dir: Path = WEB_DIR,
+    metrics: Callable[[], bytes] | None = None,
+) -> FastAPI:
     app = FastAPI(title=f"GuideBot {screen.robot} touch screen", docs_url=None, redoc_url=None)
+    if metrics is not None:
+        render = metrics
+
+        @app.get("/metrics", response_class=Response)
+        async def get_metrics() -> Response:
+            """Prometheus text format (docs/metrics.md)."""
+            return Response(render(), media_type="text/plain; version=0.0.4; charset=utf-8")
+
     files = resources.files("robot_agent")
     page = files.joinpath("gui_page.html").read_text(encoding="utf-8")
     script = files.joinpath("gui_page.js").read_text(encoding="utf-8")
@@ -412,8 +424,16 @@ class _QuietServer(uvicorn.Server):
 class ScreenServer:
     """uvicorn serving the screen app on 127.0.0.1 (port 0: any free port, read back)."""
 
-    def __init__(self, screen: OnboardScreen, *, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(
+        self,
+        screen: OnboardScreen,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        metrics: Callable[[], bytes] | None = None,
+    ) -> None:
         self.screen = screen
+        self.metrics = metrics
         self.host = host
         self.port = port
         self._server: _QuietServer | None = None
@@ -425,7 +445,7 @@ class ScreenServer:
 
     async def start(self) -> None:
         config = uvicorn.Config(
-            create_screen_app(self.screen),
+            create_screen_app(self.screen, metrics=self.metrics),
             host=self.host,
             port=self.port,
             log_level="warning",

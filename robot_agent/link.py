@@ -36,6 +36,7 @@ UP_TYPES: tuple[str, ...] = (
     "robot_fault",
     "task_started",
     "task_ended",
+    "task_reaction",
     "task_request",
     "tour_progress",
     "get_path",

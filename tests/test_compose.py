@@ -1,9 +1,10 @@
-"""docker-compose.yml cannot run here (no Docker engine), so check what can go stale: every
-service's command is a valid `guidebot` command line, its site file exists, and each robot's
-token is the one the site gives it."""
+"""docker-compose.yml: every service's command is a valid `guidebot` command line with existing
+site files and the site's robot tokens; and (tests/compose_engine.py) the fleet really runs on a
+Docker engine."""
 
 from __future__ import annotations
 
+import re
 import shlex
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,10 @@ from guidebot.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 COMPOSE = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
-SERVICES: dict[str, Any] = COMPOSE["services"]
+SERVICES: dict[str, Any] = {
+    name: service for name, service in COMPOSE["services"].items() if "command" in service
+}
+VARIABLE = re.compile(r"\$\{[A-Z_0-9]+:?-([^}]*)\}")
 
 
 def _argv(service: dict[str, Any]) -> list[str]:
@@ -25,7 +29,7 @@ def _argv(service: dict[str, Any]) -> list[str]:
     argv = shlex.split(command) if isinstance(command, str) else list(command)
     # Compose variables with defaults (${TIME_SCALE:-1}) resolve to their defaults; the image's
     # /app is this checkout.
-    return [a.replace("${TIME_SCALE:-1}", "1").replace("/app/", f"{ROOT}/") for a in argv]
+    return [VARIABLE.sub(r"\1", a).replace("/app/", f"{ROOT}/") for a in argv]
 
 
 def _parse(argv: list[str]) -> click.Context:

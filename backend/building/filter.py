@@ -26,6 +26,11 @@ class InputFilter:
         self.value = value
         self._since: float | None = None
 
+    @property
+    def pending(self) -> bool:
+        """A change is being timed (seen, not yet accepted)."""
+        return self._since is not None
+
     def update(self, raw: int, t: float) -> int | None:
         """Feed one sample; returns the new accepted value when it changes, else None."""
         if raw == self.value:

@@ -79,6 +79,7 @@ class BuildingInterface:
         }
         self.values: dict[tuple[str, str], int] = {}
         self._filters: dict[tuple[str, str], InputFilter] = {}
+        self._first_seen: dict[tuple[str, str], float] = {}  # wall time, docs/reaction.md
         self._waiters: dict[tuple[str, str], list[tuple[int, asyncio.Future[None]]]] = {}
         self._floors: dict[tuple[str, str], str] = {}
         if floor_of_node:
@@ -219,8 +220,13 @@ class BuildingInterface:
             self._wake(key, raw)
             return
         if point.kind == PointKind.discrete_input:
-            new = self._filters[key].update(raw, t)
+            input_filter = self._filters[key]
+            new = input_filter.update(raw, t)
             if new is None:
+                if input_filter.pending:
+                    self._first_seen.setdefault(key, time.time())
+                else:
+                    self._first_seen.pop(key, None)
                 return
         elif raw == self.values[key]:
             return
@@ -240,6 +246,7 @@ class BuildingInterface:
                 "value": value,
                 "node": point.node,
                 "floor": self._floors.get(key),
+                "sampled_at": self._first_seen.pop(key, None) or time.time(),
             },
         )
         self._wake(key, new)

@@ -58,6 +58,7 @@ _ROBOT = frozenset(
         "task_ended",
         "petri_net_ended",
         "tour_progress",
+        "task_reaction",  # the reaction chain's robot-side stamps (docs/reaction.md)
         "petri_net_event",  # markings for the console's RoboGraph monitor
         "site_loaded",
         "get_path",

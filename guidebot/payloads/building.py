@@ -91,6 +91,9 @@ class BuildingInputChanged(PayloadModel):
     value: int | bool
     node: str | None = None
     floor: str | None = None
+    sampled_at: float | None = None
+    """Wall time (time.time()) the server received the first sample showing the new value:
+    the anti-spurious filter runs from there (docs/reaction.md)."""
 
 
 @register_payload("building_module_health")

@@ -9,11 +9,13 @@ from pydantic import Field
 from guidebot.messages import PayloadModel, register_payload
 
 __all__ = [
+    "ReactionMeasured",
     "RobotLink",
     "TaskAssigned",
     "TaskCancel",
     "TaskEnded",
     "TaskEvent",
+    "TaskReaction",
     "TaskRequest",
     "TaskStarted",
     "TourProgress",
@@ -61,6 +63,39 @@ class TaskEnded(PayloadModel):
     robot: str
     outcome: Outcome = "done"
     reason: str = ""
+
+
+@register_payload("task_reaction")
+class TaskReaction(PayloadModel):
+    """The robot's side of the reaction chain (docs/reaction.md), sent once per task, when the
+    robot first moves for it. Wall-clock stamps (time.time()), seconds."""
+
+    task_id: str
+    robot: str
+    received_at: float
+    """The link got task_assigned (T9)."""
+    net_started_at: float | None = None
+    """RG dispatch was asked to run the task's net (T10)."""
+    path_requested_at: float | None = None
+    """Navigation sent get_path."""
+    path_received_at: float | None = None
+    """The path arrived (T11)."""
+    commanded_at: float
+    """Navigation published the first non-zero set_velocity (T13)."""
+    moving_at: float
+    """The base entity had put the first non-zero velocity frame on the CAN bus (T14)."""
+
+
+@register_payload("reaction_measured")
+class ReactionMeasured(PayloadModel):
+    """The server's join of one task's reaction chain (docs/reaction.md): every stamp known,
+    and each step in milliseconds. ``button`` is set when a building button started it."""
+
+    task_id: str
+    robot: str
+    button: str | None = None
+    stamps: dict[str, float]
+    steps_ms: dict[str, float]
 
 
 @register_payload("task_event")

@@ -1,0 +1,1 @@
+"""Prometheus metrics of the central server and the reaction chain (docs/metrics.md)."""
