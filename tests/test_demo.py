@@ -85,7 +85,7 @@ async def test_busy_demo_survives_a_robot_crash_beside_a_second_fleet(tmp_path: 
         block = await busy.wait_line(r"building sim\s+http", busy.out)
         text = "\n".join(busy.out)
         assert f"{busy.url}/admin" in text and f"{busy.url}/config" in text
-        assert f"{busy.url}/visitor#token=demo-panel-token" in text
+        assert f"{busy.url}/visitor/#token=dev-panel-token" in text
         assert re.search(r"robot R2\s+http://127\.0\.0\.1:\d+\s+touch screen", text)
         busy.control = block.split()[-1].removesuffix("/state")
         await quiet.wait_line(r"building sim\s+http", quiet.out)
