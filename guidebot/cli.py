@@ -30,6 +30,7 @@ BENCHMARKS: dict[str, str] = {
     "traffic": "bench.traffic:main",
     "tasks": "bench.tasks:main",
     "modbus": "bench.modbus:main",
+    "soak": "bench.soak:main",
 }
 
 

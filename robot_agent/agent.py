@@ -17,6 +17,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from fastapi import FastAPI
+
 from guidebot.bus import Bus
 from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
@@ -246,7 +248,9 @@ class RobotAgent:
             )
             self.screen.start()
             stack.callback(self.screen.stop)
-            self.screen_server = ScreenServer(self.screen, port=c.gui_port)
+            self.screen_server = ScreenServer(
+                self.screen, port=c.gui_port, extra=self._sim_routes()
+            )
             await self.screen_server.start()
             stack.push_async_callback(self.screen_server.stop)
         # Hardware last: its watchdogs run from here on, with every module ready to listen.
@@ -259,6 +263,21 @@ class RobotAgent:
             c.server or "none",
             self.screen_server.url if self.screen_server else "none",
         )
+
+    def _sim_routes(self) -> Callable[[FastAPI], None] | None:
+        """Fault injection on the screen port, for simulated RoboCAN modules only."""
+        hardware = self.hardware
+        if not (self.config.simulate and isinstance(hardware, RoboCANHardware)):
+            return None
+        from robot_agent.sim_control import add_sim_routes
+
+        endpoint = self.bus.endpoint("sim_control")
+
+        def modules() -> list[int]:
+            stack = hardware.stack
+            return list(stack.simulator.layout) if stack and stack.simulator else []
+
+        return lambda app: add_sim_routes(app, endpoint, modules)
 
     async def _make_dispatch(self) -> Any:
         try:
@@ -292,7 +311,14 @@ class RobotAgent:
         )
         state = self.state
         assert state is not None
-        self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=state.publish_now)
+        navigator = self.navigator
+        assert navigator is not None
+
+        def on_connect() -> None:
+            state.publish_now()  # first: the server takes back the areas it holds
+            navigator.resync()
+
+        self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=on_connect)
         self.link.start()
         self._stack.push_async_callback(self.link.stop)
         await self.hub.start()

@@ -201,8 +201,13 @@ class OnboardScreen:
         )
 
 
-def create_screen_app(screen: OnboardScreen) -> FastAPI:
+def create_screen_app(
+    screen: OnboardScreen, *, extra: Callable[[FastAPI], None] | None = None
+) -> FastAPI:
+    """The touch screen's app; ``extra`` adds routes (the simulator's fault injection)."""
     app = FastAPI(title=f"GuideBot {screen.robot} touch screen", docs_url=None, redoc_url=None)
+    if extra is not None:
+        extra(app)
     page = resources.files("robot_agent").joinpath("gui_page.html").read_text(encoding="utf-8")
 
     @app.get("/", response_class=HTMLResponse)
@@ -264,8 +269,16 @@ class _QuietServer(uvicorn.Server):
 class ScreenServer:
     """uvicorn serving the screen app on 127.0.0.1 (port 0: any free port, read back)."""
 
-    def __init__(self, screen: OnboardScreen, *, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(
+        self,
+        screen: OnboardScreen,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        extra: Callable[[FastAPI], None] | None = None,
+    ) -> None:
         self.screen = screen
+        self.extra = extra
         self.host = host
         self.port = port
         self._server: _QuietServer | None = None
@@ -277,7 +290,7 @@ class ScreenServer:
 
     async def start(self) -> None:
         config = uvicorn.Config(
-            create_screen_app(self.screen),
+            create_screen_app(self.screen, extra=self.extra),
             host=self.host,
             port=self.port,
             log_level="warning",

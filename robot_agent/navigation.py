@@ -159,6 +159,7 @@ class Navigator:
         self._door_failed: dict[str, str] = {}
         self._elevators: dict[str, str] = {}
         self._granted: set[str] = set()
+        self._waiting_area: str | None = None
         self._news = asyncio.Event()
         self._odom_event = asyncio.Event()
         self._last_cmd: tuple[float, float, float] = (math.nan, math.nan, 0.0)
@@ -550,6 +551,17 @@ class Navigator:
                 distance += math.hypot(steps[j + 1].x - s.x, steps[j + 1].y - s.y)
             j += 1
 
+    def areas_held(self) -> list[str]:
+        """Areas held or granted ahead (robot_state ``areas``: the server's resync)."""
+        return sorted(self.held_areas | self._granted)
+
+    def resync(self) -> None:
+        """The link is back (maybe to a restarted server that never saw the request): ask
+        again for the area the robot stands waiting for. A repeated request is harmless."""
+        if self._waiting_area is not None:
+            log.info("%s: still waiting for area %s: asked again", self.robot, self._waiting_area)
+            self.ep.publish("request_area", {"robot": self.robot, "area": self._waiting_area})
+
     async def _acquire_area(self, area: str) -> None:
         if area in self._granted:
             # Granted ahead as part of a chain of back-to-back areas.
@@ -558,7 +570,11 @@ class Navigator:
         self.state = NavState.WAITING_AREA
         self._send_velocity(0.0, 0.0)
         self.ep.publish("request_area", {"robot": self.robot, "area": area})
-        await self._wait_until(lambda: area in self._granted, f"area {area}")
+        self._waiting_area = area
+        try:
+            await self._wait_until(lambda: area in self._granted, f"area {area}")
+        finally:
+            self._waiting_area = None
         log.info("%s: area %s granted", self.robot, area)
         self.held_areas.add(area)
         self.state = NavState.MOVING

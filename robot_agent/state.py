@@ -46,7 +46,18 @@ class StateReporter:
         self._unsub: Callable[[], None] | None = None
 
     def start(self) -> None:
-        self._unsub = self.ep.subscribe("module_status", self._on_module_status)
+        unsubs = [
+            self.ep.subscribe("module_status", self._on_module_status),
+            # A fault is told at once: the server must not hand a broken robot more work
+            # in the meantime (it did, a task every few ms, until the next periodic state).
+            self.ep.subscribe("robot_fault", self._on_fault),
+        ]
+
+        def unsubscribe() -> None:
+            for u in unsubs:
+                u()
+
+        self._unsub = unsubscribe
         self._task = asyncio.get_running_loop().create_task(self._run(), name="robot-state")
 
     async def stop(self) -> None:
@@ -56,6 +67,9 @@ class StateReporter:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+
+    def _on_fault(self, _message: Message) -> None:
+        self.publish_now()
 
     def _on_module_status(self, message: Message) -> None:
         p = message.payload
@@ -93,6 +107,7 @@ class StateReporter:
             "speed": round(self.nav.speed, 3),
             "nets": self.nets(),
             "modules": dict(self.modules),
+            "areas": self.nav.areas_held(),
             "seq": self.seq,
         }
 

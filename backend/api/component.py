@@ -201,6 +201,9 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
                 logger.subscribe(pattern, log_message, tap=True)
             for pattern in LOGGED_BROADCASTS:
                 logger.subscribe(pattern, log_message)
+            # The log's mark of a new server life: grants of an earlier one are void (robots
+            # declare what they hold again in their robot_state; guidebot/invariants.py).
+            store.record_event("server_started", "server", {"site_version": version})
             tasks.restore(await store.load_open_tasks())
             traffic.start()
             health.set("traffic_manager", ComponentState.ok)

@@ -224,6 +224,7 @@ class TrafficManager:
             return
         self._positions[robot] = node
         here = self.graph.area_at.get(node)
+        self._adopt(robot, here, msg.payload.get("areas"))
         self._check_conflict(robot, here)
         grants: list[Grant] = []
         for area in self.locks.held_by(robot):
@@ -250,6 +251,20 @@ class TrafficManager:
             self.locks.set_online(robot, False)
 
     # --- helpers -------------------------------------------------------------------------
+    def _adopt(self, robot: str, here: str | None, reported: object) -> None:
+        """The locks a robot says it holds (robot_state ``areas``) and the area it stands in
+        are its own: after a server restart this lock table starts empty, and without this a
+        second robot would be granted an area the first is in (found by the soak)."""
+        claimed = [a for a in reported if isinstance(a, str)] if isinstance(reported, list) else []
+        if here is not None:
+            claimed.append(here)
+        for area in dict.fromkeys(claimed):
+            if area not in self.graph.area_nodes or self.locks.holder(area) == robot:
+                continue
+            if self.locks.adopt(robot, area, entered=area == here):
+                log.warning("traffic: %s holds %s by its own report (resync)", robot, area)
+                self._emit("area_granted", {"robot": robot, "area": area, "resync": True})
+
     def _check_conflict(self, robot: str, here: str | None) -> None:
         """A robot reporting itself inside an area another robot holds: tell staff at once."""
         alert_id = f"conflict:{robot}"

@@ -42,6 +42,9 @@ class RobotState(PayloadModel):
     speed: float = 0.0
     nets: list[str] = Field(default_factory=list)
     modules: dict[str, str] = Field(default_factory=dict)
+    areas: list[str] = Field(default_factory=list, max_length=64)
+    """Restricted areas the robot holds or was granted: after a server restart the Traffic
+    Manager takes them from here (its lock table starts empty)."""
     seq: int = 0
 
 

@@ -354,3 +354,31 @@ async def test_a_robot_reporting_no_floor_is_on_its_nodes_floor() -> None:
         assert tasks.robots["R1"].as_dict()["floor"] == "F1"
     finally:
         await tasks.stop()
+
+
+async def test_a_robot_whose_agent_restarted_gives_its_running_task_back(
+    bus: Bus, manager: TaskManager, events: list[Message]
+) -> None:
+    """Killed and restarted within the loss grace, the robot reports no task: the task is
+    requeued at once, not left `running` for ever (found by the soak)."""
+    _r1, _r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    await r3.wait_for("task_assigned")
+    r3.start(task.id)
+    r3.state("busy")
+    assert task.state is TaskState.RUNNING
+    r3.task_id = None  # a new agent process: it knows of no task
+    r3.state("idle")
+    assert states_of(events, task.id)[2:4] == ["running", "queued"]
+    assert task.state is not TaskState.RUNNING or task.robot != "R3"
+
+
+async def test_a_failed_task_always_carries_a_reason(bus: Bus, manager: TaskManager) -> None:
+    _r1, _r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    order = await r3.wait_for("task_assigned")  # nearest to the hall
+    assert order.payload["task_id"] == task.id
+    r3.start(task.id)
+    r3.end(task.id, outcome="failed")  # no reason in the report
+    assert task.state is TaskState.FAILED
+    assert task.reason == "R3 reported the task failed without saying why"

@@ -253,3 +253,31 @@ def test_the_planner_never_crosses_a_cabin_without_riding() -> None:
     assert path.nodes == ["charge_b", "charge_a", "entrance", "hall"]
     up = SiteGraph(site).shortest_path("hall", "gc1")
     assert up.nodes[:3] == ["hall", "lift0", "lift1"]
+
+
+async def test_a_restarted_server_takes_back_the_locks_robots_report(bus: Bus) -> None:
+    """The lock table starts empty after a restart: a robot inside an area, or holding a grant
+    it has not used yet, keeps it from its robot_state; a second robot waits (found by the
+    soak: both were once granted the elevator)."""
+    events: list[tuple[str, dict[str, Any]]] = []
+    traffic = TrafficManager(
+        bus.endpoint("traffic_manager"),
+        demo_site(),
+        on_event=lambda kind, data: events.append((kind, data)),
+    )
+    traffic.start()
+    r1, r2 = RobotStub(bus, "R1", "corridor_w"), RobotStub(bus, "R2", "hall")
+    r3 = RobotStub(bus, "R3", "ga1")
+    r1.state("busy")  # inside the corridor: nobody else held it
+    r2.state("busy", areas=["elevator"])  # granted before the restart, not entered yet
+    assert traffic.locks.holder("corridor") == "R1" and traffic.locks.entered("corridor")
+    assert traffic.locks.holder("elevator") == "R2" and not traffic.locks.entered("elevator")
+    assert ("area_granted", {"robot": "R2", "area": "elevator", "resync": True}) in events
+    r3.endpoint.publish("request_area", {"robot": "R3", "area": "elevator"})
+    r3.state("busy", areas=["corridor"])  # a stale claim on a held area is not taken
+    assert traffic.locks.holder("corridor") == "R1" and not r3.of_type("area_granted")
+    r2.node = "lift0"
+    r2.state("busy", areas=["elevator"])
+    r2.node = "hall"
+    r2.state("busy", areas=[])  # out again: released, and the waiter gets it
+    await r3.wait_for("area_granted")
