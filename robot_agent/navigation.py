@@ -39,6 +39,10 @@ __all__ = ["NavState", "NavigationFailed", "Navigator", "PathStep"]
 log = logging.getLogger(__name__)
 
 
+WAIT_LOG_S = 60.0
+"""Robot seconds between two "still waiting for ..." warnings."""
+
+
 class NavigationFailed(Exception):
     """A goal could not be reached; ``reason`` is sent in navigation_failed."""
 
@@ -668,16 +672,31 @@ class Navigator:
     async def _wait_until(
         self, ready: Callable[[], bool], what: str, *, retry: Callable[[], None] | None = None
     ) -> None:
-        deadline = self.clock.now() + self.wait_timeout_s
+        started = self.clock.now()
+        deadline = started + self.wait_timeout_s
         # Re-ask no sooner than the building's own time-out (a few wall seconds).
         retry_every = max(10.0, 7.0 * self.clock.time_scale)
-        next_retry = self.clock.now() + retry_every
+        next_retry = started + retry_every
+        # What the robot stands waiting for is in its log: at once, then every WAIT_LOG_S.
+        next_log: float | None = None
         while True:
             self._news.clear()
             self._check_fault()
             if ready():
+                if next_log is not None:
+                    waited = self.clock.now() - started
+                    log.info("%s: %s came after %.0f s", self.robot, what, waited)
                 return
             now = self.clock.now()
+            if next_log is None or now >= next_log:
+                if next_log is None:
+                    log.info("%s: waiting for %s", self.robot, what)
+                else:
+                    log.warning(
+                        "%s: still waiting for %s after %.0f s (gives up after %.0f s)",
+                        *(self.robot, what, now - started, self.wait_timeout_s),
+                    )
+                next_log = now + WAIT_LOG_S
             if now >= deadline:
                 raise NavigationFailed(f"timed out waiting for {what}")
             if retry is not None and now >= next_retry:

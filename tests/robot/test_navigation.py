@@ -134,3 +134,28 @@ async def test_area_wait_and_yield_then_goal_reached(rig: Rig) -> None:
     await rig.seen.wait_for(lambda: rig.seen.of("goal_reached"), timeout=30)
     assert rig.nav.node == "gb1"
     assert not rig.seen.of("navigation_failed")
+
+
+async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_reconnect(
+    rig: Rig, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level("INFO", logger="robot_agent.navigation")
+    r2 = rig.bus.endpoint("R2")
+    r2.publish("request_area", {"robot": "R2", "area": "corridor"})
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+
+    def asked() -> list[Any]:
+        return [m for m in rig.seen.of("request_area") if m.payload["robot"] == "R1"]
+
+    await rig.seen.wait_for(lambda: asked())
+    assert rig.nav.state == "waiting_area" and rig.nav.areas_held() == []
+    assert "R1: waiting for area corridor" in caplog.text
+    rig.nav.resync()  # the link is back, maybe to a restarted server: ask again
+    assert len(asked()) == 2 and asked()[-1].payload == {"robot": "R1", "area": "corridor"}
+    # 60 robot seconds (3 s of wall time here) later, a warning says it still waits.
+    await rig.seen.wait_for(lambda: "still waiting for area corridor" in caplog.text, timeout=20)
+    r2.publish("release_area", {"robot": "R2", "area": "corridor"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached"), timeout=30)
+    assert "R1: area corridor came after" in caplog.text
+    rig.nav.resync()  # nothing is waited for any more: nothing is asked
+    assert len(asked()) == 2
