@@ -318,7 +318,13 @@ class RobotAgent:
             state.publish_now()  # first: the server takes back the areas it holds
             navigator.resync()
 
-        self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=on_connect)
+        self.link = Link(
+            self.bus.endpoint("link"),
+            self.hub,
+            c.name,
+            on_connect=on_connect,
+            on_disconnect=navigator.link_lost,
+        )
         self.link.start()
         self._stack.push_async_callback(self.link.stop)
         await self.hub.start()

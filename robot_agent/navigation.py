@@ -164,6 +164,7 @@ class Navigator:
         self._elevators: dict[str, str] = {}
         self._granted: set[str] = set()
         self._waiting_area: str | None = None
+        self._wait_retry: Callable[[], None] | None = None
         self._news = asyncio.Event()
         self._odom_event = asyncio.Event()
         self._last_cmd: tuple[float, float, float] = (math.nan, math.nan, 0.0)
@@ -559,12 +560,26 @@ class Navigator:
         """Areas held or granted ahead (robot_state ``areas``: the server's resync)."""
         return sorted(self.held_areas | self._granted)
 
+    def link_lost(self) -> None:
+        """Without the link the building's broadcasts are missed: doors and cabins become
+        unknown, and unknown is closed (the robot stops before them until told again). A
+        robot once drove into a cabin that had left while its link was down (the soak)."""
+        self._doors_open.clear()
+        self._elevators.clear()
+        self._news.set()
+
     def resync(self) -> None:
-        """The link is back (maybe to a restarted server that never saw the request): ask
-        again for the area the robot stands waiting for. A repeated request is harmless."""
+        """The link is back (maybe to a restarted server that never saw the requests): ask
+        again for the area the robot stands waiting for, the doors it holds and the elevator
+        it waits for; the answers say how things stand. Repeated requests are harmless."""
+        self.link_lost()  # whatever was missed meanwhile is asked again below
         if self._waiting_area is not None:
             log.info("%s: still waiting for area %s: asked again", self.robot, self._waiting_area)
             self.ep.publish("request_area", {"robot": self.robot, "area": self._waiting_area})
+        for door in sorted(self._held_doors):
+            self._open_door(door)
+        if self._wait_retry is not None:
+            self._wait_retry()
 
     async def _acquire_area(self, area: str) -> None:
         if area in self._granted:
@@ -679,31 +694,35 @@ class Navigator:
         next_retry = started + retry_every
         # What the robot stands waiting for is in its log: at once, then every WAIT_LOG_S.
         next_log: float | None = None
-        while True:
-            self._news.clear()
-            self._check_fault()
-            if ready():
-                if next_log is not None:
-                    waited = self.clock.now() - started
-                    log.info("%s: %s came after %.0f s", self.robot, what, waited)
-                return
-            now = self.clock.now()
-            if next_log is None or now >= next_log:
-                if next_log is None:
-                    log.info("%s: waiting for %s", self.robot, what)
-                else:
-                    log.warning(
-                        "%s: still waiting for %s after %.0f s (gives up after %.0f s)",
-                        *(self.robot, what, now - started, self.wait_timeout_s),
-                    )
-                next_log = now + WAIT_LOG_S
-            if now >= deadline:
-                raise NavigationFailed(f"timed out waiting for {what}")
-            if retry is not None and now >= next_retry:
-                retry()
-                next_retry = now + retry_every
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._news.wait(), self.clock.wall(1.0) + 0.05)
+        self._wait_retry = retry  # a reconnect asks again at once (resync)
+        try:
+            while True:
+                self._news.clear()
+                self._check_fault()
+                if ready():
+                    if next_log is not None:
+                        waited = self.clock.now() - started
+                        log.info("%s: %s came after %.0f s", self.robot, what, waited)
+                    return
+                now = self.clock.now()
+                if next_log is None or now >= next_log:
+                    if next_log is None:
+                        log.info("%s: waiting for %s", self.robot, what)
+                    else:
+                        log.warning(
+                            "%s: still waiting for %s after %.0f s (gives up after %.0f s)",
+                            *(self.robot, what, now - started, self.wait_timeout_s),
+                        )
+                    next_log = now + WAIT_LOG_S
+                if now >= deadline:
+                    raise NavigationFailed(f"timed out waiting for {what}")
+                if retry is not None and now >= next_retry:
+                    retry()
+                    next_retry = now + retry_every
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._news.wait(), self.clock.wall(1.0) + 0.05)
+        finally:
+            self._wait_retry = None
 
     def _check_fault(self) -> None:
         if self.fault is not None:

@@ -286,12 +286,14 @@ async def test_link_told_of_a_drop_resends_without_polling() -> None:
     bus = Bus()
     up = _FakeUpstreamWithDisconnect()
     up.connected.set()
-    link = Link(bus.endpoint("link"), up, "R1")
+    drops: list[bool] = []
+    link = Link(bus.endpoint("link"), up, "R1", on_disconnect=lambda: drops.append(True))
     link.start()
     assert link._watch is None  # nothing polls the connection
     tasks = bus.endpoint("tasks")
     tasks.publish("task_ended", {"task_id": "t1", "robot": "R1"})
     up.drop()
+    assert drops == [True]  # navigation forgets doors and cabins (it misses their news)
     tasks.publish("task_ended", {"task_id": "t2", "robot": "R1"})  # queued
     up.connected.set()
     for callback in up.on_connect_callbacks:

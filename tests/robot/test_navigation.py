@@ -150,6 +150,12 @@ async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_rec
     await rig.seen.wait_for(lambda: asked())
     assert rig.nav.state == "waiting_area" and rig.nav.areas_held() == []
     assert "R1: waiting for area corridor" in caplog.text
+    building = rig.bus.endpoint("building-broadcast")
+    building.publish("door_opened", {"door": "door_upstairs"})
+    building.publish("elevator_in_position", {"elevator": "lift", "floor": "F0", "door_open": True})
+    assert "door_upstairs" in rig.nav._doors_open and rig.nav._elevators == {"lift": "F0"}
+    rig.nav.link_lost()  # broadcasts are missed from now on: unknown is closed
+    assert not rig.nav._doors_open and not rig.nav._elevators
     rig.nav.resync()  # the link is back, maybe to a restarted server: ask again
     assert len(asked()) == 2 and asked()[-1].payload == {"robot": "R1", "area": "corridor"}
     # 60 robot seconds (3 s of wall time here) later, a warning says it still waits.

@@ -281,3 +281,33 @@ async def test_a_restarted_server_takes_back_the_locks_robots_report(bus: Bus) -
     r2.node = "hall"
     r2.state("busy", areas=[])  # out again: released, and the waiter gets it
     await r3.wait_for("area_granted")
+
+
+async def test_after_a_restart_no_area_is_granted_before_the_robots_that_had_tasks_resync(
+    bus: Bus,
+) -> None:
+    """R4 was inside the corridor when the server died; R1 came back first and asked for it.
+    It must wait for R4's word (found by the soak: both drove in)."""
+    traffic = start_traffic(bus, demo_site())
+    r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "corridor_e")
+    traffic.await_resync({"R2", "R3"}, timeout_s=30)
+    r1.state("busy")
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
+    r2.state("busy", areas=["corridor"])  # R2 back: it is inside and holds it
+    assert traffic.locks.holder("corridor") == "R2"
+    RobotStub(bus, "R3", "hall").state("idle")  # the last one: R1's request is handled now
+    assert traffic.locks.waiting_for("R1") == ("corridor",) and not r1.of_type("area_granted")
+    r2.node = "gb1"
+    r2.state("busy", areas=[])
+    await r1.wait_for("area_granted")
+    traffic.stop()
+
+
+async def test_the_resync_wait_ends_without_a_robot_that_never_comes_back(bus: Bus) -> None:
+    traffic = start_traffic(bus, demo_site())
+    traffic.await_resync({"R3"}, timeout_s=0.3)
+    r1 = RobotStub(bus, "R1", "ga1")
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
+    assert not r1.of_type("area_granted")
+    await r1.wait_for("area_granted", timeout=10)
+    traffic.stop()
