@@ -39,6 +39,8 @@ __all__ = ["NavState", "NavigationFailed", "Navigator", "PathStep"]
 log = logging.getLogger(__name__)
 
 
+CABIN_HOLD_CALL_S = 3.0
+"""Robot seconds between two calls that keep a cabin's door open while the robot drives in."""
 WAIT_LOG_S = 60.0
 """Robot seconds between two "still waiting for ..." warnings."""
 
@@ -480,11 +482,22 @@ class Navigator:
 
     def _passable(self, step: PathStep, cabin: bool) -> Callable[[], bool]:
         door, elevator, floor = step.door, step.elevator, step.floor
+        next_hold = self.clock.now() + CABIN_HOLD_CALL_S
 
         def clear() -> bool:
+            nonlocal next_hold
             if door is not None and door not in self._doors_open:
                 return False
-            return not cabin or self._elevators.get(elevator or "") == floor
+            if not cabin:
+                return True
+            if self._elevators.get(elevator or "") != floor:
+                return False
+            if self.clock.now() >= next_hold:
+                # Driving in: call again, as a person keeps the button pressed, so the cabin
+                # door does not close on the robot (the soak saw it close under one).
+                next_hold = self.clock.now() + CABIN_HOLD_CALL_S
+                self.ep.publish("call_elevator", {"elevator": elevator, "floor": floor})
+            return True
 
         return clear
 

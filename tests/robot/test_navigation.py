@@ -77,7 +77,11 @@ async def test_navigate_with_elevator_ride(rig: Rig) -> None:
     await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
     assert not rig.seen.of("navigation_failed"), rig.seen.of("navigation_failed")[0].payload
     assert rig.nav.node == "gc1" and rig.nav.floor == "F1"
-    assert rig.building.calls == [("lift", "F0"), ("lift", "F1")]
+    # Called to F0, called again while driving in (8 m, about 11 s: the door must not close
+    # on the robot; the building holds it 8 s per call), then sent to F1.
+    calls = rig.building.calls
+    assert calls[0] == ("lift", "F0") and calls[-1] == ("lift", "F1"), calls
+    assert len(calls) >= 3 and set(calls[:-1]) == {("lift", "F0")}, calls
     assert rig.building.opened == ["door_upstairs"]
     assert [m.payload["area"] for m in rig.seen.of("request_area")] == ["elevator"]
     assert [m.payload["area"] for m in rig.seen.of("release_area")] == ["elevator"]
