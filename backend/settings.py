@@ -112,6 +112,8 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(default=64 * 1024, ge=1024)
     # Traffic Manager: release a lock whose holder went offline before entering its area.
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
+    # After a restart: how long area requests wait for the robots that had tasks to resync.
+    lock_resync_s: float = Field(default=10.0, ge=0, le=300)
 
     @property
     def development(self) -> bool:

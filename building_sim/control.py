@@ -3,6 +3,8 @@
 POST /buttons/{button}/press   {"ms": 300}
 POST /modules/{module}/fault   {"kind": "offline" | "slow" | "exception" | "none",
                                 "delay_ms": 0, "code": 4}
+POST /doors/{door}/jam         {"jammed": true}  (a door that does not open)
+POST /elevators/{elevator}/stuck {"stuck": true} (an elevator that never arrives)
 POST /points/{module}/{point}  {"value": 1}      (force an input, e.g. a door sensor)
 GET  /state
 """
@@ -42,6 +44,11 @@ class Jam(BaseModel):
     jammed: bool = True
 
 
+class Stuck(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    stuck: bool = True
+
+
 class PointValue(BaseModel):
     model_config = ConfigDict(extra="forbid")
     value: int = Field(ge=0, le=0xFFFF)
@@ -79,6 +86,15 @@ def control_app(sim: BuildingSimulator) -> FastAPI:
         except SimulatorError as exc:
             raise HTTPException(404, str(exc)) from None
         return {"door": door, "jammed": jammed}
+
+    @app.post("/elevators/{elevator}/stuck")
+    async def stuck(elevator: str, body: Stuck | None = None) -> dict[str, Any]:
+        value = (body or Stuck()).stuck
+        try:
+            sim.stick_elevator(elevator, value)
+        except SimulatorError as exc:
+            raise HTTPException(404, str(exc)) from None
+        return {"elevator": elevator, "stuck": value}
 
     @app.post("/points/{module}/{point}")
     async def set_point(module: str, point: str, body: PointValue) -> dict[str, Any]:

@@ -136,7 +136,8 @@ CABIN_TRANSITIONS: dict[CabinState, frozenset[CabinState]] = {
 class ElevatorSim(_Timed):
     """An elevator: call coils per floor, travel floor by floor, in-position input per floor
     while the cabin is there with its door open. Optional input registers ``<id>_floor`` and
-    ``<id>_door`` on the first stop's module report the floor index and door state."""
+    ``<id>_door`` on the first stop's module report the floor index and door state. A ``stuck``
+    cabin (a fault) keeps its calls but never leaves its floor until freed: it never arrives."""
 
     def __init__(
         self,
@@ -159,6 +160,13 @@ class ElevatorSim(_Timed):
         self.pending: set[int] = set()
         self.floor_register, self.door_register = registers
         self.arrivals = 0
+        self.stuck = False
+
+    def set_stuck(self, stuck: bool) -> None:
+        """Stuck: calls are kept, the cabin does not move; freed: it serves them."""
+        self.stuck = stuck
+        if not stuck and self.state == CabinState.idle:
+            self._next()
 
     @property
     def floor(self) -> str:
@@ -182,7 +190,7 @@ class ElevatorSim(_Timed):
         if not value:
             self.pending.discard(index)
             return
-        if index == self.index and self.state == CabinState.door_open:
+        if index == self.index and self.state == CabinState.door_open and not self.stuck:
             self.write(self.elevator.stops[index].call, 0)
             self._after(self.hold_s / self.scale, self._door_closes)
             return
@@ -191,7 +199,7 @@ class ElevatorSim(_Timed):
             self._next()
 
     def _next(self) -> None:
-        if not self.pending:
+        if not self.pending or self.stuck:
             return
         target = min(self.pending, key=lambda i: abs(i - self.index))
         if target == self.index:

@@ -184,6 +184,12 @@ class BuildingSimulator:
             raise SimulatorError(f"no door {door!r}; known: {sorted(self.doors)}")
         self.doors[door].jammed = jammed
 
+    def stick_elevator(self, elevator: str, stuck: bool = True) -> None:
+        """A stuck elevator keeps its calls but never arrives until freed."""
+        if elevator not in self.elevators:
+            raise SimulatorError(f"no elevator {elevator!r}; known: {sorted(self.elevators)}")
+        self.elevators[elevator].set_stuck(stuck)
+
     async def set_fault(
         self, module: str, kind: FaultKind | str, *, delay_ms: float = 0.0, code: int = 4
     ) -> None:
@@ -219,7 +225,12 @@ class BuildingSimulator:
             },
             "doors": {d: s.state.value for d, s in self.doors.items()},
             "elevators": {
-                e: {"floor": s.floor, "state": s.state.value, "pending": sorted(s.pending)}
+                e: {
+                    "floor": s.floor,
+                    "state": s.state.value,
+                    "pending": sorted(s.pending),
+                    "stuck": s.stuck,
+                }
                 for e, s in self.elevators.items()
             },
             "buttons": {b: bool(self.read(btn.input)) for b, btn in self.buttons.items()},

@@ -33,6 +33,7 @@ BENCHMARKS: dict[str, str] = {
     "reconfigure": "bench.reconfigure:main",
     "console": "bench.console:main",
     "reaction": "bench.reaction:main",
+    "soak": "bench.soak:main",
 }
 
 

@@ -86,6 +86,10 @@ class InvariantChecker:
         for event in events:
             self.feed(str(event["kind"]), event.get("data") or {})
 
+    def forget(self, robot: str) -> None:
+        """The robot's position is no longer known (its process restarted elsewhere)."""
+        self.position.pop(robot, None)
+
     def _fail(self, invariant: str, robot: str, detail: str) -> None:
         self.violations.append(Violation(invariant, robot, detail))
 
@@ -133,6 +137,11 @@ class InvariantChecker:
         if holder is not None and holder != robot:
             self._fail("area", robot, f"granted area {area} still held by {holder}")
         self.holders[area] = robot
+
+    def _on_server_started(self, p: Mapping[str, Any]) -> None:
+        """A new server life starts with no locks: the robots declare theirs again (an
+        ``area_granted`` with ``resync``); positions and the building are physical and stay."""
+        self.holders.clear()
 
     def _on_release_area(self, p: Mapping[str, Any]) -> None:
         robot, area = str(p.get("robot")), str(p.get("area"))

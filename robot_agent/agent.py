@@ -17,6 +17,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal
 
+from fastapi import FastAPI
+
 from guidebot.bus import Bus
 from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
@@ -282,7 +284,10 @@ class RobotAgent:
             self.metrics.start()
             stack.push_async_callback(self.metrics.stop)
             self.screen_server = ScreenServer(
-                self.screen, port=c.gui_port, metrics=self.metrics.render
+                self.screen,
+                port=c.gui_port,
+                metrics=self.metrics.render,
+                extra=self._sim_routes(),
             )
             await self.screen_server.start()
             stack.push_async_callback(self.screen_server.stop)
@@ -304,6 +309,21 @@ class RobotAgent:
         """The RoboCAN masters (none without CAN or before the hardware started)."""
         stack = getattr(self.hardware, "stack", None)
         return list(getattr(stack, "masters", ()))
+
+    def _sim_routes(self) -> Callable[[FastAPI], None] | None:
+        """Fault injection on the screen port, for simulated RoboCAN modules only."""
+        hardware = self.hardware
+        if not (self.config.simulate and isinstance(hardware, RoboCANHardware)):
+            return None
+        from robot_agent.sim_control import add_sim_routes
+
+        endpoint = self.bus.endpoint("sim_control")
+
+        def modules() -> list[int]:
+            stack = hardware.stack
+            return list(stack.simulator.layout) if stack and stack.simulator else []
+
+        return lambda app: add_sim_routes(app, endpoint, modules)
 
     async def _make_dispatch(self) -> Any:
         try:
@@ -341,12 +361,21 @@ class RobotAgent:
         follower.start()
         self._stack.callback(follower.stop)
         self.site_follower = follower
+        navigator = self.navigator
+        assert navigator is not None
 
-        def connected() -> None:
-            state.publish_now()
+        def on_connect() -> None:
+            state.publish_now()  # first: the server takes back the areas it holds
+            navigator.resync()
             follower.announce()
 
-        self.link = Link(self.bus.endpoint("link"), self.hub, c.name, on_connect=connected)
+        self.link = Link(
+            self.bus.endpoint("link"),
+            self.hub,
+            c.name,
+            on_connect=on_connect,
+            on_disconnect=navigator.link_lost,
+        )
         self.link.start()
         self._stack.push_async_callback(self.link.stop)
         await self.hub.start()

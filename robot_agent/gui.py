@@ -324,8 +324,13 @@ def create_screen_app(
     screen: OnboardScreen,
     web_dir: Path = WEB_DIR,
     metrics: Callable[[], bytes] | None = None,
+    *,
+    extra: Callable[[FastAPI], None] | None = None,
 ) -> FastAPI:
+    """The touch screen's app; ``extra`` adds routes (the simulator's fault injection)."""
     app = FastAPI(title=f"GuideBot {screen.robot} touch screen", docs_url=None, redoc_url=None)
+    if extra is not None:
+        extra(app)
     if metrics is not None:
         render = metrics
 
@@ -431,9 +436,11 @@ class ScreenServer:
         host: str = "127.0.0.1",
         port: int = 0,
         metrics: Callable[[], bytes] | None = None,
+        extra: Callable[[FastAPI], None] | None = None,
     ) -> None:
         self.screen = screen
         self.metrics = metrics
+        self.extra = extra
         self.host = host
         self.port = port
         self._server: _QuietServer | None = None
@@ -445,7 +452,7 @@ class ScreenServer:
 
     async def start(self) -> None:
         config = uvicorn.Config(
-            create_screen_app(self.screen, metrics=self.metrics),
+            create_screen_app(self.screen, metrics=self.metrics, extra=self.extra),
             host=self.host,
             port=self.port,
             log_level="warning",

@@ -117,11 +117,13 @@ class Link:
         robot: str,
         *,
         on_connect: Callable[[], Any] | None = None,
+        on_disconnect: Callable[[], Any] | None = None,
     ) -> None:
         self.onboard = onboard
         self.upstream = upstream
         self.robot = robot
         self.on_connect_callback = on_connect
+        self.on_disconnect_callback = on_disconnect
         self.sent_up = 0
         self.sent_down = 0
         self.connections = 0
@@ -169,6 +171,8 @@ class Link:
         if self._down_since is None:
             self._down_since = time.monotonic()
         log.warning("%s: link down; reports are queued until it is back", self.robot)
+        if self.on_disconnect_callback is not None:
+            self.on_disconnect_callback()
 
     def _connected(self) -> None:
         self.connections += 1

@@ -39,6 +39,12 @@ __all__ = ["NavState", "NavigationFailed", "Navigator", "PathStep"]
 log = logging.getLogger(__name__)
 
 
+CABIN_HOLD_CALL_S = 3.0
+"""Robot seconds between two calls that keep a cabin's door open while the robot drives in."""
+WAIT_LOG_S = 60.0
+"""Robot seconds between two "still waiting for ..." warnings."""
+
+
 class NavigationFailed(Exception):
     """A goal could not be reached; ``reason`` is sent in navigation_failed."""
 
@@ -164,6 +170,8 @@ class Navigator:
         self._door_failed: dict[str, str] = {}
         self._elevators: dict[str, str] = {}
         self._granted: set[str] = set()
+        self._waiting_area: str | None = None
+        self._wait_retry: Callable[[], None] | None = None
         self._news = asyncio.Event()
         self._odom_event = asyncio.Event()
         self._last_cmd: tuple[float, float, float] = (math.nan, math.nan, 0.0)
@@ -479,11 +487,22 @@ class Navigator:
 
     def _passable(self, step: PathStep, cabin: bool) -> Callable[[], bool]:
         door, elevator, floor = step.door, step.elevator, step.floor
+        next_hold = self.clock.now() + CABIN_HOLD_CALL_S
 
         def clear() -> bool:
+            nonlocal next_hold
             if door is not None and door not in self._doors_open:
                 return False
-            return not cabin or self._elevators.get(elevator or "") == floor
+            if not cabin:
+                return True
+            if self._elevators.get(elevator or "") != floor:
+                return False
+            if self.clock.now() >= next_hold:
+                # Driving in: call again, as a person keeps the button pressed, so the cabin
+                # door does not close on the robot (the soak saw it close under one).
+                next_hold = self.clock.now() + CABIN_HOLD_CALL_S
+                self.ep.publish("call_elevator", {"elevator": elevator, "floor": floor})
+            return True
 
         return clear
 
@@ -555,6 +574,31 @@ class Navigator:
                 distance += math.hypot(steps[j + 1].x - s.x, steps[j + 1].y - s.y)
             j += 1
 
+    def areas_held(self) -> list[str]:
+        """Areas held or granted ahead (robot_state ``areas``: the server's resync)."""
+        return sorted(self.held_areas | self._granted)
+
+    def link_lost(self) -> None:
+        """Without the link the building's broadcasts are missed: doors and cabins become
+        unknown, and unknown is closed (the robot stops before them until told again). A
+        robot once drove into a cabin that had left while its link was down (the soak)."""
+        self._doors_open.clear()
+        self._elevators.clear()
+        self._news.set()
+
+    def resync(self) -> None:
+        """The link is back (maybe to a restarted server that never saw the requests): ask
+        again for the area the robot stands waiting for, the doors it holds and the elevator
+        it waits for; the answers say how things stand. Repeated requests are harmless."""
+        self.link_lost()  # whatever was missed meanwhile is asked again below
+        if self._waiting_area is not None:
+            log.info("%s: still waiting for area %s: asked again", self.robot, self._waiting_area)
+            self.ep.publish("request_area", {"robot": self.robot, "area": self._waiting_area})
+        for door in sorted(self._held_doors):
+            self._open_door(door)
+        if self._wait_retry is not None:
+            self._wait_retry()
+
     async def _acquire_area(self, area: str) -> None:
         if area in self._granted:
             # Granted ahead as part of a chain of back-to-back areas.
@@ -563,7 +607,11 @@ class Navigator:
         self.state = NavState.WAITING_AREA
         self._send_velocity(0.0, 0.0)
         self.ep.publish("request_area", {"robot": self.robot, "area": area})
-        await self._wait_until(lambda: area in self._granted, f"area {area}")
+        self._waiting_area = area
+        try:
+            await self._wait_until(lambda: area in self._granted, f"area {area}")
+        finally:
+            self._waiting_area = None
         log.info("%s: area %s granted", self.robot, area)
         self.held_areas.add(area)
         self.state = NavState.MOVING
@@ -610,8 +658,9 @@ class Navigator:
             if retry_at is not None and now >= retry_at:
                 retry_at = None
                 self._open_door(door)
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._news.wait(), self.clock.wall(1.0) + 0.05)
+            with contextlib.suppress(TimeoutError):  # not wait_for: see _wait_until
+                async with asyncio.timeout(self.clock.wall(1.0) + 0.05):
+                    await self._news.wait()
         log.info("%s: door %s open", self.robot, door)
         self.state = NavState.MOVING
 
@@ -657,26 +706,46 @@ class Navigator:
     async def _wait_until(
         self, ready: Callable[[], bool], what: str, *, retry: Callable[[], None] | None = None
     ) -> None:
-        deadline = self.clock.now() + self.wait_timeout_s
+        started = self.clock.now()
+        deadline = started + self.wait_timeout_s
         # Re-ask no sooner than the building's own time-out (a few wall seconds).
         retry_every = max(10.0, 7.0 * self.clock.time_scale)
-        next_retry = self.clock.now() + retry_every
-        while True:
-            self._news.clear()
-            self._check_fault()
-            if ready():
-                return
-            now = self.clock.now()
-            if now >= deadline:
-                raise NavigationFailed(f"timed out waiting for {what}")
-            if retry is not None and now >= next_retry:
-                retry()
-                next_retry = now + retry_every
-            # asyncio.timeout, not wait_for: on Python 3.11 wait_for swallows a cancellation
-            # that coincides with the wake-up, and the cancelled goal would drive on.
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(self.clock.wall(1.0) + 0.05):
-                    await self._news.wait()
+        next_retry = started + retry_every
+        # What the robot stands waiting for is in its log: at once, then every WAIT_LOG_S.
+        next_log: float | None = None
+        self._wait_retry = retry  # a reconnect asks again at once (resync)
+        try:
+            while True:
+                self._news.clear()
+                self._check_fault()
+                if ready():
+                    if next_log is not None:
+                        waited = self.clock.now() - started
+                        log.info("%s: %s came after %.0f s", self.robot, what, waited)
+                    return
+                now = self.clock.now()
+                if next_log is None or now >= next_log:
+                    if next_log is None:
+                        log.info("%s: waiting for %s", self.robot, what)
+                    else:
+                        log.warning(
+                            "%s: still waiting for %s after %.0f s (gives up after %.0f s)",
+                            *(self.robot, what, now - started, self.wait_timeout_s),
+                        )
+                    next_log = now + WAIT_LOG_S
+                if now >= deadline:
+                    raise NavigationFailed(f"timed out waiting for {what}")
+                if retry is not None and now >= next_retry:
+                    retry()
+                    next_retry = now + retry_every
+                # asyncio.timeout, not wait_for: on Python 3.11 wait_for swallows a
+                # cancellation that coincides with the wake-up, and the cancelled goal would
+                # drive on.
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(self.clock.wall(1.0) + 0.05):
+                        await self._news.wait()
+        finally:
+            self._wait_retry = None
 
     def _check_fault(self) -> None:
         if self.fault is not None:

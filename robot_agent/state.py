@@ -51,6 +51,9 @@ class StateReporter:
         self._unsubs = [
             self.ep.subscribe("module_status", self._on_module_status),
             self.ep.subscribe("show_point", self._on_show_point),
+            # A fault is told at once: the server must not hand a broken robot more work
+            # in the meantime (it did, a task every few ms, until the next periodic state).
+            self.ep.subscribe("robot_fault", self._on_fault),
         ]
         self._task = asyncio.get_running_loop().create_task(self._run(), name="robot-state")
 
@@ -61,6 +64,9 @@ class StateReporter:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+
+    def _on_fault(self, _message: Message) -> None:
+        self.publish_now()
 
     def _on_module_status(self, message: Message) -> None:
         p = message.payload
@@ -102,6 +108,7 @@ class StateReporter:
             "nets": self.nets(),
             "modules": dict(self.modules),
             "poi": self.poi[1] if self.poi and self.poi[0] == self.tasks.task_id else None,
+            "areas": self.nav.areas_held(),
             "seq": self.seq,
         }
 

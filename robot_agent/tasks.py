@@ -51,6 +51,9 @@ class MainTask:
     instance_id: str
     phase: TaskPhase = TaskPhase.STARTING
     reason: str = ""
+    problem: str = ""
+    """The last thing that went wrong while it ran (navigation_failed, a robot fault): the
+    reason given when its net fails without saying why."""
     history: list[TaskPhase] = field(default_factory=list)
 
     def move(self, to: TaskPhase) -> None:
@@ -96,6 +99,8 @@ class TaskRunner:
             sub("petri_net_event", self._on_net_event),
             sub("show_point", self._on_point),
             sub("point_explained", self._on_point),
+            sub("navigation_failed", self._on_problem),
+            sub("robot_fault", self._on_problem),
         ]
         self._start_waiting()
 
@@ -167,6 +172,17 @@ class TaskRunner:
         if self.on_cancel is not None:
             self.on_cancel()
 
+    def _on_problem(self, message: Message) -> None:
+        task = self.current
+        if task is None:
+            return
+        p = message.payload
+        if message.type == "navigation_failed":
+            what = f"navigation to {p.get('node') or '?'} failed: {p.get('reason') or 'no reason'}"
+        else:
+            what = f"robot fault {p.get('kind') or '?'}: {p.get('detail') or ''}".rstrip(": ")
+        task.problem = what
+
     def _on_net_event(self, message: Message) -> None:
         p = message.payload
         instance, kind = p.get("instance_id"), p.get("kind")
@@ -191,6 +207,9 @@ class TaskRunner:
         outcome = OUTCOMES.get(str(p.get("outcome")), "failed")
         if task.phase is TaskPhase.CANCELLING:
             outcome = "cancelled"
+        if outcome == "failed" and not task.reason:
+            # A failed task always says why, for the staff and the visitor who asked for it.
+            task.reason = task.problem or f"the {task.net} task net failed (no step said why)"
         task.move(TaskPhase.ENDED)
         self.current = None
         self.finished.append(task)

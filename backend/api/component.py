@@ -203,8 +203,15 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
                 logger.subscribe(pattern, log_message, tap=True)
             for pattern in LOGGED_BROADCASTS:
                 logger.subscribe(pattern, log_message)
-            tasks.restore(await store.load_open_tasks())
+            # The log's mark of a new server life: grants of an earlier one are void (robots
+            # declare what they hold again in their robot_state; guidebot/invariants.py).
+            store.record_event("server_started", "server", {"site_version": version})
+            restored = await store.load_open_tasks()
+            tasks.restore(restored)
             traffic.start()
+            traffic.await_resync(
+                {t.robot for t in restored if t.robot and not t.final}, settings.lock_resync_s
+            )
             health.set("traffic_manager", ComponentState.ok)
             tasks.start()
             health.set("task_manager", ComponentState.ok)

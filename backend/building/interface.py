@@ -98,6 +98,9 @@ class BuildingInterface:
             if d.is_open is not None
         }
         self._door_coils = {(d.open.module, d.open.point): self.doors[d.id] for d in config.doors}
+        self._coil_left_set: set[str] = set()
+        """Doors whose open coil could not be cleared (module offline): cleared when it is back,
+        else the building keeps the door open for ever (found by the soak)."""
         # (module, point) -> (elevator, floor) of each in_position input; its last state.
         self._stops = {
             (s.in_position.module, s.in_position.point): (e.id, s.floor)
@@ -173,7 +176,18 @@ class BuildingInterface:
 
     def _on_health(self, health: ModuleHealth) -> None:
         self.endpoint.publish("building_module_health", health.payload())
-        if health.state != HealthState.online:
+        if health.state == HealthState.online:
+            for door_id in sorted(self._coil_left_set):
+                keeper = self.doors[door_id]
+                if keeper.door.open.module == health.module and not keeper.holders:
+                    self._coil_left_set.discard(door_id)
+                    log.info("door %s: module back, clearing its coil", door_id)
+                    task = asyncio.get_running_loop().create_task(
+                        self._close(keeper, best_effort=True)
+                    )
+                    self._commands.add(task)
+                    task.add_done_callback(self._commands.discard)
+        else:
             # Unknown is closed: a door whose sensor cannot be read is not passable.
             now = time.monotonic()
             for (module, _), keeper in self._door_sensors.items():
@@ -385,10 +399,16 @@ class BuildingInterface:
         keeper.closing()
         try:
             await self._write(keeper.door.open, 0)
+            self._coil_left_set.discard(keeper.door.id)
         except (CommandError, ModbusIOError) as exc:
+            self._coil_left_set.add(keeper.door.id)
             if not best_effort:
                 raise
-            log.warning("door %s: could not clear its coil: %s", keeper.door.id, exc)
+            log.warning(
+                "door %s: could not clear its coil (cleared when its module is back): %s",
+                keeper.door.id,
+                exc,
+            )
         finally:
             keeper.cleared(time.monotonic())
 

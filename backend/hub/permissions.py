@@ -65,10 +65,10 @@ _ROBOT = frozenset(
         "request_area",
         "release_area",
         "open_door",
-        "close_door",
         "release_door",
+        "close_door",
         "call_elevator",
-        "node_reached",
+        "node_reached",  # what the fleet's safety invariants are checked on
         "say",  # what it says, for consoles; nothing on the server acts on it
         # answers to on-board requests a server module or tool may send it
         "goal_reached",

@@ -539,7 +539,10 @@ class TaskManager:
         state = {"done": TaskState.DONE, "failed": TaskState.FAILED}.get(
             outcome, TaskState.CANCELLED
         )
-        task.move(state, reason=str(msg.payload.get("reason", "")))
+        reason = str(msg.payload.get("reason") or "").strip()
+        if state is TaskState.FAILED and not reason:
+            reason = f"{robot.name} reported the task failed without saying why"
+        task.move(state, reason=reason)
         if robot.current == task.id:
             self._set_current(robot, None)
         if task.kind == "charge" and state is TaskState.DONE:
@@ -629,6 +632,11 @@ class TaskManager:
             # Restarted server (or robot back from a long absence): it no longer runs it.
             self._unconfirmed.discard(ours.id)
             self._requeue(ours, "the robot no longer runs it")
+        elif ours.state is TaskState.RUNNING:
+            # It started it (task_started came first on the same link) and now runs something
+            # else or nothing: its agent restarted. Without this the task stayed `running`
+            # for ever on a robot back in seconds (found by the soak).
+            self._requeue(ours, "the robot no longer runs it (its agent restarted)")
 
     def _on_battery_low(self, msg: Message) -> None:
         robot = self._robot_msg(msg)

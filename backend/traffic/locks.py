@@ -266,6 +266,28 @@ class AreaLocks:
         grants = self._grant_waiting() if any(d.released for d in decided) else []
         return decided, grants
 
+    def adopt(self, robot: str, area: str, *, entered: bool) -> bool:
+        """A robot says it holds ``area`` (its resync after a server restart): a free lock is
+        given to it at once, ahead of any waiter. False when another robot holds it."""
+        lock = self._lock(area)
+        if lock.holder == robot:
+            lock.entered = lock.entered or entered
+            return True
+        if lock.holder is not None:
+            return False
+        lock.move(LockState.HELD)
+        lock.holder = robot
+        lock.since = time.time()
+        lock.entered = entered
+        self._held.setdefault(robot, []).append(area)
+        wait = self._waits.get(robot)
+        if wait is not None and area in wait.areas:
+            del self._waits[robot]
+        if robot in self._offline:
+            lock.move(LockState.HOLDER_OFFLINE)
+            lock.offline_since = time.monotonic()
+        return True
+
     def mark_entered(self, robot: str, area: str) -> None:
         lock = self._lock(area)
         if lock.holder == robot:

@@ -5,6 +5,7 @@ A plain asyncio-free service over a bus endpoint: every handler runs inline and 
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
 from collections.abc import Callable
@@ -50,6 +51,10 @@ class TrafficManager:
         self.graph = graph or SiteGraph(site)
         self.locks = AreaLocks([a.id for a in site.areas])
         self._robots = {r.name for r in site.robots}
+        # After a restart: robots that may hold locks, whose word comes before any grant.
+        self._awaiting: set[str] = set()
+        self._deferred: list[Message] = []
+        self._resync_timer: asyncio.TimerHandle | None = None
 
     # --- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
@@ -68,6 +73,38 @@ class TrafficManager:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
+        if self._resync_timer is not None:
+            self._resync_timer.cancel()
+            self._resync_timer = None
+
+    def await_resync(self, robots: set[str], timeout_s: float) -> None:
+        """A restart: the lock table is empty, and ``robots`` (those that had a task) may
+        hold areas. Area requests wait until each has sent its robot_state (which declares
+        what it holds) or ``timeout_s`` has passed, so that no area is granted over a robot
+        inside it that reconnects a second later (found by the soak)."""
+        self._awaiting = set(robots) & self._robots
+        if not self._awaiting:
+            return
+        log.warning(
+            "traffic: no area granted until %s report(s) what they hold (at most %g s)",
+            ", ".join(sorted(self._awaiting)),
+            timeout_s,
+        )
+        loop = asyncio.get_running_loop()
+        self._resync_timer = loop.call_later(timeout_s, self._end_resync)
+
+    def _end_resync(self) -> None:
+        if self._resync_timer is not None:
+            self._resync_timer.cancel()
+            self._resync_timer = None
+        if self._awaiting:
+            log.warning(
+                "traffic: resync over without word from %s", ", ".join(sorted(self._awaiting))
+            )
+        self._awaiting.clear()
+        deferred, self._deferred = self._deferred, []
+        for msg in deferred:
+            self._on_request_area(msg)
 
     def load_site(self, site: Site, graph: SiteGraph | None = None) -> None:
         """New map, same locks: areas that still exist keep holder and queue."""
@@ -166,6 +203,15 @@ class TrafficManager:
         robot = self._robot_of(msg, req.robot)
         if robot is None:
             return self._refuse(msg, f"{msg.source} may not ask for areas as {req.robot}")
+        if self._awaiting:
+            log.info(
+                "traffic: %s waits for %s until %s have resynced",
+                robot,
+                req.area,
+                ", ".join(sorted(self._awaiting)),
+            )
+            self._deferred.append(msg)
+            return
         chain = self._chain(robot, req.area)
         try:
             grants, yields = self.locks.request(robot, chain, msg.id)
@@ -220,10 +266,16 @@ class TrafficManager:
             for area in self.locks.held_by(robot):
                 self.alerts.clear(f"lock:{area}", f"{robot} is back online; it holds {area}")
         self.locks.set_online(robot, online)
-        if not isinstance(node, str) or node not in self.graph:
+        known = isinstance(node, str) and node in self.graph
+        here = self.graph.area_at.get(node) if isinstance(node, str) and known else None
+        self._adopt(robot, here, msg.payload.get("areas"))
+        if robot in self._awaiting:
+            self._awaiting.discard(robot)
+            if not self._awaiting:
+                self._end_resync()
+        if not isinstance(node, str) or not known:
             return
         self._positions[robot] = node
-        here = self.graph.area_at.get(node)
         self._check_conflict(robot, here)
         grants: list[Grant] = []
         for area in self.locks.held_by(robot):
@@ -250,6 +302,20 @@ class TrafficManager:
             self.locks.set_online(robot, False)
 
     # --- helpers -------------------------------------------------------------------------
+    def _adopt(self, robot: str, here: str | None, reported: object) -> None:
+        """The locks a robot says it holds (robot_state ``areas``) and the area it stands in
+        are its own: after a server restart this lock table starts empty, and without this a
+        second robot would be granted an area the first is in (found by the soak)."""
+        claimed = [a for a in reported if isinstance(a, str)] if isinstance(reported, list) else []
+        if here is not None:
+            claimed.append(here)
+        for area in dict.fromkeys(claimed):
+            if area not in self.graph.area_nodes or self.locks.holder(area) == robot:
+                continue
+            if self.locks.adopt(robot, area, entered=area == here):
+                log.warning("traffic: %s holds %s by its own report (resync)", robot, area)
+                self._emit("area_granted", {"robot": robot, "area": area, "resync": True})
+
     def _check_conflict(self, robot: str, here: str | None) -> None:
         """A robot reporting itself inside an area another robot holds: tell staff at once."""
         alert_id = f"conflict:{robot}"

@@ -44,6 +44,9 @@ class RobotState(PayloadModel):
     modules: dict[str, str] = Field(default_factory=dict)
     poi: str | None = None
     """The point of interest the current task last showed (a tour's current step)."""
+    areas: list[str] = Field(default_factory=list, max_length=64)
+    """Restricted areas the robot holds or was granted: after a server restart the Traffic
+    Manager takes them from here (its lock table starts empty)."""
     seq: int = 0
 
 

@@ -62,3 +62,26 @@ async def test_simulator_refuses_unknown_names_and_illegal_moves(sim: BuildingSi
         await sim.set_fault("M1", "melt")
     with pytest.raises(IllegalTransition, match="closed -> open not allowed"):
         sim.doors["D1"]._go(sim.doors["D1"].state.__class__("open"))
+
+
+async def test_a_stuck_elevator_keeps_its_call_and_serves_it_once_freed(
+    sim: BuildingSimulator, m1: ModuleClient
+) -> None:
+    import httpx
+
+    from building_sim.control import control_app
+
+    elevator = sim.elevators["E1"]
+    transport = httpx.ASGITransport(app=control_app(sim))
+    async with httpx.AsyncClient(transport=transport, base_url="http://sim") as http:
+        r = await http.post("/elevators/E1/stuck", json={"stuck": True})
+        assert r.status_code == 200, r.text
+        await m1.write(PointKind.coil, 4, 1)  # call to floor "2": it never comes
+        await wait_until(lambda: 2 in elevator.pending)
+        assert elevator.state == "idle" and elevator.arrivals == 0
+        assert (await http.get("/state")).json()["elevators"]["E1"]["stuck"] is True
+        missing = await http.post("/elevators/E9/stuck", json={"stuck": True})
+        assert missing.status_code == 404 and "no elevator 'E9'" in missing.text
+        assert (await http.post("/elevators/E1/stuck", json={"stuck": False})).status_code == 200
+    await wait_until(lambda: elevator.floor == "2" and elevator.state == "door_open")
+    assert elevator.arrivals == 1

@@ -116,6 +116,29 @@ async def test_a_jammed_door_fails_with_a_reason_and_is_not_left_energised(
         await wait_until(lambda: sim.read_point("M1", "d1_cmd") == 0)
 
 
+async def test_a_door_released_while_its_module_is_offline_is_closed_once_it_is_back(
+    hub: Bus, building: BuildingConfig
+) -> None:
+    """The coil could not be cleared at the release: when the module answers again it is,
+    else the building would keep the door open for ever (found by the soak)."""
+    async with (
+        BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
+        BuildingInterface(hub.endpoint("building"), sim.bound_config()) as bi,
+    ):
+        await wait_until(lambda: all(p.health.polls > 0 for p in bi.pollers.values()))
+        robot = hub.endpoint("R1")
+        opened = await robot.request("open_door", {"door": "D1"}, timeout=10)
+        assert opened.type == "door_opened"
+        await sim.set_fault("M1", "offline")
+        await wait_until(lambda: not bi.pollers["M1"].health.online, timeout=20)
+        reply = await robot.request("release_door", {"door": "D1"}, timeout=10)
+        assert reply.type == "command_failed" and "M1 is offline" in reply.payload["reason"]
+        assert sim.read_point("M1", "d1_cmd") == 1  # still set: nobody could reach the module
+        await sim.set_fault("M1", "none")
+        await wait_until(lambda: sim.read_point("M1", "d1_cmd") == 0, timeout=30)
+        await wait_until(lambda: sim.doors["D1"].state in ("closing", "closed"))
+
+
 async def test_close_door_is_confirmed(
     hub: Bus, sim: BuildingSimulator, interface: BuildingInterface
 ) -> None:

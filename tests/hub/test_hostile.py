@@ -52,6 +52,17 @@ def test_the_permission_table_names_only_registered_types() -> None:
         assert allowed is None or not (allowed & SERVER_ONLY), role
 
 
+def test_a_robot_may_publish_everything_its_link_sends_up() -> None:
+    """The robot's link and the hub's table must agree: a type the link forwards but the hub
+    refuses is lost on every send (release_door and node_reached were, found by the soak)."""
+    from backend.auth import Role
+    from robot_agent.link import UP_TYPES
+
+    allowed = PUBLISH[Role.ROBOT]
+    assert allowed is not None
+    assert set(UP_TYPES) <= allowed, sorted(set(UP_TYPES) - allowed)
+
+
 @pytest.mark.parametrize("who", ["panel", "gui", "R1", "op"])
 @pytest.mark.parametrize(
     ("type_", "payload"),

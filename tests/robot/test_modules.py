@@ -138,6 +138,37 @@ def test_task_runner_reports_start_end_cancel_and_refuses_a_second_task(helpers:
     assert seen.of("run_petri_net")[-1].payload["net"] == "waiting"
 
 
+def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers: Any) -> None:
+    """A net that fails says nothing itself: the reason is the last navigation failure or
+    robot fault seen during the task, else a plain sentence, never empty (found under load
+    in tests/robot/test_e2e.py and by the soak)."""
+    bus = Bus()
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
+    seen = helpers.Recorder(bus.endpoint("t"), "task_ended", "run_petri_net")
+    runner.start()
+    tm, dispatch, nav = bus.endpoint("tm"), bus.endpoint("dispatch"), bus.endpoint("navigation")
+
+    def run_and_fail(task_id: str, *problems: tuple[str, dict[str, Any]]) -> dict[str, Any]:
+        tm.publish("task_assigned", {"task_id": task_id, "robot": "R1", "net": "go_to_poi"})
+        instance = seen.of("run_petri_net")[-1].payload["instance_id"]
+        for type_, payload in problems:
+            nav.publish(type_, payload)
+        dispatch.publish(
+            "petri_net_ended", {"net": "go_to_poi", "instance_id": instance, "outcome": "failed"}
+        )
+        return dict(seen.of("task_ended")[-1].payload)
+
+    ended = run_and_fail(
+        "t1",
+        ("robot_fault", {"robot": "R1", "kind": "motor_lost", "detail": "module 0x02 lost"}),
+        ("navigation_failed", {"node": "gb1", "reason": "base fault: module 0x02 lost"}),
+    )
+    assert ended["outcome"] == "failed"
+    assert ended["reason"] == "navigation to gb1 failed: base fault: module 0x02 lost"
+    ended = run_and_fail("t2")  # nothing seen: still a sentence, and not the last task's
+    assert ended["reason"] == "the go_to_poi task net failed (no step said why)"
+
+
 async def test_head_watchdog_confirms_servos_a_lost_head_never_does(helpers: Any) -> None:
     bus = Bus()
     head = HeadWatchdog(bus.endpoint("head_watchdog"), Clock(10.0), timeout_s=1.0, min_wall_s=0.05)
@@ -280,12 +311,14 @@ async def test_link_told_of_a_drop_resends_without_polling() -> None:
     bus = Bus()
     up = _FakeUpstreamWithDisconnect()
     up.connected.set()
-    link = Link(bus.endpoint("link"), up, "R1")
+    drops: list[bool] = []
+    link = Link(bus.endpoint("link"), up, "R1", on_disconnect=lambda: drops.append(True))
     link.start()
     assert link._watch is None  # nothing polls the connection
     tasks = bus.endpoint("tasks")
     tasks.publish("task_ended", {"task_id": "t1", "robot": "R1"})
     up.drop()
+    assert drops == [True]  # navigation forgets doors and cabins (it misses their news)
     tasks.publish("task_ended", {"task_id": "t2", "robot": "R1"})  # queued
     up.connected.set()
     for callback in up.on_connect_callbacks:

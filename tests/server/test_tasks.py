@@ -388,3 +388,31 @@ async def test_out_of_service_robot_gets_no_tasks_but_manual_moves(
     assert back.payload["task_id"] == pinned_tour.id
     with pytest.raises(TaskError):
         manager.set_out_of_service("R9", True)
+
+
+async def test_a_robot_whose_agent_restarted_gives_its_running_task_back(
+    bus: Bus, manager: TaskManager, events: list[Message]
+) -> None:
+    """Killed and restarted within the loss grace, the robot reports no task: the task is
+    requeued at once, not left `running` for ever (found by the soak)."""
+    _r1, _r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    await r3.wait_for("task_assigned")
+    r3.start(task.id)
+    r3.state("busy")
+    assert task.state is TaskState.RUNNING
+    r3.task_id = None  # a new agent process: it knows of no task
+    r3.state("idle")
+    assert states_of(events, task.id)[2:4] == ["running", "queued"]
+    assert task.state is not TaskState.RUNNING or task.robot != "R3"
+
+
+async def test_a_failed_task_always_carries_a_reason(bus: Bus, manager: TaskManager) -> None:
+    _r1, _r2, r3 = fleet(bus)
+    task = manager.request("tour", {"tour": "ground"})
+    order = await r3.wait_for("task_assigned")  # nearest to the hall
+    assert order.payload["task_id"] == task.id
+    r3.start(task.id)
+    r3.end(task.id, outcome="failed")  # no reason in the report
+    assert task.state is TaskState.FAILED
+    assert task.reason == "R3 reported the task failed without saying why"

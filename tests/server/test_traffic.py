@@ -253,3 +253,61 @@ def test_the_planner_never_crosses_a_cabin_without_riding() -> None:
     assert path.nodes == ["charge_b", "charge_a", "entrance", "hall"]
     up = SiteGraph(site).shortest_path("hall", "gc1")
     assert up.nodes[:3] == ["hall", "lift0", "lift1"]
+
+
+async def test_a_restarted_server_takes_back_the_locks_robots_report(bus: Bus) -> None:
+    """The lock table starts empty after a restart: a robot inside an area, or holding a grant
+    it has not used yet, keeps it from its robot_state; a second robot waits (found by the
+    soak: both were once granted the elevator)."""
+    events: list[tuple[str, dict[str, Any]]] = []
+    traffic = TrafficManager(
+        bus.endpoint("traffic_manager"),
+        demo_site(),
+        on_event=lambda kind, data: events.append((kind, data)),
+    )
+    traffic.start()
+    r1, r2 = RobotStub(bus, "R1", "corridor_w"), RobotStub(bus, "R2", "hall")
+    r3 = RobotStub(bus, "R3", "ga1")
+    r1.state("busy")  # inside the corridor: nobody else held it
+    r2.state("busy", areas=["elevator"])  # granted before the restart, not entered yet
+    assert traffic.locks.holder("corridor") == "R1" and traffic.locks.entered("corridor")
+    assert traffic.locks.holder("elevator") == "R2" and not traffic.locks.entered("elevator")
+    assert ("area_granted", {"robot": "R2", "area": "elevator", "resync": True}) in events
+    r3.endpoint.publish("request_area", {"robot": "R3", "area": "elevator"})
+    r3.state("busy", areas=["corridor"])  # a stale claim on a held area is not taken
+    assert traffic.locks.holder("corridor") == "R1" and not r3.of_type("area_granted")
+    r2.node = "lift0"
+    r2.state("busy", areas=["elevator"])
+    r2.node = "hall"
+    r2.state("busy", areas=[])  # out again: released, and the waiter gets it
+    await r3.wait_for("area_granted")
+
+
+async def test_after_a_restart_no_area_is_granted_before_the_robots_that_had_tasks_resync(
+    bus: Bus,
+) -> None:
+    """R4 was inside the corridor when the server died; R1 came back first and asked for it.
+    It must wait for R4's word (found by the soak: both drove in)."""
+    traffic = start_traffic(bus, demo_site())
+    r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "corridor_e")
+    traffic.await_resync({"R2", "R3"}, timeout_s=30)
+    r1.state("busy")
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
+    r2.state("busy", areas=["corridor"])  # R2 back: it is inside and holds it
+    assert traffic.locks.holder("corridor") == "R2"
+    RobotStub(bus, "R3", "hall").state("idle")  # the last one: R1's request is handled now
+    assert traffic.locks.waiting_for("R1") == ("corridor",) and not r1.of_type("area_granted")
+    r2.node = "gb1"
+    r2.state("busy", areas=[])
+    await r1.wait_for("area_granted")
+    traffic.stop()
+
+
+async def test_the_resync_wait_ends_without_a_robot_that_never_comes_back(bus: Bus) -> None:
+    traffic = start_traffic(bus, demo_site())
+    traffic.await_resync({"R3"}, timeout_s=0.3)
+    r1 = RobotStub(bus, "R1", "ga1")
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
+    assert not r1.of_type("area_granted")
+    await r1.wait_for("area_granted", timeout=10)
+    traffic.stop()

@@ -1,0 +1,99 @@
+"""The soak's faults: a schedule drawn from the seed, and how each kind is injected from
+outside the processes (docs/robot.md "Soak benchmark" lists them).
+
+| kind | injected with | undone after ``hold_s`` by |
+|---|---|---|
+| robot_kill | SIGKILL of the robot agent | starting it again (same name, same screen port) |
+| link_cut | the robot's TCP relay drops its connection and refuses new ones | accepting again |
+| server_kill | SIGKILL of the server | starting it again on the same port and database |
+| modbus_offline | building simulator `POST /modules/{id}/fault {"kind": "offline"}` | kind none |
+| elevator_stuck | building simulator `POST /elevators/{id}/stuck` | `{"stuck": false}` |
+| door_jam | building simulator `POST /doors/{id}/jam` | `{"jammed": false}` |
+| can_unplug | robot `POST /sim/module_plug {"plugged": false}` | `{"plugged": true}` |
+| battery_panic | robot `POST /sim/battery {"level": 0.05}` | nothing: the robot goes to charge |
+"""
+
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+
+__all__ = ["KINDS", "Fault", "schedule"]
+
+KINDS = (
+    "robot_kill",
+    "link_cut",
+    "server_kill",
+    "modbus_offline",
+    "elevator_stuck",
+    "door_jam",
+    "can_unplug",
+    "battery_panic",
+)
+
+HOLD_S: dict[str, tuple[float, float]] = {
+    "robot_kill": (1.0, 4.0),
+    "link_cut": (3.0, 15.0),
+    "server_kill": (1.0, 3.0),
+    "modbus_offline": (3.0, 10.0),
+    "elevator_stuck": (5.0, 20.0),
+    "door_jam": (5.0, 20.0),
+    "can_unplug": (2.0, 8.0),
+    "battery_panic": (0.0, 0.0),
+}
+"""Wall seconds a fault lasts (drawn uniformly)."""
+
+CAN_MODULES = (0x02, 0x04, 0x08, 0x10, 0x20, 0x40)
+
+
+@dataclass(frozen=True)
+class Fault:
+    at_s: float
+    """Seconds after the start of the soak."""
+    kind: str
+    target: str
+    """A robot name, module id, elevator or door (for can_unplug: ``R1:0x10``)."""
+    hold_s: float
+
+    def __str__(self) -> str:
+        return f"t={self.at_s:6.1f}s {self.kind} {self.target} for {self.hold_s:.1f}s"
+
+
+def schedule(
+    seed: int,
+    duration_s: float,
+    every_s: float,
+    robots: list[str],
+    modules: list[str],
+    elevators: list[str],
+    doors: list[str],
+) -> list[Fault]:
+    """Faults at random times (exponential gaps of mean ``every_s``), kinds dealt from a
+    shuffled deck so that every kind comes once before any comes twice."""
+    rng = random.Random(seed)
+    targets = {
+        "robot_kill": robots,
+        "link_cut": robots,
+        "battery_panic": robots,
+        "server_kill": ["server"],
+        "modbus_offline": modules,
+        "elevator_stuck": elevators,
+        "door_jam": doors,
+    }
+    faults: list[Fault] = []
+    deck: list[str] = []
+    t = min(5.0, duration_s / 10)
+    while True:
+        t += rng.expovariate(1.0 / every_s)
+        if t >= duration_s:
+            return faults
+        if not deck:
+            deck = list(KINDS)
+            rng.shuffle(deck)
+        kind = deck.pop()
+        if kind == "can_unplug":
+            target = f"{rng.choice(robots)}:{rng.choice(CAN_MODULES):#04x}"
+        else:
+            target = rng.choice(targets[kind])
+        low, high = HOLD_S[kind]
+        faults.append(Fault(round(t, 2), kind, target, round(rng.uniform(low, high), 2)))
