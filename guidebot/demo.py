@@ -134,7 +134,7 @@ def demo(
     visitors: bool,
 ) -> None:
     """Run the server, the building simulator and N simulated robots until Ctrl-C."""
-    from backend.site.yamlio import load_site_file
+    from guidebot.site.yamlio import load_site_file
 
     known = load_site_file(site).robots
     if robots > len(known):

@@ -14,7 +14,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from backend.site.yamlio import MAX_SITE_BYTES
+from guidebot.site.yamlio import MAX_SITE_BYTES
 
 __all__ = ["BodyLimit", "BodyTooLarge", "install_error_handlers", "limit_for"]
 

@@ -9,10 +9,10 @@ from fastapi import APIRouter, Body, HTTPException, Query, Request, Response, st
 from backend.api.component import hash_robot_tokens, weak_robot_tokens
 from backend.api.deps import Admin, Requester, Staff, forbid, sites, traffic
 from backend.auth import Role
-from backend.site.schema import Site
-from backend.site.validate import SiteInvalid, SiteIssue, validate_site
-from backend.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
-from backend.traffic.graph import NoPath, UnknownNode
+from guidebot.site.graph import NoPath, UnknownNode
+from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, SiteIssue, validate_site
+from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
 
 __all__ = ["router"]
 

@@ -23,9 +23,9 @@ from backend.auth import token_digest
 from backend.site.diff import site_diff
 from backend.site.draft import SiteDrafts, StaleDraft, check_document
 from backend.site.rollout import SiteRollout
-from backend.site.schema import Site
-from backend.site.validate import SiteInvalid, validate_site
-from backend.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
+from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
 
 __all__ = ["MAX_MEDIA_BYTES", "MAX_PLAN_BYTES", "router"]
 

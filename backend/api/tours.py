@@ -8,8 +8,8 @@ from fastapi import APIRouter, Body, Path, Request, status
 
 from backend.api.deps import Admin, Anyone, not_found, sites
 from backend.api.site import invalid
-from backend.site.schema import PointOfInterest, Tour
-from backend.site.validate import SiteInvalid
+from guidebot.site.schema import PointOfInterest, Tour
+from guidebot.site.validate import SiteInvalid
 
 __all__ = ["router"]
 

@@ -10,9 +10,9 @@ from fastapi import APIRouter, Path, Query, Request
 from fastapi.responses import FileResponse
 
 from backend.api.deps import Anyone, Requester, not_found, sites, task_manager
-from backend.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
-from backend.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
-from backend.site.schema import Site
+from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from guidebot.site.schema import Site
 
 __all__ = ["media_url", "router"]
 

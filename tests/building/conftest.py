@@ -8,11 +8,11 @@ from typing import Any
 
 import pytest
 
-from backend.building.config import BuildingConfig, load_building
 from backend.building.interface import BuildingInterface
 from building_sim.simulator import BuildingSimulator
 from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message
+from guidebot.site.building_config import BuildingConfig, load_building
 
 TIME_SCALE = 20.0
 PERIOD_MS = 50  # fast enough that a 300 ms press is always seen twice 200 ms apart

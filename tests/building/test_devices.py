@@ -7,9 +7,9 @@ from collections.abc import AsyncIterator
 import pytest
 
 from backend.building._modbus import ModuleClient
-from backend.site.building import PointKind
 from building_sim.devices import IllegalTransition
 from building_sim.simulator import BuildingSimulator, SimulatorError
+from guidebot.site.building import PointKind
 
 from .conftest import wait_until
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import asyncio
 
-from backend.building.config import BuildingConfig, load_building
 from backend.building.interface import BuildingInterface
 from building_sim.simulator import BuildingSimulator
 from guidebot.bus import Bus
+from guidebot.site.building_config import BuildingConfig, load_building
 
 from .conftest import TIME_SCALE, Recorder, site_dict, wait_until
 

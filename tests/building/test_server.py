@@ -8,11 +8,11 @@ from pathlib import Path
 import httpx
 import yaml
 
-from backend.building.config import load_building
 from backend.settings import Settings
 from backend.testing import running_server
 from building_sim.simulator import BuildingSimulator
 from guidebot.messages import Message
+from guidebot.site.building_config import load_building
 
 from .conftest import Recorder, wait_until
 

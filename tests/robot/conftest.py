@@ -9,10 +9,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from backend.site.schema import Site
-from backend.site.yamlio import load_site_file
 from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message
+from guidebot.site.schema import Site
+from guidebot.site.yamlio import load_site_file
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
