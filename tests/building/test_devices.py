@@ -10,8 +10,7 @@ from backend.building._modbus import ModuleClient
 from building_sim.devices import IllegalTransition
 from building_sim.simulator import BuildingSimulator, SimulatorError
 from guidebot.site.building import PointKind
-
-from .conftest import wait_until
+from guidebot.testing import wait_until
 
 
 @pytest.fixture

@@ -8,8 +8,9 @@ from backend.building.interface import BuildingInterface
 from building_sim.simulator import BuildingSimulator
 from guidebot.bus import Bus
 from guidebot.site.building_config import BuildingConfig, load_building
+from guidebot.testing import Recorder, wait_until
 
-from .conftest import TIME_SCALE, Recorder, site_dict, wait_until
+from .conftest import TIME_SCALE, site_dict
 
 
 async def test_300ms_press_gives_one_event(
