@@ -26,7 +26,8 @@ import guidebot
 from backend.api import ROUTERS as api_routers
 from backend.api.component import server_brain
 from backend.api.deps import ERRORS
-from backend.api.limits import BodyLimit, install_error_handlers
+from backend.api.errors import install_error_handlers
+from backend.api.limits import BodyLimit
 from backend.auth import Authenticator, Role, TokenStore
 from backend.building import routes as building_routes
 from backend.building.component import building_interface

@@ -12,8 +12,8 @@ from pydantic import ValidationError
 
 def refuse_broken_site(path: Path) -> None:
     """A broken site file stops the start with every problem and its line (no traceback)."""
-    from backend.site.validate import SiteInvalid
-    from backend.site.yamlio import load_site_file
+    from guidebot.site.validate import SiteInvalid
+    from guidebot.site.yamlio import load_site_file
 
     try:
         load_site_file(path)

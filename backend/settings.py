@@ -17,6 +17,7 @@ from pydantic import BaseModel, Field, ValidationError, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from backend.auth import Role
+from guidebot.paths import SITES_DIR, WEB_DIR
 
 __all__ = [
     "DEFAULT_ADMIN_TOKEN",
@@ -31,15 +32,12 @@ __all__ = [
 DEFAULT_ADMIN_TOKEN = "dev-admin-token"
 MIN_PRODUCTION_TOKEN_LENGTH = 16
 
-ROOT = Path(__file__).resolve().parent.parent
-WEB_DIR = ROOT / "web"
-
 
 @cache
 def published_tokens() -> frozenset[str]:
     """Tokens anyone can read in this repository: the dev admin token and the shipped sites'."""
     found = {DEFAULT_ADMIN_TOKEN}
-    for path in sorted((ROOT / "sites").glob("*.yaml")):
+    for path in sorted(SITES_DIR.glob("*.yaml")):
         try:
             data = yaml.safe_load(path.read_text(encoding="utf-8"))
         except (OSError, yaml.YAMLError):

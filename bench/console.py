@@ -37,8 +37,8 @@ import orjson
 import websockets
 import yaml
 
-from backend.site.yamlio import load_site_file
 from guidebot.benchutil import percentiles, print_result
+from guidebot.site.yamlio import load_site_file
 
 __all__ = ["CHROMIUM", "CHROMIUM_ARGS", "main"]
 

@@ -35,12 +35,12 @@ import httpx
 import psutil
 import yaml
 
-from backend.building.config import BuildingConfig, load_building
 from backend.building.interface import BuildingInterface
-from backend.site.building import PointKind
 from guidebot.benchutil import percentiles, print_result
 from guidebot.bus import Bus
 from guidebot.messages import Message
+from guidebot.site.building import PointKind
+from guidebot.site.building_config import BuildingConfig, load_building
 
 __all__ = ["main"]
 

@@ -156,10 +156,10 @@ async def _wait_fleet(http: httpx.AsyncClient, count: int) -> None:
 async def _experiment(
     runs: int, robots: int, period_ms: int, press_ms: float, seed: int
 ) -> list[dict[str, float]]:
-    from backend.building.config import load_building
     from building_sim.simulator import BuildingSimulator
     from guidebot.client import HubClient
     from guidebot.messages import Message
+    from guidebot.site.building_config import load_building
     from robot_agent.agent import hub_ws_url
 
     rng = random.Random(seed)

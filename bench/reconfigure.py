@@ -127,11 +127,11 @@ class Fleet:
 @contextlib.asynccontextmanager
 async def fleet(tmp: Path, robots: int, time_scale: float) -> AsyncIterator[Fleet]:
     """Building simulator, server (demo site, plans copied) and simulated robots, on loopback."""
-    from backend.building.config import BuildingConfig
     from backend.settings import Settings
-    from backend.site.yamlio import load_site_file
     from backend.testing import running_server
     from building_sim.simulator import BuildingSimulator
+    from guidebot.site.building_config import BuildingConfig
+    from guidebot.site.yamlio import load_site_file
     from robot_agent.agent import AgentConfig, RobotAgent
 
     site = load_site_file(DEMO_SITE)

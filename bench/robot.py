@@ -74,7 +74,7 @@ class _FirstMovingFrame(can.Listener):
 
 
 def _bench_site(tmp: Path, robots: list[str]) -> Path:
-    from backend.site.yamlio import load_site_file
+    from guidebot.site.yamlio import load_site_file
 
     data = load_site_file(SITE).model_dump(mode="json")
     data["robots"] = [r for r in data["robots"] if r["name"] in robots]

@@ -310,7 +310,7 @@ def _auth(token: str) -> dict[str, str]:
 
 
 def _validated(site: dict[str, Any]) -> Any:
-    from backend.site.validate import validate_site
+    from guidebot.site.validate import validate_site
 
     return validate_site(site)
 

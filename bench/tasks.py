@@ -22,12 +22,12 @@ from pathlib import Path
 import click
 
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
-from backend.site.synthetic import synthetic_site
 from backend.tasks.manager import TaskManager
-from backend.traffic.graph import SiteGraph
 from guidebot.benchutil import percentiles, print_result
 from guidebot.bus import Bus
 from guidebot.messages import Message
+from guidebot.site.graph import SiteGraph
+from guidebot.site.synthetic import synthetic_site
 
 __all__ = ["main"]
 

@@ -33,14 +33,14 @@ import click
 
 from backend.hub import Hub
 from backend.settings import Settings
-from backend.site.schema import Site
-from backend.site.synthetic import synthetic_site
-from backend.site.yamlio import dump_site
 from backend.testing import running_server
-from backend.traffic.graph import SiteGraph
 from backend.traffic.manager import TrafficManager
 from guidebot.benchutil import percentiles, print_result
 from guidebot.client import HubClient
+from guidebot.site.graph import SiteGraph
+from guidebot.site.schema import Site
+from guidebot.site.synthetic import synthetic_site
+from guidebot.site.yamlio import dump_site
 
 __all__ = ["main"]
 

@@ -16,7 +16,7 @@ from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from backend.site.building import BuildingModule, PointKind
+from guidebot.site.building import BuildingModule, PointKind
 
 __all__ = ["FaultKind", "ModuleFault", "ModuleServer", "ModuleStore"]
 

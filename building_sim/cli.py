@@ -20,7 +20,7 @@ from pathlib import Path
 import click
 import httpx
 
-from backend.building.config import BuildingConfigError, load_building_file
+from guidebot.site.building_config import BuildingConfigError, load_building_file
 
 __all__ = ["building_sim"]
 

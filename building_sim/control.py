@@ -20,9 +20,9 @@ import uvicorn
 from fastapi import FastAPI, HTTPException
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.site.building import IORef
 from building_sim._modbus import FaultKind
 from building_sim.simulator import BuildingSimulator, SimulatorError
+from guidebot.site.building import IORef
 
 __all__ = ["control_app", "serve_control"]
 

@@ -11,7 +11,7 @@ import asyncio
 from collections.abc import Callable
 from enum import StrEnum
 
-from backend.site.building import Door, Elevator, IORef
+from guidebot.site.building import Door, Elevator, IORef
 
 __all__ = [
     "CabinState",

@@ -17,9 +17,9 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
-from backend.site.building import IORef
 from building_sim._modbus import FaultKind
 from building_sim.simulator import BuildingSimulator
+from guidebot.site.building import IORef
 
 __all__ = ["ScenarioError", "Step", "load_scenario", "run_scenario"]
 

@@ -16,11 +16,11 @@ from collections.abc import Callable
 from types import TracebackType
 from typing import Any
 
-from backend.building.config import BuildingConfig
-from backend.site.building import IORef, PointKind
-from backend.site.io_rules import Role, allowed
 from building_sim._modbus import FaultKind, ModuleFault, ModuleServer, ModuleStore
 from building_sim.devices import DoorSim, ElevatorSim
+from guidebot.site.building import IORef, PointKind
+from guidebot.site.building_config import BuildingConfig
+from guidebot.site.io_rules import Role, allowed
 
 __all__ = ["BuildingSimulator", "SimulatorError"]
 

@@ -276,8 +276,8 @@ def demo(
     visitors: bool,
 ) -> None:
     """Run the building simulator, the server and N simulated robots until Ctrl-C."""
-    from backend.site.yamlio import load_site_file
     from guidebot.demo_visitors import Visitors
+    from guidebot.site.yamlio import load_site_file
 
     loaded = load_site_file(site)
     known = loaded.robots

@@ -59,7 +59,7 @@ class InvariantChecker:
 
     @classmethod
     def from_site(cls, site: Any) -> InvariantChecker:
-        """From a site document (backend.site.schema.Site or anything shaped like it)."""
+        """From a site document (guidebot.site.schema.Site or anything shaped like it)."""
         return cls(
             door_at={d.node: d.id for d in site.doors},
             cabin_at={s.node: (e.id, s.floor) for e in site.elevators for s in e.stops},

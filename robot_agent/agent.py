@@ -94,21 +94,21 @@ class OnboardSite:
     position_of: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Node -> (x, y): the robot reports its start node's position before it first moves."""
     site: Any = None
-    """The parsed site (backend.site.schema.Site): the touch screen's texts per language."""
+    """The parsed site (guidebot.site.schema.Site): the touch screen's texts per language."""
 
 
 def load_onboard_site(path: Path | None) -> OnboardSite:
     """Parse the site file (slow: call it in a thread)."""
     if path is None:
         return OnboardSite([], [], None, {})
-    from backend.site.yamlio import load_site_file
+    from guidebot.site.yamlio import load_site_file
 
     return onboard_site(load_site_file(path))
 
 
 def onboard_site(site: Any) -> OnboardSite:
     """The on-board view of a ``Site``: menu entries and a planner over its graph."""
-    from backend.traffic.graph import SiteGraph
+    from guidebot.site.graph import SiteGraph
 
     graph = SiteGraph(site)
 

@@ -97,7 +97,7 @@ def robot(
         raise click.UsageError("--server needs --token (or GUIDEBOT_ROBOT_TOKEN)")
     robot_params: dict[str, float] = {}
     if site is not None:
-        from backend.site.yamlio import load_site_file
+        from guidebot.site.yamlio import load_site_file
 
         known = load_site_file(site).robot(name)
         if known is not None:

@@ -29,12 +29,12 @@ from fastapi.responses import FileResponse, HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
-from backend.settings import WEB_DIR
-from backend.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
-from backend.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
-from backend.site.schema import Site
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.paths import WEB_DIR
+from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from guidebot.site.schema import Site
 from robot_agent.clock import Clock
 
 __all__ = ["OnboardScreen", "ScreenServer"]

@@ -38,7 +38,7 @@ class SiteFollower:
         self.ep.publish("site_loaded", {"robot": self.robot, "version": self.version})
 
     def _on_changed(self, message: Message) -> None:
-        from backend.site.validate import SiteInvalid, validate_site
+        from guidebot.site.validate import SiteInvalid, validate_site
 
         version = int(message.payload.get("version", 0))
         if version == self.version:

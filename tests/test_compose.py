@@ -13,8 +13,8 @@ import click
 import pytest
 import yaml
 
-from backend.site import load_site_file
 from guidebot.cli import main
+from guidebot.site import load_site_file
 
 ROOT = Path(__file__).resolve().parent.parent
 COMPOSE = yaml.safe_load((ROOT / "docker-compose.yml").read_text())

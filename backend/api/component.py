@@ -16,15 +16,15 @@ from backend.auth import Role, TokenStore, is_digest, token_digest
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.health import ComponentState
 from backend.settings import published_tokens, weak_secret
-from backend.site.schema import Site
 from backend.site.service import EMPTY_SITE, SiteService
-from backend.site.validate import validate_site
-from backend.site.yamlio import load_site_file
 from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.manager import TaskManager
-from backend.traffic.graph import SiteGraph
 from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
+from guidebot.site.graph import SiteGraph
+from guidebot.site.schema import Site
+from guidebot.site.validate import validate_site
+from guidebot.site.yamlio import load_site_file
 
 __all__ = [
     "LOGGED_BROADCASTS",

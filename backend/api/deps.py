@@ -1,8 +1,9 @@
-"""Shared dependencies of the REST routers: roles as Annotated aliases, services from app.state."""
+"""Shared dependencies of the REST routers: roles as Annotated aliases, services from app.state
+as typed Annotated dependencies (``manager: Tasks``)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, TypeVar
 
 from fastapi import Depends, HTTPException, Request, status
 
@@ -18,7 +19,12 @@ __all__ = [
     "Admin",
     "Anyone",
     "Requester",
+    "Sites",
     "Staff",
+    "Store",
+    "Tasks",
+    "Traffic",
+    "app_service",
     "forbid",
     "not_found",
     "rate_limited",
@@ -39,20 +45,38 @@ Anyone = Annotated[
 """Any known token: reading tours and points of interest."""
 
 
+ServiceT = TypeVar("ServiceT")
+
+
+def app_service(request: Request, name: str, kind: type[ServiceT]) -> ServiceT:
+    """A service the app factory's components put on app.state, checked for its type."""
+    value = getattr(request.app.state, name, None)
+    if not isinstance(value, kind):
+        raise RuntimeError(f"app.state.{name} is not a {kind.__name__}: is its component started?")
+    return value
+
+
 def task_manager(request: Request) -> TaskManager:
-    return request.app.state.task_manager  # type: ignore[no-any-return]
+    return app_service(request, "task_manager", TaskManager)
 
 
 def traffic(request: Request) -> TrafficManager:
-    return request.app.state.traffic  # type: ignore[no-any-return]
+    return app_service(request, "traffic", TrafficManager)
 
 
 def sites(request: Request) -> SiteService:
-    return request.app.state.sites  # type: ignore[no-any-return]
+    return app_service(request, "sites", SiteService)
 
 
 def store(request: Request) -> DbStore:
-    return request.app.state.store  # type: ignore[no-any-return]
+    return app_service(request, "store", DbStore)
+
+
+Tasks = Annotated[TaskManager, Depends(task_manager)]
+"""The Task Manager, as a route parameter (``manager: Tasks``)."""
+Traffic = Annotated[TrafficManager, Depends(traffic)]
+Sites = Annotated[SiteService, Depends(sites)]
+Store = Annotated[DbStore, Depends(store)]
 
 
 def not_found(what: str) -> HTTPException:

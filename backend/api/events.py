@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Query
 
-from backend.api.deps import Staff, store
+from backend.api.deps import Staff, Store
 
 __all__ = ["router"]
 
@@ -15,8 +15,8 @@ router = APIRouter(prefix="/api/events", tags=["events"])
 
 @router.get("")
 async def list_events(
-    request: Request,
     _: Staff,
+    db: Store,
     after_id: Annotated[int, Query(ge=0, le=2**62)] = 0,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     kind: Annotated[str | None, Query(max_length=64)] = None,
@@ -24,5 +24,5 @@ async def list_events(
 ) -> dict[str, Any]:
     """Events with id greater than ``after_id``; pass ``next_after_id`` to get the next page.
     ``latest=true``: the last ``limit`` events instead of the first (still in id order)."""
-    events = await store(request).events(after_id=after_id, limit=limit, kind=kind, latest=latest)
+    events = await db.events(after_id=after_id, limit=limit, kind=kind, latest=latest)
     return {"events": events, "next_after_id": events[-1]["id"] if events else after_id}

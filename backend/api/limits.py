@@ -1,4 +1,4 @@
-"""Request body size limits and validation errors that never echo the input back.
+"""Request body size limits (the error handlers are in backend.api.errors).
 
 ``BodyLimit`` is plain ASGI middleware: it refuses a body larger than its limit with 413 before
 the route reads it (Content-Length checked up front, a streamed body counted as it arrives), so
@@ -7,16 +7,13 @@ a 20 MB ``params`` is never parsed, stored or served. Site uploads get the site 
 
 from __future__ import annotations
 
-from typing import Any
-
-from fastapi import FastAPI, Request, status
-from fastapi.exceptions import RequestValidationError
+from fastapi import status
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from backend.site.yamlio import MAX_SITE_BYTES
+from guidebot.site.yamlio import MAX_SITE_BYTES
 
-__all__ = ["BodyLimit", "BodyTooLarge", "install_error_handlers", "limit_for"]
+__all__ = ["BodyLimit", "BodyTooLarge", "limit_for"]
 
 LARGE_BODY_PATHS = ("/api/site",)
 """Path prefixes that take a whole site document (up to the site file limit)."""
@@ -89,22 +86,3 @@ async def _too_large(send: Send, limit: int) -> None:
 
 async def _nothing() -> Message:
     return {"type": "http.disconnect"}
-
-
-def _clean(errors: Any) -> list[dict[str, Any]]:
-    """Validation errors as [{loc, msg, type}]: no ``input`` (it may be huge or a secret)."""
-    return [
-        {"loc": list(err.get("loc", ())), "msg": err.get("msg", ""), "type": err.get("type", "")}
-        for err in errors
-    ]
-
-
-async def _validation_error(_: Request, exc: Exception) -> JSONResponse:
-    assert isinstance(exc, RequestValidationError)
-    return JSONResponse(
-        {"detail": _clean(exc.errors())}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT
-    )
-
-
-def install_error_handlers(app: FastAPI) -> None:
-    app.add_exception_handler(RequestValidationError, _validation_error)

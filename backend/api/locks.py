@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 
-from backend.api.deps import Staff, forbid, not_found, traffic
+from backend.api.deps import Staff, Traffic, forbid, not_found
 from backend.auth import Role
 
 __all__ = ["router"]
@@ -15,7 +15,7 @@ router = APIRouter(prefix="/api/locks", tags=["locks"])
 
 
 @router.get("")
-async def list_locks(request: Request, _: Staff) -> list[dict[str, Any]]:
+async def list_locks(_: Staff, traffic: Traffic) -> list[dict[str, Any]]:
     """Every restricted area: free, held, holder_offline (kept: it may be inside) or yielding."""
     return [
         {
@@ -26,18 +26,17 @@ async def list_locks(request: Request, _: Staff) -> list[dict[str, Any]]:
             "entered": v.entered,
             "waiting": v.waiting,
         }
-        for v in traffic(request).lock_views()
+        for v in traffic.lock_views()
     ]
 
 
 @router.post("/{area}/release")
 async def force_release(
-    request: Request, who: Staff, area: Annotated[str, Path(max_length=64)]
+    request: Request, who: Staff, manager: Traffic, area: Annotated[str, Path(max_length=64)]
 ) -> dict[str, Any]:
     """Release an area by hand, e.g. its robot is offline and staff saw it is outside.
 
     Operators may release only a lock whose holder is offline; admins any lock."""
-    manager = traffic(request)
     if area not in manager.locks.areas:
         raise not_found(f"area {area!r}")
     view = next(v for v in manager.lock_views() if v.area == area)

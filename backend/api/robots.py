@@ -4,33 +4,35 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Path, Request
+from fastapi import APIRouter, Path
 
-from backend.api.deps import Requester, Staff, forbid, not_found, task_manager, traffic
+from backend.api.deps import Requester, Staff, Tasks, Traffic, forbid, not_found
 from backend.auth import Role
+from backend.tasks.manager import TaskManager
+from backend.traffic.manager import TrafficManager
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/api/robots", tags=["robots"])
 
 
-def _view(request: Request, name: str) -> dict[str, Any]:
-    info = task_manager(request).robots[name]
-    return {**info.as_dict(), "areas": traffic(request).locks.held_by(name)}
+def _view(manager: TaskManager, traffic: TrafficManager, name: str) -> dict[str, Any]:
+    info = manager.robots[name]
+    return {**info.as_dict(), "areas": traffic.locks.held_by(name)}
 
 
 @router.get("")
-async def list_robots(request: Request, _: Staff) -> list[dict[str, Any]]:
-    return [_view(request, name) for name in task_manager(request).robots]
+async def list_robots(_: Staff, manager: Tasks, traffic: Traffic) -> list[dict[str, Any]]:
+    return [_view(manager, traffic, name) for name in manager.robots]
 
 
 @router.get("/{name}")
 async def get_robot(
-    request: Request, who: Requester, name: Annotated[str, Path(max_length=64)]
+    who: Requester, manager: Tasks, traffic: Traffic, name: Annotated[str, Path(max_length=64)]
 ) -> dict[str, Any]:
     """Staff see any robot; a robot only itself."""
     if who.role is Role.PANEL or (who.role is Role.ROBOT and who.name != name):
         raise forbid("a robot may only see itself")
-    if name not in task_manager(request).robots:
+    if name not in manager.robots:
         raise not_found(f"robot {name!r}")
-    return _view(request, name)
+    return _view(manager, traffic, name)

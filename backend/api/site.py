@@ -7,12 +7,12 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException, Query, Request, Response, status
 
 from backend.api.component import hash_robot_tokens, weak_robot_tokens
-from backend.api.deps import Admin, Requester, Staff, forbid, sites, traffic
+from backend.api.deps import Admin, Requester, Sites, Staff, Traffic, forbid
 from backend.auth import Role
-from backend.site.schema import Site
-from backend.site.validate import SiteInvalid, SiteIssue, validate_site
-from backend.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
-from backend.traffic.graph import NoPath, UnknownNode
+from guidebot.site.graph import NoPath, UnknownNode
+from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, SiteIssue, validate_site
+from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
 
 __all__ = ["router"]
 
@@ -33,18 +33,16 @@ def _secured(request: Request, site: Site) -> Site:
 
 
 @router.get("/site")
-async def get_site(request: Request, _: Admin) -> dict[str, Any]:
+async def get_site(_: Admin, service: Sites) -> dict[str, Any]:
     """The whole site document with its version (robot tokens as SHA-256 digests only)."""
-    service = sites(request)
     return {"version": service.version, "site": service.site.model_dump(mode="json")}
 
 
 @router.put("/site")
 async def put_site(
-    request: Request, _: Admin, document: Annotated[dict[str, Any], Body()]
+    request: Request, _: Admin, service: Sites, document: Annotated[dict[str, Any], Body()]
 ) -> dict[str, Any]:
     """Replace the site while running; refused as a whole (422, every problem) if broken."""
-    service = sites(request)
     try:
         await service.replace(_secured(request, validate_site(document)))
     except SiteInvalid as exc:
@@ -53,9 +51,9 @@ async def put_site(
 
 
 @router.get("/site/export", response_class=Response)
-async def export_site(request: Request, _: Admin) -> Response:
+async def export_site(_: Admin, service: Sites) -> Response:
     """The site as a YAML file."""
-    return yaml_download(dump_site(sites(request).site))
+    return yaml_download(dump_site(service.site))
 
 
 def yaml_download(text: str) -> Response:
@@ -73,14 +71,13 @@ def yaml_download(text: str) -> Response:
         "requestBody": {"content": {"application/yaml": {"schema": {"type": "string"}}}}
     },
 )
-async def import_site(request: Request, _: Admin) -> dict[str, Any]:
+async def import_site(request: Request, _: Admin, service: Sites) -> dict[str, Any]:
     """Replace the site with a YAML file (request body); 422 lists every error with its line."""
     raw = await request.body()
     if len(raw) > MAX_SITE_BYTES:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site file too large")
     try:
         site = load_site_text(raw.decode("utf-8", errors="replace"))
-        service = sites(request)
         await service.replace(_secured(request, site))
     except SiteInvalid as exc:
         raise invalid(exc) from None
@@ -89,8 +86,8 @@ async def import_site(request: Request, _: Admin) -> dict[str, Any]:
 
 @router.get("/paths")
 async def get_path(
-    request: Request,
     who: Requester,
+    traffic: Traffic,
     from_node: Annotated[str, Query(max_length=64)],
     to_node: Annotated[str, Query(max_length=64)],
 ) -> dict[str, Any]:
@@ -98,7 +95,7 @@ async def get_path(
     if who.role is Role.PANEL:
         raise forbid("panels do not plan paths")
     try:
-        result = traffic(request).path(from_node, to_node)
+        result = traffic.path(from_node, to_node)
     except UnknownNode as exc:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"unknown node {exc}") from None
     except NoPath as exc:

@@ -13,19 +13,21 @@ import secrets
 from pathlib import Path as FsPath
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response, status
+from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, Response, status
 from fastapi.responses import FileResponse
 
 from backend.api.component import hash_robot_tokens
-from backend.api.deps import Admin, not_found, sites, store
+from backend.api.deps import Admin, Sites, Store, app_service, not_found
 from backend.api.site import _secured, invalid, yaml_download
 from backend.auth import token_digest
+from backend.db.store import DbStore
 from backend.site.diff import site_diff
 from backend.site.draft import SiteDrafts, StaleDraft, check_document
 from backend.site.rollout import SiteRollout
-from backend.site.schema import Site
-from backend.site.validate import SiteInvalid, validate_site
-from backend.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
+from backend.site.service import SiteService
+from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
 
 __all__ = ["MAX_MEDIA_BYTES", "MAX_PLAN_BYTES", "router"]
 
@@ -42,11 +44,15 @@ UPLOAD_HEADERS = {
 
 
 def drafts(request: Request) -> SiteDrafts:
-    return request.app.state.site_drafts  # type: ignore[no-any-return]
+    return app_service(request, "site_drafts", SiteDrafts)
 
 
 def rollout(request: Request) -> SiteRollout:
-    return request.app.state.site_rollout  # type: ignore[no-any-return]
+    return app_service(request, "site_rollout", SiteRollout)
+
+
+Drafts = Annotated[SiteDrafts, Depends(drafts)]
+Rollout = Annotated[SiteRollout, Depends(rollout)]
 
 
 def stale(exc: StaleDraft) -> HTTPException:
@@ -67,49 +73,48 @@ def _issues(data: Any) -> list[dict[str, Any]]:
     return [i.as_dict() for i in check_document(data)]
 
 
-def _state(request: Request) -> dict[str, Any]:
-    d = drafts(request)
+def _state(d: SiteDrafts, live: SiteService) -> dict[str, Any]:
     return {
         **d.state.as_dict(),
-        "live_version": sites(request).version,
+        "live_version": live.version,
         "issues": _issues(d.state.data),
     }
 
 
 @router.get("/draft")
-async def get_draft(request: Request, _: Admin) -> dict[str, Any]:
+async def get_draft(_: Admin, d: Drafts, live: Sites) -> dict[str, Any]:
     """The shared draft, its revision (send it back with every save), the live version and
     the draft's problems (the checks of ``guidebot site check``)."""
-    return _state(request)
+    return _state(d, live)
 
 
 @router.put("/draft")
 async def put_draft(
-    request: Request,
     who: Admin,
+    d: Drafts,
     draft: Annotated[dict[str, Any], Body()],
     revision: Annotated[int, Body(ge=0)],
 ) -> dict[str, Any]:
     """Save the draft (it may have problems: they come back in ``issues``); 409 if stale."""
     try:
-        state = await drafts(request).save(draft, revision=revision, by=who.name)
+        state = await d.save(draft, revision=revision, by=who.name)
     except StaleDraft as exc:
         raise stale(exc) from None
     return {"revision": state.revision, "issues": _issues(state.data)}
 
 
 @router.post("/draft/reset")
-async def reset_draft(request: Request, who: Admin) -> dict[str, Any]:
+async def reset_draft(who: Admin, d: Drafts, live: Sites) -> dict[str, Any]:
     """Throw the draft away and start again from the live site."""
-    await drafts(request).reset(by=who.name)
-    return _state(request)
+    await d.reset(by=who.name)
+    return _state(d, live)
 
 
 @router.get("/draft/export", response_class=Response)
-async def export_draft(request: Request, _: Admin) -> Response:
+async def export_draft(_: Admin, d: Drafts) -> Response:
     """The draft as a YAML file (stable: same content, same order); 422 if it has problems."""
     try:
-        text = dump_site(validate_site(drafts(request).state.data))
+        text = dump_site(validate_site(d.state.data))
     except SiteInvalid as exc:
         raise invalid(exc) from None
     return yaml_download(text)
@@ -122,7 +127,11 @@ async def export_draft(request: Request, _: Admin) -> Response:
     },
 )
 async def import_draft(
-    request: Request, who: Admin, revision: Annotated[int, Query(ge=0)]
+    request: Request,
+    who: Admin,
+    d: Drafts,
+    live: Sites,
+    revision: Annotated[int, Query(ge=0)],
 ) -> dict[str, Any]:
     """Replace the draft with a YAML file; a broken file is refused (422, every problem with
     its line) and the draft is left as it was."""
@@ -131,18 +140,19 @@ async def import_draft(
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site file too large")
     try:
         site = hash_robot_tokens(load_site_text(raw.decode("utf-8", errors="replace")))
-        await drafts(request).save(site.model_dump(mode="json"), revision=revision, by=who.name)
+        await d.save(site.model_dump(mode="json"), revision=revision, by=who.name)
     except SiteInvalid as exc:
         raise invalid(exc) from None
     except StaleDraft as exc:
         raise stale(exc) from None
-    return _state(request)
+    return _state(d, live)
 
 
 @router.post("/publish")
 async def publish(
     request: Request,
     who: Admin,
+    d: Drafts,
     revision: Annotated[int, Body(ge=0)],
     note: Annotated[str, Body(max_length=500)] = "",
 ) -> dict[str, Any]:
@@ -153,24 +163,22 @@ async def publish(
         return _secured(request, site)
 
     try:
-        version = await drafts(request).publish(
-            revision=revision, by=who.name, secure=secure, note=note
-        )
+        version = await d.publish(revision=revision, by=who.name, secure=secure, note=note)
     except SiteInvalid as exc:
         raise invalid(exc) from None
     except StaleDraft as exc:
         raise stale(exc) from None
-    return {"version": version, "revision": drafts(request).state.revision}
+    return {"version": version, "revision": d.state.revision}
 
 
 @router.get("/versions")
-async def versions(request: Request, _: Admin) -> list[dict[str, Any]]:
+async def versions(_: Admin, db: Store) -> list[dict[str, Any]]:
     """Every published version, newest first: who published it, when, and a note."""
-    return await store(request).site_versions()
+    return await db.site_versions()
 
 
-async def _version_data(request: Request, version: int) -> dict[str, Any]:
-    data = await store(request).site_version(version)
+async def _version_data(db: DbStore, version: int) -> dict[str, Any]:
+    data = await db.site_version(version)
     if data is None:
         raise not_found(f"site version {version}")
     return data
@@ -178,57 +186,61 @@ async def _version_data(request: Request, version: int) -> dict[str, Any]:
 
 @router.get("/versions/{version}")
 async def version_document(
-    request: Request, _: Admin, version: Annotated[int, Path(ge=1)]
+    _: Admin, db: Store, version: Annotated[int, Path(ge=1)]
 ) -> dict[str, Any]:
-    return {"version": version, "site": await _version_data(request, version)}
+    return {"version": version, "site": await _version_data(db, version)}
 
 
 @router.get("/diff")
 async def diff(
-    request: Request,
     _: Admin,
+    d: Drafts,
+    db: Store,
     from_version: Annotated[int, Query(alias="from", ge=1)],
     to: Annotated[str, Query(max_length=16, pattern=r"^(\d+|draft)$")] = "draft",
 ) -> list[dict[str, Any]]:
     """What changed from a version to another version (or to the draft), element by element."""
-    old = await _version_data(request, from_version)
-    new = drafts(request).state.data if to == "draft" else await _version_data(request, int(to))
+    old = await _version_data(db, from_version)
+    new = d.state.data if to == "draft" else await _version_data(db, int(to))
     return site_diff(old, new)
 
 
 @router.post("/rollback")
 async def rollback(
-    request: Request, who: Admin, version: Annotated[int, Body(embed=True, ge=1)]
+    request: Request,
+    who: Admin,
+    d: Drafts,
+    db: Store,
+    version: Annotated[int, Body(embed=True, ge=1)],
 ) -> dict[str, Any]:
     """Publish a kept version again (as a new version); the draft becomes that site."""
-    data = await _version_data(request, version)
+    data = await _version_data(db, version)
 
     def secure(site: Site) -> Site:
         return _secured(request, site)
 
     try:
-        new = await drafts(request).rollback(data, version=version, by=who.name, secure=secure)
+        new = await d.rollback(data, version=version, by=who.name, secure=secure)
     except SiteInvalid as exc:
         raise invalid(exc) from None
-    return {"version": new, "revision": drafts(request).state.revision}
+    return {"version": new, "revision": d.state.revision}
 
 
 @router.get("/rollout")
-async def rollout_status(request: Request, _: Admin) -> dict[str, Any]:
+async def rollout_status(_: Admin, r: Rollout) -> dict[str, Any]:
     """How far the last published version reached the robots connected at publish time."""
-    return rollout(request).status()
+    return r.status()
 
 
 @router.post("/draft/robots/{name}/token")
 async def regenerate_token(
-    request: Request,
     who: Admin,
+    d: Drafts,
     name: Annotated[str, Path(max_length=64)],
     revision: Annotated[int, Body(embed=True, ge=0)],
 ) -> dict[str, Any]:
     """A new token for a robot: returned once, only its digest is kept (in the draft; live on
     publish)."""
-    d = drafts(request)
     data = d.state.data
     robots = data.get("robots") if isinstance(data, dict) else None
     robot = next(

@@ -9,27 +9,26 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, status
+from fastapi import APIRouter, Body, Path, Query, Request, status
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from backend.api.deps import (
     Requester,
     Staff,
+    Store,
+    Tasks,
     forbid,
     not_found,
     rate_limited,
-    store,
-    task_manager,
 )
 from backend.auth import Principal, Role
+from backend.db.store import DbStore
 from backend.ratelimit import RateLimited
+from backend.tasks.manager import TaskManager
 from backend.tasks.model import (
     FINAL_STATES,
-    IllegalTransition,
     InvalidTask,
-    QueueFull,
     Task,
-    TaskError,
     TaskFinished,
     TaskNotFound,
     TaskState,
@@ -118,27 +117,16 @@ class TaskPage(BaseModel):
     tasks: list[TaskStatus]
 
 
-def task_error(exc: TaskError) -> HTTPException:
-    """One status per kind of mistake, the same on every route."""
-    if isinstance(exc, TaskNotFound):
-        return not_found("task")
-    if isinstance(exc, TaskFinished | IllegalTransition):
-        return HTTPException(status.HTTP_409_CONFLICT, str(exc))
-    if isinstance(exc, QueueFull):
-        return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, str(exc))
-    return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc))
+def _status(manager: TaskManager, task: Task) -> TaskStatus:
+    return TaskStatus.model_validate(manager.status(task))
 
 
-def _status(request: Request, task: Task) -> TaskStatus:
-    return TaskStatus.model_validate(task_manager(request).status(task))
-
-
-async def _find(request: Request, who: Principal, task_id: str) -> Task:
+async def _find(manager: TaskManager, db: DbStore, who: Principal, task_id: str) -> Task:
     """The live task, else the stored one; 404 also for a task this caller may not see."""
     try:
-        task = task_manager(request).get(task_id)
+        task = manager.get(task_id)
     except TaskNotFound:
-        old = await store(request).task(task_id)
+        old = await db.task(task_id)
         if old is None:
             raise not_found(f"task {task_id!r}") from None
         task = old
@@ -159,12 +147,12 @@ def _may_see(who: Principal, task: Task) -> bool:
 def _refuse_finished(task: Task) -> None:
     """A finished task (live or only in the database since a restart) answers 409 the same."""
     if task.state in FINAL_STATES:
-        raise task_error(TaskFinished(f"task {task.id} is already {task.state.value}"))
+        raise TaskFinished(f"task {task.id} is already {task.state.value}")
 
 
 @router.post("", status_code=status.HTTP_201_CREATED)
 async def create_task(
-    request: Request, who: Requester, body: Annotated[TaskCreate, Body()]
+    request: Request, who: Requester, manager: Tasks, body: Annotated[TaskCreate, Body()]
 ) -> TaskStatus:
     """Request a task. Panels: tours and points of interest, priority up to 5. Robots: a
     visitor at the robot's screen, so that robot takes it. Panels and robots are rate-limited
@@ -184,19 +172,17 @@ async def create_task(
             request.app.state.task_limits.spend(who.name, f"too many task requests from {who.name}")
         except RateLimited as exc:
             raise rate_limited(exc) from None
-    try:
-        task = task_manager(request).request(
-            body.kind, body.params, priority=body.priority, requester=who.name, robot=robot
-        )
-    except TaskError as exc:
-        raise task_error(exc) from None
-    return _status(request, task)
+    task = manager.request(
+        body.kind, body.params, priority=body.priority, requester=who.name, robot=robot
+    )
+    return _status(manager, task)
 
 
 @router.get("")
 async def list_tasks(
-    request: Request,
     who: Requester,
+    manager: Tasks,
+    db: Store,
     state: TaskState | None = None,
     robot: Annotated[str | None, Query(max_length=64)] = None,
     include_internal: bool = True,
@@ -205,7 +191,6 @@ async def list_tasks(
 ) -> TaskPage:
     """Queued tasks first (in service order), then every other task, live or finished, newest
     change first; finished ones survive restarts. Panels and robots see only their own."""
-    manager = task_manager(request)
     owner: tuple[str | None, str | None] | None = None
     if who.role is Role.PANEL:
         owner = (who.name, None)
@@ -225,7 +210,7 @@ async def list_tasks(
     rest_limit = limit - len(page)
     total = len(queued)
     if state is not TaskState.QUEUED:
-        counted, stored = await store(request).list_tasks(
+        counted, stored = await db.list_tasks(
             states=[state.value] if state is not None else None,
             exclude_states=[TaskState.QUEUED.value],
             robot=robot,
@@ -238,60 +223,54 @@ async def list_tasks(
         if rest_limit > 0:
             live = manager.tasks
             page += [live.get(t.id, t) for t in stored]
-    return TaskPage(total=total, tasks=[_status(request, t) for t in page])
+    return TaskPage(total=total, tasks=[_status(manager, t) for t in page])
 
 
 @router.get("/{task_id}")
-async def get_task(request: Request, who: Requester, task_id: TaskId) -> TaskStatus:
+async def get_task(who: Requester, manager: Tasks, db: Store, task_id: TaskId) -> TaskStatus:
     """A task's state, its robot, its queue position and estimated wait."""
-    return _status(request, await _find(request, who, task_id))
+    return _status(manager, await _find(manager, db, who, task_id))
 
 
 @router.get("/{task_id}/history")
-async def task_history(request: Request, who: Staff, task_id: TaskId) -> list[dict[str, Any]]:
-    await _find(request, who, task_id)
-    return await store(request).history(task_id)
+async def task_history(
+    who: Staff, manager: Tasks, db: Store, task_id: TaskId
+) -> list[dict[str, Any]]:
+    await _find(manager, db, who, task_id)
+    return await db.history(task_id)
 
 
 @router.post("/{task_id}/cancel")
 async def cancel_task(
-    request: Request,
     who: Requester,
+    manager: Tasks,
+    db: Store,
     task_id: TaskId,
     body: Annotated[Cancel | None, Body()] = None,
 ) -> TaskStatus:
     """Staff cancel any task; a panel or robot only what it requested."""
-    task = await _find(request, who, task_id)
+    task = await _find(manager, db, who, task_id)
     if who.role in (Role.PANEL, Role.ROBOT) and task.requester != who.name:
         raise forbid("you may cancel only the tasks you requested")
     _refuse_finished(task)
-    try:
-        task = task_manager(request).cancel(task_id, reason=(body or Cancel()).reason, by=who.name)
-    except TaskError as exc:
-        raise task_error(exc) from None
-    return _status(request, task)
+    task = manager.cancel(task_id, reason=(body or Cancel()).reason, by=who.name)
+    return _status(manager, task)
 
 
 @router.post("/{task_id}/reassign")
 async def reassign_task(
-    request: Request, who: Staff, task_id: TaskId, body: Annotated[Reassign, Body()]
+    who: Staff, manager: Tasks, db: Store, task_id: TaskId, body: Annotated[Reassign, Body()]
 ) -> TaskStatus:
     """Move a task to another robot (or back to the queue), even off a broken-down robot."""
-    _refuse_finished(await _find(request, who, task_id))
-    try:
-        task = task_manager(request).reassign(task_id, body.robot, by=who.name)
-    except TaskError as exc:
-        raise task_error(exc) from None
-    return _status(request, task)
+    _refuse_finished(await _find(manager, db, who, task_id))
+    task = manager.reassign(task_id, body.robot, by=who.name)
+    return _status(manager, task)
 
 
 @router.post("/{task_id}/priority")
 async def reprioritise_task(
-    request: Request, who: Staff, task_id: TaskId, body: Annotated[Priority, Body()]
+    who: Staff, manager: Tasks, db: Store, task_id: TaskId, body: Annotated[Priority, Body()]
 ) -> TaskStatus:
-    _refuse_finished(await _find(request, who, task_id))
-    try:
-        task = task_manager(request).reprioritise(task_id, body.priority)
-    except TaskError as exc:
-        raise task_error(exc) from None
-    return _status(request, task)
+    _refuse_finished(await _find(manager, db, who, task_id))
+    task = manager.reprioritise(task_id, body.priority)
+    return _status(manager, task)

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Path, Request, status
+from fastapi import APIRouter, Body, Path, status
 
-from backend.api.deps import Admin, Anyone, not_found, sites
+from backend.api.deps import Admin, Anyone, Sites, not_found
 from backend.api.site import invalid
-from backend.site.schema import PointOfInterest, Tour
-from backend.site.validate import SiteInvalid
+from backend.site.service import SiteService
+from guidebot.site.schema import PointOfInterest, Tour
+from guidebot.site.validate import SiteInvalid
 
 __all__ = ["router"]
 
@@ -18,8 +19,8 @@ router = APIRouter(prefix="/api", tags=["tours"])
 ItemId = Annotated[str, Path(max_length=64)]
 
 
-def _tour_view(request: Request, tour: Tour) -> dict[str, Any]:
-    site = sites(request).site
+def _tour_view(service: SiteService, tour: Tour) -> dict[str, Any]:
+    site = service.site
     points = [site.poi(p) for p in tour.points]
     return {
         **tour.model_dump(mode="json"),
@@ -30,19 +31,19 @@ def _tour_view(request: Request, tour: Tour) -> dict[str, Any]:
 
 
 @router.get("/tours")
-async def list_tours(request: Request, _: Anyone) -> list[dict[str, Any]]:
-    return [_tour_view(request, t) for t in sites(request).site.tours]
+async def list_tours(_: Anyone, service: Sites) -> list[dict[str, Any]]:
+    return [_tour_view(service, t) for t in service.site.tours]
 
 
 @router.get("/tours/{tour_id}")
-async def get_tour(request: Request, _: Anyone, tour_id: ItemId) -> dict[str, Any]:
-    tour = sites(request).site.tour(tour_id)
+async def get_tour(_: Anyone, service: Sites, tour_id: ItemId) -> dict[str, Any]:
+    tour = service.site.tour(tour_id)
     if tour is None:
         raise not_found(f"tour {tour_id!r}")
-    return _tour_view(request, tour)
+    return _tour_view(service, tour)
 
 
-async def _put(request: Request, section: str, item: dict[str, Any]) -> None:
+async def _put(service: SiteService, section: str, item: dict[str, Any]) -> None:
     def change(doc: dict[str, Any]) -> None:
         items = doc[section]
         for i, old in enumerate(items):
@@ -52,13 +53,12 @@ async def _put(request: Request, section: str, item: dict[str, Any]) -> None:
         items.append(item)
 
     try:
-        await sites(request).edit(change)
+        await service.edit(change)
     except SiteInvalid as exc:
         raise invalid(exc) from None
 
 
-async def _delete(request: Request, section: str, item_id: str) -> None:
-    service = sites(request)
+async def _delete(service: SiteService, section: str, item_id: str) -> None:
     if not any(i.id == item_id for i in getattr(service.site, section)):
         raise not_found(f"{section[:-1]} {item_id!r}")
 
@@ -73,27 +73,27 @@ async def _delete(request: Request, section: str, item_id: str) -> None:
 
 @router.put("/tours/{tour_id}")
 async def put_tour(
-    request: Request, _: Admin, tour_id: ItemId, tour: Annotated[Tour, Body()]
+    _: Admin, service: Sites, tour_id: ItemId, tour: Annotated[Tour, Body()]
 ) -> dict[str, Any]:
     """Create or replace a tour (its points must exist)."""
     data = tour.model_dump(mode="json") | {"id": tour_id}
-    await _put(request, "tours", data)
+    await _put(service, "tours", data)
     return data
 
 
 @router.delete("/tours/{tour_id}", status_code=status.HTTP_204_NO_CONTENT)
-async def delete_tour(request: Request, _: Admin, tour_id: ItemId) -> None:
-    await _delete(request, "tours", tour_id)
+async def delete_tour(_: Admin, service: Sites, tour_id: ItemId) -> None:
+    await _delete(service, "tours", tour_id)
 
 
 @router.get("/pois")
-async def list_pois(request: Request, _: Anyone) -> list[dict[str, Any]]:
-    return [p.model_dump(mode="json") for p in sites(request).site.pois]
+async def list_pois(_: Anyone, service: Sites) -> list[dict[str, Any]]:
+    return [p.model_dump(mode="json") for p in service.site.pois]
 
 
 @router.get("/pois/{poi_id}")
-async def get_poi(request: Request, _: Anyone, poi_id: ItemId) -> dict[str, Any]:
-    poi = sites(request).site.poi(poi_id)
+async def get_poi(_: Anyone, service: Sites, poi_id: ItemId) -> dict[str, Any]:
+    poi = service.site.poi(poi_id)
     if poi is None:
         raise not_found(f"point of interest {poi_id!r}")
     return poi.model_dump(mode="json")
@@ -101,15 +101,15 @@ async def get_poi(request: Request, _: Anyone, poi_id: ItemId) -> dict[str, Any]
 
 @router.put("/pois/{poi_id}")
 async def put_poi(
-    request: Request, _: Admin, poi_id: ItemId, poi: Annotated[PointOfInterest, Body()]
+    _: Admin, service: Sites, poi_id: ItemId, poi: Annotated[PointOfInterest, Body()]
 ) -> dict[str, Any]:
     """Create or replace a point of interest (text, media, node)."""
     data = poi.model_dump(mode="json") | {"id": poi_id}
-    await _put(request, "pois", data)
+    await _put(service, "pois", data)
     return data
 
 
 @router.delete("/pois/{poi_id}", status_code=status.HTTP_204_NO_CONTENT)
-async def delete_poi(request: Request, _: Admin, poi_id: ItemId) -> None:
+async def delete_poi(_: Admin, service: Sites, poi_id: ItemId) -> None:
     """Refused (422) while a tour or button still uses the point."""
-    await _delete(request, "pois", poi_id)
+    await _delete(service, "pois", poi_id)

@@ -9,10 +9,10 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Query, Request
 from fastapi.responses import FileResponse
 
-from backend.api.deps import Anyone, Requester, not_found, sites, task_manager
-from backend.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
-from backend.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
-from backend.site.schema import Site
+from backend.api.deps import Anyone, Requester, Sites, Tasks, not_found
+from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from guidebot.site.schema import Site
 
 __all__ = ["media_url", "router"]
 
@@ -45,12 +45,13 @@ def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
 
 
 @router.get("/api/visitor")
-async def visitor_menu(request: Request, _: Anyone, lang: Lang = None) -> dict[str, Any]:
+async def visitor_menu(
+    _: Anyone, service: Sites, manager: Tasks, lang: Lang = None
+) -> dict[str, Any]:
     """Tours and points in ``lang`` (the site's default when not offered), each with its
     length and what a request would be told now: available, busy (with the wait), or
     unavailable (no robot in service)."""
-    site = sites(request).site
-    manager = task_manager(request)
+    site = service.site
     estimator = manager.estimator
     chosen = resolve_language(site, lang)
     tours = []
@@ -78,9 +79,8 @@ async def visitor_menu(request: Request, _: Anyone, lang: Lang = None) -> dict[s
 
 
 @router.get("/api/visitor/requests")
-async def my_requests(request: Request, who: Requester) -> list[dict[str, Any]]:
+async def my_requests(who: Requester, manager: Tasks) -> list[dict[str, Any]]:
     """The caller's own tasks that are not finished (a panel never sees another's)."""
-    manager = task_manager(request)
     mine = [
         t
         for t in manager.tasks.values()

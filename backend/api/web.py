@@ -9,7 +9,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Request
 from fastapi.responses import FileResponse
 
-from backend.api.deps import Anyone, not_found, sites
+from backend.api.deps import Anyone, Sites, not_found
 
 __all__ = ["router"]
 
@@ -31,9 +31,8 @@ async def me(who: Anyone) -> dict[str, str]:
 
 
 @router.get("/site/map")
-async def site_map(request: Request, _: Anyone) -> dict[str, Any]:
+async def site_map(_: Anyone, service: Sites) -> dict[str, Any]:
     """The site without secrets (robot tokens): what every page draws its map from."""
-    service = sites(request)
     data = service.site.model_dump(mode="json")
     data["robots"] = [{k: v for k, v in robot.items() if k != "token"} for robot in data["robots"]]
     for floor in data["floors"]:
@@ -54,10 +53,10 @@ def plan_file(site_file: FsPath | None, image: str) -> FsPath | None:
 
 @router.get("/site/plans/{floor_id}", response_class=FileResponse)
 async def floor_plan(
-    request: Request, _: Anyone, floor_id: Annotated[str, Path(max_length=64)]
+    request: Request, _: Anyone, service: Sites, floor_id: Annotated[str, Path(max_length=64)]
 ) -> FileResponse:
     """A floor's plan image; 404 when the floor has none (pages then draw the graph)."""
-    floor = next((f for f in sites(request).site.floors if f.id == floor_id), None)
+    floor = next((f for f in service.site.floors if f.id == floor_id), None)
     if floor is None or not floor.plan_image:
         raise not_found(f"plan of floor {floor_id!r}")
     path = plan_file(request.app.state.settings.site, floor.plan_image)

@@ -16,7 +16,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 from pymodbus.pdu import ExceptionResponse
 
-from backend.site.building import PointKind
+from guidebot.site.building import PointKind
 
 __all__ = ["ModbusIOError", "ModuleClient", "ModuleExceptionAnswer", "ModuleUnreachable"]
 

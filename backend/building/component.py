@@ -15,9 +15,9 @@ from typing import Any
 
 from fastapi import FastAPI
 
-from backend.building.config import BuildingConfigError, load_building
 from backend.building.interface import BuildingInterface
 from backend.health import ComponentState
+from guidebot.site.building_config import BuildingConfigError, load_building
 
 __all__ = ["building_interface"]
 

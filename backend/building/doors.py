@@ -17,7 +17,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from backend.site.building import Door
+from guidebot.site.building import Door
 
 __all__ = ["STALE_MARGIN_S", "DoorKeeper"]
 

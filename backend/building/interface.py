@@ -27,16 +27,16 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.building._modbus import ModbusIOError
-from backend.building.config import BuildingConfig
 from backend.building.doors import DoorKeeper
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
 from backend.health import ComponentState
-from backend.site.building import Door, IOPoint, IORef, PointKind
-from backend.site.io_rules import Role, allowed
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.building import CallElevator, CloseDoor, OpenDoor, ReleaseDoor, SetOutput
+from guidebot.site.building import Door, IOPoint, IORef, PointKind
+from guidebot.site.building_config import BuildingConfig
+from guidebot.site.io_rules import Role, allowed
 
 __all__ = ["BuildingInterface", "CommandError"]
 

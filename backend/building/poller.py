@@ -22,7 +22,7 @@ from backend.building._modbus import (
     ModuleExceptionAnswer,
     ModuleUnreachable,
 )
-from backend.site.building import BuildingModule, PointKind
+from guidebot.site.building import BuildingModule, PointKind
 
 __all__ = ["HealthState", "ModuleHealth", "ModulePoller", "Sample"]
 

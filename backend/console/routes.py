@@ -6,10 +6,10 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 import httpx
-from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, status
+from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import Admin, Staff, not_found, task_manager
+from backend.api.deps import Admin, Staff, Tasks, app_service, not_found
 from backend.console.alerts import AlertBook, AlertNotFound
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
@@ -41,38 +41,42 @@ class Press(BaseModel):
 
 
 def _alerts(request: Request) -> AlertBook:
-    return request.app.state.alerts  # type: ignore[no-any-return]
+    return app_service(request, "alerts", AlertBook)
 
 
 def _feed(request: Request) -> ConsoleFeed:
-    return request.app.state.console  # type: ignore[no-any-return]
+    return app_service(request, "console", ConsoleFeed)
+
+
+Alerts = Annotated[AlertBook, Depends(_alerts)]
+Feed = Annotated[ConsoleFeed, Depends(_feed)]
 
 
 @router.get("/alerts")
 async def list_alerts(
-    request: Request, _: Staff, include_acked: bool = False
+    _: Staff, alerts: Alerts, include_acked: bool = False
 ) -> list[dict[str, Any]]:
     """Open alerts, newest first (with ``include_acked``: the acknowledged ones too)."""
-    return _alerts(request).listing(include_acked=include_acked)
+    return alerts.listing(include_acked=include_acked)
 
 
 @router.post("/alerts/{alert_id}/ack")
-async def acknowledge_alert(request: Request, who: Staff, alert_id: Name) -> dict[str, Any]:
+async def acknowledge_alert(who: Staff, alerts: Alerts, alert_id: Name) -> dict[str, Any]:
     """Acknowledge an alert: who and when are recorded (idempotent)."""
     try:
-        return _alerts(request).acknowledge(alert_id, who.name).as_dict()
+        return alerts.acknowledge(alert_id, who.name).as_dict()
     except AlertNotFound:
         raise not_found(f"alert {alert_id!r}") from None
 
 
 @router.post("/robots/{name}/service")
 async def set_service(
-    request: Request, who: Staff, name: Name, body: Annotated[Service, Body()]
+    who: Staff, manager: Tasks, name: Name, body: Annotated[Service, Body()]
 ) -> dict[str, Any]:
     """Take a robot out of service (its task goes to another robot; it gets no more tasks
     but go_to and charge pinned to it) or put it back."""
     try:
-        robot = task_manager(request).set_out_of_service(name, body.out_of_service, by=who.name)
+        robot = manager.set_out_of_service(name, body.out_of_service, by=who.name)
     except TaskNotFound:
         raise not_found(f"robot {name!r}") from None
     return robot.as_dict()
@@ -127,22 +131,24 @@ async def net_structure(request: Request, _: Staff, net: Name) -> dict[str, Any]
 
 @router.get("/nets/running")
 async def running_nets(
-    request: Request, _: Staff, target: Annotated[str, Query(min_length=1, max_length=64)]
+    _: Staff, feed: Feed, target: Annotated[str, Query(min_length=1, max_length=64)]
 ) -> list[dict[str, Any]]:
     """The nets running on a robot (or on the server, target "rgm") with their marking."""
-    return _feed(request).running_nets(target)
+    return feed.running_nets(target)
 
 
 @router.post("/nets/kill")
-async def kill_net(request: Request, who: Admin, body: Annotated[Kill, Body()]) -> dict[str, Any]:
+async def kill_net(
+    request: Request, who: Admin, feed: Feed, body: Annotated[Kill, Body()]
+) -> dict[str, Any]:
     """Admin only: stop one running net instance on a robot or on the server."""
-    known = {n["instance_id"] for n in _feed(request).running_nets(body.target)}
+    known = {n["instance_id"] for n in feed.running_nets(body.target)}
     if body.instance_id not in known:
         raise not_found(f"net instance {body.instance_id!r} on {body.target!r}")
     if body.target == "rgm":
         killed = request.app.state.rgm.kill(body.instance_id)
         return {"target": "rgm", "instance_id": body.instance_id, "killed": bool(killed)}
-    _feed(request).endpoint.publish(
+    feed.endpoint.publish(
         "kill_petri_net", {"instance_id": body.instance_id}, destination=body.target
     )
     return {"target": body.target, "instance_id": body.instance_id, "killed": True, "by": who.name}

@@ -1,55 +1,5 @@
-"""The site: schema (pydantic), YAML import/export, validation with every error and its place."""
+"""The server's site services: the live site and its reloads, drafts, roll-out, diff and CLI.
 
-from backend.site.building import (
-    BuildingModule,
-    Button,
-    ButtonTask,
-    Door,
-    Elevator,
-    ElevatorStop,
-    IOPoint,
-    IORef,
-    PointKind,
-)
-from backend.site.schema import (
-    ChargingStation,
-    Edge,
-    Floor,
-    Node,
-    PointOfInterest,
-    RestrictedArea,
-    RobotConfig,
-    Site,
-    Tour,
-    WaitPoint,
-)
-from backend.site.validate import SiteInvalid, SiteIssue, validate_site
-from backend.site.yamlio import dump_site, load_site_file, load_site_text
-
-__all__ = [
-    "BuildingModule",
-    "Button",
-    "ButtonTask",
-    "ChargingStation",
-    "Door",
-    "Edge",
-    "Elevator",
-    "ElevatorStop",
-    "Floor",
-    "IOPoint",
-    "IORef",
-    "Node",
-    "PointKind",
-    "PointOfInterest",
-    "RestrictedArea",
-    "RobotConfig",
-    "Site",
-    "SiteInvalid",
-    "SiteIssue",
-    "Tour",
-    "WaitPoint",
-    "dump_site",
-    "load_site_file",
-    "load_site_text",
-    "validate_site",
-]
+The site model itself (schema, YAML, validation, texts, graph) lives in guidebot.site, which
+every process may import.
+"""

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import click
 
-from backend.site.i18n import missing_translations
-from backend.site.validate import SiteInvalid
-from backend.site.yamlio import dump_site, load_site_file
+from guidebot.site.i18n import missing_translations
+from guidebot.site.validate import SiteInvalid
+from guidebot.site.yamlio import dump_site, load_site_file
 
 __all__ = ["site"]
 

@@ -15,9 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from backend.site.schema import Site
 from backend.site.service import SiteService
-from backend.site.validate import SiteInvalid, SiteIssue, validate_site
+from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, SiteIssue, validate_site
 
 __all__ = ["DraftState", "SiteDrafts", "StaleDraft", "check_document"]
 

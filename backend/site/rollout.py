@@ -12,10 +12,10 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from backend.site.schema import Site
 from backend.site.service import SiteService
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.site.schema import Site
 
 __all__ = ["SiteRollout", "robot_view"]
 

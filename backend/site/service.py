@@ -11,8 +11,8 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
-from backend.site.schema import Site
-from backend.site.validate import validate_site
+from guidebot.site.schema import Site
+from guidebot.site.validate import validate_site
 
 __all__ = ["EMPTY_SITE", "SiteService", "SiteStore"]
 

@@ -10,12 +10,12 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-from backend.site.building import Button
-from backend.site.schema import Site
 from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError, TaskState
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.site.building import Button
+from guidebot.site.schema import Site
 
 __all__ = ["ButtonWatcher"]
 

@@ -24,8 +24,8 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
-from backend.site.i18n import poi_texts
 from backend.tasks.model import Task, TaskState
+from guidebot.site.i18n import poi_texts
 
 if TYPE_CHECKING:
     from backend.tasks.manager import TaskManager

@@ -19,8 +19,6 @@ from typing import Any, Protocol
 
 from pydantic import ValidationError
 
-from backend.site.i18n import poi_texts, resolve_language, site_languages
-from backend.site.schema import Site
 from backend.tasks.eta import EtaEstimator
 from backend.tasks.model import (
     FINAL_STATES,
@@ -35,10 +33,12 @@ from backend.tasks.model import (
 from backend.tasks.params import validate_params
 from backend.tasks.queue import TaskQueue
 from backend.tasks.robots import RobotInfo
-from backend.traffic.graph import SiteGraph
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.tasks import TaskRequest, TourProgress
+from guidebot.site.graph import SiteGraph
+from guidebot.site.i18n import poi_texts, resolve_language, site_languages
+from guidebot.site.schema import Site
 
 __all__ = ["TaskManager", "TaskStore"]
 

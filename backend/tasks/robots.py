@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from backend.site.schema import RobotConfig
+from guidebot.site.schema import RobotConfig
 
 __all__ = ["RobotInfo"]
 

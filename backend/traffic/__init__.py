@@ -1,6 +1,5 @@
-"""Traffic Manager: shortest paths over the site graph and restricted-area locks."""
+"""Traffic Manager: routes and restricted-area locks (the site graph is guidebot.site.graph)."""
 
-from backend.traffic.graph import NoPath, PathResult, SiteGraph, UnknownNode
 from backend.traffic.locks import AreaLocks, LockError, LockState, LockView
 from backend.traffic.manager import TrafficManager
 
@@ -9,9 +8,5 @@ __all__ = [
     "LockError",
     "LockState",
     "LockView",
-    "NoPath",
-    "PathResult",
-    "SiteGraph",
     "TrafficManager",
-    "UnknownNode",
 ]

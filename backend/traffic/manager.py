@@ -14,12 +14,12 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.alerts import AlertBoard
-from backend.site.schema import Site
-from backend.traffic.graph import NoPath, PathResult, SiteGraph, UnknownNode
 from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
+from guidebot.site.graph import NoPath, PathResult, SiteGraph, UnknownNode
+from guidebot.site.schema import Site
 
 __all__ = ["TrafficManager"]
 

@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-import asyncio
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
 
-from backend.building.config import BuildingConfig, load_building
 from backend.building.interface import BuildingInterface
 from building_sim.simulator import BuildingSimulator
-from guidebot.bus import Bus, Endpoint
-from guidebot.messages import Message
+from guidebot.bus import Bus
+from guidebot.site.building_config import BuildingConfig, load_building
+from guidebot.testing import Recorder, wait_until
 
 TIME_SCALE = 20.0
 PERIOD_MS = 50  # fast enough that a 300 ms press is always seen twice 200 ms apart
@@ -108,43 +107,6 @@ async def sim(building: BuildingConfig) -> AsyncIterator[BuildingSimulator]:
         yield simulator
 
 
-class Recorder:
-    """Every message of some types seen on the hub, with a way to wait for one."""
-
-    def __init__(self, endpoint: Endpoint, patterns: list[str]) -> None:
-        self.messages: list[Message] = []
-        self._changed = asyncio.Event()
-        for pattern in patterns:
-            endpoint.subscribe(pattern, self._put)
-
-    def _put(self, message: Message) -> None:
-        self.messages.append(message)
-        self._changed.set()
-
-    def of(self, type_name: str, **fields: Any) -> list[Message]:
-        return [
-            m
-            for m in self.messages
-            if m.type == type_name and all(m.payload.get(k) == v for k, v in fields.items())
-        ]
-
-    async def wait(self, type_name: str, timeout: float = 10.0, **fields: Any) -> Message:
-        async with asyncio.timeout(timeout):
-            while True:
-                found = self.of(type_name, **fields)
-                if found:
-                    return found[0]
-                self._changed.clear()
-                await self._changed.wait()
-
-
-async def wait_until(condition: Callable[[], bool], timeout: float = 10.0) -> None:
-    """Wait on a condition polled every 10 ms (for state that emits no event)."""
-    async with asyncio.timeout(timeout):
-        while not condition():  # noqa: ASYNC110 - the state polled here emits no event
-            await asyncio.sleep(0.01)
-
-
 @pytest.fixture
 def hub() -> Bus:
     return Bus()
@@ -154,7 +116,11 @@ def hub() -> Bus:
 def recorder(hub: Bus) -> Recorder:
     return Recorder(
         hub.endpoint("recorder"),
-        ["building_*", "task_request", "door_*", "elevator_*", "command_failed"],
+        "building_*",
+        "task_request",
+        "door_*",
+        "elevator_*",
+        "command_failed",
     )
 
 

@@ -7,10 +7,10 @@ from typing import Any
 
 import pytest
 
-from backend.building.config import BuildingConfigError, load_building
 from backend.building.filter import InputFilter
 from backend.building.interface import BuildingInterface
 from guidebot.bus import Bus
+from guidebot.site.building_config import BuildingConfigError, load_building
 
 from .conftest import site_dict
 

@@ -7,11 +7,10 @@ from collections.abc import AsyncIterator
 import pytest
 
 from backend.building._modbus import ModuleClient
-from backend.site.building import PointKind
 from building_sim.devices import IllegalTransition
 from building_sim.simulator import BuildingSimulator, SimulatorError
-
-from .conftest import wait_until
+from guidebot.site.building import PointKind
+from guidebot.testing import wait_until
 
 
 @pytest.fixture

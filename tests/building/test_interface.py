@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import asyncio
 
-from backend.building.config import BuildingConfig, load_building
 from backend.building.interface import BuildingInterface
 from building_sim.simulator import BuildingSimulator
 from guidebot.bus import Bus
+from guidebot.site.building_config import BuildingConfig, load_building
+from guidebot.testing import Recorder, wait_until
 
-from .conftest import TIME_SCALE, Recorder, site_dict, wait_until
+from .conftest import TIME_SCALE, site_dict
 
 
 async def test_300ms_press_gives_one_event(

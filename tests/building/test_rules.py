@@ -1,5 +1,5 @@
 """One set of site rules: the site check, the server's building check (BuildingInterface) and
-the simulator accept exactly the point kinds backend.site.io_rules allows for each role."""
+the simulator accept exactly the point kinds guidebot.site.io_rules allows for each role."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from typing import Any
 import pytest
 import yaml
 
-from backend.building.config import BuildingConfigError, load_building
-from backend.site.io_rules import PointKind, Role, allowed
-from backend.site.validate import SiteInvalid, validate_site
 from building_sim.simulator import BuildingSimulator
+from guidebot.site.building_config import BuildingConfigError, load_building
+from guidebot.site.io_rules import PointKind, Role, allowed
+from guidebot.site.validate import SiteInvalid, validate_site
 
 DEMO = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
 

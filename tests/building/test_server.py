@@ -8,13 +8,12 @@ from pathlib import Path
 import httpx
 import yaml
 
-from backend.building.config import load_building
 from backend.settings import Settings
 from backend.testing import running_server
 from building_sim.simulator import BuildingSimulator
 from guidebot.messages import Message
-
-from .conftest import Recorder, wait_until
+from guidebot.site.building_config import load_building
+from guidebot.testing import Recorder, wait_until
 
 DEMO_SITE = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
 
@@ -30,7 +29,7 @@ async def test_button_press_requests_its_task_and_lights_its_led(tmp_path: Path)
         async with running_server(settings) as server:
             building = server.app.state.building
             assert building is not None
-            recorder = Recorder(server.app.state.hub.endpoint("test"), ["task_event", "building_*"])
+            recorder = Recorder(server.app.state.hub.endpoint("test"), "task_event", "building_*")
             await wait_until(lambda: all(p.health.polls > 0 for p in building.pollers.values()))
 
             sim.press("button_entrance", ms=600)

@@ -13,13 +13,14 @@ import yaml
 from click.testing import CliRunner
 
 from backend.building._modbus import ModuleClient, ModuleExceptionAnswer
-from backend.building.config import load_building
-from backend.site.building import PointKind
 from building_sim.cli import building_sim
 from building_sim.scenario import ScenarioError, load_scenario, run_scenario
 from building_sim.simulator import BuildingSimulator
+from guidebot.site.building import PointKind
+from guidebot.site.building_config import load_building
+from guidebot.testing import wait_until
 
-from .conftest import site_dict, wait_until
+from .conftest import site_dict
 
 DEMO_SITE = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
 

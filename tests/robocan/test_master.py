@@ -11,13 +11,14 @@ import can
 import pytest
 
 from guidebot.bus import Bus
+from guidebot.testing import wait_until
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.busopen import open_bus
 from robot_agent.robocan.entities import BaseDriver
 from robot_agent.robocan.sim import HeadIo, MotorController, SonarRing
 from robot_agent.robocan.stack import RoboCanStack
 
-from .conftest import Watch, wait_until
+from .conftest import Watch
 
 BELLBOT_IDS = {0x02, 0x04, 0x08, 0x10, 0x20, 0x40}
 
@@ -55,11 +56,11 @@ async def test_velocity_reaches_the_motors_and_odometry_comes_back(
             assert left.target == pytest.approx(0.4 - 0.1 * 0.2, abs=1e-6)
             assert right.target == pytest.approx(0.4 + 0.1 * 0.2, abs=1e-6)
             # at K=10, 0.4 m/s covers a metre in about a quarter of a wall-clock second
-            odometry = await watch.wait_for("odometry", lambda m: m.payload["x"] > 1.0)
+            odometry = await watch.wait("odometry", lambda m: m.payload["x"] > 1.0)
             assert odometry.payload["theta"] > 0.1  # turning left
             assert odometry.payload["v"] == pytest.approx(0.4, abs=0.05)
             nav.publish("set_velocity", {"v": 0.0, "w": 0.0})
-            await watch.wait_for("odometry", lambda m: m.payload["v"] == 0.0)
+            await watch.wait("odometry", lambda m: m.payload["v"] == 0.0)
     finally:
         notifier.stop(1.0)
         tap.shutdown()
@@ -79,13 +80,13 @@ async def test_hot_plug_and_unplug_in_any_order(
 ) -> None:
     for module_id in unplug_order:
         await stack.unplug(module_id)
-        await watch.wait_for("module_status", watch.status(module_id, "lost"))
+        await watch.wait("module_status", watch.status(module_id, "lost"))
         assert module_id not in stack.online()
     assert stack.online() == BELLBOT_IDS - set(unplug_order)
     for module_id in plug_order:
         await stack.plug(module_id)
         count = len(watch.of("module_status"))
-        await watch.wait_for(
+        await watch.wait(
             "module_status",
             lambda m, mid=module_id, n=count: (
                 m.payload["module_id"] == mid
@@ -107,7 +108,7 @@ async def test_hot_plug_and_unplug_in_any_order(
 async def test_plug_from_the_onboard_bus(stack: RoboCanStack, watch: Watch) -> None:
     operator = stack.endpoint
     operator.publish("module_plug", {"module_id": 0x20, "plugged": False})
-    await watch.wait_for("module_status", watch.status(0x20, "lost"))
+    await watch.wait("module_status", watch.status(0x20, "lost"))
     operator.publish("module_plug", {"module_id": 0x20, "plugged": True})
     await stack.wait_online({0x20})
 
@@ -121,7 +122,7 @@ async def test_master_restart_with_modules_running(
     await stack.wait_online(BELLBOT_IDS)
     onboard.endpoint("navigation").publish("set_velocity", {"v": 0.3, "w": 0.0})
     start = len(watch.of("odometry"))
-    await watch.wait_for(
+    await watch.wait(
         "odometry", lambda m: m.payload["v"] > 0.2 and len(watch.of("odometry")) > start
     )
 
@@ -136,9 +137,9 @@ async def test_critical_module_lost_mid_motion_stops_the_base(
     assert isinstance(survivor, MotorController)
     await wait_until(lambda: survivor.velocity > 0.4)
     await stack.unplug(0x02)
-    fault = await watch.wait_for("base_fault")
+    fault = await watch.wait("base_fault")
     assert "0x02" in fault.payload["reason"]
-    lost = await watch.wait_for("module_status", watch.status(0x02, "lost"))
+    lost = await watch.wait("module_status", watch.status(0x02, "lost"))
     assert lost.payload["critical"] is True
     await wait_until(lambda: survivor.target == 0.0 and survivor.velocity == 0.0)
     # commands are refused while the fault lasts...
@@ -154,7 +155,7 @@ async def test_critical_module_lost_mid_motion_stops_the_base(
 
 async def test_losing_the_head_is_not_a_base_fault(stack: RoboCanStack, watch: Watch) -> None:
     await stack.unplug(0x40)
-    lost = await watch.wait_for("module_status", watch.status(0x40, "lost"))
+    lost = await watch.wait("module_status", watch.status(0x40, "lost"))
     assert lost.payload["critical"] is False
     assert not watch.of("base_fault")
 
@@ -166,7 +167,7 @@ async def test_bumper_hit_stops_the_base(onboard: Bus, stack: RoboCanStack, watc
     assert isinstance(motor, MotorController) and isinstance(ring, SonarRing)
     await wait_until(lambda: motor.target > 0)
     ring.press_bumper(5)
-    hit = await watch.wait_for("bumper_hit")
+    hit = await watch.wait("bumper_hit")
     assert hit.payload == {"ring": 1, "index": 5}
     await wait_until(lambda: motor.target == 0.0)
 
@@ -177,7 +178,7 @@ async def test_head_servos_sonar_touch_and_leds(
     nets = onboard.endpoint("nets")
     nets.publish("move_servos", {"servos": {"head_pan": 30, "eyelid_left": -10}, "speed": 120})
     done = {
-        (await watch.wait_for("servo_in_position", lambda m, s=s: m.payload["servo"] == s)).payload[
+        (await watch.wait("servo_in_position", lambda m, s=s: m.payload["servo"] == s)).payload[
             "position"
         ]
         for s in ("head_pan", "eyelid_left")
@@ -186,17 +187,17 @@ async def test_head_servos_sonar_touch_and_leds(
     # a servo told to go where it already is still confirms
     count = len(watch.of("servo_in_position"))
     nets.publish("move_servos", {"servos": {"head_pan": 30}, "speed": 120})
-    await watch.wait_for(
+    await watch.wait(
         "servo_in_position",
         lambda m: m.payload["servo"] == "head_pan" and len(watch.of("servo_in_position")) > count,
     )
-    ranges = await watch.wait_for("sonar_ranges", lambda m: m.payload["ring"] == 0)
+    ranges = await watch.wait("sonar_ranges", lambda m: m.payload["ring"] == 0)
     assert ranges.payload["ranges"] == [pytest.approx(3.0)] * 8
     assert stack.simulator is not None
     head = stack.simulator.modules[0x40]
     assert isinstance(head, HeadIo)
     head.touch(0)
-    assert (await watch.wait_for("button_pressed")).payload == {"button": "head_top"}
+    assert (await watch.wait("button_pressed")).payload == {"button": "head_top"}
     nets.publish("set_leds", {"leds": {"eye_right": 200, "nonsense": 1}})
     await wait_until(lambda: head.outputs[1] == 200)
 
@@ -221,13 +222,13 @@ async def test_battery_level_charging_and_panic(
     onboard: Bus, stack: RoboCanStack, watch: Watch
 ) -> None:
     logic = onboard.endpoint("battery_logic")
-    first = await watch.wait_for("battery_level")
+    first = await watch.wait("battery_level")
     assert first.payload["level"] > 0.9 and first.payload["charging"] is False
     logic.publish("sim_set_battery", {"level": 0.05})
-    panic = await watch.wait_for("battery_panic")
+    panic = await watch.wait("battery_panic")
     assert panic.payload == {"robot": "R1", "level": 0.05}
     logic.publish("set_charging", {"on": True})
-    charging = await watch.wait_for("battery_level", lambda m: m.payload["charging"])
+    charging = await watch.wait("battery_level", lambda m: m.payload["charging"])
     assert charging.payload["level"] >= 0.05
 
 
@@ -272,7 +273,7 @@ async def test_garbage_is_counted_and_starves_nobody(stack: RoboCanStack, watch:
         assert master.counters.block_errors >= 1
         # everybody else stayed online and keeps publishing
         start = len(watch.of("odometry"))
-        await watch.wait_for("odometry", lambda m: len(watch.of("odometry")) > start + 3)
+        await watch.wait("odometry", lambda m: len(watch.of("odometry")) > start + 3)
         assert stack.online() >= {0x02, 0x04, 0x08, 0x10, 0x20, 0x40}
         assert master.running
     finally:
@@ -281,15 +282,15 @@ async def test_garbage_is_counted_and_starves_nobody(stack: RoboCanStack, watch:
 
 async def test_disable_and_enable_a_module(stack: RoboCanStack, watch: Watch) -> None:
     await stack.set_enabled(0x10, False)
-    disabled = await watch.wait_for("module_status", watch.status(0x10, "disabled"))
+    disabled = await watch.wait("module_status", watch.status(0x10, "disabled"))
     assert disabled.payload["name"] == "sonar_ring_10"
     assert stack.simulator is not None
     ring = stack.simulator.modules[0x10]
     await wait_until(lambda: not ring.enabled)
     # it keeps its watchdog going: disabled, not lost, and no sonar frames from it
     mark = len(watch.messages)
-    await watch.wait_for("sonar_ranges", lambda m: m.payload["ring"] == 1)
-    await watch.wait_for(
+    await watch.wait("sonar_ranges", lambda m: m.payload["ring"] == 1)
+    await watch.wait(
         "sonar_ranges", lambda m: m.payload["ring"] == 1 and watch.messages.index(m) > mark
     )
     assert not [
@@ -299,8 +300,8 @@ async def test_disable_and_enable_a_module(stack: RoboCanStack, watch: Watch) ->
     with pytest.raises(RuntimeError, match="expected one of"):
         await stack.set_enabled(0x10, False)
     await stack.set_enabled(0x10, True)
-    await watch.wait_for("module_status", watch.status(0x10, "online"))
-    await watch.wait_for(
+    await watch.wait("module_status", watch.status(0x10, "online"))
+    await watch.wait(
         "sonar_ranges", lambda m: m.payload["ring"] == 0 and watch.messages.index(m) > mark
     )
 
@@ -346,15 +347,15 @@ async def test_unopenable_bus_is_a_clear_error(onboard: Bus) -> None:
 async def test_battery_alarms_fire_once_per_discharge(
     onboard: Bus, stack: RoboCanStack, watch: Watch
 ) -> None:
-    await watch.wait_for("battery_level")
+    await watch.wait("battery_level")
     for level in (0.24, 0.22, 0.26, 0.2):  # hovering around "low" (0.25): one alarm
         stack.set_battery_level(level)
-        await watch.wait_for("battery_level", lambda m, lv=level: m.payload["level"] == lv)
+        await watch.wait("battery_level", lambda m, lv=level: m.payload["level"] == lv)
     assert len(watch.of("battery_low")) == 1
     stack.set_battery_level(0.9)  # charged: re-armed
-    await watch.wait_for("battery_level", lambda m: m.payload["level"] == 0.9)
+    await watch.wait("battery_level", lambda m: m.payload["level"] == 0.9)
     stack.set_battery_level(0.2)
-    await watch.wait_for(
+    await watch.wait(
         "battery_level", lambda m: m.payload["level"] == 0.2 and len(watch.of("battery_low")) == 2
     )
     assert not watch.of("battery_panic")
@@ -370,7 +371,7 @@ async def test_a_stalled_process_does_not_lose_its_modules(
     master = stack.masters[0]
     time.sleep(0.8)  # noqa: ASYNC251 -- the stall under test: blocks the whole loop
     start = len(watch.of("odometry"))
-    await watch.wait_for("odometry", lambda m: len(watch.of("odometry")) > start + 3)
+    await watch.wait("odometry", lambda m: len(watch.of("odometry")) > start + 3)
     assert master.counters.stalls >= 1
     assert not [m for m in watch.of("module_status") if m.payload["state"] == "lost"]
     assert stack.online() == BELLBOT_IDS

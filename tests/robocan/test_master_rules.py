@@ -9,12 +9,13 @@ import math
 import pytest
 
 from guidebot.bus import Bus
+from guidebot.testing import wait_until
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.entities import BaseDriver
 from robot_agent.robocan.sim import SimModule
 from robot_agent.robocan.stack import RoboCanStack
 
-from .conftest import Watch, wait_until
+from .conftest import Watch
 from .rawslave import RawSlave, Tap
 
 
@@ -56,7 +57,7 @@ async def test_a_frame_sent_right_after_the_enable_ack_is_delivered(
             assert enable == p.enable(p.MODULE, True)
             slave.send(p.ack(p.Op.ENABLE, p.MODULE))
             slave.send(p.mask_frame(p.Op.BUMPERS, 0, 0b10))  # in the same burst as the ACK
-            hit = await watch.wait_for("bumper_hit", timeout=3)
+            hit = await watch.wait("bumper_hit", timeout=3)
             assert hit.payload == {"ring": 0x62, "index": 1}
             assert stack.masters[0].counters.not_online == 0
         finally:
@@ -76,7 +77,7 @@ async def test_a_frame_naming_an_element_of_another_kind_is_bad(
     assert master.modules[0x40].errors == errors + 1
     assert not watch.of("button_pressed")
     tap.send(0x40, p.mask_frame(p.Op.INPUTS, 1, 0b1))  # element 1 is the touch element
-    assert (await watch.wait_for("button_pressed")).payload == {"button": "head_top"}
+    assert (await watch.wait("button_pressed")).payload == {"button": "head_top"}
 
 
 async def test_an_encoder_frame_for_a_missing_element_leaves_odometry_alone(
@@ -84,12 +85,12 @@ async def test_an_encoder_frame_for_a_missing_element_leaves_odometry_alone(
 ) -> None:
     master = stack.masters[0]
     start = len(watch.of("odometry"))
-    await watch.wait_for("odometry", lambda m: len(watch.of("odometry")) > start)
+    await watch.wait("odometry", lambda m: len(watch.of("odometry")) > start)
     bad = master.counters.bad_frame
     tap.send(0x02, p.encoder(7, 100_000, 0.0))  # 5 m of ticks for an element that is not there
     await wait_until(lambda: master.counters.bad_frame > bad, timeout=3)
     mark = len(watch.of("odometry"))
-    await watch.wait_for("odometry", lambda m: len(watch.of("odometry")) > mark + 3)
+    await watch.wait("odometry", lambda m: len(watch.of("odometry")) > mark + 3)
     last = watch.of("odometry")[-1].payload
     assert abs(last["x"]) < 0.01 and abs(last["y"]) < 0.01 and abs(last["theta"]) < 0.01
 
@@ -118,7 +119,7 @@ async def test_a_module_with_two_encoders_drives_both_wheels(
             for left, right in ((0, 0), (2000, 6000)):  # 0.1 m and 0.3 m at 20000 ticks/m
                 module.send(p.encoder(0, left, 0.1))
                 module.send(p.encoder(1, right, 0.3))
-            odometry = await watch.wait_for("odometry", lambda m: m.payload["theta"] != 0)
+            odometry = await watch.wait("odometry", lambda m: m.payload["theta"] != 0)
             assert odometry.payload["theta"] == pytest.approx(0.5)
             assert odometry.payload["x"] == pytest.approx(0.2 * math.cos(0.25))
             base = stack.masters[0].drivers_of(BaseDriver)[0]
@@ -141,7 +142,7 @@ async def test_a_module_with_two_touch_elements_numbers_its_inputs_in_order(
         try:
             await stack.wait_online({0x44})
             module.send(p.mask_frame(p.Op.INPUTS, 1, 0b1))  # first input of the second element
-            pressed = await watch.wait_for("button_pressed")
+            pressed = await watch.wait("button_pressed")
             assert pressed.payload == {"button": "hand_left"}  # touch input number 3
         finally:
             await module.stop()

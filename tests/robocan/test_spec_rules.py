@@ -7,12 +7,13 @@ from __future__ import annotations
 import pytest
 
 from guidebot.bus import Bus
+from guidebot.testing import wait_until
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.master import CommandFailed
 from robot_agent.robocan.sim import MotorController, SonarRing
 from robot_agent.robocan.stack import RoboCanStack
 
-from .conftest import Watch, sim_module, wait_until
+from .conftest import Watch, sim_module
 from .rawslave import Tap
 
 
@@ -29,7 +30,7 @@ async def test_nothing_in_range_reaches_navigation_as_none(
     ring = sim_module(stack, 0x10, SonarRing)
     ring.ranges[3] = None
     ring.ranges[4] = 9.0  # beyond the sonar's reach
-    message = await watch.wait_for(
+    message = await watch.wait(
         "sonar_ranges", lambda m: m.payload["ring"] == 0 and m.payload["ranges"][3] is None
     )
     assert message.payload["ranges"][4] is None
@@ -46,7 +47,7 @@ async def test_a_ring_with_more_sonars_than_configured_fires_them_all(
             await stack.wait_online({0x30})
             # the configured order (0 4 1 5 2 6 3 7), then the sonars it does not list
             assert ring.firing_sequence == bytes([0, 4, 1, 5, 2, 6, 3, 7, 8, 9, 10, 11])
-            message = await watch.wait_for("sonar_ranges")
+            message = await watch.wait("sonar_ranges")
             assert message.payload["ranges"] == [pytest.approx(3.0)] * 12
         finally:
             await ring.stop()
@@ -76,7 +77,7 @@ async def test_a_bumper_pressed_while_disabled_is_reported_on_enable(
     ring.press_bumper(3)  # not sent: the module is disabled
     assert not watch.of("bumper_hit")
     await stack.set_enabled(0x20, True)
-    hit = await watch.wait_for("bumper_hit")
+    hit = await watch.wait("bumper_hit")
     assert hit.payload == {"ring": 1, "index": 3}
 
 
@@ -92,7 +93,7 @@ async def test_only_master_start_and_stop_act_on_the_broadcast_id(
 
 
 async def test_battery_voltage_is_volts_on_board(stack: RoboCanStack, watch: Watch) -> None:
-    level = await watch.wait_for("battery_level")
+    level = await watch.wait("battery_level")
     assert 20.0 < level.payload["voltage"] < 30.0  # 22..26 V, sent in millivolts
 
 

@@ -20,7 +20,7 @@ async def test_robocan_status_follows_losses_and_bad_frames(
     ) as stack:
         await stack.wait_online()
         await stack.unplug(0x40)
-        await watch.wait_for("module_status", watch.status(0x40, "lost"))
+        await watch.wait("module_status", watch.status(0x40, "lost"))
         await stack.plug(0x40)
         await stack.wait_online({0x40})
         tap.send(0x40, p.mask_frame(p.Op.INPUTS, 0, 1))  # names the servo element: bad
@@ -31,7 +31,7 @@ async def test_robocan_status_follows_losses_and_bad_frames(
                 row["module_id"] == 0x40 and row["state"] == "online" for row in bus["modules"]
             )
 
-        message = await watch.wait_for("robocan_status", settled)
+        message = await watch.wait("robocan_status", settled)
         assert message.payload["robot"] == "R1"
         (bus,) = message.payload["buses"]
         assert bus["bus"] == channel

@@ -48,7 +48,7 @@ async def test_spec_slave_with_a_lost_block_frame(onboard: Bus, channel: str, wa
             enable = await slave.expect(p.Op.ENABLE)
             assert enable == p.enable(p.MODULE, True)
             slave.send(p.ack(p.Op.ENABLE, p.MODULE))
-            online = await watch.wait_for("module_status", watch.status(MODULE, "online"))
+            online = await watch.wait("module_status", watch.status(MODULE, "online"))
             assert online.payload["name"] == "third_party_io_module"
             row = next(r for r in stack.module_table() if r["module_id"] == MODULE)
             assert row["elements"] == ["kind_238", "led"]
@@ -57,7 +57,7 @@ async def test_spec_slave_with_a_lost_block_frame(onboard: Bus, channel: str, wa
             assert await slave.expect(p.Op.SET_OUTPUT) == p.set_output(1, 0, 255)
 
             # the slave falls silent: lost within its time-out
-            await watch.wait_for("module_status", watch.status(MODULE, "lost"), timeout=5)
+            await watch.wait("module_status", watch.status(MODULE, "lost"), timeout=5)
         finally:
             await slave.close()
 

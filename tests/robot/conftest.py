@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
+import functools
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
-from backend.site.schema import Site
-from backend.site.yamlio import load_site_file
-from guidebot.bus import Bus, Endpoint
+from guidebot.bus import Bus
 from guidebot.messages import Message
+from guidebot.site.schema import Site
+from guidebot.site.yamlio import load_site_file
+from guidebot.testing import Recorder
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
@@ -21,31 +22,6 @@ DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
 @pytest.fixture(scope="session")
 def demo_site() -> Site:
     return load_site_file(DEMO_SITE)
-
-
-class Recorder:
-    """Every message of some types seen on a bus, with an awaitable condition."""
-
-    def __init__(self, endpoint: Endpoint, *patterns: str) -> None:
-        self.messages: list[Message] = []
-        self._changed = asyncio.Event()
-        for pattern in patterns:
-            endpoint.subscribe(pattern, self._add, tap=True)
-
-    def _add(self, message: Message) -> None:
-        self.messages.append(message)
-        self._changed.set()
-
-    def of(self, type_: str) -> list[Message]:
-        return [m for m in self.messages if m.type == type_]
-
-    async def wait_for(self, predicate: Callable[[], bool], timeout: float = 20.0) -> None:
-        async with asyncio.timeout(timeout):
-            while not predicate():
-                self._changed.clear()
-                if predicate():
-                    return
-                await self._changed.wait()
 
 
 class BuildingStandIn:
@@ -87,7 +63,9 @@ class BuildingStandIn:
 def helpers() -> SimpleNamespace:
     """The helper classes, as a fixture: test modules here do not import each other."""
     return SimpleNamespace(
-        Recorder=Recorder, BuildingStandIn=BuildingStandIn, LinkCutter=LinkCutter
+        Recorder=functools.partial(Recorder, tap=True),
+        BuildingStandIn=BuildingStandIn,
+        LinkCutter=LinkCutter,
     )
 
 

@@ -26,13 +26,13 @@ from typing import Any
 import httpx
 import yaml
 
-from backend.building.config import load_building
 from backend.settings import Settings
-from backend.site.validate import validate_site
 from backend.testing import RunningServer, running_server
 from building_sim.simulator import BuildingSimulator
 from guidebot.invariants import InvariantChecker
 from guidebot.messages import Message
+from guidebot.site.building_config import load_building
+from guidebot.site.validate import validate_site
 from robot_agent.agent import AgentConfig, RobotAgent
 
 ROBOT_SCALE = 10.0

@@ -22,13 +22,13 @@ import httpx
 import pytest
 import yaml
 
-from backend.building.config import BuildingConfig
 from backend.building.interface import BuildingInterface
 from backend.settings import Settings
-from backend.site.schema import Site
 from backend.testing import RunningServer, running_server
 from building_sim.simulator import BuildingSimulator
 from guidebot.messages import Message
+from guidebot.site.building_config import BuildingConfig
+from guidebot.site.schema import Site
 from robot_agent.agent import AgentConfig, RobotAgent
 from robot_agent.robocan import protocol as p
 

@@ -9,8 +9,8 @@ from typing import Any
 import httpx
 import pytest
 
-from backend.site.yamlio import load_site_file
 from guidebot.bus import Bus
+from guidebot.site.yamlio import load_site_file
 from robot_agent.clock import Clock
 from robot_agent.gui import OnboardScreen, ScreenServer
 

@@ -69,7 +69,7 @@ def _msg(type_: str, **payload: Any) -> Message:
 
 
 def test_the_checker_catches_each_kind_of_violation() -> None:
-    from backend.site.validate import validate_site
+    from guidebot.site.validate import validate_site
 
     checker = InvariantChecker.from_site(validate_site(safety_site()))
     feed = checker.feed_message

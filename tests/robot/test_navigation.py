@@ -9,9 +9,9 @@ from typing import Any
 
 import pytest
 
-from backend.site.schema import Site
 from backend.traffic.manager import TrafficManager
 from guidebot.bus import Bus
+from guidebot.site.schema import Site
 from robot_agent.clock import Clock
 from robot_agent.navigation import Navigator
 from robot_agent.sim_base import SimulatedBase

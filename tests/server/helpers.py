@@ -6,9 +6,9 @@ import asyncio
 from pathlib import Path
 from typing import Any
 
-from backend.site import Site, load_site_file
 from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message
+from guidebot.site import Site, load_site_file
 
 DEMO = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
 

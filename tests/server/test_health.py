@@ -12,11 +12,11 @@ import yaml
 from click.testing import CliRunner
 
 from backend.app import create_app
-from backend.building.config import load_building
 from backend.settings import Settings
 from backend.testing import running_server
 from building_sim.simulator import BuildingSimulator
 from guidebot.cli import main
+from guidebot.site.building_config import load_building
 
 from .helpers import DEMO
 

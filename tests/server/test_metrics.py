@@ -15,7 +15,6 @@ import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
 from backend.auth import Role
-from backend.building.config import load_building
 from backend.hub import Hub
 from backend.metrics.server import ServerMetrics
 from backend.settings import Settings, StaticToken
@@ -24,6 +23,7 @@ from bench.reaction import bench_site
 from building_sim.simulator import BuildingSimulator
 from guidebot.client import HubClient
 from guidebot.messages import Message
+from guidebot.site.building_config import load_building
 
 PANEL = "panel-token-1234"
 OPERATOR = "operator-token-1234"

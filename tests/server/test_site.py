@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from backend.site import SiteInvalid, dump_site, load_site_text
 from guidebot.cli import main
+from guidebot.site import SiteInvalid, dump_site, load_site_text
 
 from .helpers import DEMO, demo_site
 

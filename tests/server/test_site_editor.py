@@ -12,8 +12,8 @@ import httpx
 import pytest
 import yaml
 
-from backend.site.yamlio import load_site_text
 from backend.testing import RunningServer, running_server
+from guidebot.site.yamlio import load_site_text
 from robot_agent.agent import AgentConfig, RobotAgent
 from tests.server.conftest import OPERATOR_TOKEN, server_settings
 

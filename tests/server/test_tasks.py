@@ -9,11 +9,11 @@ from typing import Any
 
 import pytest
 
-from backend.site import validate_site
 from backend.site.service import SiteService
 from backend.tasks import Task, TaskError, TaskManager, TaskState
 from guidebot.bus import Bus
 from guidebot.messages import Message
+from guidebot.site import validate_site
 
 from .conftest import Clock
 from .helpers import RobotStub, demo_site

@@ -6,9 +6,10 @@ from typing import Any
 
 import pytest
 
-from backend.site import Site, validate_site
-from backend.traffic import LockState, NoPath, SiteGraph, TrafficManager, UnknownNode
+from backend.traffic import LockState, TrafficManager
 from guidebot.bus import Bus
+from guidebot.site import Site, validate_site
+from guidebot.site.graph import NoPath, SiteGraph, UnknownNode
 
 from .helpers import RobotStub, demo_site
 

@@ -11,10 +11,10 @@ import yaml
 from click.testing import CliRunner
 
 from backend.site.cli import site as site_cli
-from backend.site.i18n import missing_translations, poi_texts, site_languages, tour_texts
-from backend.site.schema import Site
-from backend.site.validate import SiteInvalid, validate_site
-from backend.site.yamlio import load_site_file
+from guidebot.site.i18n import missing_translations, poi_texts, site_languages, tour_texts
+from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.site.yamlio import load_site_file
 
 ROOT = Path(__file__).resolve().parents[2]
 

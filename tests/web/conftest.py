@@ -21,15 +21,15 @@ import httpx
 import pytest
 import yaml
 
-from backend.building.config import BuildingConfig
 from backend.settings import Settings, StaticToken
-from backend.site.schema import Site
-from backend.site.yamlio import load_site_file
 from backend.testing import RunningServer, running_server
 from bench.console import CHROMIUM as BENCH_CHROMIUM
 from bench.console import CHROMIUM_ARGS
 from building_sim.control import serve_control
 from building_sim.simulator import BuildingSimulator
+from guidebot.site.building_config import BuildingConfig
+from guidebot.site.schema import Site
+from guidebot.site.yamlio import load_site_file
 from robot_agent.agent import AgentConfig, RobotAgent
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -18,8 +18,8 @@ from typing import Any
 import pytest
 from playwright.async_api import expect
 
-from backend.site.schema import Site
 from guidebot.messages import Message
+from guidebot.site.schema import Site
 from robot_agent.agent import RobotAgent
 from robot_agent.testing import light_robot
 

@@ -1,9 +1,9 @@
 """Which Modbus point kinds each building role may use: ONE table for the whole product.
 
-The site checker (backend.site.validate), the building check run by the server and the
-BuildingInterface (backend.building.config), the interface's ``set_output`` and the building
-simulator (building_sim) all ask this module, so a site one of them accepts the others accept
-too. It imports nothing from the project (the site model will move to a neutral package).
+The site checker (guidebot.site.validate), the building check run by the server's
+BuildingInterface (guidebot.site.building_config), the interface's ``set_output`` and the
+building simulator (building_sim) all ask this module, so a site one of them accepts the others
+accept too. It imports nothing from the project.
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@ import math
 import random
 from typing import Any
 
-from backend.site.schema import Site
-from backend.site.validate import validate_site
+from guidebot.site.schema import Site
+from guidebot.site.validate import validate_site
 
 __all__ = ["synthetic_site"]
 

@@ -1,7 +1,7 @@
 """Building part of the site: Modbus I/O modules, their points, doors, elevators and buttons.
 
 The BuildingInterface (backend/building) and the simulator (building_sim) read these models;
-the site validator (backend.site.validate) checks that every reference between them resolves.
+the site validator (guidebot.site.validate) checks that every reference between them resolves.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.site.io_rules import PointKind
+from guidebot.site.io_rules import PointKind
 
 __all__ = [
     "BuildingModule",

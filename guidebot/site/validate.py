@@ -12,9 +12,9 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from backend.site.building import IORef, PointKind
-from backend.site.io_rules import Role, kind_problem
-from backend.site.schema import Site
+from guidebot.site.building import IORef, PointKind
+from guidebot.site.io_rules import Role, kind_problem
+from guidebot.site.schema import Site
 
 __all__ = ["SiteInvalid", "SiteIssue", "cabin_through_ways", "check_references", "validate_site"]
 

@@ -18,8 +18,8 @@ from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from backend.site.schema import Site
-from backend.site.validate import cabin_through_ways
+from guidebot.site.schema import Site
+from guidebot.site.validate import cabin_through_ways
 
 __all__ = ["NoPath", "PathResult", "PathStep", "SiteGraph", "UnknownNode"]
 

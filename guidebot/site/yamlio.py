@@ -7,8 +7,8 @@ from typing import Any
 
 import yaml
 
-from backend.site.schema import Site
-from backend.site.validate import SiteInvalid, SiteIssue, validate_site
+from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, SiteIssue, validate_site
 
 __all__ = ["MAX_SITE_BYTES", "dump_site", "load_site_file", "load_site_text"]
 

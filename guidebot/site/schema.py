@@ -2,7 +2,7 @@
 
 A site is a plain pydantic document. ``Site.model_validate`` checks shapes; cross references
 (an edge naming an unknown node, a tour naming an unknown point) are checked by
-``backend.site.validate.check_references`` so that every error is reported at once.
+``guidebot.site.validate.check_references`` so that every error is reported at once.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.site.building import ID_PATTERN, BuildingModule, Button, Door, Elevator
+from guidebot.site.building import ID_PATTERN, BuildingModule, Button, Door, Elevator
 
 __all__ = [
     "ChargingStation",

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from backend.site.schema import PointOfInterest, Site, Tour
-from backend.site.validate import SiteIssue
+from guidebot.site.schema import PointOfInterest, Site, Tour
+from guidebot.site.validate import SiteIssue
 
 __all__ = ["missing_translations", "poi_texts", "resolve_language", "site_languages", "tour_texts"]
 

@@ -1,6 +1,6 @@
 """The building section of a site, checked as a whole before anything connects.
 
-The models of single items live in backend.site.building (owned by the site schema); this
+The models of single items live in guidebot.site.building (owned by the site schema); this
 module groups them and refuses a building whose references or addresses do not make sense,
 with an error that names the module, point or device at fault.
 """
@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from backend.site.building import (
+from guidebot.site.building import (
     BuildingModule,
     Button,
     Door,
@@ -23,7 +23,7 @@ from backend.site.building import (
     IORef,
     PointKind,
 )
-from backend.site.io_rules import Role, kind_problem
+from guidebot.site.io_rules import Role, kind_problem
 
 __all__ = [
     "BuildingConfig",

@@ -1,0 +1,55 @@
+"""How the API answers a mistake: one handler per kind of error, installed on the app once.
+
+Routes raise the service's own exceptions (a ``TaskError`` subclass from the Task Manager) and
+never translate them themselves, so the same mistake gets the same status on every route
+(docs/server.md, "Status codes"). Validation errors never echo the input back.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI, Request, status
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+
+from backend.tasks.model import IllegalTransition, QueueFull, TaskError, TaskFinished, TaskNotFound
+
+__all__ = ["install_error_handlers", "task_error_status"]
+
+
+def task_error_status(exc: TaskError) -> tuple[int, str]:
+    """One status per kind of task mistake, with the sentence the caller sees."""
+    if isinstance(exc, TaskNotFound):
+        return status.HTTP_404_NOT_FOUND, "task not found"
+    if isinstance(exc, TaskFinished | IllegalTransition):
+        return status.HTTP_409_CONFLICT, str(exc)
+    if isinstance(exc, QueueFull):
+        return status.HTTP_503_SERVICE_UNAVAILABLE, str(exc)
+    return status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc)
+
+
+async def _task_error(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, TaskError)
+    code, detail = task_error_status(exc)
+    return JSONResponse({"detail": detail}, status_code=code)
+
+
+def _clean(errors: Any) -> list[dict[str, Any]]:
+    """Validation errors as [{loc, msg, type}]: no ``input`` (it may be huge or a secret)."""
+    return [
+        {"loc": list(err.get("loc", ())), "msg": err.get("msg", ""), "type": err.get("type", "")}
+        for err in errors
+    ]
+
+
+async def _validation_error(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    return JSONResponse(
+        {"detail": _clean(exc.errors())}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT
+    )
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(TaskError, _task_error)
