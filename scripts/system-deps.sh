@@ -3,8 +3,9 @@
 # espeak-ng: the robots' speech (tests fall back to timed speech without it).
 # postgresql: the server's second database; tests run a private cluster on 127.0.0.1.
 # chromium: the browser tests (tests/web) drive /usr/bin/chromium with Playwright.
+# redis-server: the broker between server processes; tests run a private one (tests/scale).
 set -euo pipefail
-wanted=(espeak-ng postgresql chromium)
+wanted=(espeak-ng postgresql chromium redis-server)
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
