@@ -22,6 +22,7 @@ from typing import Any
 from fastapi import FastAPI
 
 from backend.api.component import _sync_robot_tokens, hash_robot_tokens
+from backend.auth import Role
 from backend.db import DbStore, make_engine, make_sessionmaker
 from backend.health import ComponentState
 from backend.hub.broker import BrokerBridge, process_id
@@ -55,6 +56,25 @@ async def _follower_tokens(app: FastAPI, db_url: str) -> None:
         await engine.dispose()
     if stored is not None:
         _sync_robot_tokens(app.state.tokens, hash_robot_tokens(validate_site(stored[1])), {})
+
+
+def _announce_links_while_following(hub: Any, leadership: Leadership) -> Callable[[], None]:
+    """robot_connected / robot_disconnected for robots on this process while it follows (the
+    leader's own watcher, in server_brain, announces them once it leads)."""
+    endpoint = hub.endpoint("follower_link_watcher")
+
+    def changed(client: Any, connected: bool) -> None:
+        if client.role is Role.ROBOT and not leadership.leading:
+            kind = "robot_connected" if connected else "robot_disconnected"
+            endpoint.publish(kind, {"robot": client.name})
+
+    unsubscribe = hub.on_connection(changed)
+
+    def stop() -> None:
+        unsubscribe()
+        endpoint.close()
+
+    return stop
 
 
 @contextlib.asynccontextmanager
@@ -92,6 +112,7 @@ async def clustered(
             log.exception("cluster: the deciding components failed on %s", process)
             raise
 
+    stop_links = _announce_links_while_following(hub, leadership)
     leadership.start()
     leader_task = asyncio.get_running_loop().create_task(lead(), name="cluster-leader")
     try:
@@ -102,6 +123,7 @@ async def clustered(
             leader_task.cancel()
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await leader_task
+        stop_links()
         await leadership.stop()
         await bridge.stop()
 

@@ -57,6 +57,13 @@ async def test_messages_cross_processes_both_ways(pair: list[ServerProcess]) -> 
         assert got[0]["source"] == "ops" and got[0]["destination"] == "R1"
         await asyncio.sleep(0.5)  # the broker delivers each message once, not echoed back
         assert len(gui.of_type("say")) == 1
+        # The leader hears of a robot that connects to, and leaves, a follower.
+        await gui.send("subscribe", {"patterns": ["robot_disconnected"]})
+        await robot.close()
+        gone = await wait_until(
+            lambda: _true(gui.of_type("robot_disconnected")), 10, "robot_disconnected"
+        )
+        assert [m["payload"]["robot"] for m in gone] == ["R1"]
     finally:
         for client in (gui, robot, admin):
             await client.close()
