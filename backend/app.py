@@ -30,7 +30,7 @@ from backend.api.limits import BodyLimit, install_error_handlers
 from backend.auth import Authenticator, Role, TokenStore
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
-from backend.cluster import cluster_report, clustered
+from backend.cluster import FollowerRest, cluster_report, clustered
 from backend.console import routes as console_routes
 from backend.console.component import console
 from backend.health import ComponentState, HealthBoard
@@ -141,6 +141,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     install_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    if settings.broker_url:
+        app.add_middleware(FollowerRest)
     for router in ROUTERS:
         app.include_router(router, responses=ERRORS)
     if settings.web_dir.is_dir():

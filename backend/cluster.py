@@ -19,7 +19,9 @@ from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import AbstractAsyncContextManager
 from typing import Any
 
+import orjson
 from fastapi import FastAPI
+from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.api.component import _sync_robot_tokens, hash_robot_tokens
 from backend.auth import Role
@@ -29,7 +31,7 @@ from backend.hub.broker import BrokerBridge, process_id
 from backend.leadership import Leadership
 from backend.site.validate import validate_site
 
-__all__ = ["DECIDING", "clustered"]
+__all__ = ["DECIDING", "FollowerRest", "cluster_report", "clustered"]
 
 log = logging.getLogger(__name__)
 
@@ -135,3 +137,28 @@ def cluster_report(app: FastAPI) -> dict[str, Any] | None:
     if leadership is None or bridge is None:
         return None
     return {**leadership.report(), "broker": bridge.stats()}
+
+
+class FollowerRest:
+    """On a follower, REST under /api (except /api/health) answers 503 and names the leader:
+    the services behind it run on the leader only (docs/scaling.md)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        path = scope.get("path", "")
+        if scope["type"] == "http" and path.startswith("/api/") and path != "/api/health":
+            leadership: Leadership | None = getattr(scope["app"].state, "leadership", None)
+            if leadership is not None and not leadership.leading:
+                body = orjson.dumps(
+                    {
+                        "detail": "this process follows: send REST to the leader",
+                        "leader": leadership.leader,
+                    }
+                )
+                headers = [(b"content-type", b"application/json"), (b"retry-after", b"1")]
+                await send({"type": "http.response.start", "status": 503, "headers": headers})
+                await send({"type": "http.response.body", "body": body})
+                return
+        await self.app(scope, receive, send)

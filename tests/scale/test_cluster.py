@@ -8,6 +8,7 @@ import time
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
+import httpx
 import pytest
 from click.testing import CliRunner
 
@@ -84,6 +85,13 @@ async def test_one_leader_and_fail_over_after_sigkill(pair: list[ServerProcess])
     assert standby["cluster"]["leader"] == leader.name
     assert standby["components"]["task_manager"]["state"] == "disabled"
 
+    async with httpx.AsyncClient(headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}) as http:
+        on_follower = await http.get(f"{follower.url}/api/tasks")
+        on_leader = await http.get(f"{leader.url}/api/tasks")
+    assert on_leader.status_code == 200
+    assert on_follower.status_code == 503  # REST runs on the leader; the answer names it
+    assert on_follower.json()["leader"] == leader.name
+
     killed_at = time.monotonic()
     leader.kill()
 
@@ -96,6 +104,7 @@ async def test_one_leader_and_fail_over_after_sigkill(pair: list[ServerProcess])
     took = time.monotonic() - killed_at
     assert health["cluster"]["leading"] and health["cluster"]["leader"] == follower.name
     assert health["cluster"]["epoch"] == old_epoch + 1
+    print(f"fail-over took {took:.2f} s")
     assert took < 15, f"fail-over took {took:.1f} s"
 
 
