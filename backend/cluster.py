@@ -109,7 +109,11 @@ async def clustered(
                 for component in components:
                     await stack.enter_async_context(component(app))
                 log.info("cluster: %s runs the deciding components", process)
-                await stopping.wait()
+                leadership.serving = True
+                try:
+                    await stopping.wait()
+                finally:
+                    leadership.serving = False
         except Exception:
             log.exception("cluster: the deciding components failed on %s", process)
             raise
@@ -140,8 +144,9 @@ def cluster_report(app: FastAPI) -> dict[str, Any] | None:
 
 
 class FollowerRest:
-    """On a follower, REST under /api (except /api/health) answers 503 and names the leader:
-    the services behind it run on the leader only (docs/scaling.md)."""
+    """On a follower (and on a leader until its components are up), REST under /api (except
+    /api/health) answers 503 and names the leader: the services behind it run on the leader
+    only (docs/scaling.md)."""
 
     def __init__(self, app: ASGIApp) -> None:
         self.app = app
@@ -150,7 +155,7 @@ class FollowerRest:
         path = scope.get("path", "")
         if scope["type"] == "http" and path.startswith("/api/") and path != "/api/health":
             leadership: Leadership | None = getattr(scope["app"].state, "leadership", None)
-            if leadership is not None and not leadership.leading:
+            if leadership is not None and not leadership.serving:
                 body = orjson.dumps(
                     {
                         "detail": "this process follows: send REST to the leader",

@@ -67,6 +67,8 @@ class Leadership:
         """The process that leads, as last read from the database."""
         self.leader_epoch: int | None = None
         self.error = ""
+        self.serving = False
+        """The deciding components are up (set by backend/cluster.py): REST may be served."""
         self._task: asyncio.Task[None] | None = None
 
     @property
@@ -89,6 +91,7 @@ class Leadership:
             "process": self.process,
             "leader": self.leader,
             "leading": self.leading,
+            "serving": self.serving,
             "epoch": self.leader_epoch,
             "error": self.error,
         }
@@ -110,6 +113,7 @@ class Leadership:
                 if self.leading:
                     log.critical("leadership: %s lost its lock (%s): stopping", self.process, exc)
                     self.won.clear()
+                    self.serving = False
                     self.on_lost()
                     return
                 await asyncio.sleep(self.poll_s)

@@ -32,6 +32,7 @@ BENCHMARKS: dict[str, str] = {
     "modbus": "bench.modbus:main",
     "reconfigure": "bench.reconfigure:main",
     "console": "bench.console:main",
+    "failover": "bench.failover:main",
 }
 
 

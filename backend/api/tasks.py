@@ -181,6 +181,9 @@ async def create_task(
         )
     except TaskError as exc:
         raise task_error(exc) from None
+    if request.app.state.settings.broker_url:
+        # Several processes: acknowledge only what a new leader would find (docs/scaling.md).
+        await request.app.state.store.flush()
     return _status(request, task)
 
 
