@@ -31,6 +31,7 @@ from backend.api.limits import BodyLimit
 from backend.auth import Authenticator, Role, TokenStore
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
+from backend.cluster import FollowerRest, cluster_report, clustered
 from backend.console import routes as console_routes
 from backend.console.component import console
 from backend.health import ComponentState, HealthBoard
@@ -111,8 +112,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         async with contextlib.AsyncExitStack() as stack:
             stack.callback(app.state.hub.close)
             stack.callback(health_board.set, "hub", ComponentState.stopped)
-            for component in COMPONENTS:
-                await stack.enter_async_context(component(app))
+            if settings.broker_url:  # several processes: components run on the leader only
+                await stack.enter_async_context(clustered(app, COMPONENTS))
+            else:
+                for component in COMPONENTS:
+                    await stack.enter_async_context(component(app))
             log.info("GuideBot server ready (%d components)", len(COMPONENTS))
             yield
 
@@ -137,10 +141,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "clients": len(hub.clients),
             "endpoints": len(hub.bus.endpoint_names),
             "published": hub.bus.published,
+            **({"cluster": cluster} if (cluster := cluster_report(app)) else {}),
         }
 
     install_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    if settings.broker_url:
+        app.add_middleware(FollowerRest)
     for router in ROUTERS:
         app.include_router(router, responses=ERRORS)
     if settings.web_dir.is_dir():

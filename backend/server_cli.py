@@ -39,9 +39,21 @@ def refuse_broken_site(path: Path) -> None:
     default=None,
     help="Site YAML file (GUIDEBOT_SITE).",
 )
+@click.option(
+    "--broker",
+    "broker_url",
+    default=None,
+    help="redis://host:port: run as one of several processes (GUIDEBOT_BROKER_URL; needs a "
+    "PostgreSQL --db; docs/scaling.md).",
+)
 @click.option("--log-level", default=None, help="uvicorn log level (default info).")
 def server(
-    host: str | None, port: int | None, db_url: str | None, site: Path | None, log_level: str | None
+    host: str | None,
+    port: int | None,
+    db_url: str | None,
+    site: Path | None,
+    broker_url: str | None,
+    log_level: str | None,
 ) -> None:
     """Run the central server: hub at /ws, REST API at /api, docs at /docs, web pages at /."""
     import uvicorn
@@ -56,6 +68,7 @@ def server(
             "port": port,
             "db_url": db_url,
             "site": site,
+            "broker_url": broker_url,
             "log_level": log_level,
         }.items()
         if value is not None

@@ -112,6 +112,10 @@ class Settings(BaseSettings):
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
     # After a restart: how long area requests wait for the robots that had tasks to resync.
     lock_resync_s: float = Field(default=10.0, ge=0, le=300)
+    # Scale-out (docs/scaling.md): Redis between processes, leadership through PostgreSQL.
+    broker_url: str | None = Field(default=None, pattern=r"^rediss?://")
+    process_name: str | None = Field(default=None, pattern=r"^[A-Za-z0-9_.:-]{1,64}$")
+    leader_poll_s: float = Field(default=1.0, gt=0, le=30)
 
     @property
     def development(self) -> bool:
@@ -122,6 +126,11 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _refuse_default_secrets(self) -> Settings:
+        if self.broker_url and not self.db_url.startswith(("postgresql", "postgres:")):
+            raise ValueError(
+                "GUIDEBOT_BROKER_URL needs a PostgreSQL GUIDEBOT_DB_URL (leadership is an advisory"
+                " lock in PostgreSQL; docs/scaling.md)"
+            )
         if len(self.admin_token) < 8:
             raise ValueError("GUIDEBOT_ADMIN_TOKEN must be at least 8 characters")
         if self.development:

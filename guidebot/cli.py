@@ -34,6 +34,7 @@ BENCHMARKS: dict[str, str] = {
     "console": "bench.console:main",
     "reaction": "bench.reaction:main",
     "soak": "bench.soak:main",
+    "failover": "bench.failover:main",
 }
 
 

@@ -4,8 +4,9 @@
 # postgresql: the server's second database; tests run a private cluster on 127.0.0.1.
 # chromium: the browser tests (tests/web) drive /usr/bin/chromium with Playwright.
 # docker.io, debootstrap: tests/test_compose_engine.py runs docker-compose.yml on a private engine.
+# redis-server: the broker between server processes; tests run a private one (tests/scale).
 set -euo pipefail
-wanted=(espeak-ng postgresql chromium docker.io debootstrap)
+wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server)
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -175,6 +175,9 @@ async def create_task(
     task = manager.request(
         body.kind, body.params, priority=body.priority, requester=who.name, robot=robot
     )
+    if request.app.state.settings.broker_url:
+        # Several processes: acknowledge only what a new leader would find (docs/scaling.md).
+        await request.app.state.store.flush()
     return _status(manager, task)
 
 

@@ -227,6 +227,8 @@ class Hub:
         self.overflow_disconnects = 0
         self.task_requests = task_requests
         """Rate limit on task_request per client name (shared with REST task creation)."""
+        self.forwards_unknown = False
+        """With a broker (backend/hub/broker.py) a destination may live on another process."""
         self._on_connection: list[ConnectionCallback] = []
         self._known: frozenset[str] = frozenset()
         self._models: dict[str, type[BaseModel]] = {}
@@ -457,7 +459,8 @@ class Hub:
             return
         destination = message.destination
         if destination is not None and (
-            destination == HUB_NAME or self.bus.get_endpoint(destination) is None
+            destination == HUB_NAME
+            or (self.bus.get_endpoint(destination) is None and not self.forwards_unknown)
         ):
             client.error("unknown_destination", f"no client named {destination!r}", message.id)
             return

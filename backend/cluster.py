@@ -1,0 +1,169 @@
+"""Several server processes: the broker bridge plus leadership (docs/scaling.md).
+
+With ``--broker`` every process serves WebSocket clients and REST, and bridges its hub to the
+others through Redis. The components that decide or own state (``server_brain``: database
+migrations, Task Manager, Traffic Manager; ``building_interface``; the site editor, console and
+RGM that use them) start only on the process that wins the PostgreSQL advisory lock, and are
+rebuilt from the database and the robots' resync when another process wins after a leader died.
+A follower accepts the site's robots (their token digests are read from the database at start).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import signal
+from collections.abc import AsyncIterator, Callable, Sequence
+from contextlib import AbstractAsyncContextManager
+from typing import Any
+
+import orjson
+from fastapi import FastAPI
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+from backend.api.component import _sync_robot_tokens, hash_robot_tokens
+from backend.auth import Role
+from backend.db import DbStore, make_engine, make_sessionmaker
+from backend.health import ComponentState
+from backend.hub.broker import BrokerBridge, process_id
+from backend.leadership import Leadership
+from guidebot.site.validate import validate_site
+
+__all__ = ["DECIDING", "FollowerRest", "cluster_report", "clustered"]
+
+log = logging.getLogger(__name__)
+
+DECIDING = ("task_manager", "traffic_manager", "building_interface")
+"""Health components that run on the leader only."""
+
+Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
+
+
+def _stop_this_process() -> None:
+    """Fencing: a leader that lost its lock stops deciding by stopping (SIGTERM to itself)."""
+    os.kill(os.getpid(), signal.SIGTERM)
+
+
+async def _follower_tokens(app: FastAPI, db_url: str) -> None:
+    """Let the site's robots connect to a follower: their token digests from the database."""
+    engine = make_engine(db_url)
+    try:
+        stored = await DbStore(make_sessionmaker(engine)).load_site()
+    except Exception as exc:  # no schema yet: the first leader has not migrated the database
+        log.warning("cluster: no site in the database yet (%s): robots connect to the leader", exc)
+        return
+    finally:
+        await engine.dispose()
+    if stored is not None:
+        _sync_robot_tokens(app.state.tokens, hash_robot_tokens(validate_site(stored[1])), {})
+
+
+def _announce_links_while_following(hub: Any, leadership: Leadership) -> Callable[[], None]:
+    """robot_connected / robot_disconnected for robots on this process while it follows (the
+    leader's own watcher, in server_brain, announces them once it leads)."""
+    endpoint = hub.endpoint("follower_link_watcher")
+
+    def changed(client: Any, connected: bool) -> None:
+        if client.role is Role.ROBOT and not leadership.leading:
+            kind = "robot_connected" if connected else "robot_disconnected"
+            endpoint.publish(kind, {"robot": client.name})
+
+    unsubscribe = hub.on_connection(changed)
+
+    def stop() -> None:
+        unsubscribe()
+        endpoint.close()
+
+    return stop
+
+
+@contextlib.asynccontextmanager
+async def clustered(
+    app: FastAPI, components: Sequence[Component], *, on_lost: Callable[[], None] | None = None
+) -> AsyncIterator[None]:
+    """Bridge the hub through the broker; run ``components`` only while this process leads."""
+    settings = app.state.settings
+    hub, health = app.state.hub, app.state.health
+    process = process_id() if settings.process_name is None else settings.process_name
+    bridge = BrokerBridge(hub, settings.broker_url, origin=process)
+    leadership = Leadership(
+        settings.db_url,
+        process,
+        on_lost=on_lost or _stop_this_process,
+        poll_s=settings.leader_poll_s,
+    )
+    app.state.broker, app.state.leadership = bridge, leadership
+    hub.forwards_unknown = True
+    await bridge.start()
+    await _follower_tokens(app, settings.db_url)
+    for name in ("database", *DECIDING):
+        health.set(name, ComponentState.disabled, "follower: the leader runs it")
+    stopping = asyncio.Event()
+
+    async def lead() -> None:
+        await leadership.won.wait()
+        try:
+            async with contextlib.AsyncExitStack() as stack:
+                for component in components:
+                    await stack.enter_async_context(component(app))
+                log.info("cluster: %s runs the deciding components", process)
+                leadership.serving = True
+                try:
+                    await stopping.wait()
+                finally:
+                    leadership.serving = False
+        except Exception:
+            log.exception("cluster: the deciding components failed on %s", process)
+            raise
+
+    stop_links = _announce_links_while_following(hub, leadership)
+    leadership.start()
+    leader_task = asyncio.get_running_loop().create_task(lead(), name="cluster-leader")
+    try:
+        yield
+    finally:
+        stopping.set()
+        if not leadership.leading:
+            leader_task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await leader_task
+        stop_links()
+        await leadership.stop()
+        await bridge.stop()
+
+
+def cluster_report(app: FastAPI) -> dict[str, Any] | None:
+    """/api/health's "cluster" section: this process, the leader, the epoch, the broker."""
+    leadership: Leadership | None = getattr(app.state, "leadership", None)
+    bridge: BrokerBridge | None = getattr(app.state, "broker", None)
+    if leadership is None or bridge is None:
+        return None
+    return {**leadership.report(), "broker": bridge.stats()}
+
+
+class FollowerRest:
+    """On a follower (and on a leader until its components are up), REST under /api (except
+    /api/health) answers 503 and names the leader: the services behind it run on the leader
+    only (docs/scaling.md)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        path = scope.get("path", "")
+        if scope["type"] == "http" and path.startswith("/api/") and path != "/api/health":
+            leadership: Leadership | None = getattr(scope["app"].state, "leadership", None)
+            if leadership is not None and not leadership.serving:
+                body = orjson.dumps(
+                    {
+                        "detail": "this process follows: send REST to the leader",
+                        "leader": leadership.leader,
+                    }
+                )
+                headers = [(b"content-type", b"application/json"), (b"retry-after", b"1")]
+                await send({"type": "http.response.start", "status": 503, "headers": headers})
+                await send({"type": "http.response.body", "body": body})
+                return
+        await self.app(scope, receive, send)

@@ -1,0 +1,111 @@
+"""Fail-over benchmark: SIGKILL the leader of two server processes, again and again.
+
+    guidebot bench failover --db postgresql+asyncpg://... --broker redis://... --json
+
+Two `guidebot server --broker` processes on 127.0.0.1 (the demo site, no building modules)
+share the given database and Redis. Each round creates ``--tasks`` tasks through the leader's
+REST API (each acknowledged with its id), SIGKILLs the leader, and waits for the other process's
+Task Manager to report "ok" in /api/health; then the killed one is started again as a follower.
+
+Last line: {"leader_kill_to_new_leader_ms": {"p50", "p99", "max"}, "tasks_lost": N,
+"double_grants": null, "kills": K}.
+leader_kill_to_new_leader_ms: SIGKILL to the new leader serving with all its components up
+("serving" in /api/health, polled every 50 ms).
+tasks_lost: acknowledged tasks the new leader does not list (the Task Manager's write-behind
+store had not written them when the leader died). double_grants: not measured (null): no robots
+request areas in this benchmark (docs/scaling.md, "Not covered").
+"""
+
+from __future__ import annotations
+
+import asyncio
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+import httpx
+
+from guidebot.benchutil import percentiles, print_result
+
+from .servers import ADMIN_TOKEN, ServerProcess, start_servers, wait_until
+
+__all__ = ["main"]
+
+_AUTH = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
+
+
+async def _leader(servers: list[ServerProcess]) -> ServerProcess:
+    async def find() -> ServerProcess | None:
+        for server in servers:
+            health = await server.health()
+            if health and health["cluster"]["serving"]:
+                return server
+        return None
+
+    found: ServerProcess = await wait_until(find, 60, "a leader")
+    return found
+
+
+async def _round(servers: list[ServerProcess], tasks: int, logs: Path) -> tuple[float, int]:
+    leader = await _leader(servers)
+    other = next(s for s in servers if s is not leader)
+    async with httpx.AsyncClient(headers=_AUTH, timeout=10) as http:
+        created = []
+        for _ in range(tasks):
+            answer = await http.post(
+                f"{leader.url}/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}
+            )
+            answer.raise_for_status()
+            created.append(answer.json()["id"])
+        killed_at = time.monotonic()
+        leader.kill()
+
+        async def leads() -> bool:
+            health = await other.health()
+            return bool(health and health["cluster"]["serving"])
+
+        await wait_until(leads, 60, f"{other.name} to lead", interval=0.05)
+        took_ms = (time.monotonic() - killed_at) * 1000
+        listed = await http.get(f"{other.url}/api/tasks", params={"limit": 1000})
+        listed.raise_for_status()
+        known = {t["id"] for t in listed.json()["tasks"]}
+    lost = sum(1 for task_id in created if task_id not in known)
+    leader.stop()
+    revived = ServerProcess(leader.name, leader.db_url, leader.broker_url, leader.log_path)
+    servers[servers.index(leader)] = revived
+    await wait_until(revived.ready, 60, f"{leader.name} to come back")
+    return took_ms, lost
+
+
+async def run(db_url: str, broker_url: str, kills: int, tasks: int) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory(prefix="guidebot-failover-") as root:
+        async with start_servers(["p0", "p1"], db_url, broker_url, Path(root)) as servers:
+            samples, lost = [], 0
+            for _ in range(kills):
+                took_ms, lost_now = await _round(servers, tasks, Path(root))
+                samples.append(took_ms)
+                lost += lost_now
+    return {
+        "leader_kill_to_new_leader_ms": {**percentiles(samples), "max": round(max(samples), 1)},
+        "tasks_lost": lost,
+        "double_grants": None,
+        "kills": kills,
+    }
+
+
+@click.command()
+@click.option(
+    "--db", "db_url", required=True, help="postgresql+asyncpg:// URL (an empty database)."
+)
+@click.option("--broker", "broker_url", required=True, help="redis:// URL.")
+@click.option("--kills", default=5, show_default=True, help="Leader kills (rounds).")
+@click.option("--tasks", default=5, show_default=True, help="Tasks created before each kill.")
+@click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
+def main(db_url: str, broker_url: str, kills: int, tasks: int, as_json: bool) -> None:
+    """SIGKILL the leader of two server processes; time the fail-over, count lost tasks."""
+    result = asyncio.run(run(db_url, broker_url, kills, tasks))
+    if not as_json:
+        click.echo(f"{kills} leader kills with {tasks} tasks each (median, p99 and max ms):")
+    print_result(result)

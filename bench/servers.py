@@ -1,0 +1,112 @@
+"""Several real `guidebot server --broker` processes on loopback sharing one PostgreSQL
+database and one Redis: for `guidebot bench failover` and the scale-out tests (tests/scale)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+__all__ = ["ADMIN_TOKEN", "DEMO", "GUI_TOKEN", "ServerProcess", "start_servers", "wait_until"]
+
+DEMO = Path(__file__).resolve().parents[1] / "sites" / "demo_museum.yaml"
+
+GUI_TOKEN = "gui-token-12345678"
+ADMIN_TOKEN = "admin-token-for-scale-tests"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+async def wait_until(
+    check: Any, timeout: float = 30.0, what: str = "condition", interval: float = 0.1
+) -> Any:
+    """Poll an async ``check`` until it returns something truthy; fail after ``timeout``."""
+    deadline = asyncio.get_running_loop().time() + timeout
+    while True:
+        result = await check()
+        if result:
+            return result
+        if asyncio.get_running_loop().time() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        await asyncio.sleep(interval)
+
+
+class ServerProcess:
+    """One `guidebot server --broker` child process."""
+
+    def __init__(self, name: str, db_url: str, broker_url: str, log: Path) -> None:
+        self.db_url, self.broker_url, self.log_path = db_url, broker_url, log
+        self.name, self.port = name, _free_port()
+        env = {
+            **os.environ,
+            "GUIDEBOT_PROCESS_NAME": name,
+            "GUIDEBOT_LEADER_POLL_S": "0.3",
+            "GUIDEBOT_ADMIN_TOKEN": ADMIN_TOKEN,
+            "GUIDEBOT_BUILDING_ENABLED": "false",
+            "GUIDEBOT_TOKENS": json.dumps([{"token": GUI_TOKEN, "name": "gui", "role": "gui"}]),
+        }
+        guidebot = Path(sys.executable).parent / "guidebot"
+        self.log = log.open("ab")
+        self.process = subprocess.Popen(
+            [str(guidebot), "server", "--port", str(self.port), "--db", db_url],
+            env={**env, "GUIDEBOT_BROKER_URL": broker_url, "GUIDEBOT_SITE": str(DEMO)},
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+        )
+        self.url = f"http://127.0.0.1:{self.port}"
+
+    async def health(self) -> dict[str, Any] | None:
+        try:
+            async with httpx.AsyncClient(timeout=5) as http:
+                response = await http.get(f"{self.url}/api/health")
+        except httpx.HTTPError:
+            return None
+        return dict(response.json())
+
+    async def ready(self) -> bool:
+        health = await self.health()
+        return bool(health and health["cluster"]["broker"]["connected"])
+
+    def kill(self) -> None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGKILL)
+        self.process.wait(10)
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(15)
+            except subprocess.TimeoutExpired:
+                self.kill()
+        self.log.close()
+
+
+@contextlib.asynccontextmanager
+async def start_servers(
+    names: list[str], db_url: str, broker_url: str, logs: Path
+) -> AsyncIterator[list[ServerProcess]]:
+    servers: list[ServerProcess] = []
+    try:
+        for name in names:
+            servers.append(ServerProcess(name, db_url, broker_url, logs / f"{name}.log"))
+            # The first one migrates the database; start the others once it leads.
+            await wait_until(servers[-1].ready, 60, f"server {name} to answer /api/health")
+        yield servers
+    finally:
+        for server in servers:
+            server.stop()
