@@ -18,6 +18,7 @@ import contextlib
 import json
 import random
 import shutil
+import signal
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -352,7 +353,11 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         open_now = watch.open_tasks()
         stuck = {i: t for i, t in open_now.items() if t.state != "queued"}
         for task_id, t in stuck.items():
-            watch.notes.append(f"task {task_id} still {t.state} after the drain")
+            watch.notes.append(f"task {task_id} still {t.state} on {t.robot} after the drain")
+            robot = soak.robots.get(t.robot or "")
+            if robot is not None:  # what that robot was doing, for whoever reads the report
+                tail = robot.log.read_text(encoding="utf-8", errors="replace").splitlines()[-25:]
+                watch.notes += [f"  {robot.name}.log: {line[:200]}" for line in tail]
     finally:
         await soak.stop()
     watch = soak.watch
@@ -384,6 +389,19 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         "unhandled_errors": len(errors),
         "max_rss_mb": watch.rss_mb,
     }
+
+
+async def _until_signal(run: Any) -> dict[str, Any]:
+    """SIGTERM or SIGINT cancel the run, whose clean-up stops every child (each runs in a
+    session of its own, so nothing else would)."""
+    task = asyncio.ensure_future(run)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, task.cancel)
+    try:
+        return await task
+    except asyncio.CancelledError:
+        raise click.ClickException("interrupted: every process stopped") from None
 
 
 @click.command()
@@ -438,7 +456,7 @@ def main(
         drain_s=drain,
         workdir=workdir,
     )
-    result = asyncio.run(run_soak(opts))
+    result = asyncio.run(_until_signal(run_soak(opts)))
     if as_json:
         print_result(result)
     else:

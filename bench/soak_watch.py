@@ -55,6 +55,7 @@ class TaskSeen:
     state: str
     reason: str
     requester: str
+    robot: str | None = None
 
 
 @dataclass

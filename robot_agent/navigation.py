@@ -456,6 +456,9 @@ class Navigator:
                 i += 1
         finally:
             self._release_doors()
+            # Grants never used are dropped (the Traffic Manager releases them with the task):
+            # reporting them in robot_state would claim areas the robot no longer needs.
+            self._granted &= self.held_areas
         self._send_velocity(0.0, 0.0, force=True)
         self.state = NavState.IDLE
 

@@ -44,7 +44,7 @@ def test_the_fault_plan_is_reproducible_and_deals_every_kind() -> None:
 async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path) -> None:
     process = await asyncio.create_subprocess_exec(
         *(sys.executable, "-m", "guidebot.cli", "bench", "soak", "--minutes", "1"),
-        *("--robots", "2", "--seed", str(SEED), "--time-scale", "10", "--fault-every", "5"),
+        *("--robots", "3", "--seed", str(SEED), "--time-scale", "10", "--fault-every", "5"),
         *("--drain", "240", "--workdir", str(tmp_path), "--json"),
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,
@@ -54,7 +54,7 @@ async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path
     assert process.returncode == 0, report
     result = json.loads(out.decode().strip().splitlines()[-1])
     assert list(result) == KEYS
-    assert result["robots"] == 2 and result["minutes"] == 1
+    assert result["robots"] == 3 and result["minutes"] == 1
     assert result["tasks_requested"] > 0 and result["tasks_done"] > 0, report
     assert result["tasks_lost"] == 0, report
     assert result["area_violations"] == 0, report
@@ -63,4 +63,4 @@ async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path
     assert result["unhandled_errors"] == 0, report
     assert set(result["faults_injected"]) == set(KINDS)
     assert sum(result["faults_injected"].values()) >= 6, result["faults_injected"]
-    assert {"server", "building_sim", "R1", "R2"} <= set(result["max_rss_mb"])
+    assert {"server", "building_sim", "R1", "R2", "R3"} <= set(result["max_rss_mb"])

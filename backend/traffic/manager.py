@@ -54,6 +54,8 @@ class TrafficManager:
         # After a restart: robots that may hold locks, whose word comes before any grant.
         self._awaiting: set[str] = set()
         self._deferred: list[Message] = []
+        self._declared: set[str] = set()
+        """Robots whose first robot_state (their declaration of locks) was taken."""
         self._resync_timer: asyncio.TimerHandle | None = None
 
     # --- life cycle ----------------------------------------------------------------------
@@ -306,6 +308,10 @@ class TrafficManager:
         """The locks a robot says it holds (robot_state ``areas``) and the area it stands in
         are its own: after a server restart this lock table starts empty, and without this a
         second robot would be granted an area the first is in (found by the soak)."""
+        if robot in self._declared:
+            return  # only a robot's first word after this server started: later, this table
+            # is the truth and a stale claim (a grant its task no longer needs) is not taken
+        self._declared.add(robot)
         claimed = [a for a in reported if isinstance(a, str)] if isinstance(reported, list) else []
         if here is not None:
             claimed.append(here)

@@ -282,6 +282,15 @@ async def test_a_restarted_server_takes_back_the_locks_robots_report(bus: Bus) -
     r2.node = "hall"
     r2.state("busy", areas=[])  # out again: released, and the waiter gets it
     await r3.wait_for("area_granted")
+    # Only a robot's first word after the start counts: later the table is the truth, and a
+    # grant a robot still lists after its task ended is not taken back (the soak saw one
+    # claim the corridor for ever).
+    r2.state("idle", areas=["corridor", "elevator"])
+    assert traffic.locks.holder("corridor") == "R1"
+    assert traffic.locks.holder("elevator") == "R3"
+    r1.node = "gb1"
+    r1.state("idle", areas=["corridor"])
+    assert traffic.locks.holder("corridor") is None
 
 
 async def test_after_a_restart_no_area_is_granted_before_the_robots_that_had_tasks_resync(
