@@ -67,7 +67,8 @@ def _compose_binary() -> Path | None:
 def _run(args: list[str], env: dict[str, str], timeout: float = 600) -> str:
     done = subprocess.run(args, env=env, capture_output=True, text=True, timeout=timeout)
     if done.returncode != 0:
-        raise AssertionError(f"{' '.join(args)} failed ({done.returncode}):\n{done.stderr[-3000:]}")
+        output = (done.stdout[-3000:] + "\n" + done.stderr[-3000:]).strip()
+        raise AssertionError(f"{' '.join(args)} failed ({done.returncode}):\n{output}")
     return done.stdout
 
 
@@ -150,7 +151,13 @@ def _wheels(env: dict[str, str]) -> None:
     WHEELS.mkdir(parents=True, exist_ok=True)
     for old in WHEELS.glob("guidebot-*.whl"):
         old.unlink()
-    _run([sys.executable, "-m", "pip", "wheel", "--quiet", str(ROOT), "-w", str(WHEELS)], env)
+    # Debian bookworm's Python is 3.11.2: redis then also needs async-timeout, which a host on
+    # a later 3.11 does not resolve for itself.
+    extra = ["async-timeout>=4.0.3"]
+    _run(
+        [sys.executable, "-m", "pip", "wheel", "--quiet", str(ROOT), *extra, "-w", str(WHEELS)],
+        env,
+    )
 
 
 def _host_network_override(path: Path) -> None:
