@@ -52,6 +52,10 @@ UP_TYPES: tuple[str, ...] = (
 )
 """On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor)."""
 
+LIVE_ONLY = frozenset({"petri_net_event"})
+"""Up types sent only while the link is up (never queued offline): the console's monitor
+follows live markings; queued, they would push reports out of the bounded offline queue."""
+
 DOWN_TYPES: tuple[str, ...] = (
     "task_assigned",
     "task_cancel",
@@ -199,6 +203,8 @@ class Link:
             self._requesters[message.id] = message.source
             if len(self._requesters) > MAX_PENDING_REPLIES:
                 self._requesters.popitem(last=False)
+        if message.type in LIVE_ONLY and not self.upstream.connected.is_set():
+            return  # monitoring would crowd the reports out of the bounded offline queue
         self.sent_up += 1
         if message.type in REPORT_TYPES:
             online = self.upstream.connected.is_set()
