@@ -55,6 +55,8 @@ class MainTask:
     """The last thing that went wrong while it ran (navigation_failed, a robot fault): the
     reason given when its net fails without saying why."""
     history: list[TaskPhase] = field(default_factory=list)
+    run_request_id: str = ""
+    """The id of the run_petri_net request, to tie RG's refusal (an ``error``) to this task."""
 
     def move(self, to: TaskPhase) -> None:
         if to not in TRANSITIONS[self.phase]:
@@ -101,6 +103,7 @@ class TaskRunner:
             sub("point_explained", self._on_point),
             sub("navigation_failed", self._on_problem),
             sub("robot_fault", self._on_problem),
+            sub("error", self._on_refused),
         ]
         self._start_waiting()
 
@@ -153,10 +156,13 @@ class TaskRunner:
         if self.on_start is not None:
             self.on_start()
         self.running_nets[task.instance_id] = net
-        self.ep.publish(
+        request = self.ep.publish(
             "run_petri_net",
             {"net": net, "instance_id": task.instance_id, "params": task.params, "main": True},
         )
+        task.run_request_id = request.id
+        if task.phase is not TaskPhase.STARTING:
+            return  # RG refused it inside the publish: already reported as ended
         task.move(TaskPhase.RUNNING)
         log.info("%s: task %s started (%s)", self.robot, task_id, net)
         self._report("task_started", task_id)
@@ -182,6 +188,15 @@ class TaskRunner:
         else:
             what = f"robot fault {p.get('kind') or '?'}: {p.get('detail') or ''}".rstrip(": ")
         task.problem = what
+
+    def _on_refused(self, message: Message) -> None:
+        """RG's ``error`` for our run request: its reason becomes the task's failure reason."""
+        task = self.current
+        p = message.payload
+        if task is None or task.phase is TaskPhase.ENDED:
+            return
+        if task.phase is TaskPhase.STARTING or p.get("message_id") == task.run_request_id:
+            task.problem = str(p.get("reason") or p.get("code") or "refused by RG")
 
     def _on_net_event(self, message: Message) -> None:
         p = message.payload

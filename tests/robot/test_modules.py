@@ -138,6 +138,31 @@ def test_task_runner_reports_start_end_cancel_and_refuses_a_second_task(helpers:
     assert seen.of("run_petri_net")[-1].payload["net"] == "waiting"
 
 
+async def test_a_net_refused_by_rg_ends_the_task_as_failed_with_rg_reason(helpers: Any) -> None:
+    """RG refuses an unknown net at once, inside the publish: the task must end as failed
+    with RG's reason and the robot go back to waiting, not raise ended -> running."""
+    from petri_nets.clock import AsyncioClock
+    from petri_nets.dispatch import Dispatch
+    from petri_nets.library import NetLibrary
+
+    bus = Bus()
+    dispatch = Dispatch(
+        bus.endpoint("dispatch"), NetLibrary(watch=False), AsyncioClock(), idle_net=None
+    )
+    dispatch.open()
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
+    seen = helpers.Recorder(bus.endpoint("t"), "task_*")
+    runner.start()
+    bus.endpoint("tm").publish(
+        "task_assigned", {"task_id": "t1", "robot": "R1", "net": "no_such_net"}
+    )
+    ended = seen.of("task_ended")
+    assert [m.payload["outcome"] for m in ended] == ["failed"]
+    assert "unknown net" in ended[0].payload["reason"]
+    assert runner.current is None and runner.finished[0].phase is TaskPhase.ENDED
+    dispatch.close()
+
+
 def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers: Any) -> None:
     """A net that fails says nothing itself: the reason is the last navigation failure or
     robot fault seen during the task, else a plain sentence, never empty (found under load
