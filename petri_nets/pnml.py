@@ -10,6 +10,7 @@ raises on content problems: it returns the net and the list of problems found.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from petri_nets.model import (
     REQUIRED,
@@ -216,16 +217,20 @@ class _Reader:
             return None
         return count
 
+    def node_fields(self, node: Node, page: str) -> dict[str, Any]:
+        """What a place and a transition read alike: id, line, page, name and graphics."""
+        return {
+            "id": self.node_id(node),
+            "line": node.line,
+            "page": page,
+            "name": label_value(node, "name"),
+            "graphics": node.find("graphics"),
+            "name_graphics": self.name_graphics(node),
+            "element": node,
+        }
+
     def read_place(self, node: Node, page: str) -> PlaceSpec:
-        place = PlaceSpec(
-            self.node_id(node),
-            node.line,
-            page,
-            name=label_value(node, "name"),
-            graphics=node.find("graphics"),
-            name_graphics=self.name_graphics(node),
-            element=node,
-        )
+        place = PlaceSpec(**self.node_fields(node, page))
         place.initial = self.count(node, "initialMarking", f"place {place.id}", 0) or 0
         capacity = label_value(node, "capacity")  # PIPE: 0 = unbounded
         if capacity not in (None, "", "0"):
@@ -272,15 +277,7 @@ class _Reader:
         )
 
     def read_transition(self, node: Node, page: str) -> TransitionSpec:
-        trans = TransitionSpec(
-            self.node_id(node),
-            node.line,
-            page,
-            name=label_value(node, "name"),
-            graphics=node.find("graphics"),
-            name_graphics=self.name_graphics(node),
-            element=node,
-        )
+        trans = TransitionSpec(**self.node_fields(node, page))
         for tool in node.findall("toolspecific"):
             if not self.ours(tool):
                 trans.foreign.append(tool)
