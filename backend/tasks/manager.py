@@ -34,6 +34,7 @@ from backend.tasks.params import validate_params
 from backend.tasks.queue import TaskQueue
 from backend.tasks.robots import RobotInfo
 from guidebot.bus import BusEndpoint
+from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message
 from guidebot.payloads.tasks import TaskRequest, TourProgress
 from guidebot.site.graph import SiteGraph
@@ -111,6 +112,8 @@ class TaskManager:
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
+        self.courier = courier_for(endpoint)
+        """task_assigned and task_cancel: sent again until the robot acknowledges them."""
         """Waits, arrivals and durations told to visitors (backend/tasks/eta.py)."""
         self.load_site(site, self.graph)
 
@@ -126,6 +129,7 @@ class TaskManager:
             sub("battery_panic", self._on_battery_panic),
             sub("robot_disconnected", self._on_robot_disconnected),
             sub("tour_progress", self._on_tour_progress),
+            *listen(self.endpoint, self.courier),
         ]
         with contextlib.suppress(RuntimeError):
             self._watchdog = asyncio.get_running_loop().create_task(
@@ -136,6 +140,7 @@ class TaskManager:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
+        self.courier.close()
         if self._watchdog is not None:
             self._watchdog.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -407,17 +412,22 @@ class TaskManager:
         self._set_current(robot, task.id)
         self._assigned_at[task.id] = self.clock()
         self._unconfirmed.discard(task.id)
-        self.endpoint.publish(
-            "task_assigned",
-            {
+        self._send_assigned(task, robot)
+        self._changed(task, "assigned")
+
+    def _send_assigned(self, task: Task, robot: RobotInfo) -> None:
+        assigned = Message(
+            type="task_assigned",
+            source=self.endpoint.name,
+            destination=robot.name,
+            payload={
                 "task_id": task.id,
                 "robot": robot.name,
                 "net": task.net,
                 "params": task.assigned_params,
             },
-            destination=robot.name,
         )
-        self._changed(task, "assigned")
+        self.courier.post(assigned, key=("task", task.id, robot.name))
 
     def _send_idle_robots(self) -> None:
         """Robots with nothing to do: charge if they must, else a free station, else the
@@ -584,7 +594,7 @@ class TaskManager:
         if p.get("mode") == "offline":
             self._robot_lost(robot)
             return
-        came_back = not robot.online
+        came_back = returned = not robot.online
         robot.online = True
         robot.offline_since = None
         robot.last_seen = self.clock()
@@ -607,6 +617,13 @@ class TaskManager:
         was_fault = robot.fault
         robot.fault = robot.mode == "fault"
         self._reconcile(robot, reported)
+        current = self.tasks.get(robot.current) if robot.current else None
+        if returned and current is not None and current.state is TaskState.ASSIGNED:
+            if reported != current.id:
+                # Its link went before it acknowledged task_assigned (retries stop when a
+                # robot is gone): now it is back, it gets the task again.
+                log.info("%s is back without task %s: sent again", robot.name, current.id)
+                self._send_assigned(current, robot)
         if robot.fault and not was_fault and robot.current is not None:
             self._requeue(self.tasks[robot.current], "robot fault")
         # robot_state comes at a steady rate from every robot: re-plan only on news.
@@ -763,9 +780,15 @@ class TaskManager:
             self._idle.discard(robot.name)
 
     def _send_cancel(self, robot: str, task_id: str, reason: str) -> None:
-        self.endpoint.publish(
-            "task_cancel", {"task_id": task_id, "reason": reason}, destination=robot
+        # Replaces an unacknowledged task_assigned of this task (same key): the robot gets the
+        # cancel, never a late copy of the assignment after it.
+        cancel = Message(
+            type="task_cancel",
+            source=self.endpoint.name,
+            destination=robot,
+            payload={"task_id": task_id, "reason": reason},
         )
+        self.courier.post(cancel, key=("task", task_id, robot))
 
     def _target_node(self, kind: str, params: dict[str, Any]) -> str:
         """Where a task starts (for path cost); raises TaskError if params do not fit."""
