@@ -3,7 +3,7 @@ guarantee").
 
 TCP gives no receipt: a message written just before a link drops may die in flight. The
 senders of must-arrive messages keep each one until its receiver answers ``ack`` (payload
-``message_id``, ``correlation_id`` = the message's id) and send it again with back-off until
+``message_id`` = the message's id) and send it again with back-off until
 then, or until the receiver is known gone; the receivers acknowledge every copy and handle one
 id once. At least once plus idempotent receivers is effectively once, while both ends live.
 
@@ -70,9 +70,8 @@ def ack_for(message: Message, source: str) -> Message:
         type=ACK,
         source=source,
         destination=message.source or None,
-        correlation_id=message.id,
         payload={"message_id": message.id},
-    )
+    )  # no correlation_id: an ack must never complete a request() waiting for the real reply
 
 
 class Seen:
@@ -184,7 +183,8 @@ class Courier:
 
     def on_ack(self, ack: Message) -> bool:
         """An ``ack`` arrived: stop sending the message it names. True if it was pending."""
-        message_id = ack.correlation_id or str((ack.payload or {}).get("message_id") or "")
+        # An ack names the message in its payload; a refusal (error) in its correlation id.
+        message_id = str((ack.payload or {}).get("message_id") or ack.correlation_id or "")
         entry = self._pending.get(message_id)
         if entry is None:
             return False

@@ -156,3 +156,19 @@ async def test_a_message_for_an_in_process_module_is_not_kept(server: RunningSer
     received = Recorder(hub.endpoint("R9"), "task_assigned")
     courier.post(assignment(robot="R9"))
     assert len(received.messages) == 1 and courier.pending == 0
+
+
+async def test_a_request_gets_its_reply_not_the_ack(
+    server: RunningServer, connect: ClientFactory
+) -> None:
+    """The hub acknowledges open_door at once; the answer comes when the door is open."""
+    building = server.app.state.hub.endpoint("building")
+
+    def open_later(message: Message) -> None:
+        loop = asyncio.get_running_loop()
+        loop.call_later(0.05, building.reply, message, "door_opened", {"door": "D1"})
+
+    building.subscribe("open_door", open_later)
+    robot = await connect("R1")
+    reply = await robot.request("open_door", {"door": "D1"}, timeout=5)
+    assert reply.type == "door_opened"
