@@ -25,6 +25,7 @@ from guidebot.messages import Message
 
 __all__ = [
     "ACK",
+    "ANSWERED",
     "MUST_ARRIVE_DOWN",
     "MUST_ARRIVE_UP",
     "Courier",
@@ -61,7 +62,12 @@ MUST_ARRIVE_UP = frozenset(
     }
 )
 """Robot -> server: sent by the link's Courier, acknowledged by the hub once the server's
-in-process modules have handled it (backend/hub/acks.py)."""
+in-process modules have handled it (backend/hub/acks.py), except the ``ANSWERED`` ones."""
+
+ANSWERED = frozenset({"task_request"})
+"""Must-arrive requests acknowledged by the module that answers them, not by the hub: the Task
+Manager answers and acknowledges a task_request once the task is written, and answers a
+repeated id with the same task."""
 
 
 def ack_for(message: Message, source: str) -> Message:
@@ -81,6 +87,9 @@ class Seen:
         self.size = size
         self._ids: OrderedDict[Hashable, None] = OrderedDict()
         self.duplicates = 0
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._ids
 
     def first(self, key: Hashable) -> bool:
         """True the first time ``key`` is seen (handle it), False for a repeat (ack only)."""
@@ -161,7 +170,7 @@ class Courier:
             self.withdraw(key)  # a newer message for the same thing replaces the older one
         entry = _Pending(
             message,
-            message.destination or self.default_acker,
+            "" if message.type in ANSWERED else message.destination or self.default_acker,
             key,
             self.initial_s,
             online=not self.paused,

@@ -471,12 +471,14 @@ class Hub:
             type_ == "task_request"
             and self.task_requests is not None
             and client.role is not Role.ADMIN
+            and not self.acks.is_repeat_request(client.name, message)
         ):
             try:
                 self.task_requests.spend(client.name, "too many task requests")
             except RateLimited as exc:
                 client.error("rate_limited", str(exc), message.id)
                 return
+            self.acks.charge(client.name, message)  # its copies sent again are not charged
         if not self.acks.wanted(message):
             self.bus.publish(message)
             return

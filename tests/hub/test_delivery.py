@@ -172,3 +172,32 @@ async def test_a_request_gets_its_reply_not_the_ack(
     robot = await connect("R1")
     reply = await robot.request("open_door", {"door": "D1"}, timeout=5)
     assert reply.type == "door_opened"
+
+
+async def test_a_task_request_is_sent_again_until_answered(
+    server: RunningServer, connect: ClientFactory
+) -> None:
+    """The hub does not ack it: the Task Manager answers and acks it once the task is written
+    (and answers a repeated id with the same task, tests/server/test_tasks.py)."""
+    upstream = await connect("R1")
+    onboard = Bus()
+    link = Link(onboard.endpoint("link"), upstream, "R1", retry_initial_s=0.05, retry_max_s=0.2)
+    link.start()
+    await upstream.sync()
+    task_manager = server.app.state.hub.endpoint("task_manager")
+    copies: list[Message] = []
+
+    def answer_the_second(message: Message) -> None:
+        copies.append(message)
+        if len(copies) == 2:  # as the Task Manager does: the answer, then the ack
+            task_manager.reply(message, "task_event", {"task_id": "T7", "state": "queued"})
+            task_manager.send(ack_for(message, "task_manager"))
+
+    task_manager.subscribe("task_request", answer_the_second)
+    onboard.endpoint("gui").publish("task_request", {"kind": "tour"})
+    await wait_until(lambda: link.courier.pending == 0)
+    assert len(copies) >= 2 and {m.id for m in copies} == {copies[0].id}
+    sent = len(copies)
+    await asyncio.sleep(5 * FAST["max_s"])
+    assert len(copies) == sent  # answered: no more copies
+    await link.stop()
