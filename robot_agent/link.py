@@ -11,8 +11,8 @@ client's bounded queue (overflow: robot_state is coalesced to the latest, otherw
 message is dropped and counted) and is flushed in order on reconnect, after which the agent
 resynchronises (``on_connect``: robot_state with the running task at once).
 
-Delivery (guidebot/delivery.py, docs/robot.md "Delivery guarantee"): the must-arrive reports and
-requests going up are kept by a Courier until the hub acknowledges them and sent again with
+Delivery (guidebot/delivery.py, docs/protocol.md "Delivery guarantee"): the must-arrive
+reports and requests going up are kept by a Courier until acknowledged and sent again with
 back-off (paused while the link is down; on reconnect those sent before the drop go again at
 once). The must-arrive messages coming down (task_assigned, task_cancel, area_granted) are
 acknowledged to their sender, every copy, and a repeated id is not published on board again.
