@@ -10,6 +10,12 @@ While the link is down the robot goes on by itself; what it must report waits in
 client's bounded queue (overflow: robot_state is coalesced to the latest, otherwise the oldest
 message is dropped and counted) and is flushed in order on reconnect, after which the agent
 resynchronises (``on_connect``: robot_state with the running task at once).
+
+Delivery (guidebot/delivery.py, docs/protocol.md "Delivery guarantee"): the must-arrive
+reports and requests going up are kept by a Courier until acknowledged and sent again with
+back-off (paused while the link is down; on reconnect those sent before the drop go again at
+once). The must-arrive messages coming down (task_assigned, task_cancel, area_granted) are
+acknowledged to their sender, every copy, and a repeated id is not published on board again.
 """
 
 from __future__ import annotations
@@ -18,11 +24,12 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections import OrderedDict, deque
+from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
 from guidebot.bus import Endpoint, Handler
+from guidebot.delivery import ACK, MUST_ARRIVE_DOWN, MUST_ARRIVE_UP, Courier, Seen, ack_for
 from guidebot.messages import Message
 
 __all__ = ["DOWN_TYPES", "UP_TYPES", "Link", "Upstream"]
@@ -77,22 +84,8 @@ ADDRESSED_ONLY = frozenset({"kill_petri_net"})
 
 MAX_PENDING_REPLIES = 1000
 
-REPORT_TYPES = frozenset(
-    {
-        "task_started",
-        "task_ended",
-        "task_request",
-        "battery_low",
-        "battery_panic",
-        "robot_fault",
-        "petri_net_ended",
-    }
-)
-"""Reports that must survive a link drop: the ones sent in the last seconds before the drop may
-have died in flight (TCP gives no receipt), so they are sent again after the reconnect with their
-original ids. Receivers treat them idempotently (the Task Manager ignores a second task_ended)."""
-IN_FLIGHT_S = 5.0
-MAX_RECENT_REPORTS = 200
+SEEN_IDS = 1024
+"""Must-arrive ids remembered for de-duplication (a repeat comes within seconds)."""
 
 
 class Upstream(Protocol):
@@ -122,6 +115,8 @@ class Link:
         *,
         on_connect: Callable[[], Any] | None = None,
         on_disconnect: Callable[[], Any] | None = None,
+        retry_initial_s: float = 1.0,
+        retry_max_s: float = 8.0,
     ) -> None:
         self.onboard = onboard
         self.upstream = upstream
@@ -134,10 +129,17 @@ class Link:
         self.on_message_down: Callable[[Message], None] | None = None
         # Request id -> on-board endpoint that sent it (bounded: oldest forgotten first).
         self._requesters: OrderedDict[str, str] = OrderedDict()
-        self.resent = 0
+        self.courier = Courier(
+            upstream.send,
+            name=f"{robot} link",
+            default_acker="hub",
+            initial_s=retry_initial_s,
+            max_s=retry_max_s,
+        )
+        """Must-arrive messages going up, kept until the hub acknowledges them."""
+        self.seen = Seen(SEEN_IDS)
+        """Must-arrive ids that came down, handled once each."""
         self._unsubs: list[Callable[[], None]] = []
-        # [time it went (or None while it waits in the hub client's offline queue), report]
-        self._recent: deque[list[Any]] = deque(maxlen=MAX_RECENT_REPORTS)
         self._down_since: float | None = None
         self._watch: asyncio.Task[None] | None = None
 
@@ -146,7 +148,10 @@ class Link:
             self._unsubs.append(self.onboard.subscribe(type_, self._up))
         for type_ in DOWN_TYPES:
             self._unsubs.append(self.upstream.subscribe(type_, self._down))
+        self._unsubs.append(self.upstream.subscribe(ACK, self._acked))
         self._unsubs.append(self.upstream.on_connect(self._connected))
+        if not self.upstream.connected.is_set():
+            self.courier.pause()  # not connected yet: the first connection resumes it
         on_disconnect = getattr(self.upstream, "on_disconnect", None)
         if callable(on_disconnect):
             self._unsubs.append(on_disconnect(self._disconnected))
@@ -157,6 +162,7 @@ class Link:
         for unsub in self._unsubs:
             unsub()
         self._unsubs.clear()
+        self.courier.close()
         if self._watch is not None:
             self._watch.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -171,9 +177,15 @@ class Link:
                 await asyncio.sleep(0.1)
             self._disconnected()
 
+    @property
+    def resent(self) -> int:
+        """Must-arrive messages sent again because no acknowledgement came."""
+        return self.courier.retries
+
     def _disconnected(self) -> None:
         if self._down_since is None:
             self._down_since = time.monotonic()
+        self.courier.pause()
         log.warning("%s: link down; reports are queued until it is back", self.robot)
         if self.on_disconnect_callback is not None:
             self.on_disconnect_callback()
@@ -181,18 +193,10 @@ class Link:
     def _connected(self) -> None:
         self.connections += 1
         log.info("%s: link up (connection %d)", self.robot, self.connections)
-        down_since, self._down_since = self._down_since, None
-        now = time.monotonic()
-        for entry in list(self._recent):
-            sent_at, message = entry
-            if sent_at is None:
-                # Queued while offline: the hub client flushes it now, so from now on it is
-                # in flight like any other report (a second drop soon after resends it).
-                entry[0] = now
-            elif down_since is not None and down_since - IN_FLIGHT_S <= sent_at <= down_since:
-                # Sent just before the drop: it may have died in flight, send it again.
-                self.resent += 1
-                self.upstream.send(message)
+        self._down_since = None
+        # Unacknowledged messages sent before the drop go again; those queued offline were
+        # just flushed by the hub client.
+        self.courier.resume()
         if self.on_connect_callback is not None:
             self.on_connect_callback()
 
@@ -206,16 +210,28 @@ class Link:
         if message.type in LIVE_ONLY and not self.upstream.connected.is_set():
             return  # monitoring would crowd the reports out of the bounded offline queue
         self.sent_up += 1
-        if message.type in REPORT_TYPES:
-            online = self.upstream.connected.is_set()
-            self._recent.append([time.monotonic() if online else None, message])
-        self.upstream.send(message)
+        if message.type in MUST_ARRIVE_UP:
+            self.courier.post(message)
+        else:
+            self.upstream.send(message)
+
+    def _acked(self, message: Message) -> None:
+        self.courier.on_ack(message)
 
     def _down(self, message: Message) -> None:
         if message.destination not in (None, self.upstream.name, self.robot):
             return
         if message.type in ADDRESSED_ONLY and message.destination is None:
             return  # a kill meant for the server's RGM (or anyone) is not for this robot
+        if message.type == "error" and message.source == "hub":
+            # The hub refused one of ours: a copy would be refused again, stop sending it.
+            if self.courier.on_ack(message):
+                log.warning("%s: the hub refused a message: %s", self.robot, message.payload)
+        if message.type in MUST_ARRIVE_DOWN and message.destination is not None:
+            # Every copy is acknowledged (the first ack may be lost); one id is handled once.
+            self.upstream.send(ack_for(message, self.upstream.name))
+            if not self.seen.first(message.id):
+                return
         requester = self._requesters.get(message.correlation_id or "")
         local = Message(
             type=message.type,

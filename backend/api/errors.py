@@ -10,8 +10,10 @@ from __future__ import annotations
 from typing import Any
 
 from fastapi import FastAPI, Request, status
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
+from starlette.exceptions import HTTPException
 
 from backend.tasks.model import IllegalTransition, QueueFull, TaskError, TaskFinished, TaskNotFound
 
@@ -50,6 +52,21 @@ async def _validation_error(_: Request, exc: Exception) -> JSONResponse:
     )
 
 
+UNPARSABLE_BODY = "There was an error parsing the body"
+"""FastAPI's 400 for a JSON body it cannot even decode as text (bad UTF-8/16/32 bytes)."""
+
+
+async def _http_error(request: Request, exc: Exception) -> Response:
+    """A body that is not JSON text is the same mistake as any other bad JSON: 422
+    ``json_invalid``, not an undocumented 400 (found by the stateful fuzz)."""
+    assert isinstance(exc, HTTPException)
+    if exc.status_code == status.HTTP_400_BAD_REQUEST and exc.detail == UNPARSABLE_BODY:
+        error = {"loc": ["body"], "msg": "the body is not JSON text", "type": "json_invalid"}
+        return JSONResponse({"detail": [error]}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
+    return await http_exception_handler(request, exc)
+
+
 def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(HTTPException, _http_error)
     app.add_exception_handler(TaskError, _task_error)

@@ -28,6 +28,7 @@ from backend.ratelimit import RateLimited, RateLimiter
 from guidebot.bus import Bus, Endpoint, is_wildcard
 from guidebot.messages import Message, known_types, payload_model
 
+from .acks import InboundAcks
 from .memory import GcFreezer
 from .outbox import Outbox, OutboxOverflow
 from .permissions import may_publish
@@ -228,6 +229,8 @@ class Hub:
         self.task_requests = task_requests
         """Rate limit on task_request per client name (shared with REST task creation)."""
         self.forwards_unknown = False
+        self.acks = InboundAcks(source=HUB_NAME)
+        """Must-arrive messages from clients: acknowledged once handled, repeats dropped."""
         """With a broker (backend/hub/broker.py) a destination may live on another process."""
         self._on_connection: list[ConnectionCallback] = []
         self._known: frozenset[str] = frozenset()
@@ -468,13 +471,20 @@ class Hub:
             type_ == "task_request"
             and self.task_requests is not None
             and client.role is not Role.ADMIN
+            and not self.acks.is_repeat_request(client.name, message)
         ):
             try:
                 self.task_requests.spend(client.name, "too many task requests")
             except RateLimited as exc:
                 client.error("rate_limited", str(exc), message.id)
                 return
-        self.bus.publish(message)
+            self.acks.charge(client.name, message)  # its copies sent again are not charged
+        if not self.acks.wanted(message):
+            self.bus.publish(message)
+            return
+        if self.acks.first(client.name, message):
+            self.bus.publish(message)  # handlers run inline: handled once this returns
+        client.send_direct(self.acks.ack(message))
 
     def _control(self, client: RemoteClient, message: Message) -> None:
         if message.type == "ping":

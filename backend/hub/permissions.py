@@ -70,6 +70,7 @@ _ROBOT = frozenset(
         "call_elevator",
         "node_reached",  # what the fleet's safety invariants are checked on
         "say",  # what it says, for consoles; nothing on the server acts on it
+        "ack",  # receipt of a must-arrive message (task_assigned, area_granted, ...)
         # answers to on-board requests a server module or tool may send it
         "goal_reached",
         "navigation_failed",

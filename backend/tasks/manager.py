@@ -14,6 +14,7 @@ import logging
 import math
 import time
 import uuid
+from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -34,6 +35,7 @@ from backend.tasks.params import validate_params
 from backend.tasks.queue import TaskQueue
 from backend.tasks.robots import RobotInfo
 from guidebot.bus import BusEndpoint
+from guidebot.delivery import ack_for, courier_for, listen
 from guidebot.messages import Message
 from guidebot.payloads.tasks import TaskRequest, TourProgress
 from guidebot.site.graph import SiteGraph
@@ -57,6 +59,7 @@ BATTERY_WEIGHT_S = 120.0
 """Cost in seconds of an empty battery when ranking robots (a full one costs nothing)."""
 UNKNOWN_POSITION_COST_S = 3600.0
 MAX_FINISHED_IN_MEMORY = 5000
+MAX_REMEMBERED_REQUESTS = 4096
 
 
 class TaskStore(Protocol):
@@ -103,6 +106,10 @@ class TaskManager:
         self._durations: dict[str, float] = dict(DEFAULT_DURATION_S)
         self._unsubscribe: list[Callable[[], None]] = []
         self._watchdog: asyncio.Task[None] | None = None
+        self._writes: set[asyncio.Task[None]] = set()
+        self._requests: OrderedDict[tuple[str, str], str] = OrderedDict()
+        """(requester, message id) of hub task_requests -> their task: a repeat is not new."""
+        """Answers to hub task_requests waiting for their task to be written."""
         self._dispatching = False
         self._dispatch_again = False
         self._idle: set[str] = set()
@@ -111,6 +118,8 @@ class TaskManager:
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
+        self.courier = courier_for(endpoint)
+        """task_assigned and task_cancel: sent again until the robot acknowledges them."""
         """Waits, arrivals and durations told to visitors (backend/tasks/eta.py)."""
         self.load_site(site, self.graph)
 
@@ -126,6 +135,7 @@ class TaskManager:
             sub("battery_panic", self._on_battery_panic),
             sub("robot_disconnected", self._on_robot_disconnected),
             sub("tour_progress", self._on_tour_progress),
+            *listen(self.endpoint, self.courier),
         ]
         with contextlib.suppress(RuntimeError):
             self._watchdog = asyncio.get_running_loop().create_task(
@@ -136,6 +146,13 @@ class TaskManager:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
+        self.courier.close()
+        if self._writes:
+            with contextlib.suppress(TimeoutError):  # a database that never answers
+                async with asyncio.timeout(5.0):
+                    await asyncio.gather(*self._writes, return_exceptions=True)
+            for writing in self._writes:
+                writing.cancel()
         if self._watchdog is not None:
             self._watchdog.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -407,17 +424,22 @@ class TaskManager:
         self._set_current(robot, task.id)
         self._assigned_at[task.id] = self.clock()
         self._unconfirmed.discard(task.id)
-        self.endpoint.publish(
-            "task_assigned",
-            {
+        self._send_assigned(task, robot)
+        self._changed(task, "assigned")
+
+    def _send_assigned(self, task: Task, robot: RobotInfo) -> None:
+        assigned = Message(
+            type="task_assigned",
+            source=self.endpoint.name,
+            destination=robot.name,
+            payload={
                 "task_id": task.id,
                 "robot": robot.name,
                 "net": task.net,
                 "params": task.assigned_params,
             },
-            destination=robot.name,
         )
-        self._changed(task, "assigned")
+        self.courier.post(assigned, key=("task", task.id, robot.name))
 
     def _send_idle_robots(self) -> None:
         """Robots with nothing to do: charge if they must, else a free station, else the
@@ -493,6 +515,13 @@ class TaskManager:
 
     # --- robot messages ------------------------------------------------------------------
     def _on_task_request(self, msg: Message) -> None:
+        # A repeat (the robot's link sends it again until answered): the same task, answered
+        # again, never a second one.
+        key = (msg.source, msg.id)
+        known = self.tasks.get(self._requests.get(key, ""))
+        if known is not None:
+            self._answer_when_written(msg, self._event_payload(known))
+            return
         try:
             req: TaskRequest = msg.payload_as(TaskRequest)
             robot = msg.source if msg.source in self.robots else None
@@ -506,8 +535,42 @@ class TaskManager:
             reason = str(exc) if isinstance(exc, TaskError) else exc.errors()[0]["msg"]
             refusal = {"code": "task_refused", "reason": reason, "message_id": msg.id}
             self._reply(msg, "error", refusal)
+            self.endpoint.send(ack_for(msg, self.endpoint.name))  # a copy would be refused too
             return
-        self._reply(msg, "task_event", self._event_payload(task))
+        self._requests[key] = task.id
+        if len(self._requests) > MAX_REMEMBERED_REQUESTS:
+            self._requests.popitem(last=False)
+        self._answer_when_written(msg, self._event_payload(task))
+
+    def _answer_when_written(self, msg: Message, payload: dict[str, Any]) -> None:
+        """The task_event answer and the ack leave once the task is in the database (as REST
+        answers with a broker): an acknowledged request survives a crash right after. Without
+        a store that can flush (unit tests) or an event loop, at once."""
+        flush = getattr(self.store, "flush", None)
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            loop = None
+        if flush is None or loop is None:
+            self._answer(msg, payload)
+            return
+        writing = loop.create_task(self._reply_after(flush, msg, payload), name="task-written")
+        self._writes.add(writing)
+        writing.add_done_callback(self._writes.discard)
+
+    async def _reply_after(
+        self, flush: Callable[[], Any], msg: Message, payload: dict[str, Any]
+    ) -> None:
+        try:
+            await flush()
+        except Exception as exc:  # the store keeps it and writes it when the database is back
+            log.warning("task %s answered before it was written: %r", payload.get("task_id"), exc)
+        self._answer(msg, payload)
+
+    def _answer(self, msg: Message, payload: dict[str, Any]) -> None:
+        """task_event to the requester, and the acknowledgement that ends its link's retries."""
+        self._reply(msg, "task_event", payload)
+        self.endpoint.send(ack_for(msg, self.endpoint.name))
 
     def _robot_msg(self, msg: Message) -> RobotInfo | None:
         name = msg.payload.get("robot")
@@ -584,7 +647,7 @@ class TaskManager:
         if p.get("mode") == "offline":
             self._robot_lost(robot)
             return
-        came_back = not robot.online
+        came_back = returned = not robot.online
         robot.online = True
         robot.offline_since = None
         robot.last_seen = self.clock()
@@ -607,6 +670,13 @@ class TaskManager:
         was_fault = robot.fault
         robot.fault = robot.mode == "fault"
         self._reconcile(robot, reported)
+        current = self.tasks.get(robot.current) if robot.current else None
+        if returned and current is not None and current.state is TaskState.ASSIGNED:
+            if reported != current.id:
+                # Its link went before it acknowledged task_assigned (retries stop when a
+                # robot is gone): now it is back, it gets the task again.
+                log.info("%s is back without task %s: sent again", robot.name, current.id)
+                self._send_assigned(current, robot)
         if robot.fault and not was_fault and robot.current is not None:
             self._requeue(self.tasks[robot.current], "robot fault")
         # robot_state comes at a steady rate from every robot: re-plan only on news.
@@ -763,9 +833,15 @@ class TaskManager:
             self._idle.discard(robot.name)
 
     def _send_cancel(self, robot: str, task_id: str, reason: str) -> None:
-        self.endpoint.publish(
-            "task_cancel", {"task_id": task_id, "reason": reason}, destination=robot
+        # Replaces an unacknowledged task_assigned of this task (same key): the robot gets the
+        # cancel, never a late copy of the assignment after it.
+        cancel = Message(
+            type="task_cancel",
+            source=self.endpoint.name,
+            destination=robot,
+            payload={"task_id": task_id, "reason": reason},
         )
+        self.courier.post(cancel, key=("task", task_id, robot))
 
     def _target_node(self, kind: str, params: dict[str, Any]) -> str:
         """Where a task starts (for path cost); raises TaskError if params do not fit."""

@@ -16,6 +16,7 @@ from pydantic import ValidationError
 from backend.alerts import AlertBoard
 from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
 from guidebot.bus import BusEndpoint
+from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message
 from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
 from guidebot.site.graph import NoPath, PathResult, SiteGraph, UnknownNode
@@ -57,6 +58,8 @@ class TrafficManager:
         self._declared: set[str] = set()
         """Robots whose first robot_state (their declaration of locks) was taken."""
         self._resync_timer: asyncio.TimerHandle | None = None
+        self.courier = courier_for(endpoint)
+        """area_granted: sent again until the robot acknowledges it."""
 
     # --- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
@@ -69,12 +72,14 @@ class TrafficManager:
             sub("task_ended", self._on_task_ended),
             sub("task_event", self._on_task_event),
             sub("robot_disconnected", self._on_robot_disconnected),
+            *listen(self.endpoint, self.courier),
         ]
 
     def stop(self) -> None:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
+        self.courier.close()
         if self._resync_timer is not None:
             self._resync_timer.cancel()
             self._resync_timer = None
@@ -132,6 +137,8 @@ class TrafficManager:
     def force_release(self, area: str, *, by: str) -> str | None:
         """Staff release of an area lock; returns the robot that held it."""
         holder, grants = self.locks.force_release(area)
+        if holder is not None:
+            self.courier.withdraw((holder, area))
         self._emit("area_force_released", {"area": area, "robot": holder, "by": by})
         self.alerts.clear(f"lock:{area}", f"area {area} released by {by}")
         self._send_grants(grants)
@@ -254,6 +261,7 @@ class TrafficManager:
             grants = self.locks.release(robot, req.area)
         except LockError as exc:
             return self._refuse(msg, str(exc))
+        self.courier.withdraw((robot, req.area))  # a grant still in flight is not news
         self._emit("area_released", {"robot": robot, "area": req.area})
         self._send_grants(grants)
 
@@ -347,6 +355,7 @@ class TrafficManager:
         self._paths.pop(robot, None)
         for area in held:
             if area != here:
+                self.courier.withdraw((robot, area))
                 self._emit("area_released", {"robot": robot, "area": area, "task_ended": True})
         self._send_grants(grants)
 
@@ -375,12 +384,14 @@ class TrafficManager:
 
     def _send_grants(self, grants: list[Grant]) -> None:
         for g in grants:
-            self.endpoint.publish(
-                "area_granted",
-                {"robot": g.robot, "area": g.area},
+            granted = Message(
+                type="area_granted",
+                source=self.endpoint.name,
                 destination=g.robot,
                 correlation_id=g.request_id,
+                payload={"robot": g.robot, "area": g.area},
             )
+            self.courier.post(granted, key=(g.robot, g.area))
             self._emit("area_granted", {"robot": g.robot, "area": g.area})
 
     def _send_yields(self, yields: list[Yield]) -> None:

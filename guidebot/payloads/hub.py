@@ -44,3 +44,10 @@ class Welcome(PayloadModel):
 
     name: str
     role: str
+
+
+@register_payload("ack")
+class Ack(PayloadModel):
+    """A must-arrive message was received (guidebot/delivery.py): stop sending it again."""
+
+    message_id: str = Field(min_length=1, max_length=64)

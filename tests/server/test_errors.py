@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import httpx
 import pytest
-from fastapi import FastAPI
+from fastapi import FastAPI, HTTPException
 
 from backend.api.deps import Tasks
 from backend.api.errors import install_error_handlers
@@ -57,3 +57,30 @@ async def test_a_route_without_its_service_fails_loudly_not_with_none() -> None:
     async with httpx.AsyncClient(transport=transport, base_url="http://test") as client:
         with pytest.raises(RuntimeError, match=r"app\.state\.task_manager is not a TaskManager"):
             await client.get("/tasks")
+
+
+async def test_a_body_that_is_not_json_text_is_a_422_like_any_bad_json() -> None:
+    """Bytes that no UTF encoding decodes made FastAPI answer an undocumented 400 (the
+    stateful fuzz found it); other HTTP errors keep their status and headers."""
+    app = FastAPI()
+    install_error_handlers(app)
+
+    @app.post("/priority")
+    async def priority(body: dict[str, int]) -> dict[str, int]:
+        return body
+
+    @app.get("/teapot")
+    async def teapot() -> None:
+        raise HTTPException(418, "short and stout", headers={"X-Kind": "teapot"})
+
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://test") as client:
+        bad = await client.post(
+            "/priority", content=b"\xff\xfe\x00", headers={"content-type": "application/json"}
+        )
+        good = await client.post("/priority", json={"priority": 3})
+        other = await client.get("/teapot")
+    assert bad.status_code == 422 and bad.json()["detail"][0]["type"] == "json_invalid"
+    assert good.status_code == 200 and good.json() == {"priority": 3}
+    assert other.status_code == 418 and other.headers["X-Kind"] == "teapot"
+    assert other.json() == {"detail": "short and stout"}

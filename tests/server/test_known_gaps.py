@@ -143,6 +143,23 @@ async def test_requeued_task_prefers_another_robot_when_one_is_free(
     assert manager.get(task_id).robot == "R1"
 
 
+async def test_a_task_whose_robot_left_before_acknowledging_is_sent_again_on_its_return(
+    bus: Bus, manager: TaskManager
+) -> None:
+    r1, _r2, _r3 = fleet(bus)
+    manager.set_out_of_service("R2", True)
+    manager.set_out_of_service("R3", True)
+    task = manager.request("go_to_poi", {"poi": "loom"}, requester="panel-1")
+    first = await r1.wait_for("task_assigned")
+    bus.endpoint("link_watcher").publish("robot_disconnected", {"robot": "R1"})
+    r1.state()  # back, and it does not run the task: its copy went with the link
+    again = await r1.wait_for("task_assigned", count=2)
+    assert again.payload == first.payload and manager.get(task.id).state is TaskState.ASSIGNED
+    r1.task_id = task.id
+    r1.state()  # running it now: nothing more is sent
+    assert len(r1.of_type("task_assigned")) == 2
+
+
 async def test_robots_joining_and_leaving_are_announced_by_a_hub_event(tmp_path: Path) -> None:
     async with running_server(server_settings(tmp_path)) as srv:
         async with HubClient(srv.ws_url, GUI_TOKEN) as gui:

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Awaitable, Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
 
+from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.site.service import SiteService
 from backend.tasks import Task, TaskError, TaskManager, TaskState
 from guidebot.bus import Bus
@@ -416,3 +418,47 @@ async def test_a_failed_task_always_carries_a_reason(bus: Bus, manager: TaskMana
     r3.end(task.id, outcome="failed")  # no reason in the report
     assert task.state is TaskState.FAILED
     assert task.reason == "R3 reported the task failed without saying why"
+
+
+async def test_a_robots_task_request_is_answered_once_the_task_is_written(
+    bus: Bus, tmp_path: Path
+) -> None:
+    """The store's background writer is not started: only the answer's own flush writes."""
+    engine = make_engine(f"sqlite+aiosqlite:///{tmp_path / 'tasks.db'}")
+    try:
+        await migrate(engine)
+        store = DbStore(make_sessionmaker(engine))
+        tm = TaskManager(bus.endpoint("task_manager"), demo_site(), store=store)
+        tm.start()
+        robot = RobotStub(bus, "R1", "charge_a")
+        robot.state()
+        reply = await robot.endpoint.request(
+            "task_request", {"kind": "go_to_poi", "params": {"poi": "globes"}}, timeout=10
+        )
+        assert reply.type == "task_event"
+        written = await store.task(reply.payload["task_id"])
+        assert written is not None and written.requester == "R1"
+        await tm.stop()
+    finally:
+        await engine.dispose()
+
+
+async def test_a_repeated_task_request_is_answered_with_the_same_task(
+    bus: Bus, manager: TaskManager
+) -> None:
+    """The robot's link sends a task_request again until it is answered (the first answer may
+    be lost): one id is one task."""
+    robot = RobotStub(bus, "R1", "charge_a")
+    robot.state()
+    answers: list[Message] = []
+    robot.endpoint.subscribe("task_event", answers.append)
+    request = Message(
+        type="task_request",
+        source="R1",
+        payload={"kind": "go_to_poi", "params": {"poi": "globes"}},
+    )
+    robot.endpoint.send(request)
+    robot.endpoint.send(request)
+    mine = [a for a in answers if a.correlation_id == request.id]
+    assert len(mine) == 2 and mine[0].payload["task_id"] == mine[1].payload["task_id"]
+    assert [t.requester for t in manager.tasks.values() if not t.internal] == ["R1"]
