@@ -299,7 +299,10 @@ class Master:
             self._acks[key] = future
             self.send_to(module_id, data)
             try:
-                status = await asyncio.wait_for(future, p.COMMAND_TIMEOUT_S)
+                # asyncio.timeout, not wait_for: on Python 3.11 wait_for returns the result
+                # and swallows a cancellation that arrives in the same loop pass as the ACK.
+                async with asyncio.timeout(p.COMMAND_TIMEOUT_S):
+                    status = await future
             except TimeoutError:
                 continue
             finally:
@@ -329,7 +332,8 @@ class Master:
                 while sender.state is BlockState.ACTIVE:
                     done.clear()
                     try:
-                        await asyncio.wait_for(done.wait(), p.BLOCK_TIMEOUT_S * 2)
+                        async with asyncio.timeout(p.BLOCK_TIMEOUT_S * 2):
+                            await done.wait()
                     except TimeoutError:
                         break
                 if sender.state is BlockState.DONE:
@@ -603,7 +607,8 @@ class Master:
             self._descriptions[module.module_id] = future
             self.send_to(module.module_id, bytes([p.Op.QUERY]))
             try:
-                raw = await asyncio.wait_for(future, 1.0)
+                async with asyncio.timeout(1.0):
+                    raw = await future
                 break
             except TimeoutError:
                 continue
