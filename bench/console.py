@@ -24,7 +24,6 @@ import os
 import shutil
 import socket
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import AsyncIterator
@@ -38,6 +37,7 @@ import websockets
 import yaml
 
 from guidebot.benchutil import percentiles, print_result
+from guidebot.processes import guidebot_command
 from guidebot.site.yamlio import load_site_file
 
 __all__ = ["CHROMIUM", "CHROMIUM_ARGS", "main"]
@@ -92,7 +92,7 @@ def _write_site(folder: Path, robots: int) -> tuple[Path, list[tuple[str, str]]]
 @contextlib.contextmanager
 def _server(site: Path, db: Path, port: int) -> Any:
     env = {**os.environ, "GUIDEBOT_BUILDING_ENABLED": "false"}
-    args = [sys.executable, "-m", "guidebot.cli", "server", "--port", str(port)]
+    args = guidebot_command("server", "--port", str(port))
     args += ["--site", str(site), "--db", f"sqlite+aiosqlite:///{db}", "--log-level", "warning"]
     process = subprocess.Popen(args, env=env)
     try:

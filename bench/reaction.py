@@ -22,7 +22,6 @@ import csv
 import logging
 import random
 import statistics
-import sys
 import tempfile
 import time
 from collections.abc import AsyncIterator, Sequence
@@ -36,6 +35,7 @@ import yaml
 from backend.metrics.reaction import STEPS, steps_ms
 from bench.robot import _server_process
 from guidebot.benchutil import percentiles, print_result
+from guidebot.processes import guidebot_command
 
 PAPER_ROWS: tuple[tuple[str, float, float, float, float | None], ...] = (
     # Table 2 of the paper: average, max, min, deviation (ms). The Modbus row is analytical
@@ -117,7 +117,7 @@ async def _robots(url: str, site: Path, count: int) -> AsyncIterator[list[Any]]:
     children = []
     try:
         for i in range(1, count + 1):
-            args = [sys.executable, "-m", "guidebot.cli", "robot", "--name", f"R{i}"]
+            args = guidebot_command("robot", "--name", f"R{i}")
             args += ["--server", url, "--token", f"robot-R{i}-bench-token", "--simulate"]
             args += ["--site", str(site), "--log-level", "warning"]
             children.append(

@@ -21,7 +21,6 @@ import contextlib
 import logging
 import socket
 import statistics
-import sys
 import tempfile
 import threading
 import time
@@ -38,6 +37,7 @@ import psutil
 import yaml
 
 from guidebot.benchutil import percentiles, print_result
+from guidebot.processes import guidebot_command
 
 ROOT = Path(__file__).resolve().parent.parent
 SITE = ROOT / "sites" / "demo_museum.yaml"
@@ -188,7 +188,7 @@ async def _idle(agent: Any, http: httpx.AsyncClient) -> None:
 
 
 async def _footprint(server: Any, site: Path, seconds: float) -> dict[str, float]:
-    args = [sys.executable, "-m", "guidebot.cli", "robot", "--name", "R2", "--server", server.url]
+    args = guidebot_command("robot", "--name", "R2", "--server", server.url)
     args += ["--token", "robot-R2-demo-token", "--simulate", "--can", "virtual:R2", "--site"]
     args += [str(site), "--start-node", "charge_b", "--log-level", "warning"]
     child = await asyncio.create_subprocess_exec(
@@ -243,7 +243,7 @@ async def _server_process(tmp: str, site: Path) -> AsyncIterator[_Server]:
     """The central server in its own process, as deployed: its work never shares the robot's
     event loop (a task's path request still crosses it, over loopback)."""
     port = _free_port()
-    args = [sys.executable, "-m", "guidebot.cli", "server", "--port", str(port), "--site"]
+    args = guidebot_command("server", "--port", str(port), "--site")
     args += [str(site), "--db", f"sqlite+aiosqlite:///{tmp}/bench.db", "--log-level", "warning"]
     child = await asyncio.create_subprocess_exec(
         *args, stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL

@@ -11,12 +11,13 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import httpx
+
+from guidebot.processes import spawn_guidebot, stop_process
 
 __all__ = ["Child", "LinkRelay", "free_port", "wait_for"]
 
@@ -56,12 +57,11 @@ class Child:
     def start(self) -> None:
         self.started_at_offset = self.log.stat().st_size if self.log.exists() else 0
         with self.log.open("ab") as out:
-            self.process = subprocess.Popen(
-                [sys.executable, "-m", "guidebot.cli", *self.args],
+            self.process = spawn_guidebot(
+                self.args,
                 stdout=out,
                 stderr=subprocess.STDOUT,
                 env={**os.environ, "PYTHONUNBUFFERED": "1", **self.env},
-                start_new_session=True,
             )
 
     @property
@@ -86,14 +86,8 @@ class Child:
 
     def stop(self, grace_s: float = 10.0) -> None:
         """SIGTERM, then SIGKILL after ``grace_s``."""
-        if self.process is None or self.process.poll() is not None:
-            return
-        self.process.terminate()
-        try:
-            self.process.wait(grace_s)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
+        if self.process is not None:
+            stop_process(self.process, grace_s)
 
     def restart(self) -> None:
         self.kill()

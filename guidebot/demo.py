@@ -20,7 +20,6 @@ import select
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -31,6 +30,8 @@ from typing import IO, Any
 import click
 import httpx
 import yaml
+
+from guidebot.processes import spawn_guidebot, stop_process
 
 __all__ = ["Fleet", "demo"]
 
@@ -61,16 +62,14 @@ class Fleet:
         self.env = env
 
     def spawn(self, name: str, *args: str, stdout: int | None = None) -> Child:
-        child = Child(name, [sys.executable, "-m", "guidebot.cli", *args])
+        child = Child(name, list(args))
         self._start(child, stdout)
         self.children.append(child)
         return child
 
     def _start(self, child: Child, stdout: int | None = None) -> None:
         # A session of its own: Ctrl-C reaches only the launcher, which stops children in order.
-        child.process = subprocess.Popen(
-            child.args, start_new_session=True, stdout=stdout, env=self.env
-        )
+        child.process = spawn_guidebot(child.args, stdout=stdout, env=self.env)
         child.started = time.monotonic()
 
     def dead(self) -> list[Child]:
@@ -101,18 +100,10 @@ class Fleet:
         """Robots first (they report their last state), then the server, then the building."""
         self.stopping = True
         for child in reversed(self.children):
-            process = child.process
-            if process is None or process.poll() is not None:
-                continue
-            process.terminate()
-            try:
-                process.wait(GRACE_S)
-            except subprocess.TimeoutExpired:
+            if child.process is not None and stop_process(child.process, GRACE_S):
                 click.echo(
                     f"demo: {child.name} ignored SIGTERM for {GRACE_S:g} s: killed", err=True
                 )
-                process.kill()
-                process.wait()
 
 
 def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> None:

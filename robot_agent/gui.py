@@ -35,6 +35,7 @@ from guidebot.paths import WEB_DIR
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
 from guidebot.site.schema import Site
+from guidebot.task_kinds import KINDS, VISITOR_KINDS
 from robot_agent.clock import Clock
 
 __all__ = ["OnboardScreen", "ScreenServer"]
@@ -46,7 +47,7 @@ PAGE_POLICY = (
     "default-src 'self'; script-src 'self'; img-src 'self' data:; style-src 'self'; "
     "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
 )
-VISITOR_NETS = frozenset({"give_tour", "go_to_poi"})
+VISITOR_NETS = frozenset(KINDS[kind].net for kind in VISITOR_KINDS)
 """Main tasks a visitor follows on the screen (the others keep the menu up)."""
 SHARED_FOLDERS = ("lib", "lang", "vendor", "visitor")
 """Folders of the server's web/ the touch screen serves too: one look, one set of texts."""

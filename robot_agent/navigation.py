@@ -26,12 +26,12 @@ import logging
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
+from guidebot.site.steps import PathStep
 from robot_agent.clock import Clock
 
 __all__ = ["NavState", "NavigationFailed", "Navigator", "PathStep"]
@@ -73,29 +73,6 @@ class NavState(StrEnum):
     DOOR_BLOCKED = "door_blocked"
     BUMPED = "bumped"
     FAULT = "fault"
-
-
-@dataclass(frozen=True)
-class PathStep:
-    node: str
-    floor: str | None
-    x: float
-    y: float
-    door: str | None = None
-    elevator: str | None = None
-    area: str | None = None
-
-    @classmethod
-    def from_payload(cls, data: dict[str, Any]) -> PathStep:
-        return cls(
-            node=str(data["node"]),
-            floor=data.get("floor"),
-            x=float(data["x"]),
-            y=float(data["y"]),
-            door=data.get("door") or None,
-            elevator=data.get("elevator") or None,
-            area=data.get("area") or None,
-        )
 
 
 def _wrap(angle: float) -> float:
@@ -391,7 +368,7 @@ class Navigator:
         log.info("%s: going from %s to %s", self.robot, self.node, node)
         self.state = NavState.PLANNING
         path = await self._get_path(node)
-        await self.follow([PathStep.from_payload(s) for s in path.get("steps", [])])
+        await self.follow([PathStep.from_dict(s) for s in path.get("steps", [])])
 
     async def _get_path(self, node: str) -> dict[str, Any]:
         attempts = 3 if self.planner is None else 1

@@ -7,7 +7,7 @@ take 409; too many requests 429; the queue at its bound 503.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Path, Query, Request, status
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -34,13 +34,14 @@ from backend.tasks.model import (
     TaskState,
 )
 from backend.tasks.params import validate_params
+from guidebot.task_kinds import VISITOR_KINDS, TaskKind
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/api/tasks", tags=["tasks"])
 
 TaskId = Annotated[str, Path(max_length=64)]
-PANEL_KINDS = frozenset({"tour", "go_to_poi"})
+PANEL_KINDS = VISITOR_KINDS
 PANEL_MAX_PRIORITY = 5
 RATE_LIMITED_ROLES = frozenset({Role.PANEL, Role.ROBOT})
 """Visitor-facing requesters (kiosks, robot screens); staff are not limited."""
@@ -48,7 +49,7 @@ RATE_LIMITED_ROLES = frozenset({Role.PANEL, Role.ROBOT})
 
 class TaskCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["tour", "go_to_poi", "charge", "go_to"]
+    kind: TaskKind
     params: dict[str, Any] = Field(default_factory=dict)
     """tour: {tour}; go_to_poi: {poi}; charge: {station} (optional); go_to: {node}."""
     priority: int = Field(default=5, ge=0, le=100)

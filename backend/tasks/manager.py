@@ -41,20 +41,14 @@ from guidebot.payloads.tasks import TaskRequest, TourProgress
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages
 from guidebot.site.schema import Site
+from guidebot.task_kinds import KINDS, MANUAL_KINDS, UnknownTarget
 
 __all__ = ["TaskManager", "TaskStore"]
 
 log = logging.getLogger(__name__)
 
-NETS = {
-    "tour": "give_tour",
-    "go_to_poi": "go_to_poi",
-    "charge": "battery_charge",
-    "go_to": "navigate_to_point",
-}
-DEFAULT_DURATION_S = {"tour": 600.0, "go_to_poi": 120.0, "go_to": 60.0, "charge": 1800.0}
-MANUAL_KINDS = frozenset({"go_to", "charge"})
-"""What staff may still send an out-of-service robot (pinned to it): moving it by hand."""
+NETS = {kind: spec.net for kind, spec in KINDS.items()}
+DEFAULT_DURATION_S = {kind: spec.duration_s for kind, spec in KINDS.items()}
 BATTERY_WEIGHT_S = 120.0
 """Cost in seconds of an empty battery when ranking robots (a full one costs nothing)."""
 UNKNOWN_POSITION_COST_S = 3600.0
@@ -845,33 +839,13 @@ class TaskManager:
 
     def _target_node(self, kind: str, params: dict[str, Any]) -> str:
         """Where a task starts (for path cost); raises TaskError if params do not fit."""
-        site = self.site
-        if kind == "tour":
-            tour = site.tour(str(params.get("tour")))
-            if tour is None:
-                raise InvalidTask(f"unknown tour {params.get('tour')!r}")
-            poi = site.poi(tour.points[0])
-            assert poi is not None
-            return poi.node
-        if kind == "go_to_poi":
-            poi = site.poi(str(params.get("poi")))
-            if poi is None:
-                raise InvalidTask(f"unknown point of interest {params.get('poi')!r}")
-            return poi.node
-        if kind == "go_to":
-            node = params.get("node")
-            if not isinstance(node, str) or node not in self.graph:
-                raise InvalidTask(f"unknown node {node!r}")
-            return node
-        if kind == "charge":
-            stations = {s.id: s.node for s in site.charging_stations}
-            station = params.get("station")
-            if station is None and stations:
-                return next(iter(stations.values()))
-            if station not in stations:
-                raise InvalidTask(f"unknown charging station {station!r}")
-            return stations[str(station)]
-        raise InvalidTask(f"unknown task kind {kind!r} (expected one of {sorted(NETS)})")
+        spec = KINDS.get(kind)
+        if spec is None:
+            raise InvalidTask(f"unknown task kind {kind!r} (expected one of {sorted(NETS)})")
+        try:
+            return spec.target(self.site, params, self.graph)
+        except UnknownTarget as exc:
+            raise InvalidTask(str(exc)) from None
 
     def _net_params(self, task: Task) -> dict[str, Any]:
         """Everything the robot's net needs, so it never asks back."""

@@ -7,6 +7,7 @@ from typing import Any, Literal
 from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
+from guidebot.task_kinds import TaskKind
 
 __all__ = [
     "ReactionMeasured",
@@ -21,7 +22,6 @@ __all__ = [
     "TourProgress",
 ]
 
-TaskKind = Literal["tour", "go_to_poi", "charge", "go_to"]
 Outcome = Literal["done", "failed", "cancelled"]
 
 

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
+from guidebot.site.steps import PathStep
 
 __all__ = ["AreaGranted", "AreaYield", "GetPath", "Path", "PathStep", "ReleaseArea", "RequestArea"]
 
@@ -15,18 +16,6 @@ class GetPath(PayloadModel):
     from_node: str | None = None
     """None: from the robot's current node (last robot_state)."""
     to_node: str
-
-
-class PathStep(BaseModel):
-    """One node of a path with what lies on it."""
-
-    node: str
-    floor: str
-    x: float
-    y: float
-    door: str | None = None
-    elevator: str | None = None
-    area: str | None = None
 
 
 @register_payload("path")

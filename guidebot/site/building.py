@@ -11,6 +11,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from guidebot.site.io_rules import PointKind
+from guidebot.task_kinds import TaskKind
 
 __all__ = [
     "BuildingModule",
@@ -103,7 +104,7 @@ class Elevator(StrictModel):
 class ButtonTask(StrictModel):
     """The task a button requests (a task_request payload without requester)."""
 
-    kind: str = Field(pattern=r"^(tour|go_to_poi|charge|go_to)$")
+    kind: TaskKind
     params: dict[str, Any] = Field(default_factory=dict)
     priority: int = Field(default=5, ge=0, le=100)
 

@@ -19,6 +19,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from guidebot.site.schema import Site
+from guidebot.site.steps import PathStep
 from guidebot.site.validate import cabin_through_ways
 
 __all__ = ["NoPath", "PathResult", "PathStep", "SiteGraph", "UnknownNode"]
@@ -36,28 +37,6 @@ class NoPath(LookupError):
 
 class UnknownNode(KeyError):
     """A node id the site does not have."""
-
-
-@dataclass(frozen=True, slots=True)
-class PathStep:
-    node: str
-    floor: str
-    x: float
-    y: float
-    door: str | None = None
-    elevator: str | None = None
-    area: str | None = None
-
-    def as_dict(self) -> dict[str, object]:
-        return {
-            "node": self.node,
-            "floor": self.floor,
-            "x": self.x,
-            "y": self.y,
-            "door": self.door,
-            "elevator": self.elevator,
-            "area": self.area,
-        }
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,6 +15,7 @@ from pydantic import ValidationError
 from guidebot.site.building import IORef, PointKind
 from guidebot.site.io_rules import Role, kind_problem
 from guidebot.site.schema import Site
+from guidebot.task_kinds import KINDS, BadParams, UnknownTarget, check_params
 
 __all__ = ["SiteInvalid", "SiteIssue", "cabin_through_ways", "check_references", "validate_site"]
 
@@ -196,7 +197,6 @@ def check_references(site: Site) -> list[Problem]:
     floors = {f.id for f in site.floors}
     nodes = {n.id: n for n in site.nodes}
     pois = {poi.id for poi in site.pois}
-    tours = {t.id for t in site.tours}
 
     def node_ref(loc: tuple[str | int, ...], node: str | None) -> None:
         if node is not None and node not in nodes:
@@ -304,13 +304,15 @@ def check_references(site: Site) -> list[Problem]:
         node_ref(("buttons", i, "node"), b.node)
         io_ref(("buttons", i, "input"), b.input, Role.button_input)
         io_ref(("buttons", i, "led"), b.led, Role.button_led)
-        params = b.task.params
-        if b.task.kind == "tour" and params.get("tour") not in tours:
-            p.append((("buttons", i, "task", "params", "tour"), "unknown tour"))
-        if b.task.kind == "go_to_poi" and params.get("poi") not in pois:
-            p.append((("buttons", i, "task", "params", "poi"), "unknown point of interest"))
-        if b.task.kind == "go_to" and params.get("node") not in nodes:
-            p.append((("buttons", i, "task", "params", "node"), "unknown node"))
+        # the checks a request of this kind meets at the Task Manager (guidebot.task_kinds)
+        where = ("buttons", i, "task", "params")
+        try:
+            params = check_params(b.task.kind, b.task.params)
+            KINDS[b.task.kind].target(site, params, nodes)
+        except BadParams as exc:
+            p.append((where, str(exc)))
+        except UnknownTarget as exc:
+            p.append(((*where, exc.param), str(exc)))
     for i, r in enumerate(site.robots):
         node_ref(("robots", i, "start_node"), r.start_node)
         if r.battery_panic > r.battery_low:

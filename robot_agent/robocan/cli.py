@@ -232,11 +232,21 @@ def status_lines(status: dict[str, Any]) -> list[str]:
 
 @robocan.command()
 def drivers() -> None:
-    """The driver plug-ins found in the guidebot.robocan_drivers entry points."""
-    from robot_agent.robocan.drivers import DriverRegistry
+    """The drivers by element kind: built in, or from the guidebot.robocan_drivers entry
+    points. A driver that cannot be loaded is listed with its error; exit status 1 then."""
+    from robot_agent.robocan.drivers import DriverRegistry, UnknownDriver
 
     registry = DriverRegistry()
+    broken = False
     for kind in registry.kinds:
-        cls = registry.driver_class(kind)
+        try:
+            cls = registry.driver_class(kind)
+        except UnknownDriver as exc:
+            click.echo(f"{kind:>16}: BROKEN {exc}")
+            broken = True
+            continue
         critical = " (critical)" if cls.critical else ""
-        click.echo(f"{kind:>16}: {cls.__module__}.{cls.__qualname__}{critical}")
+        source = registry.source(kind)
+        click.echo(f"{kind:>16}: {cls.__module__}.{cls.__qualname__}{critical} [{source}]")
+    if broken:
+        raise SystemExit(1)

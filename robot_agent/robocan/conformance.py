@@ -11,31 +11,32 @@ the motor command time-out of a silent master. Each check names its spec section
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import itertools
-import statistics
 import time
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import can
 
 from guidebot.bus import Bus
 from robot_agent.robocan import protocol as p
-from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
 from robot_agent.robocan.busopen import BusReader, open_bus
 from robot_agent.robocan.master import Master, ModuleState
+from robot_agent.robocan.probe import (
+    CheckFailed,
+    Probe,
+    battery_charging,
+    expect_status,
+    frame_is,
+    median_interval,
+    near,
+    periods,
+    servo_at,
+)
 
 __all__ = ["CHECKS", "CheckFailed", "Result", "run_conformance"]
 
 K = p.ElementKind
-SILENCE_S = 0.3  # how long "no answer" is watched for
-PERIOD_TOLERANCE = 0.3  # a measured period may be off by this fraction
-
-
-class CheckFailed(AssertionError):
-    """A module did not behave as the spec says; the message says how."""
 
 
 @dataclass
@@ -44,159 +45,6 @@ class Result:
     section: str
     passed: bool
     detail: str = ""
-
-
-@dataclass
-class Frame:
-    t: float  # wall-clock time stamp (time.time), as python-can stamps frames
-    can_id: int
-    data: bytes
-
-
-@dataclass
-class Probe:
-    """A raw master: sends on M + 1 (or 0x001) and records every frame from M."""
-
-    bus: can.BusABC
-    module_id: int
-    frames: list[Frame] = field(default_factory=list)
-    changed: asyncio.Event = field(default_factory=asyncio.Event)
-
-    def on_batch(self, batch: list[can.Message]) -> None:
-        for msg in batch:
-            if msg.arbitration_id == self.module_id and not msg.is_extended_id:
-                # the bus's own time stamp (wall clock): no event-loop latency in the periods
-                stamp = msg.timestamp or time.time()
-                self.frames.append(Frame(stamp, msg.arbitration_id, bytes(msg.data)))
-        self.changed.set()
-
-    def send(self, data: bytes, *, can_id: int | None = None, extended: bool = False) -> None:
-        target = self.module_id + 1 if can_id is None else can_id
-        self.bus.send(can.Message(arbitration_id=target, data=data, is_extended_id=extended))
-
-    def mark(self) -> int:
-        return len(self.frames)
-
-    def since(self, mark: int, op: int | None = None) -> list[Frame]:
-        return [
-            f
-            for f in self.frames[mark:]
-            if op is None or (f.data and (f.data[0] == op or (op == 0 and f.data[0] <= 0x0F)))
-        ]
-
-    async def expect(
-        self, mark: int, match: Callable[[bytes], bool], timeout: float, what: str
-    ) -> Frame:
-        """The first frame from ``mark`` on that matches; CheckFailed after ``timeout``."""
-        deadline = time.monotonic() + timeout
-        seen = mark
-        while True:
-            for frame in self.frames[seen:]:
-                if match(frame.data):
-                    return frame
-            seen = len(self.frames)
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise CheckFailed(f"no {what} within {timeout:.2f} s")
-            self.changed.clear()
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self.changed.wait(), remaining)
-
-    async def command(self, data: bytes, timeout: float = 0.5) -> int:
-        """Send a command that is acknowledged; return the ACK's status byte. The ACK must
-        repeat the opcode and element (0xFF for SET_CHARGING)."""
-        element = p.MODULE if data[0] == p.Op.SET_CHARGING else data[1]
-        mark = self.mark()
-        self.send(data)
-        frame = await self.expect(
-            mark,
-            lambda d: len(d) == 4 and d[0] == p.Op.ACK and d[1] == data[0] and d[2] == element,
-            timeout,
-            f"ACK to 0x{data[0]:02X} element {element}",
-        )
-        return frame.data[3]
-
-    async def silence(self, mark: int, ignore_watchdogs: bool = True) -> list[bytes]:
-        """Frames (other than watchdogs) the module sent during SILENCE_S from ``mark``."""
-        await asyncio.sleep(SILENCE_S)
-        return [f.data for f in self.frames[mark:] if not (ignore_watchdogs and f.data[0] <= 0x0F)]
-
-    async def query(self, *, drop: int | None = None, pause_after: int | None = None) -> bytes:
-        """QUERY and receive the DESCRIPTION as a receiver would. ``drop``: ignore that data
-        frame the first time (a gap: ask again from it). ``pause_after``: a first window of
-        that many frames, then 300 ms of silence, then the rest in one window."""
-        mark = self.mark()
-        self.send(bytes([p.Op.QUERY]))
-        start = await self.expect(
-            mark, lambda d: d[0] == p.Op.BLOCK_START, 1.0, "BLOCK_START after QUERY"
-        )
-        receiver = BlockReceiver(start.data, types=(p.BlockType.DESCRIPTION,))
-        if receiver.state is BlockState.FAILED:
-            raise CheckFailed(f"description block refused: {receiver.error}")
-        first = receiver.first_reply()
-        if receiver.state is not BlockState.ACTIVE:
-            return receiver.data
-        if pause_after is not None:
-            first = bytes([p.Op.BLOCK_FLOW, p.FlowStatus.CONTINUE, 1, pause_after])
-        mark = self.mark()
-        self.send(first)
-        dropped = False
-        received = 0
-        while receiver.state is BlockState.ACTIVE:
-            frame = await self.expect(
-                mark, lambda d: d[0] == p.Op.BLOCK_DATA, 1.0, "BLOCK_DATA of the description"
-            )
-            mark = self.frames.index(frame, mark) + 1
-            if drop is not None and frame.data[1] == drop and not dropped:
-                dropped = True
-                continue
-            replies = receiver.on_data(frame.data)
-            received += 1
-            if pause_after is not None and received == pause_after:
-                await asyncio.sleep(SILENCE_S)
-                if [f for f in self.since(mark) if f.data[0] == p.Op.BLOCK_DATA]:
-                    raise CheckFailed("sent beyond the window the flow frame allowed")
-                replies = [bytes([p.Op.BLOCK_FLOW, p.FlowStatus.CONTINUE, received + 1, 0])]
-                pause_after = None
-            for reply in replies:
-                self.send(reply)
-        if receiver.state is BlockState.FAILED:
-            raise CheckFailed(f"description transfer failed: {receiver.error}")
-        return receiver.data
-
-    async def send_block(
-        self, block_type: int, data: bytes, *, drop: int | None = None, stall: int | None = None
-    ) -> int:
-        """Send a block to the module; return its BLOCK_END status. ``drop``: that data frame
-        is not sent the first time (the module must ask for it). ``stall``: stop after that
-        frame until the module asks again on its own time-out."""
-        sender = BlockSender(block_type, data)
-        mark = self.mark()
-        self.send(sender.start())
-        while sender.state is BlockState.ACTIVE:
-            reply = await self.expect(
-                mark,
-                lambda d: d[0] in (p.Op.BLOCK_FLOW, p.Op.BLOCK_END),
-                1.0,
-                "BLOCK_FLOW or BLOCK_END from the receiving module",
-            )
-            mark = self.frames.index(reply, mark) + 1
-            asked = time.time()
-            for frame in sender.on_frame(reply.data):
-                if frame[1] == drop:
-                    drop = None
-                    continue
-                self.send(frame)
-                if frame[1] == stall:
-                    stall = None
-                    again = await self.expect(
-                        mark, lambda d: d[0] == p.Op.BLOCK_FLOW, 1.0, "a re-request on time-out"
-                    )
-                    waited = again.t - asked
-                    if not 0.15 <= waited <= 0.6:
-                        raise CheckFailed(f"re-request after {waited * 1000:.0f} ms, not ~250")
-                    break
-        return sender.end_status if sender.end_status is not None else -1
 
 
 # --- the checks ---------------------------------------------------------------------------------
@@ -230,65 +78,11 @@ def check(name: str, section: str) -> Callable[[Check], Check]:
     return register
 
 
-def _expect_status(got: int, want: p.AckStatus, what: str) -> None:
-    if got != want:
-        name = p.AckStatus(got).name if got <= max(p.AckStatus) else str(got)
-        raise CheckFailed(f"{what}: ACK {name}, expected {want.name}")
-
-
-async def _periods(probe: Probe, op: int, element: int | None, count: int, timeout: float) -> float:
-    """Median interval between ``count`` + 1 frames of an opcode (and element)."""
-    mark = probe.mark()
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        times = [
-            f.t
-            for f in probe.since(mark, op)
-            if element is None or (len(f.data) > 1 and f.data[1] == element)
-        ]
-        if len(times) > count:
-            return _median_interval(times)
-        await asyncio.sleep(0.02)
-    raise CheckFailed(f"fewer than {count + 1} frames 0x{op:02X} in {timeout:.1f} s")
-
-
-def _median_interval(times: list[float]) -> float:
-    return statistics.median(b - a for a, b in itertools.pairwise(times))
-
-
-def _is(op: int, element: int) -> Callable[[bytes], bool]:
-    """Matches a frame with this opcode naming this element."""
-    return lambda d: len(d) > 1 and d[0] == op and d[1] == element
-
-
-def _battery_charging(on: int) -> Callable[[bytes], bool]:
-    return lambda d: len(d) == 5 and d[0] == p.Op.BATTERY and d[4] & 1 == on
-
-
-def _servo_at(element: int, target: float) -> Callable[[bytes], bool]:
-    """Matches the SERVO frame of servo 0 of ``element`` in position at ``target``."""
-
-    def match(d: bytes) -> bool:
-        if len(d) != 6 or d[0] != p.Op.SERVO or d[1] != element:
-            return False
-        _, index, position, in_position = p.parse_servo(d)
-        return index == 0 and in_position and abs(position - target) < 0.05
-
-    return match
-
-
-def _near(measured: float, expected: float, what: str) -> None:
-    if abs(measured - expected) > expected * PERIOD_TOLERANCE:
-        raise CheckFailed(
-            f"{what}: period {measured * 1000:.0f} ms, expected {expected * 1000:.0f}"
-        )
-
-
 @check("watchdog", "4.1, 6")
 async def check_watchdog(ctx: Context) -> str:
     probe = ctx.probe
-    period = await _periods(probe, p.Op.WATCHDOG, None, 5, 2.0)
-    _near(period, p.WATCHDOG_PERIOD_S, "WATCHDOG")
+    period = await periods(probe, p.Op.WATCHDOG, None, 5, 2.0)
+    near(period, p.WATCHDOG_PERIOD_S, "WATCHDOG")
     bad = [
         f.data for f in probe.frames if f.data[0] <= 0x0F and (len(f.data) != 1 or f.data[0] > 1)
     ]
@@ -353,22 +147,20 @@ async def check_parameters(ctx: Context) -> str:
     probe, d = ctx.probe, ctx.d
     checked = 0
     status = await probe.command(p.set_param(p.MODULE, p.Param.WATCHDOG_MS, 100))
-    _expect_status(status, p.AckStatus.OK, "WATCHDOG_MS 100")
+    expect_status(status, p.AckStatus.OK, "WATCHDOG_MS 100")
     status = await probe.command(p.set_param(p.MODULE, p.Param.WATCHDOG_MS, 5))
-    _expect_status(status, p.AckStatus.BAD_VALUE, "WATCHDOG_MS 5")
+    expect_status(status, p.AckStatus.BAD_VALUE, "WATCHDOG_MS 5")
     status = await probe.command(p.set_param(p.MODULE, p.Param.PUBLISH_MS, 100))
-    _expect_status(status, p.AckStatus.BAD_PARAM, "PUBLISH_MS on the module")
+    expect_status(status, p.AckStatus.BAD_PARAM, "PUBLISH_MS on the module")
     status = await probe.command(p.set_param(len(d.elements), p.Param.PUBLISH_MS, 100))
-    _expect_status(status, p.AckStatus.UNKNOWN_ELEMENT, "an element beyond the description")
+    expect_status(status, p.AckStatus.UNKNOWN_ELEMENT, "an element beyond the description")
     for i, e in enumerate(d.elements):
         params = p.ELEMENT_PARAMS.get(e.kind, frozenset())
         for param in sorted(params):
             low, high = p.PARAM_RANGES[param]
             for value in (low - 1, high + 1):
                 status = await probe.command(p.set_param(i, param, value))
-                _expect_status(
-                    status, p.AckStatus.BAD_VALUE, f"element {i} param {param} = {value}"
-                )
+                expect_status(status, p.AckStatus.BAD_VALUE, f"element {i} param {param} = {value}")
             default = (
                 p.DEFAULT_PUBLISH_MS[e.kind]
                 if param == p.Param.PUBLISH_MS
@@ -376,11 +168,11 @@ async def check_parameters(ctx: Context) -> str:
             )
             if default is not None:
                 status = await probe.command(p.set_param(i, param, default))
-                _expect_status(status, p.AckStatus.OK, f"element {i} param {param} = {default}")
+                expect_status(status, p.AckStatus.OK, f"element {i} param {param} = {default}")
             checked += 1
         foreign = next(q for q in p.Param if q not in params and q != p.Param.WATCHDOG_MS)
         status = await probe.command(p.set_param(i, foreign, 1))
-        _expect_status(status, p.AckStatus.BAD_PARAM, f"element {i} param {foreign.name}")
+        expect_status(status, p.AckStatus.BAD_PARAM, f"element {i} param {foreign.name}")
     return f"{checked} parameters in range / out of range, foreign ones refused"
 
 
@@ -390,23 +182,23 @@ async def check_modes(ctx: Context) -> str:
     for i, e in enumerate(d.elements):
         if not e.modes:
             status = await probe.command(p.set_mode(i, 0))
-            _expect_status(status, p.AckStatus.UNSUPPORTED, f"SET_MODE on element {i} (no modes)")
+            expect_status(status, p.AckStatus.UNSUPPORTED, f"SET_MODE on element {i} (no modes)")
             continue
         clear = next((m for m in range(8) if not e.modes & (1 << m)), None)
         if clear is not None:
             status = await probe.command(p.set_mode(i, clear))
-            _expect_status(status, p.AckStatus.BAD_VALUE, f"element {i} mode {clear}")
+            expect_status(status, p.AckStatus.BAD_VALUE, f"element {i} mode {clear}")
         status = await probe.command(p.set_mode(i, 0))
-        _expect_status(status, p.AckStatus.OK, f"element {i} mode 0")
+        expect_status(status, p.AckStatus.OK, f"element {i} mode 0")
     status = await probe.command(p.set_mode(len(d.elements), 0))
-    _expect_status(status, p.AckStatus.UNKNOWN_ELEMENT, "SET_MODE beyond the description")
+    expect_status(status, p.AckStatus.UNKNOWN_ELEMENT, "SET_MODE beyond the description")
     return f"{len(d.elements)} elements"
 
 
 async def _enable(ctx: Context, on: bool) -> int:
     mark = ctx.probe.mark()
     status = await ctx.probe.command(p.enable(p.MODULE, on))
-    _expect_status(status, p.AckStatus.OK, f"ENABLE 0xFF {int(on)}")
+    expect_status(status, p.AckStatus.OK, f"ENABLE 0xFF {int(on)}")
     return mark
 
 
@@ -424,7 +216,7 @@ async def check_enable(ctx: Context) -> str:
     for i, e in enumerate(ctx.d.elements):
         op = reports.get(K(e.kind)) if e.kind in list(K) else None
         if op is not None:
-            await probe.expect(mark, _is(op, i), 0.5, f"state of element {i}")
+            await probe.expect(mark, frame_is(op, i), 0.5, f"state of element {i}")
     frame = await probe.expect(probe.mark(), lambda d: d[0] <= 0x0F, 0.5, "a watchdog")
     if frame.data[0] != p.SlaveState.ENABLED:
         raise CheckFailed("watchdog still says DISABLED after ENABLE")
@@ -458,7 +250,7 @@ async def check_publish(ctx: Context) -> str:
         if op is None:
             continue
         status = await probe.command(p.set_param(i, p.Param.PUBLISH_MS, 200))
-        _expect_status(status, p.AckStatus.OK, f"PUBLISH_MS 200 on element {i}")
+        expect_status(status, p.AckStatus.OK, f"PUBLISH_MS 200 on element {i}")
         element = None if op == p.Op.BATTERY else i
         if op == p.Op.SONAR:  # several frames per round: time the first one of each round
             mark = probe.mark()
@@ -466,10 +258,10 @@ async def check_publish(ctx: Context) -> str:
             starts = [f.t for f in probe.since(mark, op) if f.data[1] == i and f.data[2] == 0]
             if len(starts) < 3:
                 raise CheckFailed(f"sonar element {i}: {len(starts)} rounds in 1 s at 200 ms")
-            period = _median_interval(starts)
+            period = median_interval(starts)
         else:
-            period = await _periods(probe, op, element, 3, 2.0)
-        _near(period, 0.2, f"element {i}")
+            period = await periods(probe, op, element, 3, 2.0)
+        near(period, 0.2, f"element {i}")
         done.append(f"{i}: {period * 1000:.0f} ms")
     return ", ".join(done) or "no periodic data element"
 
@@ -485,17 +277,17 @@ async def check_commands(ctx: Context) -> str:
         status = await probe.command(bytes([p.Op.SET_CHARGING, on]))
         if not batteries:
             break
-        _expect_status(status, p.AckStatus.OK, f"SET_CHARGING {on}")
+        expect_status(status, p.AckStatus.OK, f"SET_CHARGING {on}")
         await probe.expect(
             mark,
-            _battery_charging(on),
+            battery_charging(on),
             0.5,
             f"BATTERY with charging = {on} at once after SET_CHARGING {on}",
         )
     if batteries:
         done.append("SET_CHARGING")
     else:
-        _expect_status(status, p.AckStatus.UNSUPPORTED, "SET_CHARGING without a battery")
+        expect_status(status, p.AckStatus.UNSUPPORTED, "SET_CHARGING without a battery")
     for i in ctx.numbers(K.SERVO):
         for speed in (0.0, 180.0):
             target = 12.5 if speed else -7.5
@@ -503,7 +295,7 @@ async def check_commands(ctx: Context) -> str:
             probe.send(p.set_servo(i, 0, target, speed))
             await probe.expect(
                 mark,
-                _servo_at(i, target),
+                servo_at(i, target),
                 3.0,
                 f"servo 0 of element {i} in position at {target}° (speed {speed})",
             )
@@ -537,7 +329,7 @@ async def check_command_timeout(ctx: Context) -> str:
         return "no PID agent"
     probe, motor, pid = ctx.probe, motors[0], pids[0]
     status = await probe.command(p.set_param(pid, p.Param.COMMAND_TIMEOUT_MS, 300))
-    _expect_status(status, p.AckStatus.OK, "COMMAND_TIMEOUT_MS 300")
+    expect_status(status, p.AckStatus.OK, "COMMAND_TIMEOUT_MS 300")
     probe.send(p.set_velocity(pid, 0.2))
     await _wheel_speed(probe, motor, True, 1.0)
     silent_from = time.time()  # the master falls silent

@@ -1,5 +1,8 @@
-"""Driver plug-ins: one driver class per kind of component or agent, found through the
-``guidebot.robocan_drivers`` entry-point group (name = element kind, e.g. ``pid_velocity``).
+"""Driver plug-ins: one driver class per kind of component or agent (name = element kind,
+e.g. ``pid_velocity``). The registry starts from the built-in table ``BUILTIN_DRIVERS`` and adds
+the ``guidebot.robocan_drivers`` entry points on top (an entry point of a built-in kind replaces
+it), as python-can does with its interfaces: a checkout that is not installed still has its
+drivers, and a hardware maker's package adds or overrides kinds without touching this one.
 
 The master loads a driver the first time a module declares an element of its kind (the
 paper's dynamic loading) and keeps one instance per class. A driver configures its elements,
@@ -9,6 +12,7 @@ its modules come and go.
 
 from __future__ import annotations
 
+import importlib
 import logging
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
@@ -20,11 +24,32 @@ if TYPE_CHECKING:
     from robot_agent.robocan.master import Master, Module
     from robot_agent.robocan.protocol import Element
 
-__all__ = ["ENTRY_POINT_GROUP", "Driver", "DriverConfig", "DriverRegistry", "UnknownDriver"]
+__all__ = [
+    "BUILTIN_DRIVERS",
+    "ENTRY_POINT_GROUP",
+    "Driver",
+    "DriverConfig",
+    "DriverRegistry",
+    "UnknownDriver",
+]
 
 log = logging.getLogger(__name__)
 
 ENTRY_POINT_GROUP = "guidebot.robocan_drivers"
+_ENTITIES = "robot_agent.robocan.entities"
+BUILTIN_DRIVERS: dict[str, str] = {
+    "pid_velocity": f"{_ENTITIES}:BaseDriver",
+    "motor": f"{_ENTITIES}:BaseDriver",
+    "bumper": f"{_ENTITIES}:BumperDriver",
+    "sonar": f"{_ENTITIES}:SonarDriver",
+    "firing_sequence": f"{_ENTITIES}:SonarDriver",
+    "servo": f"{_ENTITIES}:HeadDriver",
+    "touch": f"{_ENTITIES}:IoDriver",
+    "led": f"{_ENTITIES}:IoDriver",
+    "battery": f"{_ENTITIES}:BatteryDriver",
+}
+"""Element kind -> ``module:Class`` of the drivers that ship with GuideBot (imported on first
+use, so that listing kinds imports nothing)."""
 
 
 class UnknownDriver(LookupError):
@@ -108,33 +133,49 @@ class Driver:
 
 
 class DriverRegistry:
-    """Element kind name -> driver class, from entry points plus explicit registrations."""
+    """Element kind name -> driver class: the built-in table, then entry points on top, then
+    explicit registrations. ``source(kind)`` says where a kind's driver came from."""
 
     def __init__(self, *, use_entry_points: bool = True) -> None:
-        self._classes: dict[str, type[Driver] | str] = {}
+        self._classes: dict[str, type[Driver] | str] = dict(BUILTIN_DRIVERS)
+        self._sources: dict[str, str] = dict.fromkeys(BUILTIN_DRIVERS, "built-in")
         if use_entry_points:
             for ep in entry_points(group=ENTRY_POINT_GROUP):
+                if BUILTIN_DRIVERS.get(ep.name) == ep.value:
+                    continue  # an older install of GuideBot itself declared its own drivers
                 self._classes[ep.name] = ep.value
+                dist = ep.dist.name if ep.dist is not None else "?"
+                self._sources[ep.name] = f"entry point {ep.name} = {ep.value} ({dist})"
 
     def register(self, kind: str, cls: type[Driver]) -> None:
         self._classes[kind] = cls
+        self._sources[kind] = "registered"
 
     @property
     def kinds(self) -> list[str]:
         return sorted(self._classes)
 
+    def source(self, kind: str) -> str:
+        """``built-in``, ``registered`` or the entry point (and its distribution)."""
+        return self._sources.get(kind, "unknown")
+
     def driver_class(self, kind: str) -> type[Driver]:
-        """Import the driver of a kind on first use; raises UnknownDriver."""
+        """Import the driver of a kind on first use; raises UnknownDriver, also when the
+        target cannot be imported or is not a Driver (the other kinds are not affected)."""
         target = self._classes.get(kind)
         if target is None:
             raise UnknownDriver(f"no RoboCAN driver for element kind {kind!r}")
-        if isinstance(target, str):
-            import importlib
-
-            module_name, _, attribute = target.partition(":")
+        if not isinstance(target, str):
+            return target
+        module_name, _, attribute = target.partition(":")
+        where = f"RoboCAN driver for {kind!r} ({self.source(kind)})"
+        try:
             cls = getattr(importlib.import_module(module_name), attribute)
-            if not (isinstance(cls, type) and issubclass(cls, Driver)):
-                raise UnknownDriver(f"{target} is not a RoboCAN Driver")
-            self._classes[kind] = cls
-            return cls
-        return target
+        except Exception as exc:  # a broken plug-in must not take the master down
+            raise UnknownDriver(
+                f"{where}: cannot load {target}: {type(exc).__name__}: {exc}"
+            ) from exc
+        if not (isinstance(cls, type) and issubclass(cls, Driver)):
+            raise UnknownDriver(f"{where}: {target} is not a subclass of robocan Driver")
+        self._classes[kind] = cls
+        return cls

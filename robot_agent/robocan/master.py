@@ -5,6 +5,11 @@ Receiving is split in two so that no module can starve another: a reader thread
 (``busopen.BusReader``) only sorts frames into one bounded queue per CAN ID (overflow rule: the
 oldest frame is dropped and counted) and wakes the event loop once per batch, and one asyncio
 task drains the queues round-robin. The time-out check sleeps until the next deadline.
+
+The module table's data (states, transitions, rows, counters) lives in modtable.py. What stays
+here (about 700 lines) is one class on purpose: receiving, bring-up, block transfers and the
+time-out check all read and write the same module table, queues and pending answers, in one
+event loop, and splitting them into mixins would scatter that state without separating it.
 """
 
 from __future__ import annotations
@@ -13,11 +18,9 @@ import asyncio
 import collections
 import contextlib
 import dataclasses
-import enum
 import logging
 import threading
 import time
-from dataclasses import dataclass, field
 from typing import Any
 
 import can
@@ -27,6 +30,15 @@ from robot_agent.robocan import protocol as p
 from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
 from robot_agent.robocan.busopen import BusReader
 from robot_agent.robocan.drivers import Driver, DriverConfig, DriverRegistry, UnknownDriver
+from robot_agent.robocan.modtable import (
+    TRANSITIONS,
+    CommandFailed,
+    Counters,
+    IllegalTransition,
+    Module,
+    ModuleState,
+    module_kind_name,
+)
 
 __all__ = [
     "CommandFailed",
@@ -49,125 +61,6 @@ DEADLINE_EPS_S = 0.001  # wake this much after a deadline, so that it has surely
 STALL_S = 0.05  # a supervisor tick this late means the process itself was not running
 SLAVE_BLOCK_TYPES = frozenset({p.BlockType.DESCRIPTION})  # blocks a master takes from a slave
 REFUSALS = frozenset({p.EndStatus.REFUSED, p.EndStatus.UNKNOWN_TYPE, p.EndStatus.TOO_LONG})
-
-
-class ModuleState(enum.Enum):
-    QUERYING = "querying"
-    CONFIGURING = "configuring"
-    ONLINE = "online"
-    DISABLED = "disabled"  # attached and powered, told by the master not to publish
-    LOST = "lost"
-    FAILED = "failed"
-
-
-TRANSITIONS: dict[ModuleState, frozenset[ModuleState]] = {
-    ModuleState.QUERYING: frozenset(
-        {ModuleState.CONFIGURING, ModuleState.LOST, ModuleState.FAILED}
-    ),
-    ModuleState.CONFIGURING: frozenset(
-        {ModuleState.ONLINE, ModuleState.LOST, ModuleState.FAILED, ModuleState.QUERYING}
-    ),
-    ModuleState.ONLINE: frozenset({ModuleState.LOST, ModuleState.QUERYING, ModuleState.DISABLED}),
-    ModuleState.DISABLED: frozenset({ModuleState.ONLINE, ModuleState.LOST, ModuleState.QUERYING}),
-    ModuleState.LOST: frozenset({ModuleState.QUERYING}),
-    ModuleState.FAILED: frozenset({ModuleState.QUERYING, ModuleState.LOST}),
-}
-
-
-class IllegalTransition(RuntimeError):
-    def __init__(self, module_id: int, current: ModuleState, target: ModuleState) -> None:
-        allowed = ", ".join(sorted(s.value for s in TRANSITIONS[current]))
-        super().__init__(
-            f"module 0x{module_id:02X}: {current.value} -> {target.value} is illegal "
-            f"(expected one of: {allowed})"
-        )
-
-
-class CommandFailed(RuntimeError):
-    """A module did not acknowledge a command after all retries, or refused it."""
-
-
-@dataclass(eq=False)
-class Module:
-    """The master's view of one slave module (an entry of the module table)."""
-
-    module_id: int
-    state: ModuleState = ModuleState.QUERYING
-    description: p.Description | None = None
-    last_seen: float = field(default_factory=time.monotonic)
-    first_seen: float = field(default_factory=time.monotonic)
-    online_since: float | None = None
-    slave_state: p.SlaveState | None = None
-    frames_rx: int = 0
-    frames_tx: int = 0
-    errors: int = 0  # bad frames from it, failed bring-ups
-    faults: int = 0  # FAULT frames
-    lost: int = 0  # times it was lost (time-out or reset)
-    requeried: int = 0  # times it was queried again after its first bring-up
-    drivers: list[Driver] = field(default_factory=list)
-    element_drivers: dict[int, Driver] = field(default_factory=dict)  # element number -> driver
-    watchdog_s: float = p.WATCHDOG_PERIOD_S
-    retry_at: float = 0.0
-    announced: bool = False
-    disabling: bool = False  # the master disabled it: a DISABLED watchdog is no reset
-    enabling: bool = False  # ENABLE on is on its way: its ACK makes the module ONLINE
-
-    @property
-    def name(self) -> str:
-        return self.description.name if self.description else f"module_{self.module_id:02x}"
-
-    @property
-    def critical(self) -> bool:
-        return any(d.critical for d in self.drivers)
-
-    @property
-    def lost_timeout_s(self) -> float:
-        return self.watchdog_s * p.LOST_TIMEOUT_FACTOR
-
-    def to_dict(self) -> dict[str, Any]:
-        """The public row of the module table (docs/robocan.md, section 8)."""
-        d = self.description
-        return {
-            "module_id": self.module_id,
-            "name": self.name,
-            "kind": module_kind_name(d.kind) if d else None,
-            "firmware": f"{d.firmware[0]}.{d.firmware[1]}" if d else None,
-            "state": self.state.value,
-            "critical": self.critical,
-            "elements": [e.kind_name for e in d.elements] if d else [],
-            "frames_rx": self.frames_rx,
-            "frames_tx": self.frames_tx,
-            "errors": self.errors,
-            "faults": self.faults,
-            "lost": self.lost,
-            "requeried": self.requeried,
-        }
-
-
-def module_kind_name(kind: int) -> str:
-    try:
-        return p.ModuleKind(kind).name.lower()
-    except ValueError:
-        return f"kind_{kind}"
-
-
-@dataclass
-class Counters:
-    """Everything odd the master saw on the bus; never a reason to stop."""
-
-    frames_rx: int = 0
-    frames_tx: int = 0
-    unknown_id: int = 0
-    bad_frame: int = 0
-    overflow: int = 0
-    block_errors: int = 0
-    send_errors: int = 0
-    driver_errors: int = 0
-    record_errors: int = 0
-    stalls: int = 0
-    not_online: int = 0  # data frames from a module that is not online (dropped)
-    modules_lost: int = 0
-    modules_requeried: int = 0
 
 
 def _set_done(future: asyncio.Future[None]) -> None:
@@ -299,7 +192,10 @@ class Master:
             self._acks[key] = future
             self.send_to(module_id, data)
             try:
-                status = await asyncio.wait_for(future, p.COMMAND_TIMEOUT_S)
+                # asyncio.timeout, not wait_for: on Python 3.11 wait_for returns the result
+                # and swallows a cancellation that arrives in the same loop pass as the ACK.
+                async with asyncio.timeout(p.COMMAND_TIMEOUT_S):
+                    status = await future
             except TimeoutError:
                 continue
             finally:
@@ -329,7 +225,8 @@ class Master:
                 while sender.state is BlockState.ACTIVE:
                     done.clear()
                     try:
-                        await asyncio.wait_for(done.wait(), p.BLOCK_TIMEOUT_S * 2)
+                        async with asyncio.timeout(p.BLOCK_TIMEOUT_S * 2):
+                            await done.wait()
                     except TimeoutError:
                         break
                 if sender.state is BlockState.DONE:
@@ -603,7 +500,8 @@ class Master:
             self._descriptions[module.module_id] = future
             self.send_to(module.module_id, bytes([p.Op.QUERY]))
             try:
-                raw = await asyncio.wait_for(future, 1.0)
+                async with asyncio.timeout(1.0):
+                    raw = await future
                 break
             except TimeoutError:
                 continue

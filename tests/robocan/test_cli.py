@@ -48,10 +48,11 @@ def test_run_refuses_a_bad_bus() -> None:
     assert result.exit_code != 0 and "interface:channel" in result.output
 
 
-def test_drivers_lists_the_entry_points() -> None:
+def test_drivers_lists_the_built_in_drivers() -> None:
     result = CliRunner().invoke(main, ["robocan", "drivers"])
     assert result.exit_code == 0
-    assert "pid_velocity: robot_agent.robocan.entities.BaseDriver (critical)" in result.output
+    expected = "pid_velocity: robot_agent.robocan.entities.BaseDriver (critical) [built-in]"
+    assert expected in result.output
 
 
 def test_bench_prints_the_issue_keys_last() -> None:

@@ -13,15 +13,8 @@ import pytest
 
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.busopen import BusReader, open_bus
-from robot_agent.robocan.sim import (
-    TICK_S,
-    BatteryMonitor,
-    HeadIo,
-    MotorController,
-    SimModule,
-    SonarRing,
-    next_slot,
-)
+from robot_agent.robocan.sim import HeadIo, MotorController, SimBattery, SimModule, SonarRing
+from robot_agent.robocan.sim.host import TICK_S, next_slot
 
 
 class Recorder:
@@ -107,7 +100,7 @@ def test_modules_of_one_robot_share_their_wake_ups() -> None:
         MotorController("virtual:x", 0x02),
         SonarRing("virtual:x", 0x10),
         HeadIo("virtual:x", 0x40),
-        BatteryMonitor("virtual:x", 0x08),
+        SimBattery("virtual:x", 0x08),
     ]
     for start, module in zip((10.013, 10.041, 10.077, 10.09), modules, strict=True):
         powered(module, start)
@@ -139,7 +132,7 @@ def test_a_moving_servo_needs_the_physics_until_it_reports_arrival() -> None:
 
 
 def test_battery_drains_over_an_idle_stretch_without_being_stepped() -> None:
-    battery = BatteryMonitor("virtual:x", 0x08)
+    battery = SimBattery("virtual:x", 0x08)
     sent = powered(battery, 0.0)
     battery.tick(0.0)
     battery.tick(3600.0)  # an hour later, in one step

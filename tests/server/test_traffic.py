@@ -5,11 +5,14 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from pydantic import ValidationError
 
 from backend.traffic import LockState, TrafficManager
 from guidebot.bus import Bus
+from guidebot.payloads.traffic import Path
 from guidebot.site import Site, validate_site
 from guidebot.site.graph import NoPath, SiteGraph, UnknownNode
+from guidebot.site.steps import PathStep
 
 from .helpers import RobotStub, demo_site
 
@@ -72,6 +75,19 @@ def test_path_across_floors_goes_through_the_elevator_and_names_doors() -> None:
     assert steps["door_f1"].door == "door_upstairs"
     assert steps["lift0"].elevator == "lift" and steps["lift1"].floor == "F1"
     assert path.areas == ["elevator"]
+
+
+def test_a_path_step_is_one_type_from_graph_to_message_to_robot() -> None:
+    """The graph's steps go out in the ``path`` payload and come back on the robot as the
+    same PathStep; a step without its floor or coordinates is refused."""
+    path = SiteGraph(demo_site()).shortest_path("ga1", "gc3")
+    wire = Path(nodes=path.nodes, steps=path.steps).model_dump(mode="json")
+    assert Path.model_validate(wire).steps == path.steps
+    assert [PathStep.from_dict(s) for s in wire["steps"]] == path.steps
+    with pytest.raises(KeyError):
+        PathStep.from_dict({"node": "ga1", "x": 0, "y": 0})
+    with pytest.raises(ValidationError, match="floor"):
+        Path.model_validate({"steps": [{"node": "ga1", "x": 0, "y": 0}]})
 
 
 def test_one_way_edges_are_respected() -> None:
