@@ -14,7 +14,6 @@ import asyncio
 import contextlib
 import logging
 import os
-import signal
 from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import AbstractAsyncContextManager
 from typing import Any
@@ -31,7 +30,7 @@ from backend.hub.broker import BrokerBridge, process_id
 from backend.leadership import Leadership
 from guidebot.site.validate import validate_site
 
-__all__ = ["DECIDING", "FollowerRest", "cluster_report", "clustered"]
+__all__ = ["DECIDING", "LOST_LEADERSHIP_EXIT", "FollowerRest", "cluster_report", "clustered"]
 
 log = logging.getLogger(__name__)
 
@@ -41,9 +40,16 @@ DECIDING = ("task_manager", "traffic_manager", "building_interface")
 Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 
 
+LOST_LEADERSHIP_EXIT = 75
+"""The exit status of a leader that lost its lock (a supervisor restarts it as a follower)."""
+
+
 def _stop_this_process() -> None:
-    """Fencing: a leader that lost its lock stops deciding by stopping (SIGTERM to itself)."""
-    os.kill(os.getpid(), signal.SIGTERM)
+    """Fencing: a leader that lost its lock exits at once, without the clean shutdown that would
+    flush its write-behind task store: another process may already lead, and anything this one
+    wrote now could overwrite that leader's decisions."""
+    logging.shutdown()
+    os._exit(LOST_LEADERSHIP_EXIT)
 
 
 async def _follower_tokens(app: FastAPI, db_url: str) -> None:
@@ -93,6 +99,7 @@ async def clustered(
         process,
         on_lost=on_lost or _stop_this_process,
         poll_s=settings.leader_poll_s,
+        lease_s=settings.leader_lease_s,
     )
     app.state.broker, app.state.leadership = bridge, leadership
     hub.forwards_unknown = True
@@ -140,7 +147,8 @@ def cluster_report(app: FastAPI) -> dict[str, Any] | None:
     bridge: BrokerBridge | None = getattr(app.state, "broker", None)
     if leadership is None or bridge is None:
         return None
-    return {**leadership.report(), "broker": bridge.stats()}
+    fenced = sum(e.dropped for e in getattr(app.state, "fenced_endpoints", []))
+    return {**leadership.report(), "fenced": fenced, "broker": bridge.stats()}
 
 
 class FollowerRest:

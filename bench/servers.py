@@ -55,6 +55,7 @@ class ServerProcess:
             **os.environ,
             "GUIDEBOT_PROCESS_NAME": name,
             "GUIDEBOT_LEADER_POLL_S": "0.3",
+            "GUIDEBOT_LEADER_LEASE_S": "1.5",
             "GUIDEBOT_ADMIN_TOKEN": ADMIN_TOKEN,
             "GUIDEBOT_BUILDING_ENABLED": "false",
             "GUIDEBOT_TOKENS": json.dumps([{"token": GUI_TOKEN, "name": "gui", "role": "gui"}]),
@@ -80,6 +81,13 @@ class ServerProcess:
     async def ready(self) -> bool:
         health = await self.health()
         return bool(health and health["cluster"]["broker"]["connected"])
+
+    def pause(self) -> None:
+        """SIGSTOP: the process keeps its sockets but runs nothing (a frozen leader)."""
+        self.process.send_signal(signal.SIGSTOP)
+
+    def resume(self) -> None:
+        self.process.send_signal(signal.SIGCONT)
 
     def kill(self) -> None:
         if self.process.poll() is None:

@@ -68,7 +68,9 @@ class BrokerBridge:
         self._prefix = self.origin.encode() + _SEP
         self._out: deque[bytes] = deque()
         self._wake = asyncio.Event()
-        self._delivering = False
+        self._incoming: Message | None = None
+        """The message being delivered from the broker: not forwarded back (but what local
+        modules publish while handling it, such as a grant answering a request, is)."""
         self._tasks: list[asyncio.Task[None]] = []
         self._endpoint = hub.endpoint(f"broker@{self.origin}")
 
@@ -103,7 +105,7 @@ class BrokerBridge:
 
     # -- outgoing ---------------------------------------------------------------------------
     def _forward(self, message: Message) -> None:
-        if self._delivering:
+        if message is self._incoming:
             return  # came from the broker: every process already has it
         if len(self._out) >= self.queue_size:
             self.dropped += 1
@@ -168,11 +170,11 @@ class BrokerBridge:
             log.warning("broker: dropped a malformed frame from %r: %s", origin, exc)
             return
         self.received += 1
-        self._delivering = True
+        self._incoming = message
         try:
             self.hub.bus.publish(message)
         finally:
-            self._delivering = False
+            self._incoming = None
 
 
 def _redact(url: str) -> str:

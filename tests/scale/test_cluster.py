@@ -6,41 +6,19 @@ from __future__ import annotations
 import asyncio
 import json
 import time
-from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
-import pytest
 from click.testing import CliRunner
 
 from backend.server_cli import server as server_command
 from bench.failover import main as bench_failover
-from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, start_servers, wait_until
-from tests.server.postgres import PostgresServer, postgres_server
+from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, wait_until
+from tests.server.postgres import PostgresServer
 
 from .cluster import WsClient
-from .redis import RedisServer, redis_server
-
-
-@pytest.fixture(scope="module")
-def redis() -> Iterator[RedisServer]:
-    with redis_server() as server:
-        yield server
-
-
-@pytest.fixture(scope="module")
-def postgres() -> Iterator[PostgresServer]:
-    with postgres_server() as pg:
-        yield pg
-
-
-@pytest.fixture
-async def pair(
-    redis: RedisServer, postgres: PostgresServer, tmp_path: Path
-) -> AsyncIterator[list[ServerProcess]]:
-    async with start_servers(["alpha", "beta"], postgres.database(), redis.url, tmp_path) as pair:
-        yield pair
+from .redis import RedisServer
 
 
 async def test_messages_cross_processes_both_ways(pair: list[ServerProcess]) -> None:
