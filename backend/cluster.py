@@ -52,18 +52,49 @@ def _stop_this_process() -> None:
     os._exit(LOST_LEADERSHIP_EXIT)
 
 
-async def _follower_tokens(app: FastAPI, db_url: str) -> None:
-    """Let the site's robots connect to a follower: their token digests from the database."""
-    engine = make_engine(db_url)
-    try:
-        stored = await DbStore(make_sessionmaker(engine)).load_site()
-    except Exception as exc:  # no schema yet: the first leader has not migrated the database
-        log.warning("cluster: no site in the database yet (%s): robots connect to the leader", exc)
-        return
-    finally:
-        await engine.dispose()
-    if stored is not None:
-        _sync_robot_tokens(app.state.tokens, hash_robot_tokens(validate_site(stored[1])), {})
+class _FollowerTokens:
+    """Let the site's robots connect to a follower: their token digests, read from the database
+    at start and again whenever the leader publishes a new site version (site_changed)."""
+
+    def __init__(self, app: FastAPI, db_url: str) -> None:
+        self.app, self.db_url = app, db_url
+        self.known: dict[str, str] = {}
+        self._reloads: set[asyncio.Task[None]] = set()
+
+    async def load(self) -> None:
+        engine = make_engine(self.db_url)
+        try:
+            stored = await DbStore(make_sessionmaker(engine)).load_site()
+        except Exception as exc:  # no schema yet: the first leader has not migrated the database
+            log.warning(
+                "cluster: no site in the database yet (%s): robots connect to the leader", exc
+            )
+            return
+        finally:
+            await engine.dispose()
+        if stored is not None:
+            site = hash_robot_tokens(validate_site(stored[1]))
+            _sync_robot_tokens(self.app.state.tokens, site, self.known)
+
+    def watch(self, hub: Any, leadership: Leadership) -> Callable[[], None]:
+        """Reload on every broadcast site_changed while following; returns the stop function."""
+        endpoint = hub.endpoint("follower_site_watcher")
+
+        def changed(_message: Any) -> None:
+            if leadership.leading:
+                return  # the leader's own components keep its tokens
+            task = asyncio.get_running_loop().create_task(self.load(), name="follower-tokens")
+            self._reloads.add(task)
+            task.add_done_callback(self._reloads.discard)
+
+        endpoint.subscribe("site_changed", changed)
+
+        def stop() -> None:
+            endpoint.close()
+            for task in self._reloads:
+                task.cancel()
+
+        return stop
 
 
 def _announce_links_while_following(hub: Any, leadership: Leadership) -> Callable[[], None]:
@@ -104,7 +135,8 @@ async def clustered(
     app.state.broker, app.state.leadership = bridge, leadership
     hub.forwards_unknown = True
     await bridge.start()
-    await _follower_tokens(app, settings.db_url)
+    tokens = _FollowerTokens(app, settings.db_url)
+    await tokens.load()
     for name in ("database", *DECIDING):
         health.set(name, ComponentState.disabled, "follower: the leader runs it")
     stopping = asyncio.Event()
@@ -126,6 +158,7 @@ async def clustered(
             raise
 
     stop_links = _announce_links_while_following(hub, leadership)
+    stop_tokens = tokens.watch(hub, leadership)
     leadership.start()
     leader_task = asyncio.get_running_loop().create_task(lead(), name="cluster-leader")
     try:
@@ -137,6 +170,7 @@ async def clustered(
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await leader_task
         stop_links()
+        stop_tokens()
         await leadership.stop()
         await bridge.stop()
 

@@ -13,11 +13,11 @@ import httpx
 from click.testing import CliRunner
 
 from backend.server_cli import server as server_command
+from bench.cluster_clients import WsClient
 from bench.failover import main as bench_failover
 from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, wait_until
 from tests.server.postgres import PostgresServer
 
-from .cluster import WsClient
 from .redis import RedisServer
 
 
@@ -130,3 +130,4 @@ def test_bench_failover_reports_the_issue_keys(
     assert last["kills"] == 2
     assert 0 < last["leader_kill_to_new_leader_ms"]["max"] < 15_000
     assert last["tasks_lost"] == 0
+    assert last["double_grants"] == 0
