@@ -48,8 +48,16 @@ async def wait_until(
 class ServerProcess:
     """One `guidebot server --broker` child process."""
 
-    def __init__(self, name: str, db_url: str, broker_url: str, log: Path) -> None:
+    def __init__(
+        self,
+        name: str,
+        db_url: str,
+        broker_url: str,
+        log: Path,
+        tokens: list[dict[str, str]] | None = None,
+    ) -> None:
         self.db_url, self.broker_url, self.log_path = db_url, broker_url, log
+        self.tokens = tokens or []
         self.name, self.port = name, _free_port()
         env = {
             **os.environ,
@@ -58,7 +66,9 @@ class ServerProcess:
             "GUIDEBOT_LEADER_LEASE_S": "1.5",
             "GUIDEBOT_ADMIN_TOKEN": ADMIN_TOKEN,
             "GUIDEBOT_BUILDING_ENABLED": "false",
-            "GUIDEBOT_TOKENS": json.dumps([{"token": GUI_TOKEN, "name": "gui", "role": "gui"}]),
+            "GUIDEBOT_TOKENS": json.dumps(
+                [{"token": GUI_TOKEN, "name": "gui", "role": "gui"}, *self.tokens]
+            ),
         }
         guidebot = Path(sys.executable).parent / "guidebot"
         self.log = log.open("ab")
@@ -106,12 +116,19 @@ class ServerProcess:
 
 @contextlib.asynccontextmanager
 async def start_servers(
-    names: list[str], db_url: str, broker_url: str, logs: Path
+    names: list[str],
+    db_url: str,
+    broker_url: str,
+    logs: Path,
+    tokens: list[dict[str, str]] | None = None,
 ) -> AsyncIterator[list[ServerProcess]]:
+    """Start the servers one after the other (the first leads); ``tokens``: more static tokens
+    ({"token", "name", "role"}) beside the GUI's."""
     servers: list[ServerProcess] = []
     try:
         for name in names:
-            servers.append(ServerProcess(name, db_url, broker_url, logs / f"{name}.log"))
+            log = logs / f"{name}.log"
+            servers.append(ServerProcess(name, db_url, broker_url, log, tokens))
             # The first one migrates the database; start the others once it leads.
             await wait_until(servers[-1].ready, 60, f"server {name} to answer /api/health")
         yield servers
