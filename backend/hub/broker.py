@@ -142,15 +142,18 @@ class BrokerBridge:
     async def _receive_loop(self) -> None:
         while True:
             client = aioredis.from_url(self.url)
-            pubsub = client.pubsub(ignore_subscribe_messages=True)
+            pubsub = client.pubsub()
             try:
-                await pubsub.subscribe(self.channel)
-                self.connected = True
-                log.info("broker: %s joined %s", self.origin, _redact(self.url))
+                await pubsub.subscribe(self.channel)  # sent; Redis confirms it later
                 while True:
                     item = await pubsub.get_message(timeout=None)
-                    if item is not None:
+                    if item is None:
+                        continue
+                    if item["type"] == "message":
                         self._deliver(item["data"])
+                    elif item["type"] == "subscribe":  # from now on nothing published is missed
+                        self.connected = True
+                        log.info("broker: %s joined %s", self.origin, _redact(self.url))
             except (RedisError, OSError) as exc:
                 log.warning("broker: subscription to %s lost: %s", _redact(self.url), exc)
             finally:
