@@ -16,6 +16,9 @@ leader_kill_to_new_leader_ms: SIGKILL to the new leader serving with all its com
 ("serving" in /api/health, polled every 50 ms).
 tasks_lost: acknowledged tasks the new leader does not list.
 double_grants: rounds in which R2 was granted the corridor while R1 held it.
+With ``--pause`` the leader is frozen (SIGSTOP) instead: the other process leads once the
+frozen one's lease has run out (GUIDEBOT_LEADER_LEASE_S, 1.5 s here), and the frozen one is
+resumed while R2 asks: fenced, it grants nothing, and it exits (75) on finding its lock gone.
 """
 
 from __future__ import annotations
@@ -51,12 +54,14 @@ async def _leader(servers: list[ServerProcess]) -> ServerProcess:
     return found
 
 
-async def _round(servers: list[ServerProcess], tasks: int) -> tuple[float, int, int]:
+async def _round(servers: list[ServerProcess], tasks: int, pause: bool) -> tuple[float, int, int]:
     leader = await _leader(servers)
     other = next(s for s in servers if s is not leader)
     r1, r2 = await AreaRobot.connect(other, "R1"), await AreaRobot.connect(other, "R2")
     try:
-        took_ms, lost = await _kill_leader(leader, other, tasks, r1)
+        took_ms, lost = await _kill_leader(leader, other, tasks, r1, pause)
+        if pause:  # the frozen leader wakes, past its lease: fenced, it finds its lock gone
+            leader.resume()
         # The new leader knows nothing of the corridor but what the robots resync.
         await r1.report("corridor_w", holding=True)
         await r2.report("charge_b", holding=False)
@@ -68,6 +73,8 @@ async def _round(servers: list[ServerProcess], tasks: int) -> tuple[float, int, 
         await r1.release()
         await r2.granted(1, "R2's grant once R1 left the corridor", timeout=60)
         await r2.release()
+        if pause:
+            await asyncio.to_thread(leader.process.wait, 60)
     finally:
         await r1.close()
         await r2.close()
@@ -79,7 +86,7 @@ async def _round(servers: list[ServerProcess], tasks: int) -> tuple[float, int, 
 
 
 async def _kill_leader(
-    leader: ServerProcess, other: ServerProcess, tasks: int, holder: AreaRobot
+    leader: ServerProcess, other: ServerProcess, tasks: int, holder: AreaRobot, pause: bool
 ) -> tuple[float, int]:
     """``holder`` takes the corridor, tasks are acknowledged, the leader is killed: the time
     to a new leader serving, and how many acknowledged tasks it does not know."""
@@ -96,7 +103,7 @@ async def _kill_leader(
             answer.raise_for_status()
             created.append(answer.json()["id"])
         killed_at = time.monotonic()
-        leader.kill()
+        leader.pause() if pause else leader.kill()
 
         async def leads() -> bool:
             health = await other.health()
@@ -110,12 +117,14 @@ async def _kill_leader(
     return took_ms, sum(1 for task_id in created if task_id not in known)
 
 
-async def run(db_url: str, broker_url: str, kills: int, tasks: int) -> dict[str, Any]:
+async def run(
+    db_url: str, broker_url: str, kills: int, tasks: int, pause: bool = False
+) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="guidebot-failover-") as root:
         async with start_servers(["p0", "p1"], db_url, broker_url, Path(root)) as servers:
             samples, lost, doubled = [], 0, 0
             for _ in range(kills):
-                took_ms, lost_now, doubled_now = await _round(servers, tasks)
+                took_ms, lost_now, doubled_now = await _round(servers, tasks, pause)
                 samples.append(took_ms)
                 lost += lost_now
                 doubled += doubled_now
@@ -124,6 +133,7 @@ async def run(db_url: str, broker_url: str, kills: int, tasks: int) -> dict[str,
         "tasks_lost": lost,
         "double_grants": doubled,
         "kills": kills,
+        "mode": "pause" if pause else "kill",
     }
 
 
@@ -134,11 +144,16 @@ async def run(db_url: str, broker_url: str, kills: int, tasks: int) -> dict[str,
 @click.option("--broker", "broker_url", required=True, help="redis:// URL.")
 @click.option("--kills", default=5, show_default=True, help="Leader kills (rounds).")
 @click.option("--tasks", default=5, show_default=True, help="Tasks created before each kill.")
+@click.option(
+    "--pause",
+    is_flag=True,
+    help="SIGSTOP the leader instead (resumed once the other leads): fail-over by its lease.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
-def main(db_url: str, broker_url: str, kills: int, tasks: int, as_json: bool) -> None:
+def main(db_url: str, broker_url: str, kills: int, tasks: int, pause: bool, as_json: bool) -> None:
     """SIGKILL the leader of two server processes; time the fail-over, count lost tasks and
     double grants of one area."""
-    result = asyncio.run(run(db_url, broker_url, kills, tasks))
+    result = asyncio.run(run(db_url, broker_url, kills, tasks, pause))
     if not as_json:
         click.echo(f"{kills} leader kills with {tasks} tasks each (median, p99 and max ms):")
     print_result(result)

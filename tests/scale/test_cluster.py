@@ -4,7 +4,6 @@ messages cross processes; exactly one process leads; a killed leader is replaced
 from __future__ import annotations
 
 import asyncio
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -14,12 +13,7 @@ from click.testing import CliRunner
 
 from backend.server_cli import server as server_command
 from bench.cluster_clients import WsClient
-from bench.failover import main as bench_failover
-from bench.hub import hub as bench_hub
 from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, wait_until
-from tests.server.postgres import PostgresServer
-
-from .redis import RedisServer
 
 
 async def test_messages_cross_processes_both_ways(pair: list[ServerProcess]) -> None:
@@ -106,49 +100,3 @@ def test_broker_needs_postgresql(tmp_path: Path) -> None:
 
 async def _true(value: object) -> object:
     return value
-
-
-def test_bench_failover_reports_the_issue_keys(
-    redis: RedisServer, postgres: PostgresServer
-) -> None:
-    result = CliRunner().invoke(
-        bench_failover,
-        [
-            "--db",
-            postgres.database(),
-            "--broker",
-            redis.url,
-            "--kills",
-            "2",
-            "--tasks",
-            "3",
-            "--json",
-        ],
-    )
-    assert result.exit_code == 0, result.output
-    last = json.loads(result.output.strip().splitlines()[-1])
-    assert set(last) >= {"leader_kill_to_new_leader_ms", "tasks_lost", "double_grants"}
-    assert last["kills"] == 2
-    assert 0 < last["leader_kill_to_new_leader_ms"]["max"] < 15_000
-    assert last["tasks_lost"] == 0
-    assert last["double_grants"] == 0
-
-
-def test_bench_hub_over_two_servers_reports_cross_process_latency(
-    redis: RedisServer, postgres: PostgresServer
-) -> None:
-    args = ["--servers", "2", "--robots", "10", "--rate", "5", "--guis", "2", "--seconds", "3"]
-    args += ["--db", postgres.database(), "--broker", redis.url, "--json"]
-    result = CliRunner().invoke(bench_hub, args)
-    assert result.exit_code == 0, result.output
-    last = json.loads(result.output.strip().splitlines()[-1])
-    assert last["servers"] == 2 and last["dropped"] == 0 and last["refused"] == 0
-    assert last["latency_samples"]["cross"] > 0 and last["latency_samples"]["local"] > 0
-    assert last["cross_process_latency_ms"]["p50"] > 0
-    assert len(last["server_cpu_percent_each"]) == 2
-
-
-def test_bench_hub_servers_needs_a_database_and_a_broker() -> None:
-    result = CliRunner().invoke(bench_hub, ["--servers", "2", "--json"])
-    assert result.exit_code == 2
-    assert "--servers needs --db" in result.output
