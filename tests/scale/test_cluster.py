@@ -98,5 +98,15 @@ def test_broker_needs_postgresql(tmp_path: Path) -> None:
     assert "needs a PostgreSQL" in result.output
 
 
+def test_a_lease_shorter_than_two_polls_is_refused() -> None:
+    result = CliRunner().invoke(
+        server_command,
+        ["--db", "postgresql+asyncpg://gb@127.0.0.1:1/x", "--broker", "redis://127.0.0.1:1"],
+        env={"GUIDEBOT_LEADER_POLL_S": "3", "GUIDEBOT_LEADER_LEASE_S": "5"},
+    )
+    assert result.exit_code == 2
+    assert "GUIDEBOT_LEADER_LEASE_S must be at least twice GUIDEBOT_LEADER_POLL_S" in result.output
+
+
 async def _true(value: object) -> object:
     return value
