@@ -14,7 +14,6 @@ import asyncio
 import contextlib
 import logging
 import os
-import signal
 from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import AbstractAsyncContextManager
 from typing import Any
@@ -31,7 +30,7 @@ from backend.hub.broker import BrokerBridge, process_id
 from backend.leadership import Leadership
 from guidebot.site.validate import validate_site
 
-__all__ = ["DECIDING", "FollowerRest", "cluster_report", "clustered"]
+__all__ = ["DECIDING", "LOST_LEADERSHIP_EXIT", "FollowerRest", "cluster_report", "clustered"]
 
 log = logging.getLogger(__name__)
 
@@ -41,23 +40,61 @@ DECIDING = ("task_manager", "traffic_manager", "building_interface")
 Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 
 
+LOST_LEADERSHIP_EXIT = 75
+"""The exit status of a leader that lost its lock (a supervisor restarts it as a follower)."""
+
+
 def _stop_this_process() -> None:
-    """Fencing: a leader that lost its lock stops deciding by stopping (SIGTERM to itself)."""
-    os.kill(os.getpid(), signal.SIGTERM)
+    """Fencing: a leader that lost its lock exits at once, without the clean shutdown that would
+    flush its write-behind task store: another process may already lead, and anything this one
+    wrote now could overwrite that leader's decisions."""
+    logging.shutdown()
+    os._exit(LOST_LEADERSHIP_EXIT)
 
 
-async def _follower_tokens(app: FastAPI, db_url: str) -> None:
-    """Let the site's robots connect to a follower: their token digests from the database."""
-    engine = make_engine(db_url)
-    try:
-        stored = await DbStore(make_sessionmaker(engine)).load_site()
-    except Exception as exc:  # no schema yet: the first leader has not migrated the database
-        log.warning("cluster: no site in the database yet (%s): robots connect to the leader", exc)
-        return
-    finally:
-        await engine.dispose()
-    if stored is not None:
-        _sync_robot_tokens(app.state.tokens, hash_robot_tokens(validate_site(stored[1])), {})
+class _FollowerTokens:
+    """Let the site's robots connect to a follower: their token digests, read from the database
+    at start and again whenever the leader publishes a new site version (site_changed)."""
+
+    def __init__(self, app: FastAPI, db_url: str) -> None:
+        self.app, self.db_url = app, db_url
+        self.known: dict[str, str] = {}
+        self._reloads: set[asyncio.Task[None]] = set()
+
+    async def load(self) -> None:
+        engine = make_engine(self.db_url)
+        try:
+            stored = await DbStore(make_sessionmaker(engine)).load_site()
+        except Exception as exc:  # no schema yet: the first leader has not migrated the database
+            log.warning(
+                "cluster: no site in the database yet (%s): robots connect to the leader", exc
+            )
+            return
+        finally:
+            await engine.dispose()
+        if stored is not None:
+            site = hash_robot_tokens(validate_site(stored[1]))
+            _sync_robot_tokens(self.app.state.tokens, site, self.known)
+
+    def watch(self, hub: Any, leadership: Leadership) -> Callable[[], None]:
+        """Reload on every broadcast site_changed while following; returns the stop function."""
+        endpoint = hub.endpoint("follower_site_watcher")
+
+        def changed(_message: Any) -> None:
+            if leadership.leading:
+                return  # the leader's own components keep its tokens
+            task = asyncio.get_running_loop().create_task(self.load(), name="follower-tokens")
+            self._reloads.add(task)
+            task.add_done_callback(self._reloads.discard)
+
+        endpoint.subscribe("site_changed", changed)
+
+        def stop() -> None:
+            endpoint.close()
+            for task in self._reloads:
+                task.cancel()
+
+        return stop
 
 
 def _announce_links_while_following(hub: Any, leadership: Leadership) -> Callable[[], None]:
@@ -93,11 +130,13 @@ async def clustered(
         process,
         on_lost=on_lost or _stop_this_process,
         poll_s=settings.leader_poll_s,
+        lease_s=settings.leader_lease_s,
     )
     app.state.broker, app.state.leadership = bridge, leadership
     hub.forwards_unknown = True
     await bridge.start()
-    await _follower_tokens(app, settings.db_url)
+    tokens = _FollowerTokens(app, settings.db_url)
+    await tokens.load()
     for name in ("database", *DECIDING):
         health.set(name, ComponentState.disabled, "follower: the leader runs it")
     stopping = asyncio.Event()
@@ -119,6 +158,7 @@ async def clustered(
             raise
 
     stop_links = _announce_links_while_following(hub, leadership)
+    stop_tokens = tokens.watch(hub, leadership)
     leadership.start()
     leader_task = asyncio.get_running_loop().create_task(lead(), name="cluster-leader")
     try:
@@ -130,6 +170,7 @@ async def clustered(
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await leader_task
         stop_links()
+        stop_tokens()
         await leadership.stop()
         await bridge.stop()
 
@@ -140,7 +181,8 @@ def cluster_report(app: FastAPI) -> dict[str, Any] | None:
     bridge: BrokerBridge | None = getattr(app.state, "broker", None)
     if leadership is None or bridge is None:
         return None
-    return {**leadership.report(), "broker": bridge.stats()}
+    fenced = sum(e.dropped for e in getattr(app.state, "fenced_endpoints", []))
+    return {**leadership.report(), "fenced": fenced, "broker": bridge.stats()}
 
 
 class FollowerRest:

@@ -6,11 +6,15 @@ dies (SIGKILL, machine lost) releases it when its connection drops and another p
 on its next try. The winner increments the leader epoch in the ``guidebot_leader`` row (the
 fencing token, shown by /api/health) and then starts the deciding components.
 
-Fencing: the leader checks its session every ``poll_s`` seconds. If the check fails (database
-gone, connection cut, lock not held) it cannot know whether another process leads already, so it
-stops deciding at once by calling ``on_lost`` (the server stops itself; a supervisor restarts it
-as a follower). A leader paused longer than the database's connection timeout may still decide
-until its first check after waking (docs/scaling.md, "Not covered").
+Lease and fencing: every session sets PostgreSQL's ``idle_session_timeout`` to ``lease_s``, so
+the server ends a leader session that has been silent that long (a paused, frozen or cut-off
+leader) and the lock goes to a follower. The leader renews by checking its lock every ``poll_s``;
+each confirmed check extends its local lease to the moment the check was sent plus ``lease_s``
+(minus a tenth for clock drift): PostgreSQL's idle clock starts later than that, so no other
+process can lead before the local lease ends. ``may_decide()`` is true only within it, and the
+deciding components' endpoints ask it before every message they handle or send
+(backend/fencing.py). If a check fails the leader calls ``on_lost`` (the server stops itself; a
+supervisor restarts it as a follower).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -53,13 +58,19 @@ class Leadership:
         *,
         on_lost: Callable[[], None],
         poll_s: float = 1.0,
+        lease_s: float = 4.0,
         key: int = LEADER_LOCK_KEY,
     ) -> None:
+        if lease_s < 2 * poll_s:
+            raise ValueError(f"the lease ({lease_s} s) must be at least twice the poll ({poll_s})")
         self.dsn = asyncpg_dsn(db_url)
         self.process = process
         self.on_lost = on_lost
         self.poll_s = poll_s
+        self.lease_s = lease_s
         self.key = key
+        self._lease_until = 0.0
+        """time.monotonic() until which no other process can lead (this one's lease)."""
         self.won = asyncio.Event()
         self.epoch: int | None = None
         """This process's leader epoch, once it leads."""
@@ -74,6 +85,13 @@ class Leadership:
     @property
     def leading(self) -> bool:
         return self.won.is_set()
+
+    def may_decide(self) -> bool:
+        """This process leads and its lease runs: the fence every decision passes."""
+        return self.won.is_set() and time.monotonic() < self._lease_until
+
+    def _renewed(self, sent_at: float) -> None:
+        self._lease_until = sent_at + self.lease_s * 0.9
 
     def start(self) -> None:
         self._task = asyncio.get_running_loop().create_task(self._run(), name="leadership")
@@ -93,6 +111,8 @@ class Leadership:
             "leading": self.leading,
             "serving": self.serving,
             "epoch": self.leader_epoch,
+            "lease_s": self.lease_s,
+            "may_decide": self.may_decide(),
             "error": self.error,
         }
 
@@ -105,15 +125,19 @@ class Leadership:
                 await asyncio.sleep(self.poll_s)
                 continue
             try:
+                # The lease: PostgreSQL ends this session once it is silent for lease_s.
+                await conn.execute(f"SET idle_session_timeout = {int(self.lease_s * 1000)}")
                 await conn.execute(_TABLE)
                 await self._campaign(conn)
                 await self._hold(conn)
-            except (OSError, asyncpg.PostgresError, asyncpg.InterfaceError) as exc:
+            except Exception as exc:  # any failure of the lock's session: the lock may be gone
+                # (asyncpg raises OSError, PostgresError, InterfaceError, InternalClientError)
                 self.error = f"{type(exc).__name__}: {exc}"
                 if self.leading:
                     log.critical("leadership: %s lost its lock (%s): stopping", self.process, exc)
                     self.won.clear()
                     self.serving = False
+                    self._lease_until = 0.0
                     self.on_lost()
                     return
                 await asyncio.sleep(self.poll_s)
@@ -123,7 +147,10 @@ class Leadership:
 
     async def _campaign(self, conn: asyncpg.Connection) -> None:
         """Try the lock until won, reading who leads meanwhile."""
-        while not await conn.fetchval("SELECT pg_try_advisory_lock($1)", self.key):
+        while True:
+            sent_at = time.monotonic()
+            if await conn.fetchval("SELECT pg_try_advisory_lock($1)", self.key):
+                break
             row = await conn.fetchrow("SELECT epoch, process FROM guidebot_leader WHERE id = 1")
             if row is not None:
                 self.leader_epoch, self.leader = row["epoch"], row["process"]
@@ -135,6 +162,7 @@ class Leadership:
                process = EXCLUDED.process, since = now() RETURNING epoch""",
             self.process,
         )
+        self._renewed(sent_at)
         self.leader, self.leader_epoch, self.error = self.process, self.epoch, ""
         log.warning("leadership: %s leads (epoch %d)", self.process, self.epoch)
         self.won.set()
@@ -143,13 +171,15 @@ class Leadership:
         """Check every ``poll_s`` that the session still holds the lock; raise once it does not."""
         while True:
             await asyncio.sleep(self.poll_s)
+            sent_at = time.monotonic()
             held = await asyncio.wait_for(
                 conn.fetchval(
                     "SELECT count(*) FROM pg_locks WHERE locktype = 'advisory' AND granted"
                     " AND pid = pg_backend_pid() AND objid = ($1::bigint & 4294967295)::oid",
                     self.key,
                 ),
-                timeout=max(self.poll_s * 3, 3.0),
+                timeout=self.lease_s,
             )
             if not held:
                 raise asyncpg.InterfaceError("the advisory lock is no longer held")
+            self._renewed(sent_at)

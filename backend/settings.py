@@ -116,6 +116,8 @@ class Settings(BaseSettings):
     broker_url: str | None = Field(default=None, pattern=r"^rediss?://")
     process_name: str | None = Field(default=None, pattern=r"^[A-Za-z0-9_.:-]{1,64}$")
     leader_poll_s: float = Field(default=1.0, gt=0, le=30)
+    # The leader's lease: PostgreSQL ends a leader session idle this long (a paused leader).
+    leader_lease_s: float = Field(default=4.0, gt=0, le=300)
 
     @property
     def development(self) -> bool:
@@ -130,6 +132,11 @@ class Settings(BaseSettings):
             raise ValueError(
                 "GUIDEBOT_BROKER_URL needs a PostgreSQL GUIDEBOT_DB_URL (leadership is an advisory"
                 " lock in PostgreSQL; docs/scaling.md)"
+            )
+        if self.broker_url and self.leader_lease_s < 2 * self.leader_poll_s:
+            raise ValueError(
+                "GUIDEBOT_LEADER_LEASE_S must be at least twice GUIDEBOT_LEADER_POLL_S (the leader"
+                " renews its lease once per poll; docs/scaling.md)"
             )
         if len(self.admin_token) < 8:
             raise ValueError("GUIDEBOT_ADMIN_TOKEN must be at least 8 characters")

@@ -606,6 +606,9 @@ def compare(ours: dict[str, Any], peer: dict[str, Any]) -> dict[str, Any]:
     type=click.FloatRange(min=0),
     help="Add one GUI that pauses this many ms after each frame it reads (0: none).",
 )
+@click.option("--servers", type=click.IntRange(min=1), help="Server processes on a broker.")
+@click.option("--db", "db_url", help="With --servers: postgresql+asyncpg:// URL.")
+@click.option("--broker", "broker_url", help="With --servers: redis:// URL.")
 @click.option("--json", "as_json", is_flag=True, help="Print only the JSON line on stdout.")
 def hub(
     robots: int,
@@ -617,11 +620,19 @@ def hub(
     peer: bool,
     rounds: int,
     slow_gui_ms: float,
+    servers: int | None,
+    db_url: str | None,
+    broker_url: str | None,
     as_json: bool,
 ) -> None:
     """Hub throughput and publish-to-GUI latency over real WebSockets."""
     if robots < 1 or guis < 1 or rate <= 0 or seconds <= WARMUP_S:
         raise click.UsageError(f"need robots >= 1, guis >= 1, rate > 0, seconds > {WARMUP_S}")
+    if servers is not None:  # several processes on a broker: bench/hub_cluster.py
+        from .hub_cluster import cluster_command
+
+        cluster_command(servers, db_url, broker_url, (robots, rate, guis, seconds, robot_procs))
+        return
     args = (robots, rate, guis, seconds, robot_procs, full_app)
     ours: list[dict[str, Any]] = []
     theirs: list[dict[str, Any]] = []

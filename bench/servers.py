@@ -48,16 +48,27 @@ async def wait_until(
 class ServerProcess:
     """One `guidebot server --broker` child process."""
 
-    def __init__(self, name: str, db_url: str, broker_url: str, log: Path) -> None:
+    def __init__(
+        self,
+        name: str,
+        db_url: str,
+        broker_url: str,
+        log: Path,
+        tokens: list[dict[str, str]] | None = None,
+    ) -> None:
         self.db_url, self.broker_url, self.log_path = db_url, broker_url, log
+        self.tokens = tokens or []
         self.name, self.port = name, _free_port()
         env = {
             **os.environ,
             "GUIDEBOT_PROCESS_NAME": name,
             "GUIDEBOT_LEADER_POLL_S": "0.3",
+            "GUIDEBOT_LEADER_LEASE_S": "1.5",
             "GUIDEBOT_ADMIN_TOKEN": ADMIN_TOKEN,
             "GUIDEBOT_BUILDING_ENABLED": "false",
-            "GUIDEBOT_TOKENS": json.dumps([{"token": GUI_TOKEN, "name": "gui", "role": "gui"}]),
+            "GUIDEBOT_TOKENS": json.dumps(
+                [{"token": GUI_TOKEN, "name": "gui", "role": "gui"}, *self.tokens]
+            ),
         }
         guidebot = Path(sys.executable).parent / "guidebot"
         self.log = log.open("ab")
@@ -81,6 +92,13 @@ class ServerProcess:
         health = await self.health()
         return bool(health and health["cluster"]["broker"]["connected"])
 
+    def pause(self) -> None:
+        """SIGSTOP: the process keeps its sockets but runs nothing (a frozen leader)."""
+        self.process.send_signal(signal.SIGSTOP)
+
+    def resume(self) -> None:
+        self.process.send_signal(signal.SIGCONT)
+
     def kill(self) -> None:
         if self.process.poll() is None:
             self.process.send_signal(signal.SIGKILL)
@@ -98,12 +116,19 @@ class ServerProcess:
 
 @contextlib.asynccontextmanager
 async def start_servers(
-    names: list[str], db_url: str, broker_url: str, logs: Path
+    names: list[str],
+    db_url: str,
+    broker_url: str,
+    logs: Path,
+    tokens: list[dict[str, str]] | None = None,
 ) -> AsyncIterator[list[ServerProcess]]:
+    """Start the servers one after the other (the first leads); ``tokens``: more static tokens
+    ({"token", "name", "role"}) beside the GUI's."""
     servers: list[ServerProcess] = []
     try:
         for name in names:
-            servers.append(ServerProcess(name, db_url, broker_url, logs / f"{name}.log"))
+            log = logs / f"{name}.log"
+            servers.append(ServerProcess(name, db_url, broker_url, log, tokens))
             # The first one migrates the database; start the others once it leads.
             await wait_until(servers[-1].ready, 60, f"server {name} to answer /api/health")
         yield servers

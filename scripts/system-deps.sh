@@ -5,8 +5,9 @@
 # chromium: the browser tests (tests/web) drive /usr/bin/chromium with Playwright.
 # docker.io, debootstrap: tests/test_compose_engine.py runs docker-compose.yml on a private engine.
 # redis-server: the broker between server processes; tests run a private one (tests/scale).
+# nginx-light: tests/scale/test_proxy.py runs deploy/cluster/nginx.conf in front of two servers.
 set -euo pipefail
-wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server)
+wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light)
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -18,8 +18,10 @@ from guidebot.site import load_site_file
 
 ROOT = Path(__file__).resolve().parent.parent
 COMPOSE = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
-SERVICES: dict[str, Any] = {
-    name: service for name, service in COMPOSE["services"].items() if "command" in service
+SERVICES: dict[str, Any] = {  # the services that run GuideBot's image (not redis, postgres)
+    name: service
+    for name, service in COMPOSE["services"].items()
+    if "command" in service and service.get("image") == "guidebot:demo"
 }
 VARIABLE = re.compile(r"\$\{[A-Z_0-9]+:?-([^}]*)\}")
 

@@ -14,6 +14,7 @@ from fastapi import FastAPI
 from backend.alerts import AlertBoard
 from backend.auth import Role, TokenStore, is_digest, token_digest
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
 from backend.settings import published_tokens, weak_secret
 from backend.site.service import EMPTY_SITE, SiteService
@@ -174,14 +175,16 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
 
             alerts = AlertBoard(hub.endpoint("alerts"), on_event=log_event)
             traffic = TrafficManager(
-                hub.endpoint("traffic_manager"),
+                deciding_endpoint(app, "traffic_manager"),
                 site,
                 graph=graph,
                 on_event=log_event,
                 alerts=alerts,
             )
-            tasks = TaskManager(hub.endpoint("task_manager"), site, graph=graph, store=store)
-            buttons = ButtonWatcher(hub.endpoint("buttons"), tasks, site)
+            tasks = TaskManager(
+                deciding_endpoint(app, "task_manager"), site, graph=graph, store=store
+            )
+            buttons = ButtonWatcher(deciding_endpoint(app, "buttons"), tasks, site)
             known_tokens: dict[str, str] = {}
             _sync_robot_tokens(app.state.tokens, site, known_tokens)
 

@@ -16,6 +16,7 @@ from typing import Any
 from fastapi import FastAPI
 
 from backend.building.interface import BuildingInterface
+from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
 from guidebot.site.building_config import BuildingConfigError, load_building
 
@@ -30,7 +31,7 @@ class _Runner:
     def __init__(self, app: FastAPI) -> None:
         self.app = app
         self.settings = app.state.settings
-        self.endpoint = app.state.hub.endpoint("building")
+        self.endpoint = deciding_endpoint(app, "building")
         self.current: BuildingInterface | None = None
         self._lock = asyncio.Lock()
         self._reloads: set[asyncio.Task[None]] = set()

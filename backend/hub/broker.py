@@ -68,7 +68,9 @@ class BrokerBridge:
         self._prefix = self.origin.encode() + _SEP
         self._out: deque[bytes] = deque()
         self._wake = asyncio.Event()
-        self._delivering = False
+        self._incoming: Message | None = None
+        """The message being delivered from the broker: not forwarded back (but what local
+        modules publish while handling it, such as a grant answering a request, is)."""
         self._tasks: list[asyncio.Task[None]] = []
         self._endpoint = hub.endpoint(f"broker@{self.origin}")
 
@@ -103,7 +105,7 @@ class BrokerBridge:
 
     # -- outgoing ---------------------------------------------------------------------------
     def _forward(self, message: Message) -> None:
-        if self._delivering:
+        if message is self._incoming:
             return  # came from the broker: every process already has it
         if len(self._out) >= self.queue_size:
             self.dropped += 1
@@ -140,15 +142,18 @@ class BrokerBridge:
     async def _receive_loop(self) -> None:
         while True:
             client = aioredis.from_url(self.url)
-            pubsub = client.pubsub(ignore_subscribe_messages=True)
+            pubsub = client.pubsub()
             try:
-                await pubsub.subscribe(self.channel)
-                self.connected = True
-                log.info("broker: %s joined %s", self.origin, _redact(self.url))
+                await pubsub.subscribe(self.channel)  # sent; Redis confirms it later
                 while True:
                     item = await pubsub.get_message(timeout=None)
-                    if item is not None:
+                    if item is None:
+                        continue
+                    if item["type"] == "message":
                         self._deliver(item["data"])
+                    elif item["type"] == "subscribe":  # from now on nothing published is missed
+                        self.connected = True
+                        log.info("broker: %s joined %s", self.origin, _redact(self.url))
             except (RedisError, OSError) as exc:
                 log.warning("broker: subscription to %s lost: %s", _redact(self.url), exc)
             finally:
@@ -168,11 +173,11 @@ class BrokerBridge:
             log.warning("broker: dropped a malformed frame from %r: %s", origin, exc)
             return
         self.received += 1
-        self._delivering = True
+        self._incoming = message
         try:
             self.hub.bus.publish(message)
         finally:
-            self._delivering = False
+            self._incoming = None
 
 
 def _redact(url: str) -> str:

@@ -24,8 +24,20 @@ def _free_port() -> int:
 
 
 class RedisServer:
-    def __init__(self, port: int, process: subprocess.Popen[bytes]) -> None:
-        self.port, self.process = port, process
+    def __init__(self, port: int, process: subprocess.Popen[bytes], args: list[str]) -> None:
+        self.port, self.process, self.args = port, process, args
+
+    def stop(self) -> None:
+        """SIGKILL: the broker is gone (every connection to it drops)."""
+        self.process.kill()
+        self.process.wait(10)
+
+    def start(self) -> None:
+        """Start it again on the same port (empty: pub/sub keeps nothing)."""
+        self.process = subprocess.Popen(
+            self.args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+        _wait_ping(self.port, self.process)
 
     @property
     def url(self) -> str:
@@ -55,9 +67,9 @@ def redis_server() -> Iterator[RedisServer]:
         args = [binary, "--bind", "127.0.0.1", "--port", str(port), "--save", ""]
         args += ["--appendonly", "no", "--dir", root, "--protected-mode", "no"]
         process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        server = RedisServer(port, process, args)
         try:
             _wait_ping(port, process)
-            yield RedisServer(port, process)
+            yield server
         finally:
-            process.kill()
-            process.wait(10)
+            server.stop()

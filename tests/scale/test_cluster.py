@@ -4,43 +4,16 @@ messages cross processes; exactly one process leads; a killed leader is replaced
 from __future__ import annotations
 
 import asyncio
-import json
 import time
-from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
-import pytest
 from click.testing import CliRunner
 
 from backend.server_cli import server as server_command
-from bench.failover import main as bench_failover
-from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, start_servers, wait_until
-from tests.server.postgres import PostgresServer, postgres_server
-
-from .cluster import WsClient
-from .redis import RedisServer, redis_server
-
-
-@pytest.fixture(scope="module")
-def redis() -> Iterator[RedisServer]:
-    with redis_server() as server:
-        yield server
-
-
-@pytest.fixture(scope="module")
-def postgres() -> Iterator[PostgresServer]:
-    with postgres_server() as pg:
-        yield pg
-
-
-@pytest.fixture
-async def pair(
-    redis: RedisServer, postgres: PostgresServer, tmp_path: Path
-) -> AsyncIterator[list[ServerProcess]]:
-    async with start_servers(["alpha", "beta"], postgres.database(), redis.url, tmp_path) as pair:
-        yield pair
+from bench.cluster_clients import WsClient
+from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, wait_until
 
 
 async def test_messages_cross_processes_both_ways(pair: list[ServerProcess]) -> None:
@@ -125,30 +98,15 @@ def test_broker_needs_postgresql(tmp_path: Path) -> None:
     assert "needs a PostgreSQL" in result.output
 
 
+def test_a_lease_shorter_than_two_polls_is_refused() -> None:
+    result = CliRunner().invoke(
+        server_command,
+        ["--db", "postgresql+asyncpg://gb@127.0.0.1:1/x", "--broker", "redis://127.0.0.1:1"],
+        env={"GUIDEBOT_LEADER_POLL_S": "3", "GUIDEBOT_LEADER_LEASE_S": "5"},
+    )
+    assert result.exit_code == 2
+    assert "GUIDEBOT_LEADER_LEASE_S must be at least twice GUIDEBOT_LEADER_POLL_S" in result.output
+
+
 async def _true(value: object) -> object:
     return value
-
-
-def test_bench_failover_reports_the_issue_keys(
-    redis: RedisServer, postgres: PostgresServer
-) -> None:
-    result = CliRunner().invoke(
-        bench_failover,
-        [
-            "--db",
-            postgres.database(),
-            "--broker",
-            redis.url,
-            "--kills",
-            "2",
-            "--tasks",
-            "3",
-            "--json",
-        ],
-    )
-    assert result.exit_code == 0, result.output
-    last = json.loads(result.output.strip().splitlines()[-1])
-    assert set(last) >= {"leader_kill_to_new_leader_ms", "tasks_lost", "double_grants"}
-    assert last["kills"] == 2
-    assert 0 < last["leader_kill_to_new_leader_ms"]["max"] < 15_000
-    assert last["tasks_lost"] == 0

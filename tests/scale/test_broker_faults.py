@@ -1,0 +1,180 @@
+"""The broker's faults (docs/scaling.md): a Redis restart is survived (the WebSocket clients stay
+connected, the bridges resubscribe, acknowledged tasks are kept), and a process with a slow
+network link to Redis does not hold the others back."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import time
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from bench.cluster_clients import WsClient
+from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, start_servers, wait_until
+from tests.server.postgres import PostgresServer
+
+from .redis import RedisServer, redis_server
+
+_texts = itertools.count()
+
+
+async def _true(value: object) -> object:
+    return value
+
+
+async def _said(speaker: WsClient, listeners: list[WsClient], timeout: float = 20) -> list[float]:
+    """The speaker says something new; seconds until each listener has it."""
+    text = f"hello {next(_texts)}"
+    sent = time.monotonic()
+    await speaker.send("say", {"text": text})
+    took: list[float] = []
+    for listener in listeners:
+
+        async def heard(listener: WsClient = listener) -> bool:
+            return any(m["payload"]["text"] == text for m in listener.of_type("say"))
+
+        await wait_until(heard, timeout, f"{text!r} at listener {len(took)}", interval=0.02)
+        took.append(time.monotonic() - sent)
+    return took
+
+
+async def _listener(server: ServerProcess) -> WsClient:
+    gui = await WsClient.connect(server, GUI_TOKEN)
+    await gui.send("subscribe", {"patterns": ["say"]})
+    await gui.send("ping", {}, id="subscribed")
+    await wait_until(lambda: _true(gui.of_type("pong")), 20, "pong")
+    return gui
+
+
+async def _broker_connected(server: ServerProcess, connected: bool) -> bool:
+    health = await server.health()
+    return bool(health and health["cluster"]["broker"]["connected"] is connected)
+
+
+async def test_a_redis_restart_is_survived(postgres: PostgresServer, tmp_path: Path) -> None:
+    with redis_server() as redis:
+        async with start_servers(["alpha", "beta"], postgres.database(), redis.url, tmp_path) as (
+            alpha,
+            beta,
+        ):
+            await _redis_restart(redis, alpha, beta)
+
+
+async def _redis_restart(redis: RedisServer, alpha: ServerProcess, beta: ServerProcess) -> None:
+    await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+    gui = await _listener(alpha)
+    local_robot = await WsClient.connect(alpha, "robot-R2-demo-token")
+    robot = await WsClient.connect(beta, "robot-R1-demo-token")
+    try:
+        await _said(robot, [gui])  # across processes, through Redis
+        redis.stop()
+        await wait_until(lambda: _broker_connected(beta, False), 20, "beta to see Redis gone")
+        # Without the broker each process still serves its own clients ...
+        await _said(local_robot, [gui])
+        # ... and what the server acknowledges is kept: a task created now is in the database.
+        async with httpx.AsyncClient(headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}) as http:
+            created = await http.post(
+                f"{alpha.url}/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}
+            )
+            assert created.status_code in (200, 201), created.text
+            redis.start()
+            for server in (alpha, beta):
+                await wait_until(lambda s=server: _broker_connected(s, True), 30, "resubscribed")
+            await _said(robot, [gui])  # the same WebSocket connections: nobody reconnected
+            listed = await http.get(f"{alpha.url}/api/tasks", params={"limit": 1000})
+        assert created.json()["id"] in {t["id"] for t in listed.json()["tasks"]}
+        assert gui.ws.close_code is None and robot.ws.close_code is None
+    finally:
+        for client in (gui, local_robot, robot):
+            await client.close()
+
+
+async def _serving(server: ServerProcess) -> bool:
+    health = await server.health()
+    return bool(health and health["cluster"]["serving"])
+
+
+@contextlib.asynccontextmanager
+async def _slow_link(port: int, delay: float) -> AsyncIterator[int]:
+    """A TCP proxy to 127.0.0.1:``port`` that delays every chunk by ``delay`` seconds each way
+    (a slow network); yields its own port."""
+
+    async def pump(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        queue: asyncio.Queue[tuple[float, bytes]] = asyncio.Queue()
+
+        async def later() -> None:
+            while True:
+                due, data = await queue.get()
+                await asyncio.sleep(max(0.0, due - time.monotonic()))
+                if not data:
+                    break
+                writer.write(data)
+                await writer.drain()
+            writer.close()
+
+        sender = asyncio.create_task(later())
+        with contextlib.suppress(ConnectionError):
+            while data := await reader.read(65536):
+                queue.put_nowait((time.monotonic() + delay, data))
+        queue.put_nowait((time.monotonic() + delay, b""))
+        with contextlib.suppress(ConnectionError):
+            await sender
+
+    links: set[asyncio.Future[Any]] = set()
+
+    async def handle(client_r: asyncio.StreamReader, client_w: asyncio.StreamWriter) -> None:
+        up_r, up_w = await asyncio.open_connection("127.0.0.1", port)
+        link = asyncio.gather(pump(client_r, up_w), pump(up_r, client_w), return_exceptions=True)
+        links.add(link)
+        try:
+            with contextlib.suppress(asyncio.CancelledError):
+                await link
+        finally:
+            for writer in (client_w, up_w):
+                writer.close()
+                with contextlib.suppress(ConnectionError, asyncio.CancelledError):
+                    await writer.wait_closed()
+
+    server = await asyncio.start_server(handle, "127.0.0.1", 0)
+    try:
+        yield int(server.sockets[0].getsockname()[1])
+    finally:
+        server.close()
+        for link in links:
+            link.cancel()
+        await asyncio.gather(*links, return_exceptions=True)
+        await asyncio.sleep(0.1)  # the handlers close their sockets
+
+
+async def test_a_slow_process_does_not_hold_the_others_back(
+    redis: RedisServer, postgres: PostgresServer, tmp_path: Path
+) -> None:
+    delay = 1.5
+    db = postgres.database()
+    async with (
+        start_servers(["alpha", "beta"], db, redis.url, tmp_path) as (alpha, beta),
+        _slow_link(redis.port, delay) as slow_port,
+    ):
+        slow_url = f"redis://127.0.0.1:{slow_port}/0"
+        gamma = ServerProcess("gamma", db, slow_url, tmp_path / "gamma.log")
+        try:
+            await wait_until(gamma.ready, 60, "gamma to join through its slow link")
+            await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+            robot = await WsClient.connect(alpha, "robot-R1-demo-token")
+            fast, slow = await _listener(beta), await _listener(gamma)
+            try:
+                await _said(robot, [fast, slow])  # everyone is subscribed everywhere
+                for _ in range(3):
+                    to_fast, to_slow = await _said(robot, [fast, slow])
+                    assert to_fast < delay, f"beta waited for the slow gamma: {to_fast:.2f} s"
+                    assert to_slow >= delay  # gamma gets it, late: its own link is slow
+            finally:
+                for client in (robot, fast, slow):
+                    await client.close()
+        finally:
+            gamma.stop()
