@@ -15,7 +15,6 @@ resynchronises (``on_connect``: robot_state with the running task at once).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from collections import OrderedDict, deque
@@ -24,6 +23,7 @@ from typing import Any, Protocol
 
 from guidebot.bus import Endpoint, Handler
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["DOWN_TYPES", "UP_TYPES", "Link", "Upstream"]
 
@@ -111,7 +111,7 @@ class Upstream(Protocol):
     # established connection is lost. Without it the link polls ``connected`` at 10 Hz.
 
 
-class Link:
+class Link(Service):
     """Forwards messages both ways between ``onboard`` and ``upstream``."""
 
     def __init__(
@@ -123,6 +123,7 @@ class Link:
         on_connect: Callable[[], Any] | None = None,
         on_disconnect: Callable[[], Any] | None = None,
     ) -> None:
+        super().__init__()
         self.onboard = onboard
         self.upstream = upstream
         self.robot = robot
@@ -135,32 +136,22 @@ class Link:
         # Request id -> on-board endpoint that sent it (bounded: oldest forgotten first).
         self._requesters: OrderedDict[str, str] = OrderedDict()
         self.resent = 0
-        self._unsubs: list[Callable[[], None]] = []
         # [time it went (or None while it waits in the hub client's offline queue), report]
         self._recent: deque[list[Any]] = deque(maxlen=MAX_RECENT_REPORTS)
         self._down_since: float | None = None
         self._watch: asyncio.Task[None] | None = None
 
-    def start(self) -> None:
+    async def on_start(self) -> None:
         for type_ in UP_TYPES:
-            self._unsubs.append(self.onboard.subscribe(type_, self._up))
+            self.subscribe(self.onboard, type_, self._up)
         for type_ in DOWN_TYPES:
-            self._unsubs.append(self.upstream.subscribe(type_, self._down))
-        self._unsubs.append(self.upstream.on_connect(self._connected))
+            self.subscribe(self.upstream, type_, self._down)
+        self.on_cleanup(self.upstream.on_connect(self._connected))
         on_disconnect = getattr(self.upstream, "on_disconnect", None)
         if callable(on_disconnect):
-            self._unsubs.append(on_disconnect(self._disconnected))
+            self.on_cleanup(on_disconnect(self._disconnected))
         else:
-            self._watch = asyncio.get_running_loop().create_task(self._watch_link(), name="link")
-
-    async def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
-        if self._watch is not None:
-            self._watch.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._watch
+            self._watch = self.spawn(self._watch_link(), name="link")
 
     async def _watch_link(self) -> None:
         """Notes when the link drops, for an upstream without ``on_disconnect``."""

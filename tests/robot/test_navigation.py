@@ -48,7 +48,7 @@ async def rig(demo_site: Site, helpers: Any) -> AsyncIterator[Rig]:
     )
     base = SimulatedBase(bus.endpoint("R1.base"), clock)
     nav = Navigator(bus.endpoint("R1"), clock, "R1", start_node="charge_a")
-    nav.start()
+    await nav.start()
     await base.start()
     yield Rig(bus, nav, base, building, traffic, seen)
     await nav.stop()
