@@ -114,19 +114,21 @@ class OnboardScreen(Service):
         self._watchers: set[asyncio.Queue[dict[str, Any]]] = set()
 
     async def on_start(self) -> None:
-        for pattern, handler in (
-            ("show_point", self._on_show_point),
-            ("ask_continue", self._on_ask),
-            ("speech_started", self._on_speech),
-            ("speech_ended", self._on_speech),
-            ("task_ended", self._on_task_ended),
-            ("task_assigned", self._on_task_assigned),
-            ("navigate_to", self._on_going),
-            ("goal_reached", self._on_going),
-            ("navigation_failed", self._on_going),
-            ("robot_state", self._on_robot_state),
-        ):
-            self.subscribe(self.ep, pattern, handler)
+        self.subscribe_all(
+            self.ep,
+            {
+                "show_point": self._on_show_point,
+                "ask_continue": self._on_ask,
+                "speech_started": self._on_speech,
+                "speech_ended": self._on_speech,
+                "task_ended": self._on_task_ended,
+                "task_assigned": self._on_task_assigned,
+                "navigate_to": self._on_going,
+                "goal_reached": self._on_going,
+                "navigation_failed": self._on_going,
+                "robot_state": self._on_robot_state,
+            },
+        )
 
     async def on_stop(self) -> None:
         if self._question_timer is not None:

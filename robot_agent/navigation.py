@@ -144,22 +144,24 @@ class Navigator(MotionControl):
     # -- life cycle -------------------------------------------------------------------------
 
     async def on_start(self) -> None:
-        for pattern, handler in (
-            ("navigate_to", self._on_navigate_to),
-            ("dock", self._on_dock),
-            ("face_people", self._on_face_people),
-            ("odometry", self._on_odometry),
-            ("bumper_hit", self._on_bumper),
-            ("base_fault", self._on_base_fault),
-            ("module_status", self._on_module_status),
-            ("door_opened", self._on_door),
-            ("door_closed", self._on_door),
-            ("command_failed", self._on_command_failed),
-            ("elevator_in_position", self._on_elevator),
-            ("area_granted", self._on_area_granted),
-            ("area_yield", self._on_area_yield),
-        ):
-            self.subscribe(self.ep, pattern, handler)
+        self.subscribe_all(
+            self.ep,
+            {
+                "navigate_to": self._on_navigate_to,
+                "dock": self._on_dock,
+                "face_people": self._on_face_people,
+                "odometry": self._on_odometry,
+                "bumper_hit": self._on_bumper,
+                "base_fault": self._on_base_fault,
+                "module_status": self._on_module_status,
+                "door_opened": self._on_door,
+                "door_closed": self._on_door,
+                "command_failed": self._on_command_failed,
+                "elevator_in_position": self._on_elevator,
+                "area_granted": self._on_area_granted,
+                "area_yield": self._on_area_yield,
+            },
+        )
 
     async def on_stop(self) -> None:
         await self.cancel()

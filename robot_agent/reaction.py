@@ -42,14 +42,17 @@ class ReactionTracker(Service):
         """Start before the task runner: this tap must see task_assigned first (the runner's
         handler starts the net, which asks for the path, inside that same publish)."""
         # Taps: path replies and velocity commands are addressed to other endpoints.
-        for pattern, handler in (
-            ("task_assigned", self._on_assigned),
-            ("run_petri_net", self._on_run),
-            ("get_path", self._on_get_path),
-            ("path", self._on_path),
-            ("task_cancel", self._on_cancel),
-        ):
-            self.subscribe(self.ep, pattern, handler, tap=True)
+        self.subscribe_all(
+            self.ep,
+            {
+                "task_assigned": self._on_assigned,
+                "run_petri_net": self._on_run,
+                "get_path": self._on_get_path,
+                "path": self._on_path,
+                "task_cancel": self._on_cancel,
+            },
+            tap=True,
+        )
         self.on_cleanup(self._drop_velocity_tap)
 
     def _drop_velocity_tap(self) -> None:

@@ -92,17 +92,19 @@ class TaskRunner(Service):
         self._waiting_seq = 0
 
     async def on_start(self) -> None:
-        for pattern, handler in (
-            ("task_assigned", self._on_assigned),
-            ("task_cancel", self._on_cancel),
-            ("petri_net_ended", self._on_net_ended),
-            ("petri_net_event", self._on_net_event),
-            ("show_point", self._on_point),
-            ("point_explained", self._on_point),
-            ("navigation_failed", self._on_problem),
-            ("robot_fault", self._on_problem),
-        ):
-            self.subscribe(self.ep, pattern, handler)
+        self.subscribe_all(
+            self.ep,
+            {
+                "task_assigned": self._on_assigned,
+                "task_cancel": self._on_cancel,
+                "petri_net_ended": self._on_net_ended,
+                "petri_net_event": self._on_net_event,
+                "show_point": self._on_point,
+                "point_explained": self._on_point,
+                "navigation_failed": self._on_problem,
+                "robot_fault": self._on_problem,
+            },
+        )
         self._start_waiting()
 
     @property
