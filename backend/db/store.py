@@ -64,7 +64,6 @@ class DbStore(Service):
         self._history: deque[dict[str, Any]] = deque()
         self._events: deque[dict[str, Any]] = deque()
         self._wake = asyncio.Event()
-        self._writer: asyncio.Task[None] | None = None
         self._flush_lock = asyncio.Lock()
         self.dropped = 0
         self.written = 0
@@ -112,7 +111,7 @@ class DbStore(Service):
 
     async def on_start(self) -> None:
         self.on_cleanup(self.flush)  # after the writer has stopped: write what is pending
-        self._writer = self.spawn(self._run(), name="db-writer")
+        self.spawn(self._run(), name="db-writer")
 
     async def _run(self) -> None:
         while True:
