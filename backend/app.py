@@ -24,11 +24,11 @@ from fastapi import APIRouter, FastAPI
 
 import guidebot
 from backend.api import ROUTERS as api_routers
-from backend.api.component import server_brain
 from backend.api.deps import ERRORS
 from backend.api.errors import install_error_handlers
 from backend.api.limits import BodyLimit
 from backend.auth import Authenticator, Role, TokenStore
+from backend.brain import server_brain
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
 from backend.cluster import FollowerRest, cluster_report, clustered

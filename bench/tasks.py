@@ -42,13 +42,13 @@ async def run(
     engine = make_engine(f"sqlite+aiosqlite:///{db_dir / 'bench.db'}")
     await migrate(engine)
     store = DbStore(make_sessionmaker(engine))
-    store.start()
+    await store.start()
     bus = Bus()
     # Robots here do not report state at a steady rate: keep them from being declared lost.
     manager = TaskManager(
         bus.endpoint("task_manager"), site, graph=graph, store=store, robot_timeout_s=3600
     )
-    manager.start()
+    await manager.start()
     fleet = bus.endpoint("fleet")
     last_order: dict[str, str] = {}
 

@@ -163,7 +163,7 @@ async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
     """Closed loop, every robot asking again at once: round trips per second at saturation."""
     hub = Hub()
     traffic = TrafficManager(hub.endpoint("traffic_manager"), site)
-    traffic.start()
+    await traffic.start()
     areas = traffic.locks.areas
 
     async def robot(k: int) -> None:
@@ -176,7 +176,7 @@ async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
     t0 = time.perf_counter()
     await asyncio.gather(*(robot(k) for k in range(robots)))
     elapsed = time.perf_counter() - t0
-    traffic.stop()
+    await traffic.stop()
     hub.close()
     return robots * rounds / elapsed
 

@@ -13,11 +13,11 @@ import asyncio
 import contextlib
 import functools
 from collections.abc import Callable
-from types import TracebackType
 from typing import Any
 
 from building_sim._modbus import FaultKind, ModuleFault, ModuleServer, ModuleStore
 from building_sim.devices import DoorSim, ElevatorSim
+from guidebot.service import Service
 from guidebot.site.building import IORef, PointKind
 from guidebot.site.building_config import BuildingConfig
 from guidebot.site.io_rules import Role, allowed
@@ -31,7 +31,7 @@ class SimulatorError(LookupError):
     """An unknown button, module, point or door was named."""
 
 
-class BuildingSimulator:
+class BuildingSimulator(Service):
     """The whole building: one ModuleServer per module, doors, elevators and buttons."""
 
     def __init__(
@@ -43,6 +43,7 @@ class BuildingSimulator:
         door_hold_s: float | None = None,
         elevator_hold_s: float = DEFAULT_ELEVATOR_HOLD_S,
     ) -> None:
+        super().__init__()
         if time_scale <= 0:
             raise ValueError(f"time_scale must be > 0, got {time_scale}")
         self.config = config.check()
@@ -95,35 +96,17 @@ class BuildingSimulator:
 
     # -- life cycle ----------------------------------------------------------------------------
 
-    async def start(self) -> None:
+    async def on_start(self) -> None:
         for server in self.servers.values():
             await server.start()
+            self.on_cleanup(functools.partial(_stop_quietly, server))
 
-    async def stop(self) -> None:
+    async def on_stop(self) -> None:
         for handle in self._releases.values():
             handle.cancel()
         self._releases.clear()
         for device in (*self.doors.values(), *self.elevators.values()):
             device.cancel()
-        for server in self.servers.values():
-            with contextlib.suppress(Exception):
-                await server.stop()
-
-    async def __aenter__(self) -> BuildingSimulator:
-        try:
-            await self.start()
-        except BaseException:
-            await self.stop()
-            raise
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        await self.stop()
 
     # -- what the outside sees -----------------------------------------------------------------
 
@@ -235,3 +218,9 @@ class BuildingSimulator:
             },
             "buttons": {b: bool(self.read(btn.input)) for b, btn in self.buttons.items()},
         }
+
+
+async def _stop_quietly(server: ModuleServer) -> None:
+    """A module server that fails to stop must not keep the others running."""
+    with contextlib.suppress(Exception):
+        await server.stop()

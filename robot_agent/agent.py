@@ -9,17 +9,16 @@ the net library, the main-task runner), interface (the link to the server, the t
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 from typing import Any, Literal
 
 from fastapi import FastAPI
 
 from guidebot.bus import Bus
+from guidebot.service import Service
 from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
 from robot_agent.gui import OnboardScreen, ScreenServer
@@ -132,8 +131,9 @@ def onboard_site(site: Any) -> OnboardSite:
     )
 
 
-class RobotAgent:
+class RobotAgent(Service):
     def __init__(self, config: AgentConfig) -> None:
+        super().__init__()
         self.config = config
         self.clock = Clock(config.time_scale)
         self.bus = Bus()
@@ -152,28 +152,12 @@ class RobotAgent:
         self.screen_server: ScreenServer | None = None
         self.reaction: ReactionTracker | None = None
         self.metrics: RobotMetrics | None = None
-        self._stack = contextlib.AsyncExitStack()
 
-    async def __aenter__(self) -> RobotAgent:
-        try:
-            await self.start()
-        except BaseException:
-            await self.stop()
-            raise
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        await self.stop()
-
-    async def start(self) -> None:
+    async def on_start(self) -> None:
+        """Every module in order; each is stopped, newest first, on stop or a failed start."""
         c = self.config
         name = c.name
-        bus, stack = self.bus, self._stack
+        bus = self.bus
 
         # The net library first: parsing it takes a while and must not stall the hardware's
         # watchdogs once RoboCAN runs (so it is parsed in a thread, before).
@@ -207,14 +191,11 @@ class RobotAgent:
             floor_of=onboard_site.floor_of,
             position_of=onboard_site.position_of,
         )
-        self.navigator.start()
-        stack.push_async_callback(self.navigator.stop)
+        await self.enter(self.navigator)
         self.head = HeadWatchdog(bus.endpoint("head_watchdog"), self.clock)
-        self.head.start()
-        stack.callback(self.head.stop)
+        await self.enter(self.head)
         self.speech = Speech(bus.endpoint("speech"), self.clock, engine=c.speech_engine)
-        self.speech.start()
-        stack.push_async_callback(self.speech.stop)
+        await self.enter(self.speech)
         self.battery = BatteryMonitor(
             bus.endpoint("battery"),
             name,
@@ -222,14 +203,13 @@ class RobotAgent:
             panic=c.battery_panic,
             alarms=not c.can,  # RoboCAN's battery entity publishes the alarms itself
         )
-        self.battery.start()
-        stack.callback(self.battery.stop)
+        await self.enter(self.battery)
 
         # Executive: RG dispatch and the main-task runner.
         nets = None
         if self.dispatch is not None:
             self.dispatch.open()
-            stack.callback(self.dispatch.close)
+            self.on_cleanup(self.dispatch.close)
             dispatch = self.dispatch
 
             def nets() -> list[str]:
@@ -237,8 +217,7 @@ class RobotAgent:
 
         navigator, battery = self.navigator, self.battery
         self.reaction = ReactionTracker(bus.endpoint("reaction"), name)
-        self.reaction.start()  # before the task runner: see robot_agent/reaction.py
-        stack.callback(self.reaction.stop)
+        await self.enter(self.reaction)  # before the task runner: see robot_agent/reaction.py
         self.tasks = TaskRunner(
             bus.endpoint("tasks"),
             name,
@@ -246,8 +225,7 @@ class RobotAgent:
             on_cancel=navigator.cancel_goal,
             on_start=battery.undock,
         )
-        self.tasks.start()
-        stack.callback(self.tasks.stop)
+        await self.enter(self.tasks)
         self.state = StateReporter(
             bus.endpoint("state"),
             name,
@@ -261,8 +239,7 @@ class RobotAgent:
         # Interface: the link to the server, the touch screen.
         if c.server:
             await self._start_link()
-        self.state.start()
-        stack.push_async_callback(self.state.stop)
+        await self.enter(self.state)
         if c.gui_port is not None:
             tours, pois = onboard_site.tours, onboard_site.pois
             self.screen = OnboardScreen(
@@ -278,22 +255,18 @@ class RobotAgent:
                 link_up=self._link_up if c.server else None,
                 offline_requests=c.offline_requests,
             )
-            self.screen.start()
-            stack.callback(self.screen.stop)
+            await self.enter(self.screen)
             self.metrics = RobotMetrics(bus.endpoint("metrics"), name, self._masters)
-            self.metrics.start()
-            stack.push_async_callback(self.metrics.stop)
+            await self.enter(self.metrics)
             self.screen_server = ScreenServer(
                 self.screen,
                 port=c.gui_port,
                 metrics=self.metrics.render,
                 extra=self._sim_routes(),
             )
-            await self.screen_server.start()
-            stack.push_async_callback(self.screen_server.stop)
+            await self.enter(self.screen_server)
         # Hardware last: its watchdogs run from here on, with every module ready to listen.
-        await self.hardware.start()
-        stack.push_async_callback(self.hardware.stop)
+        await self.enter(self.hardware)
         log.info(
             "robot %s up: hardware=%s link=%s screen=%s",
             name,
@@ -358,8 +331,7 @@ class RobotAgent:
         state = self.state
         assert state is not None
         follower = SiteFollower(self.bus.endpoint("site"), c.name, self._use_site)
-        follower.start()
-        self._stack.callback(follower.stop)
+        await self.enter(follower)
         self.site_follower = follower
         navigator = self.navigator
         assert navigator is not None
@@ -376,10 +348,9 @@ class RobotAgent:
             on_connect=on_connect,
             on_disconnect=navigator.link_lost,
         )
-        self.link.start()
-        self._stack.push_async_callback(self.link.stop)
+        await self.enter(self.link)
         await self.hub.start()
-        self._stack.push_async_callback(self.hub.close)
+        self.on_cleanup(self.hub.close)
 
     def _use_site(self, site: Any) -> None:
         """A new live site: the fallback planner and the screen's menu follow it."""
@@ -388,6 +359,3 @@ class RobotAgent:
             self.navigator.planner = view.planner
         if self.screen is not None:
             self.screen.tours, self.screen.pois = view.tours, view.pois
-
-    async def stop(self) -> None:
-        await self._stack.aclose()

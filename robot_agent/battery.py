@@ -9,17 +9,17 @@ charge now). Each alarm fires once per discharge and re-arms after charging abov
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["BatteryMonitor"]
 
 log = logging.getLogger(__name__)
 
 
-class BatteryMonitor:
+class BatteryMonitor(Service):
     def __init__(
         self,
         endpoint: BusEndpoint,
@@ -33,6 +33,7 @@ class BatteryMonitor:
     ) -> None:
         if not 0.0 <= panic < low < full <= 1.0:
             raise ValueError(f"need 0 <= panic < low < full <= 1, got {panic}, {low}, {full}")
+        super().__init__()
         self.ep = endpoint
         self.robot = robot
         self.low = low
@@ -46,18 +47,10 @@ class BatteryMonitor:
         self.docked_at: str | None = None
         self._low_sent = False
         self._panic_sent = False
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
-        self._unsubs = [
-            self.ep.subscribe("battery_level", self._on_level),
-            self.ep.subscribe("docked", self._on_docked),
-        ]
-
-    def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
+    async def on_start(self) -> None:
+        self.subscribe(self.ep, "battery_level", self._on_level)
+        self.subscribe(self.ep, "docked", self._on_docked)
 
     def _on_docked(self, message: Message) -> None:
         self.docked_at = str(message.payload.get("station") or message.payload.get("node") or "")

@@ -32,6 +32,7 @@ from pydantic import BaseModel, Field
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.paths import WEB_DIR
+from guidebot.service import Service
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
 from guidebot.site.schema import Site
@@ -68,7 +69,7 @@ class Answer(BaseModel):
     answer: Literal["yes", "no"]
 
 
-class OnboardScreen:
+class OnboardScreen(Service):
     """What the touch screen shows, and the question/answer logic (no HTTP here)."""
 
     def __init__(
@@ -86,6 +87,7 @@ class OnboardScreen:
         link_up: Callable[[], bool] | None = None,
         offline_requests: Literal["queue", "refuse"] = "queue",
     ) -> None:
+        super().__init__()
         self.ep = endpoint
         self.auto_answer = auto_answer
         """Demo: a simulated visitor who answers this after 3 robot seconds (None: nobody)."""
@@ -111,27 +113,25 @@ class OnboardScreen:
         self.answers: list[str] = []
         self._question_timer: asyncio.TimerHandle | None = None
         self._watchers: set[asyncio.Queue[dict[str, Any]]] = set()
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
-        sub = self.ep.subscribe
-        self._unsubs = [
-            sub("show_point", self._on_show_point),
-            sub("ask_continue", self._on_ask),
-            sub("speech_started", self._on_speech),
-            sub("speech_ended", self._on_speech),
-            sub("task_ended", self._on_task_ended),
-            sub("task_assigned", self._on_task_assigned),
-            sub("navigate_to", self._on_going),
-            sub("goal_reached", self._on_going),
-            sub("navigation_failed", self._on_going),
-            sub("robot_state", self._on_robot_state),
-        ]
+    async def on_start(self) -> None:
+        self.subscribe_all(
+            self.ep,
+            {
+                "show_point": self._on_show_point,
+                "ask_continue": self._on_ask,
+                "speech_started": self._on_speech,
+                "speech_ended": self._on_speech,
+                "task_ended": self._on_task_ended,
+                "task_assigned": self._on_task_assigned,
+                "navigate_to": self._on_going,
+                "goal_reached": self._on_going,
+                "navigation_failed": self._on_going,
+                "robot_state": self._on_robot_state,
+            },
+        )
 
-    def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
+    async def on_stop(self) -> None:
         if self._question_timer is not None:
             self._question_timer.cancel()
 
@@ -427,7 +427,7 @@ class _QuietServer(uvicorn.Server):
         yield
 
 
-class ScreenServer:
+class ScreenServer(Service):
     """uvicorn serving the screen app on 127.0.0.1 (port 0: any free port, read back)."""
 
     def __init__(
@@ -439,6 +439,7 @@ class ScreenServer:
         metrics: Callable[[], bytes] | None = None,
         extra: Callable[[FastAPI], None] | None = None,
     ) -> None:
+        super().__init__()
         self.screen = screen
         self.metrics = metrics
         self.extra = extra
@@ -451,7 +452,7 @@ class ScreenServer:
     def url(self) -> str:
         return f"http://{self.host}:{self.port}"
 
-    async def start(self) -> None:
+    async def on_start(self) -> None:
         config = uvicorn.Config(
             create_screen_app(self.screen, metrics=self.metrics, extra=self.extra),
             host=self.host,
@@ -463,6 +464,7 @@ class ScreenServer:
         )
         self._server = _QuietServer(config)
         self._task = asyncio.create_task(self._server.serve(), name="screen-server")
+        self.on_cleanup(self._shut_down)
         async with asyncio.timeout(20):
             while not self._server.started:
                 if self._task.done():
@@ -472,7 +474,8 @@ class ScreenServer:
         sockets = self._server.servers[0].sockets
         self.port = sockets[0].getsockname()[1]
 
-    async def stop(self) -> None:
+    async def _shut_down(self) -> None:
+        """Graceful: uvicorn closes its connections itself (a cancel would cut them)."""
         if self._server is not None and self._task is not None:
             self._server.should_exit = True
             with contextlib.suppress(asyncio.CancelledError):

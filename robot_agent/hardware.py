@@ -12,6 +12,7 @@ import logging
 from typing import Any, Protocol
 
 from guidebot.bus import Endpoint
+from guidebot.service import Service
 from robot_agent.clock import Clock
 from robot_agent.sim_base import SimulatedBase
 
@@ -28,23 +29,21 @@ class Hardware(Protocol):
     def describe(self) -> dict[str, Any]: ...
 
 
-class BareSimulation:
+class BareSimulation(Service):
     """A simulated base on the on-board bus, without CAN."""
 
     def __init__(self, endpoint: Endpoint, clock: Clock) -> None:
+        super().__init__()
         self.base = SimulatedBase(endpoint, clock)
 
-    async def start(self) -> None:
-        await self.base.start()
-
-    async def stop(self) -> None:
-        await self.base.stop()
+    async def on_start(self) -> None:
+        await self.enter(self.base)
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "bare-simulation", "velocity_commands": self.base.velocity_commands}
 
 
-class RoboCANHardware:
+class RoboCANHardware(Service):
     """RoboCAN (robot_agent.robocan.RoboCanStack): master(s) and, simulated, the BellBot set."""
 
     def __init__(
@@ -59,6 +58,7 @@ class RoboCANHardware:
         battery_panic: float,
         battery_level: float | None = None,
     ) -> None:
+        super().__init__()
         self.endpoint = endpoint
         self.clock = clock
         self.can_spec = can
@@ -69,7 +69,7 @@ class RoboCANHardware:
         self.battery_level = battery_level
         self.stack: Any = None
 
-    async def start(self) -> None:
+    async def on_start(self) -> None:
         from robot_agent.robocan.drivers import DriverConfig
         from robot_agent.robocan.stack import RoboCanStack
 
@@ -85,16 +85,12 @@ class RoboCANHardware:
         )
         if self.simulate and self.battery_level is not None:
             self.stack.simulator.battery_level = self.battery_level
-        await self.stack.start()
+        await self.enter(self.stack)
         if self.simulate:
             try:
                 await self.stack.wait_online(timeout=20.0)
             except TimeoutError as exc:
                 log.warning("%s: %s", self.robot, exc)
-
-    async def stop(self) -> None:
-        if self.stack is not None:
-            await self.stack.stop()
 
     def describe(self) -> dict[str, Any]:
         modules = self.stack.module_table() if self.stack is not None else []

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
 from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 from robot_agent.clock import Clock
 
 __all__ = ["HeadWatchdog"]
@@ -23,7 +23,7 @@ __all__ = ["HeadWatchdog"]
 log = logging.getLogger(__name__)
 
 
-class HeadWatchdog:
+class HeadWatchdog(Service):
     def __init__(
         self,
         endpoint: BusEndpoint,
@@ -32,24 +32,19 @@ class HeadWatchdog:
         timeout_s: float = 3.0,
         min_wall_s: float = 0.5,
     ) -> None:
+        super().__init__()
         self.ep = endpoint
         self.clock = clock
         self.timeout_s = timeout_s
         self.min_wall_s = min_wall_s
         self.degraded = 0
         self._pending: dict[str, tuple[Any, asyncio.TimerHandle]] = {}
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
-        self._unsubs = [
-            self.ep.subscribe("move_servos", self._on_move),
-            self.ep.subscribe("servo_in_position", self._on_in_position),
-        ]
+    async def on_start(self) -> None:
+        self.subscribe(self.ep, "move_servos", self._on_move)
+        self.subscribe(self.ep, "servo_in_position", self._on_in_position)
 
-    def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
+    async def on_stop(self) -> None:
         for _, timer in self._pending.values():
             timer.cancel()
         self._pending.clear()

@@ -21,7 +21,6 @@ acknowledged to their sender, every copy, and a repeated id is not published on 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from collections import OrderedDict
@@ -31,6 +30,7 @@ from typing import Any, Protocol
 from guidebot.bus import Endpoint, Handler
 from guidebot.delivery import ACK, MUST_ARRIVE_DOWN, MUST_ARRIVE_UP, Courier, Seen, ack_for
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["DOWN_TYPES", "UP_TYPES", "Link", "Upstream"]
 
@@ -104,7 +104,7 @@ class Upstream(Protocol):
     # established connection is lost. Without it the link polls ``connected`` at 10 Hz.
 
 
-class Link:
+class Link(Service):
     """Forwards messages both ways between ``onboard`` and ``upstream``."""
 
     def __init__(
@@ -118,6 +118,7 @@ class Link:
         retry_initial_s: float = 1.0,
         retry_max_s: float = 8.0,
     ) -> None:
+        super().__init__()
         self.onboard = onboard
         self.upstream = upstream
         self.robot = robot
@@ -139,34 +140,26 @@ class Link:
         """Must-arrive messages going up, kept until the hub acknowledges them."""
         self.seen = Seen(SEEN_IDS)
         """Must-arrive ids that came down, handled once each."""
-        self._unsubs: list[Callable[[], None]] = []
         self._down_since: float | None = None
         self._watch: asyncio.Task[None] | None = None
 
-    def start(self) -> None:
+    async def on_start(self) -> None:
         for type_ in UP_TYPES:
-            self._unsubs.append(self.onboard.subscribe(type_, self._up))
+            self.subscribe(self.onboard, type_, self._up)
         for type_ in DOWN_TYPES:
-            self._unsubs.append(self.upstream.subscribe(type_, self._down))
-        self._unsubs.append(self.upstream.subscribe(ACK, self._acked))
-        self._unsubs.append(self.upstream.on_connect(self._connected))
+            self.subscribe(self.upstream, type_, self._down)
+        self.subscribe(self.upstream, ACK, self._acked)
+        self.on_cleanup(self.upstream.on_connect(self._connected))
         if not self.upstream.connected.is_set():
             self.courier.pause()  # not connected yet: the first connection resumes it
         on_disconnect = getattr(self.upstream, "on_disconnect", None)
         if callable(on_disconnect):
-            self._unsubs.append(on_disconnect(self._disconnected))
+            self.on_cleanup(on_disconnect(self._disconnected))
         else:
-            self._watch = asyncio.get_running_loop().create_task(self._watch_link(), name="link")
+            self._watch = self.spawn(self._watch_link(), name="link")
 
-    async def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
+    async def on_stop(self) -> None:
         self.courier.close()
-        if self._watch is not None:
-            self._watch.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._watch
 
     async def _watch_link(self) -> None:
         """Notes when the link drops, for an upstream without ``on_disconnect``."""

@@ -8,7 +8,6 @@ task that sleeps 0.5 s and records how late it wakes (docs/metrics.md).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -19,6 +18,7 @@ from prometheus_client.registry import Collector
 
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["RobotMetrics"]
 
@@ -28,10 +28,11 @@ FRAME_BITS_MAX = 135  # 8 data bytes, worst-case stuffing, interframe space (doc
 COUNTERS = ("frames_rx", "frames_tx", "bad_frame", "unknown_id", "send_errors", "overflow")
 
 
-class RobotMetrics:
+class RobotMetrics(Service):
     """Registry of one agent; ``masters()`` lists its RoboCAN masters (none without CAN)."""
 
     def __init__(self, endpoint: Endpoint, robot: str, masters: Callable[[], list[Any]]) -> None:
+        super().__init__()
         self.ep = endpoint
         self.robot = robot
         self.masters = masters
@@ -44,21 +45,11 @@ class RobotMetrics:
         )
         self.losses = 0
         self._last: tuple[float, int] | None = None
-        self._task: asyncio.Task[None] | None = None
-        self._unsub: Callable[[], None] | None = None
         self.registry.register(_CanCollector(self))
 
-    def start(self) -> None:
-        self._unsub = self.ep.subscribe("module_status", self._on_status)
-        self._task = asyncio.get_running_loop().create_task(self._watch_lag(), name="loop-lag")
-
-    async def stop(self) -> None:
-        if self._unsub is not None:
-            self._unsub()
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+    async def on_start(self) -> None:
+        self.subscribe(self.ep, "module_status", self._on_status)
+        self.spawn(self._watch_lag(), name="loop-lag")
 
     def _on_status(self, message: Message) -> None:
         if message.payload.get("state") == "lost":

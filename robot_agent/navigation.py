@@ -24,15 +24,14 @@ import asyncio
 import contextlib
 import logging
 import math
-import time
 from collections.abc import Callable, Mapping
-from enum import StrEnum
 from typing import Any
 
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
 from guidebot.site.steps import PathStep
 from robot_agent.clock import Clock
+from robot_agent.motion import MotionControl, NavigationFailed, NavState, wrap_angle
 
 __all__ = ["NavState", "NavigationFailed", "Navigator", "PathStep"]
 
@@ -45,14 +44,6 @@ WAIT_LOG_S = 60.0
 """Robot seconds between two "still waiting for ..." warnings."""
 
 
-class NavigationFailed(Exception):
-    """A goal could not be reached; ``reason`` is sent in navigation_failed."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
-
-
 class YieldRequested(Exception):
     """The Traffic Manager asks this robot to back off from an area (deadlock resolution)."""
 
@@ -62,25 +53,9 @@ class YieldRequested(Exception):
         self.node = node
 
 
-class NavState(StrEnum):
-    IDLE = "idle"
-    PLANNING = "planning"
-    MOVING = "moving"
-    WAITING_AREA = "waiting_area"
-    WAITING_DOOR = "waiting_door"
-    WAITING_ELEVATOR = "waiting_elevator"
-    RIDING = "riding"
-    DOOR_BLOCKED = "door_blocked"
-    BUMPED = "bumped"
-    FAULT = "fault"
-
-
-def _wrap(angle: float) -> float:
-    return math.atan2(math.sin(angle), math.cos(angle))
-
-
-class Navigator:
-    """The on-board navigation module (an endpoint on the on-board bus)."""
+class Navigator(MotionControl):
+    """The on-board navigation module (an endpoint on the on-board bus): route following
+    (areas, doors, elevators, goals) over the motion control it inherits."""
 
     def __init__(
         self,
@@ -102,12 +77,14 @@ class Navigator:
         position_of: Mapping[str, tuple[float, float]] | None = None,
         door_retry_s: float = 5.0,
     ) -> None:
-        self.ep = endpoint
-        self.clock = clock
-        self.robot = robot
-        self.max_speed = max_speed
-        self.max_turn = max_turn
-        self.tolerance_m = tolerance_m
+        super().__init__(
+            endpoint,
+            clock,
+            robot,
+            max_speed=max_speed,
+            max_turn=max_turn,
+            tolerance_m=tolerance_m,
+        )
         self.lookahead_m = lookahead_m
         self.bumper_pause_s = bumper_pause_s
         self.wait_timeout_s = wait_timeout_s
@@ -119,27 +96,16 @@ class Navigator:
         # Map pose and where the robot is in the graph.
         self.node: str | None = start_node
         self.floor: str | None = (floor_of or {}).get(start_node or "")
-        self.x = self.y = self.theta = 0.0
-        self.speed = 0.0
         self.localized = False
-        self.state = NavState.IDLE
         self.goal: str | None = None
         self.held_areas: set[str] = set()
-        self.fault: str | None = None
         self.bumps = 0
         self.yields = 0
         self._yield: YieldRequested | None = None
-        # Odometry frame -> map frame: map = R(dtheta) * odom + (tx, ty).
-        self._odom: tuple[float, float, float] | None = None
-        self._dtheta = 0.0
-        self._tx = self._ty = 0.0
-        self._odom_dt = 0.05
-        self._odom_last = 0.0
         if (start := (position_of or {}).get(start_node or "")) is not None:
             # Odometry starts at (0, 0): anchor it at the start node until the first path.
             self._tx, self._ty = start
             self.x, self.y = start
-        self._bumped_until = -1.0
         self._doors_open: set[str] = set()
         self._held_doors: set[str] = set()
         # id of our last open_door request -> door; the reason when the building refused it.
@@ -150,35 +116,31 @@ class Navigator:
         self._waiting_area: str | None = None
         self._wait_retry: Callable[[], None] | None = None
         self._news = asyncio.Event()
-        self._odom_event = asyncio.Event()
-        self._last_cmd: tuple[float, float, float] = (math.nan, math.nan, 0.0)
         self._goal_task: asyncio.Task[None] | None = None
-        self._unsubs: list[Callable[[], None]] = []
 
     # -- life cycle -------------------------------------------------------------------------
 
-    def start(self) -> None:
-        sub = self.ep.subscribe
-        self._unsubs = [
-            sub("navigate_to", self._on_navigate_to),
-            sub("dock", self._on_dock),
-            sub("face_people", self._on_face_people),
-            sub("odometry", self._on_odometry),
-            sub("bumper_hit", self._on_bumper),
-            sub("base_fault", self._on_base_fault),
-            sub("module_status", self._on_module_status),
-            sub("door_opened", self._on_door),
-            sub("door_closed", self._on_door),
-            sub("command_failed", self._on_command_failed),
-            sub("elevator_in_position", self._on_elevator),
-            sub("area_granted", self._on_area_granted),
-            sub("area_yield", self._on_area_yield),
-        ]
+    async def on_start(self) -> None:
+        self.subscribe_all(
+            self.ep,
+            {
+                "navigate_to": self._on_navigate_to,
+                "dock": self._on_dock,
+                "face_people": self._on_face_people,
+                "odometry": self._on_odometry,
+                "bumper_hit": self._on_bumper,
+                "base_fault": self._on_base_fault,
+                "module_status": self._on_module_status,
+                "door_opened": self._on_door,
+                "door_closed": self._on_door,
+                "command_failed": self._on_command_failed,
+                "elevator_in_position": self._on_elevator,
+                "area_granted": self._on_area_granted,
+                "area_yield": self._on_area_yield,
+            },
+        )
 
-    async def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
+    async def on_stop(self) -> None:
         await self.cancel()
 
     def cancel_goal(self) -> None:
@@ -235,21 +197,6 @@ class Navigator:
         if previous is not None and not previous.done():
             previous.cancel()
         self._goal_task = asyncio.get_running_loop().create_task(coro, name="navigation-goal")
-
-    def _on_odometry(self, message: Message) -> None:
-        p = message.payload
-        ox, oy, oth = float(p.get("x", 0.0)), float(p.get("y", 0.0)), float(p.get("theta", 0.0))
-        now = time.monotonic()
-        if self._odom_last:
-            self._odom_dt = 0.8 * self._odom_dt + 0.2 * min(1.0, now - self._odom_last)
-        self._odom_last = now
-        self._odom = (ox, oy, oth)
-        c, s = math.cos(self._dtheta), math.sin(self._dtheta)
-        self.x = c * ox - s * oy + self._tx
-        self.y = s * ox + c * oy + self._ty
-        self.theta = _wrap(oth + self._dtheta)
-        self.speed = float(p.get("v", 0.0))
-        self._odom_event.set()
 
     def _on_bumper(self, message: Message) -> None:
         self.bumps += 1
@@ -357,7 +304,7 @@ class Navigator:
 
     async def _face_people(self, request_id: str) -> None:
         with contextlib.suppress(NavigationFailed):
-            await self.turn_to(_wrap(self.theta + math.pi))
+            await self.turn_to(wrap_angle(self.theta + math.pi))
         self.ep.publish("people_faced", {}, correlation_id=request_id)
 
     async def go_to(self, node: str) -> None:
@@ -515,7 +462,7 @@ class Navigator:
         """Anchor the map pose at a known node (path start, elevator exit)."""
         heading = self.theta if theta is None else theta
         ox, oy, oth = self._odom or (0.0, 0.0, 0.0)
-        self._dtheta = _wrap(heading - oth)
+        self._dtheta = wrap_angle(heading - oth)
         c, s = math.cos(self._dtheta), math.sin(self._dtheta)
         self._tx = step.x - (c * ox - s * oy)
         self._ty = step.y - (s * ox + c * oy)
@@ -728,76 +675,6 @@ class Navigator:
             self._wait_retry = None
 
     def _check_fault(self) -> None:
-        if self.fault is not None:
-            raise NavigationFailed(f"base fault: {self.fault}")
+        super()._check_fault()
         if self._yield is not None:
             raise self._yield
-
-    # -- motion -------------------------------------------------------------------------------
-
-    async def drive_to(
-        self, x: float, y: float, *, stop: bool = True, clear: Callable[[], bool] | None = None
-    ) -> bool:
-        """Closed loop on odometry: turn towards the target, then drive with steering.
-
-        Returns False (stopped) as soon as ``clear()`` says the way is no longer free."""
-        self.state = NavState.MOVING
-        distance = math.hypot(x - self.x, y - self.y)
-        budget = self.clock.now() + 20.0 + 4.0 * distance / self.max_speed
-        fresh = self._odom is not None  # first command at once, from the pose we have
-        while True:
-            if not fresh:
-                await self._next_odometry()
-            fresh = False
-            self._check_fault()
-            if self.clock.now() < self._bumped_until:
-                self.state = NavState.BUMPED
-                self._send_velocity(0.0, 0.0)
-                budget += self._odom_dt * self.clock.time_scale
-                continue
-            self.state = NavState.MOVING
-            dx, dy = x - self.x, y - self.y
-            dist = math.hypot(dx, dy)
-            if dist < self.tolerance_m:
-                break
-            if clear is not None and not clear():
-                self._send_velocity(0.0, 0.0, force=True)
-                return False
-            if self.clock.now() > budget:
-                raise NavigationFailed(f"stuck {dist:.2f} m from ({x:.1f}, {y:.1f})")
-            err = _wrap(math.atan2(dy, dx) - self.theta)
-            step = max(1e-3, self._odom_dt * self.clock.time_scale)
-            w = max(-self.max_turn, min(self.max_turn, 0.7 * err / step))
-            v = 0.0 if abs(err) > 0.35 else min(self.max_speed, 0.7 * dist / step) * math.cos(err)
-            self._send_velocity(v, w)
-        if stop:
-            self._send_velocity(0.0, 0.0, force=True)
-        return True
-
-    async def turn_to(self, heading: float) -> None:
-        budget = self.clock.now() + 20.0
-        while True:
-            await self._next_odometry()
-            self._check_fault()
-            err = _wrap(heading - self.theta)
-            if abs(err) < 0.08 or self.clock.now() > budget:
-                break
-            step = max(1e-3, self._odom_dt * self.clock.time_scale)
-            self._send_velocity(0.0, max(-self.max_turn, min(self.max_turn, 0.7 * err / step)))
-        self._send_velocity(0.0, 0.0, force=True)
-
-    async def _next_odometry(self) -> None:
-        self._odom_event.clear()
-        try:
-            async with asyncio.timeout(2.0):  # not wait_for: see _wait_until
-                await self._odom_event.wait()
-        except TimeoutError:
-            raise NavigationFailed("no odometry from the base") from None
-
-    def _send_velocity(self, v: float, w: float, *, force: bool = False) -> None:
-        last_v, last_w, last_t = self._last_cmd
-        now = time.monotonic()
-        if not force and abs(v - last_v) < 0.01 and abs(w - last_w) < 0.01 and now - last_t < 0.5:
-            return
-        self._last_cmd = (v, w, now)
-        self.ep.publish("set_velocity", {"v": round(v, 4), "w": round(w, 4)})

@@ -20,14 +20,16 @@ from typing import Any
 
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["ReactionTracker"]
 
 
-class ReactionTracker:
+class ReactionTracker(Service):
     """Stamps one main task at a time; publishes ``task_reaction`` when the robot moves."""
 
     def __init__(self, endpoint: Endpoint, robot: str) -> None:
+        super().__init__()
         self.ep = endpoint
         self.robot = robot
         self.sent = 0
@@ -35,26 +37,27 @@ class ReactionTracker:
         self._instance = ""
         self._path_request: str | None = None
         self._velocity_unsub: Callable[[], None] | None = None
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
+    async def on_start(self) -> None:
         """Start before the task runner: this tap must see task_assigned first (the runner's
         handler starts the net, which asks for the path, inside that same publish)."""
         # Taps: path replies and velocity commands are addressed to other endpoints.
-        sub = self.ep.subscribe
-        self._unsubs = [
-            sub("task_assigned", self._on_assigned, tap=True),
-            sub("run_petri_net", self._on_run, tap=True),
-            sub("get_path", self._on_get_path, tap=True),
-            sub("path", self._on_path, tap=True),
-            sub("task_cancel", self._on_cancel, tap=True),
-        ]
+        self.subscribe_all(
+            self.ep,
+            {
+                "task_assigned": self._on_assigned,
+                "run_petri_net": self._on_run,
+                "get_path": self._on_get_path,
+                "path": self._on_path,
+                "task_cancel": self._on_cancel,
+            },
+            tap=True,
+        )
+        self.on_cleanup(self._drop_velocity_tap)
 
-    def stop(self) -> None:
-        for unsub in (*self._unsubs, self._velocity_unsub):
-            if unsub is not None:
-                unsub()
-        self._unsubs.clear()
+    def _drop_velocity_tap(self) -> None:
+        if self._velocity_unsub is not None:
+            self._velocity_unsub()
         self._velocity_unsub = None
 
     def _on_assigned(self, message: Message) -> None:

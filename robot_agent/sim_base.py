@@ -9,18 +9,18 @@ stop on bumper_hit exactly like the RoboCAN master does.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 import time
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 from robot_agent.clock import Clock
 
 __all__ = ["SimulatedBase"]
 
 
-class SimulatedBase:
+class SimulatedBase(Service):
     """Unicycle model with acceleration limits; odometry starts at (0, 0, 0)."""
 
     def __init__(
@@ -32,6 +32,7 @@ class SimulatedBase:
         max_accel: float = 1.0,
         max_wacc: float = 3.0,
     ) -> None:
+        super().__init__()
         self.ep = endpoint
         self.clock = clock
         self.period = 1.0 / rate_hz
@@ -41,11 +42,6 @@ class SimulatedBase:
         self.v = self.w = 0.0
         self.v_cmd = self.w_cmd = 0.0
         self.velocity_commands = 0
-        self._task: asyncio.Task[None] | None = None
-        self._unsubs = [
-            endpoint.subscribe("set_velocity", self._on_velocity),
-            endpoint.subscribe("bumper_hit", self._on_stop),
-        ]
 
     def _on_velocity(self, message: Message) -> None:
         self.v_cmd = float(message.payload.get("v", 0.0))
@@ -55,16 +51,10 @@ class SimulatedBase:
     def _on_stop(self, _message: Message) -> None:
         self.v_cmd = self.w_cmd = self.v = self.w = 0.0
 
-    async def start(self) -> None:
-        self._task = asyncio.create_task(self._run(), name="sim-base")
-
-    async def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+    async def on_start(self) -> None:
+        self.subscribe(self.ep, "set_velocity", self._on_velocity)
+        self.subscribe(self.ep, "bumper_hit", self._on_stop)
+        self.spawn(self._run(), name="sim-base")
 
     def step(self, dt: float) -> None:
         """Advance the model by ``dt`` robot seconds."""

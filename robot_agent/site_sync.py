@@ -10,28 +10,24 @@ from typing import Any
 
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["SiteFollower"]
 
 log = logging.getLogger(__name__)
 
 
-class SiteFollower:
+class SiteFollower(Service):
     def __init__(self, endpoint: Endpoint, robot: str, apply: Callable[[Any], None]) -> None:
         """``apply`` receives the validated ``Site`` of each new version."""
+        super().__init__()
         self.ep = endpoint
         self.robot = robot
         self.apply = apply
         self.version = 0
-        self._unsub: Callable[[], None] | None = None
 
-    def start(self) -> None:
-        self._unsub = self.ep.subscribe("site_changed", self._on_changed)
-
-    def stop(self) -> None:
-        if self._unsub is not None:
-            self._unsub()
-            self._unsub = None
+    async def on_start(self) -> None:
+        self.subscribe(self.ep, "site_changed", self._on_changed)
 
     def announce(self) -> None:
         """Tell the server which version this robot runs (0: none from the server yet)."""

@@ -14,17 +14,16 @@ voice for is simulated (timed) and logged. speech_started / speech_ended carry `
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import shutil
 import subprocess
 import tempfile
 import wave
-from collections.abc import Callable
 from pathlib import Path
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.service import Service, cancel_and_wait
 from robot_agent.clock import Clock
 
 __all__ = ["Speech", "espeak_voices", "simulated_duration", "voice_for"]
@@ -60,7 +59,7 @@ def simulated_duration(text: str) -> float:
     return 0.3 + len(text.split()) / WORDS_PER_SECOND
 
 
-class Speech:
+class Speech(Service):
     """The speech module (an endpoint on the on-board bus)."""
 
     def __init__(
@@ -71,6 +70,7 @@ class Speech:
         engine: str | None = "auto",
         playback: bool = False,
     ) -> None:
+        super().__init__()
         self.ep = endpoint
         self.clock = clock
         self.engine = shutil.which("espeak-ng") if engine == "auto" else engine
@@ -79,19 +79,12 @@ class Speech:
         self.spoken = 0
         self._voices: frozenset[str] | None = None
         self._task: asyncio.Task[None] | None = None
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
-        self._unsubs = [self.ep.subscribe("say", self._on_say)]
+    async def on_start(self) -> None:
+        self.subscribe(self.ep, "say", self._on_say)
 
-    async def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+    async def on_stop(self) -> None:
+        await cancel_and_wait(self._task)
 
     def _on_say(self, message: Message) -> None:
         text = str(message.payload.get("text") or "")[:MAX_TEXT]

@@ -7,13 +7,13 @@ hub) and on demand (``publish_now``) after a reconnect so the server resynchroni
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from collections.abc import Callable
 from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.robot import RobotMode
+from guidebot.service import Service
 from robot_agent.battery import BatteryMonitor
 from robot_agent.navigation import Navigator
 from robot_agent.tasks import TaskRunner
@@ -21,7 +21,7 @@ from robot_agent.tasks import TaskRunner
 __all__ = ["StateReporter"]
 
 
-class StateReporter:
+class StateReporter(Service):
     def __init__(
         self,
         endpoint: BusEndpoint,
@@ -33,6 +33,7 @@ class StateReporter:
         nets: Callable[[], list[str]] | None = None,
         period_s: float = 1.0,
     ) -> None:
+        super().__init__()
         self.ep = endpoint
         self.robot = robot
         self.nav = navigator
@@ -44,26 +45,14 @@ class StateReporter:
         self.poi: tuple[str | None, str] | None = None
         """(task id, point) of the last show_point: the tour's current step."""
         self.seq = 0
-        self._task: asyncio.Task[None] | None = None
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
-        self._unsubs = [
-            self.ep.subscribe("module_status", self._on_module_status),
-            self.ep.subscribe("show_point", self._on_show_point),
-            # A fault is told at once: the server must not hand a broken robot more work
-            # in the meantime (it did, a task every few ms, until the next periodic state).
-            self.ep.subscribe("robot_fault", self._on_fault),
-        ]
-        self._task = asyncio.get_running_loop().create_task(self._run(), name="robot-state")
-
-    async def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+    async def on_start(self) -> None:
+        self.subscribe(self.ep, "module_status", self._on_module_status)
+        self.subscribe(self.ep, "show_point", self._on_show_point)
+        # A fault is told at once: the server must not hand a broken robot more work
+        # in the meantime (it did, a task every few ms, until the next periodic state).
+        self.subscribe(self.ep, "robot_fault", self._on_fault)
+        self.spawn(self._run(), name="robot-state")
 
     def _on_fault(self, _message: Message) -> None:
         self.publish_now()

@@ -16,6 +16,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
 
@@ -68,7 +69,7 @@ class MainTask:
         self.phase = to
 
 
-class TaskRunner:
+class TaskRunner(Service):
     """Runs main tasks and the waiting task through RG dispatch."""
 
     def __init__(
@@ -80,37 +81,34 @@ class TaskRunner:
         on_cancel: Callable[[], None] | None = None,
         on_start: Callable[[], None] | None = None,
     ) -> None:
+        super().__init__()
         self.ep = endpoint
         self.robot = robot
         self.waiting_net = waiting_net
         self.on_cancel = on_cancel
-        self.on_start = on_start
+        self.on_task_start = on_start
         self.current: MainTask | None = None
         self.finished: list[MainTask] = []
         self.running_nets: dict[str, str] = {}
         self._waiting_instance: str | None = None
         self._waiting_seq = 0
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
-        sub = self.ep.subscribe
-        self._unsubs = [
-            sub("task_assigned", self._on_assigned),
-            sub("task_cancel", self._on_cancel),
-            sub("petri_net_ended", self._on_net_ended),
-            sub("petri_net_event", self._on_net_event),
-            sub("show_point", self._on_point),
-            sub("point_explained", self._on_point),
-            sub("navigation_failed", self._on_problem),
-            sub("robot_fault", self._on_problem),
-            sub("error", self._on_refused),
-        ]
+    async def on_start(self) -> None:
+        self.subscribe_all(
+            self.ep,
+            {
+                "task_assigned": self._on_assigned,
+                "task_cancel": self._on_cancel,
+                "petri_net_ended": self._on_net_ended,
+                "petri_net_event": self._on_net_event,
+                "show_point": self._on_point,
+                "point_explained": self._on_point,
+                "navigation_failed": self._on_problem,
+                "robot_fault": self._on_problem,
+                "error": self._on_refused,
+            },
+        )
         self._start_waiting()
-
-    def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
 
     @property
     def task_id(self) -> str | None:
@@ -153,8 +151,8 @@ class TaskRunner:
         task = MainTask(task_id, net, dict(params), instance_id=f"{self.robot}-task-{task_id}")
         self.current = task
         self._kill_waiting()
-        if self.on_start is not None:
-            self.on_start()
+        if self.on_task_start is not None:
+            self.on_task_start()
         self.running_nets[task.instance_id] = net
         request = self.ep.publish(
             "run_petri_net",

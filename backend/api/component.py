@@ -1,28 +1,20 @@
-"""The server brain as one app component: database, site, Task Manager, Traffic Manager,
-event log, building buttons and robot tokens. Listed in backend.app.COMPONENTS."""
+"""What the server brain (backend/brain.py) is made of: the site as first stored, robot
+tokens, the hub messages the event log keeps, robot link announcements, offline locks."""
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import FastAPI
 
-from backend.alerts import AlertBoard
 from backend.auth import Role, TokenStore, is_digest, token_digest
-from backend.db import DbStore, make_engine, make_sessionmaker, migrate
-from backend.fencing import deciding_endpoint
-from backend.health import ComponentState
+from backend.db import DbStore
 from backend.settings import published_tokens, weak_secret
 from backend.site.service import EMPTY_SITE, SiteService
-from backend.tasks.buttons import ButtonWatcher
-from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
-from guidebot.messages import Message
-from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 from guidebot.site.validate import validate_site
 from guidebot.site.yamlio import load_site_file
@@ -32,7 +24,7 @@ __all__ = [
     "LOGGED_TYPES",
     "InsecureSite",
     "hash_robot_tokens",
-    "server_brain",
+    "watch_offline_locks",
     "weak_robot_tokens",
 ]
 
@@ -140,109 +132,3 @@ async def watch_offline_locks(
             traffic.check_offline_locks(grace_s)
         except Exception:
             log.exception("offline lock check failed")
-
-
-@contextlib.asynccontextmanager
-async def server_brain(app: FastAPI) -> AsyncIterator[None]:
-    settings = app.state.settings
-    hub = app.state.hub
-    health = app.state.health
-    engine = make_engine(settings.db_url)
-    try:
-        try:
-            await migrate(engine)
-        except Exception as exc:
-            health.set("database", ComponentState.failed, f"{type(exc).__name__}: {exc}")
-            raise
-        store = DbStore(make_sessionmaker(engine))
-        store.start()
-        health.set("database", ComponentState.ok, engine.url.get_backend_name())
-        try:
-            site, version = await _initial_site(app, store)
-            if not settings.development and (problems := weak_robot_tokens(site)):
-                raise InsecureSite(
-                    f"refusing to start with environment={settings.environment!r}: "
-                    + "; ".join(problems)
-                    + " (give the robots real tokens in the site, or GUIDEBOT_ENVIRONMENT="
-                    "development)"
-                )
-            sites = SiteService(site, version, store)
-            # Seconds on a large site: built in a thread so the event loop keeps serving.
-            graph = await asyncio.to_thread(SiteGraph, site)
-
-            def log_event(kind: str, data: dict[str, Any]) -> None:
-                store.record_event(kind, "traffic_manager", data)
-
-            alerts = AlertBoard(hub.endpoint("alerts"), on_event=log_event)
-            traffic = TrafficManager(
-                deciding_endpoint(app, "traffic_manager"),
-                site,
-                graph=graph,
-                on_event=log_event,
-                alerts=alerts,
-            )
-            tasks = TaskManager(
-                deciding_endpoint(app, "task_manager"), site, graph=graph, store=store
-            )
-            buttons = ButtonWatcher(deciding_endpoint(app, "buttons"), tasks, site)
-            known_tokens: dict[str, str] = {}
-            _sync_robot_tokens(app.state.tokens, site, known_tokens)
-
-            async def on_site(new: Site) -> None:
-                new_graph = await asyncio.to_thread(SiteGraph, new)
-                # One synchronous block: every module switches to the new site at once.
-                traffic.load_site(new, new_graph)
-                tasks.load_site(new, new_graph)
-                buttons.load_site(new)
-                _sync_robot_tokens(app.state.tokens, new, known_tokens)
-
-            sites.on_change(on_site)
-            logger = hub.endpoint("event_log")
-
-            def log_message(msg: Message) -> None:
-                store.record_event(msg.type, msg.source, msg.payload)
-
-            for pattern in LOGGED_TYPES:
-                logger.subscribe(pattern, log_message, tap=True)
-            for pattern in LOGGED_BROADCASTS:
-                logger.subscribe(pattern, log_message)
-            # The log's mark of a new server life: grants of an earlier one are void (robots
-            # declare what they hold again in their robot_state; guidebot/invariants.py).
-            store.record_event("server_started", "server", {"site_version": version})
-            restored = await store.load_open_tasks()
-            tasks.restore(restored)
-            traffic.start()
-            traffic.await_resync(
-                {t.robot for t in restored if t.robot and not t.final}, settings.lock_resync_s
-            )
-            health.set("traffic_manager", ComponentState.ok)
-            tasks.start()
-            health.set("task_manager", ComponentState.ok)
-            buttons.start()
-            app.state.store = store
-            app.state.sites = sites
-            app.state.task_manager = tasks
-            app.state.traffic = traffic
-            app.state.staff_alerts = alerts
-            stop_links = announce_robot_links(hub, sites)
-            locks = asyncio.get_running_loop().create_task(
-                watch_offline_locks(traffic, settings.lock_offline_grace_s),
-                name="offline-lock-watcher",
-            )
-            try:
-                yield
-            finally:
-                stop_links()
-                locks.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await locks
-                buttons.stop()
-                await tasks.stop()
-                traffic.stop()
-                for name in ("task_manager", "traffic_manager", "database"):
-                    health.set(name, ComponentState.stopped)
-                logger.close()
-        finally:
-            await store.stop()
-    finally:
-        await engine.dispose()

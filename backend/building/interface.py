@@ -21,7 +21,6 @@ import functools
 import logging
 import time
 from collections.abc import Awaitable, Callable, Mapping
-from types import TracebackType
 from typing import Any
 
 from pydantic import ValidationError
@@ -34,6 +33,7 @@ from backend.health import ComponentState
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.building import CallElevator, CloseDoor, OpenDoor, ReleaseDoor, SetOutput
+from guidebot.service import Service, cancel_and_wait
 from guidebot.site.building import Door, IOPoint, IORef, PointKind
 from guidebot.site.building_config import BuildingConfig
 from guidebot.site.io_rules import Role, allowed
@@ -49,7 +49,7 @@ class CommandError(Exception):
     """A building command that cannot be done; the text is the command_failed reason."""
 
 
-class BuildingInterface:
+class BuildingInterface(Service):
     """Polls the modules of one site and serves building commands on the hub."""
 
     def __init__(
@@ -62,6 +62,7 @@ class BuildingInterface:
         health_interval_s: float = 5.0,
         floor_of_node: Mapping[str, str] | None = None,
     ) -> None:
+        super().__init__()
         self.endpoint = endpoint
         self.config = config.check()
         self.filter_s = filter_ms / 1000
@@ -109,12 +110,17 @@ class BuildingInterface:
         }
         self._cabin: dict[tuple[str, str], bool] = {}
         self._commands: set[asyncio.Task[None]] = set()
-        self._unsubscribe: list[Callable[[], None]] = []
         self.events = 0
 
     # -- life cycle ----------------------------------------------------------------------------
 
-    async def start(self) -> None:
+    async def on_start(self) -> None:
+        # Given back in reverse: subscriptions, commands running, pollers, doors held.
+        self.on_cleanup(self._release_doors)
+        for poller in self.pollers.values():
+            poller.start()
+            self.on_cleanup(poller.stop)
+        self.on_cleanup(self._cancel_commands)
         handlers: dict[str, Callable[[Message], Awaitable[dict[str, Any]]]] = {
             "open_door": self._open_door,
             "release_door": self._release_door,
@@ -123,36 +129,17 @@ class BuildingInterface:
             "set_output": self._set_output,
         }
         for type_name, handler in handlers.items():
-            self._unsubscribe.append(
-                self.endpoint.subscribe(type_name, functools.partial(self._spawn, handler=handler))
+            self.subscribe(
+                self.endpoint, type_name, functools.partial(self._spawn, handler=handler)
             )
-        for poller in self.pollers.values():
-            poller.start()
 
-    async def stop(self) -> None:
-        for unsubscribe in self._unsubscribe:
-            unsubscribe()
-        self._unsubscribe.clear()
-        while pending := [t for t in self._commands if not t.done()]:
-            for task in pending:  # repeated: see ModulePoller.stop
-                task.cancel()
-            await asyncio.wait(pending, timeout=0.5)
-        for poller in self.pollers.values():
-            await poller.stop()
+    async def _cancel_commands(self) -> None:
+        for task in list(self._commands):
+            await cancel_and_wait(task)
+
+    def _release_doors(self) -> None:
         for keeper in self.doors.values():
             keeper.release_all()
-
-    async def __aenter__(self) -> BuildingInterface:
-        await self.start()
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        await self.stop()
 
     def component_state(self) -> tuple[ComponentState, str]:
         """For /api/health: degraded while any module does not answer normally."""

@@ -22,6 +22,7 @@ from backend.building._modbus import (
     ModuleExceptionAnswer,
     ModuleUnreachable,
 )
+from guidebot.service import cancel_and_wait
 from guidebot.site.building import BuildingModule, PointKind
 
 __all__ = ["HealthState", "ModuleHealth", "ModulePoller", "Sample"]
@@ -124,11 +125,7 @@ class ModulePoller:
 
     async def stop(self) -> None:
         task, self._task = self._task, None
-        # Python 3.11's wait_for (used inside pymodbus) can swallow a cancellation that races
-        # with an answer: cancel until the task is really done.
-        while task is not None and not task.done():
-            task.cancel()
-            await asyncio.wait([task], timeout=0.5)
+        await cancel_and_wait(task)  # cancelled until really done (pymodbus's wait_for)
         self.client.close()
 
     def _set_health(self, state: HealthState, error: str | None = None) -> None:

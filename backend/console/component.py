@@ -28,12 +28,12 @@ async def console(app: FastAPI) -> AsyncIterator[None]:
     )
     listener = relay_events(endpoint)
     store.listeners.append(listener)
-    feed.start()
+    await feed.start()
     app.state.console = feed
     app.state.alerts = alerts
     try:
         yield
     finally:
-        feed.stop()
+        await feed.stop()
         store.listeners.remove(listener)
         endpoint.close()

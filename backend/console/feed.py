@@ -21,6 +21,7 @@ from typing import Any, Protocol
 from backend.console.alerts import AlertBook
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 
 __all__ = ["ConsoleFeed", "RunningNet"]
 
@@ -72,7 +73,7 @@ def lock_dict(view: Any) -> dict[str, Any]:
     }
 
 
-class ConsoleFeed:
+class ConsoleFeed(Service):
     def __init__(
         self,
         endpoint: Endpoint,
@@ -80,6 +81,7 @@ class ConsoleFeed:
         alerts: AlertBook,
         robots: Callable[[], set[str]],
     ) -> None:
+        super().__init__()
         self.endpoint = endpoint
         self.locks = locks
         self.alerts = alerts
@@ -88,9 +90,8 @@ class ConsoleFeed:
         self.nets: dict[tuple[str, str], RunningNet] = {}
         self._diff_scheduled = False
         self._lost_modules: set[tuple[str, str]] = set()
-        self._unsubs: list[Callable[[], None]] = []
 
-    def start(self) -> None:
+    async def on_start(self) -> None:
         self.lock_views = {v.area: lock_dict(v) for v in self.locks.lock_views()}
         handlers: dict[str, Callable[[Message], None]] = {
             "robot_state": self._on_robot_state,
@@ -105,14 +106,7 @@ class ConsoleFeed:
         }
         for pattern in {*LOCK_TRIGGERS, *handlers}:
             handler = handlers.get(pattern)
-            self._unsubs.append(
-                self.endpoint.subscribe(pattern, self._make_handler(pattern, handler), tap=True)
-            )
-
-    def stop(self) -> None:
-        for unsub in self._unsubs:
-            unsub()
-        self._unsubs.clear()
+            self.subscribe(self.endpoint, pattern, self._make_handler(pattern, handler), tap=True)
 
     def _make_handler(
         self, pattern: str, handler: Callable[[Message], None] | None

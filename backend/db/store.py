@@ -10,7 +10,6 @@ by ``max_pending`` and the oldest unwritten ones are dropped (counted in ``dropp
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from collections import deque
@@ -29,6 +28,7 @@ from backend.db.models import (
     TaskRow,
 )
 from backend.tasks.model import FINAL_STATES, Task, TaskState
+from guidebot.service import Service
 
 __all__ = ["DbStore"]
 
@@ -55,15 +55,15 @@ TASK_FIELDS = (
 )
 
 
-class DbStore:
+class DbStore(Service):
     def __init__(self, sessionmaker: Any, *, max_pending: int = 100_000) -> None:
+        super().__init__()
         self.sessionmaker = sessionmaker
         self.max_pending = max_pending
         self._tasks: dict[str, dict[str, Any]] = {}
         self._history: deque[dict[str, Any]] = deque()
         self._events: deque[dict[str, Any]] = deque()
         self._wake = asyncio.Event()
-        self._writer: asyncio.Task[None] | None = None
         self._flush_lock = asyncio.Lock()
         self.dropped = 0
         self.written = 0
@@ -109,17 +109,9 @@ class DbStore:
         rows.append(row)
         self._wake.set()
 
-    def start(self) -> None:
-        self._writer = asyncio.get_running_loop().create_task(self._run(), name="db-writer")
-
-    async def stop(self) -> None:
-        """Stop the writer and write what is pending."""
-        if self._writer is not None:
-            self._writer.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._writer
-            self._writer = None
-        await self.flush()
+    async def on_start(self) -> None:
+        self.on_cleanup(self.flush)  # after the writer has stopped: write what is pending
+        self.spawn(self._run(), name="db-writer")
 
     async def _run(self) -> None:
         while True:

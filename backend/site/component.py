@@ -27,12 +27,12 @@ async def site_editor(app: FastAPI) -> AsyncIterator[None]:
 
     endpoint = hub.endpoint("site_editor")
     rollout = SiteRollout(endpoint, sites, connected_robots)
-    rollout.start()
+    await rollout.start()
     sites.on_change(rollout.on_site)
     app.state.site_drafts = drafts
     app.state.site_rollout = rollout
     try:
         yield
     finally:
-        rollout.stop()
+        await rollout.stop()
         endpoint.close()

@@ -15,6 +15,7 @@ from typing import Any
 from backend.site.service import SiteService
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 from guidebot.site.schema import Site
 
 __all__ = ["SiteRollout", "robot_view"]
@@ -27,13 +28,14 @@ def robot_view(site: Site) -> dict[str, Any]:
     return data
 
 
-class SiteRollout:
+class SiteRollout(Service):
     def __init__(
         self,
         endpoint: Endpoint,
         sites: SiteService,
         connected_robots: Callable[[], set[str]],
     ) -> None:
+        super().__init__()
         self.ep = endpoint
         self.sites = sites
         self.connected_robots = connected_robots
@@ -43,17 +45,11 @@ class SiteRollout:
         self.ms: float | None = None
         self._t0 = 0.0
         self._payload: dict[str, Any] = {}
-        self._unsub: Callable[[], None] | None = None
 
-    def start(self) -> None:
+    async def on_start(self) -> None:
         self._payload = self._make_payload(self.sites.site)
         self.version = self.sites.version
-        self._unsub = self.ep.subscribe("site_loaded", self._on_loaded)
-
-    def stop(self) -> None:
-        if self._unsub is not None:
-            self._unsub()
-            self._unsub = None
+        self.subscribe(self.ep, "site_loaded", self._on_loaded)
 
     def _make_payload(self, site: Site) -> dict[str, Any]:
         return {

@@ -8,12 +8,12 @@ press was seen). After a server restart the live requests are found again from t
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 
 from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError, TaskState
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 from guidebot.site.building import Button
 from guidebot.site.schema import Site
 
@@ -25,15 +25,15 @@ REQUESTER_PREFIX = "button:"
 FINAL = frozenset({TaskState.DONE.value, TaskState.FAILED.value, TaskState.CANCELLED.value})
 
 
-class ButtonWatcher:
+class ButtonWatcher(Service):
     def __init__(self, endpoint: BusEndpoint, tasks: TaskManager, site: Site) -> None:
+        super().__init__()
         self.endpoint = endpoint
         self.tasks = tasks
         self._buttons: dict[tuple[str, str], Button] = {}
         self._by_id: dict[str, Button] = {}
         self._lit: dict[str, Button] = {}  # task id -> button whose LED is on
         self._waiting: dict[str, str] = {}  # button id -> its live task id
-        self._unsubscribe: list[Callable[[], None]] = []
         self.presses_ignored = 0
         self.load_site(site)
 
@@ -41,20 +41,13 @@ class ButtonWatcher:
         self._buttons = {(b.input.module, b.input.point): b for b in site.buttons}
         self._by_id = {b.id: b for b in site.buttons}
 
-    def start(self) -> None:
-        self._unsubscribe = [
-            self.endpoint.subscribe("building_input_changed", self._on_input),
-            self.endpoint.subscribe("task_event", self._on_task_event),
-        ]
+    async def on_start(self) -> None:
+        self.subscribe(self.endpoint, "building_input_changed", self._on_input)
+        self.subscribe(self.endpoint, "task_event", self._on_task_event)
         for task in self.tasks.tasks.values():  # live requests restored after a restart
             button = self._by_id.get(task.requester.removeprefix(REQUESTER_PREFIX))
             if task.requester.startswith(REQUESTER_PREFIX) and button and not task.final:
                 self._track(button, task.id)
-
-    def stop(self) -> None:
-        for unsubscribe in self._unsubscribe:
-            unsubscribe()
-        self._unsubscribe.clear()
 
     def _on_input(self, msg: Message) -> None:
         key = (str(msg.payload.get("module")), str(msg.payload.get("point")))

@@ -11,7 +11,6 @@ import asyncio
 import contextlib
 import itertools
 import logging
-import math
 import time
 import uuid
 from collections import OrderedDict
@@ -20,6 +19,7 @@ from typing import Any, Protocol
 
 from pydantic import ValidationError
 
+from backend.tasks.choice import available, choose_robot, nearest
 from backend.tasks.eta import EtaEstimator
 from backend.tasks.model import (
     FINAL_STATES,
@@ -38,10 +38,11 @@ from guidebot.bus import BusEndpoint
 from guidebot.delivery import ack_for, courier_for, listen
 from guidebot.messages import Message
 from guidebot.payloads.tasks import TaskRequest, TourProgress
+from guidebot.service import Service
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages
 from guidebot.site.schema import Site
-from guidebot.task_kinds import KINDS, MANUAL_KINDS, UnknownTarget
+from guidebot.task_kinds import KINDS, UnknownTarget
 
 __all__ = ["TaskManager", "TaskStore"]
 
@@ -49,9 +50,6 @@ log = logging.getLogger(__name__)
 
 NETS = {kind: spec.net for kind, spec in KINDS.items()}
 DEFAULT_DURATION_S = {kind: spec.duration_s for kind, spec in KINDS.items()}
-BATTERY_WEIGHT_S = 120.0
-"""Cost in seconds of an empty battery when ranking robots (a full one costs nothing)."""
-UNKNOWN_POSITION_COST_S = 3600.0
 MAX_FINISHED_IN_MEMORY = 5000
 MAX_REMEMBERED_REQUESTS = 4096
 
@@ -62,7 +60,7 @@ class TaskStore(Protocol):
     def record(self, task: Task, event: str) -> None: ...
 
 
-class TaskManager:
+class TaskManager(Service):
     """One per server. ``graph`` is shared with the Traffic Manager (same site version)."""
 
     def __init__(
@@ -75,10 +73,11 @@ class TaskManager:
         robot_timeout_s: float = 10.0,
         lost_grace_s: float = 30.0,
         start_timeout_s: float = 30.0,
-        tick_s: float = 0.5,
+        tick_s: float | None = 0.5,
         max_queued: int = 100_000,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        super().__init__()
         self.endpoint = endpoint
         self.store = store
         self.robot_timeout_s = robot_timeout_s
@@ -98,12 +97,9 @@ class TaskManager:
         self._rather_not: dict[str, set[str]] = {}
         """Task -> robots it was taken from (lost, battery panic): used only if no other is free."""
         self._durations: dict[str, float] = dict(DEFAULT_DURATION_S)
-        self._unsubscribe: list[Callable[[], None]] = []
-        self._watchdog: asyncio.Task[None] | None = None
         self._writes: set[asyncio.Task[None]] = set()
         self._requests: OrderedDict[tuple[str, str], str] = OrderedDict()
         """(requester, message id) of hub task_requests -> their task: a repeat is not new."""
-        """Answers to hub task_requests waiting for their task to be written."""
         self._dispatching = False
         self._dispatch_again = False
         self._idle: set[str] = set()
@@ -112,34 +108,34 @@ class TaskManager:
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
+        """Waits, arrivals and durations told to visitors (backend/tasks/eta.py)."""
         self.courier = courier_for(endpoint)
         """task_assigned and task_cancel: sent again until the robot acknowledges them."""
-        """Waits, arrivals and durations told to visitors (backend/tasks/eta.py)."""
         self.load_site(site, self.graph)
 
     # --- life cycle ----------------------------------------------------------------------
-    def start(self) -> None:
-        sub = self.endpoint.subscribe
-        self._unsubscribe = [
-            sub("task_request", self._on_task_request),
-            sub("task_started", self._on_task_started),
-            sub("task_ended", self._on_task_ended),
-            sub("robot_state", self._on_robot_state),
-            sub("battery_low", self._on_battery_low),
-            sub("battery_panic", self._on_battery_panic),
-            sub("robot_disconnected", self._on_robot_disconnected),
-            sub("tour_progress", self._on_tour_progress),
-            *listen(self.endpoint, self.courier),
-        ]
-        with contextlib.suppress(RuntimeError):
-            self._watchdog = asyncio.get_running_loop().create_task(
-                self._watch(), name="task-manager-watchdog"
-            )
+    async def on_start(self) -> None:
+        self.subscribe_all(
+            self.endpoint,
+            {
+                "task_request": self._on_task_request,
+                "task_started": self._on_task_started,
+                "task_ended": self._on_task_ended,
+                "robot_state": self._on_robot_state,
+                "battery_low": self._on_battery_low,
+                "battery_panic": self._on_battery_panic,
+                "robot_disconnected": self._on_robot_disconnected,
+                "tour_progress": self._on_tour_progress,
+            },
+        )
+        for unsubscribe in listen(self.endpoint, self.courier):
+            self.on_cleanup(unsubscribe)
+        self.on_cleanup(self._finish_writes)
+        if self.tick_s is not None:  # None: whoever drives the clock calls check_timeouts
+            self.spawn(self._watch(), name="task-manager-watchdog")
 
-    async def stop(self) -> None:
-        for unsubscribe in self._unsubscribe:
-            unsubscribe()
-        self._unsubscribe.clear()
+    async def _finish_writes(self) -> None:
+        """Stop: retries end, and task writes in flight get 5 s to reach the database."""
         self.courier.close()
         if self._writes:
             with contextlib.suppress(TimeoutError):  # a database that never answers
@@ -147,11 +143,6 @@ class TaskManager:
                     await asyncio.gather(*self._writes, return_exceptions=True)
             for writing in self._writes:
                 writing.cancel()
-        if self._watchdog is not None:
-            self._watchdog.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._watchdog
-            self._watchdog = None
 
     def load_site(self, site: Site, graph: SiteGraph | None = None) -> None:
         """New site while running: robots added or removed, new map for costs."""
@@ -339,14 +330,7 @@ class TaskManager:
             self._dispatching = False
 
     def _available(self, robot: RobotInfo) -> bool:
-        if not robot.online or robot.fault or robot.needs_charge:
-            return False
-        if robot.battery <= robot.config.battery_low:
-            return False
-        if robot.current is None:
-            return True
-        current = self.tasks.get(robot.current)
-        return current is None or current.internal
+        return available(robot, self.tasks.get(robot.current) if robot.current else None)
 
     def _assign_queued(self) -> None:
         robots = self.robots
@@ -373,35 +357,13 @@ class TaskManager:
             self._assign(task, robot)
 
     def _best_robot(self, task: Task, free: dict[str, RobotInfo]) -> RobotInfo | None:
-        if task.pinned_robot is not None:
-            robot = free.get(task.pinned_robot)
-            if robot is not None and robot.out_of_service and task.kind not in MANUAL_KINDS:
-                return None
-            return robot
-        avoid = self._avoid.get(task.id, ())
-        rather_not = self._rather_not.get(task.id, ())
-        dist = self.graph.distances_to(self._target_node(task.kind, task.params))
-        best: RobotInfo | None = None
-        best_cost = math.inf
-        best_is_fallback = True
-        for robot in free.values():
-            if robot.name in avoid or robot.out_of_service:
-                continue
-            fallback = robot.name in rather_not
-            metres = dist.get(robot.node) if robot.node is not None else None
-            travel = (
-                metres / robot.config.max_speed_mps
-                if metres is not None
-                else UNKNOWN_POSITION_COST_S
-            )
-            cost = travel + (1.0 - robot.battery) * BATTERY_WEIGHT_S
-            # Another robot first; the one it was taken from only if no other is free now, so
-            # a visitor never waits for a busy robot while the returning one stands idle.
-            if (best_is_fallback and not fallback) or (
-                fallback == best_is_fallback and cost < best_cost
-            ):
-                best, best_cost, best_is_fallback = robot, cost, fallback
-        return best
+        return choose_robot(
+            task,
+            free,
+            lambda: self.graph.distances_to(self._target_node(task.kind, task.params)),
+            avoid=self._avoid.get(task.id, ()),
+            rather_not=self._rather_not.get(task.id, ()),
+        )
 
     def _assign(self, task: Task, robot: RobotInfo) -> None:
         if robot.current is not None:
@@ -484,13 +446,7 @@ class TaskManager:
         return False
 
     def _nearest(self, robot: RobotInfo, places: list[Any]) -> Any:
-        best, best_cost = None, math.inf
-        for place in places:
-            found = self.graph.distances_to(place.node).get(robot.node)
-            dist = math.inf if found is None else found
-            if best is None or dist < best_cost:
-                best, best_cost = place, dist
-        return best
+        return nearest(robot.node, places, self.graph.distances_to)
 
     def _internal(self, robot: RobotInfo, kind: str, params: dict[str, Any]) -> None:
         task = Task(
@@ -748,6 +704,7 @@ class TaskManager:
 
     # --- watchdog ------------------------------------------------------------------------
     async def _watch(self) -> None:
+        assert self.tick_s is not None
         while True:
             await asyncio.sleep(self.tick_s)
             try:

@@ -19,6 +19,7 @@ from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message
 from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
+from guidebot.service import Service
 from guidebot.site.graph import NoPath, PathResult, SiteGraph, UnknownNode
 from guidebot.site.schema import Site
 
@@ -30,7 +31,7 @@ FINAL_TASK_STATES = frozenset({"done", "failed", "cancelled"})
 EventSink = Callable[[str, dict[str, Any]], None]
 
 
-class TrafficManager:
+class TrafficManager(Service):
     """Paths and area locks for one site; ``load_site`` swaps the map while running."""
 
     def __init__(
@@ -42,10 +43,10 @@ class TrafficManager:
         on_event: EventSink | None = None,
         alerts: AlertBoard | None = None,
     ) -> None:
+        super().__init__()
         self.endpoint = endpoint
         self.on_event = on_event
         self.alerts = alerts if alerts is not None else AlertBoard(endpoint, on_event)
-        self._unsubscribe: list[Callable[[], None]] = []
         self._positions: dict[str, str] = {}
         self._paths: dict[str, PathResult] = {}
         self.site = site
@@ -62,23 +63,23 @@ class TrafficManager:
         """area_granted: sent again until the robot acknowledges it."""
 
     # --- life cycle ----------------------------------------------------------------------
-    def start(self) -> None:
-        sub = self.endpoint.subscribe
-        self._unsubscribe = [
-            sub("get_path", self._on_get_path),
-            sub("request_area", self._on_request_area),
-            sub("release_area", self._on_release_area),
-            sub("robot_state", self._on_robot_state),
-            sub("task_ended", self._on_task_ended),
-            sub("task_event", self._on_task_event),
-            sub("robot_disconnected", self._on_robot_disconnected),
-            *listen(self.endpoint, self.courier),
-        ]
+    async def on_start(self) -> None:
+        self.subscribe_all(
+            self.endpoint,
+            {
+                "get_path": self._on_get_path,
+                "request_area": self._on_request_area,
+                "release_area": self._on_release_area,
+                "robot_state": self._on_robot_state,
+                "task_ended": self._on_task_ended,
+                "task_event": self._on_task_event,
+                "robot_disconnected": self._on_robot_disconnected,
+            },
+        )
+        for unsubscribe in listen(self.endpoint, self.courier):
+            self.on_cleanup(unsubscribe)
 
-    def stop(self) -> None:
-        for unsubscribe in self._unsubscribe:
-            unsubscribe()
-        self._unsubscribe.clear()
+    async def on_stop(self) -> None:
         self.courier.close()
         if self._resync_timer is not None:
             self._resync_timer.cancel()

@@ -8,17 +8,16 @@ and, when simulating, the simulated modules on the first (virtual) bus in this p
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import copy
 import time
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import can
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.service import Service
 from robot_agent.robocan.busopen import open_bus, parse_bus_spec
 from robot_agent.robocan.drivers import DriverConfig, DriverRegistry
 from robot_agent.robocan.master import Master
@@ -50,7 +49,7 @@ class _LockedLogger(can.Listener):
             self._logger.stop()
 
 
-class RoboCanStack:
+class RoboCanStack(Service):
     """Masters + optional simulated robot, as one async context manager."""
 
     def __init__(
@@ -66,6 +65,7 @@ class RoboCanStack:
         layout: dict[int, str] | None = None,
         status_period_s: float = STATUS_PERIOD_S,
     ) -> None:
+        super().__init__()
         self.endpoint = endpoint
         self.bus_specs = list(buses or ["virtual:R1"])
         for spec in self.bus_specs:
@@ -85,38 +85,20 @@ class RoboCanStack:
         self.masters: list[Master] = []
         self._buses: list[can.BusABC] = []
         self._recorder: _LockedLogger | None = None
-        self._unsubscribe: list[Any] = []
         self.status_period_s = status_period_s
-        self._status_task: asyncio.Task[None] | None = None
 
-    async def __aenter__(self) -> RoboCanStack:
-        await self.start()
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        await self.stop()
-
-    async def start(self) -> None:
-        try:
-            if self.record is not None:
-                self._recorder = _LockedLogger(self.record)
-            for spec in self.bus_specs:
-                await self.start_master(spec)
-            self._status_task = asyncio.create_task(self._publish_status(), name="robocan-status")
-            if self.simulator is not None:
-                await self.simulator.start()
-                self._unsubscribe.append(self.endpoint.subscribe("module_plug", self._on_plug))
-                self._unsubscribe.append(
-                    self.endpoint.subscribe("sim_set_battery", self._on_set_battery)
-                )
-        except BaseException:
-            await self.stop()
-            raise
+    async def on_start(self) -> None:
+        # Given back in reverse: subscriptions, the status task, then masters and modules.
+        self.on_cleanup(self._stop_hardware)
+        if self.record is not None:
+            self._recorder = _LockedLogger(self.record)
+        for spec in self.bus_specs:
+            await self.start_master(spec)
+        self.spawn(self._publish_status(), name="robocan-status")
+        if self.simulator is not None:
+            await self.simulator.start()
+            self.subscribe(self.endpoint, "module_plug", self._on_plug)
+            self.subscribe(self.endpoint, "sim_set_battery", self._on_set_battery)
 
     async def start_master(self, spec: str) -> Master:
         bus = open_bus(spec)
@@ -141,15 +123,7 @@ class RoboCanStack:
         self._buses.remove(old.bus)
         return await self.start_master(self.bus_specs[index])
 
-    async def stop(self) -> None:
-        for unsubscribe in self._unsubscribe:
-            unsubscribe()
-        self._unsubscribe.clear()
-        if self._status_task is not None:
-            self._status_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._status_task
-            self._status_task = None
+    async def _stop_hardware(self) -> None:
         # Masters first: a robot shutting down must not report every module lost and a base
         # fault on its way out.
         for master in self.masters:

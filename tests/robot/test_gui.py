@@ -31,13 +31,13 @@ async def screen(helpers: Any) -> AsyncIterator[Screen]:
     tours = [{"id": "ground", "name": "Ground floor tour", "points": ["welcome"]}]
     pois = [{"id": "welcome", "name": "Welcome hall", "node": "hall"}]
     onboard = OnboardScreen(bus.endpoint("screen"), Clock(10.0), "R1", tours=tours, pois=pois)
-    onboard.start()
+    await onboard.start()
     server = ScreenServer(onboard, port=0)
     await server.start()
     assert server.port != 0
     yield Screen(bus, onboard, server, seen)
     await server.stop()
-    onboard.stop()
+    await onboard.stop()
 
 
 async def test_page_and_menu(screen: Screen) -> None:
@@ -92,9 +92,9 @@ async def test_demo_visitor_answers_by_itself(helpers: Any) -> None:
     bus = Bus()
     seen = helpers.Recorder(bus.endpoint("t"), "continue_answer")
     onboard = OnboardScreen(bus.endpoint("screen"), Clock(20.0), "R1", auto_answer="yes")
-    onboard.start()
+    await onboard.start()
     ask = bus.endpoint("net").publish("ask_continue", {"question": "Go on?", "timeout_s": 600})
     await seen.wait_for(lambda: seen.of("continue_answer"))
     [answer] = seen.of("continue_answer")
     assert answer.payload == {"answer": "yes"} and answer.correlation_id == ask.id
-    onboard.stop()
+    await onboard.stop()

@@ -29,7 +29,7 @@ async def screen_for(link: list[bool], policy: str) -> tuple[OnboardScreen, Scre
         link_up=lambda: link[0],
         offline_requests=policy,  # type: ignore[arg-type]
     )
-    onboard.start()
+    await onboard.start()
     server = ScreenServer(onboard, port=0)
     await server.start()
     return onboard, server
@@ -55,7 +55,7 @@ async def test_requests_while_the_link_is_down_are_queued_or_refused_as_configur
             assert down.status_code == 503 and "refused" in down.json()["detail"]
     finally:
         await server.stop()
-        onboard.stop()
+        await onboard.stop()
 
 
 async def test_texts_in_the_chosen_language_and_the_site_pictures() -> None:
@@ -77,4 +77,4 @@ async def test_texts_in_the_chosen_language_and_the_site_pictures() -> None:
             assert "script-src 'self'" in page.headers["content-security-policy"]
     finally:
         await server.stop()
-        onboard.stop()
+        await onboard.stop()

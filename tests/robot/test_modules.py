@@ -20,7 +20,7 @@ from robot_agent.tasks import IllegalTransition, MainTask, TaskPhase, TaskRunner
 async def test_speech_simulated_is_scaled_by_the_clock(helpers: Any) -> None:
     bus = Bus()
     speech = Speech(bus.endpoint("speech"), Clock(50.0), engine=None)
-    speech.start()
+    await speech.start()
     seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
     text = "Welcome to the museum, please follow me to the first room."
     loop = asyncio.get_running_loop()
@@ -43,7 +43,7 @@ async def test_speech_with_espeak_ng(helpers: Any) -> None:
     bus = Bus()
     speech = Speech(bus.endpoint("speech"), Clock(100.0))
     assert speech.engine is not None
-    speech.start()
+    await speech.start()
     seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
     bus.endpoint("net").publish("say", {"text": "Hello visitors.", "lang": "en"})
     await seen.wait_for(lambda: seen.of("speech_ended"))
@@ -54,7 +54,7 @@ async def test_speech_with_espeak_ng(helpers: Any) -> None:
 async def test_a_new_say_interrupts_the_current_one(helpers: Any) -> None:
     bus = Bus()
     speech = Speech(bus.endpoint("speech"), Clock(1.0), engine=None)
-    speech.start()
+    await speech.start()
     seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
     net = bus.endpoint("net")
     net.publish("say", {"text": "a long story " * 50})
@@ -67,10 +67,10 @@ async def test_a_new_say_interrupts_the_current_one(helpers: Any) -> None:
     await speech.stop()
 
 
-def test_battery_thresholds_fire_once_per_discharge(helpers: Any) -> None:
+async def test_battery_thresholds_fire_once_per_discharge(helpers: Any) -> None:
     bus = Bus()
     battery = BatteryMonitor(bus.endpoint("battery"), "R1", low=0.3, panic=0.1)
-    battery.start()
+    await battery.start()
     seen = helpers.Recorder(bus.endpoint("t"), "battery_low", "battery_panic", "charged")
     entity = bus.endpoint("entity")
     for level in (0.5, 0.31, 0.29, 0.25, 0.2, 0.09, 0.05):
@@ -101,12 +101,12 @@ def test_task_phase_transitions_are_checked() -> None:
         task.move(TaskPhase.RUNNING)
 
 
-def test_task_runner_reports_start_end_cancel_and_refuses_a_second_task(helpers: Any) -> None:
+async def test_task_runner_reports_start_end_cancel_and_refuses_a_second_task(helpers: Any) -> None:
     bus = Bus()
     cancelled: list[bool] = []
     runner = TaskRunner(bus.endpoint("tasks"), "R1", on_cancel=lambda: cancelled.append(True))
     seen = helpers.Recorder(bus.endpoint("t"), "task_*", "run_petri_net", "kill_petri_net")
-    runner.start()
+    await runner.start()
     tm = bus.endpoint("task_manager")
     dispatch = bus.endpoint("dispatch")
     # Idle: the waiting net runs.
@@ -152,7 +152,7 @@ async def test_a_net_refused_by_rg_ends_the_task_as_failed_with_rg_reason(helper
     dispatch.open()
     runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
     seen = helpers.Recorder(bus.endpoint("t"), "task_*")
-    runner.start()
+    await runner.start()
     bus.endpoint("tm").publish(
         "task_assigned", {"task_id": "t1", "robot": "R1", "net": "no_such_net"}
     )
@@ -163,14 +163,14 @@ async def test_a_net_refused_by_rg_ends_the_task_as_failed_with_rg_reason(helper
     dispatch.close()
 
 
-def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers: Any) -> None:
+async def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers: Any) -> None:
     """A net that fails says nothing itself: the reason is the last navigation failure or
     robot fault seen during the task, else a plain sentence, never empty (found under load
     in tests/robot/test_e2e.py and by the soak)."""
     bus = Bus()
     runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
     seen = helpers.Recorder(bus.endpoint("t"), "task_ended", "run_petri_net")
-    runner.start()
+    await runner.start()
     tm, dispatch, nav = bus.endpoint("tm"), bus.endpoint("dispatch"), bus.endpoint("navigation")
 
     def run_and_fail(task_id: str, *problems: tuple[str, dict[str, Any]]) -> dict[str, Any]:
@@ -197,7 +197,7 @@ def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers: Any) 
 async def test_head_watchdog_confirms_servos_a_lost_head_never_does(helpers: Any) -> None:
     bus = Bus()
     head = HeadWatchdog(bus.endpoint("head_watchdog"), Clock(10.0), timeout_s=1.0, min_wall_s=0.05)
-    head.start()
+    await head.start()
     seen = helpers.Recorder(bus.endpoint("t"), "servo_in_position")
     net = bus.endpoint("net")
     net.publish("move_servos", {"servos": {"mouth": 0.5, "left_eye": 1.0}})
@@ -207,7 +207,7 @@ async def test_head_watchdog_confirms_servos_a_lost_head_never_does(helpers: Any
     degraded = [m.payload for m in seen.messages if m.payload.get("degraded")]
     assert degraded == [{"servo": "left_eye", "position": 1.0, "degraded": True}]
     assert head.degraded == 1
-    head.stop()
+    await head.stop()
 
 
 class _FakeUpstream:
@@ -242,7 +242,7 @@ async def test_link_takes_a_kill_only_when_addressed_and_forwards_net_events() -
     up = _FakeUpstream()
     up.connected.set()
     link = Link(bus.endpoint("link"), up, "R1")
-    link.start()
+    await link.start()
     kills: list[Message] = []
     dispatch = bus.endpoint("dispatch")
     dispatch.subscribe("kill_petri_net", kills.append)
@@ -265,7 +265,7 @@ async def test_link_routes_replies_to_the_requester_and_never_echoes() -> None:
     up = _FakeUpstream()
     up.connected.set()
     link = Link(bus.endpoint("link"), up, "R1")
-    link.start()
+    await link.start()
     nav = bus.endpoint("navigation")
     request = asyncio.ensure_future(nav.request("get_path", {"to_node": "hall"}, timeout=5))
     await asyncio.sleep(0)
@@ -301,7 +301,7 @@ async def test_link_resends_reports_that_may_have_died_in_flight() -> None:
     up.connected.set()
     states: list[int] = []
     link = Link(bus.endpoint("link"), up, "R1", on_connect=lambda: states.append(1))
-    link.start()
+    await link.start()
     bus.endpoint("tasks").publish("task_ended", {"task_id": "t1", "robot": "R1"})
     await asyncio.sleep(0.15)  # the link's watcher is running
     up.connected.clear()  # the Wi-Fi drops
@@ -338,7 +338,7 @@ async def test_link_told_of_a_drop_resends_without_polling() -> None:
     up.connected.set()
     drops: list[bool] = []
     link = Link(bus.endpoint("link"), up, "R1", on_disconnect=lambda: drops.append(True))
-    link.start()
+    await link.start()
     assert link._watch is None  # nothing polls the connection
     tasks = bus.endpoint("tasks")
     tasks.publish("task_ended", {"task_id": "t1", "robot": "R1"})
@@ -361,7 +361,7 @@ async def test_link_resends_offline_reports_lost_in_a_second_drop() -> None:
     up = _FakeUpstreamWithDisconnect()
     up.connected.set()
     link = Link(bus.endpoint("link"), up, "R1")
-    link.start()
+    await link.start()
     up.drop()
     bus.endpoint("tasks").publish("task_ended", {"task_id": "t1", "robot": "R1"})  # queued
     for _ in range(2):  # back, then gone again at once, then back

@@ -32,7 +32,7 @@ async def rig(demo_site: Site, helpers: Any) -> AsyncIterator[Rig]:
     bus = Bus()
     clock = Clock(time_scale=20.0)
     traffic = TrafficManager(bus.endpoint("traffic"), demo_site)
-    traffic.start()
+    await traffic.start()
     building = helpers.BuildingStandIn(bus)
     seen = helpers.Recorder(
         bus.endpoint("test"),
@@ -48,12 +48,12 @@ async def rig(demo_site: Site, helpers: Any) -> AsyncIterator[Rig]:
     )
     base = SimulatedBase(bus.endpoint("R1.base"), clock)
     nav = Navigator(bus.endpoint("R1"), clock, "R1", start_node="charge_a")
-    nav.start()
+    await nav.start()
     await base.start()
     yield Rig(bus, nav, base, building, traffic, seen)
     await nav.stop()
     await base.stop()
-    traffic.stop()
+    await traffic.stop()
 
 
 async def test_navigate_through_door_corridor_area(rig: Rig) -> None:

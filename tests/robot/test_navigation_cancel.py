@@ -29,7 +29,7 @@ async def _waiting_for_odometry(nav: Navigator, odometry: Endpoint) -> asyncio.T
 async def test_goal_cancelled_as_odometry_arrives_stops_for_good() -> None:
     bus = Bus()
     nav = Navigator(bus.endpoint("R1"), Clock(time_scale=1.0), "R1", start_node="a")
-    nav.start()
+    await nav.start()
     commands: list[Message] = []
     bus.endpoint("probe").subscribe("set_velocity", commands.append)
     odometry = bus.endpoint("base")

@@ -30,7 +30,7 @@ async def test_spanish_is_spoken_with_the_spanish_voice_and_unknown_languages_ar
         pytest.skip("espeak-ng not installed (make system-deps)")
     bus = Bus()
     speech = Speech(bus.endpoint("speech"), Clock(100.0))
-    speech.start()
+    await speech.start()
     seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
     net = bus.endpoint("net")
     net.publish("say", {"text": "Bienvenidos al museo.", "lang": "es"})

@@ -102,8 +102,9 @@ def events(bus: Bus) -> list[Message]:
 
 
 @pytest.fixture
-def manager(bus: Bus, clock: Clock) -> Iterator[TaskManager]:
-    """A Task Manager over a bare bus with the demo site and short time-outs."""
+async def manager(bus: Bus, clock: Clock) -> AsyncIterator[TaskManager]:
+    """A Task Manager over a bare bus with the demo site and short time-outs; no watchdog
+    task (the tests drive the clock and call check_timeouts)."""
     tm = TaskManager(
         bus.endpoint("task_manager"),
         demo_site(),
@@ -111,6 +112,8 @@ def manager(bus: Bus, clock: Clock) -> Iterator[TaskManager]:
         robot_timeout_s=5,
         lost_grace_s=20,
         start_timeout_s=30,
+        tick_s=None,
     )
-    tm.start()
+    await tm.start()
     yield tm
+    await tm.stop()

@@ -17,7 +17,7 @@ async def test_migrations_build_the_schema_and_the_store_round_trips(db_url: str
             tables = await conn.run_sync(lambda c: set(inspect(c).get_table_names()))
         assert {"site", "tasks", "task_history", "events", "alembic_version"} <= tables
         store = DbStore(make_sessionmaker(engine))
-        store.start()
+        await store.start()
         task = Task("t1", "go_to", {"node": "hall"}, 3, "admin", 1)
         store.record(task, "created")
         task.move(TaskState.ASSIGNED)

@@ -23,9 +23,9 @@ from .test_tasks import fleet
 GRACE = 30.0
 
 
-def start_traffic(bus: Bus) -> tuple[TrafficManager, list[Message]]:
+async def start_traffic(bus: Bus) -> tuple[TrafficManager, list[Message]]:
     traffic = TrafficManager(bus.endpoint("traffic_manager"), demo_site())
-    traffic.start()
+    await traffic.start()
     alerts: list[Message] = []
     bus.endpoint("console").subscribe("staff_alert", alerts.append)
     return traffic, alerts
@@ -35,7 +35,7 @@ async def test_lock_of_a_robot_that_went_offline_before_entering_is_released(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     bus = Bus()
-    traffic, alerts = start_traffic(bus)
+    traffic, alerts = await start_traffic(bus)
     r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "gb1")
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
     r1.state("busy")  # granted, still outside at ga1
@@ -61,7 +61,7 @@ async def test_lock_of_a_robot_that_went_offline_before_entering_is_released(
 
 async def test_offline_holder_that_may_be_inside_keeps_the_lock_and_staff_are_alerted() -> None:
     bus = Bus()
-    traffic, alerts = start_traffic(bus)
+    traffic, alerts = await start_traffic(bus)
     r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "gb1")
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
     r1.node = "corridor_w"
@@ -85,7 +85,7 @@ async def test_offline_holder_that_may_be_inside_keeps_the_lock_and_staff_are_al
 
 async def test_robot_inside_an_area_another_holds_raises_a_conflict_alert() -> None:
     bus = Bus()
-    traffic, alerts = start_traffic(bus)
+    traffic, alerts = await start_traffic(bus)
     r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "gb1")
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
     r2.node = "corridor_e"

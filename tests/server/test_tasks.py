@@ -290,7 +290,7 @@ async def test_button_press_requests_a_task_and_lights_its_led(
 
     site = manager.site
     watcher = ButtonWatcher(bus.endpoint("buttons"), manager, site)
-    watcher.start()
+    await watcher.start()
     outputs: list[Message] = []
     bus.endpoint("building").subscribe("set_output", outputs.append)
     press = {"module": "otb_ground", "point": "button_entrance", "name": "b", "value": 1}
@@ -319,7 +319,7 @@ async def test_button_press_requests_a_task_and_lights_its_led(
     assert outputs[-1].payload["value"] == 0  # the tour is over: LED off
     building.publish("building_input_changed", press)  # a new press: a new request
     assert len([t for t in manager.tasks.values() if not t.internal]) == 2
-    watcher.stop()
+    await watcher.stop()
 
 
 async def test_site_change_cancels_queued_tasks_it_invalidates(manager: TaskManager) -> None:
@@ -351,7 +351,7 @@ async def test_a_robot_reporting_no_floor_is_on_its_nodes_floor() -> None:
     bus = Bus()
     site = demo_site()
     tasks = TaskManager(bus.endpoint("task_manager"), site)
-    tasks.start()
+    await tasks.start()
     try:
         r1 = RobotStub(bus, "R1", "gc1")
         r1.state()  # an agent without the site on board: node known, floor not

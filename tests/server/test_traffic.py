@@ -59,9 +59,9 @@ def bus() -> Bus:
     return Bus()
 
 
-def start_traffic(bus: Bus, site: Site) -> TrafficManager:
+async def start_traffic(bus: Bus, site: Site) -> TrafficManager:
     manager = TrafficManager(bus.endpoint("traffic_manager"), site)
-    manager.start()
+    await manager.start()
     return manager
 
 
@@ -111,7 +111,7 @@ def test_unknown_nodes_and_unreachable_targets_are_errors() -> None:
 
 
 async def test_get_path_is_answered_over_the_bus(bus: Bus) -> None:
-    start_traffic(bus, demo_site())
+    await start_traffic(bus, demo_site())
     robot = bus.endpoint("R1")
     ask = {"robot": "R1", "from_node": "entrance", "to_node": "gc3"}
     reply = await robot.request("get_path", ask)
@@ -122,7 +122,7 @@ async def test_get_path_is_answered_over_the_bus(bus: Bus) -> None:
 
 
 async def test_waiting_robots_are_served_in_order(bus: Bus) -> None:
-    traffic = start_traffic(bus, demo_site())
+    traffic = await start_traffic(bus, demo_site())
     r1, r2, r3 = (RobotStub(bus, n, "ga1") for n in ("R1", "R2", "R3"))
     for robot in (r1, r2, r3):
         robot.endpoint.publish("request_area", {"robot": robot.name, "area": "corridor"})
@@ -138,14 +138,14 @@ async def test_waiting_robots_are_served_in_order(bus: Bus) -> None:
 
 
 async def test_a_grant_answers_the_request_it_belongs_to(bus: Bus) -> None:
-    start_traffic(bus, demo_site())
+    await start_traffic(bus, demo_site())
     robot = RobotStub(bus, "R1", "ga1")
     reply = await robot.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
     assert reply.type == "area_granted"
 
 
 async def test_robot_may_not_ask_or_release_for_another(bus: Bus) -> None:
-    traffic = start_traffic(bus, demo_site())
+    traffic = await start_traffic(bus, demo_site())
     r1 = RobotStub(bus, "R1", "ga1")
     reply = await r1.endpoint.request("request_area", {"robot": "R2", "area": "corridor"})
     assert reply.type == "error"
@@ -159,7 +159,7 @@ async def test_robot_may_not_ask_or_release_for_another(bus: Bus) -> None:
 
 
 async def test_lock_is_released_when_the_robot_leaves_the_area(bus: Bus) -> None:
-    traffic = start_traffic(bus, demo_site())
+    traffic = await start_traffic(bus, demo_site())
     r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "gb1")
     r1.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
     r2.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
@@ -174,7 +174,7 @@ async def test_lock_is_released_when_the_robot_leaves_the_area(bus: Bus) -> None
 
 
 async def test_offline_holder_keeps_its_lock_until_staff_release_it(bus: Bus) -> None:
-    traffic = start_traffic(bus, demo_site())
+    traffic = await start_traffic(bus, demo_site())
     r1, r2 = RobotStub(bus, "R1", "corridor_w"), RobotStub(bus, "R2", "gb1")
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
     r1.state("busy")
@@ -188,7 +188,7 @@ async def test_offline_holder_keeps_its_lock_until_staff_release_it(bus: Bus) ->
 
 
 async def test_task_end_releases_locks_except_the_area_the_robot_stands_in(bus: Bus) -> None:
-    traffic = start_traffic(bus, demo_site())
+    traffic = await start_traffic(bus, demo_site())
     r1 = RobotStub(bus, "R1", "corridor_e")
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "elevator"})
@@ -198,7 +198,7 @@ async def test_task_end_releases_locks_except_the_area_the_robot_stands_in(bus: 
 
 
 async def test_head_on_with_known_paths_is_prevented(bus: Bus) -> None:
-    traffic = start_traffic(bus, line_site())
+    traffic = await start_traffic(bus, line_site())
     r1, r2 = RobotStub(bus, "R1", "w"), RobotStub(bus, "R2", "e")
     await r1.endpoint.request("get_path", {"robot": "R1", "from_node": "w", "to_node": "e"})
     await r2.endpoint.request("get_path", {"robot": "R2", "from_node": "e", "to_node": "w"})
@@ -216,7 +216,7 @@ async def test_head_on_with_known_paths_is_prevented(bus: Bus) -> None:
 
 
 async def test_head_on_without_paths_is_detected_and_one_robot_backs_off(bus: Bus) -> None:
-    traffic = start_traffic(bus, line_site())
+    traffic = await start_traffic(bus, line_site())
     r1, r2 = RobotStub(bus, "R1", "x1"), RobotStub(bus, "R2", "x2")
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "west"})
     await r2.endpoint.request("request_area", {"robot": "R2", "area": "east"})
@@ -234,7 +234,7 @@ async def test_head_on_without_paths_is_detected_and_one_robot_backs_off(bus: Bu
 
 
 async def test_three_robots_in_a_circle_all_get_through(bus: Bus) -> None:
-    traffic = start_traffic(bus, line_site())
+    traffic = await start_traffic(bus, line_site())
     robots = [RobotStub(bus, "R1", "a"), RobotStub(bus, "R2", "b"), RobotStub(bus, "R3", "c")]
     held = ["A", "B", "C"]
     for robot, area in zip(robots, held, strict=True):
@@ -282,7 +282,7 @@ async def test_a_restarted_server_takes_back_the_locks_robots_report(bus: Bus) -
         demo_site(),
         on_event=lambda kind, data: events.append((kind, data)),
     )
-    traffic.start()
+    await traffic.start()
     r1, r2 = RobotStub(bus, "R1", "corridor_w"), RobotStub(bus, "R2", "hall")
     r3 = RobotStub(bus, "R3", "ga1")
     r1.state("busy")  # inside the corridor: nobody else held it
@@ -314,7 +314,7 @@ async def test_after_a_restart_no_area_is_granted_before_the_robots_that_had_tas
 ) -> None:
     """R4 was inside the corridor when the server died; R1 came back first and asked for it.
     It must wait for R4's word (found by the soak: both drove in)."""
-    traffic = start_traffic(bus, demo_site())
+    traffic = await start_traffic(bus, demo_site())
     r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "corridor_e")
     traffic.await_resync({"R2", "R3"}, timeout_s=30)
     r1.state("busy")
@@ -326,14 +326,14 @@ async def test_after_a_restart_no_area_is_granted_before_the_robots_that_had_tas
     r2.node = "gb1"
     r2.state("busy", areas=[])
     await r1.wait_for("area_granted")
-    traffic.stop()
+    await traffic.stop()
 
 
 async def test_the_resync_wait_ends_without_a_robot_that_never_comes_back(bus: Bus) -> None:
-    traffic = start_traffic(bus, demo_site())
+    traffic = await start_traffic(bus, demo_site())
     traffic.await_resync({"R3"}, timeout_s=0.3)
     r1 = RobotStub(bus, "R1", "ga1")
     r1.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
     assert not r1.of_type("area_granted")
     await r1.wait_for("area_granted", timeout=10)
-    traffic.stop()
+    await traffic.stop()

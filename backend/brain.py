@@ -1,0 +1,149 @@
+"""The server brain wired in order: database, site, Traffic Manager, Task Manager, building
+buttons, event log, robot links and the offline-lock watcher (listed in backend.app.COMPONENTS).
+
+One flat exit stack, like the robot agent's (robot_agent/agent.py): each part is given back,
+newest first, when the server stops or when a later part fails to start. The helpers it uses
+(site import, robot tokens, what the event log keeps) are in backend/api/component.py.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+from typing import Any
+
+from fastapi import FastAPI
+
+from backend.alerts import AlertBoard
+from backend.api.component import (
+    LOGGED_BROADCASTS,
+    LOGGED_TYPES,
+    InsecureSite,
+    _initial_site,
+    _sync_robot_tokens,
+    announce_robot_links,
+    watch_offline_locks,
+    weak_robot_tokens,
+)
+from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.fencing import deciding_endpoint
+from backend.health import ComponentState
+from backend.site.service import SiteService
+from backend.tasks.buttons import ButtonWatcher
+from backend.tasks.manager import TaskManager
+from backend.traffic.manager import TrafficManager
+from guidebot.messages import Message
+from guidebot.service import Service
+from guidebot.site.graph import SiteGraph
+from guidebot.site.schema import Site
+
+__all__ = ["ServerBrain", "server_brain"]
+
+
+class ServerBrain(Service):
+    """Starts the brain's parts on ``app.state`` (store, sites, task_manager, traffic,
+    staff_alerts); ``stop`` gives them back in reverse order."""
+
+    def __init__(self, app: FastAPI) -> None:
+        super().__init__()
+        self.app = app
+
+    async def on_start(self) -> None:
+        app = self.app
+        settings = app.state.settings
+        hub = app.state.hub
+        health = app.state.health
+        engine = make_engine(settings.db_url)
+        self.on_cleanup(engine.dispose)
+        try:
+            await migrate(engine)
+        except Exception as exc:
+            health.set("database", ComponentState.failed, f"{type(exc).__name__}: {exc}")
+            raise
+        store = DbStore(make_sessionmaker(engine))
+        await self.enter(store)
+        health.set("database", ComponentState.ok, engine.url.get_backend_name())
+
+        site, version = await _initial_site(app, store)
+        if not settings.development and (problems := weak_robot_tokens(site)):
+            raise InsecureSite(
+                f"refusing to start with environment={settings.environment!r}: "
+                + "; ".join(problems)
+                + " (give the robots real tokens in the site, or GUIDEBOT_ENVIRONMENT="
+                "development)"
+            )
+        sites = SiteService(site, version, store)
+        # Seconds on a large site: built in a thread so the event loop keeps serving.
+        graph = await asyncio.to_thread(SiteGraph, site)
+
+        def log_event(kind: str, data: dict[str, Any]) -> None:
+            store.record_event(kind, "traffic_manager", data)
+
+        alerts = AlertBoard(hub.endpoint("alerts"), on_event=log_event)
+        traffic = TrafficManager(
+            deciding_endpoint(app, "traffic_manager"),
+            site,
+            graph=graph,
+            on_event=log_event,
+            alerts=alerts,
+        )
+        tasks = TaskManager(deciding_endpoint(app, "task_manager"), site, graph=graph, store=store)
+        buttons = ButtonWatcher(deciding_endpoint(app, "buttons"), tasks, site)
+        known_tokens: dict[str, str] = {}
+        _sync_robot_tokens(app.state.tokens, site, known_tokens)
+
+        async def on_site(new: Site) -> None:
+            new_graph = await asyncio.to_thread(SiteGraph, new)
+            # One synchronous block: every module switches to the new site at once.
+            traffic.load_site(new, new_graph)
+            tasks.load_site(new, new_graph)
+            buttons.load_site(new)
+            _sync_robot_tokens(app.state.tokens, new, known_tokens)
+
+        sites.on_change(on_site)
+        logger = hub.endpoint("event_log")
+        self.on_cleanup(logger.close)
+        self.on_cleanup(self._mark_stopped)  # after the managers below have stopped
+
+        def log_message(msg: Message) -> None:
+            store.record_event(msg.type, msg.source, msg.payload)
+
+        for pattern in LOGGED_TYPES:
+            logger.subscribe(pattern, log_message, tap=True)
+        for pattern in LOGGED_BROADCASTS:
+            logger.subscribe(pattern, log_message)
+        # The log's mark of a new server life: grants of an earlier one are void (robots
+        # declare what they hold again in their robot_state; guidebot/invariants.py).
+        store.record_event("server_started", "server", {"site_version": version})
+        restored = await store.load_open_tasks()
+        tasks.restore(restored)
+        await self.enter(traffic)
+        traffic.await_resync(
+            {t.robot for t in restored if t.robot and not t.final}, settings.lock_resync_s
+        )
+        health.set("traffic_manager", ComponentState.ok)
+        await self.enter(tasks)
+        health.set("task_manager", ComponentState.ok)
+        await self.enter(buttons)
+        app.state.store = store
+        app.state.sites = sites
+        app.state.task_manager = tasks
+        app.state.traffic = traffic
+        app.state.staff_alerts = alerts
+        self.spawn(
+            watch_offline_locks(traffic, settings.lock_offline_grace_s),
+            name="offline-lock-watcher",
+        )
+        self.on_cleanup(announce_robot_links(hub, sites))
+
+    def _mark_stopped(self) -> None:
+        for name in ("task_manager", "traffic_manager", "database"):
+            self.app.state.health.set(name, ComponentState.stopped)
+
+
+@contextlib.asynccontextmanager
+async def server_brain(app: FastAPI) -> AsyncIterator[None]:
+    """The brain as an app component (backend.app.COMPONENTS)."""
+    async with ServerBrain(app):
+        yield
