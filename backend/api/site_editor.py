@@ -177,6 +177,10 @@ async def versions(_: Admin, db: Store) -> list[dict[str, Any]]:
     return await db.site_versions()
 
 
+MAX_VERSION = 2**63 - 1
+"""The largest version number a database integer holds: larger ones are refused (422)."""
+
+
 async def _version_data(db: DbStore, version: int) -> dict[str, Any]:
     data = await db.site_version(version)
     if data is None:
@@ -186,7 +190,7 @@ async def _version_data(db: DbStore, version: int) -> dict[str, Any]:
 
 @router.get("/versions/{version}")
 async def version_document(
-    _: Admin, db: Store, version: Annotated[int, Path(ge=1)]
+    _: Admin, db: Store, version: Annotated[int, Path(ge=1, le=MAX_VERSION)]
 ) -> dict[str, Any]:
     return {"version": version, "site": await _version_data(db, version)}
 
@@ -196,7 +200,7 @@ async def diff(
     _: Admin,
     d: Drafts,
     db: Store,
-    from_version: Annotated[int, Query(alias="from", ge=1)],
+    from_version: Annotated[int, Query(alias="from", ge=1, le=MAX_VERSION)],
     to: Annotated[str, Query(max_length=16, pattern=r"^(\d+|draft)$")] = "draft",
 ) -> list[dict[str, Any]]:
     """What changed from a version to another version (or to the draft), element by element."""
@@ -211,7 +215,7 @@ async def rollback(
     who: Admin,
     d: Drafts,
     db: Store,
-    version: Annotated[int, Body(embed=True, ge=1)],
+    version: Annotated[int, Body(embed=True, ge=1, le=MAX_VERSION)],
 ) -> dict[str, Any]:
     """Publish a kept version again (as a new version); the draft becomes that site."""
     data = await _version_data(db, version)

@@ -69,7 +69,7 @@ async def test_a_repeated_task_assigned_is_handled_once_and_acked_each_time(
     upstream = await connect("R1")
     onboard = Bus()
     link = Link(onboard.endpoint("link"), upstream, "R1")
-    link.start()
+    await link.start()
     seen_on_board = Recorder(onboard.endpoint("tasks"), "task_assigned")
     await upstream.sync()
     endpoint = server.app.state.hub.endpoint("task_manager")
@@ -91,7 +91,7 @@ async def test_a_robot_report_whose_ack_is_lost_is_resent_and_handled_once(
     upstream = await connect("R1", backoff_initial=0.05)
     onboard = Bus()
     link = Link(onboard.endpoint("link"), upstream, "R1", retry_initial_s=0.05, retry_max_s=0.2)
-    link.start()
+    await link.start()
     await upstream.sync()
     handled: list[Message] = []
 
@@ -182,7 +182,7 @@ async def test_a_task_request_is_sent_again_until_answered(
     upstream = await connect("R1")
     onboard = Bus()
     link = Link(onboard.endpoint("link"), upstream, "R1", retry_initial_s=0.05, retry_max_s=0.2)
-    link.start()
+    await link.start()
     await upstream.sync()
     task_manager = server.app.state.hub.endpoint("task_manager")
     copies: list[Message] = []

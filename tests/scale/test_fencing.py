@@ -38,7 +38,7 @@ async def test_a_leader_past_its_lease_grants_nothing(postgres: PostgresServer) 
     try:
         await asyncio.wait_for(alpha.won.wait(), 30)
         beta.start()
-        traffic.start()
+        await traffic.start()
         assert alpha.may_decide()
         # While the lease runs the fenced Traffic Manager grants as usual.
         robots["R1"].publish("request_area", {"robot": "R1", "area": "corridor"})
@@ -57,7 +57,7 @@ async def test_a_leader_past_its_lease_grants_nothing(postgres: PostgresServer) 
         report = alpha.report()
         assert report["leading"] and not report["may_decide"]
     finally:
-        traffic.stop()
+        await traffic.stop()
         await alpha.stop()
         await beta.stop()
 

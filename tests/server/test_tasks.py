@@ -429,7 +429,7 @@ async def test_a_robots_task_request_is_answered_once_the_task_is_written(
         await migrate(engine)
         store = DbStore(make_sessionmaker(engine))
         tm = TaskManager(bus.endpoint("task_manager"), demo_site(), store=store)
-        tm.start()
+        await tm.start()
         robot = RobotStub(bus, "R1", "charge_a")
         robot.state()
         reply = await robot.endpoint.request(
