@@ -16,6 +16,7 @@ from backend.auth import Role, TokenStore, is_digest, token_digest
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.health import ComponentState
 from backend.settings import published_tokens, weak_secret
+from backend.site.offloop import off_loop
 from backend.site.service import EMPTY_SITE, SiteService
 from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.manager import TaskManager
@@ -186,7 +187,7 @@ async def server_brain(app: FastAPI) -> AsyncIterator[None]:
             _sync_robot_tokens(app.state.tokens, site, known_tokens)
 
             async def on_site(new: Site) -> None:
-                new_graph = await asyncio.to_thread(SiteGraph, new)
+                new_graph = await off_loop(SiteGraph, new)
                 # One synchronous block: every module switches to the new site at once.
                 traffic.load_site(new, new_graph)
                 tasks.load_site(new, new_graph)
