@@ -19,7 +19,7 @@ from guidebot.site.schema import Site
 
 __all__ = ["SLICE", "dump_site_doc", "prevalidate"]
 
-SLICE = 500
+SLICE = 200
 """Items per native call: a few milliseconds each."""
 
 
