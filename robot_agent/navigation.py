@@ -93,6 +93,10 @@ class Navigator(MotionControl):
         self.door_retry_s = door_retry_s
         self.planner = planner
         """On-board map (the site graph): plans when the Traffic Manager cannot be reached."""
+        self.plan_on_board = False
+        """The planner holds the server's live site version (set when ``site_changed`` was
+        applied): plan on board at once and only tell the Traffic Manager the path, saving the
+        get_path round trip (the same graph and search give the same path)."""
         # Map pose and where the robot is in the graph.
         self.node: str | None = start_node
         self.floor: str | None = (floor_of or {}).get(start_node or "")
@@ -318,6 +322,18 @@ class Navigator(MotionControl):
         await self.follow([PathStep.from_dict(s) for s in path.get("steps", [])])
 
     async def _get_path(self, node: str) -> dict[str, Any]:
+        if self.plan_on_board and self.planner is not None and self.node is not None:
+            try:
+                path = self.planner(self.node, node)
+            except Exception:  # the server answers why (unknown node, no path)
+                pass
+            else:
+                # The Traffic Manager keeps each robot's path (head-on prevention): it is
+                # told by the same request, whose answer nobody waits for.
+                self.ep.publish(
+                    "get_path", {"robot": self.robot, "from_node": self.node, "to_node": node}
+                )
+                return path
         attempts = 3 if self.planner is None else 1
         for attempt in range(attempts):
             try:

@@ -169,3 +169,43 @@ async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_rec
     assert "R1: area corridor came after" in caplog.text
     rig.nav.resync()  # nothing is waited for any more: nothing is asked
     assert len(asked()) == 2
+
+
+async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
+    rig: Rig, demo_site: Site
+) -> None:
+    """No get_path round trip before moving; the Traffic Manager still knows the path (its
+    head-on rule needs it), the same one it would have given."""
+    from robot_agent.agent import onboard_site
+
+    rig.nav.planner = onboard_site(demo_site).planner
+    rig.nav.plan_on_board = True
+    replies: list[Any] = []
+    rig.bus.endpoint("paths").subscribe("path", replies.append, tap=True)
+    net = rig.bus.endpoint("net")
+    net.publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert not rig.seen.of("navigation_failed")
+    assert replies[0].payload["nodes"][-1] == "gb1"
+    assert rig.traffic._paths["R1"].nodes == replies[0].payload["nodes"]
+    # A silent Traffic Manager is not waited for (without the on-board plan: path_timeout_s).
+    rig.traffic.stop()
+    rig.nav.path_timeout_s = 600.0
+    reached = len(rig.seen.of("goal_reached"))
+    net.publish("navigate_to", {"node": "gb2"})
+    await rig.seen.wait_for(
+        lambda: len(rig.seen.of("goal_reached")) > reached or rig.seen.of("navigation_failed")
+    )
+    assert not rig.seen.of("navigation_failed") and rig.nav.node == "gb2"
+
+
+async def test_an_on_board_plan_that_fails_asks_the_traffic_manager_for_the_reason(
+    rig: Rig, demo_site: Site
+) -> None:
+    from robot_agent.agent import onboard_site
+
+    rig.nav.planner = onboard_site(demo_site).planner
+    rig.nav.plan_on_board = True
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "nowhere"})
+    await rig.seen.wait_for(lambda: rig.seen.of("navigation_failed"))
+    assert "nowhere" in str(rig.seen.of("navigation_failed")[0].payload)
