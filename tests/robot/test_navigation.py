@@ -171,6 +171,35 @@ async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_rec
     assert len(asked()) == 2
 
 
+async def test_a_robot_whose_link_is_down_does_not_enter_an_area_granted_meanwhile(
+    rig: Rig,
+) -> None:
+    """The server may release an offline robot's grant it never saw used and give the area
+    to another robot (docs/server.md, offline grace): so the robot does not enter while its
+    link is down, and after the reconnect it asks again (found by the 30-minute soak)."""
+    import asyncio
+
+    r2 = rig.bus.endpoint("R2")
+    r2.publish("request_area", {"robot": "R2", "area": "corridor"})
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+
+    def asked() -> list[Any]:
+        return [m for m in rig.seen.of("request_area") if m.payload["robot"] == "R1"]
+
+    await rig.seen.wait_for(lambda: asked())
+    rig.nav.link_lost()
+    r2.publish("release_area", {"robot": "R2", "area": "corridor"})
+    await rig.seen.wait_for(
+        lambda: [m for m in rig.seen.of("area_granted") if m.destination == "R1"]
+    )
+    await asyncio.sleep(0.5)  # 10 robot seconds: it would be through the corridor by now
+    assert rig.nav.state == "waiting_area" and rig.nav.node == "ga1"
+    rig.nav.resync()
+    assert len(asked()) == 2  # the grant it never used is asked for again
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached"), timeout=30)
+    assert rig.nav.node == "gb1"
+
+
 async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
     rig: Rig, demo_site: Site
 ) -> None:
@@ -189,7 +218,7 @@ async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
     assert replies[0].payload["nodes"][-1] == "gb1"
     assert rig.traffic._paths["R1"].nodes == replies[0].payload["nodes"]
     # A silent Traffic Manager is not waited for (without the on-board plan: path_timeout_s).
-    rig.traffic.stop()
+    await rig.traffic.stop()
     rig.nav.path_timeout_s = 600.0
     reached = len(rig.seen.of("goal_reached"))
     net.publish("navigate_to", {"node": "gb2"})
