@@ -29,6 +29,7 @@ from backend.api.component import (
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
+from backend.site.offloop import off_loop
 from backend.site.service import SiteService
 from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.manager import TaskManager
@@ -94,7 +95,7 @@ class ServerBrain(Service):
         _sync_robot_tokens(app.state.tokens, site, known_tokens)
 
         async def on_site(new: Site) -> None:
-            new_graph = await asyncio.to_thread(SiteGraph, new)
+            new_graph = await off_loop(SiteGraph, new)
             # One synchronous block: every module switches to the new site at once.
             traffic.load_site(new, new_graph)
             tasks.load_site(new, new_graph)

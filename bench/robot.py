@@ -2,9 +2,10 @@
 
 - cmd_to_velocity_frame_ms: a task arriving over the link (task_assigned received by the
   robot's link from the hub) -> the first non-zero velocity frame on the robot's CAN bus. In
-  between: RG dispatch starts navigate_to_point, navigation asks the Traffic Manager for a path
-  over the hub (a WebSocket round trip), plans, commands the base, the RoboCAN base entity
-  sends the frame. The GuideBot paper's T8 -> T14, 772 ms on average. Real server on loopback,
+  between: RG dispatch starts navigate_to_point, navigation plans on its on-board map (the
+  robot runs the server's live site version) and declares the path to the Traffic Manager
+  without waiting for its answer, commands the base, the RoboCAN base entity sends the frame.
+  The GuideBot paper's T8 -> T14, 772 ms on average. Real server on loopback,
   real agent with simulated RoboCAN modules, time scale 1; the server runs in its own process.
   Consecutive commands (each task cancelled before the next): ``blocks_p50_ms`` gives the p50
   of every block of 25, so a reaction time that degrades as commands accumulate shows up;

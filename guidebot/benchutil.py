@@ -1,9 +1,12 @@
-"""Small helpers every benchmark uses: percentiles and the closing JSON line."""
+"""Small helpers every benchmark uses: percentiles, the closing JSON line, a loop-stall probe."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import statistics
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -23,3 +26,38 @@ def percentiles(samples: Sequence[float], digits: int = 3) -> dict[str, float | 
 def print_result(result: dict[str, Any]) -> None:
     """The benchmark's last line: one JSON object."""
     print(json.dumps(result, sort_keys=False), flush=True)
+
+
+class LoopStall:
+    """The longest time the running event loop went without running a 1 ms ticker (its
+    lateness), while the block runs: how long anything else on that loop would have waited.
+
+        async with LoopStall() as probe:
+            await something()
+        probe.max_ms
+    """
+
+    def __init__(self, tick_s: float = 0.001) -> None:
+        self.tick_s = tick_s
+        self.max_ms = 0.0
+        self._task: asyncio.Task[None] | None = None
+
+    async def _tick(self) -> None:
+        clock = time.perf_counter
+        while True:
+            t0 = clock()
+            await asyncio.sleep(self.tick_s)
+            late = (clock() - t0 - self.tick_s) * 1000
+            if late > self.max_ms:
+                self.max_ms = late
+
+    async def __aenter__(self) -> LoopStall:
+        self._task = asyncio.get_running_loop().create_task(self._tick())
+        await asyncio.sleep(0)  # the ticker is running before the measured work starts
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task

@@ -357,5 +357,6 @@ class RobotAgent(Service):
         view = onboard_site(site)
         if self.navigator is not None:
             self.navigator.planner = view.planner
+            self.navigator.plan_on_board = True  # the server's live version: plan on board
         if self.screen is not None:
             self.screen.tours, self.screen.pois = view.tours, view.pois

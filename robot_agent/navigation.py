@@ -93,6 +93,10 @@ class Navigator(MotionControl):
         self.door_retry_s = door_retry_s
         self.planner = planner
         """On-board map (the site graph): plans when the Traffic Manager cannot be reached."""
+        self.plan_on_board = False
+        """The planner holds the server's live site version (set when ``site_changed`` was
+        applied): plan on board at once and only tell the Traffic Manager the path, saving the
+        get_path round trip (the same graph and search give the same path)."""
         # Map pose and where the robot is in the graph.
         self.node: str | None = start_node
         self.floor: str | None = (floor_of or {}).get(start_node or "")
@@ -113,6 +117,9 @@ class Navigator(MotionControl):
         self._door_failed: dict[str, str] = {}
         self._elevators: dict[str, str] = {}
         self._granted: set[str] = set()
+        self._link_down = False
+        """The link is down: the server may release a granted area it never saw us enter
+        (docs/server.md, offline grace), so no granted area is entered until it is back."""
         self._waiting_area: str | None = None
         self._wait_retry: Callable[[], None] | None = None
         self._news = asyncio.Event()
@@ -318,6 +325,18 @@ class Navigator(MotionControl):
         await self.follow([PathStep.from_dict(s) for s in path.get("steps", [])])
 
     async def _get_path(self, node: str) -> dict[str, Any]:
+        if self.plan_on_board and self.planner is not None and self.node is not None:
+            try:
+                path = self.planner(self.node, node)
+            except Exception:  # the server answers why (unknown node, no path)
+                pass
+            else:
+                # The Traffic Manager keeps each robot's path (head-on prevention): it is
+                # told by the same request, whose answer nobody waits for.
+                self.ep.publish(
+                    "get_path", {"robot": self.robot, "from_node": self.node, "to_node": node}
+                )
+                return path
         attempts = 3 if self.planner is None else 1
         for attempt in range(attempts):
             try:
@@ -509,6 +528,10 @@ class Navigator(MotionControl):
         """Without the link the building's broadcasts are missed: doors and cabins become
         unknown, and unknown is closed (the robot stops before them until told again). A
         robot once drove into a cabin that had left while its link was down (the soak)."""
+        self._link_down = True
+        self._forget_building()
+
+    def _forget_building(self) -> None:
         self._doors_open.clear()
         self._elevators.clear()
         self._news.set()
@@ -516,8 +539,16 @@ class Navigator(MotionControl):
     def resync(self) -> None:
         """The link is back (maybe to a restarted server that never saw the requests): ask
         again for the area the robot stands waiting for, the doors it holds and the elevator
-        it waits for; the answers say how things stand. Repeated requests are harmless."""
-        self.link_lost()  # whatever was missed meanwhile is asked again below
+        it waits for; the answers say how things stand. Repeated requests are harmless.
+
+        Areas granted but not entered are forgotten: while we were away the server may have
+        released them (offline grace) and granted them to another robot; each is asked for
+        again at its edge."""
+        self._link_down = False
+        self._forget_building()  # whatever was missed meanwhile is asked again below
+        if stale := self._granted - self.held_areas:
+            log.info("%s: granted areas %s not entered: asked again", self.robot, sorted(stale))
+            self._granted -= stale
         if self._waiting_area is not None:
             log.info("%s: still waiting for area %s: asked again", self.robot, self._waiting_area)
             self.ep.publish("request_area", {"robot": self.robot, "area": self._waiting_area})
@@ -527,16 +558,21 @@ class Navigator(MotionControl):
             self._wait_retry()
 
     async def _acquire_area(self, area: str) -> None:
-        if area in self._granted:
+        if area in self._granted and not self._link_down:
             # Granted ahead as part of a chain of back-to-back areas.
             self.held_areas.add(area)
             return
         self.state = NavState.WAITING_AREA
         self._send_velocity(0.0, 0.0)
-        self.ep.publish("request_area", {"robot": self.robot, "area": area})
+        if area not in self._granted:
+            self.ep.publish("request_area", {"robot": self.robot, "area": area})
+        else:
+            log.warning("%s: link down: area %s is not entered until it is back", self.robot, area)
         self._waiting_area = area
         try:
-            await self._wait_until(lambda: area in self._granted, f"area {area}")
+            await self._wait_until(
+                lambda: area in self._granted and not self._link_down, f"area {area}"
+            )
         finally:
             self._waiting_area = None
         log.info("%s: area %s granted", self.robot, area)

@@ -1,7 +1,8 @@
 """The robot's side of the reaction chain: from task_assigned to the first moving CAN frame.
 
 A tap on the on-board bus stamps, for the current main task, the paper's T9 (the link got
-task_assigned), T10 (RG dispatch asked to run the net), the get_path round trip (T10-T11), T13
+task_assigned), T10 (RG dispatch asked to run the net), the get_path round trip (T10-T11; zero
+when the robot planned on board and only declared its path), T13
 (navigation's first non-zero set_velocity) and T14 (that command's velocity frame is on the
 CAN bus), then sends them once as ``task_reaction`` for the server's metrics and the reaction
 benchmark (docs/reaction.md). Stamps are time.time(): comparable with the server's on one
@@ -93,10 +94,13 @@ class ReactionTracker(Service):
 
     def _on_velocity(self, message: Message) -> None:
         s = self._stamps
-        if s is None or "path_received_at" not in s:
+        if s is None or "path_requested_at" not in s:
             return
         if not (message.payload.get("v") or message.payload.get("w")):
             return
+        # Moving before the answer: navigation planned on board and only told the Traffic
+        # Manager (navigation.plan_on_board); the path was in hand when it was declared.
+        s.setdefault("path_received_at", s["path_requested_at"])
         moving_at = time.time()
         self._stamps = None
         s["commanded_at"] = message.timestamp

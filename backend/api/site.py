@@ -4,14 +4,16 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, HTTPException, Query, Request, Response, status
+import orjson
+from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 
 from backend.api.component import hash_robot_tokens, weak_robot_tokens
 from backend.api.deps import Admin, Requester, Sites, Staff, Traffic, forbid
 from backend.auth import Role
+from backend.site.offloop import off_loop
 from guidebot.site.graph import NoPath, UnknownNode
 from guidebot.site.schema import Site
-from guidebot.site.validate import SiteInvalid, SiteIssue, validate_site
+from guidebot.site.validate import SiteInvalid, SiteIssue
 from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
 
 __all__ = ["router"]
@@ -38,13 +40,31 @@ async def get_site(_: Admin, service: Sites) -> dict[str, Any]:
     return {"version": service.version, "site": service.site.model_dump(mode="json")}
 
 
-@router.put("/site")
-async def put_site(
-    request: Request, _: Admin, service: Sites, document: Annotated[dict[str, Any], Body()]
-) -> dict[str, Any]:
-    """Replace the site while running; refused as a whole (422, every problem) if broken."""
+@router.put(
+    "/site",
+    openapi_extra={
+        "requestBody": {"content": {"application/json": {"schema": {"type": "object"}}}}
+    },
+)
+async def put_site(request: Request, _: Admin, service: Sites) -> dict[str, Any]:
+    """Replace the site while running; refused as a whole (422, every problem) if broken.
+
+    The body is parsed and validated off the event loop (a 10 000-node site is megabytes)."""
+    raw = await request.body()
+    if len(raw) > MAX_SITE_BYTES:
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site document too large")
     try:
-        await service.replace(_secured(request, validate_site(document)))
+        document = await off_loop(orjson.loads, raw)
+    except orjson.JSONDecodeError as exc:
+        raise HTTPException(
+            status.HTTP_422_UNPROCESSABLE_CONTENT, f"not valid JSON: {exc}"
+        ) from None
+    if not isinstance(document, dict):
+        raise HTTPException(
+            status.HTTP_422_UNPROCESSABLE_CONTENT, "a site document is a JSON object"
+        )
+    try:
+        await service.replace(_secured(request, await service.validate(document)))
     except SiteInvalid as exc:
         raise invalid(exc) from None
     return {"version": service.version}
@@ -77,7 +97,7 @@ async def import_site(request: Request, _: Admin, service: Sites) -> dict[str, A
     if len(raw) > MAX_SITE_BYTES:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site file too large")
     try:
-        site = load_site_text(raw.decode("utf-8", errors="replace"))
+        site = await off_loop(load_site_text, raw.decode("utf-8", errors="replace"))
         await service.replace(_secured(request, site))
     except SiteInvalid as exc:
         raise invalid(exc) from None

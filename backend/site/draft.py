@@ -15,7 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from backend.site.offloop import off_loop
 from backend.site.service import SiteService
+from guidebot.site.bulk import dump_site_doc
 from guidebot.site.schema import Site
 from guidebot.site.validate import SiteInvalid, SiteIssue, validate_site
 
@@ -124,7 +126,10 @@ class SiteDrafts:
 
     async def reset(self, *, by: str) -> DraftState:
         """Throw the draft away: a fresh copy of the live site."""
-        return await self._store(self.sites.site.model_dump(mode="json"), self.sites.version, by)
+        return await self._store(await self._live_doc(), self.sites.version, by)
+
+    async def _live_doc(self) -> dict[str, Any]:
+        return await off_loop(dump_site_doc, self.sites.site)
 
     async def publish(self, *, revision: int, by: str, secure: Secure, note: str = "") -> int:
         """Make the draft live (a new kept version); SiteInvalid with every problem if broken,
@@ -137,14 +142,14 @@ class SiteDrafts:
                 f"version {self.state.base_version}: start a new draft from the live site",
                 self.state,
             )
-        site = secure(validate_site(self.state.data))
+        site = secure(await self.sites.validate(self.state.data))
         await self.sites.replace(site, by=by, note=note)
-        await self._store(self.sites.site.model_dump(mode="json"), self.sites.version, by)
+        await self._store(await self._live_doc(), self.sites.version, by)
         return self.sites.version
 
     async def rollback(self, data: dict[str, Any], *, version: int, by: str, secure: Secure) -> int:
         """Publish a kept version's document again (as a new version); the draft follows."""
-        site = secure(validate_site(data))
+        site = secure(await self.sites.validate(data))
         await self.sites.replace(site, by=by, note=f"rollback to version {version}")
-        await self._store(self.sites.site.model_dump(mode="json"), self.sites.version, by)
+        await self._store(await self._live_doc(), self.sites.version, by)
         return self.sites.version

@@ -12,10 +12,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from backend.site.offloop import off_loop
 from backend.site.service import SiteService
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
 from guidebot.service import Service
+from guidebot.site.bulk import dump_site_doc
 from guidebot.site.schema import Site
 
 __all__ = ["SiteRollout", "robot_view"]
@@ -23,7 +25,7 @@ __all__ = ["SiteRollout", "robot_view"]
 
 def robot_view(site: Site) -> dict[str, Any]:
     """The site as robots get it: without the robots' token digests."""
-    data = site.model_dump(mode="json")
+    data = dump_site_doc(site)
     data["robots"] = [{k: v for k, v in r.items() if k != "token"} for r in data["robots"]]
     return data
 
@@ -58,15 +60,16 @@ class SiteRollout(Service):
             "site": robot_view(site),
         }
 
-    def on_site(self, site: Site) -> None:
+    async def on_site(self, site: Site) -> None:
         """SiteService listener: send the new version to every robot and start the clock."""
         self._t0 = time.perf_counter()
+        payload = await off_loop(self._make_payload, site)
         known = {r.name for r in site.robots}
         self.version = self.sites.version
         self.expected = sorted(self.connected_robots() & known)
         self.loaded_ms = {}
         self.ms = None
-        self._payload = self._make_payload(site)
+        self._payload = payload
         self.ep.publish("site_changed", self._payload)
         self._report()
 

@@ -156,7 +156,7 @@ class TrafficManager(Service):
                     f"lock:{d.area}",
                     "lock_released_offline",
                     f"area {d.area} released: {d.robot} went offline {d.offline_s:.0f} s ago "
-                    "and was never seen inside it",
+                    "and was never seen inside it or at its edge",
                     robot=d.robot,
                     area=d.area,
                     sticky=False,
@@ -175,7 +175,15 @@ class TrafficManager(Service):
         self._send_grants(grants)
 
     def _may_be_inside(self, robot: str, area: str) -> bool:
-        return self.graph.area_at.get(self._positions.get(robot, "")) == area
+        """Last seen inside the area, or at its edge (a node one step from it): a robot
+        granted the area there may have driven in after its link dropped. Robots never enter
+        a granted area while their link is down (docs/robot.md), so a holder last seen
+        farther away is outside."""
+        node = self._positions.get(robot, "")
+        at = self.graph.area_at
+        if at.get(node) == area:
+            return True
+        return any(at.get(n) == area for n, _ in self.graph.adj.get(node, ()))
 
     # --- handlers ------------------------------------------------------------------------
     def _on_get_path(self, msg: Message) -> None:

@@ -6,8 +6,12 @@ precomputed distance field; paths between any two nodes are found with A* whose 
 larger of the straight-line bound (scaled to the shortest edge-length/straight-line ratio of
 the map) and the ALT landmark bound (triangle inequality over distances to and from a few far
 apart landmarks, Goldberg and Harrelson 2005), which cuts the nodes A* visits by an order of
-magnitude on large sites. Lengths are exact sums of edge costs; round them only for display.
-Building takes seconds on a 10 000-node site: the server builds in a thread and swaps.
+magnitude on large sites. Between nodes that only an elevator ride connects (floors apart),
+the path is read, not searched: distances to and from every elevator stop are kept, the best
+stop is the minimum of (start to stop) + (stop to goal), and both halves are walked down those
+distance fields (transit nodes; exact, a fraction of a millisecond). Lengths are exact sums of
+edge costs; round them only for display. Building takes seconds on a 10 000-node site: the
+server builds in a thread and swaps.
 """
 
 from __future__ import annotations
@@ -125,7 +129,13 @@ class SiteGraph:
         # ALT: distance from each landmark to every node, and from every node to it.
         self._lm_from: list[array[float]] = []
         self._lm_to: list[array[float]] = []
+        self._component = self._floor_components(set(self.elevator_at))
         self._choose_landmarks(landmarks)
+        # Transit through elevators: distances to and from every elevator stop.
+        self._transit = [
+            (i, self._dijkstra(i, self._radj_i), self._dijkstra(i, self._adj_i))
+            for i in sorted(self.index[n] for n in self.elevator_at)
+        ]
         if warm:
             self.warm(
                 [p.node for p in site.pois]
@@ -157,7 +167,78 @@ class SiteGraph:
         field = self._fields.get(goal)
         if field is not None:
             return self._descend(start, goal, field)
-        return self._astar(self.index[start], self.index[goal])
+        s, g = self.index[start], self.index[goal]
+        if self._transit and self._component[s] != self._component[g]:
+            return self._via_transit(s, g)
+        return self._astar(s, g)
+
+    def _floor_components(self, stops: set[str]) -> list[int]:
+        """Component of each node over the edges that are not elevator rides (undirected):
+        a path between two components must ride an elevator, so passes an elevator stop."""
+        comp = [-1] * len(self.names)
+        rides = {(a, b) for a in stops for b in stops}
+        adj = self._adj_i
+        undirected: list[list[int]] = [[] for _ in self.names]
+        for a, out in enumerate(adj):
+            for b, _ in out:
+                if (self.names[a], self.names[b]) not in rides:
+                    undirected[a].append(b)
+                    undirected[b].append(a)
+        label = 0
+        for root in range(len(comp)):
+            if comp[root] >= 0:
+                continue
+            comp[root] = label
+            stack = [root]
+            while stack:
+                for nxt in undirected[stack.pop()]:
+                    if comp[nxt] < 0:
+                        comp[nxt] = label
+                        stack.append(nxt)
+            label += 1
+        return comp
+
+    def _via_transit(self, s: int, g: int) -> PathResult:
+        """Exact path between nodes that only an elevator ride connects: the shortest is the
+        best of (s to a stop) + (that stop to g) over the stops, both read from the stops'
+        precomputed distances, then walked down and up those distance fields."""
+        best, via = math.inf, None
+        for entry in self._transit:
+            total = entry[1][s] + entry[2][g]
+            if total < best:
+                best, via = total, entry
+        if via is None:
+            raise NoPath(f"no path from {self.names[s]} to {self.names[g]}")
+        stop, to_stop, from_stop = via
+        first = self._walk(s, stop, to_stop, self._adj_i)
+        second = self._walk(g, stop, from_stop, self._radj_i)
+        second.reverse()
+        nodes = [self.names[i] for i in first + second[1:]]
+        return PathResult(nodes, best, [self.step(n) for n in nodes])
+
+    def _walk(
+        self, s: int, g: int, field: array[float], adj: list[list[tuple[int, float]]]
+    ) -> list[int]:
+        """From ``s`` to ``g`` down ``field`` (cost to ``g`` over ``adj``): each step takes an
+        edge on a shortest path. Given the reverse lists and a field of costs from ``g``, this
+        walks a shortest path from ``g`` to ``s`` backwards."""
+        if field[s] == math.inf:
+            raise NoPath(f"no path between {self.names[s]} and {self.names[g]}")
+        path = [s]
+        node = s
+        limit = len(self.names)
+        while node != g:
+            here = field[node]
+            best, best_left = -1, math.inf
+            for nxt, cost in adj[node]:
+                left = cost + field[nxt]
+                if left < best_left:
+                    best, best_left = nxt, left
+            if best < 0 or best_left > here + 1e-6 or len(path) > limit:
+                raise NoPath(f"no path between {self.names[s]} and {self.names[g]}")
+            path.append(best)
+            node = best
+        return path
 
     def _dijkstra(self, source: int, adj: list[list[tuple[int, float]]]) -> array[float]:
         """Costs from ``source`` over ``adj`` (or, given the reverse lists, to ``source``)."""
@@ -214,27 +295,37 @@ class SiteGraph:
         return [(f, t, lg, gl) for _, f, t, lg, gl in scored[:ACTIVE_LANDMARKS]]
 
     def _astar(self, s: int, g: int) -> PathResult:
-        """A* over integer node indexes (targets without a precomputed distance field)."""
+        """A* over integer node indexes (targets without a precomputed distance field).
+
+        The heuristic is computed once per node: on grid-like floors every node of the
+        rectangle between start and goal is nearly on a shortest path, so the cost per node,
+        not their count, decides the time."""
         xs, ys, adj = self._xs, self._ys, self._adj_i
+        n = len(xs)
         gx, gy = xs[g], ys[g]
         scale, shift = self._h_scale, self._h_shift
         hypot, pop, push = math.hypot, heapq.heappop, heapq.heappush
         inf = math.inf
         active = self._alt_bounds(s, g)
+        heur = [-1.0] * n
 
         def bound(v: int) -> float:
+            # A bound of +inf (the landmark reaches v but not g, or g reaches it but v does
+            # not) is exact: v cannot reach g.
             h = hypot(xs[v] - gx, ys[v] - gy) * scale - shift
             for from_lm, to_lm, lg, gl in active:
-                lv = from_lm[v]
-                if lv != inf and lg != inf and lg - lv > h:
-                    h = lg - lv
-                vl = to_lm[v]
-                if vl != inf and gl != inf and vl - gl > h:
-                    h = vl - gl
-            return h if h > 0 else 0.0
+                x = lg - from_lm[v]
+                if x > h:
+                    h = x
+                x = to_lm[v] - gl
+                if x > h:
+                    h = x
+            h = h if h > 0 else 0.0
+            heur[v] = h
+            return h
 
-        best = [inf] * len(xs)
-        came = [-1] * len(xs)
+        best = [inf] * n
+        came = [-1] * n
         best[s] = 0.0
         # Ties on f go to the node farther along (-g first): on grid-like maps many nodes
         # share an f, and taking the deepest first walks straight to the goal.
@@ -251,7 +342,8 @@ class SiteGraph:
                 if ng < best[nxt]:
                     best[nxt] = ng
                     came[nxt] = node
-                    push(heap, (ng + bound(nxt), -ng, nxt))
+                    h = heur[nxt]
+                    push(heap, (ng + (h if h >= 0.0 else bound(nxt)), -ng, nxt))
         else:
             raise NoPath(f"no path from {self.names[s]} to {self.names[g]}")
         path = [g]
@@ -296,25 +388,8 @@ class SiteGraph:
     def _descend(self, start: str, goal: str, field: array[float]) -> PathResult:
         """Follow the distance field downhill: each step takes the edge on a shortest path."""
         s, g = self.index[start], self.index[goal]
-        total = field[s]
-        if total == math.inf:
-            raise NoPath(f"no path from {start} to {goal}")
-        adj, names = self._adj_i, self.names
-        path = [s]
-        node = s
-        while node != g:
-            here = field[node]
-            best, best_left = -1, math.inf
-            for nxt, cost in adj[node]:
-                left = cost + field[nxt]
-                if left < best_left:
-                    best, best_left = nxt, left
-            if best < 0 or best_left > here + 1e-6 or len(path) > len(names):
-                raise NoPath(f"no path from {start} to {goal}")
-            path.append(best)
-            node = best
-        nodes = [names[i] for i in path]
-        return PathResult(nodes, total, [self.step(n) for n in nodes])
+        nodes = [self.names[i] for i in self._walk(s, g, field, self._adj_i)]
+        return PathResult(nodes, field[s], [self.step(n) for n in nodes])
 
     def distances_to(self, goal: str) -> _FieldView:
         """Path cost from every node to ``goal`` (mapping node -> metres; cached per goal).

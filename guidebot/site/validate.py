@@ -13,6 +13,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from guidebot.site.building import IORef, PointKind
+from guidebot.site.bulk import prevalidate
 from guidebot.site.io_rules import Role, kind_problem
 from guidebot.site.schema import Site
 from guidebot.task_kinds import KINDS, BadParams, UnknownTarget, check_params
@@ -69,7 +70,7 @@ def validate_site(data: Any, *, lines: Any = None) -> Site:
         return lines(loc) if lines is not None else None
 
     try:
-        site = Site.model_validate(data)
+        site = Site.model_validate(prevalidate(data))
     except ValidationError as exc:
         errors = exc.errors(include_url=False)
         issues = [

@@ -169,3 +169,72 @@ async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_rec
     assert "R1: area corridor came after" in caplog.text
     rig.nav.resync()  # nothing is waited for any more: nothing is asked
     assert len(asked()) == 2
+
+
+async def test_a_robot_whose_link_is_down_does_not_enter_an_area_granted_meanwhile(
+    rig: Rig,
+) -> None:
+    """The server may release an offline robot's grant it never saw used and give the area
+    to another robot (docs/server.md, offline grace): so the robot does not enter while its
+    link is down, and after the reconnect it asks again (found by the 30-minute soak)."""
+    import asyncio
+
+    r2 = rig.bus.endpoint("R2")
+    r2.publish("request_area", {"robot": "R2", "area": "corridor"})
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+
+    def asked() -> list[Any]:
+        return [m for m in rig.seen.of("request_area") if m.payload["robot"] == "R1"]
+
+    await rig.seen.wait_for(lambda: asked())
+    rig.nav.link_lost()
+    r2.publish("release_area", {"robot": "R2", "area": "corridor"})
+    await rig.seen.wait_for(
+        lambda: [m for m in rig.seen.of("area_granted") if m.destination == "R1"]
+    )
+    await asyncio.sleep(0.5)  # 10 robot seconds: it would be through the corridor by now
+    assert rig.nav.state == "waiting_area" and rig.nav.node == "ga1"
+    rig.nav.resync()
+    assert len(asked()) == 2  # the grant it never used is asked for again
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached"), timeout=30)
+    assert rig.nav.node == "gb1"
+
+
+async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
+    rig: Rig, demo_site: Site
+) -> None:
+    """No get_path round trip before moving; the Traffic Manager still knows the path (its
+    head-on rule needs it), the same one it would have given."""
+    from robot_agent.agent import onboard_site
+
+    rig.nav.planner = onboard_site(demo_site).planner
+    rig.nav.plan_on_board = True
+    replies: list[Any] = []
+    rig.bus.endpoint("paths").subscribe("path", replies.append, tap=True)
+    net = rig.bus.endpoint("net")
+    net.publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert not rig.seen.of("navigation_failed")
+    assert replies[0].payload["nodes"][-1] == "gb1"
+    assert rig.traffic._paths["R1"].nodes == replies[0].payload["nodes"]
+    # A silent Traffic Manager is not waited for (without the on-board plan: path_timeout_s).
+    await rig.traffic.stop()
+    rig.nav.path_timeout_s = 600.0
+    reached = len(rig.seen.of("goal_reached"))
+    net.publish("navigate_to", {"node": "gb2"})
+    await rig.seen.wait_for(
+        lambda: len(rig.seen.of("goal_reached")) > reached or rig.seen.of("navigation_failed")
+    )
+    assert not rig.seen.of("navigation_failed") and rig.nav.node == "gb2"
+
+
+async def test_an_on_board_plan_that_fails_asks_the_traffic_manager_for_the_reason(
+    rig: Rig, demo_site: Site
+) -> None:
+    from robot_agent.agent import onboard_site
+
+    rig.nav.planner = onboard_site(demo_site).planner
+    rig.nav.plan_on_board = True
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "nowhere"})
+    await rig.seen.wait_for(lambda: rig.seen.of("navigation_failed"))
+    assert "nowhere" in str(rig.seen.of("navigation_failed")[0].payload)

@@ -313,6 +313,20 @@ async def test_robot_added_to_the_site_can_connect_at_once(
     assert names == {"R1", "R2", "R4"}
 
 
+async def test_a_site_body_that_is_not_a_json_object_is_refused_and_changes_nothing(
+    server: RunningServer, http: Http
+) -> None:
+    admin = http(server.admin_token)
+    before = (await admin.get("/api/site")).json()
+    broken = await admin.put(
+        "/api/site", content=b'{"name": ', headers={"Content-Type": "application/json"}
+    )
+    assert broken.status_code == 422 and "not valid JSON" in broken.json()["detail"]
+    listed = await admin.put("/api/site", json=[before["site"]])
+    assert listed.status_code == 422 and "JSON object" in listed.json()["detail"]
+    assert (await admin.get("/api/site")).json() == before
+
+
 async def test_events_are_paged(server: RunningServer, http: Http) -> None:
     staff = http(OPERATOR_TOKEN)
     for _ in range(3):

@@ -36,9 +36,9 @@ async def test_lock_of_a_robot_that_went_offline_before_entering_is_released(
 ) -> None:
     bus = Bus()
     traffic, alerts = await start_traffic(bus)
-    r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "gb1")
+    r1, r2 = RobotStub(bus, "R1", "ga2"), RobotStub(bus, "R2", "gb1")
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
-    r1.state("busy")  # granted, still outside at ga1
+    r1.state("busy")  # granted, still outside at ga2, two steps from the corridor
     bus.endpoint("link_watcher").publish("robot_disconnected", {"robot": "R1"})
     caplog.set_level(logging.INFO)
     r2.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
@@ -57,6 +57,22 @@ async def test_lock_of_a_robot_that_went_offline_before_entering_is_released(
         r.levelno == logging.WARNING and "lock_released_offline" in r.getMessage()
         for r in caplog.records
     )
+
+
+async def test_offline_holder_last_seen_at_the_areas_edge_keeps_the_lock() -> None:
+    """At ga1, one step from the corridor, R1 may have driven in after its link dropped
+    (found by the 30-minute soak: two robots in one corridor after a link cut)."""
+    bus = Bus()
+    traffic, alerts = await start_traffic(bus)
+    r1, r2 = RobotStub(bus, "R1", "ga1"), RobotStub(bus, "R2", "gb1")
+    await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
+    r1.state("busy")
+    bus.endpoint("link_watcher").publish("robot_disconnected", {"robot": "R1"})
+    r2.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
+    traffic.check_offline_locks(GRACE, now=time.monotonic() + GRACE + 1)
+    assert traffic.locks.holder("corridor") == "R1" and not r2.of_type("area_granted")
+    [alert] = alerts
+    assert alert.payload["kind"] == "lock_holder_offline"
 
 
 async def test_offline_holder_that_may_be_inside_keeps_the_lock_and_staff_are_alerted() -> None:

@@ -1,0 +1,60 @@
+"""Heavy site work (validation, dumps, the route graph) in a thread, so that the server's event
+loop keeps serving while a 10 000-node site is loaded or published.
+
+A thread alone is not enough: the work allocates a few hundred thousand objects, and the cyclic
+garbage collector's passes over them run in one piece while holding the GIL (up to 100 ms on a
+10 000-node site), stopping the loop as surely as running on it. So the collector is paused
+while such work runs and what it built is then frozen (``gc.freeze()``): a site lives until the
+next publish, and rescanning it finds nothing. Reference counting still frees the replaced site;
+only reference cycles made meanwhile wait for the next unfreeze (the hub's, when clients leave).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import gc
+import sys
+from collections.abc import Callable, Iterator
+from typing import ParamSpec, TypeVar
+
+__all__ = ["gc_paused", "off_loop"]
+
+P = ParamSpec("P")
+T = TypeVar("T")
+
+SWITCH_INTERVAL_S = 0.001
+"""The GIL's switch interval while site work runs in a thread (Python's default is 5 ms): the
+loop thread, woken by I/O, waits at most this long for the worker to hand the GIL over."""
+
+_paused = 0
+_was_enabled = False
+_interval = 0.005
+
+
+@contextlib.contextmanager
+def gc_paused() -> Iterator[None]:
+    """No cyclic collection and a short GIL switch interval inside the block (nested and
+    overlapping blocks allowed); what was allocated is frozen when the last block ends."""
+    global _paused, _was_enabled, _interval
+    if _paused == 0:
+        _was_enabled = gc.isenabled()
+        gc.disable()
+        _interval = sys.getswitchinterval()
+        sys.setswitchinterval(min(_interval, SWITCH_INTERVAL_S))
+    _paused += 1
+    try:
+        yield
+    finally:
+        _paused -= 1
+        if _paused == 0:
+            sys.setswitchinterval(_interval)
+            gc.freeze()
+            if _was_enabled:
+                gc.enable()
+
+
+async def off_loop(fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
+    """``fn(*args, **kwargs)`` in a thread with the collector paused."""
+    with gc_paused():
+        return await asyncio.to_thread(fn, *args, **kwargs)

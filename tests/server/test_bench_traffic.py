@@ -1,0 +1,21 @@
+"""bench traffic, briefly: its JSON names every figure, including the loop stalls of a site
+publish and load on the running server (both must succeed, or the bench fails)."""
+
+from __future__ import annotations
+
+import json
+
+from click.testing import CliRunner
+
+from bench.traffic import main
+
+
+def test_bench_traffic_reports_paths_and_loop_stalls() -> None:
+    args = ["--nodes", "400", "--robots", "5", "--queries", "50", "--seconds", "1", "--json"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    figures = json.loads(result.output.strip().splitlines()[-1])
+    for key in ("any_pair_path_ms", "any_pair_path_cpu_ms", "destination_lookup_ms"):
+        assert figures[key]["p50"] is not None and figures[key]["p99"] >= figures[key]["p50"]
+    for key in ("idle_max_stall_ms", "publish_max_stall_ms", "load_max_stall_ms"):
+        assert figures[key] >= 0.0
