@@ -32,6 +32,7 @@ from pydantic import BaseModel, Field
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.paths import WEB_DIR
+from guidebot.queues import KeyedQueue
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
 from guidebot.site.schema import Site
@@ -109,7 +110,7 @@ class OnboardScreen:
         self.question: dict[str, Any] | None = None
         self.answers: list[str] = []
         self._question_timer: asyncio.TimerHandle | None = None
-        self._watchers: set[asyncio.Queue[dict[str, Any]]] = set()
+        self._watchers: set[KeyedQueue[dict[str, Any]]] = set()
         self._unsubs: list[Callable[[], None]] = []
 
     def start(self) -> None:
@@ -185,19 +186,22 @@ class OnboardScreen:
 
     def _push(self, kind: str, data: Any) -> None:
         event = {"kind": kind, "data": data}
-        for queue in list(self._watchers):
-            if queue.full():  # overflow rule: a slow screen loses its oldest events
-                queue.get_nowait()
-            queue.put_nowait(event)
+        for feed in list(self._watchers):
+            feed.put(event)
 
     @contextlib.contextmanager
-    def watch(self) -> Generator[asyncio.Queue[dict[str, Any]], None, None]:
-        queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=WATCHER_QUEUE)
-        self._watchers.add(queue)
+    def watch(self) -> Generator[KeyedQueue[dict[str, Any]], None, None]:
+        """Every change, as an async iterator of events; bounded like a bus subscription:
+        a slow screen loses its oldest events."""
+        feed: KeyedQueue[dict[str, Any]] = KeyedQueue(
+            WATCHER_QUEUE, drop_oldest=True, name=f"{self.robot} touch screen"
+        )
+        self._watchers.add(feed)
         try:
-            yield queue
+            yield feed
         finally:
-            self._watchers.discard(queue)
+            self._watchers.discard(feed)
+            feed.close()
 
     def _on_task_assigned(self, message: Message) -> None:
         if message.payload.get("net") not in VISITOR_NETS:
@@ -394,13 +398,13 @@ def create_screen_app(
     @app.websocket("/ws")
     async def ws(websocket: WebSocket) -> None:
         await websocket.accept()
-        with screen.watch() as queue:
+        with screen.watch() as events:
             lang = websocket.query_params.get("lang")
             await websocket.send_json({"kind": "screen", "data": screen.screen(lang)})
 
             async def push() -> None:
-                while True:
-                    await websocket.send_json(await queue.get())
+                async for event in events:
+                    await websocket.send_json(event)
 
             async def until_closed() -> None:
                 with contextlib.suppress(WebSocketDisconnect):
