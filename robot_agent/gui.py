@@ -18,7 +18,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable, Generator
+from collections.abc import AsyncIterator, Callable, Generator
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
@@ -32,7 +32,6 @@ from pydantic import BaseModel, Field
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.paths import WEB_DIR
-from guidebot.queues import KeyedQueue
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
 from guidebot.site.schema import Site
@@ -43,6 +42,8 @@ __all__ = ["OnboardScreen", "ScreenServer"]
 log = logging.getLogger(__name__)
 
 WATCHER_QUEUE = 100
+SCREEN_EVENT = "screen_event"
+"""On-board only: what the screen's page is pushed (docs/messages.md)."""
 PAGE_POLICY = (
     "default-src 'self'; script-src 'self'; img-src 'self' data:; style-src 'self'; "
     "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
@@ -110,7 +111,6 @@ class OnboardScreen:
         self.question: dict[str, Any] | None = None
         self.answers: list[str] = []
         self._question_timer: asyncio.TimerHandle | None = None
-        self._watchers: set[KeyedQueue[dict[str, Any]]] = set()
         self._unsubs: list[Callable[[], None]] = []
 
     def start(self) -> None:
@@ -185,23 +185,12 @@ class OnboardScreen:
         return out
 
     def _push(self, kind: str, data: Any) -> None:
-        event = {"kind": kind, "data": data}
-        for feed in list(self._watchers):
-            feed.put(event)
+        self.ep.publish(SCREEN_EVENT, {"kind": kind, "data": data})
 
-    @contextlib.contextmanager
-    def watch(self) -> Generator[KeyedQueue[dict[str, Any]], None, None]:
-        """Every change, as an async iterator of events; bounded like a bus subscription:
-        a slow screen loses its oldest events."""
-        feed: KeyedQueue[dict[str, Any]] = KeyedQueue(
-            WATCHER_QUEUE, drop_oldest=True, name=f"{self.robot} touch screen"
-        )
-        self._watchers.add(feed)
-        try:
-            yield feed
-        finally:
-            self._watchers.discard(feed)
-            feed.close()
+    def watch(self) -> contextlib.AbstractAsyncContextManager[AsyncIterator[Message]]:
+        """Every change, as screen_event messages (payload: kind, data): a bus subscription,
+        so bounded; a slow screen loses its oldest events."""
+        return self.ep.subscription(SCREEN_EVENT, maxsize=WATCHER_QUEUE)
 
     def _on_task_assigned(self, message: Message) -> None:
         if message.payload.get("net") not in VISITOR_NETS:
@@ -213,8 +202,7 @@ class OnboardScreen:
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
 
     def _on_robot_state(self, message: Message) -> None:
-        if self._watchers:  # battery, mode and the link change without other events
-            self._push("state", {})
+        self._push("state", {})  # battery, mode and the link change without other events
 
     def _on_going(self, message: Message) -> None:
         self.going = message.type == "navigate_to" and self.task is not None
@@ -398,13 +386,13 @@ def create_screen_app(
     @app.websocket("/ws")
     async def ws(websocket: WebSocket) -> None:
         await websocket.accept()
-        with screen.watch() as events:
+        async with screen.watch() as events:
             lang = websocket.query_params.get("lang")
             await websocket.send_json({"kind": "screen", "data": screen.screen(lang)})
 
             async def push() -> None:
                 async for event in events:
-                    await websocket.send_json(event)
+                    await websocket.send_json(event.payload)
 
             async def until_closed() -> None:
                 with contextlib.suppress(WebSocketDisconnect):

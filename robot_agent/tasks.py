@@ -16,6 +16,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.payloads.petri import KillPetriNet
 
 __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
 
@@ -129,7 +130,7 @@ class TaskRunner:
     def _kill_waiting(self) -> None:
         instance, self._waiting_instance = self._waiting_instance, None
         if instance is not None:
-            self.ep.publish("kill_petri_net", {"instance_id": instance})
+            self.ep.publish(KillPetriNet(instance_id=instance))
 
     # -- main tasks ---------------------------------------------------------------------------
 
@@ -168,7 +169,7 @@ class TaskRunner:
             return
         task.reason = str(message.payload.get("reason") or "cancelled")
         task.move(TaskPhase.CANCELLING)
-        self.ep.publish("kill_petri_net", {"instance_id": task.instance_id})
+        self.ep.publish(KillPetriNet(instance_id=task.instance_id))
         if self.on_cancel is not None:
             self.on_cancel()
 

@@ -21,6 +21,7 @@ from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
+from guidebot.payloads.tasks import RobotLink
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 from guidebot.site.validate import validate_site
@@ -118,7 +119,7 @@ def announce_robot_links(hub: Any, sites: SiteService) -> Callable[[], None]:
         if client.role is not Role.ROBOT or sites.site.robot(client.name) is None:
             return
         kind = "robot_connected" if connected else "robot_disconnected"
-        endpoint.publish(kind, {"robot": client.name})
+        endpoint.publish(kind, RobotLink(robot=client.name))
 
     unsubscribe = hub.on_connection(changed)
 

@@ -17,7 +17,7 @@ from backend.alerts import AlertBoard
 from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
+from guidebot.payloads.traffic import AreaGranted, AreaYield, GetPath, ReleaseArea, RequestArea
 from guidebot.site.graph import NoPath, PathResult, SiteGraph, UnknownNode
 from guidebot.site.schema import Site
 
@@ -376,8 +376,7 @@ class TrafficManager:
     def _send_grants(self, grants: list[Grant]) -> None:
         for g in grants:
             self.endpoint.publish(
-                "area_granted",
-                {"robot": g.robot, "area": g.area},
+                AreaGranted(robot=g.robot, area=g.area),
                 destination=g.robot,
                 correlation_id=g.request_id,
             )
@@ -388,8 +387,7 @@ class TrafficManager:
             near = [self._positions[y.robot]] if y.robot in self._positions else []
             go_to = self.graph.passing_place_for(y.area, near) or ""
             self.endpoint.publish(
-                "area_yield",
-                {"robot": y.robot, "area": y.area, "go_to_node": go_to},
+                AreaYield(robot=y.robot, area=y.area, go_to_node=go_to),
                 destination=y.robot,
             )
             self._emit(
