@@ -62,13 +62,18 @@ class PatternTable(Generic[R]):
     """Routes by pattern: exact types looked up in a dict, wildcards scanned.
 
     Tuples are replaced, never mutated, so a handler may subscribe or unsubscribe while a
-    message is being delivered.
+    message is being delivered. The routes of each type are remembered until the table
+    changes: a hub with "*" taps matches a type's wildcards once, not once per message.
     """
+
+    CACHE_TYPES = 1024
+    """Types remembered at most (the on-board bus carries any type a net publishes)."""
 
     def __init__(self) -> None:
         self._exact: dict[str, tuple[R, ...]] = {}
         self._wild: dict[str, tuple[R, ...]] = {}
         self._wild_routes: tuple[R, ...] = ()
+        self._cache: dict[str, tuple[R, ...]] = {}
 
     def add(self, route: R) -> bool:
         """Add a route; True if it is the first for its pattern."""
@@ -77,6 +82,7 @@ class PatternTable(Generic[R]):
         table[route.pattern] = (*routes, route)
         if route.wild:
             self._wild_routes = (*self._wild_routes, route)
+        self._cache.clear()
         return not routes
 
     def remove(self, route: R) -> bool:
@@ -92,16 +98,23 @@ class PatternTable(Generic[R]):
             del table[route.pattern]
         if route.wild:
             self._wild_routes = tuple(r for r in self._wild_routes if r is not route)
+        self._cache.clear()
         return not left
 
     def matching(self, message_type: str) -> tuple[R, ...]:
         """The routes for a type, exact ones first, each in the order it was added."""
-        exact = self._exact.get(message_type, ())
-        if not self._wild_routes:
-            return exact
-        return exact + tuple(
-            r for r in self._wild_routes if fnmatch.fnmatchcase(message_type, r.pattern)
-        )
+        routes = self._cache.get(message_type)
+        if routes is not None:
+            return routes
+        routes = self._exact.get(message_type, ())
+        if self._wild_routes:
+            matched = [r for r in self._wild_routes if fnmatch.fnmatchcase(message_type, r.pattern)]
+            if matched:
+                routes = (*routes, *matched)
+        if len(self._cache) >= self.CACHE_TYPES:
+            self._cache.clear()
+        self._cache[message_type] = routes
+        return routes
 
     def patterns(self) -> list[str]:
         """Every pattern with at least one route."""

@@ -16,7 +16,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.petri import KillPetriNet
+from guidebot.payloads.petri import KillPetriNet, RunPetriNet
 
 __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
 
@@ -123,8 +123,7 @@ class TaskRunner:
         self._waiting_instance = f"{self.robot}-waiting-{self._waiting_seq}"
         self.running_nets[self._waiting_instance] = self.waiting_net
         self.ep.publish(
-            "run_petri_net",
-            {"net": self.waiting_net, "instance_id": self._waiting_instance, "main": False},
+            RunPetriNet(net=self.waiting_net, instance_id=self._waiting_instance, main=False),
         )
 
     def _kill_waiting(self) -> None:
@@ -155,8 +154,7 @@ class TaskRunner:
             self.on_start()
         self.running_nets[task.instance_id] = net
         self.ep.publish(
-            "run_petri_net",
-            {"net": net, "instance_id": task.instance_id, "params": task.params, "main": True},
+            RunPetriNet(net=net, instance_id=task.instance_id, params=task.params, main=True),
         )
         task.move(TaskPhase.RUNNING)
         log.info("%s: task %s started (%s)", self.robot, task_id, net)

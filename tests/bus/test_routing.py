@@ -73,3 +73,24 @@ async def test_cancel_all_cancels_the_waiting_requests() -> None:
     pending.cancel_all()
     with pytest.raises(asyncio.CancelledError):
         await asyncio.wait_for(task, 5)
+
+
+def test_a_route_added_or_removed_after_a_type_was_matched_counts_at_once() -> None:
+    table: PatternTable[Route] = PatternTable()
+    opened = _route("door_opened")
+    table.add(opened)
+    assert table.matching("door_opened") == (opened,)
+    doors = _route("door_*")
+    table.add(doors)
+    assert table.matching("door_opened") == (opened, doors)
+    table.remove(opened)
+    assert table.matching("door_opened") == (doors,)
+
+
+def test_the_remembered_types_are_bounded() -> None:
+    table: PatternTable[Route] = PatternTable()
+    everything = _route("*")
+    table.add(everything)
+    for i in range(PatternTable.CACHE_TYPES * 3):
+        assert table.matching(f"type_{i}") == (everything,)
+    assert len(table._cache) <= PatternTable.CACHE_TYPES
