@@ -148,6 +148,15 @@ def make_message(
     A payload model is validated where it is built, so a sender's mistake raises at the
     sender; it travels as its JSON dict, as a dict payload would.
     """
+    if type(type_or_payload) is str and (payload is None or type(payload) is dict):
+        # The common case, without pydantic's (ABC) isinstance checks.
+        return Message(
+            type=type_or_payload,
+            source=source,
+            destination=destination,
+            correlation_id=correlation_id,
+            payload=payload or {},
+        )
     if isinstance(type_or_payload, BaseModel):
         if payload is not None:
             raise TypeError("give either a payload model or a type name and a payload")
