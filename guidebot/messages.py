@@ -150,13 +150,20 @@ def make_message(
     """
     if type(type_or_payload) is str and (payload is None or type(payload) is dict):
         # The common case, without pydantic's (ABC) isinstance checks.
-        return Message(
-            type=type_or_payload,
-            source=source,
-            destination=destination,
-            correlation_id=correlation_id,
-            payload=payload or {},
-        )
+        type_, body = type_or_payload, payload
+    else:
+        type_, body = _typed(type_or_payload, payload)
+    return Message(
+        type=type_,
+        source=source,
+        destination=destination,
+        correlation_id=correlation_id,
+        payload=body or {},
+    )
+
+
+def _typed(type_or_payload: str | BaseModel, payload: Payload) -> tuple[str, dict[str, Any]]:
+    """Type name and JSON dict of a message given with a payload model."""
     if isinstance(type_or_payload, BaseModel):
         if payload is not None:
             raise TypeError("give either a payload model or a type name and a payload")
@@ -171,11 +178,5 @@ def make_message(
             raise TypeError(
                 f"{type_!r} carries {expected.__name__}, not {builtins.type(payload).__name__}"
             )
-        payload = payload.model_dump(mode="json")
-    return Message(
-        type=type_,
-        source=source,
-        destination=destination,
-        correlation_id=correlation_id,
-        payload=payload or {},
-    )
+        return type_, payload.model_dump(mode="json")
+    return type_, payload or {}
