@@ -28,6 +28,7 @@ from backend.db import DbStore, make_engine, make_sessionmaker
 from backend.health import ComponentState
 from backend.hub.broker import BrokerBridge, process_id
 from backend.leadership import Leadership
+from guidebot.payloads.tasks import RobotLink
 from guidebot.site.validate import validate_site
 
 __all__ = ["DECIDING", "LOST_LEADERSHIP_EXIT", "FollowerRest", "cluster_report", "clustered"]
@@ -105,7 +106,7 @@ def _announce_links_while_following(hub: Any, leadership: Leadership) -> Callabl
     def changed(client: Any, connected: bool) -> None:
         if client.role is Role.ROBOT and not leadership.leading:
             kind = "robot_connected" if connected else "robot_disconnected"
-            endpoint.publish(kind, {"robot": client.name})
+            endpoint.publish(kind, RobotLink(robot=client.name))
 
     unsubscribe = hub.on_connection(changed)
 

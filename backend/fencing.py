@@ -15,20 +15,23 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from guidebot.bus import Endpoint, Handler
-from guidebot.messages import Message
+from pydantic import BaseModel
+
+from guidebot.bus import BusEndpoint, Endpoint, Handler
+from guidebot.messages import Message, Payload, type_name
 
 __all__ = ["FencedEndpoint", "deciding_endpoint"]
 
 log = logging.getLogger(__name__)
 
 
-class FencedEndpoint:
+class FencedEndpoint(BusEndpoint):
     """A bus endpoint that passes nothing in or out while ``may_decide()`` is false."""
 
-    def __init__(self, inner: Any, may_decide: Callable[[], bool]) -> None:
+    def __init__(self, inner: Endpoint, may_decide: Callable[[], bool]) -> None:
         self.inner = inner
-        self.name: str = inner.name
+        self.name = inner.name
+        self._pending = inner._pending  # replies reach the inner endpoint
         self.may_decide = may_decide
         self.dropped = 0
         """Messages not handled or not sent because the lease had run out."""
@@ -42,59 +45,28 @@ class FencedEndpoint:
         )
         return True
 
-    def publish(
-        self,
-        type: str,
-        payload: dict[str, Any] | None = None,
-        *,
-        destination: str | None = None,
-        correlation_id: str | None = None,
-    ) -> Message:
-        if self._fenced("send", type):
-            return Message(
-                type=type,
-                source=self.name,
-                destination=destination,
-                correlation_id=correlation_id,
-                payload=payload or {},
-            )
-        message: Message = self.inner.publish(
-            type, payload, destination=destination, correlation_id=correlation_id
-        )
-        return message
-
-    def send(self, message: Message) -> None:
+    def _transmit(self, message: Message) -> None:
         if not self._fenced("send", message.type):
-            self.inner.send(message)
-
-    def reply(self, request: Message, type: str, payload: dict[str, Any] | None = None) -> Message:
-        if self._fenced("send", type):
-            return request.reply(type, payload, source=self.name)
-        reply: Message = self.inner.reply(request, type, payload)
-        return reply
+            self.inner._transmit(message)
 
     def subscribe(self, pattern: str, handler: Handler, **options: Any) -> Callable[[], None]:
         def gated(message: Message) -> None:
             if not self._fenced("handle", message.type):
                 handler(message)
 
-        unsubscribe: Callable[[], None] = self.inner.subscribe(pattern, gated, **options)
-        return unsubscribe
+        return self.inner.subscribe(pattern, gated, **options)
 
     async def request(
         self,
-        type: str,
-        payload: dict[str, Any] | None = None,
+        type: str | BaseModel,
+        payload: Payload = None,
         *,
         destination: str | None = None,
         timeout: float = 2.0,
     ) -> Message:
-        if self._fenced("send", type):
-            raise TimeoutError(f"{self.name}: this process's lease ran out; {type} not sent")
-        answer: Message = await self.inner.request(
-            type, payload, destination=destination, timeout=timeout
-        )
-        return answer
+        if self._fenced("send", type if isinstance(type, str) else type_name(type.__class__)):
+            raise TimeoutError(f"{self.name}: this process's lease ran out; request not sent")
+        return await super().request(type, payload, destination=destination, timeout=timeout)
 
     def close(self) -> None:
         self.inner.close()

@@ -1,8 +1,8 @@
 """Client library of the JCentral hub: what robot agents, the building simulator and external
 modules use to talk to the central server over WebSocket.
 
-``HubClient`` satisfies ``guidebot.bus.BusEndpoint`` (publish, send, subscribe, request), so a
-module written against the in-process bus runs unchanged against the hub::
+``HubClient`` is a ``guidebot.bus.BusEndpoint`` (publish, send, subscribe, subscription,
+request), so a module written against the in-process bus runs unchanged against the hub::
 
     async with HubClient("ws://127.0.0.1:8000/ws", token) as hub:
         hub.subscribe("task_*", on_task)
@@ -27,23 +27,23 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import fnmatch
 import inspect
 import logging
 import random
-from collections import deque
 from collections.abc import Awaitable, Callable
 from typing import Any
 from urllib.parse import urlencode, urlsplit, urlunsplit
 
 import orjson
 from pydantic import ValidationError
-from pydantic_core import to_jsonable_python
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake
 
-from guidebot.bus import Handler, RequestTimeout, is_wildcard
+from guidebot import wire
+from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.queues import KeyedQueue
+from guidebot.routing import Handler, PatternTable, PendingRequests, RequestTimeout, Route
 
 __all__ = ["FINAL_CLOSE_CODES", "HubClient", "HubClosed", "HubError", "HubRefused"]
 
@@ -79,14 +79,10 @@ class HubClosed(ConnectionError):
     """The client was closed, or could not connect in time."""
 
 
-def _encode(message: Message) -> bytes:
-    return orjson.dumps(message.__dict__, default=to_jsonable_python)
-
-
 OnConnect = Callable[[], Awaitable[None] | None]
 
 
-class HubClient:
+class HubClient(BusEndpoint):
     """A named client of the hub over WebSocket, with heartbeats and reconnection."""
 
     def __init__(
@@ -117,24 +113,26 @@ class HubClient:
         self.connected = asyncio.Event()
         self.failure: HubRefused | None = None
         self.last_error: HubError | None = None
-        self.dropped = 0
         self.connections = 0
         self._token = token
         self._requested_name = name
         self._max_size = max_size
-        self._exact: dict[str, list[Handler]] = {}
-        self._wild: list[tuple[str, Handler]] = []
-        self._patterns: dict[str, int] = {}
-        self._pending: dict[str, asyncio.Future[Message]] = {}
+        self._routes: PatternTable[Route] = PatternTable()
+        self._pending = PendingRequests()
         self._on_connect: list[OnConnect] = []
         self._on_disconnect: list[Callable[[], None]] = []
-        self._out: deque[list[Any]] = deque()
-        self._out_by_key: dict[str, list[Any]] = {}
-        self._out_ready = asyncio.Event()
+        self._out: KeyedQueue[bytes] = KeyedQueue(
+            queue_size, drop_oldest=True, name=f"hub client {name or url}: send queue"
+        )
         self._ws: ClientConnection | None = None
         self._runner: asyncio.Task[None] | None = None
         self._closing = False
         self._last_seen = 0.0
+
+    @property
+    def dropped(self) -> int:
+        """Messages dropped from the full send queue (oldest first) while disconnected."""
+        return self._out.dropped
 
     # -- life cycle ---------------------------------------------------------------------------
     async def __aenter__(self) -> HubClient:
@@ -168,7 +166,7 @@ class HubClient:
 
     async def close(self, *, flush: bool = True, flush_timeout: float = 2.0) -> None:
         """Send what is queued (if connected, up to ``flush_timeout``), then disconnect."""
-        if flush and self.connected.is_set() and self._out:
+        if flush and self.connected.is_set() and len(self._out):
             with contextlib.suppress(TimeoutError, RequestTimeout, HubError):
                 await self.sync(timeout=flush_timeout)
         self._closing = True
@@ -181,10 +179,7 @@ class HubClient:
             runner.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await runner
-        for future in self._pending.values():
-            if not future.done():
-                future.cancel()
-        self._pending.clear()
+        self._pending.cancel_all()
         self.connected.clear()
 
     async def wait_stopped(self) -> HubRefused | None:
@@ -208,34 +203,8 @@ class HubClient:
         return lambda: self._on_connect.remove(callback) if callback in self._on_connect else None
 
     # -- BusEndpoint ----------------------------------------------------------------------------
-    def publish(
-        self,
-        type: str,
-        payload: dict[str, Any] | None = None,
-        *,
-        destination: str | None = None,
-        correlation_id: str | None = None,
-    ) -> Message:
-        message = Message(
-            type=type,
-            source=self.name,
-            destination=destination,
-            correlation_id=correlation_id,
-            payload=payload or {},
-        )
+    def _transmit(self, message: Message) -> None:
         self._enqueue(message)
-        return message
-
-    def send(self, message: Message) -> None:
-        """Send a ready-made message; the hub stamps this client's name as its source."""
-        if message.source != self.name:
-            message = message.model_copy(update={"source": self.name})
-        self._enqueue(message)
-
-    def reply(self, request: Message, type: str, payload: dict[str, Any] | None = None) -> Message:
-        message = request.reply(type, payload, source=self.name)
-        self._enqueue(message)
-        return message
 
     def subscribe(self, pattern: str, handler: Handler) -> Callable[[], None]:
         """Call ``handler`` for messages whose type matches; returns the unsubscribe function.
@@ -245,14 +214,8 @@ class HubClient:
         only handlers whose pattern matches are called. Replies that complete a ``request`` and
         the hub's heartbeat pongs are not passed to handlers.
         """
-        wild = is_wildcard(pattern)
-        entry = (pattern, handler)
-        if wild:
-            self._wild.append(entry)
-        else:
-            self._exact.setdefault(pattern, []).append(handler)
-        self._patterns[pattern] = self._patterns.get(pattern, 0) + 1
-        if self._patterns[pattern] == 1 and self.connected.is_set():
+        route = Route(pattern, handler)
+        if self._routes.add(route) and self.connected.is_set():
             self._control("subscribe", [pattern])
         removed = False
 
@@ -261,43 +224,13 @@ class HubClient:
             if removed:
                 return
             removed = True
-            if wild:
-                self._wild.remove(entry)
-            else:
-                handlers = self._exact[pattern]
-                handlers.remove(handler)
-                if not handlers:
-                    del self._exact[pattern]
-            self._patterns[pattern] -= 1
-            if not self._patterns[pattern]:
-                del self._patterns[pattern]
-                if self.connected.is_set():
-                    self._control("unsubscribe", [pattern])
+            if self._routes.remove(route) and self.connected.is_set():
+                self._control("unsubscribe", [pattern])
 
         return unsubscribe
 
-    async def request(
-        self,
-        type: str,
-        payload: dict[str, Any] | None = None,
-        *,
-        destination: str | None = None,
-        timeout: float = 2.0,
-    ) -> Message:
-        """Send and wait for the message correlated to it; an ``error`` reply raises HubError."""
-        message = Message(
-            type=type, source=self.name, destination=destination, payload=payload or {}
-        )
-        future: asyncio.Future[Message] = asyncio.get_running_loop().create_future()
-        self._pending[message.id] = future
-        try:
-            self._enqueue(message)
-            async with asyncio.timeout(timeout):  # not wait_for: see guidebot/bus.py request
-                reply = await future
-        except TimeoutError:
-            raise RequestTimeout(f"no reply to {type!r} within {timeout} s") from None
-        finally:
-            self._pending.pop(message.id, None)
+    def _check_reply(self, reply: Message) -> Message:
+        """A request refused by the hub (an ``error`` reply) raises HubError."""
         if reply.type == "error" and reply.source == "hub":
             raise HubError(str(reply.payload.get("code")), str(reply.payload.get("reason")))
         return reply
@@ -312,25 +245,7 @@ class HubClient:
             raise HubClosed("the hub client is closed")
         # Coalesce only while offline: when connected every state is sent (seq has no gaps).
         coalesce = message.type in _COALESCED and not self.connected.is_set()
-        key = message.source if coalesce else None
-        data = _encode(message)
-        if key is not None:
-            entry = self._out_by_key.get(key)
-            if entry is not None:
-                entry[1] = data
-                return
-        if len(self._out) >= self.queue_size:
-            old_key, _ = self._out.popleft()
-            if old_key is not None:
-                self._out_by_key.pop(old_key, None)
-            self.dropped += 1
-            log.warning("%s: outgoing queue full, oldest message dropped", self.name)
-        entry = [key, data]
-        self._out.append(entry)
-        if key is not None:
-            self._out_by_key[key] = entry
-        if not self._out_ready.is_set():
-            self._out_ready.set()
+        self._out.put(wire.encode(message), message.source if coalesce else None)
 
     def _control(self, type: str, patterns: list[str]) -> None:
         self._enqueue(Message(type=type, source=self.name, payload={"patterns": patterns}))
@@ -338,26 +253,12 @@ class HubClient:
     async def _writer(self, ws: ClientConnection) -> None:
         out = self._out
         while True:
-            while not out:
-                self._out_ready.clear()
-                await self._out_ready.wait()
-            batch: list[list[Any]] = []
-            size = 0
-            while out and len(batch) < _BATCH_MAX and size < _BATCH_BYTES:
-                entry = out.popleft()
-                size += len(entry[1])
-                if entry[0] is not None:
-                    self._out_by_key.pop(entry[0], None)
-                batch.append(entry)
-            data = batch[0][1] if len(batch) == 1 else b"[" + b",".join(e[1] for e in batch) + b"]"
+            await out.wait()
+            batch = out.take_entries(_BATCH_MAX, _BATCH_BYTES)
             try:
-                await ws.send(data, text=True)
+                await ws.send(wire.frame([entry[1] for entry in batch]), text=True)
             except BaseException:
-                # Not sent: put back in order, the next connection sends them.
-                for entry in reversed(batch):
-                    out.appendleft(entry)
-                    if entry[0] is not None and entry[0] not in self._out_by_key:
-                        self._out_by_key[entry[0]] = entry
+                out.requeue(batch)  # not sent: the next connection sends them, in order
                 raise
 
     # -- connection -----------------------------------------------------------------------------
@@ -411,11 +312,10 @@ class HubClient:
             self.name = welcome["payload"]["name"]
             self.role = welcome["payload"]["role"]
             self._last_seen = loop.time()
-            if self._patterns:
-                sub = Message(
-                    type="subscribe", source=self.name, payload={"patterns": list(self._patterns)}
-                )
-                await ws.send(_encode(sub), text=True)
+            patterns = self._routes.patterns()
+            if patterns:
+                sub = Message(type="subscribe", source=self.name, payload={"patterns": patterns})
+                await ws.send(wire.encode(sub), text=True)
             self.connections += 1
             self.connected.set()
             tasks = [
@@ -527,23 +427,16 @@ class HubClient:
         except ValidationError as exc:
             log.warning("%s: hub sent an invalid message: %s", self.name, exc)
             return
-        if message.correlation_id is not None:
-            future = self._pending.get(message.correlation_id)
-            if future is not None and not future.done():
-                future.set_result(message)  # a reply goes to its request, not to handlers
-                return
+        if message.correlation_id is not None and self._pending.resolve(message):
+            return  # a reply goes to its request, not to handlers
         if message.type == "pong" and message.source == "hub":
             return  # heartbeat
         if message.type == "error" and message.source == "hub":
             payload = message.payload or {}
             self.last_error = HubError(str(payload.get("code")), str(payload.get("reason")))
             log.warning("%s: hub refused a message: %s", self.name, self.last_error)
-        handlers: list[Handler] = list(self._exact.get(message.type, ()))
-        for pattern, handler in self._wild:
-            if fnmatch.fnmatchcase(message.type, pattern):
-                handlers.append(handler)
-        for handler in handlers:
+        for route in self._routes.matching(message.type):
             try:
-                handler(message)
+                route.handler(message)
             except Exception:
                 log.exception("%s: handler for %r failed", self.name, message.type)

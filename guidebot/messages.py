@@ -18,12 +18,15 @@ from pydantic import BaseModel, ConfigDict, Field
 __all__ = [
     "ENVELOPE_VERSION",
     "Message",
+    "Payload",
     "PayloadModel",
     "UnknownMessageType",
     "known_types",
+    "make_message",
     "new_message_id",
     "payload_model",
     "register_payload",
+    "type_name",
 ]
 
 ENVELOPE_VERSION = 1
@@ -55,16 +58,10 @@ class Message(BaseModel):
         """Validate the payload against a payload model."""
         return model.model_validate(self.payload)
 
-    def reply(
-        self, type: str, payload: dict[str, Any] | None = None, *, source: str = ""
-    ) -> Message:
+    def reply(self, type: str | BaseModel, payload: Payload = None, *, source: str = "") -> Message:
         """Build the reply to this message: addressed to its source, correlated by its id."""
-        return Message(
-            type=type,
-            source=source,
-            destination=self.source or None,
-            correlation_id=self.id,
-            payload=payload or {},
+        return make_message(
+            type, payload, source=source, destination=self.source or None, correlation_id=self.id
         )
 
 
@@ -77,6 +74,7 @@ class PayloadModel(BaseModel):
 M = TypeVar("M", bound=BaseModel)
 
 _REGISTRY: dict[str, type[BaseModel]] = {}
+_TYPE_NAMES: dict[type[BaseModel], list[str]] = {}
 
 
 class UnknownMessageType(KeyError):
@@ -91,6 +89,9 @@ def register_payload(type_name: str) -> Any:
         if existing is not None and existing is not model:
             raise ValueError(f"message type {type_name!r} is already bound to {existing.__name__}")
         _REGISTRY[type_name] = model
+        names = _TYPE_NAMES.setdefault(model, [])
+        if type_name not in names:
+            names.append(type_name)
         return model
 
     return decorate
@@ -113,3 +114,69 @@ def known_types() -> frozenset[str]:
 def _load_catalogue() -> None:
     # Imported lazily: the catalogue imports this module.
     import guidebot.payloads  # noqa: F401
+
+
+def type_name(model: builtins.type[BaseModel]) -> str:
+    """The message type a payload model is registered for; a model bound to several types
+    (BatteryAlarm: battery_low and battery_panic) needs the type name given with it."""
+    _load_catalogue()
+    names = _TYPE_NAMES.get(model, [])
+    if len(names) == 1:
+        return names[0]
+    if not names:
+        raise TypeError(f"{model.__name__} is not a registered payload model")
+    raise TypeError(
+        f"{model.__name__} is the payload of {', '.join(sorted(names))}: give the type name with it"
+    )
+
+
+Payload = dict[str, Any] | BaseModel | None
+"""What a sender publishes: a payload model (preferred: the type name comes with it), or a
+plain dict with the type name given."""
+
+
+def make_message(
+    type_or_payload: str | BaseModel,
+    payload: Payload = None,
+    *,
+    source: str = "",
+    destination: str | None = None,
+    correlation_id: str | None = None,
+) -> Message:
+    """The envelope for ``publish(RequestArea(...))`` or ``publish("request_area", {...})``.
+
+    A payload model is validated where it is built, so a sender's mistake raises at the
+    sender; it travels as its JSON dict, as a dict payload would.
+    """
+    if type(type_or_payload) is str and (payload is None or type(payload) is dict):
+        # The common case, without pydantic's (ABC) isinstance checks.
+        type_, body = type_or_payload, payload
+    else:
+        type_, body = _typed(type_or_payload, payload)
+    return Message(
+        type=type_,
+        source=source,
+        destination=destination,
+        correlation_id=correlation_id,
+        payload=body or {},
+    )
+
+
+def _typed(type_or_payload: str | BaseModel, payload: Payload) -> tuple[str, dict[str, Any]]:
+    """Type name and JSON dict of a message given with a payload model."""
+    if isinstance(type_or_payload, BaseModel):
+        if payload is not None:
+            raise TypeError("give either a payload model or a type name and a payload")
+        payload = type_or_payload
+        type_ = type_name(builtins.type(payload))
+    else:
+        type_ = type_or_payload
+    if isinstance(payload, BaseModel):
+        _load_catalogue()
+        expected = _REGISTRY.get(type_)
+        if expected is not None and expected is not builtins.type(payload):
+            raise TypeError(
+                f"{type_!r} carries {expected.__name__}, not {builtins.type(payload).__name__}"
+            )
+        return type_, payload.model_dump(mode="json")
+    return type_, payload or {}

@@ -12,6 +12,8 @@ import logging
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.payloads.petri import Charged
+from guidebot.payloads.robot import BatteryAlarm
 from guidebot.service import Service
 
 __all__ = ["BatteryMonitor"]
@@ -74,15 +76,19 @@ class BatteryMonitor(Service):
         elif self.level <= self.panic and not self._panic_sent:
             self._panic_sent = self._low_sent = True
             log.warning("%s: battery panic at %.2f", self.robot, self.level)
-            self.ep.publish("battery_panic", {"robot": self.robot, "level": round(self.level, 3)})
+            self.ep.publish(
+                "battery_panic", BatteryAlarm(robot=self.robot, level=round(self.level, 3))
+            )
         elif self.level <= self.low and not self._low_sent:
             self._low_sent = True
             log.info("%s: battery low at %.2f", self.robot, self.level)
-            self.ep.publish("battery_low", {"robot": self.robot, "level": round(self.level, 3)})
+            self.ep.publish(
+                "battery_low", BatteryAlarm(robot=self.robot, level=round(self.level, 3))
+            )
         self._check_charged()
 
     def _check_charged(self) -> None:
         if self.docked_at is not None and self.level is not None and self.level >= self.full:
             station = self.docked_at
-            self.ep.publish("charged", {"station": station, "level": round(self.level, 3)})
+            self.ep.publish(Charged(station=station, level=round(self.level, 3)))
             self.undock()

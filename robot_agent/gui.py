@@ -18,7 +18,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable, Generator
+from collections.abc import AsyncIterator, Callable, Generator
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
@@ -44,6 +44,8 @@ __all__ = ["OnboardScreen", "ScreenServer"]
 log = logging.getLogger(__name__)
 
 WATCHER_QUEUE = 100
+SCREEN_EVENT = "screen_event"
+"""On-board only: what the screen's page is pushed (docs/messages.md)."""
 PAGE_POLICY = (
     "default-src 'self'; script-src 'self'; img-src 'self' data:; style-src 'self'; "
     "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
@@ -112,7 +114,6 @@ class OnboardScreen(Service):
         self.question: dict[str, Any] | None = None
         self.answers: list[str] = []
         self._question_timer: asyncio.TimerHandle | None = None
-        self._watchers: set[asyncio.Queue[dict[str, Any]]] = set()
 
     async def on_start(self) -> None:
         self.subscribe_all(
@@ -185,20 +186,12 @@ class OnboardScreen(Service):
         return out
 
     def _push(self, kind: str, data: Any) -> None:
-        event = {"kind": kind, "data": data}
-        for queue in list(self._watchers):
-            if queue.full():  # overflow rule: a slow screen loses its oldest events
-                queue.get_nowait()
-            queue.put_nowait(event)
+        self.ep.publish(SCREEN_EVENT, {"kind": kind, "data": data})
 
-    @contextlib.contextmanager
-    def watch(self) -> Generator[asyncio.Queue[dict[str, Any]], None, None]:
-        queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=WATCHER_QUEUE)
-        self._watchers.add(queue)
-        try:
-            yield queue
-        finally:
-            self._watchers.discard(queue)
+    def watch(self) -> contextlib.AbstractAsyncContextManager[AsyncIterator[Message]]:
+        """Every change, as screen_event messages (payload: kind, data): a bus subscription,
+        so bounded; a slow screen loses its oldest events."""
+        return self.ep.subscription(SCREEN_EVENT, maxsize=WATCHER_QUEUE)
 
     def _on_task_assigned(self, message: Message) -> None:
         if message.payload.get("net") not in VISITOR_NETS:
@@ -210,8 +203,7 @@ class OnboardScreen(Service):
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
 
     def _on_robot_state(self, message: Message) -> None:
-        if self._watchers:  # battery, mode and the link change without other events
-            self._push("state", {})
+        self._push("state", {})  # battery, mode and the link change without other events
 
     def _on_going(self, message: Message) -> None:
         self.going = message.type == "navigate_to" and self.task is not None
@@ -395,13 +387,13 @@ def create_screen_app(
     @app.websocket("/ws")
     async def ws(websocket: WebSocket) -> None:
         await websocket.accept()
-        with screen.watch() as queue:
+        async with screen.watch() as events:
             lang = websocket.query_params.get("lang")
             await websocket.send_json({"kind": "screen", "data": screen.screen(lang)})
 
             async def push() -> None:
-                while True:
-                    await websocket.send_json(await queue.get())
+                async for event in events:
+                    await websocket.send_json(event.payload)
 
             async def until_closed() -> None:
                 with contextlib.suppress(WebSocketDisconnect):

@@ -15,6 +15,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.payloads.petri import ServoInPosition
 from guidebot.service import Service
 from robot_agent.clock import Clock
 
@@ -78,6 +79,4 @@ class HeadWatchdog(Service):
             log.warning(
                 "head did not confirm servo %r (%d so far): gestures skipped", servo, self.degraded
             )
-        self.ep.publish(
-            "servo_in_position", {"servo": servo, "position": entry[0], "degraded": True}
-        )
+        self.ep.publish(ServoInPosition(servo=servo, position=entry[0], degraded=True))

@@ -29,6 +29,10 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
+from guidebot.payloads.building import OpenDoor, ReleaseDoor
+from guidebot.payloads.petri import PeopleFaced
+from guidebot.payloads.robot import NodeReached, RobotFault
+from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
 from guidebot.site.steps import PathStep
 from robot_agent.clock import Clock
 from robot_agent.motion import MotionControl, NavigationFailed, NavState, wrap_angle
@@ -210,16 +214,14 @@ class Navigator(MotionControl):
         self._bumped_until = self.clock.now() + self.bumper_pause_s
         self._send_velocity(0.0, 0.0, force=True)
         detail = f"bumper ring {message.payload.get('ring')} index {message.payload.get('index')}"
-        self.ep.publish("robot_fault", {"robot": self.robot, "kind": "bumper", "detail": detail})
+        self.ep.publish(RobotFault(robot=self.robot, kind="bumper", detail=detail))
         self._news.set()
 
     def _on_base_fault(self, message: Message) -> None:
         self.fault = str(message.payload.get("reason") or "base fault")
         self.state = NavState.FAULT
         self._send_velocity(0.0, 0.0, force=True)
-        self.ep.publish(
-            "robot_fault", {"robot": self.robot, "kind": "motor_lost", "detail": self.fault}
-        )
+        self.ep.publish(RobotFault(robot=self.robot, kind="motor_lost", detail=self.fault))
         self._news.set()
         self._odom_event.set()
 
@@ -307,12 +309,12 @@ class Navigator(MotionControl):
         if request.area in self.held_areas or request.area in self._granted:
             self.held_areas.discard(request.area)
             self._granted.discard(request.area)
-            self.ep.publish("release_area", {"robot": self.robot, "area": request.area})
+            self.ep.publish(ReleaseArea(robot=self.robot, area=request.area))
 
     async def _face_people(self, request_id: str) -> None:
         with contextlib.suppress(NavigationFailed):
             await self.turn_to(wrap_angle(self.theta + math.pi))
-        self.ep.publish("people_faced", {}, correlation_id=request_id)
+        self.ep.publish(PeopleFaced(), correlation_id=request_id)
 
     async def go_to(self, node: str) -> None:
         """Reach ``node``: plan with the Traffic Manager, then follow the path."""
@@ -341,8 +343,7 @@ class Navigator(MotionControl):
         for attempt in range(attempts):
             try:
                 reply = await self.ep.request(
-                    "get_path",
-                    {"robot": self.robot, "from_node": self.node, "to_node": node},
+                    GetPath(robot=self.robot, from_node=self.node, to_node=node),
                     timeout=self.path_timeout_s,
                 )
             except RequestTimeout:
@@ -391,9 +392,7 @@ class Navigator(MotionControl):
                     await self._approach(steps, i, called)
                 self.node = step.node
                 self.floor = step.floor
-                self.ep.publish(
-                    "node_reached", {"robot": self.robot, "node": step.node, "floor": step.floor}
-                )
+                self.ep.publish(NodeReached(robot=self.robot, node=step.node, floor=step.floor))
                 self._release_left(step, steps[i + 1] if i + 1 < len(steps) else None)
                 self._release_passed(i, doors_ahead)
                 i += 1
@@ -459,11 +458,11 @@ class Navigator(MotionControl):
             if door not in doors_ahead.values() and door in self._held_doors:
                 self._held_doors.discard(door)
                 log.info("%s: passed door %s, released", self.robot, door)
-                self.ep.publish("release_door", {"door": door})
+                self.ep.publish(ReleaseDoor(door=door))
 
     def _release_doors(self) -> None:
         for door in sorted(self._held_doors):
-            self.ep.publish("release_door", {"door": door})
+            self.ep.publish(ReleaseDoor(door=door))
         self._held_doors.clear()
         self._door_requests.clear()
 
@@ -474,7 +473,7 @@ class Navigator(MotionControl):
         for request, known in list(self._door_requests.items()):
             if known == door:
                 del self._door_requests[request]
-        message = self.ep.publish("open_door", {"door": door})
+        message = self.ep.publish(OpenDoor(door=door))
         self._door_requests[message.id] = door
 
     def relocalize(self, step: PathStep, theta: float | None = None) -> None:
@@ -551,7 +550,7 @@ class Navigator(MotionControl):
             self._granted -= stale
         if self._waiting_area is not None:
             log.info("%s: still waiting for area %s: asked again", self.robot, self._waiting_area)
-            self.ep.publish("request_area", {"robot": self.robot, "area": self._waiting_area})
+            self.ep.publish(RequestArea(robot=self.robot, area=self._waiting_area))
         for door in sorted(self._held_doors):
             self._open_door(door)
         if self._wait_retry is not None:
@@ -565,7 +564,7 @@ class Navigator(MotionControl):
         self.state = NavState.WAITING_AREA
         self._send_velocity(0.0, 0.0)
         if area not in self._granted:
-            self.ep.publish("request_area", {"robot": self.robot, "area": area})
+            self.ep.publish(RequestArea(robot=self.robot, area=area))
         else:
             log.warning("%s: link down: area %s is not entered until it is back", self.robot, area)
         self._waiting_area = area
@@ -585,7 +584,7 @@ class Navigator(MotionControl):
             self.held_areas.discard(area)
             self._granted.discard(area)
             log.info("%s: left area %s, released", self.robot, area)
-            self.ep.publish("release_area", {"robot": self.robot, "area": area})
+            self.ep.publish(ReleaseArea(robot=self.robot, area=area))
 
     async def _wait_door(self, door: str) -> None:
         """Stand still until the building reports ``door`` open; a refusal is an alert."""
@@ -609,9 +608,10 @@ class Navigator(MotionControl):
                 log.warning("%s: door %s did not open: %s", self.robot, door, reason)
                 if not alerted:
                     alerted = True
-                    fault = {"robot": self.robot, "kind": "door_blocked"}
                     detail = f"door {door} did not open: {reason}"
-                    self.ep.publish("robot_fault", {**fault, "detail": detail})
+                    self.ep.publish(
+                        RobotFault(robot=self.robot, kind="door_blocked", detail=detail)
+                    )
                 retry_at = now + self.door_retry_s
             if now >= deadline:
                 raise NavigationFailed(

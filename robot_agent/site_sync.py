@@ -10,6 +10,7 @@ from typing import Any
 
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.payloads.site import SiteLoaded
 from guidebot.service import Service
 
 __all__ = ["SiteFollower"]
@@ -31,7 +32,7 @@ class SiteFollower(Service):
 
     def announce(self) -> None:
         """Tell the server which version this robot runs (0: none from the server yet)."""
-        self.ep.publish("site_loaded", {"robot": self.robot, "version": self.version})
+        self.ep.publish(SiteLoaded(robot=self.robot, version=self.version))
 
     def _on_changed(self, message: Message) -> None:
         from guidebot.site.validate import SiteInvalid, validate_site

@@ -16,6 +16,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.payloads.petri import KillPetriNet, RunPetriNet
 from guidebot.service import Service
 
 __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
@@ -123,14 +124,13 @@ class TaskRunner(Service):
         self._waiting_instance = f"{self.robot}-waiting-{self._waiting_seq}"
         self.running_nets[self._waiting_instance] = self.waiting_net
         self.ep.publish(
-            "run_petri_net",
-            {"net": self.waiting_net, "instance_id": self._waiting_instance, "main": False},
+            RunPetriNet(net=self.waiting_net, instance_id=self._waiting_instance, main=False),
         )
 
     def _kill_waiting(self) -> None:
         instance, self._waiting_instance = self._waiting_instance, None
         if instance is not None:
-            self.ep.publish("kill_petri_net", {"instance_id": instance})
+            self.ep.publish(KillPetriNet(instance_id=instance))
 
     # -- main tasks ---------------------------------------------------------------------------
 
@@ -155,8 +155,7 @@ class TaskRunner(Service):
             self.on_task_start()
         self.running_nets[task.instance_id] = net
         request = self.ep.publish(
-            "run_petri_net",
-            {"net": net, "instance_id": task.instance_id, "params": task.params, "main": True},
+            RunPetriNet(net=net, instance_id=task.instance_id, params=task.params, main=True),
         )
         task.run_request_id = request.id
         if task.phase is not TaskPhase.STARTING:
@@ -172,7 +171,7 @@ class TaskRunner(Service):
             return
         task.reason = str(message.payload.get("reason") or "cancelled")
         task.move(TaskPhase.CANCELLING)
-        self.ep.publish("kill_petri_net", {"instance_id": task.instance_id})
+        self.ep.publish(KillPetriNet(instance_id=task.instance_id))
         if self.on_cancel is not None:
             self.on_cancel()
 

@@ -15,6 +15,7 @@ from backend.db import DbStore
 from backend.settings import published_tokens, weak_secret
 from backend.site.service import EMPTY_SITE, SiteService
 from backend.traffic.manager import TrafficManager
+from guidebot.payloads.tasks import RobotLink
 from guidebot.site.schema import Site
 from guidebot.site.validate import validate_site
 from guidebot.site.yamlio import load_site_file
@@ -111,7 +112,7 @@ def announce_robot_links(hub: Any, sites: SiteService) -> Callable[[], None]:
         if client.role is not Role.ROBOT or sites.site.robot(client.name) is None:
             return
         kind = "robot_connected" if connected else "robot_disconnected"
-        endpoint.publish(kind, {"robot": client.name})
+        endpoint.publish(kind, RobotLink(robot=client.name))
 
     unsubscribe = hub.on_connection(changed)
 

@@ -32,7 +32,16 @@ from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sam
 from backend.health import ComponentState
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.building import CallElevator, CloseDoor, OpenDoor, ReleaseDoor, SetOutput
+from guidebot.payloads.building import (
+    CallElevator,
+    CloseDoor,
+    DoorClosed,
+    DoorOpened,
+    ElevatorInPosition,
+    OpenDoor,
+    ReleaseDoor,
+    SetOutput,
+)
 from guidebot.service import Service, cancel_and_wait
 from guidebot.site.building import Door, IOPoint, IORef, PointKind
 from guidebot.site.building_config import BuildingConfig
@@ -205,12 +214,11 @@ class BuildingInterface(Service):
             self._cabin[key] = bool(value)
             elevator, floor = stop
             self.endpoint.publish(
-                "elevator_in_position",
-                {"elevator": elevator, "floor": floor, "door_open": bool(value)},
+                ElevatorInPosition(elevator=elevator, floor=floor, door_open=bool(value)),
             )
 
     def _publish_door(self, door: str, is_open: bool) -> None:
-        self.endpoint.publish("door_opened" if is_open else "door_closed", {"door": door})
+        self.endpoint.publish(DoorOpened(door=door) if is_open else DoorClosed(door=door))
 
     def _observe(self, module_id: str, point: IOPoint, raw: int, t: float) -> None:
         key = (module_id, point.name)

@@ -21,12 +21,12 @@ from typing import Any
 
 import orjson
 from pydantic import BaseModel, ValidationError
-from pydantic_core import to_jsonable_python
 
 from backend.auth import Role
 from backend.ratelimit import RateLimited, RateLimiter
 from guidebot.bus import Bus, Endpoint, is_wildcard
 from guidebot.messages import Message, known_types, payload_model
+from guidebot.wire import encode
 
 from .acks import InboundAcks
 from .memory import GcFreezer
@@ -86,10 +86,6 @@ _TRANSITIONS: dict[ClientState, frozenset[ClientState]] = {
     ClientState.CLOSING: frozenset({ClientState.CLOSED}),
     ClientState.CLOSED: frozenset(),
 }
-
-
-def _encode(message: Message) -> bytes:
-    return orjson.dumps(message.__dict__, default=to_jsonable_python)
 
 
 class HubBus(Bus):
@@ -153,7 +149,7 @@ class RemoteClient:
         if self.state is not ClientState.OPEN:
             return
         try:
-            self.outbox.put(_encode(message))
+            self.outbox.put(encode(message))
         except OutboxOverflow as exc:
             self.hub.overflow_disconnects += 1
             self.request_close(CLOSE_OVERFLOW, f"slow consumer: {exc}")
@@ -272,7 +268,7 @@ class Hub:
     def encode(self, message: Message) -> bytes:
         """JSON bytes of a message, computed once however many clients receive it."""
         if message is not self._encoded_message:
-            self._encoded = _encode(message)
+            self._encoded = encode(message)
             self._encoded_message = message
         return self._encoded
 

@@ -18,7 +18,7 @@ from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message
-from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
+from guidebot.payloads.traffic import AreaYield, GetPath, ReleaseArea, RequestArea
 from guidebot.service import Service
 from guidebot.site.graph import NoPath, PathResult, SiteGraph, UnknownNode
 from guidebot.site.schema import Site
@@ -408,8 +408,7 @@ class TrafficManager(Service):
             near = [self._positions[y.robot]] if y.robot in self._positions else []
             go_to = self.graph.passing_place_for(y.area, near) or ""
             self.endpoint.publish(
-                "area_yield",
-                {"robot": y.robot, "area": y.area, "go_to_node": go_to},
+                AreaYield(robot=y.robot, area=y.area, go_to_node=go_to),
                 destination=y.robot,
             )
             self._emit(

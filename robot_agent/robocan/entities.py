@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from guidebot.messages import Message
+from guidebot.payloads.petri import ServoInPosition
+from guidebot.payloads.robot import BatteryAlarm
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.drivers import Driver
 
@@ -407,7 +409,7 @@ class HeadDriver(Driver):
         self.positions[name] = position
         if in_position and name in self.moving:
             self.moving.discard(name)
-            self.endpoint.publish("servo_in_position", {"servo": name, "position": position})
+            self.endpoint.publish(ServoInPosition(servo=name, position=position))
 
 
 class IoDriver(Driver):
@@ -502,7 +504,9 @@ class BatteryDriver(Driver):
             self.sent.clear()
         if level <= self.config.battery_panic and "battery_panic" not in self.sent:
             self.sent |= {"battery_panic", "battery_low"}
-            self.endpoint.publish("battery_panic", {"robot": self.config.robot, "level": level})
+            self.endpoint.publish(
+                "battery_panic", BatteryAlarm(robot=self.config.robot, level=level)
+            )
         elif level <= self.config.battery_low and "battery_low" not in self.sent:
             self.sent.add("battery_low")
-            self.endpoint.publish("battery_low", {"robot": self.config.robot, "level": level})
+            self.endpoint.publish("battery_low", BatteryAlarm(robot=self.config.robot, level=level))

@@ -10,6 +10,7 @@ from backend.testing import RunningServer
 from guidebot.bus import RequestTimeout
 from guidebot.client import HubError
 from guidebot.messages import Message
+from guidebot.payloads.petri import Say
 
 from .conftest import ClientFactory
 
@@ -165,3 +166,15 @@ async def test_in_process_module_and_websocket_client_talk(
     answer = await traffic.request("navigate_to", {"node": "N7"}, destination="R1", timeout=WAIT)
     assert answer.type == "goal_reached" and answer.payload == {"node": "N7"}
     traffic.close()
+
+
+async def test_client_subscription_is_a_bounded_async_iterator(connect: ClientFactory) -> None:
+    gui, r1 = await connect("gui"), await connect("R1")
+    async with gui.subscription("say", maxsize=2) as said:
+        await gui.sync()
+        for i in range(3):
+            r1.publish(Say(text=str(i)))
+        await r1.sync()
+        await gui.sync()  # all three reached the gui: the first was dropped for the newest
+        got = [(await asyncio.wait_for(anext(said), WAIT)).payload["text"] for _ in range(2)]
+    assert got == ["1", "2"]
