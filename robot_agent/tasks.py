@@ -15,7 +15,7 @@ from enum import StrEnum
 from typing import Any
 
 from guidebot.bus import BusEndpoint
-from guidebot.messages import Message
+from guidebot.messages import Message, make_message
 from guidebot.payloads.petri import KillPetriNet, RunPetriNet
 from guidebot.service import Service
 
@@ -154,10 +154,12 @@ class TaskRunner(Service):
         if self.on_task_start is not None:
             self.on_task_start()
         self.running_nets[task.instance_id] = net
-        request = self.ep.publish(
+        request = make_message(
             RunPetriNet(net=net, instance_id=task.instance_id, params=task.params, main=True),
+            source=self.ep.name,
         )
-        task.run_request_id = request.id
+        task.run_request_id = request.id  # known before RG answers, even inside the send
+        self.ep.send(request)
         if task.phase is not TaskPhase.STARTING:
             return  # RG refused it inside the publish: already reported as ended
         task.move(TaskPhase.RUNNING)
@@ -190,9 +192,7 @@ class TaskRunner(Service):
         """RG's ``error`` for our run request: its reason becomes the task's failure reason."""
         task = self.current
         p = message.payload
-        if task is None or task.phase is TaskPhase.ENDED:
-            return
-        if task.phase is TaskPhase.STARTING or p.get("message_id") == task.run_request_id:
+        if task is not None and p.get("message_id") == task.run_request_id:
             task.problem = str(p.get("reason") or p.get("code") or "refused by RG")
 
     def _on_net_event(self, message: Message) -> None:
