@@ -237,9 +237,9 @@ class Soak:
             robot = self.robots[target]
             if not undo:
                 robot.kill()
+                assert self.watch is not None
+                self.watch.checker.forget(target, time.time())
                 return True
-            assert self.watch is not None
-            self.watch.restarted.add(target)
             robot.restart()
             return True
         if kind == "link_cut":

@@ -1,8 +1,9 @@
 """The soak's referee: reads the server while faults fly and counts what went wrong.
 
 - Safety invariants (guidebot/invariants.py) on the event log (GET /api/events), which is in
-  causal order and survives server restarts. A robot whose process was killed restarts at its
-  dock: its last position is forgotten at its next ``robot_connected``.
+  causal order and survives server restarts, each event at its time (a robot's ``node_reached``
+  at the robot's own time: it may arrive late, after a link outage). A robot whose process was
+  killed restarts at its dock: its position is unknown from the kill on (``forget``).
 - Tasks: every task ever listed is remembered; one that disappears from the server, or that
   failed without a reason a person can read, is lost.
 - Locks: one held by an offline robot for longer than the grace period plus a margin must be
@@ -67,8 +68,6 @@ class Watch:
     after_id: int = 0
     tasks: dict[str, TaskSeen] = field(default_factory=dict)
     vanished: set[str] = field(default_factory=set)
-    restarted: set[str] = field(default_factory=set)
-    """Robots killed and restarted whose old position is still in the checker."""
     offline_since: dict[tuple[str, str], float] = field(default_factory=dict)
     lock_violations: list[str] = field(default_factory=list)
     rss_mb: dict[str, float] = field(default_factory=dict)
@@ -98,13 +97,7 @@ class Watch:
             )
             r.raise_for_status()
             page = r.json()
-            for event in page["events"]:
-                kind, data = str(event["kind"]), event.get("data") or {}
-                robot = data.get("robot") or data.get("name")
-                if kind == "robot_connected" and robot in self.restarted:
-                    self.restarted.discard(robot)
-                    self.checker.forget(str(robot))
-                self.checker.feed(kind, data)
+            self.checker.feed_events(page["events"])
             self.after_id = page["next_after_id"]
             if len(page["events"]) < 1000:
                 return

@@ -9,19 +9,30 @@ door_open), the robots' node_reached and the Traffic Manager's area_granted / ar
 (or the robots' release_area). Used by the integration tests and ``guidebot bench soak``;
 it depends on nothing but the standard library, so any process can run it.
 
-Order matters. The server's event log (GET /api/events: area_granted / area_released from the
-Traffic Manager, the building's and robots' broadcasts) is in causal order. A monitor on the
-hub itself sees a reaction published inside its cause's handler (area_granted, in the handler of
-a release_area) *before* the cause: feed area_granted a moment later (``loop.call_soon``).
+Time, not arrival, decides. A robot whose link is down keeps its ``node_reached`` reports and
+sends them when the link is back, seconds later: the soak saw a robot "enter a closed cabin"
+that had been open when it drove in. So every event has a time (the event log's ``at``, or the
+moment a live monitor saw it), ``node_reached`` carries the robot's own ``at`` (Unix seconds),
+and each check is made against the building's and the other robots' state *at that time*:
+doors, cabins and positions are kept as time lines, not as a last value.
+
+Order still matters for grants. The server's event log (GET /api/events) is in causal order. A
+monitor on the hub itself sees a reaction published inside its cause's handler (area_granted,
+in the handler of a release_area) *before* the cause: feed area_granted a moment later
+(``loop.call_soon``).
 """
 
 from __future__ import annotations
 
+import bisect
+import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 __all__ = ["InvariantChecker", "Violation"]
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -30,14 +41,51 @@ class Violation:
     """"door", "cabin" or "area"."""
     robot: str
     detail: str
+    at: float | None = None
+    """When it happened (Unix seconds), if the events carried times."""
 
     def __str__(self) -> str:
-        return f"{self.invariant}: {self.robot}: {self.detail}"
+        when = ""
+        if self.at is not None and self.at > 1e9:  # a wall-clock time, not a sequence number
+            when = time.strftime("%H:%M:%S", time.localtime(self.at)) + f".{self.at % 1:.3f}"[2:]
+            when = f"{when} "
+        return f"{when}{self.invariant}: {self.robot}: {self.detail}"
+
+
+@dataclass
+class TimeLine(Generic[T]):
+    """A value that changes over time; reports may arrive out of time order."""
+
+    initial: T
+    times: list[float] = field(default_factory=list)
+    values: list[T] = field(default_factory=list)
+
+    def set(self, at: float, value: T) -> None:
+        i = bisect.bisect_right(self.times, at)
+        self.times.insert(i, at)
+        self.values.insert(i, value)
+
+    def at(self, when: float) -> T:
+        i = bisect.bisect_right(self.times, when)
+        return self.values[i - 1] if i else self.initial
+
+    def last(self) -> T:
+        return self.values[-1] if self.values else self.initial
+
+    def changes(self, after: float, before: float) -> list[tuple[float, T]]:
+        """The changes strictly after ``after`` and before ``before``."""
+        lo = bisect.bisect_right(self.times, after)
+        hi = bisect.bisect_left(self.times, before)
+        return list(zip(self.times[lo:hi], self.values[lo:hi], strict=True))
+
+    def next_change(self, after: float) -> float:
+        i = bisect.bisect_right(self.times, after)
+        return self.times[i] if i < len(self.times) else float("inf")
 
 
 @dataclass
 class InvariantChecker:
-    """Feed it events in the order the hub carried them; ``violations`` lists what broke."""
+    """Feed it events with their times; ``violations`` lists what broke."""
 
     door_at: Mapping[str, str]
     """node -> door"""
@@ -50,12 +98,16 @@ class InvariantChecker:
         default_factory=lambda: {"door": 0, "cabin": 0, "area": 0, "events": 0}
     )
     """How many times each invariant was checked (a run that checked nothing proves nothing)."""
-    open_doors: set[str] = field(default_factory=set)
-    cabins: dict[str, str] = field(default_factory=dict)
-    """elevator -> floor where it stands with its door open"""
-    position: dict[str, str] = field(default_factory=dict)
+    doors: dict[str, TimeLine[bool]] = field(default_factory=dict)
+    """door -> open?"""
+    cabins: dict[str, TimeLine[str | None]] = field(default_factory=dict)
+    """elevator -> floor where it stands with its door open (None: closed or moving)"""
+    positions: dict[str, TimeLine[str | None]] = field(default_factory=dict)
+    """robot -> node (None: unknown)"""
     holders: dict[str, str] = field(default_factory=dict)
     """area -> robot granted it"""
+    _now: float = 0.0
+    """The latest event time seen; events fed without a time come just after it."""
 
     @classmethod
     def from_site(cls, site: Any) -> InvariantChecker:
@@ -66,84 +118,127 @@ class InvariantChecker:
             area_at={n: a.id for a in site.areas for n in a.nodes},
         )
 
-    def feed(self, kind: str, payload: Mapping[str, Any]) -> None:
-        """One event: a message type (or event-log kind) and its payload."""
+    @property
+    def position(self) -> dict[str, str]:
+        """Each robot's last known node."""
+        return {r: n for r, line in self.positions.items() if (n := line.last()) is not None}
+
+    def feed(self, kind: str, payload: Mapping[str, Any], at: float | None = None) -> None:
+        """One event: a message type (or event-log kind), its payload and when it happened."""
         self.counts["events"] += 1
+        if at is None:
+            at = self._now + 1e-6
+        self._now = max(self._now, at)
         handler = getattr(self, f"_on_{kind}", None)
         if handler is not None:
-            handler(payload)
+            handler(payload, at)
 
     def feed_message(self, message: Any) -> None:
-        """A hub message; replies addressed to one requester are not the building's state."""
+        """A hub message as it passes; replies addressed to one requester are not the
+        building's state."""
         if message.type in ("door_opened", "door_closed", "elevator_in_position") and (
             message.destination is not None
         ):
             return
-        self.feed(message.type, message.payload)
+        self.feed(message.type, message.payload, time.time())
 
     def feed_events(self, events: Iterable[Mapping[str, Any]]) -> None:
-        """Rows of GET /api/events (``kind`` and ``data``), oldest first."""
+        """Rows of GET /api/events (``kind``, ``data`` and ``at``), oldest first."""
         for event in events:
-            self.feed(str(event["kind"]), event.get("data") or {})
+            at = event.get("at")
+            self.feed(
+                str(event["kind"]),
+                event.get("data") or {},
+                float(at) if isinstance(at, int | float) else None,
+            )
 
-    def forget(self, robot: str) -> None:
-        """The robot's position is no longer known (its process restarted elsewhere)."""
-        self.position.pop(robot, None)
+    def forget(self, robot: str, at: float | None = None) -> None:
+        """The robot's position is no longer known from ``at`` on (its process restarted)."""
+        self._line(self.positions, robot, None).set(self._now if at is None else at, None)
 
-    def _fail(self, invariant: str, robot: str, detail: str) -> None:
-        self.violations.append(Violation(invariant, robot, detail))
+    @staticmethod
+    def _line(lines: dict[str, TimeLine[Any]], key: str, initial: Any) -> TimeLine[Any]:
+        line = lines.get(key)
+        if line is None:
+            line = lines[key] = TimeLine(initial)
+        return line
 
-    def _on_door_opened(self, p: Mapping[str, Any]) -> None:
-        self.open_doors.add(str(p.get("door")))
+    def _fail(self, invariant: str, robot: str, detail: str, at: float) -> None:
+        self.violations.append(Violation(invariant, robot, detail, at))
 
-    def _on_door_closed(self, p: Mapping[str, Any]) -> None:
-        self.open_doors.discard(str(p.get("door")))
+    def _on_door_opened(self, p: Mapping[str, Any], at: float) -> None:
+        self._line(self.doors, str(p.get("door")), False).set(at, True)
 
-    def _on_elevator_in_position(self, p: Mapping[str, Any]) -> None:
+    def _on_door_closed(self, p: Mapping[str, Any], at: float) -> None:
+        self._line(self.doors, str(p.get("door")), False).set(at, False)
+
+    def _on_elevator_in_position(self, p: Mapping[str, Any], at: float) -> None:
         elevator, floor = str(p.get("elevator")), str(p.get("floor"))
+        line = self._line(self.cabins, elevator, None)
         if p.get("door_open", True):
-            self.cabins[elevator] = floor
-        elif self.cabins.get(elevator) == floor:
-            del self.cabins[elevator]
+            line.set(at, floor)
+        elif line.at(at) == floor:
+            line.set(at, None)
 
-    def _on_node_reached(self, p: Mapping[str, Any]) -> None:
+    def _on_node_reached(self, p: Mapping[str, Any], at: float) -> None:
         robot, node = str(p.get("robot")), str(p.get("node"))
-        self.position[robot] = node
+        reached = p.get("at")
+        if isinstance(reached, int | float) and reached <= at:
+            at = float(reached)  # the robot's time: it may report late, never early
+        self._line(self.positions, robot, None).set(at, node)
         door = self.door_at.get(node)
         if door is not None:
             self.counts["door"] += 1
-            if door not in self.open_doors:
-                self._fail("door", robot, f"reached {node} while door {door} was closed")
+            if not self._line(self.doors, door, False).at(at):
+                self._fail("door", robot, f"reached {node} while door {door} was closed", at)
         cabin = self.cabin_at.get(node)
         if cabin is not None:
             self.counts["cabin"] += 1
             elevator, floor = cabin
-            if self.cabins.get(elevator) != floor:
-                where = self.cabins.get(elevator)
+            where = self._line(self.cabins, elevator, None).at(at)
+            if where != floor:
                 state = f"open at {where}" if where else "closed or moving"
-                self._fail("cabin", robot, f"entered {node} while {elevator} was {state}")
+                self._fail("cabin", robot, f"entered {node} while {elevator} was {state}", at)
         area = self.area_at.get(node)
         if area is not None:
             self.counts["area"] += 1
-            others = sorted(
-                r for r, n in self.position.items() if r != robot and self.area_at.get(n) == area
-            )
-            if others:
-                self._fail("area", robot, f"in area {area} at {node} with {', '.join(others)}")
+            self._check_area(robot, node, area, at)
 
-    def _on_area_granted(self, p: Mapping[str, Any]) -> None:
+    def _area_of(self, robot: str, at: float) -> str | None:
+        node = self.positions[robot].at(at)
+        return self.area_at.get(node) if node is not None else None
+
+    def _check_area(self, robot: str, node: str, area: str, at: float) -> None:
+        """``robot`` is in ``area`` from ``at`` until its next move: nobody else may be in it
+        at ``at``, nor enter it in that time (a report that came in late finds those)."""
+        until = self.positions[robot].next_change(at)
+        others = []
+        for other, line in self.positions.items():
+            if other == robot:
+                continue
+            if self._area_of(other, at) == area:
+                others.append(other)
+                continue
+            for when, there in line.changes(at, until):
+                if there is not None and self.area_at.get(there) == area:
+                    self._fail("area", other, f"in area {area} at {there} with {robot}", when)
+                    break
+        if others:
+            self._fail("area", robot, f"in area {area} at {node} with {', '.join(others)}", at)
+
+    def _on_area_granted(self, p: Mapping[str, Any], at: float) -> None:
         robot, area = str(p.get("robot")), str(p.get("area"))
         holder = self.holders.get(area)
         if holder is not None and holder != robot:
-            self._fail("area", robot, f"granted area {area} still held by {holder}")
+            self._fail("area", robot, f"granted area {area} still held by {holder}", at)
         self.holders[area] = robot
 
-    def _on_server_started(self, p: Mapping[str, Any]) -> None:
+    def _on_server_started(self, p: Mapping[str, Any], at: float) -> None:
         """A new server life starts with no locks: the robots declare theirs again (an
         ``area_granted`` with ``resync``); positions and the building are physical and stay."""
         self.holders.clear()
 
-    def _on_release_area(self, p: Mapping[str, Any]) -> None:
+    def _on_release_area(self, p: Mapping[str, Any], at: float) -> None:
         robot, area = str(p.get("robot")), str(p.get("area"))
         if self.holders.get(area) == robot:
             del self.holders[area]

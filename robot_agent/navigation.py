@@ -24,6 +24,7 @@ import asyncio
 import contextlib
 import logging
 import math
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -107,6 +108,9 @@ class Navigator(MotionControl):
         self.localized = False
         self.goal: str | None = None
         self.held_areas: set[str] = set()
+        """Areas acquired for the path ahead (entered or about to be)."""
+        self.inside: str | None = None
+        """The restricted area of the node the robot stands on (None: outside every area)."""
         self.bumps = 0
         self.yields = 0
         self._yield: YieldRequested | None = None
@@ -378,7 +382,7 @@ class Navigator(MotionControl):
                 self._check_fault()
                 step = steps[i]
                 self._ask_ahead(steps, i, doors_ahead, called)
-                if step.area is not None and step.area not in self.held_areas:
+                if step.area is not None and self._must_ask(step.area):
                     await self._acquire_area(step.area)
                 prev = steps[i - 1]
                 ride = (
@@ -392,7 +396,10 @@ class Navigator(MotionControl):
                     await self._approach(steps, i, called)
                 self.node = step.node
                 self.floor = step.floor
-                self.ep.publish(NodeReached(robot=self.robot, node=step.node, floor=step.floor))
+                self.inside = step.area
+                self.ep.publish(
+                    NodeReached(robot=self.robot, node=step.node, floor=step.floor, at=time.time())
+                )
                 self._release_left(step, steps[i + 1] if i + 1 < len(steps) else None)
                 self._release_passed(i, doors_ahead)
                 i += 1
@@ -416,26 +423,38 @@ class Navigator(MotionControl):
             and steps[i + 1].floor != step.floor
         )
         while True:
+            if step.area is not None and self._must_ask(step.area):
+                await self._acquire_area(step.area)
             if step.door is not None:
                 await self._wait_door(step.door)
             if cabin:
                 assert step.elevator is not None
                 await self._wait_elevator(step.elevator, step.floor, called)
+            if step.area is not None and self._must_ask(step.area):
+                continue  # the grant was forgotten while we waited (the link dropped): ask again
             if await self.drive_to(
                 step.x, step.y, stop=i == len(steps) - 1, clear=self._passable(step, cabin)
             ):
                 return
-            log.warning("%s: %s closed in front of the robot, stopped", self.robot, step.node)
+            log.warning("%s: %s not passable now, stopped before it", self.robot, step.node)
             called.discard((step.elevator or "", step.floor))
             if step.door is not None and step.door not in self._doors_open:
                 self._open_door(step.door)  # closed under our hold: ask again
 
+    def _must_ask(self, area: str) -> bool:
+        """Entering ``area`` needs a grant we hold now, with the link up (docs/robot.md,
+        "Link down"); the area the robot already stands in needs nothing more."""
+        return area != self.inside and (area not in self.held_areas or self._link_down)
+
     def _passable(self, step: PathStep, cabin: bool) -> Callable[[], bool]:
         door, elevator, floor = step.door, step.elevator, step.floor
+        area = step.area
         next_hold = self.clock.now() + CABIN_HOLD_CALL_S
 
         def clear() -> bool:
             nonlocal next_hold
+            if area is not None and self._must_ask(area):
+                return False
             if door is not None and door not in self._doors_open:
                 return False
             if not cabin:
@@ -486,6 +505,7 @@ class Navigator(MotionControl):
         self._ty = step.y - (s * ox + c * oy)
         self.x, self.y, self.theta = step.x, step.y, heading
         self.node, self.floor = step.node, step.floor
+        self.inside = step.area
         self.localized = True
 
     def _ask_ahead(
@@ -540,14 +560,17 @@ class Navigator(MotionControl):
         again for the area the robot stands waiting for, the doors it holds and the elevator
         it waits for; the answers say how things stand. Repeated requests are harmless.
 
-        Areas granted but not entered are forgotten: while we were away the server may have
-        released them (offline grace) and granted them to another robot; each is asked for
-        again at its edge."""
+        Areas granted but not entered are forgotten, even those the robot was about to enter
+        (waiting at the edge for a door or a cabin): while we were away the server may have
+        released them (offline grace), or restarted without them, and granted them to another
+        robot. Each is asked for again at its edge (the soak saw two robots drive into one
+        cabin when this kept the grant of a robot waiting for the lift)."""
         self._link_down = False
         self._forget_building()  # whatever was missed meanwhile is asked again below
-        if stale := self._granted - self.held_areas:
+        if stale := (self._granted | self.held_areas) - {self.inside}:
             log.info("%s: granted areas %s not entered: asked again", self.robot, sorted(stale))
             self._granted -= stale
+            self.held_areas -= stale
         if self._waiting_area is not None:
             log.info("%s: still waiting for area %s: asked again", self.robot, self._waiting_area)
             self.ep.publish(RequestArea(robot=self.robot, area=self._waiting_area))

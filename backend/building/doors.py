@@ -6,6 +6,11 @@ Safety rules (docs/building.md, "Doors"):
   without a sensor, ``open_time_s`` after the interface set the coil;
 - it is **closed** as soon as the interface clears the coil, when the sensor falls, when a
   sensorless door's coil reads back cleared, or when the sensor's module goes offline;
+- a clear that could not be written (the module was offline) leaves the coil set, so the door
+  may stand open: its sensor is not believed until the coil is cleared when the module is back,
+  or set again for a new ``open_door`` (otherwise the first sample after the module's return
+  would announce the door open a moment before the interface closes it: the soak saw a robot
+  drive on such an announcement);
 - robots hold a door from ``open_door`` until ``release_door``; the coil is cleared when the
   last holder lets go, or when a holder has held it ``max_hold_s`` (a lost robot).
 """
@@ -35,7 +40,10 @@ class DoorKeeper:
     """Called with (door id, open) on every change of the published state."""
     is_open: bool | None = None
     closed_at: float = -math.inf
-    """time.monotonic() of the last coil clear (inf while a clear is being written)."""
+    """time.monotonic() of the last coil clear (inf while a clear is being written, and after
+    one failed until the coil is written again)."""
+    coil_left_set: bool = False
+    """A clear failed: the coil is still set (cleared when its module is back)."""
     set_at: float = -math.inf
     """time.monotonic() of the last coil set (sensorless doors)."""
     holders: dict[str, asyncio.TimerHandle] = field(default_factory=dict)
@@ -66,6 +74,9 @@ class DoorKeeper:
     def coil_set(self, now: float) -> None:
         """The interface set the coil; a sensorless door counts as open ``open_time_s`` later."""
         self.set_at = now
+        if self.coil_left_set:
+            self.coil_left_set = False
+            self.closed_at = now  # the coil is ours again: samples read from now on count
         if self.door.is_open is None and not self.is_open and self._open_timer is None:
             self._open_timer = asyncio.get_running_loop().call_later(
                 self.door.open_time_s, self._sensorless_open
@@ -87,6 +98,12 @@ class DoorKeeper:
     def cleared(self, now: float) -> None:
         """The coil clear was written: samples read from now on count again."""
         self.closed_at = now
+        self.coil_left_set = False
+
+    def clear_failed(self) -> None:
+        """The coil clear could not be written: no sample counts until the coil is written."""
+        self.closed_at = math.inf
+        self.coil_left_set = True
 
     def lost(self, now: float) -> None:
         """The sensor's module stopped answering: the door counts as closed."""

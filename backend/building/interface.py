@@ -108,7 +108,6 @@ class BuildingInterface(Service):
             if d.is_open is not None
         }
         self._door_coils = {(d.open.module, d.open.point): self.doors[d.id] for d in config.doors}
-        self._coil_left_set: set[str] = set()
         """Doors whose open coil could not be cleared (module offline): cleared when it is back,
         else the building keeps the door open for ever (found by the soak)."""
         # (module, point) -> (elevator, floor) of each in_position input; its last state.
@@ -173,14 +172,13 @@ class BuildingInterface(Service):
     def _on_health(self, health: ModuleHealth) -> None:
         self.endpoint.publish("building_module_health", health.payload())
         if health.state == HealthState.online:
-            for door_id in sorted(self._coil_left_set):
-                keeper = self.doors[door_id]
-                if keeper.door.open.module == health.module and not keeper.holders:
-                    self._coil_left_set.discard(door_id)
-                    log.info("door %s: module back, clearing its coil", door_id)
-                    task = asyncio.get_running_loop().create_task(
-                        self._close(keeper, best_effort=True)
-                    )
+            for keeper in self.doors.values():
+                if (
+                    keeper.coil_left_set
+                    and keeper.door.open.module == health.module
+                    and not keeper.holders
+                ):
+                    task = asyncio.get_running_loop().create_task(self._clear_left_coil(keeper))
                     self._commands.add(task)
                     task.add_done_callback(self._commands.discard)
         else:
@@ -389,14 +387,24 @@ class BuildingInterface(Service):
             self._commands.add(task)
             task.add_done_callback(self._commands.discard)
 
+    async def _clear_left_coil(self, keeper: DoorKeeper) -> None:
+        """The door's module is back with the coil we could not clear still set: clear it,
+        unless a robot asked for the door since. Its ``open_door`` may already have been
+        answered (the door is physically open): closing under it would shut the door on a
+        robot told to drive through (the soak saw it)."""
+        if keeper.holders:
+            log.info("door %s: module back, held again: its coil stays set", keeper.door.id)
+        elif keeper.coil_left_set:
+            log.info("door %s: module back, clearing its coil", keeper.door.id)
+            await self._close(keeper, best_effort=True)
+
     async def _close(self, keeper: DoorKeeper, *, best_effort: bool = False) -> None:
         """Clear the open coil; the door counts as closed from this moment on."""
         keeper.closing()
         try:
             await self._write(keeper.door.open, 0)
-            self._coil_left_set.discard(keeper.door.id)
         except (CommandError, ModbusIOError) as exc:
-            self._coil_left_set.add(keeper.door.id)
+            keeper.clear_failed()
             if not best_effort:
                 raise
             log.warning(
@@ -404,7 +412,10 @@ class BuildingInterface(Service):
                 keeper.door.id,
                 exc,
             )
-        finally:
+        except BaseException:
+            keeper.clear_failed()
+            raise
+        else:
             keeper.cleared(time.monotonic())
 
     async def _close_door(self, message: Message) -> dict[str, Any]:

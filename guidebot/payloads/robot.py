@@ -73,3 +73,6 @@ class NodeReached(PayloadModel):
     robot: str
     node: str
     floor: str | None = None
+    at: float | None = None
+    """When the robot reached it (Unix seconds, the robot's clock): a report held back while
+    the link was down arrives late, and the invariants are checked at this time."""

@@ -118,10 +118,12 @@ async def test_a_jammed_door_fails_with_a_reason_and_is_not_left_energised(
 
 
 async def test_a_door_released_while_its_module_is_offline_is_closed_once_it_is_back(
-    hub: Bus, building: BuildingConfig
+    hub: Bus, building: BuildingConfig, recorder: Recorder
 ) -> None:
     """The coil could not be cleared at the release: when the module answers again it is,
-    else the building would keep the door open for ever (found by the soak)."""
+    else the building would keep the door open for ever (found by the soak). Meanwhile the
+    door may stand open, but it is not announced open: the interface is about to close it, and
+    a robot told "open" would drive into a closing door (the soak saw it)."""
     async with (
         BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
         BuildingInterface(hub.endpoint("building"), sim.bound_config()) as bi,
@@ -135,9 +137,15 @@ async def test_a_door_released_while_its_module_is_offline_is_closed_once_it_is_
         reply = await robot.request("release_door", {"door": "D1"}, timeout=10)
         assert reply.type == "command_failed" and "M1 is offline" in reply.payload["reason"]
         assert sim.read_point("M1", "d1_cmd") == 1  # still set: nobody could reach the module
+        released = len(recorder.messages)
         await sim.set_fault("M1", "none")
         await wait_until(lambda: sim.read_point("M1", "d1_cmd") == 0, timeout=30)
         await wait_until(lambda: sim.doors["D1"].state in ("closing", "closed"))
+        await wait_until(lambda: bi.pollers["M1"].health.online)
+        assert not [m for m in recorder.messages[released:] if m.type == "door_opened"]
+        assert bi.doors["D1"].is_open is False
+        # And the door is the fleet's again: a new open_door opens it.
+        assert (await robot.request("open_door", {"door": "D1"}, timeout=10)).type == "door_opened"
 
 
 async def test_close_door_is_confirmed(

@@ -105,3 +105,29 @@ def test_the_checker_catches_each_kind_of_violation() -> None:
     ):
         clean.feed_message(message)
     assert clean.violations == [] and clean.counts["door"] == 1 and clean.counts["cabin"] == 1
+
+
+def test_a_late_report_is_judged_at_the_time_the_robot_gives() -> None:
+    """A robot's link was down: its node_reached comes seconds late. It entered the cabin
+    while the cabin was open (no violation), and a second robot's late report shows it in an
+    area while another was there (a violation the arrival order alone would miss)."""
+    from guidebot.site.validate import validate_site
+
+    checker = InvariantChecker.from_site(validate_site(safety_site()))
+    feed = checker.feed
+    feed("elevator_in_position", {"elevator": "lift_a", "floor": "F0", "door_open": True}, 100.0)
+    feed("elevator_in_position", {"elevator": "lift_a", "floor": "F0", "door_open": False}, 108.0)
+    # Reached la0 at 101 (open), reported at 110 (closed by then).
+    feed("node_reached", {"robot": "R1", "node": "la0", "floor": "F0", "at": 101.0}, 110.0)
+    assert checker.violations == []
+    # R2 in corr_b from 120 on, reported at once; R3's late report puts it there from 121.
+    feed("node_reached", {"robot": "R2", "node": "cb1", "at": 120.0}, 120.0)
+    feed("node_reached", {"robot": "R3", "node": "cb1", "at": 121.0}, 125.0)
+    assert [(v.invariant, v.robot, v.at) for v in checker.violations] == [("area", "R3", 121.0)]
+    # A late report of R1 entering corr_b at 119 (still there): R2 and R3 came in after it.
+    feed("node_reached", {"robot": "R1", "node": "cb1", "at": 119.0}, 131.0)
+    assert [(v.robot, v.at) for v in checker.violations][1:] == [("R2", 120.0), ("R3", 121.0)]
+    # A report that claims a time after its arrival is taken at its arrival.
+    feed("node_reached", {"robot": "R4", "node": "la0", "at": 999.0}, 140.0)
+    assert "while lift_a was closed or moving" in str(checker.violations[-1])
+    assert checker.violations[-1].at == 140.0

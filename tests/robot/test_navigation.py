@@ -200,6 +200,50 @@ async def test_a_robot_whose_link_is_down_does_not_enter_an_area_granted_meanwhi
     assert rig.nav.node == "gb1"
 
 
+async def test_a_robot_waiting_at_the_lift_asks_again_for_the_lift_after_a_reconnect(
+    rig: Rig, demo_site: Site
+) -> None:
+    """Granted the lift, waiting for its cabin, the robot loses its link; the server restarts
+    without its grant and gives the lift to R2. Back online, the robot must not drive into
+    the cabin on its old grant: it asks again and waits for R2 (the 30-minute soak saw two
+    robots ride together when it did not)."""
+    import asyncio
+
+    rig.building.delay_s = 3600.0  # the cabin comes when this test says
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gc1"})
+    await rig.seen.wait_for(lambda: rig.nav.state == "waiting_elevator")
+    assert rig.nav.areas_held() == ["elevator"] and rig.nav.node == "hall"
+
+    rig.nav.link_lost()
+    await rig.traffic.stop()  # a new server life: no locks until the robots declare theirs
+    traffic = TrafficManager(rig.bus.endpoint("traffic-2"), demo_site)
+    await traffic.start()
+    try:
+        r2 = rig.bus.endpoint("R2")
+        r2.publish("request_area", {"robot": "R2", "area": "elevator"})
+        await rig.seen.wait_for(
+            lambda: [m for m in rig.seen.of("area_granted") if m.destination == "R2"]
+        )
+        rig.nav.resync()
+        assert rig.nav.areas_held() == []
+        building = rig.bus.endpoint("building-broadcast")
+        building.publish(
+            "elevator_in_position", {"elevator": "lift", "floor": "F0", "door_open": True}
+        )
+        await rig.seen.wait_for(
+            lambda: [m for m in rig.seen.of("request_area") if m.payload["robot"] == "R1"][1:]
+        )
+        await asyncio.sleep(0.5)  # 10 robot seconds: it would be in the cabin by now
+        assert rig.nav.state == "waiting_area" and rig.nav.node == "hall"
+        r2.publish("release_area", {"robot": "R2", "area": "elevator"})
+        await rig.seen.wait_for(
+            lambda: [m for m in rig.seen.of("area_granted") if m.destination == "R1"][1:]
+        )
+        await rig.seen.wait_for(lambda: rig.nav.node == "lift0", timeout=30)
+    finally:
+        await traffic.stop()
+
+
 async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
     rig: Rig, demo_site: Site
 ) -> None:
