@@ -114,12 +114,14 @@ class ServerBrain(Service):
             logger.subscribe(pattern, log_message, tap=True)
         for pattern in LOGGED_BROADCASTS:
             logger.subscribe(pattern, log_message)
-        # The log's mark of a new server life: grants of an earlier one are void (robots
-        # declare what they hold again in their robot_state; guidebot/invariants.py).
+        # The log's mark of a new server life. The locks of the last one are read first and
+        # held again (logged as grants with ``restored``) until their robots report.
+        held = await store.lock_holders()
         store.record_event("server_started", "server", {"site_version": version})
         restored = await store.load_open_tasks()
         tasks.restore(restored)
         await self.enter(traffic)
+        traffic.restore_locks(held)
         traffic.await_resync(
             {t.robot for t in restored if t.robot and not t.final}, settings.lock_resync_s
         )

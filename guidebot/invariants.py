@@ -234,8 +234,9 @@ class InvariantChecker:
         self.holders[area] = robot
 
     def _on_server_started(self, p: Mapping[str, Any], at: float) -> None:
-        """A new server life starts with no locks: the robots declare theirs again (an
-        ``area_granted`` with ``resync``); positions and the building are physical and stay."""
+        """A new server life starts with the locks of the last one logged again (an
+        ``area_granted`` with ``restored``) and the robots' own word (``resync``); positions
+        and the building are physical and stay."""
         self.holders.clear()
 
     def _on_release_area(self, p: Mapping[str, Any], at: float) -> None:

@@ -249,6 +249,37 @@ class DbStore(Service):
                 for r in rows
             ]
 
+    async def lock_holders(self) -> dict[str, str]:
+        """Area -> robot: the restricted areas held when the last server life ended, replayed
+        from its grants and releases in the event log (a life's restored locks are logged as
+        grants too, so the chain holds across several restarts). Call it before this life's
+        ``server_started`` is recorded."""
+        await self.flush()
+        kinds = ("area_granted", "area_released", "area_force_released")
+        async with self.sessionmaker() as session:
+            since = (
+                await session.execute(
+                    select(func.max(EventRow.id)).where(EventRow.kind == "server_started")
+                )
+            ).scalar() or 0
+            rows = (
+                await session.execute(
+                    select(EventRow.kind, EventRow.data)
+                    .where(EventRow.id > since, EventRow.kind.in_(kinds))
+                    .order_by(EventRow.id)
+                )
+            ).all()
+        holders: dict[str, str] = {}
+        for kind, data in rows:
+            area, robot = (data or {}).get("area"), (data or {}).get("robot")
+            if not isinstance(area, str) or not isinstance(robot, str):
+                continue
+            if kind == "area_granted":
+                holders[area] = robot
+            elif holders.get(area) == robot:
+                del holders[area]
+        return holders
+
     async def load_site(self) -> tuple[int, dict[str, Any]] | None:
         async with self.sessionmaker() as session:
             row = await session.get(SiteRow, 1)

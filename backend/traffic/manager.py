@@ -8,7 +8,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from pydantic import ValidationError
@@ -100,6 +100,20 @@ class TrafficManager(Service):
         )
         loop = asyncio.get_running_loop()
         self._resync_timer = loop.call_later(timeout_s, self._end_resync)
+
+    def restore_locks(self, holders: Mapping[str, str]) -> None:
+        """A restart: the locks held when the last server life ended (area -> robot, from the
+        event log) are held again, by robots offline until they report, as if entered. A robot
+        inside an area whose link is still down when the resync window ends would otherwise
+        find another robot granted its area. Its first ``robot_state`` releases what it is
+        not in; one that never comes back leaves its locks to staff (offline grace)."""
+        for area, robot in sorted(holders.items()):
+            if area not in self.graph.area_nodes or robot not in self._robots:
+                continue
+            self.locks.set_online(robot, False)
+            if self.locks.adopt(robot, area, entered=True):
+                log.warning("traffic: %s holds %s since the last server life", robot, area)
+                self._emit("area_granted", {"robot": robot, "area": area, "restored": True})
 
     def _end_resync(self) -> None:
         if self._resync_timer is not None:

@@ -33,3 +33,31 @@ async def test_migrations_build_the_schema_and_the_store_round_trips(db_url: str
         assert await store.load_site() == (2, {"name": "y"})
     finally:
         await engine.dispose()
+
+
+async def test_the_locks_of_the_last_server_life_are_replayed_from_the_event_log(
+    db_url: str,
+) -> None:
+    """What was held when the server died comes back at the next start (docs/server.md)."""
+    engine = make_engine(db_url)
+    try:
+        await migrate(engine)
+        store = DbStore(make_sessionmaker(engine))
+        await store.start()
+        assert await store.lock_holders() == {}
+        log = store.record_event
+        log("server_started", "server", {})
+        log("area_granted", "traffic_manager", {"robot": "R9", "area": "corridor"})
+        log("server_started", "server", {})  # an earlier life's grants are not this one's
+        log("area_granted", "traffic_manager", {"robot": "R1", "area": "corridor"})
+        log("area_granted", "traffic_manager", {"robot": "R2", "area": "elevator"})
+        log("area_granted", "traffic_manager", {"robot": "R3", "area": "stairs"})
+        log("area_released", "traffic_manager", {"robot": "R1", "area": "corridor"})
+        log("area_granted", "traffic_manager", {"robot": "R4", "area": "corridor"})
+        log("area_released", "traffic_manager", {"robot": "R9", "area": "elevator"})  # not its
+        log("area_force_released", "traffic_manager", {"area": "stairs", "robot": "R3", "by": "x"})
+        log("area_granted", "traffic_manager", {"robot": 7, "area": "bad row"})
+        assert await store.lock_holders() == {"corridor": "R4", "elevator": "R2"}
+        await store.stop()
+    finally:
+        await engine.dispose()

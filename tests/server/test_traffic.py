@@ -337,3 +337,37 @@ async def test_the_resync_wait_ends_without_a_robot_that_never_comes_back(bus: B
     assert not r1.of_type("area_granted")
     await r1.wait_for("area_granted", timeout=10)
     await traffic.stop()
+
+
+async def test_a_restarted_server_holds_the_last_lives_locks_until_their_robots_report(
+    bus: Bus,
+) -> None:
+    """R2 was in the lift when the server died and its link is still down when the resync
+    window ends: the lift stays R2's (restored from the event log), R1 waits. R2's word from
+    outside releases it (docs/server.md: locks come back from the event log)."""
+    events: list[tuple[str, dict[str, Any]]] = []
+    traffic = TrafficManager(
+        bus.endpoint("traffic_manager"),
+        demo_site(),
+        on_event=lambda kind, data: events.append((kind, data)),
+    )
+    await traffic.start()
+    traffic.restore_locks({"elevator": "R2", "corridor": "R3", "nowhere": "R2", "stairs": "R99"})
+    assert ("area_granted", {"robot": "R2", "area": "elevator", "restored": True}) in events
+    views = {v.area: v for v in traffic.lock_views()}
+    assert views["elevator"].holder == "R2" and views["elevator"].state == "holder_offline"
+    r1 = RobotStub(bus, "R1", "hall")
+    r1.state("busy")
+    r1.endpoint.publish("request_area", {"robot": "R1", "area": "elevator"})
+    assert not r1.of_type("area_granted")
+    traffic.check_offline_locks(grace_s=0.0)  # it may be inside: kept, staff alerted
+    assert traffic.locks.holder("elevator") == "R2"
+    assert "lock:elevator" in traffic.alerts.active
+    r3 = RobotStub(bus, "R3", "corridor_w")
+    r3.state("busy", areas=["corridor"])  # inside: still its own
+    assert traffic.locks.holder("corridor") == "R3"
+    r2 = RobotStub(bus, "R2", "landing")
+    r2.state("idle")  # back, outside the lift: released, and R1 gets it
+    await r1.wait_for("area_granted")
+    assert traffic.locks.holder("elevator") == "R1"
+    await traffic.stop()
