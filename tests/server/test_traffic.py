@@ -59,8 +59,16 @@ def bus() -> Bus:
     return Bus()
 
 
-async def start_traffic(bus: Bus, site: Site) -> TrafficManager:
-    manager = TrafficManager(bus.endpoint("traffic_manager"), site)
+async def start_traffic(
+    bus: Bus, site: Site, events: list[tuple[str, dict[str, Any]]] | None = None
+) -> TrafficManager:
+    """A started Traffic Manager; what it logs is appended to ``events``."""
+    log = events.append if events is not None else None
+    manager = TrafficManager(
+        bus.endpoint("traffic_manager"),
+        site,
+        on_event=(lambda kind, data: log((kind, data))) if log is not None else None,
+    )
     await manager.start()
     return manager
 
@@ -277,12 +285,7 @@ async def test_a_restarted_server_takes_back_the_locks_robots_report(bus: Bus) -
     it has not used yet, keeps it from its robot_state; a second robot waits (found by the
     soak: both were once granted the elevator)."""
     events: list[tuple[str, dict[str, Any]]] = []
-    traffic = TrafficManager(
-        bus.endpoint("traffic_manager"),
-        demo_site(),
-        on_event=lambda kind, data: events.append((kind, data)),
-    )
-    await traffic.start()
+    traffic = await start_traffic(bus, demo_site(), events)
     r1, r2 = RobotStub(bus, "R1", "corridor_w"), RobotStub(bus, "R2", "hall")
     r3 = RobotStub(bus, "R3", "ga1")
     r1.state("busy")  # inside the corridor: nobody else held it
@@ -346,12 +349,7 @@ async def test_a_restarted_server_holds_the_last_lives_locks_until_their_robots_
     window ends: the lift stays R2's (restored from the event log), R1 waits. R2's word from
     outside releases it (docs/server.md: locks come back from the event log)."""
     events: list[tuple[str, dict[str, Any]]] = []
-    traffic = TrafficManager(
-        bus.endpoint("traffic_manager"),
-        demo_site(),
-        on_event=lambda kind, data: events.append((kind, data)),
-    )
-    await traffic.start()
+    traffic = await start_traffic(bus, demo_site(), events)
     traffic.restore_locks({"elevator": "R2", "corridor": "R3", "nowhere": "R2", "stairs": "R99"})
     assert ("area_granted", {"robot": "R2", "area": "elevator", "restored": True}) in events
     views = {v.area: v for v in traffic.lock_views()}
