@@ -405,8 +405,15 @@ class Navigator(MotionControl):
                 i += 1
         finally:
             self._release_doors()
-            # Grants never used are dropped (the Traffic Manager releases them with the task):
-            # reporting them in robot_state would claim areas the robot no longer needs.
+            # A path ended early (a fault, a cancel) leaves areas acquired but not entered: give
+            # them back. Kept, the next path would drive in on them, though the server may have
+            # released them with the task meanwhile (the soak saw a robot enter a lift granted
+            # to another). Grants never used are dropped too: reporting them in robot_state
+            # would claim areas the robot no longer needs.
+            for area in sorted(self.held_areas - {self.inside}):
+                self.held_areas.discard(area)
+                log.info("%s: area %s not entered, released", self.robot, area)
+                self.ep.publish(ReleaseArea(robot=self.robot, area=area))
             self._granted &= self.held_areas
         self._send_velocity(0.0, 0.0, force=True)
         self.state = NavState.IDLE

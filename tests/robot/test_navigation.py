@@ -244,6 +244,21 @@ async def test_a_robot_waiting_at_the_lift_asks_again_for_the_lift_after_a_recon
         await traffic.stop()
 
 
+async def test_a_goal_that_fails_at_an_areas_edge_gives_the_area_back(rig: Rig) -> None:
+    """Granted the lift, waiting for its cabin, the robot's motor is lost and its goal fails.
+    The next path must ask for the lift again: the server released it with the task (the
+    30-minute soak saw the robot ride on the old grant with another robot)."""
+    rig.building.delay_s = 3600.0
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gc1"})
+    await rig.seen.wait_for(lambda: rig.nav.state == "waiting_elevator")
+    assert rig.nav.areas_held() == ["elevator"]
+    rig.bus.endpoint("base").publish("base_fault", {"reason": "motor module lost"})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("navigation_failed")))
+    assert rig.nav.areas_held() == [] and rig.nav.node == "hall"
+    assert [m.payload["area"] for m in rig.seen.of("release_area")] == ["elevator"]
+    assert rig.traffic.locks.holder("elevator") is None
+
+
 async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
     rig: Rig, demo_site: Site
 ) -> None:
