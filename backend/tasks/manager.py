@@ -114,7 +114,7 @@ class TaskManager(Service):
         """Waits, arrivals and durations told to visitors (backend/tasks/eta.py)."""
         self.courier = courier_for(endpoint)
         """task_assigned and task_cancel: sent again until the robot acknowledges them."""
-        self.requests = HubRequests(self)
+        self.hub_requests = HubRequests(self)
         self.reports = TaskReports(self)
         self.presence = Presence(self)
         self.battery = BatteryAlarms(self)
@@ -126,7 +126,7 @@ class TaskManager(Service):
         self.subscribe_all(
             self.endpoint,
             {
-                "task_request": self.requests.on_task_request,
+                "task_request": self.hub_requests.on_task_request,
                 "task_started": self.reports.on_task_started,
                 "task_ended": self.reports.on_task_ended,
                 "tour_progress": self.reports.on_tour_progress,
@@ -145,7 +145,7 @@ class TaskManager(Service):
     async def _finish(self) -> None:
         """Stop: retries end, and task writes in flight get 5 s to reach the database."""
         self.courier.close()
-        await self.requests.finish_writes()
+        await self.hub_requests.finish_writes()
 
     def load_site(self, site: Site, graph: SiteGraph | None = None) -> None:
         """New site while running: robots added or removed, new map for costs."""
