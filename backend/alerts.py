@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 from guidebot.bus import BusEndpoint
 from guidebot.payloads.alerts import AlertKind, StaffAlert
@@ -28,7 +28,7 @@ class AlertBoard:
     def __init__(self, endpoint: BusEndpoint, on_event: EventSink | None = None) -> None:
         self.endpoint = endpoint
         self.on_event = on_event
-        self.active: dict[str, dict[str, Any]] = {}
+        self.active: dict[str, StaffAlert] = {}
 
     def raise_(
         self,
@@ -36,39 +36,37 @@ class AlertBoard:
         kind: AlertKind,
         message: str,
         *,
-        severity: str = "warning",
+        severity: Literal["info", "warning", "critical"] = "warning",
         robot: str | None = None,
         area: str | None = None,
         sticky: bool = True,
     ) -> None:
         """Publish an alert; ``sticky`` ones stay active until ``clear``."""
-        payload = StaffAlert.model_validate(
-            {
-                "alert_id": alert_id,
-                "kind": kind,
-                "severity": severity,
-                "active": sticky,
-                "message": message,
-                "robot": robot,
-                "area": area,
-                "at": time.time(),
-            }
-        ).model_dump()
+        alert = StaffAlert(
+            alert_id=alert_id,
+            kind=kind,
+            severity=severity,
+            active=sticky,
+            message=message,
+            robot=robot,
+            area=area,
+            at=time.time(),
+        )
         if sticky:
-            self.active[alert_id] = payload
+            self.active[alert_id] = alert
         log.warning("staff alert [%s] %s", kind, message)
-        self._send(payload)
+        self._send(alert)
 
     def clear(self, alert_id: str, message: str) -> None:
         """The condition is over: publish the alert inactive (nothing if it was not active)."""
         old = self.active.pop(alert_id, None)
         if old is None:
             return
-        payload = {**old, "active": False, "message": message, "at": time.time()}
-        log.info("staff alert cleared [%s] %s", old["kind"], message)
-        self._send(payload)
+        cleared = old.model_copy(update={"active": False, "message": message, "at": time.time()})
+        log.info("staff alert cleared [%s] %s", old.kind, message)
+        self._send(cleared)
 
-    def _send(self, payload: dict[str, Any]) -> None:
-        self.endpoint.publish("staff_alert", payload)
+    def _send(self, alert: StaffAlert) -> None:
+        self.endpoint.publish(alert)
         if self.on_event is not None:
-            self.on_event("staff_alert", payload)
+            self.on_event("staff_alert", alert.model_dump())

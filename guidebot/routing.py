@@ -64,12 +64,17 @@ class PatternTable(Generic[R]):
     Tuples are replaced, never mutated, so a handler may subscribe or unsubscribe while a
     message is being delivered. The routes of each type are remembered until the table
     changes: a hub with "*" taps matches a type's wildcards once, not once per message.
+
+    ``distinct`` (for example the WebSocket client a hub route belongs to): of the routes a
+    type matches, only the first with each key is kept, so a client whose patterns overlap
+    (``robot_state`` and ``*``) gets a message once. Worked out once per type, as the rest.
     """
 
     CACHE_TYPES = 1024
     """Types remembered at most (the on-board bus carries any type a net publishes)."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, distinct: Callable[[R], object] | None = None) -> None:
+        self._distinct = distinct
         self._exact: dict[str, tuple[R, ...]] = {}
         self._wild: dict[str, tuple[R, ...]] = {}
         self._wild_routes: tuple[R, ...] = ()
@@ -111,6 +116,8 @@ class PatternTable(Generic[R]):
             matched = [r for r in self._wild_routes if fnmatch.fnmatchcase(message_type, r.pattern)]
             if matched:
                 routes = (*routes, *matched)
+        if self._distinct is not None and len(routes) > 1:
+            routes = _first_per_key(routes, self._distinct)
         if len(self._cache) >= self.CACHE_TYPES:
             self._cache.clear()
         self._cache[message_type] = routes
@@ -119,6 +126,17 @@ class PatternTable(Generic[R]):
     def patterns(self) -> list[str]:
         """Every pattern with at least one route."""
         return [*self._exact, *self._wild]
+
+
+def _first_per_key(routes: tuple[R, ...], key: Callable[[R], object]) -> tuple[R, ...]:
+    seen: set[object] = set()
+    kept: list[R] = []
+    for route in routes:
+        k = key(route)
+        if k not in seen:
+            seen.add(k)
+            kept.append(route)
+    return tuple(kept)
 
 
 class PendingRequests:

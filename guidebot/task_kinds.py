@@ -5,7 +5,7 @@ Every process reads this table: the Task Manager (net, duration, target, manual 
 REST API and the ``task_request`` payload (the kinds, the parameters), the site validator (a
 button's task), the visitor panel and the robot's touch screen (the visitor kinds). Adding a
 kind is one entry here (plus its net in petri_nets/library and its robot-side parameters in
-the Task Manager's ``_net_params``).
+``net_params`` in backend/tasks/targets.py).
 """
 
 from __future__ import annotations

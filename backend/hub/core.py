@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import asyncio
 import enum
-import fnmatch
 import logging
-from collections.abc import Callable, Iterable
+import operator
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import orjson
@@ -24,8 +25,9 @@ from pydantic import BaseModel, ValidationError
 
 from backend.auth import Role
 from backend.ratelimit import RateLimited, RateLimiter
-from guidebot.bus import Bus, Endpoint, is_wildcard
+from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message, known_types, payload_model
+from guidebot.routing import PatternTable, Route
 from guidebot.wire import encode
 
 from .acks import InboundAcks
@@ -43,6 +45,7 @@ __all__ = [
     "COALESCED_TYPES",
     "CONTROL_TYPES",
     "HUB_NAME",
+    "ClientRoute",
     "ClientState",
     "ConnectionCallback",
     "Hub",
@@ -110,6 +113,13 @@ class HubBus(Bus):
         return delivered
 
 
+@dataclass(eq=False)
+class ClientRoute(Route):
+    """One subscription pattern of a WebSocket client, in the hub's pattern table."""
+
+    client: RemoteClient
+
+
 class RemoteClient:
     """A WebSocket client as the hub sees it: a name, a role, subscriptions, an outbox."""
 
@@ -119,7 +129,7 @@ class RemoteClient:
         self.role = role
         self.endpoint = endpoint
         self.outbox = Outbox(hub.queue_size, hub.coalesce_after)
-        self.patterns: dict[str, bool] = {}
+        self.patterns: dict[str, ClientRoute] = {}
         self.state = ClientState.OPEN
         self.close_code: int | None = None
         self.close_reason = ""
@@ -168,12 +178,13 @@ class RemoteClient:
 
     def subscribe(self, pattern: str) -> None:
         if pattern not in self.patterns:
-            self.patterns[pattern] = True
-            self.hub._join(self, pattern)
+            route = self.patterns[pattern] = ClientRoute(pattern, self.deliver, self)
+            self.hub.subscriptions.add(route)
 
     def unsubscribe(self, pattern: str) -> None:
-        if self.patterns.pop(pattern, None):
-            self.hub._leave(self, pattern)
+        route = self.patterns.pop(pattern, None)
+        if route is not None:
+            self.hub.subscriptions.remove(route)
 
     def request_close(self, code: int, reason: str) -> None:
         """Stop routing to this client; its transport closes the socket with code and reason."""
@@ -234,12 +245,13 @@ class Hub:
         self._encoded_message: Message | None = None
         self._encoded = b""
         self._gui_counter = 0
-        # WebSocket subscriptions, by pattern: one bus subscription ("*") finds every remote
-        # recipient of a message once, however many of its patterns match, and queues the
-        # message serialised once. Tuples: replaced, never mutated, so iteration is safe.
+        self.subscriptions: PatternTable[ClientRoute] = PatternTable(
+            distinct=operator.attrgetter("client")
+        )
+        """WebSocket subscriptions: one bus subscription ("*") finds every remote recipient of
+        a message once, however many of its patterns match (the table keeps one route per
+        client, worked out once per type), and queues the message serialised once."""
         self._own = self.bus.endpoint(HUB_NAME)
-        self._exact: dict[str, tuple[RemoteClient, ...]] = {}
-        self._wild: dict[str, tuple[RemoteClient, ...]] = {}
         self._own.subscribe("*", self._fan_out)
 
     # -- in-process side --------------------------------------------------------------------
@@ -272,38 +284,21 @@ class Hub:
             self._encoded_message = message
         return self._encoded
 
-    def _join(self, client: RemoteClient, pattern: str) -> None:
-        table = self._wild if is_wildcard(pattern) else self._exact
-        table[pattern] = (*table.get(pattern, ()), client)
-
-    def _leave(self, client: RemoteClient, pattern: str) -> None:
-        table = self._wild if is_wildcard(pattern) else self._exact
-        members = tuple(c for c in table.get(pattern, ()) if c is not client)
-        if members:
-            table[pattern] = members
-        else:
-            table.pop(pattern, None)
+    def recipients(self, message_type: str) -> int:
+        """How many WebSocket clients a published (not addressed) message of this type reaches."""
+        return len(self.subscriptions.matching(message_type))
 
     def _fan_out(self, message: Message) -> None:
         """Queue a published message for every WebSocket client subscribed to its type."""
         if message.destination is not None:
             return  # addressed messages reach their client through HubBus.publish
-        type_ = message.type
-        recipients: Iterable[RemoteClient] | None = self._exact.get(type_)
-        several = False
-        for pattern, members in self._wild.items():
-            if fnmatch.fnmatchcase(type_, pattern):
-                if recipients is None:
-                    recipients = members
-                else:
-                    recipients, several = (*recipients, *members), True
-        if not recipients:
+        routes = self.subscriptions.matching(message.type)
+        if not routes:
             return
-        if several:
-            recipients = dict.fromkeys(recipients)  # a client matched twice gets it once
         data = self.encode(message)
-        key = message.source if type_ in COALESCED_TYPES else None
-        for client in recipients:
+        key = message.source if message.type in COALESCED_TYPES else None
+        for route in routes:
+            client = route.client
             if client.state is not ClientState.OPEN:
                 continue
             try:
@@ -365,8 +360,8 @@ class Hub:
             client.endpoint.close()
             self.memory.detached(len(self.bus.remote))
         client.closing.set()
-        for pattern in client.patterns:
-            self._leave(client, pattern)
+        for route in client.patterns.values():
+            self.subscriptions.remove(route)
         client.patterns.clear()
         if client.state is not ClientState.CLOSED:
             client._move(ClientState.CLOSED)

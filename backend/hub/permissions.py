@@ -25,6 +25,7 @@ SERVER_ONLY = frozenset(
         "task_event",
         "robot_connected",
         "robot_disconnected",
+        "robot_service",
         "path",
         "area_granted",
         "area_yield",

@@ -19,6 +19,7 @@ from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect
 
 from backend.auth import Authenticator, SignInRefused, bearer_token, client_address
+from guidebot import wire
 
 from .core import (
     CLOSE_FORBIDDEN,
@@ -145,11 +146,7 @@ async def _write(websocket: WebSocket, client: RemoteClient) -> None:
             batch = outbox.take(batch_max)
             if not batch or client.close_code is not None:
                 break
-            if len(batch) == 1:
-                data = batch[0]
-            else:
-                data = b"[" + b",".join(batch) + b"]"
-            await websocket.send_text(data.decode())
+            await websocket.send_text(wire.frame(batch).decode())
             client.frames_sent += 1
             if linger > 0:
                 last_send = loop.time()

@@ -7,7 +7,6 @@ kept up to date that nobody reads.
 
 from __future__ import annotations
 
-import fnmatch
 import statistics
 import time
 from collections import Counter as Tally
@@ -21,6 +20,7 @@ from prometheus_client.registry import Collector
 
 from backend.metrics.reaction import STEPS, ReactionJoin, steps_ms
 from guidebot.messages import Message
+from guidebot.payloads.tasks import ReactionMeasured
 
 __all__ = ["ServerMetrics"]
 
@@ -89,7 +89,7 @@ class ServerMetrics:
         self._assigned: OrderedDict[str, float] = OrderedDict()
         self._area_requests: OrderedDict[str, tuple[str, float]] = OrderedDict()
         self.join = ReactionJoin(self._requester_of, self._button_input, self._measured)
-        self._publish: Callable[[str, dict[str, Any]], object] | None = None
+        self._publish: Callable[[ReactionMeasured], object] | None = None
         r.register(_ScrapeCollector(self))
 
     # -- feeding -----------------------------------------------------------------------------
@@ -120,15 +120,10 @@ class ServerMetrics:
 
     @staticmethod
     def _recipients(hub: Any, message: Message) -> int:
-        """WebSocket clients this message is queued for, from the hub's subscription tables
-        (a client matching two patterns counts twice: cheap, and rare)."""
+        """WebSocket clients this message is queued for, from the hub's subscription table."""
         if message.destination is not None:
             return 1 if message.destination in hub.clients else 0
-        count = len(hub._exact.get(message.type, ()))
-        for pattern, members in hub._wild.items():
-            if fnmatch.fnmatchcase(message.type, pattern):
-                count += len(members)
-        return count
+        return int(hub.recipients(message.type))
 
     def _on_task_event(self, message: Message) -> None:
         p, now = message.payload, message.timestamp
@@ -187,14 +182,11 @@ class ServerMetrics:
         if "sampled_at" in stamps:
             self.reaction_chain.observe(max(0.0, stamps["moving_at"] - stamps["sampled_at"]))
         if self._publish is not None:
-            payload = {
-                "task_id": task_id,
-                "robot": robot,
-                "button": button,
-                "stamps": stamps,
-                "steps_ms": steps,
-            }
-            self._publish("reaction_measured", payload)
+            self._publish(
+                ReactionMeasured(
+                    task_id=task_id, robot=robot, button=button, stamps=stamps, steps_ms=steps
+                )
+            )
 
     def render(self) -> bytes:
         return generate_latest(self.registry)

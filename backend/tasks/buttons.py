@@ -13,6 +13,7 @@ from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError, TaskState
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.payloads.building import SetOutput
 from guidebot.service import Service
 from guidebot.site.building import Button
 from guidebot.site.schema import Site
@@ -90,6 +91,5 @@ class ButtonWatcher(Service):
     def _set_led(self, button: Button, on: bool) -> None:
         if button.led is not None:
             self.endpoint.publish(
-                "set_output",
-                {"module": button.led.module, "point": button.led.point, "value": int(on)},
+                SetOutput(module=button.led.module, point=button.led.point, value=int(on))
             )

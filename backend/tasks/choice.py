@@ -1,4 +1,4 @@
-"""Which robot gets a task, and which place suits an idle robot: pure functions of what the
+"""Which robot gets a task, and where an idle robot goes: pure functions of what the
 Task Manager knows (robots, the task, distances over the site graph), no bus and no clock,
 so the rules can be read and tested on their own (docs/server.md "Assignment")."""
 
@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Collection, Iterable, Mapping
-from typing import Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from backend.tasks.model import Task
 from backend.tasks.robots import RobotInfo
+from guidebot.site.schema import Site
 from guidebot.task_kinds import MANUAL_KINDS
 
 __all__ = [
@@ -17,8 +18,10 @@ __all__ = [
     "MANUAL_KINDS",
     "UNKNOWN_POSITION_COST_S",
     "Distances",
+    "Errand",
     "available",
     "choose_robot",
+    "idle_errands",
     "nearest",
     "robot_cost",
 ]
@@ -102,3 +105,49 @@ def nearest(
         if best is None or dist < best_cost:
             best, best_cost = place, dist
     return best
+
+
+Errand = tuple[RobotInfo, str, dict[str, Any]]
+"""An internal task for an idle robot: (robot, kind, params)."""
+
+
+def idle_errands(
+    idle: Iterable[RobotInfo],
+    fleet: Iterable[RobotInfo],
+    charging_at: Collection[str | None],
+    site: Site,
+    distances_to: Callable[[str], Distances],
+    has_work: Callable[[RobotInfo], bool],
+) -> list[Errand]:
+    """Where the ``idle`` robots (free as far as tasks go) go: charge if they must, else a
+    free charging station, else the nearest wait point; nowhere if already at one, or if
+    ``has_work`` (a queued task it can take). ``charging_at``: stations a charge task holds."""
+    candidates = [
+        r for r in idle if r.current is None and r.online and not r.fault and not r.out_of_service
+    ]
+    if not candidates:
+        return []
+    at = {s.node: s.id for s in site.charging_stations}
+    taken: set[str | None] = set(charging_at)
+    taken |= {at[r.node] for r in fleet if r.node in at}
+    wait_nodes = {w.node for w in site.wait_points}
+    free_stations = [s for s in site.charging_stations if s.id not in taken]
+    errands: list[Errand] = []
+    for robot in candidates:
+        if has_work(robot):
+            continue
+        if robot.node in at:
+            if robot.needs_charge and robot.mode != "charging":
+                errands.append((robot, "charge", {"station": at[robot.node]}))
+            continue
+        if robot.node in wait_nodes and not robot.needs_charge:
+            continue
+        station = nearest(robot.node, [s for s in free_stations if s.id not in taken], distances_to)
+        if station is not None:
+            taken.add(station.id)
+            errands.append((robot, "charge", {"station": station.id}))
+        elif not robot.needs_charge:
+            wait = nearest(robot.node, site.wait_points, distances_to)
+            if wait is not None:
+                errands.append((robot, "go_to", {"node": wait.node}))
+    return errands

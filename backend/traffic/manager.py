@@ -17,8 +17,9 @@ from backend.alerts import AlertBoard
 from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
-from guidebot.messages import Message
-from guidebot.payloads.traffic import AreaYield, GetPath, ReleaseArea, RequestArea
+from guidebot.messages import Message, make_message
+from guidebot.payloads.hub import Error
+from guidebot.payloads.traffic import AreaGranted, AreaYield, GetPath, ReleaseArea, RequestArea
 from guidebot.service import Service
 from guidebot.site.graph import NoPath, PathResult, SiteGraph, UnknownNode
 from guidebot.site.schema import Site
@@ -407,12 +408,11 @@ class TrafficManager(Service):
 
     def _send_grants(self, grants: list[Grant]) -> None:
         for g in grants:
-            granted = Message(
-                type="area_granted",
+            granted = make_message(
+                AreaGranted(robot=g.robot, area=g.area),
                 source=self.endpoint.name,
                 destination=g.robot,
                 correlation_id=g.request_id,
-                payload={"robot": g.robot, "area": g.area},
             )
             self.courier.post(granted, key=(g.robot, g.area))
             self._emit("area_granted", {"robot": g.robot, "area": g.area})
@@ -432,8 +432,7 @@ class TrafficManager(Service):
 
     def _refuse(self, msg: Message, reason: str) -> None:
         log.info("traffic: refused %s from %s: %s", msg.type, msg.source, reason)
-        payload = {"code": "refused", "reason": reason, "message_id": msg.id}
-        self._reply(msg, "error", payload)
+        self.endpoint.reply(msg, Error(code="refused", reason=reason, message_id=msg.id))
 
     def _reply(self, msg: Message, type_: str, payload: dict[str, Any]) -> None:
         self.endpoint.send(msg.reply(type_, payload))

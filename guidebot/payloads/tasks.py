@@ -12,6 +12,7 @@ from guidebot.task_kinds import TaskKind
 __all__ = [
     "ReactionMeasured",
     "RobotLink",
+    "RobotService",
     "TaskAssigned",
     "TaskCancel",
     "TaskEnded",
@@ -138,3 +139,12 @@ class RobotLink(PayloadModel):
     """A robot's hub link came up or dropped (published by the server, not by robots)."""
 
     robot: str
+
+
+@register_payload("robot_service")
+class RobotService(PayloadModel):
+    """Staff took a robot out of service (it gets no task) or put it back (Task Manager)."""
+
+    robot: str
+    out_of_service: bool
+    by: str = ""

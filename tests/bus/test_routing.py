@@ -43,6 +43,18 @@ def test_add_and_remove_say_when_a_pattern_starts_and_ends() -> None:
     assert table.matching("battery_low") == () and table.patterns() == []
 
 
+def test_a_distinct_table_keeps_one_route_per_key_until_the_overlap_ends() -> None:
+    """The hub's table (key: the WebSocket client): overlapping patterns deliver once."""
+    table: PatternTable[Route] = PatternTable(distinct=lambda r: r.pattern[0])
+    exact, star, other = _route("robot_state"), _route("r*"), _route("*")
+    for route in (star, exact, other):
+        table.add(route)
+    assert table.matching("robot_state") == (exact, other)  # "r*" is the same key as exact
+    assert table.matching("release") == (star, other)
+    table.remove(exact)  # the cached answer is dropped with the route
+    assert table.matching("robot_state") == (star, other)
+
+
 async def test_a_request_gets_its_reply_and_only_its_reply() -> None:
     pending = PendingRequests()
     sent: list[Message] = []

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from types import SimpleNamespace
+from typing import Any
 
 import pytest
 
@@ -11,6 +12,7 @@ from backend.tasks.choice import (
     UNKNOWN_POSITION_COST_S,
     available,
     choose_robot,
+    idle_errands,
     nearest,
     robot_cost,
 )
@@ -87,3 +89,41 @@ def test_nearest_place_with_unreachable_ones_last() -> None:
     assert nearest("hall", places, lambda node: table[node]) is places[2]
     assert nearest("hall", places[1:2], lambda node: table[node]) is places[1]
     assert nearest("hall", [], lambda node: table[node]) is None
+
+
+def test_idle_robots_charge_at_a_free_station_else_wait_and_stay_where_they_belong() -> None:
+    site: Any = SimpleNamespace(
+        charging_stations=[
+            SimpleNamespace(id="s1", node="dock1"),
+            SimpleNamespace(id="s2", node="dock2"),
+        ],
+        wait_points=[SimpleNamespace(node="lobby")],
+    )
+    metres = {"dock1": {"hall": 5.0, "cafe": 50.0}, "dock2": {"hall": 9.0, "cafe": 8.0}}
+    metres["lobby"] = {"hall": 1.0, "cafe": 1.0}
+    hall, cafe, docked = robot("R1", "hall"), robot("R2", "cafe"), robot("R3", "dock2")
+    waiting, low = robot("R4", "lobby"), robot("R5", "dock1")
+    low.needs_charge = True
+
+    def errands(idle: list[RobotInfo], charging_at: tuple[str, ...] = ()) -> list[object]:
+        fleet = [hall, cafe, docked, waiting, low]
+        found = idle_errands(idle, fleet, charging_at, site, metres.__getitem__, lambda r: False)
+        return [(r.name, kind, params) for r, kind, params in found]
+
+    # Both stations are taken (R3 and R5 stand on them): to the wait point; R4 is there already.
+    assert errands([hall, waiting]) == [("R1", "go_to", {"node": "lobby"})]
+    # A robot needing charge on its station charges there; one already charging stays.
+    assert errands([low]) == [("R5", "charge", {"station": "s1"})]
+    low.mode = "charging"
+    assert errands([low]) == []
+    # A station is free when nobody stands on it or holds a charge task for it.
+    docked.node, low.node = "hall", "cafe"
+    assert errands([hall, cafe], charging_at=("s1",)) == [
+        ("R1", "charge", {"station": "s2"}),
+        ("R2", "go_to", {"node": "lobby"}),
+    ]
+    # Offline, faulty or out-of-service robots, and robots with queued work, go nowhere.
+    hall.online = False
+    assert errands([hall]) == []
+    found = idle_errands([cafe], [cafe], (), site, metres.__getitem__, lambda r: True)
+    assert found == []

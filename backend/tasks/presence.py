@@ -1,0 +1,111 @@
+"""Where each robot is and what it says it runs: ``robot_state``, link loss, and the match of
+its reported task with the one we gave it after a reconnect or a restart (docs/server.md,
+"Robot loss")."""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING
+
+from backend.tasks.model import TaskState
+from backend.tasks.robots import RobotInfo
+from guidebot.messages import Message
+
+if TYPE_CHECKING:
+    from backend.tasks.manager import TaskManager
+
+__all__ = ["Presence"]
+
+log = logging.getLogger(__name__)
+
+
+class Presence:
+    """The Task Manager's handlers of robot_state and robot_disconnected."""
+
+    def __init__(self, manager: TaskManager) -> None:
+        self.tm = manager
+
+    def on_robot_state(self, msg: Message) -> None:
+        tm = self.tm
+        robot = tm.robot_of(msg)
+        if robot is None:
+            return
+        p = msg.payload
+        if p.get("mode") == "offline":
+            self.lost(robot)
+            return
+        came_back = returned = not robot.online
+        robot.online = True
+        robot.offline_since = None
+        robot.last_seen = tm.clock()
+        robot.mode = str(p.get("mode", "idle"))
+        moved = False
+        if isinstance(p.get("node"), str) and p["node"] in tm.graph:
+            moved = robot.node != p["node"]
+            robot.node = p["node"]
+        # A robot that does not know its floor yet (no site on board) is on its node's floor.
+        robot.floor = p.get("floor") or tm.graph.floor_of.get(robot.node or "") or robot.floor
+        battery = p.get("battery")
+        if isinstance(battery, int | float) and 0 <= battery <= 1:
+            robot.battery = float(battery)
+            if robot.needs_charge and robot.battery >= 0.95:
+                robot.needs_charge = False
+                came_back = True  # available again: worth a dispatch
+        reported = p.get("task_id") or None
+        robot.reported_task = reported
+        before = robot.current
+        was_fault = robot.fault
+        robot.fault = robot.mode == "fault"
+        self.reconcile(robot, reported)
+        current = tm.current_of(robot)
+        if returned and current is not None and current.state is TaskState.ASSIGNED:
+            if reported != current.id:
+                # Its link went before it acknowledged task_assigned (retries stop when a
+                # robot is gone): now it is back, it gets the task again.
+                log.info("%s is back without task %s: sent again", robot.name, current.id)
+                tm.send_assigned(current, robot)
+        if robot.fault and not was_fault and robot.current is not None:
+            tm.requeue(tm.tasks[robot.current], "robot fault")
+        # robot_state comes at a steady rate from every robot: re-plan only on news.
+        released = robot.current is None and before is not None
+        if came_back or was_fault != robot.fault or released or (robot.current is None and moved):
+            tm.dispatch()
+
+    def reconcile(self, robot: RobotInfo, reported: str | None) -> None:
+        """Match what the robot says it runs with what we gave it."""
+        tm = self.tm
+        ours = tm.current_of(robot)
+        if reported is not None and (ours is None or ours.id != reported):
+            task = tm.tasks.get(reported)
+            if task is None or task.robot != robot.name or task.final:
+                tm.send_cancel(robot.name, reported, "not assigned to you")
+        if ours is None or ours.final:
+            return
+        if reported == ours.id:
+            if ours.state is TaskState.ASSIGNED:
+                ours.move(TaskState.RUNNING, reason="reported by the robot")
+                tm.changed(ours, "started")
+            tm.unconfirmed.discard(ours.id)
+        elif ours.id in tm.unconfirmed:
+            # Restarted server (or robot back from a long absence): it no longer runs it.
+            tm.unconfirmed.discard(ours.id)
+            tm.requeue(ours, "the robot no longer runs it")
+        elif ours.state is TaskState.RUNNING:
+            # It started it (task_started came first on the same link) and now runs something
+            # else or nothing: its agent restarted. Without this the task stayed `running`
+            # for ever on a robot back in seconds (found by the soak).
+            tm.requeue(ours, "the robot no longer runs it (its agent restarted)")
+
+    def on_robot_disconnected(self, msg: Message) -> None:
+        name = msg.payload.get("robot") or msg.payload.get("name")
+        if isinstance(name, str) and name in self.tm.robots:
+            self.lost(self.tm.robots[name])
+
+    def lost(self, robot: RobotInfo) -> None:
+        """Off the network: it may still be running its task; after ``lost_grace_s`` the task
+        goes to another robot (backend/tasks/watchdog.py)."""
+        if robot.online:
+            robot.online = False
+            robot.mode = "offline"
+            robot.offline_since = self.tm.clock()
+            self.tm.dispatch()

@@ -1,0 +1,87 @@
+"""A robot's reports on its task: ``task_started``, ``task_ended``, ``tour_progress``.
+
+A robot speaks only for itself and only about the task it holds; a report about a task taken
+from it gets that task cancelled on the robot again (docs/server.md, "Task Manager").
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from pydantic import ValidationError
+
+from backend.tasks.model import TaskState
+from guidebot.messages import Message
+from guidebot.payloads.tasks import TourProgress
+
+if TYPE_CHECKING:
+    from backend.tasks.manager import TaskManager
+
+__all__ = ["TaskReports"]
+
+_ENDED = {"done": TaskState.DONE, "failed": TaskState.FAILED}
+"""A task_ended outcome -> the task's final state (anything else: cancelled)."""
+
+
+class TaskReports:
+    """The Task Manager's handlers of what robots say about their tasks."""
+
+    def __init__(self, manager: TaskManager) -> None:
+        self.tm = manager
+
+    def on_task_started(self, msg: Message) -> None:
+        tm = self.tm
+        robot = tm.robot_of(msg)
+        task = tm.tasks.get(str(msg.payload.get("task_id")))
+        if robot is None or task is None:
+            return
+        if task.robot != robot.name or task.final:
+            tm.send_cancel(robot.name, task.id, "this task is not yours any more")
+            return
+        if task.state is TaskState.ASSIGNED:
+            task.move(TaskState.RUNNING)
+            tm.unconfirmed.discard(task.id)
+            tm.changed(task, "started")
+
+    def on_task_ended(self, msg: Message) -> None:
+        tm = self.tm
+        robot = tm.robot_of(msg)
+        task = tm.tasks.get(str(msg.payload.get("task_id")))
+        if robot is None or task is None or task.robot != robot.name or task.final:
+            return
+        state = _ENDED.get(msg.payload.get("outcome", "done"), TaskState.CANCELLED)
+        reason = str(msg.payload.get("reason") or "").strip()
+        if state is TaskState.FAILED and not reason:
+            reason = f"{robot.name} reported the task failed without saying why"
+        task.move(state, reason=reason)
+        if robot.current == task.id:
+            tm.set_current(robot, None)
+        if task.kind == "charge" and state is TaskState.DONE:
+            robot.needs_charge = False
+        if task.kind == "go_to" and state is TaskState.DONE:
+            # The robot is where it was sent; its next robot_state may come a second later
+            # and the idle policy must not send it there again meanwhile.
+            target = task.params.get("node")
+            if isinstance(target, str) and target in tm.graph:
+                robot.node = target
+        if state is TaskState.DONE and task.started_at:
+            tm.estimator.ended(task, time.time() - task.started_at)
+        tm.changed(task, state.value)
+        tm.dispatch()
+
+    def on_tour_progress(self, msg: Message) -> None:
+        """A point reached or explained: into the task's history, refined estimate to all."""
+        tm = self.tm
+        robot = tm.robot_of(msg)
+        task = tm.tasks.get(str(msg.payload.get("task_id")))
+        if robot is None or task is None or task.robot != robot.name or task.final:
+            return
+        try:
+            p = msg.payload_as(TourProgress)
+        except ValidationError:
+            return
+        tm.estimator.progress(task, p.index, p.stage, p.poi)
+        if tm.store is not None:
+            tm.store.record(task, f"point {p.index}/{p.total} {p.stage}")
+        tm.endpoint.publish(tm.event(task))

@@ -1,0 +1,53 @@
+"""Where a task starts on the site and what its robot's net is given: pure functions of the
+site, the graph and the task (no bus, no clock), shared by the Task Manager's checks, its
+assignment and the visitor estimates (backend/tasks/eta.py)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from backend.tasks.model import InvalidTask, Task
+from guidebot.site.graph import SiteGraph
+from guidebot.site.i18n import poi_texts, resolve_language
+from guidebot.site.schema import Site
+from guidebot.task_kinds import KINDS, UnknownTarget
+
+__all__ = ["net_params", "target_node"]
+
+
+def target_node(site: Site, graph: SiteGraph, kind: str, params: dict[str, Any]) -> str:
+    """Where a ``kind`` task starts (for path cost); raises InvalidTask if ``params`` name
+    what the site does not have."""
+    spec = KINDS.get(kind)
+    if spec is None:
+        raise InvalidTask(f"unknown task kind {kind!r} (expected one of {sorted(KINDS)})")
+    try:
+        return spec.target(site, params, graph)
+    except UnknownTarget as exc:
+        raise InvalidTask(str(exc)) from None
+
+
+def net_params(site: Site, task: Task) -> dict[str, Any]:
+    """Everything the robot's net needs (nodes, texts in the visitor's language), so it never
+    asks back. The task's parameters were checked against this site (``target_node``)."""
+    p = task.params
+    lang = resolve_language(site, p.get("lang"))
+    if task.kind == "tour":
+        tour = site.tour(p["tour"])
+        assert tour is not None
+        pois = [q for q in (site.poi(i) for i in tour.points) if q is not None]
+        points = [
+            {"poi": q.id, "node": q.node, "index": i, "total": len(pois)} | poi_texts(site, q, lang)
+            for i, q in enumerate(pois, start=1)
+        ]
+        return {"tour": tour.id, "points": points, "lang": lang}
+    if task.kind == "go_to_poi":
+        poi = site.poi(p["poi"])
+        assert poi is not None
+        texts = poi_texts(site, poi, lang)
+        return {"poi": poi.id, "node": poi.node, "text": texts["text"], "lang": texts["lang"]}
+    if task.kind == "charge":
+        station = p.get("station") or site.charging_stations[0].id
+        node = next(s.node for s in site.charging_stations if s.id == station)
+        return {"station": station, "node": node}
+    return {"node": p["node"]}
