@@ -149,6 +149,30 @@ async def test_broken_yaml_import_lists_every_error_with_its_line(
         await expect(page.locator("#problem-count")).to_have_text("No problems")  # draft kept
 
 
+async def test_a_file_imported_while_the_version_list_loads_is_answered(
+    fleet_factory: Any, open_page: Any
+) -> None:
+    """The editor draws as soon as the draft arrives; a slow version list (a loaded server) must
+    not leave its controls calling helpers that are not set up yet."""
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_page(f"{fleet.server.url}/config/")
+        watch.expect_error(r"status of 422")
+        page = watch.page
+        held: list[Any] = []
+        await page.route("**/api/site/versions", lambda route: held.append(route))
+        await page.get_by_label("Admin token").fill(fleet.server.admin_token)
+        await page.get_by_label("Admin token").press("Enter")
+        await page.get_by_label("Import YAML into the draft").wait_for()
+        await page.get_by_label("Import YAML into the draft").set_input_files(
+            files=[{"name": "empty.yaml", "mimeType": "application/yaml", "buffer": b"name: [\n"}]
+        )
+        await expect(page.get_by_role("alert").first).to_contain_text("empty.yaml refused")
+        assert held, "the version list was not held back"
+        for route in held:
+            await route.continue_()
+        await expect(page.get_by_role("table", name="Published versions")).to_contain_text("(live)")
+
+
 async def test_new_floor_with_plan_calibrated_published_and_planned_to(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:

@@ -82,9 +82,6 @@ async function start(me) {
   const map = new EditMap($("map"), (url) => api.get(url));
   ui.map = map;
   model.addEventListener("change", () => draw());
-  await model.load();
-  ui.floor = model.doc.floors[0].id;
-  await loadVersions();
 
   function select(section, index) {
     ui.section = section;
@@ -352,6 +349,12 @@ async function start(me) {
         <label>Import YAML into the draft <input type="file" accept=".yaml,.yml,application/yaml,text/yaml" @change=${(e) => importYaml(e.target)}></label>
         ${ui.importErrors ? html`<ul class="problems" aria-label="Problems in the imported file">${ui.importErrors.map((i) => html`<li>line ${i.line ?? "?"}: ${i.loc}: ${i.msg}</li>`)}</ul>` : nothing}</section>`, $("details"));
   }
+
+  // Load last, once every handler above exists: the page draws as soon as the draft arrives, and a
+  // control used before the version list is in must not reach a helper that is not declared yet.
+  await model.load();
+  ui.floor = model.doc.floors[0].id;
+  await loadVersions();
   draw();
 }
 
