@@ -22,13 +22,11 @@ import orjson
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from backend.api.component import _sync_robot_tokens, hash_robot_tokens
-from backend.auth import Role
+from backend.api.component import _sync_robot_tokens, announce_links, hash_robot_tokens
 from backend.db import DbStore, make_engine, make_sessionmaker
 from backend.health import ComponentState
 from backend.hub.broker import BrokerBridge, process_id
 from backend.leadership import Leadership
-from guidebot.payloads.tasks import RobotLink
 from guidebot.site.validate import validate_site
 
 __all__ = ["DECIDING", "LOST_LEADERSHIP_EXIT", "FollowerRest", "cluster_report", "clustered"]
@@ -101,20 +99,7 @@ class _FollowerTokens:
 def _announce_links_while_following(hub: Any, leadership: Leadership) -> Callable[[], None]:
     """robot_connected / robot_disconnected for robots on this process while it follows (the
     leader's own watcher, in server_brain, announces them once it leads)."""
-    endpoint = hub.endpoint("follower_link_watcher")
-
-    def changed(client: Any, connected: bool) -> None:
-        if client.role is Role.ROBOT and not leadership.leading:
-            kind = "robot_connected" if connected else "robot_disconnected"
-            endpoint.publish(kind, RobotLink(robot=client.name))
-
-    unsubscribe = hub.on_connection(changed)
-
-    def stop() -> None:
-        unsubscribe()
-        endpoint.close()
-
-    return stop
+    return announce_links(hub, lambda _client: not leadership.leading, name="follower_link_watcher")
 
 
 @contextlib.asynccontextmanager

@@ -103,13 +103,16 @@ def _sync_robot_tokens(tokens: TokenStore, site: Site, known: dict[str, str]) ->
             known[digest] = name
 
 
-def announce_robot_links(hub: Any, sites: SiteService) -> Callable[[], None]:
-    """Publish robot_connected / robot_disconnected when a site robot's hub link comes up or
-    goes (a hub connection event, no polling). Returns the unsubscribe function."""
-    endpoint = hub.endpoint("link_watcher")
+def announce_links(
+    hub: Any, accept: Callable[[Any], bool], *, name: str = "link_watcher"
+) -> Callable[[], None]:
+    """Publish robot_connected / robot_disconnected when the hub link of a robot that ``accept``
+    takes comes up or goes (a hub connection event, no polling). Returns the unsubscribe
+    function."""
+    endpoint = hub.endpoint(name)
 
     def changed(client: Any, connected: bool) -> None:
-        if client.role is not Role.ROBOT or sites.site.robot(client.name) is None:
+        if client.role is not Role.ROBOT or not accept(client):
             return
         kind = "robot_connected" if connected else "robot_disconnected"
         endpoint.publish(kind, RobotLink(robot=client.name))
@@ -121,6 +124,11 @@ def announce_robot_links(hub: Any, sites: SiteService) -> Callable[[], None]:
         endpoint.close()
 
     return stop
+
+
+def announce_robot_links(hub: Any, sites: SiteService) -> Callable[[], None]:
+    """The links of the robots the site names (a robot the site does not know is refused)."""
+    return announce_links(hub, lambda client: sites.site.robot(client.name) is not None)
 
 
 async def watch_offline_locks(
