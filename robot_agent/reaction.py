@@ -21,6 +21,7 @@ from typing import Any
 
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.payloads.tasks import TaskReaction
 from guidebot.service import Service
 
 __all__ = ["ReactionTracker"]
@@ -106,7 +107,7 @@ class ReactionTracker(Service):
         s["commanded_at"] = message.timestamp
         s["moving_at"] = moving_at
         self.sent += 1
-        self.ep.publish("task_reaction", s)
+        self.ep.publish(TaskReaction(**s))
 
     def _on_cancel(self, message: Message) -> None:
         s = self._stamps

@@ -20,9 +20,11 @@ import subprocess
 import tempfile
 import wave
 from pathlib import Path
+from typing import Literal
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.payloads.petri import SpeechEnded, SpeechStarted
 from guidebot.service import Service, cancel_and_wait
 from robot_agent.clock import Clock
 
@@ -109,9 +111,8 @@ class Speech(Service):
         self.speaking = text
         voice = await self._voice(lang)
         log.info("saying (%s): %s", voice or f"{lang}, timed", text[:120])
-        said = {"text": text, "lang": lang, "voice": voice}
-        self.ep.publish("speech_started", said, correlation_id=request_id)
-        outcome = "done"
+        self.ep.publish(SpeechStarted(text=text, lang=lang, voice=voice), correlation_id=request_id)
+        outcome: Literal["done", "interrupted"] = "done"
         try:
             duration = await self._duration(text, voice)
             await self.clock.sleep(duration)
@@ -121,7 +122,8 @@ class Speech(Service):
         finally:
             self.speaking = None
             self.spoken += 1
-            self.ep.publish("speech_ended", {**said, "outcome": outcome}, correlation_id=request_id)
+            ended = SpeechEnded(text=text, lang=lang, voice=voice, outcome=outcome)
+            self.ep.publish(ended, correlation_id=request_id)
 
     async def _duration(self, text: str, voice: str | None) -> float:
         if not self.engine or voice is None or not text.strip():

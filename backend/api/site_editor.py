@@ -23,8 +23,9 @@ from backend.auth import token_digest
 from backend.db.store import DbStore
 from backend.site.diff import site_diff
 from backend.site.draft import SiteDrafts, StaleDraft, check_document
-from backend.site.rollout import SiteRollout
+from backend.site.rollout import RolloutTracker
 from backend.site.service import SiteService
+from guidebot.payloads.site import SiteRollout
 from guidebot.site.schema import Site
 from guidebot.site.validate import SiteInvalid, validate_site
 from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
@@ -47,12 +48,12 @@ def drafts(request: Request) -> SiteDrafts:
     return app_service(request, "site_drafts", SiteDrafts)
 
 
-def rollout(request: Request) -> SiteRollout:
-    return app_service(request, "site_rollout", SiteRollout)
+def rollout(request: Request) -> RolloutTracker:
+    return app_service(request, "site_rollout", RolloutTracker)
 
 
 Drafts = Annotated[SiteDrafts, Depends(drafts)]
-Rollout = Annotated[SiteRollout, Depends(rollout)]
+Rollout = Annotated[RolloutTracker, Depends(rollout)]
 
 
 def stale(exc: StaleDraft) -> HTTPException:
@@ -231,7 +232,7 @@ async def rollback(
 
 
 @router.get("/rollout")
-async def rollout_status(_: Admin, r: Rollout) -> dict[str, Any]:
+async def rollout_status(_: Admin, r: Rollout) -> SiteRollout:
     """How far the last published version reached the robots connected at publish time."""
     return r.status()
 

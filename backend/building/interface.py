@@ -35,6 +35,7 @@ from guidebot.messages import Message
 from guidebot.payloads.building import (
     CallElevator,
     CloseDoor,
+    CommandFailed,
     DoorClosed,
     DoorOpened,
     ElevatorInPosition,
@@ -165,12 +166,15 @@ class BuildingInterface(Service):
 
     def health(self) -> list[dict[str, object]]:
         """Every module's health, for the admin GUI and the REST API."""
-        return [p.health.payload() | {"state": p.health.state.value} for p in self.pollers.values()]
+        return [
+            p.health.payload().model_dump() | {"state": p.health.state.value}
+            for p in self.pollers.values()
+        ]
 
     # -- inputs --------------------------------------------------------------------------------
 
     def _on_health(self, health: ModuleHealth) -> None:
-        self.endpoint.publish("building_module_health", health.payload())
+        self.endpoint.publish(health.payload())
         if health.state == HealthState.online:
             for keeper in self.doors.values():
                 if (
@@ -314,13 +318,11 @@ class BuildingInterface(Service):
 
     def _fail(self, request: Message, reason: str) -> None:
         log.info("%s from %s failed: %s", request.type, request.source, reason)
-        payload = {"command": request.type, "reason": reason}
+        payload = CommandFailed(command=request.type, reason=reason)
         if request.source:
-            self.endpoint.publish(
-                "command_failed", payload, destination=request.source, correlation_id=request.id
-            )
+            self.endpoint.publish(payload, destination=request.source, correlation_id=request.id)
         else:
-            self.endpoint.publish("command_failed", payload)
+            self.endpoint.publish(payload)
 
     async def _write(self, ref: IORef, value: int) -> None:
         module, point = self.config.resolve(ref)

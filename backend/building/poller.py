@@ -22,6 +22,7 @@ from backend.building._modbus import (
     ModuleExceptionAnswer,
     ModuleUnreachable,
 )
+from guidebot.payloads.building import BuildingModuleHealth
 from guidebot.service import cancel_and_wait
 from guidebot.site.building import BuildingModule, PointKind
 
@@ -64,15 +65,15 @@ class ModuleHealth:
     def online(self) -> bool:
         return self.state in (HealthState.online, HealthState.faulty)
 
-    def payload(self) -> dict[str, object]:
+    def payload(self) -> BuildingModuleHealth:
         """building_module_health payload (docs/messages.md)."""
-        return {
-            "module": self.module,
-            "online": self.state == HealthState.online,
-            "rtt_ms": None if self.rtt_ms is None else round(self.rtt_ms, 3),
-            "errors": self.errors,
-            "last_error": self.last_error,
-        }
+        return BuildingModuleHealth(
+            module=self.module,
+            online=self.state == HealthState.online,
+            rtt_ms=None if self.rtt_ms is None else round(self.rtt_ms, 3),
+            errors=self.errors,
+            last_error=self.last_error,
+        )
 
 
 @dataclass

@@ -10,7 +10,7 @@ from fastapi import FastAPI
 
 from backend.auth import Role
 from backend.site.draft import SiteDrafts
-from backend.site.rollout import SiteRollout
+from backend.site.rollout import RolloutTracker
 
 __all__ = ["site_editor"]
 
@@ -26,7 +26,7 @@ async def site_editor(app: FastAPI) -> AsyncIterator[None]:
         return {c.name for c in hub.clients.values() if c.role is Role.ROBOT}
 
     endpoint = hub.endpoint("site_editor")
-    rollout = SiteRollout(endpoint, sites, connected_robots)
+    rollout = RolloutTracker(endpoint, sites, connected_robots)
     await rollout.start()
     sites.on_change(rollout.on_site)
     app.state.site_drafts = drafts

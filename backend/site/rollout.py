@@ -16,11 +16,12 @@ from backend.site.offloop import off_loop
 from backend.site.service import SiteService
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.payloads.site import SiteRollout
 from guidebot.service import Service
 from guidebot.site.bulk import dump_site_doc
 from guidebot.site.schema import Site
 
-__all__ = ["SiteRollout", "robot_view"]
+__all__ = ["RolloutTracker", "robot_view"]
 
 
 def robot_view(site: Site) -> dict[str, Any]:
@@ -30,7 +31,7 @@ def robot_view(site: Site) -> dict[str, Any]:
     return data
 
 
-class SiteRollout(Service):
+class RolloutTracker(Service):
     def __init__(
         self,
         endpoint: Endpoint,
@@ -86,14 +87,14 @@ class SiteRollout(Service):
                 self.ms = max(self.loaded_ms.values())
             self._report()
 
-    def status(self) -> dict[str, Any]:
-        return {
-            "version": self.version,
-            "expected": self.expected,
-            "loaded_ms": self.loaded_ms,
-            "complete": set(self.loaded_ms) == set(self.expected),
-            "ms": self.ms if self.expected else 0.0,
-        }
+    def status(self) -> SiteRollout:
+        return SiteRollout(
+            version=self.version,
+            expected=self.expected,
+            loaded_ms=self.loaded_ms,
+            complete=set(self.loaded_ms) == set(self.expected),
+            ms=self.ms if self.expected else 0.0,
+        )
 
     def _report(self) -> None:
-        self.ep.publish("site_rollout", self.status())
+        self.ep.publish(self.status())

@@ -83,12 +83,14 @@ class Say(PayloadModel):
 @register_payload("speech_started")
 class SpeechStarted(PayloadModel):
     text: str = ""
+    lang: str = "en"
+    voice: str | None = None
+    """The espeak-ng voice; None when the speech is only timed (no engine, or no voice)."""
 
 
 @register_payload("speech_ended")
-class SpeechEnded(PayloadModel):
-    text: str = ""
-    outcome: str | None = None
+class SpeechEnded(SpeechStarted):
+    outcome: Literal["done", "interrupted"] | None = None
 
 
 @register_payload("face_people")
