@@ -14,6 +14,8 @@ from collections.abc import Awaitable, Callable
 from dataclasses import asdict, dataclass
 from typing import Any, Literal, Protocol
 
+from guidebot.payloads.console import ConsoleAlert
+
 __all__ = ["Alert", "AlertBook", "AlertNotFound"]
 
 Severity = Literal["warning", "error"]
@@ -51,7 +53,7 @@ class EventSink(Protocol):
 class AlertBook:
     """Open and recent alerts; ``publish`` puts each change on the hub."""
 
-    def __init__(self, sink: EventSink, publish: Callable[[str, dict[str, Any]], object]) -> None:
+    def __init__(self, sink: EventSink, publish: Callable[[str, ConsoleAlert], object]) -> None:
         self.sink = sink
         self.publish = publish
         self.alerts: dict[str, Alert] = {}
@@ -90,7 +92,7 @@ class AlertBook:
         alert = Alert(uuid.uuid4().hex[:12], kind, subject, message, severity, time.time())
         self.alerts[alert.id] = alert
         self.sink.record_event("alert_raised", "console", alert.as_dict())
-        self.publish("alert_raised", alert.as_dict())
+        self.publish("alert_raised", ConsoleAlert(**alert.as_dict()))
         self._trim()
         return alert
 
@@ -101,7 +103,7 @@ class AlertBook:
         if alert.open:
             alert.acked_by, alert.acked_at = by, time.time()
             self.sink.record_event("alert_acked", by, alert.as_dict())
-            self.publish("alert_acked", alert.as_dict())
+            self.publish("alert_acked", ConsoleAlert(**alert.as_dict()))
         return alert
 
     def listing(self, *, include_acked: bool = False) -> list[dict[str, Any]]:

@@ -21,6 +21,7 @@ from typing import Any, Protocol
 from backend.console.alerts import AlertBook
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.payloads.console import EventLogged, LockChanged
 from guidebot.service import Service
 
 __all__ = ["ConsoleFeed", "RunningNet"]
@@ -136,7 +137,7 @@ class ConsoleFeed(Service):
             if before == now:
                 continue
             self.lock_views[view.area] = now
-            self.endpoint.publish("lock_changed", now)
+            self.endpoint.publish(LockChanged(**now))
             if now["state"] == "holder_offline" and (before or {}).get("state") != now["state"]:
                 self.alerts.raise_(
                     "lock_holder_offline",
@@ -239,6 +240,6 @@ def relay_events(endpoint: Endpoint) -> Callable[[dict[str, Any]], None]:
     """A DbStore listener that publishes each event-log row as ``event_logged``."""
 
     def listener(row: dict[str, Any]) -> None:
-        endpoint.publish("event_logged", row)
+        endpoint.publish(EventLogged(**row))
 
     return listener

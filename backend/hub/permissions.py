@@ -40,6 +40,11 @@ SERVER_ONLY = frozenset(
         "command_failed",
         "building_input_changed",
         "building_module_health",
+        # staff console: lock views, its alert book, the event log as written
+        "lock_changed",
+        "alert_raised",
+        "alert_acked",
+        "event_logged",
         # the hub's own answers
         "welcome",
         "error",

@@ -6,6 +6,7 @@ Importing this package registers every known type (see guidebot.messages.registe
 from guidebot.payloads import (  # noqa: F401
     alerts,
     building,
+    console,
     hub,
     petri,
     robot,
