@@ -26,6 +26,7 @@ from typing import Any
 import can
 
 from guidebot.bus import BusEndpoint
+from guidebot.service import Service
 from robot_agent.robocan import protocol as p
 from robot_agent.robocan.blocks import BlockReceiver, BlockSender, BlockState
 from robot_agent.robocan.busopen import BusReader
@@ -68,8 +69,8 @@ def _set_done(future: asyncio.Future[None]) -> None:
         future.set_result(None)
 
 
-class Master:
-    """One master per CAN bus. Start with ``await start()``, stop with ``await stop()``."""
+class Master(Service):
+    """One master per CAN bus, with the service life cycle (start and stop, or ``async with``)."""
 
     def __init__(
         self,
@@ -82,6 +83,7 @@ class Master:
         announce: bool = True,
         name: str | None = None,
     ) -> None:
+        super().__init__()
         self.bus = bus
         self.name = name or str(bus.channel_info)
         self.endpoint = endpoint
@@ -102,41 +104,37 @@ class Master:
         self._supervisor: asyncio.Future[None] | None = None  # its sleep, to cut it short
         self._loop: asyncio.AbstractEventLoop | None = None
         self.reader: BusReader | None = None
-        self._tasks: list[asyncio.Task[None]] = []
         self._bring_up: dict[int, asyncio.Task[None]] = {}
         self._acks: dict[tuple[int, int, int], asyncio.Future[int]] = {}
         self._descriptions: dict[int, asyncio.Future[bytes]] = {}
         self._receivers: dict[int, tuple[BlockReceiver, float]] = {}
         self._senders: dict[int, tuple[BlockSender, asyncio.Event]] = {}
         self._last_warning: dict[str, float] = {}
-        self.running = False
 
     # --- life cycle -------------------------------------------------------------------
 
-    async def start(self) -> None:
+    async def on_start(self) -> None:
         self._loop = asyncio.get_running_loop()
-        self.running = True
         self.reader = BusReader(self.bus, self._on_frames_thread, name="robocan-reader")
         self.reader.start()
-        self._tasks = [
-            asyncio.create_task(self._drain(), name="robocan-drain"),
-            asyncio.create_task(self._supervise(), name="robocan-supervise"),
-        ]
+        self.on_cleanup(self._close)
+        self.spawn(self._drain(), name="robocan-drain")
+        self.spawn(self._supervise(), name="robocan-supervise")
         if self.announce:
             # Every slave drops to DISABLED and is re-queried: a restarted master never
             # inherits motors it did not command itself.
             self.send(p.BROADCAST_ID, bytes([p.Op.MASTER_START]))
 
-    async def stop(self) -> None:
-        if not self.running:
-            return
-        self.running = False
-        for task in [*self._bring_up.values(), *self._tasks]:
+    async def on_stop(self) -> None:
+        for task in self._bring_up.values():
             task.cancel()
-        for task in [*self._bring_up.values(), *self._tasks]:
+        for task in list(self._bring_up.values()):
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         self._bring_up.clear()
+
+    async def _close(self) -> None:
+        """After the tasks: the reader thread, then the drivers."""
         if self.reader is not None:
             await asyncio.to_thread(self.reader.stop)
         for driver in self.drivers.values():

@@ -70,8 +70,10 @@ async def test_stamps_in_chain_order_and_t14_is_the_can_frame() -> None:
             assert stamps == sorted(stamps), report
             assert tap.seen.wait(5.0)
             assert tap.at is not None
-            # T14 is stamped after the frame left the master, within a millisecond of it.
-            assert 0 <= report["moving_at"] - tap.at < 0.001, (report["moving_at"], tap.at)
+            # T14 is stamped after the frame left the master, and for this frame: well before
+            # the next 8 Hz command could have been sent (125 ms). Usually well under 1 ms; the
+            # margin is for a loaded machine preempting the robot's loop in between.
+            assert 0 <= report["moving_at"] - tap.at < 0.02, (report["moving_at"], tap.at)
             # Once per task: later velocity commands of the same task send nothing more.
             assert len(seen.of("task_reaction")) == 1
             assert agent.reaction is not None and agent.reaction.sent == 1
