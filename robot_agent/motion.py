@@ -1,9 +1,9 @@
 """Motion control: the base's pose from odometry, and velocity commands that drive it to a
 point or turn it to a heading (closed loop, bumper pauses, base faults).
 
-Route following (paths, areas, doors, elevators: robot_agent/navigation.py) builds on it.
-Odometry arrives in the base's own frame; the map pose is ``R(dtheta) * odom + (tx, ty)``,
-re-anchored by the navigator (``relocalize``) on known nodes.
+Route following (robot_agent/navigation.py) builds on it; the areas, doors and elevators on the
+way are robot_agent/passage.py. Odometry arrives in the base's own frame; the map pose is
+``R(dtheta) * odom + (tx, ty)``, re-anchored by the navigator (``relocalize``) on known nodes.
 """
 
 from __future__ import annotations
@@ -160,6 +160,11 @@ class MotionControl(Service):
                 await self._odom_event.wait()
         except TimeoutError:
             raise NavigationFailed("no odometry from the base") from None
+
+    def halt(self, *, force: bool = True) -> None:
+        """Command the base to stand still. ``force``: even when the last command was the same
+        (without it, a repeat within half a second is skipped)."""
+        self._send_velocity(0.0, 0.0, force=force)
 
     def _send_velocity(self, v: float, w: float, *, force: bool = False) -> None:
         last_v, last_w, last_t = self._last_cmd
