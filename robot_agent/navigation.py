@@ -27,17 +27,22 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
-from guidebot.payloads.petri import PeopleFaced
+from guidebot.payloads.petri import NavigationFailed, PeopleFaced
 from guidebot.payloads.robot import NodeReached, RobotFault
 from guidebot.payloads.traffic import GetPath
 from guidebot.site.steps import PathStep
 from robot_agent.clock import Clock
-from robot_agent.motion import MotionControl, NavigationFailed, NavState, wrap_angle
+from robot_agent.motion import MotionControl, NavigationError, NavState, wrap_angle
 from robot_agent.passage import Called, Passage
 
-__all__ = ["NavState", "NavigationFailed", "Navigator", "PathStep"]
+__all__ = ["NavState", "NavigationError", "Navigator", "PathStep"]
 
 log = logging.getLogger(__name__)
+
+
+def _node_or_none(node: Any) -> str | None:
+    """The node a request named, for its navigation_failed: a string, else none."""
+    return node if isinstance(node, str) else None
 
 
 class YieldRequested(Exception):
@@ -175,8 +180,7 @@ class Navigator(MotionControl):
         node = message.payload.get("node")
         if not isinstance(node, str) or not node:
             self.ep.publish(
-                "navigation_failed",
-                {"node": node, "reason": "navigate_to needs a node id"},
+                NavigationFailed(node=_node_or_none(node), reason="navigate_to needs a node id"),
                 correlation_id=message.id,
             )
             return
@@ -187,7 +191,9 @@ class Navigator(MotionControl):
         station = message.payload.get("station")
         node = message.payload.get("node") or self.node
         if not isinstance(node, str) or not node:
-            self.ep.publish("navigation_failed", {"node": node, "reason": "dock: position unknown"})
+            self.ep.publish(
+                NavigationFailed(node=_node_or_none(node), reason="dock: position unknown")
+            )
             return
         self._start_goal(self._goal(node, message.id, reply="docked", station=station))
 
@@ -245,13 +251,11 @@ class Navigator(MotionControl):
                 except YieldRequested as request:
                     await self._back_off(request)
             else:
-                raise NavigationFailed(f"asked to yield too often on the way to {node}")
-        except NavigationFailed as failure:
+                raise NavigationError(f"asked to yield too often on the way to {node}")
+        except NavigationError as failure:
             self._send_velocity(0.0, 0.0, force=True)
             self.ep.publish(
-                "navigation_failed",
-                {"node": node, "reason": failure.reason},
-                correlation_id=request_id,
+                NavigationFailed(node=node, reason=failure.reason), correlation_id=request_id
             )
             return
         finally:
@@ -272,7 +276,7 @@ class Navigator(MotionControl):
         self.passage.give_up(request.area)
 
     async def _face_people(self, request_id: str) -> None:
-        with contextlib.suppress(NavigationFailed):
+        with contextlib.suppress(NavigationError):
             await self.turn_to(wrap_angle(self.theta + math.pi))
         self.ep.publish(PeopleFaced(), correlation_id=request_id)
 
@@ -311,7 +315,7 @@ class Navigator(MotionControl):
                 continue
             if reply.type != "path" or not reply.payload.get("steps"):
                 reason = reply.payload.get("error") or reply.payload.get("reason") or reply.payload
-                raise NavigationFailed(f"no path to {node}: {reason}")
+                raise NavigationError(f"no path to {node}: {reason}")
             return reply.payload
         if self.planner is not None and self.node is not None:
             # The link is down: plan on the on-board map and go on alone (areas, doors and
@@ -320,8 +324,8 @@ class Navigator(MotionControl):
             try:
                 return self.planner(self.node, node)
             except Exception as exc:
-                raise NavigationFailed(f"no path to {node}: {exc}") from None
-        raise NavigationFailed(f"no answer to get_path for {node}")
+                raise NavigationError(f"no path to {node}: {exc}") from None
+        raise NavigationError(f"no answer to get_path for {node}")
 
     async def follow(self, steps: list[PathStep]) -> None:
         """Drive along ``steps``; the first step is where the robot is."""

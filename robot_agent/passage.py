@@ -24,11 +24,11 @@ import math
 from collections.abc import Callable
 
 from guidebot.messages import Message
-from guidebot.payloads.building import OpenDoor, ReleaseDoor
+from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
 from guidebot.payloads.robot import RobotFault
 from guidebot.payloads.traffic import ReleaseArea, RequestArea
 from guidebot.site.steps import PathStep
-from robot_agent.motion import MotionControl, NavigationFailed, NavState
+from robot_agent.motion import MotionControl, NavigationError, NavState
 
 __all__ = ["CABIN_HOLD_CALL_S", "WAIT_LOG_S", "Passage"]
 
@@ -40,7 +40,7 @@ CABIN_HOLD_CALL_S = 3.0
 WAIT_LOG_S = 60.0
 """Robot seconds between two "still waiting for ..." warnings."""
 
-Called = set[tuple[str, str | None]]
+Called = set[tuple[str, str]]
 """(elevator, floor) calls made on this pass of a path."""
 
 
@@ -253,7 +253,7 @@ class Passage:
             ):
                 called.add((s.elevator, s.floor))
                 if self._elevators.get(s.elevator) != s.floor:
-                    self.ep.publish("call_elevator", {"elevator": s.elevator, "floor": s.floor})
+                    self.ep.publish(CallElevator(elevator=s.elevator, floor=s.floor))
             if j + 1 < len(steps):
                 distance += math.hypot(steps[j + 1].x - s.x, steps[j + 1].y - s.y)
             j += 1
@@ -305,7 +305,8 @@ class Passage:
                 # Driving in: call again, as a person keeps the button pressed, so the cabin
                 # door does not close on the robot (the soak saw it close under one).
                 next_hold = self.clock.now() + CABIN_HOLD_CALL_S
-                self.ep.publish("call_elevator", {"elevator": elevator, "floor": floor})
+                assert elevator is not None  # a cabin's step names its elevator
+                self.ep.publish(CallElevator(elevator=elevator, floor=floor))
             return True
 
         return clear
@@ -347,7 +348,7 @@ class Passage:
                     )
                 retry_at = now + self.door_retry_s
             if now >= deadline:
-                raise NavigationFailed(
+                raise NavigationError(
                     f"door {door} did not open within {self.wait_timeout_s:g} s"
                     + (f": {reason}" if reason else "")
                 )
@@ -360,10 +361,10 @@ class Passage:
         log.info("%s: door %s open", self.robot, door)
         self.motion.state = NavState.MOVING
 
-    async def wait_elevator(self, elevator: str, floor: str | None, called: Called) -> None:
+    async def wait_elevator(self, elevator: str, floor: str, called: Called) -> None:
         """Stand still until ``elevator``'s cabin is at ``floor`` with its door open."""
         if (elevator, floor) not in called and self._elevators.get(elevator) != floor:
-            self.ep.publish("call_elevator", {"elevator": elevator, "floor": floor})
+            self.ep.publish(CallElevator(elevator=elevator, floor=floor))
         called.add((elevator, floor))
         if self._elevators.get(elevator) == floor:
             return
@@ -371,7 +372,7 @@ class Passage:
         self.motion.halt(force=False)
 
         def resend() -> None:
-            self.ep.publish("call_elevator", {"elevator": elevator, "floor": floor})
+            self.ep.publish(CallElevator(elevator=elevator, floor=floor))
 
         await self._wait_until(
             lambda: self._elevators.get(elevator) == floor, f"elevator {elevator}", retry=resend
@@ -385,11 +386,11 @@ class Passage:
         self.motion.halt()
         self._elevators.pop(cabin.elevator, None)
         log.info("%s: riding elevator %s to floor %s", self.robot, cabin.elevator, exit_.floor)
-        self.ep.publish("call_elevator", {"elevator": cabin.elevator, "floor": exit_.floor})
+        self.ep.publish(CallElevator(elevator=cabin.elevator, floor=exit_.floor))
         elevator = cabin.elevator
 
         def resend() -> None:
-            self.ep.publish("call_elevator", {"elevator": elevator, "floor": exit_.floor})
+            self.ep.publish(CallElevator(elevator=elevator, floor=exit_.floor))
 
         await self._wait_until(
             lambda: self._elevators.get(elevator) == exit_.floor,
@@ -428,7 +429,7 @@ class Passage:
                         )
                     next_log = now + WAIT_LOG_S
                 if now >= deadline:
-                    raise NavigationFailed(f"timed out waiting for {what}")
+                    raise NavigationError(f"timed out waiting for {what}")
                 if retry is not None and now >= next_retry:
                     retry()
                     next_retry = now + retry_every

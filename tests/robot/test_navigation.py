@@ -122,6 +122,13 @@ async def test_unknown_node_fails_with_the_traffic_managers_reason(rig: Rig) -> 
     assert "nowhere" in rig.seen.of("navigation_failed")[0].payload["reason"]
 
 
+async def test_navigate_to_without_a_node_fails_at_once(rig: Rig) -> None:
+    request = rig.bus.endpoint("net").publish("navigate_to", {})
+    [failed] = rig.seen.of("navigation_failed")
+    assert failed.correlation_id == request.id
+    assert failed.payload == {"node": None, "reason": "navigate_to needs a node id"}
+
+
 async def test_area_wait_and_yield_then_goal_reached(rig: Rig) -> None:
     """R2 holds the corridor: R1 waits at its edge, is told to yield (back off to hall), and
     reaches its goal once R2 has released the corridor."""
