@@ -21,7 +21,7 @@ from guidebot.bus import Bus
 from guidebot.service import Service
 from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
-from robot_agent.gui import OnboardScreen, ScreenServer
+from robot_agent.gui import OnboardScreen, ScreenServer, VisitorAnswer
 from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
 from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
@@ -63,7 +63,7 @@ class AgentConfig:
     speech_engine: str | None = "auto"
     idle_net: str | None = "waiting"
     link_queue_size: int = 1000
-    auto_answer: str | None = None
+    auto_answer: VisitorAnswer | None = None
     """Demo: a simulated visitor answers "continue the tour?" with this (None: nobody does)."""
     offline_requests: Literal["queue", "refuse"] = "queue"
     """Touch-screen requests while the link is down: kept and sent later, or refused."""

@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from robot_agent.agent import AgentConfig, RobotAgent
+from robot_agent.gui import VisitorAnswer
 
 __all__ = ["robot", "run_agent"]
 
@@ -79,7 +80,7 @@ def robot(
     site: Path | None,
     battery_level: float | None,
     state_period: float,
-    visitor: str | None,
+    visitor: VisitorAnswer | None,  # click.Choice(["yes", "no"])
     offline_requests: str,
     log_level: str,
 ) -> None:

@@ -32,6 +32,7 @@ from pydantic import BaseModel, Field
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.paths import WEB_DIR
+from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
@@ -39,7 +40,7 @@ from guidebot.site.schema import Site
 from guidebot.task_kinds import KINDS, VISITOR_KINDS
 from robot_agent.clock import Clock
 
-__all__ = ["OnboardScreen", "ScreenServer"]
+__all__ = ["OnboardScreen", "ScreenServer", "VisitorAnswer"]
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +57,10 @@ SHARED_FOLDERS = ("lib", "lang", "vendor", "visitor")
 """Folders of the server's web/ the touch screen serves too: one look, one set of texts."""
 
 
+VisitorAnswer = Literal["yes", "no"]
+"""What a visitor answers to "continue the tour?" (without an answer: "timeout")."""
+
+
 class LinkDown(RuntimeError):
     """A request while the link to the server is down and requests are refused."""
 
@@ -68,7 +73,7 @@ class TourRequest(BaseModel):
 
 
 class Answer(BaseModel):
-    answer: Literal["yes", "no"]
+    answer: VisitorAnswer
 
 
 class OnboardScreen(Service):
@@ -83,7 +88,7 @@ class OnboardScreen(Service):
         tours: list[dict[str, Any]] | None = None,
         pois: list[dict[str, Any]] | None = None,
         state: Callable[[], dict[str, Any]] | None = None,
-        auto_answer: str | None = None,
+        auto_answer: VisitorAnswer | None = None,
         site: Site | None = None,
         site_file: Path | None = None,
         link_up: Callable[[], bool] | None = None,
@@ -264,14 +269,14 @@ class OnboardScreen(Service):
         if self.question is not None and self.question["id"] == question_id:
             self._close_question(self.auto_answer)
 
-    def answer(self, answer: str) -> bool:
+    def answer(self, answer: VisitorAnswer) -> bool:
         """The visitor touched yes or no; False when no question is open."""
         if self.question is None:
             return False
         self._close_question(answer)
         return True
 
-    def _close_question(self, answer: str | None) -> None:
+    def _close_question(self, answer: VisitorAnswer | Literal["timeout"] | None) -> None:
         question, self.question = self.question, None
         if self._question_timer is not None:
             self._question_timer.cancel()
@@ -279,7 +284,7 @@ class OnboardScreen(Service):
         if question is None or answer is None:
             return
         self.answers.append(answer)
-        self.ep.publish("continue_answer", {"answer": answer}, correlation_id=question["id"])
+        self.ep.publish(ContinueAnswer(answer=answer), correlation_id=question["id"])
         self._push("continue_answer", {"answer": answer})
 
     # -- requests from the screen -------------------------------------------------------------

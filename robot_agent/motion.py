@@ -1,9 +1,9 @@
 """Motion control: the base's pose from odometry, and velocity commands that drive it to a
 point or turn it to a heading (closed loop, bumper pauses, base faults).
 
-Route following (paths, areas, doors, elevators: robot_agent/navigation.py) builds on it.
-Odometry arrives in the base's own frame; the map pose is ``R(dtheta) * odom + (tx, ty)``,
-re-anchored by the navigator (``relocalize``) on known nodes.
+Route following (robot_agent/navigation.py) builds on it; the areas, doors and elevators on the
+way are robot_agent/passage.py. Odometry arrives in the base's own frame; the map pose is
+``R(dtheta) * odom + (tx, ty)``, re-anchored by the navigator (``relocalize``) on known nodes.
 """
 
 from __future__ import annotations
@@ -19,11 +19,12 @@ from guidebot.messages import Message
 from guidebot.service import Service
 from robot_agent.clock import Clock
 
-__all__ = ["MotionControl", "NavState", "NavigationFailed", "wrap_angle"]
+__all__ = ["MotionControl", "NavState", "NavigationError", "wrap_angle"]
 
 
-class NavigationFailed(Exception):
-    """A goal could not be reached; ``reason`` is sent in navigation_failed."""
+class NavigationError(Exception):
+    """A goal could not be reached; ``reason`` is sent in navigation_failed (the payload
+    ``guidebot.payloads.petri.NavigationFailed``)."""
 
     def __init__(self, reason: str) -> None:
         super().__init__(reason)
@@ -98,7 +99,7 @@ class MotionControl(Service):
 
     def _check_fault(self) -> None:
         if self.fault is not None:
-            raise NavigationFailed(f"base fault: {self.fault}")
+            raise NavigationError(f"base fault: {self.fault}")
 
     # -- closed loop ------------------------------------------------------------------------------
 
@@ -131,7 +132,7 @@ class MotionControl(Service):
                 self._send_velocity(0.0, 0.0, force=True)
                 return False
             if self.clock.now() > budget:
-                raise NavigationFailed(f"stuck {dist:.2f} m from ({x:.1f}, {y:.1f})")
+                raise NavigationError(f"stuck {dist:.2f} m from ({x:.1f}, {y:.1f})")
             err = wrap_angle(math.atan2(dy, dx) - self.theta)
             step = max(1e-3, self._odom_dt * self.clock.time_scale)
             w = max(-self.max_turn, min(self.max_turn, 0.7 * err / step))
@@ -159,7 +160,12 @@ class MotionControl(Service):
             async with asyncio.timeout(2.0):  # not wait_for: see _wait_until
                 await self._odom_event.wait()
         except TimeoutError:
-            raise NavigationFailed("no odometry from the base") from None
+            raise NavigationError("no odometry from the base") from None
+
+    def halt(self, *, force: bool = True) -> None:
+        """Command the base to stand still. ``force``: even when the last command was the same
+        (without it, a repeat within half a second is skipped)."""
+        self._send_velocity(0.0, 0.0, force=force)
 
     def _send_velocity(self, v: float, w: float, *, force: bool = False) -> None:
         last_v, last_w, last_t = self._last_cmd

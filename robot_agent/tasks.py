@@ -12,11 +12,14 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import Any, Literal
+
+from pydantic import ValidationError
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message, make_message
 from guidebot.payloads.petri import KillPetriNet, RunPetriNet
+from guidebot.payloads.tasks import TourProgress
 from guidebot.service import Service
 
 __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
@@ -237,18 +240,22 @@ class TaskRunner(Service):
         index, total = point.get("index"), point.get("total")
         if not isinstance(index, int) or not isinstance(total, int):
             return  # points without their place in the tour (not from the Task Manager)
-        stage = "arrived" if message.type == "show_point" else "explained"
-        self.ep.publish(
-            "tour_progress",
-            {
-                "task_id": self.current.task_id,
-                "robot": self.robot,
-                "index": index,
-                "total": total,
-                "poi": point.get("poi"),
-                "stage": stage,
-            },
+        stage: Literal["arrived", "explained"] = (
+            "arrived" if message.type == "show_point" else "explained"
         )
+        try:
+            progress = TourProgress(
+                task_id=self.current.task_id,
+                robot=self.robot,
+                index=index,
+                total=total,
+                poi=point.get("poi"),
+                stage=stage,
+            )
+        except ValidationError as exc:  # the Task Manager would refuse it
+            log.warning("%s: tour point not reported: %s", self.robot, exc)
+            return
+        self.ep.publish(progress)
 
     def _report(self, type_: str, task_id: str, **extra: Any) -> None:
         self.ep.publish(type_, {"task_id": task_id, "robot": self.robot, **extra})

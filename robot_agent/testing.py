@@ -15,6 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from robot_agent.agent import AgentConfig, RobotAgent
+from robot_agent.gui import VisitorAnswer
 
 __all__ = ["light_robot"]
 
@@ -27,7 +28,7 @@ def light_robot(
     site: Path | None = None,
     start_node: str | None = None,
     time_scale: float = 20.0,
-    visitor: str | None = "yes",
+    visitor: VisitorAnswer | None = "yes",
 ) -> RobotAgent:
     """A RobotAgent to use as ``async with``: starts on enter, stops on exit."""
     return RobotAgent(

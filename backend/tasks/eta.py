@@ -21,17 +21,20 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from backend.tasks.model import Task, TaskState
 from guidebot.site.i18n import poi_texts
 
 if TYPE_CHECKING:
-    from backend.tasks.manager import TaskManager
+    from backend.tasks.queue import TaskQueue
     from backend.tasks.robots import RobotInfo
+    from guidebot.site.graph import SiteGraph
+    from guidebot.site.schema import Site
 
-__all__ = ["Estimate", "EtaEstimator", "Service", "speech_s"]
+__all__ = ["Estimate", "EtaEstimator", "Fleet", "Service", "speech_s"]
 
 WORDS_PER_SECOND = 2.6
 """Speaking rate of robot_agent.speech's timed fallback (espeak-ng's default is close)."""
@@ -129,10 +132,29 @@ class _Schedule:
     """Id of the last queued task simulated (extension only after it)."""
 
 
+class Fleet(Protocol):
+    """What the estimator reads of the Task Manager (read only; TaskManager has it)."""
+
+    @property
+    def clock(self) -> Callable[[], float]: ...
+    @property
+    def site(self) -> Site: ...
+    @property
+    def graph(self) -> SiteGraph: ...
+    @property
+    def robots(self) -> Mapping[str, RobotInfo]: ...
+    @property
+    def tasks(self) -> Mapping[str, Task]: ...
+    @property
+    def queue(self) -> TaskQueue: ...
+    def has_free_robot(self) -> bool: ...
+    def target_of(self, kind: str, params: dict[str, Any]) -> str: ...
+
+
 class EtaEstimator:
     """Owned by the Task Manager, which calls ``changed``, ``progress`` and ``ended``."""
 
-    def __init__(self, manager: TaskManager, *, refresh_s: float = 1.0) -> None:
+    def __init__(self, manager: Fleet, *, refresh_s: float = 1.0) -> None:
         self.tm = manager
         self.refresh_s = refresh_s
         self.move = _Factor()
@@ -203,7 +225,7 @@ class EtaEstimator:
         robots = self.tm.robots
         if not any(r.online and not r.fault for r in robots.values()):
             return "unavailable"
-        if any(self.tm._available(robots[n]) for n in self.tm._idle if n in robots):
+        if self.tm.has_free_robot():
             return "available"
         return "busy"
 
@@ -286,7 +308,7 @@ class EtaEstimator:
             poi = site.poi(str(p.get("poi")))
             return [(poi.node, poi_texts(site, poi, lang)["text"])] if poi else []
         try:
-            return [(self.tm._target_node(task.kind, p), None)]
+            return [(self.tm.target_of(task.kind, p), None)]
         except ValueError:
             return []
 

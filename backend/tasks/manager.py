@@ -166,7 +166,7 @@ class TaskManager(Service):
             self._idle.discard(name)
         for task in [t for t in self.queue.ordered()]:
             try:
-                self._target_node(task.kind, task.params)
+                self.target_of(task.kind, task.params)
             except TaskError as exc:
                 self.queue.remove(task.id)
                 task.move(TaskState.CANCELLED, reason=f"the site changed: {exc}")
@@ -205,7 +205,7 @@ class TaskManager(Service):
     ) -> Task:
         """Queue a task; raises TaskError if its parameters do not fit the site."""
         params = validate_params(kind, params if params is not None else {})
-        self._target_node(kind, params)  # the references exist in the site
+        self.target_of(kind, params)  # the references exist in the site
         if "lang" in params and params["lang"] not in (offered := site_languages(self.site)):
             raise InvalidTask(f"language {params['lang']!r} not offered (offered: {offered})")
         if robot is not None and robot not in self.robots:
@@ -335,6 +335,12 @@ class TaskManager(Service):
     def _available(self, robot: RobotInfo) -> bool:
         return available(robot, self.current_of(robot))
 
+    def has_free_robot(self) -> bool:
+        """A robot could start a main task now: idle as far as tasks go, and available (the
+        visitors' "available" service, backend/tasks/eta.py)."""
+        robots = self.robots
+        return any(self._available(robots[n]) for n in self._idle if n in robots)
+
     def _assign_queued(self) -> None:
         robots = self.robots
         free = {n: robots[n] for n in self._idle if self._available(robots[n])}
@@ -363,7 +369,7 @@ class TaskManager(Service):
         return choose_robot(
             task,
             free,
-            lambda: self.graph.distances_to(self._target_node(task.kind, task.params)),
+            lambda: self.graph.distances_to(self.target_of(task.kind, task.params)),
             avoid=self._avoid.get(task.id, ()),
             rather_not=self.rather_not.get(task.id, ()),
         )
@@ -465,7 +471,7 @@ class TaskManager(Service):
             return
         self._leave_robot(task, reason)
         try:
-            self._target_node(task.kind, task.params)
+            self.target_of(task.kind, task.params)
         except TaskError as exc:  # the site changed under it: nothing to go back to
             task.move(TaskState.CANCELLED, reason=f"{reason}; the site changed: {exc}")
             self.changed(task, "cancelled")
@@ -504,8 +510,9 @@ class TaskManager(Service):
         )
         self.courier.post(cancel, key=("task", task_id, robot))
 
-    def _target_node(self, kind: str, params: dict[str, Any]) -> str:
-        """Where a task starts (for path cost); raises TaskError if params do not fit."""
+    def target_of(self, kind: str, params: dict[str, Any]) -> str:
+        """Where a ``kind`` task starts (for path cost); raises InvalidTask (a TaskError) if
+        ``params`` name what the site does not have."""
         return target_node(self.site, self.graph, kind, params)
 
     def event(self, task: Task) -> TaskEvent:

@@ -115,7 +115,10 @@ class GoalReached(PayloadModel):
 
 @register_payload("navigation_failed")
 class NavigationFailed(PayloadModel):
-    node: str
+    """A goal was not reached (robot_agent.motion.NavigationError says why)."""
+
+    node: str | None
+    """The goal's node; None when navigate_to or dock named none the robot could use."""
     reason: str = ""
 
 

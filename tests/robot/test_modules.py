@@ -194,6 +194,29 @@ async def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers:
     assert ended["reason"] == "the go_to_poi task net failed (no step said why)"
 
 
+async def test_tour_points_become_tour_progress_and_points_out_of_range_do_not(
+    helpers: Any,
+) -> None:
+    """A point the tour reached or explained goes to the Task Manager as tour_progress (the
+    wire of docs/messages.md); one the Task Manager would refuse (index 0) is not sent."""
+    bus = Bus()
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
+    seen = helpers.Recorder(bus.endpoint("t"), "tour_progress")
+    await runner.start()
+    bus.endpoint("tm").publish(
+        "task_assigned", {"task_id": "t1", "robot": "R1", "net": "give_tour"}
+    )
+    tour = bus.endpoint("give_tour")
+    tour.publish("show_point", {"poi": "p1", "point": {"poi": "p1", "index": 1, "total": 2}})
+    tour.publish("point_explained", {"point": {"poi": "p1", "index": 1, "total": 2}})
+    tour.publish("show_point", {"poi": "p0", "point": {"poi": "p0", "index": 0, "total": 2}})
+    assert [m.payload for m in seen.of("tour_progress")] == [
+        {"task_id": "t1", "robot": "R1", "index": 1, "total": 2, "poi": "p1", "stage": stage}
+        for stage in ("arrived", "explained")
+    ]
+    await runner.stop()
+
+
 async def test_head_watchdog_confirms_servos_a_lost_head_never_does(helpers: Any) -> None:
     bus = Bus()
     head = HeadWatchdog(bus.endpoint("head_watchdog"), Clock(10.0), timeout_s=1.0, min_wall_s=0.05)

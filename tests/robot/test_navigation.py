@@ -122,6 +122,13 @@ async def test_unknown_node_fails_with_the_traffic_managers_reason(rig: Rig) -> 
     assert "nowhere" in rig.seen.of("navigation_failed")[0].payload["reason"]
 
 
+async def test_navigate_to_without_a_node_fails_at_once(rig: Rig) -> None:
+    request = rig.bus.endpoint("net").publish("navigate_to", {})
+    [failed] = rig.seen.of("navigation_failed")
+    assert failed.correlation_id == request.id
+    assert failed.payload == {"node": None, "reason": "navigate_to needs a node id"}
+
+
 async def test_area_wait_and_yield_then_goal_reached(rig: Rig) -> None:
     """R2 holds the corridor: R1 waits at its edge, is told to yield (back off to hall), and
     reaches its goal once R2 has released the corridor."""
@@ -143,7 +150,7 @@ async def test_area_wait_and_yield_then_goal_reached(rig: Rig) -> None:
 async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_reconnect(
     rig: Rig, caplog: pytest.LogCaptureFixture
 ) -> None:
-    caplog.set_level("INFO", logger="robot_agent.navigation")
+    caplog.set_level("INFO", logger="robot_agent.passage")
     r2 = rig.bus.endpoint("R2")
     r2.publish("request_area", {"robot": "R2", "area": "corridor"})
     rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
@@ -157,9 +164,10 @@ async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_rec
     building = rig.bus.endpoint("building-broadcast")
     building.publish("door_opened", {"door": "door_upstairs"})
     building.publish("elevator_in_position", {"elevator": "lift", "floor": "F0", "door_open": True})
-    assert "door_upstairs" in rig.nav._doors_open and rig.nav._elevators == {"lift": "F0"}
+    passage = rig.nav.passage
+    assert "door_upstairs" in passage._doors_open and passage._elevators == {"lift": "F0"}
     rig.nav.link_lost()  # broadcasts are missed from now on: unknown is closed
-    assert not rig.nav._doors_open and not rig.nav._elevators
+    assert not passage._doors_open and not passage._elevators
     rig.nav.resync()  # the link is back, maybe to a restarted server: ask again
     assert len(asked()) == 2 and asked()[-1].payload == {"robot": "R1", "area": "corridor"}
     # 60 robot seconds (3 s of wall time here) later, a warning says it still waits.
