@@ -27,7 +27,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
-from guidebot.payloads.petri import NavigationFailed, PeopleFaced
+from guidebot.payloads.petri import Docked, GoalReached, NavigationFailed, PeopleFaced
 from guidebot.payloads.robot import NodeReached, RobotFault
 from guidebot.payloads.traffic import GetPath
 from guidebot.site.steps import PathStep
@@ -184,7 +184,7 @@ class Navigator(MotionControl):
                 correlation_id=message.id,
             )
             return
-        self._start_goal(self._goal(node, message.id, reply="goal_reached"))
+        self._start_goal(self._goal(node, message.id, reply=GoalReached(node=node)))
 
     def _on_dock(self, message: Message) -> None:
         """The battery_charge net is at the station's node: run the docking approach."""
@@ -195,7 +195,8 @@ class Navigator(MotionControl):
                 NavigationFailed(node=_node_or_none(node), reason="dock: position unknown")
             )
             return
-        self._start_goal(self._goal(node, message.id, reply="docked", station=station))
+        docked = Docked(node=node, station=station if isinstance(station, str) else None)
+        self._start_goal(self._goal(node, message.id, reply=docked))
 
     def _on_face_people(self, message: Message) -> None:
         # Visitors follow the robot: they stand behind it. Turn around in place.
@@ -241,7 +242,8 @@ class Navigator(MotionControl):
 
     # -- goals --------------------------------------------------------------------------------
 
-    async def _goal(self, node: str, request_id: str, *, reply: str, **extra: Any) -> None:
+    async def _goal(self, node: str, request_id: str, *, reply: GoalReached | Docked) -> None:
+        """Drive to ``node`` and answer ``reply`` (or navigation_failed)."""
         self.goal = node
         try:
             for _attempt in range(4):
@@ -261,9 +263,9 @@ class Navigator(MotionControl):
         finally:
             self.goal = None
         log.info("%s: reached %s", self.robot, node)
-        if reply == "docked":
+        if isinstance(reply, Docked):
             await self.clock.sleep(self.docking_s)  # the final approach onto the contacts
-        self.ep.publish(reply, {**extra, "node": node}, correlation_id=request_id)
+        self.ep.publish(reply, correlation_id=request_id)
 
     async def _back_off(self, request: YieldRequested) -> None:
         """Leave the area for its passing place, give it up, then the goal is tried again."""

@@ -12,7 +12,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.robot import RobotMode
+from guidebot.payloads.robot import RobotMode, RobotState
 from guidebot.service import Service
 from robot_agent.battery import BatteryMonitor
 from robot_agent.navigation import Navigator
@@ -89,7 +89,7 @@ class StateReporter(Service):
             "theta": round(self.nav.theta, 3),
             "node": self.nav.node,
             "floor": self.nav.floor,
-            "battery": 1.0 if level is None else round(level, 3),
+            "battery": 1.0 if level is None else round(min(max(level, 0.0), 1.0), 3),
             "mode": self.mode().value,
             "navigation": self.nav.state.value,
             "task_id": self.tasks.task_id,
@@ -102,7 +102,7 @@ class StateReporter(Service):
         }
 
     def publish_now(self) -> Message:
-        return self.ep.publish("robot_state", self.snapshot())
+        return self.ep.publish(RobotState(**self.snapshot()))
 
     async def _run(self) -> None:
         while True:

@@ -19,14 +19,14 @@ from pydantic import ValidationError
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message, make_message
 from guidebot.payloads.petri import KillPetriNet, RunPetriNet
-from guidebot.payloads.tasks import TourProgress
+from guidebot.payloads.tasks import Outcome, TaskEnded, TaskStarted, TourProgress
 from guidebot.service import Service
 
 __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
 
 log = logging.getLogger(__name__)
 
-OUTCOMES = {"done": "done", "killed": "cancelled", "failed": "failed"}
+OUTCOMES: dict[str, Outcome] = {"done": "done", "killed": "cancelled", "failed": "failed"}
 
 
 class TaskPhase(StrEnum):
@@ -148,7 +148,9 @@ class TaskRunner(Service):
         if self.current is not None:
             if self.current.task_id == task_id:
                 return  # a duplicate after a reconnect: already running
-            self._report("task_ended", task_id, outcome="failed", reason="robot busy")
+            self.ep.publish(
+                TaskEnded(task_id=task_id, robot=self.robot, outcome="failed", reason="robot busy")
+            )
             return
         params = p.get("params") or {}
         task = MainTask(task_id, net, dict(params), instance_id=f"{self.robot}-task-{task_id}")
@@ -167,7 +169,7 @@ class TaskRunner(Service):
             return  # RG refused it inside the publish: already reported as ended
         task.move(TaskPhase.RUNNING)
         log.info("%s: task %s started (%s)", self.robot, task_id, net)
-        self._report("task_started", task_id)
+        self.ep.publish(TaskStarted(task_id=task_id, robot=self.robot))
 
     def _on_cancel(self, message: Message) -> None:
         task = self.current
@@ -229,7 +231,9 @@ class TaskRunner(Service):
         self.current = None
         self.finished.append(task)
         log.info("%s: task %s %s %s", self.robot, task.task_id, outcome, task.reason)
-        self._report("task_ended", task.task_id, outcome=outcome, reason=task.reason)
+        self.ep.publish(
+            TaskEnded(task_id=task.task_id, robot=self.robot, outcome=outcome, reason=task.reason)
+        )
         self._start_waiting()
 
     def _on_point(self, message: Message) -> None:
@@ -256,6 +260,3 @@ class TaskRunner(Service):
             log.warning("%s: tour point not reported: %s", self.robot, exc)
             return
         self.ep.publish(progress)
-
-    def _report(self, type_: str, task_id: str, **extra: Any) -> None:
-        self.ep.publish(type_, {"task_id": task_id, "robot": self.robot, **extra})

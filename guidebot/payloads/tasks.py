@@ -54,8 +54,6 @@ class TaskCancel(PayloadModel):
 class TaskStarted(PayloadModel):
     task_id: str
     robot: str
-    outcome: Outcome | None = None
-    reason: str = ""
 
 
 @register_payload("task_ended")
