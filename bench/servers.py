@@ -55,9 +55,13 @@ class ServerProcess:
         broker_url: str,
         log: Path,
         tokens: list[dict[str, str]] | None = None,
+        *,
+        site: Path = DEMO,
+        env: dict[str, str] | None = None,
     ) -> None:
         self.db_url, self.broker_url, self.log_path = db_url, broker_url, log
         self.tokens = tokens or []
+        self.site, self.env = site, dict(env or {})
         self.name, self.port = name, _free_port()
         env = {
             **os.environ,
@@ -74,7 +78,7 @@ class ServerProcess:
         self.log = log.open("ab")
         self.process = subprocess.Popen(
             [str(guidebot), "server", "--port", str(self.port), "--db", db_url],
-            env={**env, "GUIDEBOT_BROKER_URL": broker_url, "GUIDEBOT_SITE": str(DEMO)},
+            env={**env, "GUIDEBOT_BROKER_URL": broker_url, "GUIDEBOT_SITE": str(site), **self.env},
             stdout=self.log,
             stderr=subprocess.STDOUT,
         )
@@ -121,14 +125,18 @@ async def start_servers(
     broker_url: str,
     logs: Path,
     tokens: list[dict[str, str]] | None = None,
+    *,
+    site: Path = DEMO,
+    env: dict[str, str] | None = None,
 ) -> AsyncIterator[list[ServerProcess]]:
     """Start the servers one after the other (the first leads); ``tokens``: more static tokens
-    ({"token", "name", "role"}) beside the GUI's."""
+    ({"token", "name", "role"}) beside the GUI's; ``env``: settings over the defaults here
+    (e.g. ``GUIDEBOT_BUILDING_ENABLED=true`` with a ``site`` on a running building_sim)."""
     servers: list[ServerProcess] = []
     try:
         for name in names:
             log = logs / f"{name}.log"
-            servers.append(ServerProcess(name, db_url, broker_url, log, tokens))
+            servers.append(ServerProcess(name, db_url, broker_url, log, tokens, site=site, env=env))
             # The first one migrates the database; start the others once it leads.
             await wait_until(servers[-1].ready, 60, f"server {name} to answer /api/health")
         yield servers

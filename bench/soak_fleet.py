@@ -114,10 +114,13 @@ async def healthy(url: str) -> bool:
 
 class LinkRelay:
     """A TCP relay 127.0.0.1:port -> the server; ``cut`` drops every connection through it and
-    refuses new ones until ``restore`` (a robot's Wi-Fi gone, then back)."""
+    refuses new ones until ``restore`` (a robot's Wi-Fi gone, then back). ``fallback_ports``:
+    servers tried in turn when the target refuses a new connection, as a load balancer does
+    when a server process died (tests/scale)."""
 
-    def __init__(self, target_port: int) -> None:
+    def __init__(self, target_port: int, *fallback_ports: int) -> None:
         self.target_port = target_port
+        self.fallback_ports = fallback_ports
         self.port = 0
         self.cut_now = False
         self._server: asyncio.Server | None = None
@@ -151,9 +154,13 @@ class LinkRelay:
         if self.cut_now:
             writer.transport.abort()
             return
-        try:
-            up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.target_port)
-        except OSError:
+        for port in (self.target_port, *self.fallback_ports):
+            try:
+                up_reader, up_writer = await asyncio.open_connection("127.0.0.1", port)
+                break
+            except OSError:
+                continue
+        else:
             writer.transport.abort()
             return
         self._writers |= {writer, up_writer}
