@@ -120,6 +120,8 @@ async def clustered(
     )
     app.state.broker, app.state.leadership = bridge, leadership
     hub.forwards_unknown = True
+    # Robots' must-arrive messages are acknowledged where they are handled (backend/hub/acks.py).
+    hub.decides = lambda: leadership.serving and leadership.may_decide()
     await bridge.start()
     tokens = _FollowerTokens(app, settings.db_url)
     await tokens.load()

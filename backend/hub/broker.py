@@ -4,7 +4,9 @@ Every message published on this process's bus (by an in-process module or a WebS
 is forwarded once to one Redis channel, prefixed with this process's id. Every message on that
 channel from another process is published into the local bus, so it reaches local modules and
 WebSocket clients through the hub's usual routing (per-client outboxes, back-pressure, coalescing
-unchanged), and is not forwarded again. Without a broker none of this runs.
+unchanged), and is not forwarded again. A robot's must-arrive messages (task reports, area, door
+and elevator requests) are acknowledged by the leader only, once handled, whichever process the
+robot is on (backend/hub/acks.py). Without a broker none of this runs.
 
 Redis pub/sub is at-most-once: while the broker is down, messages between processes are lost
 (each process keeps serving its own clients); the bridge reconnects every ``retry_s`` seconds.
@@ -77,6 +79,7 @@ class BrokerBridge:
     async def start(self) -> None:
         """Tap every local message; run the sender and the receiver (reconnecting)."""
         self._endpoint.subscribe("*", self._forward, tap=True)
+        self.hub.forward = self._send
         loop = asyncio.get_running_loop()
         self._tasks = [
             loop.create_task(self._send_loop(), name="broker-send"),
@@ -85,6 +88,7 @@ class BrokerBridge:
 
     async def stop(self) -> None:
         self._endpoint.close()
+        self.hub.forward = None
         for task in self._tasks:
             task.cancel()
         for task in self._tasks:
@@ -105,8 +109,10 @@ class BrokerBridge:
 
     # -- outgoing ---------------------------------------------------------------------------
     def _forward(self, message: Message) -> None:
-        if message is self._incoming:
-            return  # came from the broker: every process already has it
+        if message is not self._incoming:  # else it came from the broker: every process has it
+            self._send(message)
+
+    def _send(self, message: Message) -> None:
         if len(self._out) >= self.queue_size:
             self.dropped += 1
             return
@@ -173,6 +179,21 @@ class BrokerBridge:
             log.warning("broker: dropped a malformed frame from %r: %s", origin, exc)
             return
         self.received += 1
+        acks = self.hub.acks
+        if acks.wanted(message) and message.source:
+            # A robot's must-arrive message on another process: the leader handles it once and
+            # acknowledges every copy (the ack goes back through the broker); elsewhere it is
+            # shown once to local clients (docs/protocol.md, "Delivery guarantee").
+            if self.hub.decides():
+                if acks.first(message.source, message):
+                    self._publish(message)
+                self.hub.bus.publish(acks.ack(message))
+                return
+            if not acks.first_passed(message.source, message):
+                return
+        self._publish(message)
+
+    def _publish(self, message: Message) -> None:
         self._incoming = message
         try:
             self.hub.bus.publish(message)

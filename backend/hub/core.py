@@ -78,6 +78,10 @@ ConnectionCallback = Callable[["RemoteClient", bool], None]
 """Called with (client, True) once a client is attached and (client, False) once it is gone."""
 
 
+def _always() -> bool:
+    return True
+
+
 class ClientState(enum.Enum):
     OPEN = "open"
     CLOSING = "closing"
@@ -236,9 +240,16 @@ class Hub:
         self.task_requests = task_requests
         """Rate limit on task_request per client name (shared with REST task creation)."""
         self.forwards_unknown = False
+        """With a broker (backend/hub/broker.py) a destination may live on another process."""
         self.acks = InboundAcks(source=HUB_NAME)
         """Must-arrive messages from clients: acknowledged once handled, repeats dropped."""
-        """With a broker (backend/hub/broker.py) a destination may live on another process."""
+        self.decides: Callable[[], bool] = _always
+        """Whether the modules that handle must-arrive messages run here and may decide: always
+        with one process; with a broker, on the serving leader within its lease (cluster.py).
+        Elsewhere nothing is acknowledged: the leader does it (backend/hub/broker.py)."""
+        self.forward: Callable[[Message], None] | None = None
+        """With a broker: hand a message to the other processes only (a copy sent again, which
+        this process's clients already have)."""
         self._on_connection: list[ConnectionCallback] = []
         self._known: frozenset[str] = frozenset()
         self._models: dict[str, type[BaseModel]] = {}
@@ -472,6 +483,14 @@ class Hub:
             self.acks.charge(client.name, message)  # its copies sent again are not charged
         if not self.acks.wanted(message):
             self.bus.publish(message)
+            return
+        if not self.decides():
+            # The leader handles and acknowledges it; every copy goes on (the first may have
+            # found no leader), this process's clients see the first.
+            if self.acks.first_passed(client.name, message):
+                self.bus.publish(message)
+            elif self.forward is not None:
+                self.forward(message)
             return
         if self.acks.first(client.name, message):
             self.bus.publish(message)  # handlers run inline: handled once this returns
