@@ -41,6 +41,10 @@ from guidebot.site.schema import Site
 
 __all__ = ["ServerBrain", "server_brain"]
 
+REPORT_GRACE_S = 15.0
+"""With several processes: how long a restored task its robot no longer names waits for the
+robot's task_ended (TaskManager.report_grace_s)."""
+
 
 class ServerBrain(Service):
     """Starts the brain's parts on ``app.state`` (store, sites, task_manager, traffic,
@@ -89,7 +93,13 @@ class ServerBrain(Service):
             on_event=log_event,
             alerts=alerts,
         )
-        tasks = TaskManager(deciding_endpoint(app, "task_manager"), site, graph=graph, store=store)
+        tasks = TaskManager(
+            deciding_endpoint(app, "task_manager"),
+            site,
+            graph=graph,
+            store=store,
+            report_grace_s=REPORT_GRACE_S if settings.broker_url else 0.0,
+        )
         buttons = ButtonWatcher(deciding_endpoint(app, "buttons"), tasks, site)
         known_tokens: dict[str, str] = {}
         _sync_robot_tokens(app.state.tokens, site, known_tokens)

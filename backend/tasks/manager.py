@@ -78,6 +78,7 @@ class TaskManager(Service):
         robot_timeout_s: float = 10.0,
         lost_grace_s: float = 30.0,
         start_timeout_s: float = 30.0,
+        report_grace_s: float = 0.0,
         tick_s: float | None = 0.5,
         max_queued: int = 100_000,
         clock: Callable[[], float] = time.monotonic,
@@ -88,6 +89,12 @@ class TaskManager(Service):
         self.robot_timeout_s = robot_timeout_s
         self.lost_grace_s = lost_grace_s
         self.start_timeout_s = start_timeout_s
+        self.report_grace_s = report_grace_s
+        """How long a task restored by a new leader that its robot no longer names waits for the
+        robot's task_ended before it goes back to the queue: one sent while no process decided
+        comes again on the robot link's back-off (at most 8 s, +-20 %), possibly after the
+        robot_state (docs/server.md, "After a restart"). 0 for one process: its robots all
+        reconnect to a restarted server and send what was not acknowledged before their state."""
         self.tick_s = tick_s
         self.clock = clock
         self.tasks: dict[str, Task] = {}
@@ -97,8 +104,9 @@ class TaskManager(Service):
         self._finished: list[str] = []
         self.assigned_at: dict[str, float] = {}
         """Task -> when it was assigned, until its robot starts it (watchdog)."""
-        self.unconfirmed: set[str] = set()
-        """Tasks restored after a restart whose robot has not said it still runs them."""
+        self.unconfirmed: dict[str, float | None] = {}
+        """Tasks restored after a restart whose robot has not said it still runs them -> when
+        the robot first reported without it (None: not yet)."""
         self._avoid: dict[str, set[str]] = {}
         """Task -> robots it must not go to (staff reassigned it away from them)."""
         self.rather_not: dict[str, set[str]] = {}
@@ -181,7 +189,7 @@ class TaskManager(Service):
                 self.queue.push(task)
             elif task.robot in self.robots:
                 self.set_current(self.robots[task.robot], task.id)
-                self.unconfirmed.add(task.id)
+                self.unconfirmed[task.id] = None
                 self.assigned_at[task.id] = self.clock()
             elif not task.final:
                 task.move(TaskState.QUEUED, reason="robot unknown after restart")
@@ -388,7 +396,7 @@ class TaskManager(Service):
         task.move(TaskState.ASSIGNED, reason="")
         self.set_current(robot, task.id)
         self.assigned_at[task.id] = self.clock()
-        self.unconfirmed.discard(task.id)
+        self.unconfirmed.pop(task.id, None)
         self.send_assigned(task, robot)
         self.changed(task, "assigned")
 
@@ -490,7 +498,7 @@ class TaskManager(Service):
         if robot is not None and robot.current == task.id:
             self.set_current(robot, None)
         self.assigned_at.pop(task.id, None)
-        self.unconfirmed.discard(task.id)
+        self.unconfirmed.pop(task.id, None)
 
     def set_current(self, robot: RobotInfo, task_id: str | None) -> None:
         robot.current = task_id

@@ -85,11 +85,18 @@ class Presence:
             if ours.state is TaskState.ASSIGNED:
                 ours.move(TaskState.RUNNING, reason="reported by the robot")
                 tm.changed(ours, "started")
-            tm.unconfirmed.discard(ours.id)
+            tm.unconfirmed.pop(ours.id, None)
         elif ours.id in tm.unconfirmed:
-            # Restarted server (or robot back from a long absence): it no longer runs it.
-            tm.unconfirmed.discard(ours.id)
-            tm.requeue(ours, "the robot no longer runs it")
+            # Restarted server or new leader: the robot no longer runs it, or it ended it and
+            # its task_ended, sent while no server decided, comes again on the link's back-off,
+            # after this robot_state. Requeued once that has had time to come.
+            now = tm.clock()
+            since = tm.unconfirmed[ours.id]
+            if since is None:
+                tm.unconfirmed[ours.id] = since = now
+            if now - since >= tm.report_grace_s:
+                tm.unconfirmed.pop(ours.id, None)
+                tm.requeue(ours, "the robot no longer runs it")
         elif ours.state is TaskState.RUNNING:
             # It started it (task_started came first on the same link) and now runs something
             # else or nothing: its agent restarted. Without this the task stayed `running`

@@ -41,7 +41,7 @@ class TaskReports:
             return
         if task.state is TaskState.ASSIGNED:
             task.move(TaskState.RUNNING)
-            tm.unconfirmed.discard(task.id)
+            tm.unconfirmed.pop(task.id, None)
             tm.changed(task, "started")
 
     def on_task_ended(self, msg: Message) -> None:

@@ -2,7 +2,8 @@
 docs/scaling.md): the hub acknowledges one once the deciding components have handled it, so a
 robot on a follower is acknowledged by the leader, through the broker. While no process
 decides (a fail-over) nothing is acknowledged: the robot's link sends the message again, and
-the new leader handles it. Copies are handled once."""
+the new leader handles it. Copies are handled once. A task_ended sent again that comes after
+the robot_state no longer naming the task still ends it (docs/server.md, "After a restart")."""
 
 from __future__ import annotations
 
@@ -10,9 +11,13 @@ import asyncio
 import itertools
 from typing import Any
 
+import httpx
+
 from backend.cluster import LOST_LEADERSHIP_EXIT
-from bench.cluster_clients import AREA, AreaRobot
-from bench.servers import ServerProcess, wait_until
+from bench.cluster_clients import AREA, ROBOT_TOKENS, AreaRobot, WsClient
+from bench.servers import ADMIN_TOKEN, ServerProcess, wait_until
+
+AUTH = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
 
 _ids = itertools.count()
 
@@ -88,3 +93,69 @@ async def test_nothing_is_acknowledged_while_no_process_decides(
 
 async def _true(value: object) -> object:
     return value
+
+
+async def test_a_task_ended_during_a_fail_over_is_not_run_again(
+    pair: list[ServerProcess],
+) -> None:
+    """R1 ends its task while no process decides. Its link sends task_ended again (no ack) on
+    its back-off, and its robot_state, which no longer names the task, may reach the new
+    leader first: the task must end done, not go back to the queue and to R1 a second time."""
+    alpha, beta = pair
+    await wait_until(lambda: _leads(alpha), 60, "alpha to lead")
+    r1 = await WsClient.connect(beta, ROBOT_TOKENS["R1"])
+    try:
+        await _state(r1, None)
+        async with httpx.AsyncClient(headers=AUTH, timeout=10) as http:
+            created = await http.post(
+                f"{alpha.url}/api/tasks",
+                json={"kind": "go_to_poi", "params": {"poi": "welcome"}, "robot": "R1"},
+            )
+        assert created.status_code == 201, created.text
+        task_id = created.json()["id"]
+        assigned = await wait_until(lambda: _true(_assigned(r1, task_id)), 20, "task_assigned")
+        await r1.send("ack", {"message_id": assigned[0]["id"]}, destination="task_manager")
+        await r1.send("task_started", {"task_id": task_id, "robot": "R1"}, id=f"s-{task_id}")
+        await _state(r1, task_id)
+        await wait_until(lambda: _task_state(alpha, task_id, "running"), 20, "the task running")
+
+        alpha.pause()
+        try:
+            ended = f"e-{task_id}"
+            await r1.send("task_ended", {"task_id": task_id, "robot": "R1"}, id=ended)
+            await wait_until(lambda: _leads(beta), 30, "beta to lead after alpha's lease")
+            await _state(r1, None)  # its state, at its steady rate, comes first
+            await r1.send("task_ended", {"task_id": task_id, "robot": "R1"}, id=ended)
+            await wait_until(lambda: _task_state(beta, task_id, "done"), 20, "the task done")
+        finally:
+            alpha.resume()
+        assert await asyncio.to_thread(alpha.process.wait, 30) == LOST_LEADERSHIP_EXIT
+        async with httpx.AsyncClient(headers=AUTH, timeout=10) as http:
+            history = (await http.get(f"{beta.url}/api/tasks/{task_id}/history")).json()
+        events = [h["event"] for h in history]
+        assert events.count("assigned") == 1 and "requeued" not in events, history
+        assert len(_assigned(r1, task_id)) == 1, "the task was sent to R1 a second time"
+    finally:
+        await r1.close()
+
+
+def _assigned(robot: WsClient, task_id: str) -> list[dict[str, Any]]:
+    return [m for m in robot.of_type("task_assigned") if m["payload"]["task_id"] == task_id]
+
+
+async def _state(robot: WsClient, task_id: str | None) -> None:
+    payload = {"robot": "R1", "node": "hall", "mode": "busy" if task_id else "idle"}
+    await robot.send("robot_state", {**payload, "task_id": task_id})
+    ping = f"state-{next(_ids)}"
+    await robot.send("ping", {}, id=ping)
+    await wait_until(
+        lambda: _true(any(m.get("correlation_id") == ping for m in robot.of_type("pong"))),
+        20,
+        "pong",
+    )
+
+
+async def _task_state(server: ServerProcess, task_id: str, state: str) -> bool:
+    async with httpx.AsyncClient(headers=AUTH, timeout=10) as http:
+        answer = await http.get(f"{server.url}/api/tasks/{task_id}")
+    return answer.status_code == 200 and answer.json()["state"] == state

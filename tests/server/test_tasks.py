@@ -260,6 +260,32 @@ async def test_restart_keeps_queued_and_reconciles_running(bus: Bus, manager: Ta
     assert next_id > 3
 
 
+async def test_a_restored_task_ended_while_no_leader_decided_is_not_run_again(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """Several processes: the robot ended its task while the leaders changed; its task_ended
+    comes again on the link's back-off, after a robot_state that no longer names the task: the
+    task ends done, it does not go back to the queue and to the robot again."""
+    manager.report_grace_s = 15.0
+    ended = Task("t1", "tour", {"tour": "ground"}, 5, "panel", 1, TaskState.RUNNING, "R1")
+    lost = Task("t2", "tour", {"tour": "upstairs"}, 5, "panel", 2, TaskState.RUNNING, "R2")
+    manager.restore([ended, lost])
+    r1, r2 = RobotStub(bus, "R1", "gb2"), RobotStub(bus, "R2", "gc1")
+    r1.state("idle")
+    r2.state("idle")
+    clock.now += 10.0
+    r1.state("idle")
+    r2.state("idle")
+    assert ended.state is TaskState.RUNNING and manager.robots["R1"].current == "t1"
+    assert lost.state is TaskState.RUNNING  # within the grace
+    r1.end("t1")
+    assert ended.state is TaskState.DONE
+    assert [m.payload["task_id"] for m in assigned(r1)].count("t1") == 0
+    clock.now += 5.0
+    r2.state("idle")  # no task_ended came: it no longer runs it
+    assert lost.state in (TaskState.QUEUED, TaskState.ASSIGNED)
+
+
 async def test_bad_requests_are_refused_and_nothing_is_lost(manager: TaskManager) -> None:
     kept = manager.request("tour", {"tour": "ground"})
     for kind, params in [
