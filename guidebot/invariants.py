@@ -1,6 +1,7 @@
 """The fleet's safety invariants, checked on the event stream (hub messages or /api/events).
 
-1. No robot reaches a door node while that door is closed.
+1. No robot reaches a door node while that door is closed (a door whose sensor cannot be read,
+   ``door_closed`` with ``sensed`` false, is unknown: not checked until it is sensed again).
 2. No robot enters a cabin node unless the cabin is at that floor with its door open.
 3. No two robots in one restricted area (by position, and by grants).
 
@@ -98,7 +99,7 @@ class InvariantChecker:
         default_factory=lambda: {"door": 0, "cabin": 0, "area": 0, "events": 0}
     )
     """How many times each invariant was checked (a run that checked nothing proves nothing)."""
-    doors: dict[str, TimeLine[bool]] = field(default_factory=dict)
+    doors: dict[str, TimeLine[bool | None]] = field(default_factory=dict)
     """door -> open?"""
     cabins: dict[str, TimeLine[str | None]] = field(default_factory=dict)
     """elevator -> floor where it stands with its door open (None: closed or moving)"""
@@ -170,7 +171,8 @@ class InvariantChecker:
         self._line(self.doors, str(p.get("door")), False).set(at, True)
 
     def _on_door_closed(self, p: Mapping[str, Any], at: float) -> None:
-        self._line(self.doors, str(p.get("door")), False).set(at, False)
+        known = p.get("sensed", True) is not False
+        self._line(self.doors, str(p.get("door")), False).set(at, False if known else None)
 
     def _on_elevator_in_position(self, p: Mapping[str, Any], at: float) -> None:
         elevator, floor = str(p.get("elevator")), str(p.get("floor"))
@@ -189,7 +191,7 @@ class InvariantChecker:
         door = self.door_at.get(node)
         if door is not None:
             self.counts["door"] += 1
-            if not self._line(self.doors, door, False).at(at):
+            if self._line(self.doors, door, False).at(at) is False:
                 self._fail("door", robot, f"reached {node} while door {door} was closed", at)
         cabin = self.cabin_at.get(node)
         if cabin is not None:

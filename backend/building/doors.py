@@ -5,7 +5,8 @@ Safety rules (docs/building.md, "Doors"):
   after the interface last cleared the open coil (a stale "open" can never survive a close);
   without a sensor, ``open_time_s`` after the interface set the coil;
 - it is **closed** as soon as the interface clears the coil, when the sensor falls, when a
-  sensorless door's coil reads back cleared, or when the sensor's module goes offline;
+  sensorless door's coil reads back cleared, or when the sensor's module goes offline (then
+  published ``sensed: false``: not passable, though the door may still stand open);
 - a clear that could not be written (the module was offline) leaves the coil set, so the door
   may stand open: its sensor is not believed until the coil is cleared when the module is back,
   or set again for a new ``open_door`` (otherwise the first sample after the module's return
@@ -36,9 +37,11 @@ class DoorKeeper:
     """One door's state as published (door_opened / door_closed) and its holders."""
 
     door: Door
-    publish: Callable[[str, bool], None]
-    """Called with (door id, open) on every change of the published state."""
+    publish: Callable[[str, bool, bool], None]
+    """Called with (door id, open, sensed) on every change of the published state."""
     is_open: bool | None = None
+    sensed: bool = True
+    """False while the state is "closed" only because the sensor cannot be read."""
     closed_at: float = -math.inf
     """time.monotonic() of the last coil clear (inf while a clear is being written, and after
     one failed until the coil is written again)."""
@@ -50,12 +53,12 @@ class DoorKeeper:
     _waiters: list[asyncio.Future[None]] = field(default_factory=list)
     _open_timer: asyncio.TimerHandle | None = None
 
-    def state(self, is_open: bool) -> None:
+    def state(self, is_open: bool, *, sensed: bool = True) -> None:
         """Set the published state; tells everyone on a change, wakes open waiters."""
-        if is_open == self.is_open:
+        if is_open == self.is_open and sensed == self.sensed:
             return
-        self.is_open = is_open
-        self.publish(self.door.id, is_open)
+        self.is_open, self.sensed = is_open, sensed
+        self.publish(self.door.id, is_open, sensed)
         if is_open:
             for future in self._waiters:
                 if not future.done():
@@ -106,9 +109,9 @@ class DoorKeeper:
         self.coil_left_set = True
 
     def lost(self, now: float) -> None:
-        """The sensor's module stopped answering: the door counts as closed."""
+        """The sensor's module stopped answering: the door counts as closed (not sensed)."""
         self.closed_at = max(self.closed_at, now) if self.closed_at != math.inf else math.inf
-        self.state(False)
+        self.state(False, sensed=False)
 
     async def wait_open(self, timeout_s: float) -> None:
         if self.is_open:

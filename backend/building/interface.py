@@ -219,8 +219,10 @@ class BuildingInterface(Service):
                 ElevatorInPosition(elevator=elevator, floor=floor, door_open=bool(value)),
             )
 
-    def _publish_door(self, door: str, is_open: bool) -> None:
-        self.endpoint.publish(DoorOpened(door=door) if is_open else DoorClosed(door=door))
+    def _publish_door(self, door: str, is_open: bool, sensed: bool) -> None:
+        self.endpoint.publish(
+            DoorOpened(door=door) if is_open else DoorClosed(door=door, sensed=sensed)
+        )
 
     def _observe(self, module_id: str, point: IOPoint, raw: int, t: float) -> None:
         key = (module_id, point.name)

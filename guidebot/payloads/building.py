@@ -51,6 +51,9 @@ class DoorOpened(PayloadModel):
 @register_payload("door_closed")
 class DoorClosed(PayloadModel):
     door: str
+    sensed: bool = True
+    """False: the door's sensor cannot be read (its module is offline or faulty). The door is
+    not passable, but may still stand open: nobody can clear its coil meanwhile."""
 
 
 @register_payload("call_elevator")

@@ -148,6 +148,30 @@ async def test_a_door_released_while_its_module_is_offline_is_closed_once_it_is_
         assert (await robot.request("open_door", {"door": "D1"}, timeout=10)).type == "door_opened"
 
 
+async def test_an_open_door_whose_module_goes_offline_is_closed_but_not_sensed(
+    hub: Bus, building: BuildingConfig, recorder: Recorder
+) -> None:
+    """Unknown is closed for the robots, but the fleet is told it was not sensed: the door
+    may still stand open (nobody can clear its coil), so no one may call it a closed door."""
+    async with (
+        BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
+        BuildingInterface(hub.endpoint("building"), sim.bound_config()) as bi,
+    ):
+        await wait_until(lambda: all(p.health.polls > 0 for p in bi.pollers.values()))
+        robot = hub.endpoint("R1")
+        assert (await robot.request("open_door", {"door": "D1"}, timeout=10)).type == "door_opened"
+        recorder.messages.clear()
+        await sim.set_fault("M1", "offline")
+        closed = await recorder.wait("door_closed", door="D1")
+        assert closed.payload["sensed"] is False
+        assert sim.doors["D1"].state == "open"  # physically still open
+        await sim.set_fault("M1", "none")
+        await recorder.wait("door_opened", door="D1")  # sensed again, and still held
+        recorder.messages.clear()
+        assert (await robot.request("close_door", {"door": "D1"}, timeout=10)).type == "door_closed"
+        await recorder.wait("door_closed", door="D1", sensed=True)  # the broadcast: sensed
+
+
 async def test_close_door_is_confirmed(
     hub: Bus, sim: BuildingSimulator, interface: BuildingInterface
 ) -> None:

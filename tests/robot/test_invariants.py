@@ -107,6 +107,23 @@ def test_the_checker_catches_each_kind_of_violation() -> None:
     assert clean.violations == [] and clean.counts["door"] == 1 and clean.counts["cabin"] == 1
 
 
+def test_a_door_not_sensed_is_not_judged_closed() -> None:
+    """door_closed with sensed false (its module offline) means "unknown", not "closed": the
+    door may stand open. Once the sensor reads it closed again, a robot on it is a violation."""
+    from guidebot.site.validate import validate_site
+
+    checker = InvariantChecker.from_site(validate_site(safety_site()))
+    feed = checker.feed
+    feed("door_opened", {"door": "D0"}, 100.0)
+    feed("door_closed", {"door": "D0", "sensed": False}, 101.0)
+    feed("node_reached", {"robot": "R1", "node": "door0", "at": 101.5}, 101.5)
+    assert checker.violations == []
+    feed("door_closed", {"door": "D0"}, 110.0)
+    feed("node_reached", {"robot": "R2", "node": "door0", "at": 111.0}, 111.0)
+    assert [(v.invariant, v.robot) for v in checker.violations] == [("door", "R2")]
+    assert checker.counts["door"] == 2
+
+
 def test_a_late_report_is_judged_at_the_time_the_robot_gives() -> None:
     """A robot's link was down: its node_reached comes seconds late. It entered the cabin
     while the cabin was open (no violation), and a second robot's late report shows it in an
