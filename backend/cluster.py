@@ -147,7 +147,7 @@ async def clustered(
 
     stop_links = _announce_links_while_following(hub, leadership)
     stop_tokens = tokens.watch(hub, leadership)
-    leadership.start()
+    await leadership.start()
     leader_task = asyncio.get_running_loop().create_task(lead(), name="cluster-leader")
     try:
         yield

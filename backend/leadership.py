@@ -28,6 +28,8 @@ from typing import Any
 
 import asyncpg
 
+from guidebot.service import Service
+
 __all__ = ["LEADER_LOCK_KEY", "Leadership", "asyncpg_dsn"]
 
 log = logging.getLogger(__name__)
@@ -48,7 +50,7 @@ def asyncpg_dsn(db_url: str) -> str:
     return "postgresql://" + rest
 
 
-class Leadership:
+class Leadership(Service):
     """Campaign for the advisory lock; ``won`` is set while this process leads."""
 
     def __init__(
@@ -61,6 +63,7 @@ class Leadership:
         lease_s: float = 4.0,
         key: int = LEADER_LOCK_KEY,
     ) -> None:
+        super().__init__()
         if lease_s < 2 * poll_s:
             raise ValueError(f"the lease ({lease_s} s) must be at least twice the poll ({poll_s})")
         self.dsn = asyncpg_dsn(db_url)
@@ -80,7 +83,6 @@ class Leadership:
         self.error = ""
         self.serving = False
         """The deciding components are up (set by backend/cluster.py): REST may be served."""
-        self._task: asyncio.Task[None] | None = None
 
     @property
     def leading(self) -> bool:
@@ -93,16 +95,9 @@ class Leadership:
     def _renewed(self, sent_at: float) -> None:
         self._lease_until = sent_at + self.lease_s * 0.9
 
-    def start(self) -> None:
-        self._task = asyncio.get_running_loop().create_task(self._run(), name="leadership")
-
-    async def stop(self) -> None:
-        """Stop campaigning; closing the connection releases the lock."""
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+    async def on_start(self) -> None:
+        """Campaign until stopped; stopping closes the connection, which releases the lock."""
+        self.spawn(self._run(), name="leadership")
 
     def report(self) -> dict[str, Any]:
         return {

@@ -27,6 +27,7 @@ from redis import asyncio as aioredis
 from redis.exceptions import RedisError
 
 from guidebot.messages import Message
+from guidebot.service import Service
 
 from .core import Hub
 
@@ -43,7 +44,7 @@ def process_id() -> str:
     return f"{socket.gethostname()}:{os.getpid()}".replace(" ", "_")
 
 
-class BrokerBridge:
+class BrokerBridge(Service):
     """Forward local bus messages to Redis; deliver other processes' messages locally."""
 
     def __init__(
@@ -57,6 +58,7 @@ class BrokerBridge:
         retry_s: float = 1.0,
     ) -> None:
         self.hub = hub
+        super().__init__()
         self.url = url
         self.origin = origin or process_id()
         self.channel = channel
@@ -73,28 +75,19 @@ class BrokerBridge:
         self._incoming: Message | None = None
         """The message being delivered from the broker: not forwarded back (but what local
         modules publish while handling it, such as a grant answering a request, is)."""
-        self._tasks: list[asyncio.Task[None]] = []
         self._endpoint = hub.endpoint(f"broker@{self.origin}")
 
-    async def start(self) -> None:
+    async def on_start(self) -> None:
         """Tap every local message; run the sender and the receiver (reconnecting)."""
-        self._endpoint.subscribe("*", self._forward, tap=True)
+        self.on_cleanup(self._endpoint.close)
+        self.subscribe(self._endpoint, "*", self._forward, tap=True)
         self.hub.forward = self._send
-        loop = asyncio.get_running_loop()
-        self._tasks = [
-            loop.create_task(self._send_loop(), name="broker-send"),
-            loop.create_task(self._receive_loop(), name="broker-receive"),
-        ]
+        self.on_cleanup(self._unhook)
+        self.spawn(self._send_loop(), name="broker-send")
+        self.spawn(self._receive_loop(), name="broker-receive")
 
-    async def stop(self) -> None:
-        self._endpoint.close()
+    def _unhook(self) -> None:
         self.hub.forward = None
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        self._tasks = []
 
     def stats(self) -> dict[str, Any]:
         return {

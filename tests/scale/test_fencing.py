@@ -34,10 +34,10 @@ async def test_a_leader_past_its_lease_grants_nothing(postgres: PostgresServer) 
     granted: list[Message] = []
     for endpoint in robots.values():
         endpoint.subscribe("area_granted", granted.append)
-    alpha.start()
+    await alpha.start()
     try:
         await asyncio.wait_for(alpha.won.wait(), 30)
-        beta.start()
+        await beta.start()
         await traffic.start()
         assert alpha.may_decide()
         # While the lease runs the fenced Traffic Manager grants as usual.
