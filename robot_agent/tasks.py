@@ -8,6 +8,7 @@ to the Task Manager.
 
 from __future__ import annotations
 
+import collections
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,6 +28,8 @@ __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
 log = logging.getLogger(__name__)
 
 OUTCOMES: dict[str, Outcome] = {"done": "done", "killed": "cancelled", "failed": "failed"}
+FINISHED_KEPT = 50
+"""Ended tasks remembered, to answer a task_assigned resent for one of them."""
 
 
 class TaskPhase(StrEnum):
@@ -56,6 +59,8 @@ class MainTask:
     instance_id: str
     phase: TaskPhase = TaskPhase.STARTING
     reason: str = ""
+    outcome: Outcome | None = None
+    """How it ended (ENDED only)."""
     problem: str = ""
     """The last thing that went wrong while it ran (navigation_failed, a robot fault): the
     reason given when its net fails without saying why."""
@@ -92,7 +97,9 @@ class TaskRunner(Service):
         self.on_cancel = on_cancel
         self.on_task_start = on_start
         self.current: MainTask | None = None
-        self.finished: list[MainTask] = []
+        self.finished: collections.deque[MainTask] = collections.deque(maxlen=FINISHED_KEPT)
+        """The last tasks that ended: a task_assigned resent for one of them (the server
+        restarted, or the link was down when it ended) is answered, not run again."""
         self.running_nets: dict[str, str] = {}
         self._waiting_instance: str | None = None
         self._waiting_seq = 0
@@ -144,6 +151,14 @@ class TaskRunner(Service):
         task_id, net = str(p.get("task_id") or ""), str(p.get("net") or "")
         if not task_id or not net:
             log.warning("%s: task_assigned without task_id or net: %s", self.robot, p)
+            return
+        ended = next((t for t in self.finished if t.task_id == task_id), None)
+        if ended is not None:
+            # Resent after a reconnect while its task_ended was still queued: say it again.
+            log.info(
+                "%s: task %s already ended (%s): not run again", self.robot, task_id, ended.outcome
+            )
+            self._report_ended(ended)
             return
         if self.current is not None:
             if self.current.task_id == task_id:
@@ -228,13 +243,22 @@ class TaskRunner(Service):
             # A failed task always says why, for the staff and the visitor who asked for it.
             task.reason = task.problem or f"the {task.net} task net failed (no step said why)"
         task.move(TaskPhase.ENDED)
+        task.outcome = outcome
         self.current = None
         self.finished.append(task)
         log.info("%s: task %s %s %s", self.robot, task.task_id, outcome, task.reason)
-        self.ep.publish(
-            TaskEnded(task_id=task.task_id, robot=self.robot, outcome=outcome, reason=task.reason)
-        )
+        self._report_ended(task)
         self._start_waiting()
+
+    def _report_ended(self, task: MainTask) -> None:
+        self.ep.publish(
+            TaskEnded(
+                task_id=task.task_id,
+                robot=self.robot,
+                outcome=task.outcome or "failed",
+                reason=task.reason,
+            )
+        )
 
     def _on_point(self, message: Message) -> None:
         """give_tour reached or explained a point: tour_progress for the Task Manager."""

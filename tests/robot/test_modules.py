@@ -194,6 +194,34 @@ async def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers:
     assert ended["reason"] == "the go_to_poi task net failed (no step said why)"
 
 
+async def test_an_assignment_resent_for_a_task_that_ended_is_answered_not_run(
+    helpers: Any,
+) -> None:
+    """The link was down when the task ended (or the server restarted): the server resends
+    task_assigned before the queued task_ended reaches it. The robot says again how the task
+    ended instead of running it a second time (the soak saw the repeat refuse the next task
+    as "robot busy")."""
+    bus = Bus()
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
+    seen = helpers.Recorder(bus.endpoint("t"), "task_ended", "run_petri_net")
+    await runner.start()
+    tm, dispatch = bus.endpoint("tm"), bus.endpoint("dispatch")
+    assign = {"task_id": "t1", "robot": "R1", "net": "go_to_poi"}
+    tm.publish("task_assigned", assign)
+    instance = seen.of("run_petri_net")[-1].payload["instance_id"]
+    dispatch.publish(
+        "petri_net_ended", {"net": "go_to_poi", "instance_id": instance, "outcome": "done"}
+    )
+    tm.publish("task_assigned", assign)  # resent
+    assert len(seen.of("run_petri_net")) == 1  # not run again
+    ended = [m.payload for m in seen.of("task_ended")]
+    assert ended == [{"task_id": "t1", "robot": "R1", "outcome": "done", "reason": ""}] * 2
+    assert runner.current is None
+    # The next task runs as usual.
+    tm.publish("task_assigned", {**assign, "task_id": "t2"})
+    assert runner.current is not None and runner.current.task_id == "t2"
+
+
 async def test_tour_points_become_tour_progress_and_points_out_of_range_do_not(
     helpers: Any,
 ) -> None:
