@@ -16,11 +16,10 @@ __all__ = ["metrics"]
 async def metrics(app: FastAPI) -> AsyncIterator[None]:
     """Tap the hub for the server's whole life; services are looked up at scrape time."""
     endpoint = app.state.hub.endpoint("metrics")
-    server_metrics = ServerMetrics(app.state)
-    server_metrics.attach(endpoint.subscribe, endpoint.publish)
+    server_metrics = ServerMetrics(app.state, endpoint)
     app.state.metrics = server_metrics
     try:
-        yield
+        async with server_metrics:
+            yield
     finally:
-        server_metrics.detach()
         endpoint.close()

@@ -21,6 +21,7 @@ from prometheus_client.registry import Collector
 from backend.metrics.reaction import STEPS, ReactionJoin, steps_ms
 from guidebot.messages import Message
 from guidebot.payloads.tasks import ReactionMeasured
+from guidebot.service import Service
 
 __all__ = ["ServerMetrics"]
 
@@ -37,11 +38,15 @@ def _bounded_put(table: OrderedDict[str, Any], key: str, value: Any) -> None:
         table.popitem(last=False)
 
 
-class ServerMetrics:
+class ServerMetrics(Service):
     """Everything ``GET /metrics`` shows; ``app_state`` is the FastAPI app's state."""
 
-    def __init__(self, app_state: Any) -> None:
+    def __init__(self, app_state: Any, endpoint: Any = None) -> None:
+        """``endpoint``: the hub endpoint tapped while started (and reaction_measured's
+        sender); without one, feed ``observe`` by hand."""
+        super().__init__()
         self.state = app_state
+        self.endpoint = endpoint
         self.registry = CollectorRegistry(auto_describe=False)
         r = self.registry
         self.delivery = Histogram(
@@ -94,15 +99,15 @@ class ServerMetrics:
 
     # -- feeding -----------------------------------------------------------------------------
 
-    def attach(self, subscribe: Callable[..., Callable[[], None]], publish: Any) -> None:
-        """Tap every hub message; ``publish`` sends reaction_measured."""
-        self._publish = publish
-        self._unsubscribe = subscribe("*", self.observe, tap=True)
+    async def on_start(self) -> None:
+        """Tap every hub message; reaction_measured goes out on the same endpoint."""
+        if self.endpoint is not None:
+            self.subscribe(self.endpoint, "*", self.observe, tap=True)
+            self._publish = self.endpoint.publish
+            self.on_cleanup(self._stop_publishing)
 
-    def detach(self) -> None:
-        unsubscribe = getattr(self, "_unsubscribe", None)
-        if unsubscribe is not None:
-            unsubscribe()
+    def _stop_publishing(self) -> None:
+        self._publish = None
 
     def observe(self, message: Message) -> None:
         """One hub message (a tap handler: cheap, never raises into the bus)."""
