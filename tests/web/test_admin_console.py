@@ -45,6 +45,7 @@ async def test_every_view_and_what_each_role_may_do(
         await web.sign_in(admin, fleet.server.admin_token)
         page = admin.page
         await expect(page.get_by_role("button", name="robot R1")).to_be_visible(timeout=20_000)
+        await expect(page.locator("#server-status")).to_have_text("Server ok")  # one process
         for label, name in VIEWS:
             await web.open_view(page, label)
             if name == "monitor":  # the idle net of R1 ("waiting") is drawn

@@ -158,10 +158,15 @@ async function start() {
   };
 
   render(
-    html`<span>${me.name} <span class="badge">${me.role}</span></span>
+    html`<span id="server-status" role="status"></span>
+      <span>${me.name} <span class="badge">${me.role}</span></span>
       <button type="button" @click=${() => { hub.stop(); forgetToken(); location.reload(); }}>Sign out</button>`,
     $("who"),
   );
+  const showServer = () => serverStatus(api).then((view) => render(view, $("server-status")));
+  showServer();
+  hub.addEventListener("connect", showServer);
+  setInterval(showServer, SERVER_REFRESH_MS);
   $("signin").hidden = true;
   $("tabs").hidden = false;
 
@@ -254,6 +259,20 @@ async function start() {
   for (const view of store.locks.values()) map.setAreaState(view);
   for (const [id, open] of store.doors) map.setDoor(id, open);
   for (const [id, lift] of store.lifts) map.setElevator(id, lift.floor, lift.door_open);
+}
+
+const SERVER_REFRESH_MS = 15000;
+
+/** The header's server line from /api/health: with several server processes, which one
+ * serves this page and which one leads (decides tasks, areas and the building). */
+async function serverStatus(api) {
+  const health = await api.get("/api/health").catch(() => null);
+  if (!health) return html`<span class="badge bad">server unreachable</span>`;
+  const c = health.cluster;
+  const state = html`<span class=${`badge ${health.status === "ok" ? "ok" : "warn"}`}>${health.status}</span>`;
+  if (!c) return html`Server ${state}`;
+  const leader = c.leader ? `leader ${c.leader} (epoch ${c.epoch})` : "no leader yet";
+  return html`Process ${c.process} <span class="badge">${c.leading ? "leads" : "follows"}</span> · ${leader} ${state}`;
 }
 
 /** The node a task is heading for (a tour: the point after the one it showed last, or the
