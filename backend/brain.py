@@ -66,7 +66,11 @@ class ServerBrain(Service):
         except Exception as exc:
             health.set("database", ComponentState.failed, f"{type(exc).__name__}: {exc}")
             raise
-        store = DbStore(make_sessionmaker(engine))
+        leadership = getattr(app.state, "leadership", None)  # several server processes
+        store = DbStore(
+            make_sessionmaker(engine),
+            epoch=None if leadership is None else leadership.fencing_epoch,
+        )
         await self.enter(store)
         health.set("database", ComponentState.ok, engine.url.get_backend_name())
 

@@ -99,6 +99,11 @@ class Leadership(Service):
         """Campaign until stopped; stopping closes the connection, which releases the lock."""
         self.spawn(self._run(), name="leadership")
 
+    def fencing_epoch(self) -> int | None:
+        """The epoch this process won, while it believes it leads: its database writes check
+        it against the leader row (the row, not the lease, says who leads now)."""
+        return self.epoch if self.leading else None
+
     def report(self) -> dict[str, Any]:
         return {
             "process": self.process,

@@ -16,7 +16,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from sqlalchemy import Insert, func, insert, or_, select
+from sqlalchemy import Insert, func, insert, or_, select, text
 from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.db.models import (
@@ -56,10 +56,22 @@ TASK_FIELDS = (
 
 
 class DbStore(Service):
-    def __init__(self, sessionmaker: Any, *, max_pending: int = 100_000) -> None:
+    def __init__(
+        self,
+        sessionmaker: Any,
+        *,
+        max_pending: int = 100_000,
+        epoch: Callable[[], int | None] | None = None,
+    ) -> None:
+        """``epoch``: with several server processes, the leader epoch this process won (None
+        once it has lost it): each write checks it against the leader row in its transaction,
+        so a paused old leader's late writes are refused (docs/scaling.md, "Fencing")."""
         super().__init__()
         self.sessionmaker = sessionmaker
         self.max_pending = max_pending
+        self.epoch = epoch
+        self.fenced = 0
+        """Rows not written because this process no longer led when they were flushed."""
         self._tasks: dict[str, dict[str, Any]] = {}
         self._history: deque[dict[str, Any]] = deque()
         self._events: deque[dict[str, Any]] = deque()
@@ -133,6 +145,9 @@ class DbStore(Service):
             events = list(self._events)
             try:
                 async with self.sessionmaker() as session, session.begin():
+                    if self.epoch is not None and not await self._still_leading(session):
+                        self._drop_fenced(tasks, history, events)
+                        return
                     if tasks:
                         rows = [{"id": task_id, **snap} for task_id, snap in tasks.items()]
                         for i in range(0, len(rows), UPSERT_CHUNK):
@@ -150,6 +165,27 @@ class DbStore(Service):
             for _ in events:
                 self._events.popleft()
             self.written += len(tasks) + len(history) + len(events)
+
+    async def _still_leading(self, session: Any) -> bool:
+        """The leader row names our epoch; ``FOR SHARE`` holds a new leader's epoch bump until
+        this transaction ends, so it either sees these rows or they are not written."""
+        assert self.epoch is not None
+        mine = self.epoch()
+        current = (
+            await session.execute(text("SELECT epoch FROM guidebot_leader WHERE id = 1 FOR SHARE"))
+        ).scalar()
+        return mine is not None and current == mine
+
+    def _drop_fenced(
+        self, tasks: dict[str, Any], history: list[dict[str, Any]], events: list[dict[str, Any]]
+    ) -> None:
+        for _ in history:
+            self._history.popleft()
+        for _ in events:
+            self._events.popleft()
+        count = len(tasks) + len(history) + len(events)
+        self.fenced += count
+        log.warning("database: %d row(s) not written: this process no longer leads (fenced)", count)
 
     # --- reads ---------------------------------------------------------------------------
     async def load_open_tasks(self) -> list[Task]:

@@ -8,6 +8,8 @@ import asyncio
 
 import pytest
 
+from backend.db import DbStore, make_engine, make_sessionmaker
+from backend.db.session import migrate
 from backend.fencing import FencedEndpoint
 from backend.hub.core import Hub
 from backend.leadership import Leadership
@@ -65,3 +67,40 @@ async def test_a_leader_past_its_lease_grants_nothing(postgres: PostgresServer) 
 def test_the_lease_must_cover_two_polls() -> None:
     with pytest.raises(ValueError, match="at least twice the poll"):
         Leadership("postgresql+asyncpg://x@127.0.0.1/db", "p", on_lost=print, poll_s=1, lease_s=1.5)
+
+
+async def test_an_old_leaders_late_writes_are_refused_by_the_leader_row(
+    postgres: PostgresServer,
+) -> None:
+    """A paused leader's write-behind rows flushed after another process took the lead (the
+    leader row's epoch moved on) are not written; the current leader's are."""
+    db = postgres.database()
+    alpha = Leadership(db, "alpha", on_lost=lambda: None, poll_s=0.2, lease_s=1.0)
+    beta = Leadership(db, "beta", on_lost=lambda: None, poll_s=0.2, lease_s=1.0)
+    engine = make_engine(db)
+    await migrate(engine)
+    await alpha.start()
+    try:
+        await asyncio.wait_for(alpha.won.wait(), 30)
+        old = DbStore(make_sessionmaker(engine), epoch=alpha.fencing_epoch)
+        old.record_event("area_granted", "traffic_manager", {"robot": "R1", "area": "corridor"})
+        await old.flush()  # alpha leads: written
+        assert old.written == 1 and old.fenced == 0
+
+        alpha.poll_s = 3600.0  # paused: its renewals stop, beta takes the lock
+        await beta.start()
+        await wait_until(lambda: _true(beta.leading), 30, "beta to win the lock")
+        assert alpha.leading  # it has not noticed yet
+        old.record_event("area_granted", "traffic_manager", {"robot": "R2", "area": "corridor"})
+        await old.flush()
+        assert old.written == 1 and old.fenced == 1
+
+        new = DbStore(make_sessionmaker(engine), epoch=beta.fencing_epoch)
+        new.record_event("area_granted", "traffic_manager", {"robot": "R3", "area": "corridor"})
+        await new.flush()
+        granted = [e["data"]["robot"] for e in await new.events(kind="area_granted")]
+        assert sorted(granted) == ["R1", "R3"]
+    finally:
+        await alpha.stop()
+        await beta.stop()
+        await engine.dispose()
