@@ -57,8 +57,8 @@ class BrokerBridge(Service):
         queue_size: int = 65536,
         retry_s: float = 1.0,
     ) -> None:
-        self.hub = hub
         super().__init__()
+        self.hub = hub
         self.url = url
         self.origin = origin or process_id()
         self.channel = channel
