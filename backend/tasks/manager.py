@@ -414,13 +414,17 @@ class TaskManager(Service):
     def _send_idle_robots(self) -> None:
         """Robots with nothing to do: charge if they must, else a free station, else the
         wait point (backend/tasks/choice.py, ``idle_errands``)."""
+        robots = self.robots
+        idle = [robots[n] for n in self._idle if n in robots]
+        if not idle:
+            return  # the usual case under load: nothing below needs the whole fleet
         charging_at = [
             t.params.get("station")
             for r in self.robots.values()
             if (t := self.current_of(r)) is not None and t.kind == "charge"
         ]
         errands = idle_errands(
-            (self.robots[n] for n in self._idle),
+            idle,
             self.robots.values(),
             charging_at,
             self.site,

@@ -39,6 +39,9 @@ class TaskReports:
         if task.robot != robot.name or task.final:
             tm.send_cancel(robot.name, task.id, "this task is not yours any more")
             return
+        # The robot has the assignment: stop resending it (its ack may still be on its way; a
+        # resend arriving after the task ended would only be answered again).
+        tm.courier.withdraw(("task", task.id, robot.name))
         if task.state is TaskState.ASSIGNED:
             task.move(TaskState.RUNNING)
             tm.unconfirmed.pop(task.id, None)
@@ -48,7 +51,10 @@ class TaskReports:
         tm = self.tm
         robot = tm.robot_of(msg)
         task = tm.tasks.get(str(msg.payload.get("task_id")))
-        if robot is None or task is None or task.robot != robot.name or task.final:
+        if robot is None or task is None or task.robot != robot.name:
+            return
+        tm.courier.withdraw(("task", task.id, robot.name))
+        if task.final:
             return
         state = _ENDED.get(msg.payload.get("outcome", "done"), TaskState.CANCELLED)
         reason = str(msg.payload.get("reason") or "").strip()

@@ -488,3 +488,28 @@ async def test_a_repeated_task_request_is_answered_with_the_same_task(
     mine = [a for a in answers if a.correlation_id == request.id]
     assert len(mine) == 2 and mine[0].payload["task_id"] == mine[1].payload["task_id"]
     assert [t.requester for t in manager.tasks.values() if not t.internal] == ["R1"]
+
+
+async def test_an_assignment_the_robot_reported_on_is_not_sent_again(
+    bus: Bus, manager: TaskManager
+) -> None:
+    """task_started (or task_ended) proves the robot has its task_assigned: resending it after
+    that, when its ack was lost, only made the robot see a task it had finished (the tasks
+    benchmark saw the resend overtake the robot's next assignment). The robot here speaks
+    through another endpoint, as a remote robot's messages arrive, so the Courier keeps what
+    it sends until it is acknowledged."""
+    link = bus.endpoint("link")
+    orders: list[Message] = []
+    link.subscribe("task_assigned", orders.append, tap=True)
+    link.publish("robot_state", {"robot": "R3", "node": "entrance", "battery": 1.0})
+    first = manager.request("tour", {"tour": "ground"}, requester="panel-1")
+    second = manager.request("tour", {"tour": "ground"}, requester="panel-1")
+    assert [m.payload["task_id"] for m in orders] == [first.id]
+    assert manager.courier.pending == 1  # no ack from R3
+    link.publish("task_started", {"robot": "R3", "task_id": first.id})
+    assert manager.courier.pending == 0
+    link.publish("task_ended", {"robot": "R3", "task_id": first.id, "outcome": "done"})
+    assert [m.payload["task_id"] for m in orders] == [first.id, second.id]
+    assert manager.courier.pending == 1
+    link.publish("task_ended", {"robot": "R3", "task_id": second.id, "outcome": "done"})
+    assert manager.courier.pending == 0  # an end without a start withdraws it too
