@@ -7,9 +7,26 @@ import { loadTexts } from "/lib/i18n.js";
 const app = document.getElementById("app");
 const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now() };
 const t = (key, vars) => state.texts.t(key, vars);
+/** language tag -> its name in itself, for the picker */
+const names = new Map();
 
+const banner = document.getElementById("connection");
+
+/** Shows or hides "connection lost" (the robot's agent restarting); English before any texts. */
+function showReachable(reachable) {
+  banner.dataset.status = reachable ? "open" : "reconnecting";
+  banner.textContent = reachable ? "" : state.texts?.t("connection_lost") ?? "Connection lost: reconnecting…";
+}
+
+/** POST to the agent; a network failure answers status 0 instead of throwing. */
 async function post(path, body) {
-  const r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  let r;
+  try {
+    r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  } catch {
+    showReachable(false);
+    return { ok: false, status: 0, data: {} };
+  }
   let data = {};
   try {
     data = await r.json();
@@ -19,10 +36,19 @@ async function post(path, body) {
   return { ok: r.ok, status: r.status, data };
 }
 
+/** Reads the whole screen again; while the agent cannot be reached, the banner says so. */
 async function refresh() {
   const lang = state.chosen ? `?lang=${encodeURIComponent(state.chosen)}` : "";
-  const r = await fetch(`/api/screen${lang}`);
-  const screen = await r.json();
+  let screen;
+  try {
+    const r = await fetch(`/api/screen${lang}`);
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    screen = await r.json();
+  } catch {
+    showReachable(false); // the WebSocket's reconnect reads the screen again
+    return;
+  }
+  showReachable(true);
   // A running tour speaks its visitor's language: the screen follows it.
   if (screen.tour_lang && screen.tour_lang !== screen.lang) {
     state.chosen = screen.tour_lang;
@@ -31,6 +57,7 @@ async function refresh() {
   if (screen.task && !state.screen?.task) state.message = ""; // the request became a tour
   state.screen = screen;
   if (!state.texts || state.texts.lang !== screen.lang) state.texts = await loadTexts(screen.lang);
+  if (!names.size) for (const lang of screen.languages) names.set(lang, (await loadTexts(lang)).name);
   document.documentElement.lang = screen.lang;
   draw();
 }
@@ -40,6 +67,7 @@ async function ask(kind, item) {
   body.lang = state.screen.lang;
   const r = await post("/api/request", body);
   if (r.ok) state.message = r.data.queued_offline ? t("request_queued_offline") : t("requested");
+  else if (r.status === 0) state.message = t("error_network");
   else state.message = r.status === 503 ? t("link_down_refuse") : t("error_server", { detail: r.data.detail ?? r.status });
   draw();
 }
@@ -121,12 +149,13 @@ function draw() {
     </section>`}`, app);
 }
 
-const names = new Map();
 
+/** The agent's push channel: every message, and every (re)connect, reads the screen again. */
 function connect() {
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
   const ws = new WebSocket(`${scheme}//${location.host}/ws`);
   let pending = false;
+  ws.onopen = () => refresh();
   ws.onmessage = () => {
     // Every change: read the whole screen again (local to the robot, a few kB).
     if (pending) return;
@@ -136,7 +165,10 @@ function connect() {
       await refresh();
     });
   };
-  ws.onclose = () => setTimeout(connect, 1000);
+  ws.onclose = () => {
+    showReachable(false);
+    setTimeout(connect, 1000);
+  };
 }
 
 document.addEventListener("contextmenu", (e) => e.preventDefault());
@@ -145,9 +177,4 @@ setInterval(() => {
   if (state.screen?.question) draw();
 }, 250);
 
-(async () => {
-  await refresh();
-  for (const lang of state.screen.languages) names.set(lang, (await loadTexts(lang)).name);
-  draw();
-  connect();
-})();
+connect();

@@ -58,9 +58,10 @@ class VisitorFleet:
 
 @pytest.fixture
 def visitor_fleet(
-    fleet_factory: Callable[..., Any], tmp_path: Any, demo_site: Site
+    fleet_factory: Callable[..., Any], tmp_path: Any, demo_site: Site, open_page: Any
 ) -> Callable[..., contextlib.AbstractAsyncContextManager[VisitorFleet]]:
-    """The web harness's server and building, plus robots with touch screens and panels."""
+    """The web harness's server and building, plus robots with touch screens and panels; the
+    test's pages close before the robots (and their touch-screen servers) stop."""
 
     @contextlib.asynccontextmanager
     async def make(
@@ -87,6 +88,7 @@ def visitor_fleet(
                     "speech_started", vf.speech.append, tap=True
                 )
                 vf.agents[robot.name] = agent
+            stack.push_async_callback(open_page.close)
             yield vf
 
     return make

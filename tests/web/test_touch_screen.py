@@ -1,0 +1,52 @@
+"""The robot's touch screen in a browser while its agent's screen server goes away and comes
+back (an agent restart): it says so, raises no error, and reads the screen again."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from playwright.async_api import expect
+
+from guidebot.bus import Bus
+from guidebot.site.yamlio import load_site_file
+from robot_agent.clock import Clock
+from robot_agent.gui import OnboardScreen, ScreenServer
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(60)]
+
+SITE = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
+
+
+async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -> None:
+    onboard = OnboardScreen(
+        Bus().endpoint("screen"),
+        Clock(10.0),
+        "R1",
+        site=load_site_file(SITE),
+        site_file=SITE,
+        link_up=lambda: True,
+    )
+    async with onboard:
+        server = ScreenServer(onboard, port=0)
+        await server.start()
+        watch = await open_page(server.url, viewport=(1024, 600))
+        watch.expect_error(r"ERR_CONNECTION_REFUSED")  # Chromium logs each refused request
+        page = watch.page
+        banner = page.locator("#connection")
+        await expect(page.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
+        await expect(banner).to_be_hidden()
+        await server.stop()
+        await expect(banner).to_have_text("Connection lost: reconnecting…")
+        # A tap meanwhile says the robot cannot be reached instead of failing silently.
+        await page.get_by_role("button", name="Ground floor tour").click()
+        await expect(page.get_by_role("status").last).to_contain_text("cannot be reached")
+        again = ScreenServer(onboard, port=server.port)
+        await again.start()
+        try:
+            await expect(banner).to_be_hidden(timeout=10_000)
+            await expect(page.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
+        finally:
+            await open_page.close()
+            await again.stop()
