@@ -201,6 +201,8 @@ class OnboardScreen(Service):
     def _on_task_assigned(self, message: Message) -> None:
         if message.payload.get("net") not in VISITOR_NETS:
             return  # charging, going to a wait point: the menu stays
+        if self.task is not None and self.task["id"] != message.payload.get("task_id"):
+            return  # one task at a time: the robot refuses this one, the running tour stays
         params = message.payload.get("params") or {}
         lang = params.get("lang")
         self.lang = lang if isinstance(lang, str) else None
@@ -234,6 +236,8 @@ class OnboardScreen(Service):
         self._push(message.type, message.payload)
 
     def _on_task_ended(self, message: Message) -> None:
+        if message.payload.get("outcome") == "refused":
+            return  # a task it did not take: the running tour stays on the screen
         self.explanation = None
         self.task = None
         self.lang = None

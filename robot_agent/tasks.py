@@ -163,8 +163,11 @@ class TaskRunner(Service):
         if self.current is not None:
             if self.current.task_id == task_id:
                 return  # a duplicate after a reconnect: already running
+            # The server thinks this robot is free: it forgot the running task (a restart) or
+            # missed its end. The server requeues the refused one; ours is reconciled.
+            busy = f"robot busy with task {self.current.task_id}"
             self.ep.publish(
-                TaskEnded(task_id=task_id, robot=self.robot, outcome="failed", reason="robot busy")
+                TaskEnded(task_id=task_id, robot=self.robot, outcome="refused", reason=busy)
             )
             return
         params = p.get("params") or {}

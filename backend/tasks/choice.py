@@ -42,7 +42,7 @@ class Distances(Protocol):
 def available(robot: RobotInfo, current: Task | None) -> bool:
     """Free for a main task: online, sound, charged enough, doing nothing or an internal task
     (``current``: the task it holds, None if it holds none or one no longer known)."""
-    if not robot.online or robot.fault or robot.needs_charge:
+    if not robot.online or robot.fault or robot.needs_charge or robot.refused:
         return False
     if robot.battery <= robot.config.battery_low:
         return False

@@ -53,6 +53,9 @@ class Presence:
                 came_back = True  # available again: worth a dispatch
         reported = p.get("task_id") or None
         robot.reported_task = reported
+        unrefused = robot.refused and reported in (None, robot.current)
+        if unrefused:
+            robot.refused = False
         before = robot.current
         was_fault = robot.fault
         robot.fault = robot.mode == "fault"
@@ -68,7 +71,8 @@ class Presence:
             tm.requeue(tm.tasks[robot.current], "robot fault")
         # robot_state comes at a steady rate from every robot: re-plan only on news.
         released = robot.current is None and before is not None
-        if came_back or was_fault != robot.fault or released or (robot.current is None and moved):
+        news = came_back or was_fault != robot.fault or released or unrefused
+        if news or (robot.current is None and moved):
             tm.dispatch()
 
     def reconcile(self, robot: RobotInfo, reported: str | None) -> None:

@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
-from backend.tasks.model import TaskState
+from backend.tasks.model import Task, TaskState
+from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
 from guidebot.payloads.tasks import TourProgress
 
@@ -56,6 +57,9 @@ class TaskReports:
         tm.courier.withdraw(("task", task.id, robot.name))
         if task.final:
             return
+        if msg.payload.get("outcome") == "refused":
+            self._refused(robot, task, str(msg.payload.get("reason") or "busy"))
+            return
         state = _ENDED.get(msg.payload.get("outcome", "done"), TaskState.CANCELLED)
         reason = str(msg.payload.get("reason") or "").strip()
         if state is TaskState.FAILED and not reason:
@@ -74,6 +78,15 @@ class TaskReports:
         if state is TaskState.DONE and task.started_at:
             tm.estimator.ended(task, time.time() - task.started_at)
         tm.changed(task, state.value)
+        tm.dispatch()
+
+    def _refused(self, robot: RobotInfo, task: Task, reason: str) -> None:
+        """Back to the queue, another robot preferred; this one waits for its next robot_state
+        (which reconciles what it runs) before it gets a task again."""
+        tm = self.tm
+        robot.refused = True
+        tm.rather_not.setdefault(task.id, set()).add(robot.name)
+        tm.requeue(task, f"{robot.name} refused it: {reason}")
         tm.dispatch()
 
     def on_tour_progress(self, msg: Message) -> None:

@@ -27,6 +27,9 @@ class RobotInfo:
     fault: bool = False
     out_of_service: bool = False
     """Taken out of service by staff: gets no tasks but the go_to/charge staff pin to it."""
+    refused: bool = False
+    """It refused a task as busy with another: no new task until a robot_state shows it runs
+    nothing or only what we gave it."""
 
     def as_dict(self) -> dict[str, object]:
         return {

@@ -321,6 +321,8 @@ class TrafficManager(Service):
         self._send_grants(grants)
 
     def _on_task_ended(self, msg: Message) -> None:
+        if msg.payload.get("outcome") == "refused":
+            return  # a task it did not take: the one it runs keeps its areas
         robot = msg.payload.get("robot")
         if isinstance(robot, str) and self._robot_of(msg, robot) is not None:
             self._task_over(robot)

@@ -23,7 +23,8 @@ __all__ = [
     "TourProgress",
 ]
 
-Outcome = Literal["done", "failed", "cancelled"]
+Outcome = Literal["done", "failed", "cancelled", "refused"]
+"""refused: the robot did not start it (it runs another task); the Task Manager requeues it."""
 
 
 @register_payload("task_request")

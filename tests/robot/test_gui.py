@@ -98,3 +98,16 @@ async def test_demo_visitor_answers_by_itself(helpers: Any) -> None:
     [answer] = seen.of("continue_answer")
     assert answer.payload == {"answer": "yes"} and answer.correlation_id == ask.id
     await onboard.stop()
+
+
+async def test_a_refused_assignment_leaves_the_running_tour_on_the_screen(screen: Screen) -> None:
+    server = screen.bus.endpoint("server")
+    server.publish("task_assigned", {"task_id": "t1", "robot": "R1", "net": "give_tour"})
+    server.publish("task_assigned", {"task_id": "t2", "robot": "R1", "net": "give_tour"})
+    assert screen.screen.screen()["task"]["id"] == "t1"
+    refused = {"task_id": "t2", "robot": "R1", "outcome": "refused", "reason": "robot busy"}
+    robot = screen.bus.endpoint("robot-tasks")
+    robot.publish("task_ended", refused)
+    assert screen.screen.screen()["task"]["id"] == "t1"
+    robot.publish("task_ended", {"task_id": "t1", "robot": "R1"})
+    assert screen.screen.screen()["task"] is None

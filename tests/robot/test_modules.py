@@ -116,9 +116,10 @@ async def test_task_runner_reports_start_end_cancel_and_refuses_a_second_task(he
     run = seen.of("run_petri_net")[1].payload
     assert run["net"] == "give_tour" and run["main"] is True
     assert seen.of("task_started")[0].payload == {"task_id": "t1", "robot": "R1"}
-    # A second main task while busy is refused, the first is untouched.
+    # A second main task while busy is refused (the server requeues it), the first untouched.
     tm.publish("task_assigned", {"task_id": "t2", "robot": "R1", "net": "give_tour"})
-    assert seen.of("task_ended")[0].payload["outcome"] == "failed"
+    refusal = seen.of("task_ended")[0].payload
+    assert refusal["outcome"] == "refused" and refusal["reason"] == "robot busy with task t1"
     assert runner.task_id == "t1"
     # Cancel: the net is killed, navigation stopped, the end reported as cancelled.
     tm.publish("task_cancel", {"task_id": "t1", "reason": "battery panic"})

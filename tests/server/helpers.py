@@ -62,8 +62,9 @@ class RobotStub:
         self.task_id = task_id
         self.endpoint.publish("task_started", {"task_id": task_id, "robot": self.name})
 
-    def end(self, task_id: str, outcome: str = "done") -> None:
+    def end(self, task_id: str, outcome: str = "done", reason: str = "") -> None:
         self.task_id = None
         self.endpoint.publish(
-            "task_ended", {"task_id": task_id, "robot": self.name, "outcome": outcome}
+            "task_ended",
+            {"task_id": task_id, "robot": self.name, "outcome": outcome, "reason": reason},
         )

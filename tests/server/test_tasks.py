@@ -435,6 +435,31 @@ async def test_a_robot_whose_agent_restarted_gives_its_running_task_back(
     assert task.state is not TaskState.RUNNING or task.robot != "R3"
 
 
+async def test_a_task_the_robot_refuses_as_busy_is_requeued_not_failed(
+    bus: Bus, manager: TaskManager, events: list[Message]
+) -> None:
+    """The server thought R3 free while it ran a task the server forgot (a restart before the
+    write-behind): the refused task goes back to the queue and to another robot; R3 gets
+    nothing until a robot_state shows it free."""
+    r3 = RobotStub(bus, "R3", "entrance")  # the only robot online
+    r3.state()
+    first = manager.request("tour", {"tour": "ground"})
+    order = await r3.wait_for("task_assigned")
+    assert order.payload["task_id"] == first.id
+    r3.end(first.id, outcome="refused", reason="robot busy with task lost-in-restart")
+    assert first.state is TaskState.QUEUED and first.robot is None
+    assert states_of(events, first.id)[-1] == "queued"
+    assert "R3 refused it: robot busy with task lost-in-restart" in first.reason
+    assert len(assigned(r3)) == 1  # not sent back to R3 while it is busy
+    r3.task_id = "lost-in-restart"
+    r3.state("busy")  # still running what the server does not know: told to drop it
+    assert len(assigned(r3)) == 1
+    r3.task_id = None
+    r3.state("idle")  # free now: the task comes back to it
+    again = await r3.wait_for("task_assigned", 2)
+    assert again.payload["task_id"] == first.id and first.robot == "R3"
+
+
 async def test_a_failed_task_always_carries_a_reason(bus: Bus, manager: TaskManager) -> None:
     _r1, _r2, r3 = fleet(bus)
     task = manager.request("tour", {"tour": "ground"})

@@ -201,6 +201,9 @@ async def test_task_end_releases_locks_except_the_area_the_robot_stands_in(bus: 
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "corridor"})
     await r1.endpoint.request("request_area", {"robot": "R1", "area": "elevator"})
     r1.state("busy")
+    # A task it refused (busy with this one) is not the end of what it runs: locks stay.
+    r1.end("t2", outcome="refused", reason="robot busy with task t1")
+    assert traffic.locks.held_by("R1") == ["corridor", "elevator"]
     r1.end("t1")
     assert traffic.locks.held_by("R1") == ["corridor"]
 
