@@ -15,6 +15,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
 from starlette.exceptions import HTTPException
 
+from backend.db.session import UnstorableJson
 from backend.tasks.model import IllegalTransition, QueueFull, TaskError, TaskFinished, TaskNotFound
 
 __all__ = ["install_error_handlers", "task_error_status"]
@@ -66,7 +67,12 @@ async def _http_error(request: Request, exc: Exception) -> Response:
     return await http_exception_handler(request, exc)
 
 
+async def _unstorable(_: Request, exc: Exception) -> JSONResponse:
+    return JSONResponse({"detail": str(exc)}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
+
+
 def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(HTTPException, _http_error)
     app.add_exception_handler(TaskError, _task_error)
+    app.add_exception_handler(UnstorableJson, _unstorable)

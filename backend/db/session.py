@@ -15,13 +15,23 @@ from sqlalchemy import event
 from sqlalchemy.engine import Connection
 from sqlalchemy.ext.asyncio import AsyncEngine, async_sessionmaker, create_async_engine
 
-__all__ = ["alembic_config", "make_engine", "make_sessionmaker", "migrate"]
+__all__ = ["UnstorableJson", "alembic_config", "make_engine", "make_sessionmaker", "migrate"]
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 
 
+class UnstorableJson(ValueError):
+    """A document the database's JSON columns cannot hold (an integer beyond 64 bits): the
+    caller's mistake, answered 422, never a server error (found by the API fuzz)."""
+
+
 def _json_text(value: object) -> str:
-    return orjson.dumps(value).decode()
+    try:
+        return orjson.dumps(value).decode()
+    except orjson.JSONEncodeError as exc:
+        raise UnstorableJson(
+            f"the document cannot be stored: {exc} (integers must fit in 64 bits)"
+        ) from None
 
 
 def make_engine(url: str) -> AsyncEngine:

@@ -10,14 +10,16 @@ by ``max_pending`` and the oldest unwritten ones are dropped (counted in ``dropp
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from sqlalchemy import Insert, func, insert, or_, select, text
 from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.exc import StatementError
 
 from backend.db.models import (
     EventRow,
@@ -27,6 +29,7 @@ from backend.db.models import (
     TaskHistoryRow,
     TaskRow,
 )
+from backend.db.session import UnstorableJson
 from backend.tasks.model import FINAL_STATES, Task, TaskState
 from guidebot.service import Service
 
@@ -322,6 +325,11 @@ class DbStore(Service):
             return (row.version, row.data) if row is not None else None
 
     async def save_site(self, data: dict[str, Any], *, by: str = "", note: str = "") -> int:
+        """Store ``data`` as the next version; UnstorableJson if a JSON column cannot hold it."""
+        with _storable():
+            return await self._save_site(data, by=by, note=note)
+
+    async def _save_site(self, data: dict[str, Any], *, by: str, note: str) -> int:
         """Store a new site document and keep it in the history; returns its version."""
         now = time.time()
         async with self.sessionmaker() as session, session.begin():
@@ -370,7 +378,14 @@ class DbStore(Service):
     async def save_draft(
         self, data: dict[str, Any], *, revision: int, base_version: int, by: str
     ) -> None:
-        """Store the draft as ``revision`` (the caller checked the previous one)."""
+        """Store the draft as ``revision`` (the caller checked the previous one);
+        UnstorableJson if a JSON column cannot hold it."""
+        with _storable():
+            await self._save_draft(data, revision=revision, base_version=base_version, by=by)
+
+    async def _save_draft(
+        self, data: dict[str, Any], *, revision: int, base_version: int, by: str
+    ) -> None:
         async with self.sessionmaker() as session, session.begin():
             row = await session.get(SiteDraftRow, 1)
             if row is None:
@@ -381,6 +396,17 @@ class DbStore(Service):
             row.data = data
             row.updated_by = by
             row.updated_at = time.time()
+
+
+@contextlib.contextmanager
+def _storable() -> Iterator[None]:
+    """SQLAlchemy wraps what the JSON serializer raised: give the caller the plain reason."""
+    try:
+        yield
+    except StatementError as exc:
+        if isinstance(exc.orig, UnstorableJson):
+            raise exc.orig from None
+        raise
 
 
 def _upsert(session: Any, rows: list[dict[str, Any]]) -> Insert:

@@ -111,13 +111,21 @@ class SiteDrafts:
             )
 
     async def _store(self, data: dict[str, Any], base_version: int, by: str) -> DraftState:
-        self.state = DraftState(data, self.state.revision + 1, base_version, by)
+        before = self.state
+        self.state = mine = DraftState(data, before.revision + 1, base_version, by)
         self._remember()
         if self.store is not None:
-            await self.store.save_draft(
-                data, revision=self.state.revision, base_version=base_version, by=by
-            )
-        return self.state
+            try:
+                await self.store.save_draft(
+                    data, revision=mine.revision, base_version=base_version, by=by
+                )
+            except BaseException:
+                # Not stored (e.g. UnstorableJson): the draft stays as it was.
+                self._revisions.pop(mine.revision, None)
+                if self.state is mine:
+                    self.state = before
+                raise
+        return mine
 
     async def save(self, data: dict[str, Any], *, revision: int, by: str) -> DraftState:
         """Replace the draft; StaleDraft if ``revision`` is not the current one."""

@@ -4,6 +4,7 @@ kept versions, diff, roll back, YAML import/export of the draft, uploads, robots
 from __future__ import annotations
 
 import asyncio
+import copy
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -241,3 +242,23 @@ async def test_publish_reaches_every_connected_robot(tmp_path: Path) -> None:
         finally:
             for agent in agents:
                 await agent.stop()
+
+
+async def test_a_draft_the_database_cannot_store_is_refused_and_nothing_changes(
+    server: RunningServer, http: Http
+) -> None:
+    """An integer beyond 64 bits (found by the API fuzz): 422 with the reason, not a 500, and
+    the stored draft and its revision stay as they were."""
+    admin = http(server.admin_token)
+    state = await _draft(admin)
+    doc = copy.deepcopy(state["draft"])
+    doc["nodes"][0]["x"] = 10**30
+    r = await admin.put("/api/site/draft", json={"draft": doc, "revision": state["revision"]})
+    assert r.status_code == 422, r.text
+    assert "integers must fit in 64 bits" in r.json()["detail"]
+    after = await _draft(admin)
+    assert after["revision"] == state["revision"] and after["draft"] == state["draft"]
+    saved = await admin.put(
+        "/api/site/draft", json={"draft": after["draft"], "revision": after["revision"]}
+    )
+    assert saved.status_code == 200 and saved.json()["revision"] == state["revision"] + 1
