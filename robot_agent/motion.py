@@ -21,6 +21,11 @@ from robot_agent.clock import Clock
 
 __all__ = ["MotionControl", "NavState", "NavigationError", "wrap_angle"]
 
+PROCESS_STALL_S = 0.5
+"""Wall seconds between two turns of the drive loop beyond which the agent itself stood still
+(a starved process, a paused VM): that time does not count against the goal's budget, which is
+robot time and runs ``time_scale`` times faster than the wall clock in simulation."""
+
 
 class NavigationError(Exception):
     """A goal could not be reached; ``reason`` is sent in navigation_failed (the payload
@@ -86,8 +91,9 @@ class MotionControl(Service):
         p = message.payload
         ox, oy, oth = float(p.get("x", 0.0)), float(p.get("y", 0.0)), float(p.get("theta", 0.0))
         now = time.monotonic()
-        if self._odom_last:
-            self._odom_dt = 0.8 * self._odom_dt + 0.2 * min(1.0, now - self._odom_last)
+        if self._odom_last and now - self._odom_last < PROCESS_STALL_S:
+            # The base's period, for the loop's gains; a stall of this process is not one.
+            self._odom_dt = 0.8 * self._odom_dt + 0.2 * (now - self._odom_last)
         self._odom_last = now
         self._odom = (ox, oy, oth)
         c, s = math.cos(self._dtheta), math.sin(self._dtheta)
@@ -108,15 +114,24 @@ class MotionControl(Service):
     ) -> bool:
         """Closed loop on odometry: turn towards the target, then drive with steering.
 
-        Returns False (stopped) as soon as ``clear()`` says the way is no longer free."""
+        Raises NavigationError "stuck" once the budget (robot time: 20 s plus four times the
+        straight-line travel time) is spent; bumper pauses and stalls of this process itself
+        (``PROCESS_STALL_S``) extend it. Returns False (stopped) as soon as ``clear()`` says
+        the way is no longer free."""
         self.state = NavState.MOVING
         distance = math.hypot(x - self.x, y - self.y)
         budget = self.clock.now() + 20.0 + 4.0 * distance / self.max_speed
         fresh = self._odom is not None  # first command at once, from the pose we have
+        turn_at = time.monotonic()
         while True:
             if not fresh:
                 await self._next_odometry()
             fresh = False
+            now = time.monotonic()
+            stalled = now - turn_at - PROCESS_STALL_S
+            if stalled > 0:
+                budget += stalled * self.clock.time_scale
+            turn_at = now
             self._check_fault()
             if self.clock.now() < self._bumped_until:
                 self.state = NavState.BUMPED

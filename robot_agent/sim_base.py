@@ -20,6 +20,10 @@ from robot_agent.clock import Clock
 __all__ = ["SimulatedBase"]
 
 
+MAX_STEP_S = 0.1
+"""Longest wall-clock step of the model: two periods at 20 Hz."""
+
+
 class SimulatedBase(Service):
     """Unicycle model with acceleration limits; odometry starts at (0, 0, 0)."""
 
@@ -73,7 +77,9 @@ class SimulatedBase(Service):
         while True:
             await asyncio.sleep(self.period)
             now = time.monotonic()
-            self.step((now - last) * self.clock.time_scale)
+            # A stall of this process freezes the simulated world too (robot_agent/motion.py
+            # does not count it against a goal): the base does not drive on blind through it.
+            self.step(min(now - last, MAX_STEP_S) * self.clock.time_scale)
             last = now
             self.ep.publish(
                 "odometry",

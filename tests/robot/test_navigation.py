@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
+import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Any
@@ -305,3 +307,26 @@ async def test_an_on_board_plan_that_fails_asks_the_traffic_manager_for_the_reas
     rig.bus.endpoint("net").publish("navigate_to", {"node": "nowhere"})
     await rig.seen.wait_for(lambda: rig.seen.of("navigation_failed"))
     assert "nowhere" in str(rig.seen.of("navigation_failed")[0].payload)
+
+
+async def test_a_stall_of_the_agents_own_process_does_not_make_the_robot_stuck() -> None:
+    """At time scale 50 a 10 m drive's budget (77 robot seconds) is 1.5 s of wall time: an
+    event loop blocked for 2.5 s (a starved process) used to end the goal as "stuck"."""
+    bus = Bus()
+    clock = Clock(time_scale=50.0)
+    base = SimulatedBase(bus.endpoint("R1.base"), clock)
+    nav = Navigator(bus.endpoint("R1"), clock, "R1", start_node="charge_a")
+    await nav.start()
+    await base.start()
+    try:
+        await nav.turn_to(0.0)
+        x, y = nav.x + 10.0, nav.y
+        driving = asyncio.create_task(nav.drive_to(x, y))
+        await asyncio.sleep(0.05)
+        assert not driving.done()
+        time.sleep(2.5)  # noqa: ASYNC251 -- the point: the whole process stands still
+        assert await asyncio.wait_for(driving, 10.0) is True
+        assert math.hypot(nav.x - x, nav.y - y) < 0.3
+    finally:
+        await nav.stop()
+        await base.stop()

@@ -15,6 +15,10 @@ __all__ = ["MotorController"]
 log = logging.getLogger(__name__)
 
 
+MAX_STEP_S = 0.1
+"""Longest wall-clock step of the wheels' model (two encoder periods of 50 ms)."""
+
+
 class MotorController(SimModule):
     """Motor + encoder, a velocity PID agent and four bumpers (the paper's dsPIC module)."""
 
@@ -57,6 +61,9 @@ class MotorController(SimModule):
         self.velocity = 0.0
 
     def step(self, now: float, dt_sim: float) -> None:
+        # A stall of the simulator's process freezes the wheels: no blind run at the last
+        # command (robot_agent/motion.py does not count such a stall against a goal either).
+        dt_sim = min(dt_sim, MAX_STEP_S * self.time_scale)
         timeout = self.param(1, p.Param.COMMAND_TIMEOUT_MS) / 1000
         timed_out = now - self.last_command > timeout and "no_command_timeout" not in self.flaws
         if self.target and timed_out:
