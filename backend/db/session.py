@@ -15,12 +15,19 @@ from sqlalchemy import event
 from sqlalchemy.engine import Connection
 from sqlalchemy.ext.asyncio import AsyncEngine, async_sessionmaker, create_async_engine
 
-__all__ = ["alembic_config", "make_engine", "make_sessionmaker", "migrate"]
+__all__ = ["JsonText", "alembic_config", "make_engine", "make_sessionmaker", "migrate"]
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 
 
+class JsonText(str):
+    """A JSON column's value already written (a large document, written off the event loop):
+    stored as it is."""
+
+
 def _json_text(value: object) -> str:
+    if isinstance(value, JsonText):
+        return str(value)
     return orjson.dumps(value).decode()
 
 

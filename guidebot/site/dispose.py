@@ -20,6 +20,8 @@ DEPTH = 6
 """Levels taken apart (a container, or an object with its attribute dictionary, is a level);
 what lies deeper is freed natively, a few hundred objects at a time at most in a site."""
 
+_SHORT = 8
+_ATOMS = (str, int, float, bytes, type(None))
 _OWNED = 2
 """``sys.getrefcount`` of an object held by one local variable only (the call adds one)."""
 
@@ -75,8 +77,11 @@ def _has_dict(item: Any) -> bool:
 
 
 def _divisible(item: Any) -> bool:
-    if isinstance(item, (dict, list)):
-        return len(item) > 0
-    if isinstance(item, tuple):
-        return len(item) > 0
+    """Worth taking apart: an object, or a container that is long or holds containers (a
+    short one of numbers and strings is freed in one short native call)."""
+    if isinstance(item, (dict, list, tuple)):
+        if len(item) > _SHORT:
+            return True
+        values = item.values() if isinstance(item, dict) else item
+        return not all(isinstance(v, _ATOMS) for v in values)
     return _has_dict(item)
