@@ -3,7 +3,8 @@
 An accepted edit is validated as a whole, stored (new version), then handed to every listener
 (Task Manager, Traffic Manager, robot tokens) in order. Validation and the stored document's
 dump run off the event loop (backend/site/offloop.py): a 10 000-node site takes a few hundred
-milliseconds of them, which the loop would otherwise wait for.
+milliseconds of them, which the loop would otherwise wait for. The replaced site and the stored
+document are freed off the loop too (``release``): freeing them there took 10-20 ms at once.
 """
 
 from __future__ import annotations
