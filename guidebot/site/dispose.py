@@ -24,12 +24,18 @@ _SHORT = 8
 _ATOMS = (str, int, float, bytes, type(None))
 _OWNED = 2
 """``sys.getrefcount`` of an object held by one local variable only (the call adds one)."""
+_COUNTS_KNOWN = sys.implementation.name == "cpython" and sys.version_info < (3, 14)
+"""Where that count is known to hold (CPython 3.14 may not count references on its stack):
+elsewhere nothing is taken apart, objects are just let go."""
 
 
 def dispose(box: list[Any], depth: int = DEPTH) -> int:
     """Empty ``box`` (a list the caller made for the purpose and keeps no other reference
     into) and free its items a piece at a time; returns how many containers were taken apart
     (0 when every item was still referenced elsewhere)."""
+    if not _COUNTS_KNOWN:
+        box.clear()
+        return 0
     stack: list[tuple[Any, int]] = []
     while box:
         stack.append((box.pop(), depth))
