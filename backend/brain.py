@@ -29,7 +29,7 @@ from backend.api.component import (
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
-from backend.site.offloop import off_loop
+from backend.site.offloop import off_loop, release
 from backend.site.service import SiteService
 from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.manager import TaskManager
@@ -110,11 +110,13 @@ class ServerBrain(Service):
 
         async def on_site(new: Site) -> None:
             new_graph = await off_loop(SiteGraph, new)
+            retired = [traffic.graph, tasks.graph]  # freed in a thread, not on the loop
             # One synchronous block: every module switches to the new site at once.
             traffic.load_site(new, new_graph)
             tasks.load_site(new, new_graph)
             buttons.load_site(new)
             _sync_robot_tokens(app.state.tokens, new, known_tokens)
+            await release(retired)
 
         sites.on_change(on_site)
         logger = hub.endpoint("event_log")

@@ -10,7 +10,8 @@ from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from backend.api.component import hash_robot_tokens, weak_robot_tokens
 from backend.api.deps import Admin, Requester, Sites, Staff, Traffic, forbid
 from backend.auth import Role
-from backend.site.offloop import off_loop
+from backend.site.offloop import off_loop, release
+from guidebot.site import jsonio
 from guidebot.site.graph import NoPath, UnknownNode
 from guidebot.site.schema import Site
 from guidebot.site.validate import SiteInvalid, SiteIssue
@@ -49,22 +50,27 @@ async def get_site(_: Admin, service: Sites) -> dict[str, Any]:
 async def put_site(request: Request, _: Admin, service: Sites) -> dict[str, Any]:
     """Replace the site while running; refused as a whole (422, every problem) if broken.
 
-    The body is parsed and validated off the event loop (a 10 000-node site is megabytes)."""
+    The body is parsed and validated off the event loop (a 10 000-node site is megabytes),
+    and the parsed document freed there too."""
     raw = await request.body()
     if len(raw) > MAX_SITE_BYTES:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site document too large")
     try:
-        document = await off_loop(orjson.loads, raw)
+        box: list[Any] = [await off_loop(jsonio.loads, raw)]
     except orjson.JSONDecodeError as exc:
         raise HTTPException(
             status.HTTP_422_UNPROCESSABLE_CONTENT, f"not valid JSON: {exc}"
         ) from None
-    if not isinstance(document, dict):
+    if not isinstance(box[0], dict):
         raise HTTPException(
             status.HTTP_422_UNPROCESSABLE_CONTENT, "a site document is a JSON object"
         )
     try:
-        await service.replace(_secured(request, await service.validate(document)))
+        try:
+            site = await service.validate(box[0])
+        finally:
+            await release(box)
+        await service.replace(_secured(request, site))
     except SiteInvalid as exc:
         raise invalid(exc) from None
     return {"version": service.version}

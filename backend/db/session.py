@@ -15,7 +15,15 @@ from sqlalchemy import event
 from sqlalchemy.engine import Connection
 from sqlalchemy.ext.asyncio import AsyncEngine, async_sessionmaker, create_async_engine
 
-__all__ = ["UnstorableJson", "alembic_config", "make_engine", "make_sessionmaker", "migrate"]
+__all__ = [
+    "JsonText",
+    "UnstorableJson",
+    "alembic_config",
+    "make_engine",
+    "make_sessionmaker",
+    "migrate",
+    "unstorable",
+]
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 
@@ -25,13 +33,23 @@ class UnstorableJson(ValueError):
     caller's mistake, answered 422, never a server error (found by the API fuzz)."""
 
 
+def unstorable(exc: Exception) -> UnstorableJson:
+    """The caller's error for what the JSON writer refused."""
+    return UnstorableJson(f"the document cannot be stored: {exc} (integers must fit in 64 bits)")
+
+
+class JsonText(str):
+    """A JSON column's value already written (a large document, written off the event loop):
+    stored as it is."""
+
+
 def _json_text(value: object) -> str:
+    if isinstance(value, JsonText):
+        return str(value)
     try:
         return orjson.dumps(value).decode()
     except orjson.JSONEncodeError as exc:
-        raise UnstorableJson(
-            f"the document cannot be stored: {exc} (integers must fit in 64 bits)"
-        ) from None
+        raise unstorable(exc) from None
 
 
 def make_engine(url: str) -> AsyncEngine:

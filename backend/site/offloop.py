@@ -7,6 +7,10 @@ garbage collector's passes over them run in one piece while holding the GIL (up 
 while such work runs and what it built is then frozen (``gc.freeze()``): a site lives until the
 next publish, and rescanning it finds nothing. Reference counting still frees the replaced site;
 only reference cycles made meanwhile wait for the next unfreeze (the hub's, when clients leave).
+
+Nor is a thread enough for single native calls that hold the GIL throughout: freeing a whole
+site at once is one (``release`` takes it apart in a thread, guidebot/site/dispose.py), and so
+are libyaml's composer and orjson on megabytes (guidebot/site/yamlio.py, jsonio.py).
 """
 
 from __future__ import annotations
@@ -16,9 +20,11 @@ import contextlib
 import gc
 import sys
 from collections.abc import Callable, Iterator
-from typing import ParamSpec, TypeVar
+from typing import Any, ParamSpec, TypeVar
 
-__all__ = ["gc_paused", "off_loop"]
+from guidebot.site.dispose import dispose
+
+__all__ = ["gc_paused", "off_loop", "release"]
 
 P = ParamSpec("P")
 T = TypeVar("T")
@@ -58,3 +64,10 @@ async def off_loop(fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
     """``fn(*args, **kwargs)`` in a thread with the collector paused."""
     with gc_paused():
         return await asyncio.to_thread(fn, *args, **kwargs)
+
+
+async def release(box: list[Any]) -> None:
+    """Free the objects in ``box`` in a thread, a piece at a time (the caller keeps no other
+    reference to them: dropping the last one on the loop would free them there in one go)."""
+    if box:
+        await off_loop(dispose, box)

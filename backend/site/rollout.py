@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from backend.site.offloop import off_loop
+from backend.site.offloop import off_loop, release
 from backend.site.service import SiteService
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
@@ -70,9 +70,11 @@ class RolloutTracker(Service):
         self.expected = sorted(self.connected_robots() & known)
         self.loaded_ms = {}
         self.ms = None
+        retired = [self._payload]  # the previous document, freed in a thread
         self._payload = payload
         self.ep.publish("site_changed", self._payload)
         self._report()
+        await release(retired)
 
     def _on_loaded(self, message: Message) -> None:
         robot = message.source

@@ -3,7 +3,8 @@
 An accepted edit is validated as a whole, stored (new version), then handed to every listener
 (Task Manager, Traffic Manager, robot tokens) in order. Validation and the stored document's
 dump run off the event loop (backend/site/offloop.py): a 10 000-node site takes a few hundred
-milliseconds of them, which the loop would otherwise wait for.
+milliseconds of them, which the loop would otherwise wait for. The replaced site and the stored
+document are freed off the loop too (``release``): freeing them there took 10-20 ms at once.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
-from backend.site.offloop import gc_paused, off_loop
+from backend.site.offloop import gc_paused, off_loop, release
 from guidebot.site.bulk import dump_site_doc
 from guidebot.site.schema import Site
 from guidebot.site.validate import validate_site
@@ -72,13 +73,16 @@ class SiteService:
 
     async def _apply(self, site: Site, *, by: str = "", note: str = "") -> Site:
         """Store and hand to the listeners; the caller holds the lock. The collector stays
-        paused until every listener has its tables (they build in threads, see offloop)."""
+        paused until every listener has its tables (they build in threads, see offloop). The
+        stored document and the replaced site are freed in a thread (``release``)."""
+        retired: list[Any] = []
         with gc_paused():
             if self.store is not None:
-                data = await off_loop(dump_site_doc, site)
-                self.version = await self.store.save_site(data, by=by, note=note)
+                retired.append(await off_loop(dump_site_doc, site))
+                self.version = await self.store.save_site(retired[-1], by=by, note=note)
             else:
                 self.version += 1
+            retired.append(self.site)
             self.site = site
             self.published_by = by
             self.published_at = time.time()
@@ -86,4 +90,5 @@ class SiteService:
                 result = listener(site)
                 if result is not None:
                     await result
+            await release(retired)
         return site

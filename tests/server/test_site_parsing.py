@@ -1,0 +1,138 @@
+"""The site's slow-but-yielding parsers and writers give what the fast one-call ones give (data
+and errors), and large objects are freed a piece at a time only when nobody else holds them."""
+
+from __future__ import annotations
+
+import json
+
+import orjson
+import pytest
+import yaml
+from yaml.composer import Composer
+
+from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from guidebot.site import jsonio
+from guidebot.site.dispose import dispose
+from guidebot.site.schema import Site
+from guidebot.site.synthetic import synthetic_site
+from guidebot.site.validate import SiteInvalid
+from guidebot.site.yamlio import LOADER, dump_site, load_site_text, load_yaml
+
+
+@pytest.fixture(scope="module")
+def big() -> Site:
+    return synthetic_site(nodes=3000, robots=20, areas=20, pois=20, floors=2)
+
+
+def _c_load(text: str) -> object:
+    return yaml.load(text, Loader=yaml.CSafeLoader)
+
+
+def test_the_yaml_tree_is_composed_in_python_over_libyaml_events() -> None:
+    assert LOADER.get_single_node is Composer.get_single_node
+    assert "CParser" in [c.__name__ for c in LOADER.__mro__]
+
+
+def test_a_large_yaml_site_loads_as_with_libyaml_alone(big: Site) -> None:
+    text = dump_site(big)
+    assert load_yaml(text) == _c_load(text)
+    assert load_site_text(text) == big
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "a: [1, 2\nb: 3\n",
+        "a: 1\n  b: 2\n",
+        "a: *nowhere\n",
+        "a: &x 1\nb: &x 2\n",
+        "a: 1\n---\nb: 2\n",
+        "a: !!python/object:os.system x\n",
+        "a: &A {x: 1}\nb: {<<: *A, y: 2}\nc: 2001-12-14\nd: .inf\ne: 0x1f\n",
+        "",
+    ],
+)
+def test_yaml_data_and_errors_are_libyamls(text: str) -> None:
+    try:
+        expected: object = _c_load(text)
+    except yaml.YAMLError as exc:
+        with pytest.raises(type(exc)) as got:
+            load_yaml(text)
+        assert str(got.value) == str(exc)
+        assert got.value.problem_mark.line == exc.problem_mark.line  # type: ignore[attr-defined]
+    else:
+        assert load_yaml(text) == expected
+
+
+def test_a_refused_large_yaml_site_still_gives_lines(big: Site) -> None:
+    head, sep, nodes = dump_site(big).partition("\nnodes:\n")
+    text = head + sep + nodes.replace("  x: ", "  x: east  # ", 1)
+    with pytest.raises(SiteInvalid) as refused:
+        load_site_text(text)
+    [issue] = refused.value.issues
+    assert issue.line is not None and "east" in text.splitlines()[issue.line - 1]
+
+
+def test_a_large_json_document_parses_and_writes_as_with_orjson(big: Site) -> None:
+    doc = big.model_dump(mode="json")
+    raw = orjson.dumps(doc)
+    assert len(raw) > jsonio.LARGE
+    assert jsonio.loads(raw) == orjson.loads(raw) == doc
+    assert orjson.loads(jsonio.dumps(doc)) == doc
+
+
+@pytest.mark.parametrize(
+    "tail",
+    [
+        b'"x": NaN}',  # not JSON
+        b'"x": 1e400}',  # overflows a double
+        b'"x": "\\ud800"}',  # a lone surrogate
+        b'"x": [1, 2,]}',  # broken
+        b'"x": "\xff"}',  # not UTF-8
+        b'"x": 18446744073709551616, "y": -9223372036854775809}',  # beyond 64 bits: a float
+    ],
+)
+def test_large_json_edge_cases_follow_orjson(tail: bytes) -> None:
+    raw = b'{"pad": "' + b"p" * (jsonio.LARGE + 10) + b'", ' + tail
+    try:
+        expected = orjson.loads(raw)
+    except orjson.JSONDecodeError as exc:
+        with pytest.raises(orjson.JSONDecodeError) as got:
+            jsonio.loads(raw)
+        assert str(got.value) == str(exc)
+    else:
+        got_value = jsonio.loads(raw)
+        assert got_value == expected
+        assert [type(v) for v in got_value.values()] == [type(v) for v in expected.values()]
+
+
+def test_small_json_documents_take_the_fast_path() -> None:
+    assert jsonio.loads(b'{"a": [1, 2.5, "\\u00e9"]}') == {"a": [1, 2.5, "é"]}
+    assert jsonio.dumps({"a": [1, 2.5]}) == '{"a":[1,2.5]}'
+    with pytest.raises(orjson.JSONDecodeError):
+        jsonio.loads(b'{"a": NaN}')
+
+
+def test_dispose_takes_apart_only_what_nobody_else_holds() -> None:
+    shared = {"kept": list(range(100))}
+    box = [{"nodes": [{"id": str(i), "xy": [i, i]} for i in range(500)], "shared": shared}]
+    assert dispose(box) > 500
+    assert box == [] and shared == {"kept": list(range(100))}  # untouched: still referenced
+    held = [[1, 2, 3] * 10]
+    alias = held[0]
+    assert dispose(held) == 0 and alias == [1, 2, 3] * 10
+
+
+async def test_a_large_site_stored_is_read_back_the_same(db_url: str, big: Site) -> None:
+    engine = make_engine(db_url)
+    try:
+        await migrate(engine)
+        store = DbStore(make_sessionmaker(engine))
+        doc = big.model_dump(mode="json")
+        assert len(json.dumps(doc)) > jsonio.LARGE
+        assert await store.save_site(doc, by="admin") == 1
+        assert await store.save_site(doc) == 2
+        assert await store.load_site() == (2, doc)
+        assert await store.site_version(1) == doc
+    finally:
+        await engine.dispose()
