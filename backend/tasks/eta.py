@@ -112,6 +112,10 @@ class _Progress:
 
     segments: list[Segment]
     mark_at: float
+    after: list[tuple[float, float]] = field(default_factory=list)
+    """after[k]: nominal seconds of the legs and of the explanations in ``segments[k:]``, so
+    what is left of a task costs two multiplications whatever its length (every task_event of
+    a task on its robot carries it)."""
     done: int = 0
     """Segments finished (reported)."""
     index: int = 0
@@ -119,6 +123,18 @@ class _Progress:
     poi: str | None = None
     stage: str = "assigned"
     learned: bool = False
+
+    def __post_init__(self) -> None:
+        move = talk = 0.0
+        after = [(0.0, 0.0)]
+        for seg in reversed(self.segments):
+            if seg.kind == "move":
+                move += seg.nominal_s
+            else:
+                talk += seg.nominal_s
+            after.append((move, talk))
+        after.reverse()
+        self.after = after
 
 
 @dataclass
@@ -171,9 +187,7 @@ class EtaEstimator:
         if task.state is TaskState.ASSIGNED and task.robot is not None:
             robot = self.tm.robots.get(task.robot)
             start = robot.node if robot is not None else None
-            self._running[task.id] = _Progress(
-                self.segments(task, start), self.tm.clock(), total=self._total(task)
-            )
+            self._running[task.id] = self._track(task, start)
         elif task.state is TaskState.QUEUED or task.final:
             self._running.pop(task.id, None)
         sched = self._schedule
@@ -188,8 +202,7 @@ class EtaEstimator:
         task: learn the real time of the segment just ended and refine what is left."""
         run = self._running.get(task.id)
         if run is None:
-            run = _Progress(self.segments(task, None), self.tm.clock(), total=self._total(task))
-            self._running[task.id] = run
+            run = self._running[task.id] = self._track(task, None)
         now = self.tm.clock()
         done = 2 * index - 1 if stage == "arrived" else 2 * index
         if done == run.done + 1 and done <= len(run.segments):
@@ -210,8 +223,7 @@ class EtaEstimator:
             return
         if run is None or run.learned or not took_s:
             return
-        moves = sum(s.nominal_s for s in run.segments if s.kind == "move")
-        talks = sum(s.nominal_s for s in run.segments if s.kind == "talk")
+        moves, talks = run.after[0]
         predicted = moves * self.move.value + talks * self.talk.value
         if predicted > 0:
             scale = took_s / predicted  # spread the surprise over both kinds of segment
@@ -237,7 +249,7 @@ class EtaEstimator:
             run = self._running.get(task.id)
             if run is None:
                 return Estimate("available", 0.0, None, None, None)
-            duration = self._real(run.segments[1:])
+            duration = self._real_after(run, 1)
             remaining = self._remaining(run)
             first = self._remaining(run, upto=1) if run.done == 0 else 0.0
             return Estimate("available", 0.0, first, remaining, duration)
@@ -281,8 +293,18 @@ class EtaEstimator:
     def segments(self, task: Task, start: str | None) -> list[Segment]:
         """Nominal segments of ``task`` when its robot starts at node ``start`` (unknown:
         ``UNKNOWN_TRAVEL_M`` to the first point)."""
+        return self._segments(self._points(task), start, self._speed(task.robot))
+
+    def _track(self, task: Task, start: str | None) -> _Progress:
+        """Start following a task on its robot (its places are looked up once)."""
         points = self._points(task)
-        speed = self._speed(task.robot)
+        segments = self._segments(points, start, self._speed(task.robot))
+        total = sum(1 for _, text in points if text is not None)
+        return _Progress(segments, self.tm.clock(), total=total)
+
+    def _segments(
+        self, points: list[tuple[str, str | None]], start: str | None, speed: float
+    ) -> list[Segment]:
         out: list[Segment] = []
         here = start
         for i, (node, text) in enumerate(points, start=1):
@@ -312,9 +334,6 @@ class EtaEstimator:
         except ValueError:
             return []
 
-    def _total(self, task: Task) -> int:
-        return sum(1 for _, text in self._points(task) if text is not None)
-
     def _metres(self, start: str | None, goal: str) -> float:
         if start is None or start not in self.tm.graph or goal not in self.tm.graph:
             return UNKNOWN_TRAVEL_M if start != goal else 0.0
@@ -335,14 +354,21 @@ class EtaEstimator:
         move, talk = self.move.value, self.talk.value
         return sum(s.nominal_s * (move if s.kind == "move" else talk) for s in segments)
 
+    def _real_after(self, run: _Progress, k: int) -> float:
+        """Real seconds of ``run.segments[k:]``."""
+        move, talk = run.after[min(k, len(run.segments))]
+        return move * self.move.value + talk * self.talk.value
+
     def _remaining(self, run: _Progress, upto: int | None = None) -> float:
         """Real seconds left of a running task (or of its first ``upto`` segments)."""
-        segs = run.segments[: upto if upto is not None else len(run.segments)]
-        if run.done >= len(segs):
+        end = len(run.segments) if upto is None else min(upto, len(run.segments))
+        if run.done >= end:
             return 0.0
         elapsed = self.tm.clock() - run.mark_at
-        current = self._real(segs[run.done : run.done + 1])
-        return max(0.0, current - elapsed) + self._real(segs[run.done + 1 :])
+        seg = run.segments[run.done]
+        current = seg.nominal_s * (self.move.value if seg.kind == "move" else self.talk.value)
+        rest = self._real_after(run, run.done + 1) - self._real_after(run, end)
+        return max(0.0, current - elapsed) + rest
 
     # --- the queue simulation -------------------------------------------------------------------
     def _current(self) -> _Schedule:
