@@ -159,6 +159,7 @@ class TaskManager(Service):
         """New site while running: robots added or removed, new map for costs."""
         self.site = site
         self.graph = graph or SiteGraph(site)
+        self.estimator.site_changed()
         for cfg in site.robots:
             info = self.robots.get(cfg.name)
             if info is None:

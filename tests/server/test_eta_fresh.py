@@ -55,3 +55,34 @@ async def test_a_running_tour_is_told_what_is_left_with_the_factors_learned_sinc
     status = manager.status(task)
     talk = real_s(manager, segments[1:2])
     assert status["remaining_s"] == round(max(0.0, talk - 2.0) + real_s(manager, segments[2:]), 1)
+
+
+async def test_a_request_ahead_of_others_is_told_the_wait_a_new_simulation_gives(
+    bus: Bus, manager: TaskManager
+) -> None:
+    robot = RobotStub(bus, "R1", "charge_a")
+    robot.state()
+    robot.start(manager.request("tour", {"tour": "ground"}).id)
+    for k in range(300):  # past a few checkpoints of the cached simulation
+        manager.request("go_to_poi", {"poi": "mosaics"}, priority=5 if k % 2 else 3)
+    manager.status(manager.queue.ordered().__next__())  # the simulation is built
+    ahead = manager.request("tour", {"tour": "upstairs"}, priority=4)  # 151st of 301
+    middle = manager.request("go_to_poi", {"poi": "loom"}, priority=3)  # behind the 300
+    first = manager.request("tour", {"tour": "highlights"}, priority=9)
+    told = {t.id: manager.eta_s(t) for t in (ahead, middle, first)}
+    manager.estimator._schedule = None  # what a simulation built now says
+    assert told == {t.id: manager.eta_s(t) for t in (ahead, middle, first)}
+    assert told[first.id] < told[ahead.id] < told[middle.id]
+
+
+async def test_a_queued_wait_follows_the_queue_at_once(bus: Bus, manager: TaskManager) -> None:
+    robot = RobotStub(bus, "R1", "charge_a")
+    robot.state()
+    robot.start(manager.request("tour", {"tour": "ground"}).id)
+    before = manager.request("tour", {"tour": "upstairs"})
+    behind = manager.request("tour", {"tour": "highlights"})
+    wait_before, wait_behind = manager.eta_s(before), manager.eta_s(behind)
+    assert wait_before is not None and wait_behind is not None and wait_behind > wait_before
+    manager.cancel(before.id)
+    # No longer behind the cancelled tour: it waits for the running one only.
+    assert manager.eta_s(behind) == wait_before
