@@ -116,6 +116,8 @@ class TaskManager(Service):
         self._idle: set[str] = set()
         """Robots free for a main task as far as tasks go: nothing, or an internal task."""
         self.assign_times_ms: list[float] | None = None
+        self._net_params: dict[tuple[str, tuple[tuple[str, Any], ...]], dict[str, Any]] = {}
+        """(kind, params) -> what its net is given on this site (shared, never changed)."""
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
@@ -160,6 +162,7 @@ class TaskManager(Service):
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator.site_changed()
+        self._net_params.clear()
         for cfg in site.robots:
             info = self.robots.get(cfg.name)
             if info is None:
@@ -393,13 +396,25 @@ class TaskManager(Service):
         self.queue.remove(task.id)
         task.robot = robot.name
         task.net = NETS[task.kind]
-        task.assigned_params = net_params(self.site, task)
+        task.assigned_params = self._params_for_net(task)
         task.move(TaskState.ASSIGNED, reason="")
         self.set_current(robot, task.id)
         self.assigned_at[task.id] = self.clock()
         self.unconfirmed.pop(task.id, None)
         self.send_assigned(task, robot)
         self.changed(task, "assigned")
+
+    def _params_for_net(self, task: Task) -> dict[str, Any]:
+        """``net_params`` looked up once per kind and parameters on this site (the texts of a
+        tour's five points are the same for every visitor who asks for it)."""
+        try:
+            key = (task.kind, tuple(sorted(task.params.items())))
+            found = self._net_params.get(key)
+        except TypeError:  # a parameter that is not hashable: not worth keeping
+            return net_params(self.site, task)
+        if found is None:
+            found = self._net_params[key] = net_params(self.site, task)
+        return found
 
     def send_assigned(self, task: Task, robot: RobotInfo) -> None:
         """task_assigned, sent again until the robot acknowledges it (guidebot/delivery.py)."""
