@@ -351,11 +351,14 @@ class TaskManager(Service):
         """A robot could start a main task now: idle as far as tasks go, and available (the
         visitors' "available" service, backend/tasks/eta.py)."""
         robots = self.robots
-        return any(self._available(robots[n]) for n in self._idle if n in robots)
+        return any(
+            (r := robots.get(n)) is not None and r.online and self._available(r) for n in self._idle
+        )
 
     def _assign_queued(self) -> None:
         robots = self.robots
-        free = {n: robots[n] for n in self._idle if self._available(robots[n])}
+        # ``online`` first: before its robots report, a fleet is idle but not available.
+        free = {n: r for n in self._idle if (r := robots[n]).online and self._available(r)}
         if not free or not len(self.queue):
             return
         plan: list[tuple[Task, RobotInfo]] = []
@@ -431,9 +434,10 @@ class TaskManager(Service):
         """Robots with nothing to do: charge if they must, else a free station, else the
         wait point (backend/tasks/choice.py, ``idle_errands``)."""
         robots = self.robots
-        idle = [robots[n] for n in self._idle if n in robots]
+        idle = [r for n in self._idle if (r := robots.get(n)) is not None and r.online]
         if not idle:
-            return  # the usual case under load: nothing below needs the whole fleet
+            return  # the usual case: nothing below needs the whole fleet (offline robots
+            # have no errands: idle_errands skips them too)
         charging_at = [
             t.params.get("station")
             for r in self.robots.values()
