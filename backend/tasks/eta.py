@@ -51,8 +51,18 @@ UNKNOWN_TRAVEL_M = 50.0
 """A robot whose node is unknown is assumed this far from the target."""
 CHECKPOINT_EVERY = 128
 """A request that goes ahead of others is simulated from the nearest earlier checkpoint."""
+MEMO_SIZE = 4096
+"""Entries kept by each of the estimator's look-up memos before it starts afresh."""
 
 Service = Literal["available", "busy", "unavailable", "ended", "withdrawn"]
+
+
+def _remember(memo: dict[int, Any], key: int, value: Any) -> None:
+    """Keep ``value`` in a memo keyed by an object's id (the value holds the object, so the id
+    stays its own while kept); a full memo starts afresh."""
+    if len(memo) >= MEMO_SIZE:
+        memo.clear()
+    memo[key] = value
 
 
 def speech_s(text: str) -> float:
@@ -190,6 +200,11 @@ class EtaEstimator:
         """(kind, tour or point, language) -> the places of a queued task (never changed by
         callers); for ``_places_of``, the site they were read from."""
         self._places_of: Site | None = None
+        self._sent: dict[int, tuple[list[Any], list[tuple[str, str | None]]]] = {}
+        """id of the points list a task's net was given -> (that list, its places)."""
+        self._after_first: dict[int, tuple[list[tuple[str, str | None]], float, list[Segment]]] = {}
+        """id of a list of places -> (the list, speed, the segments after the first leg):
+        the same whichever robot starts them."""
         self._mean_speed: tuple[int, float] | None = None
         """(number of robots, their mean speed): for tasks not yet on a robot."""
 
@@ -318,11 +333,27 @@ class EtaEstimator:
     def _segments(
         self, points: list[tuple[str, str | None]], start: str | None, speed: float
     ) -> list[Segment]:
+        if not points:
+            return []
+        first = Segment("move", self._metres(start, points[0][0]) / speed, 1)
+        if len(points) == 1:
+            return [first, *self._segments_after_first(points, speed)]
+        found = self._after_first.get(id(points))
+        if found is None or found[0] is not points or found[1] != speed:
+            found = (points, speed, self._segments_after_first(points, speed))
+            _remember(self._after_first, id(points), found)
+        return [first, *found[2]]
+
+    def _segments_after_first(
+        self, points: list[tuple[str, str | None]], speed: float
+    ) -> list[Segment]:
+        """Everything but the leg to the first place (which depends on where a robot is)."""
         out: list[Segment] = []
-        here = start
+        here = points[0][0]
         for i, (node, text) in enumerate(points, start=1):
-            metres = self._metres(here, node)
-            out.append(Segment("move", metres / speed + (QUESTION_S if i > 1 else 0.0), i))
+            if i > 1:
+                metres = self._metres(here, node)
+                out.append(Segment("move", metres / speed + QUESTION_S, i))
             if text is not None:
                 out.append(Segment("talk", FACE_AND_REST_S + speech_s(text), i))
             here = node
@@ -332,7 +363,14 @@ class EtaEstimator:
         """(node, spoken text or None) of each place the task visits."""
         sent = task.assigned_params.get("points") if task.assigned_params else None
         if isinstance(sent, list) and sent:
-            return [(str(p.get("node")), str(p.get("text") or "")) for p in sent]
+            known = self._sent.get(id(sent))
+            if known is not None and known[0] is sent:
+                return known[1]
+            places: list[tuple[str, str | None]] = [
+                (str(p.get("node")), str(p.get("text") or "")) for p in sent
+            ]
+            _remember(self._sent, id(sent), (sent, places))
+            return places
         site, p = self.tm.site, task.params
         lang = p.get("lang") if isinstance(p.get("lang"), str) else None
         if task.kind in ("tour", "go_to_poi"):
@@ -364,6 +402,8 @@ class EtaEstimator:
         """The site was replaced or edited: forget the places looked up in it."""
         self._places.clear()
         self._places_of = None
+        self._sent.clear()
+        self._after_first.clear()
 
     def _metres(self, start: str | None, goal: str) -> float:
         if start is None or start not in self.tm.graph or goal not in self.tm.graph:
