@@ -147,6 +147,8 @@ class Courier:
         self.reliable = reliable
         """Destinations that cannot lose a message (an in-process endpoint): sent, not kept."""
         self._pending: OrderedDict[str, _Pending] = OrderedDict()
+        self._keyed: dict[Hashable, str] = {}
+        """key -> id of the message kept under it: replacing and withdrawing are O(1)."""
         self.paused = False
         self.sent = 0
         self.retries = 0
@@ -176,9 +178,11 @@ class Courier:
             online=not self.paused,
         )
         self._pending[message.id] = entry
+        if key is not None:
+            self._keyed[key] = message.id
         if len(self._pending) > self.max_pending:
-            _, oldest = self._pending.popitem(last=False)
-            self._cancel(oldest)
+            oldest = next(iter(self._pending.values()))
+            self._drop(oldest.message.id)
             self.dropped += 1
             log.warning(
                 "%s: %d unacknowledged messages; dropped the oldest (%s %s)",
@@ -206,8 +210,7 @@ class Courier:
                 entry.acker,
             )
             return False
-        del self._pending[message_id]
-        self._cancel(entry)
+        self._drop(message_id)
         self.acked += 1
         return True
 
@@ -215,7 +218,7 @@ class Courier:
         """The receiver is gone: stop sending it anything. Returns how many were dropped."""
         gone = [i for i, e in self._pending.items() if e.message.destination == destination]
         for message_id in gone:
-            self._cancel(self._pending.pop(message_id))
+            self._drop(message_id)
         if gone:
             log.info(
                 "%s: %s is gone; %d unacknowledged message(s) no longer sent",
@@ -227,8 +230,9 @@ class Courier:
 
     def withdraw(self, key: Hashable) -> None:
         """Stop sending the message kept under ``key`` (its content is no longer true)."""
-        for message_id in [i for i, e in self._pending.items() if e.key == key]:
-            self._cancel(self._pending.pop(message_id))
+        message_id = self._keyed.get(key)
+        if message_id is not None:
+            self._drop(message_id)
 
     def pause(self) -> None:
         """The link is down: no retries (they would only fill the offline queue)."""
@@ -254,6 +258,16 @@ class Courier:
         for entry in self._pending.values():
             self._cancel(entry)
         self._pending.clear()
+        self._keyed.clear()
+
+    def _drop(self, message_id: str) -> None:
+        """Forget one kept message: its retry timer and its key."""
+        entry = self._pending.pop(message_id, None)
+        if entry is None:
+            return
+        if entry.key is not None and self._keyed.get(entry.key) == message_id:
+            del self._keyed[entry.key]
+        self._cancel(entry)
 
     # -- retries ----------------------------------------------------------------------------
     def _schedule(self, entry: _Pending) -> None:

@@ -116,6 +116,8 @@ class TaskManager(Service):
         self._idle: set[str] = set()
         """Robots free for a main task as far as tasks go: nothing, or an internal task."""
         self.assign_times_ms: list[float] | None = None
+        self._net_params: dict[tuple[str, tuple[tuple[str, Any], ...]], dict[str, Any]] = {}
+        """(kind, params) -> what its net is given on this site (shared, never changed)."""
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
@@ -159,6 +161,8 @@ class TaskManager(Service):
         """New site while running: robots added or removed, new map for costs."""
         self.site = site
         self.graph = graph or SiteGraph(site)
+        self.estimator.site_changed()
+        self._net_params.clear()
         for cfg in site.robots:
             info = self.robots.get(cfg.name)
             if info is None:
@@ -347,11 +351,14 @@ class TaskManager(Service):
         """A robot could start a main task now: idle as far as tasks go, and available (the
         visitors' "available" service, backend/tasks/eta.py)."""
         robots = self.robots
-        return any(self._available(robots[n]) for n in self._idle if n in robots)
+        return any(
+            (r := robots.get(n)) is not None and r.online and self._available(r) for n in self._idle
+        )
 
     def _assign_queued(self) -> None:
         robots = self.robots
-        free = {n: robots[n] for n in self._idle if self._available(robots[n])}
+        # ``online`` first: before its robots report, a fleet is idle but not available.
+        free = {n: r for n in self._idle if (r := robots[n]).online and self._available(r)}
         if not free or not len(self.queue):
             return
         plan: list[tuple[Task, RobotInfo]] = []
@@ -392,13 +399,25 @@ class TaskManager(Service):
         self.queue.remove(task.id)
         task.robot = robot.name
         task.net = NETS[task.kind]
-        task.assigned_params = net_params(self.site, task)
+        task.assigned_params = self._params_for_net(task)
         task.move(TaskState.ASSIGNED, reason="")
         self.set_current(robot, task.id)
         self.assigned_at[task.id] = self.clock()
         self.unconfirmed.pop(task.id, None)
         self.send_assigned(task, robot)
         self.changed(task, "assigned")
+
+    def _params_for_net(self, task: Task) -> dict[str, Any]:
+        """``net_params`` looked up once per kind and parameters on this site (the texts of a
+        tour's five points are the same for every visitor who asks for it)."""
+        try:
+            key = (task.kind, tuple(sorted(task.params.items())))
+            found = self._net_params.get(key)
+        except TypeError:  # a parameter that is not hashable: not worth keeping
+            return net_params(self.site, task)
+        if found is None:
+            found = self._net_params[key] = net_params(self.site, task)
+        return found
 
     def send_assigned(self, task: Task, robot: RobotInfo) -> None:
         """task_assigned, sent again until the robot acknowledges it (guidebot/delivery.py)."""
@@ -415,9 +434,10 @@ class TaskManager(Service):
         """Robots with nothing to do: charge if they must, else a free station, else the
         wait point (backend/tasks/choice.py, ``idle_errands``)."""
         robots = self.robots
-        idle = [robots[n] for n in self._idle if n in robots]
+        idle = [r for n in self._idle if (r := robots.get(n)) is not None and r.online]
         if not idle:
-            return  # the usual case under load: nothing below needs the whole fleet
+            return  # the usual case: nothing below needs the whole fleet (offline robots
+            # have no errands: idle_errands skips them too)
         charging_at = [
             t.params.get("station")
             for r in self.robots.values()

@@ -201,3 +201,28 @@ async def test_a_task_request_is_sent_again_until_answered(
     await asyncio.sleep(5 * FAST["max_s"])
     assert len(copies) == sent  # answered: no more copies
     await link.stop()
+
+
+def test_keyed_messages_are_replaced_and_withdrawn_one_by_one() -> None:
+    """The key index stays true through replacement, acks, withdrawal and overflow drops."""
+    sent: list[Message] = []
+    courier = Courier(sent.append, name="task_manager", max_pending=3)
+    first = courier.post(assignment("T1", "R1"), key=("task", "T1", "R1"))
+    courier.post(assignment("T2", "R2"), key=("task", "T2", "R2"))
+    newer = courier.post(assignment("T1", "R1"), key=("task", "T1", "R1"))  # replaces the first
+    assert courier.pending_ids() == [sent[1].id, newer.id]
+    assert first.id not in courier.pending_ids()
+    # An ack of the replaced copy changes nothing; the ack of the kept one frees its key.
+    assert not courier.on_ack(ack_for(first, "R1"))
+    assert courier.on_ack(ack_for(newer, "R1"))
+    courier.withdraw(("task", "T1", "R1"))  # nothing under that key any more
+    assert courier.pending_ids() == [sent[1].id]
+    # Overflow drops the oldest (T2's): its key goes with it, and a later T2 is kept anew.
+    for n in range(3, 6):
+        courier.post(assignment(f"T{n}", "R3"), key=("task", f"T{n}", "R3"))
+    assert courier.dropped == 1 and sent[1].id not in courier.pending_ids()
+    again = courier.post(assignment("T2", "R2"), key=("task", "T2", "R2"))
+    assert again.id in courier.pending_ids() and courier.pending == 3
+    courier.withdraw(("task", "T4", "R3"))
+    courier.withdraw(("task", "T2", "R2"))
+    assert [m.payload["task_id"] for m in sent if m.id in courier.pending_ids()] == ["T5"]

@@ -358,6 +358,25 @@ async def test_site_change_cancels_queued_tasks_it_invalidates(manager: TaskMana
     assert kept.state is TaskState.QUEUED and manager.queue_position(kept) == 1
 
 
+async def test_an_assignment_after_a_site_change_carries_the_new_texts(
+    bus: Bus, manager: TaskManager
+) -> None:
+    robot = RobotStub(bus, "R1", "hall")
+    robot.state()
+    first = manager.request("tour", {"tour": "ground"})
+    robot.start(first.id)
+    robot.end(first.id)
+    old = assigned(robot, "give_tour")[-1].payload["params"]["points"][0]["text"]
+    doc = manager.site.model_dump(mode="json")
+    next(p for p in doc["pois"] if p["id"] == "welcome")["text"] = "Welcome, said anew."
+    manager.load_site(validate_site(doc))
+    second = manager.request("tour", {"tour": "ground"})
+    order = assigned(robot, "give_tour")[-1]
+    assert order.payload["task_id"] == second.id
+    assert order.payload["params"]["points"][0]["text"] == "Welcome, said anew."
+    assert old != "Welcome, said anew."
+
+
 async def test_concurrent_site_edits_both_land() -> None:
     service = SiteService(demo_site(), 1)
 
