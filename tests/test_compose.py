@@ -1,5 +1,5 @@
 """docker-compose.yml: every service's command is a valid `guidebot` command line with existing
-site files and the site's robot tokens; and (tests/compose_engine.py) the fleet really runs on a
+site files and the site's robot tokens; tests/test_compose_engine.py runs the fleet on a
 Docker engine."""
 
 from __future__ import annotations

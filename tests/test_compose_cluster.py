@@ -59,6 +59,8 @@ def test_the_cluster_profile_runs_two_servers_on_one_database_and_one_broker() -
     # REST reaches the leader: a follower's 503 sends the request on to the next server.
     assert re.search(r"proxy_next_upstream [^;]*http_503", conf)
     assert "Upgrade $http_upgrade" in conf  # WebSockets pass
+    # A server whose container is gone answers nothing: give up on it quickly, try the next.
+    assert re.search(r"proxy_connect_timeout [1-5]s;", conf)
 
 
 def test_without_the_profile_nothing_of_the_cluster_runs() -> None:

