@@ -373,6 +373,7 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
     ):
         _log(line)
     _log(f"invariant checks: {watch.checker.counts}")
+    _log(f"failure reasons: {watch.failure_reasons()}")
     memory = {n: (watch.rss_first[n], watch.rss_last[n]) for n in watch.rss_last}
     _log(f"rss first/last MB: {memory}")
     _log(f"restarts: { {c.name: c.restarts for c in soak.children() if c.restarts} }")

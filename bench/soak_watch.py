@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import re
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -193,6 +194,16 @@ class Watch:
             "tasks_failed": states.count("failed"),
             "tasks_lost": len(self.vanished) + len(unreadable),
         }
+
+    def failure_reasons(self) -> dict[str, int]:
+        """Failed tasks by reason, most frequent first; numbers (robots, seconds, metres) are
+        blurred to "#" so that like reasons count together."""
+        kinds = Counter(
+            re.sub(r"\d+(?:\.\d+)?", "#", t.reason.strip()) or "(no reason)"
+            for t in self.tasks.values()
+            if t.state == "failed"
+        )
+        return dict(kinds.most_common())
 
     def open_tasks(self) -> dict[str, TaskSeen]:
         return {i: t for i, t in self.tasks.items() if t.state not in FINAL}

@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 
 from bench.soak_faults import KINDS, schedule
+from bench.soak_watch import TaskSeen, Watch
+from guidebot.invariants import InvariantChecker
 
 KEYS = [
     "minutes",
@@ -41,6 +43,20 @@ def test_the_fault_plan_is_reproducible_and_deals_every_kind() -> None:
 
 
 @pytest.mark.timeout(480)
+def test_failure_reasons_are_counted_with_their_numbers_blurred() -> None:
+    watch = Watch("http://127.0.0.1:1", "token", InvariantChecker({}, {}, {}), 30.0)
+    watch.tasks = {
+        "a": TaskSeen("failed", "R3: timed out waiting for area elevator after 600 s", "p"),
+        "b": TaskSeen("failed", "R10: timed out waiting for area elevator after 600 s", "p"),
+        "c": TaskSeen("failed", "navigation to gc1 failed: stuck 9.50 m from (5.0, 8.0)", "p"),
+        "d": TaskSeen("done", "", "p"),
+    }
+    assert watch.failure_reasons() == {
+        "R#: timed out waiting for area elevator after # s": 2,
+        "navigation to gc# failed: stuck # m from (#, #)": 1,
+    }
+
+
 async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path) -> None:
     process = await asyncio.create_subprocess_exec(
         *(sys.executable, "-m", "guidebot.cli", "bench", "soak", "--minutes", "1"),
@@ -52,6 +68,7 @@ async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path
     out, err = await asyncio.wait_for(process.communicate(), 470)
     report = err.decode(errors="replace")
     assert process.returncode == 0, report
+    assert "soak: failure reasons: {" in report
     result = json.loads(out.decode().strip().splitlines()[-1])
     assert list(result) == KEYS
     assert result["robots"] == 3 and result["minutes"] == 1
