@@ -42,7 +42,6 @@ def test_the_fault_plan_is_reproducible_and_deals_every_kind() -> None:
     assert plan(SEED) != plan(SEED + 1)
 
 
-@pytest.mark.timeout(480)
 def test_failure_reasons_are_counted_with_their_numbers_blurred() -> None:
     watch = Watch("http://127.0.0.1:1", "token", InvariantChecker({}, {}, {}), 30.0)
     watch.tasks = {
@@ -57,6 +56,7 @@ def test_failure_reasons_are_counted_with_their_numbers_blurred() -> None:
     }
 
 
+@pytest.mark.timeout(480)
 async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path) -> None:
     process = await asyncio.create_subprocess_exec(
         *(sys.executable, "-m", "guidebot.cli", "bench", "soak", "--minutes", "1"),
