@@ -158,6 +158,13 @@ async def test_a_refused_request_says_why_on_the_page(
         await expect(alert).to_contain_text("Too many requests from this panel")
         await expect(alert).to_contain_text("5 per minute")
         await web.axe_check(page)
+        # The panel's link drops and comes back (the page then reloads its state over REST):
+        # the visitor's error stays until the next tap; a reconnect does not wipe it unread.
+        async with page.expect_response("**/api/visitor/requests"):
+            server.app.state.hub.clients["panel-kiosk"].request_close(1012, "test: restart")
+        await page.wait_for_timeout(500)  # the reload's draw
+        await expect(page.locator("#connection")).to_have_attribute("data-status", "open")
+        await expect(alert).to_contain_text("Too many requests from this panel", timeout=100)
         # A page opened without its token says how to get one.
         bare = (await open_page(f"{server.url}/visitor/", viewport=PHONE)).page
         await expect(bare.get_by_role("alert")).to_contain_text("has no access key")

@@ -24,6 +24,9 @@ const state = {
   lang: options.get("lang") ?? null,
   menu: null,
   error: "",
+  /** "load" when `error` is reload()'s own (a later reload clears it), "action" when it answers
+   * the visitor's tap (it stays until the next tap: a reconnect must not wipe it unread) */
+  errorFrom: "",
   view: "start",
   current: null,
   /** task id -> its latest status (REST) merged with task_event payloads */
@@ -79,11 +82,16 @@ async function reload() {
     for (const status of await api.get("/api/visitor/requests")) state.requests.set(status.id, status);
     await refreshRequests([...state.requests.keys()]);
     for (const status of state.requests.values()) state.labels.set(status.id, labelOf(status));
-    state.error = "";
+    if (state.errorFrom !== "action") showError("", "");
   } catch (err) {
-    state.error = describe(err);
+    showError(describe(err), "load");
   }
   draw();
+}
+
+function showError(text, from) {
+  state.error = text;
+  state.errorFrom = from;
 }
 
 let menuTimer = null;
@@ -117,7 +125,7 @@ function describe(err) {
 async function request(kind, item) {
   if (state.busy) return;
   state.busy = true;
-  state.error = "";
+  showError("", "");
   draw();
   const params = kind === "tour" ? { tour: item.id } : { poi: item.id };
   params.lang = state.menu.lang;
@@ -130,7 +138,7 @@ async function request(kind, item) {
     state.confirming = false;
     remember();
   } catch (err) {
-    state.error = describe(err);
+    showError(describe(err), "action");
   } finally {
     state.busy = false;
   }
@@ -142,9 +150,9 @@ async function cancel() {
   const id = state.current;
   try {
     state.requests.set(id, await api.post(`/api/tasks/${encodeURIComponent(id)}/cancel`, { reason: "cancelled by the visitor" }));
-    state.error = "";
+    showError("", "");
   } catch (err) {
-    state.error = describe(err);
+    showError(describe(err), "action");
   }
   state.confirming = false;
   remember();
@@ -153,6 +161,7 @@ async function cancel() {
 
 async function chooseLanguage(lang) {
   state.lang = lang;
+  showError("", "");
   await reload();
 }
 
@@ -326,7 +335,7 @@ function kioskMode() {
       // The next visitor starts afresh: start screen, site's default language.
       state.view = "start";
       state.confirming = false;
-      state.error = "";
+      showError("", "");
       state.lang = state.menu?.default_language ?? state.lang;
       await reload();
     }, idleS * 1000);
