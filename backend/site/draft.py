@@ -150,14 +150,14 @@ class SiteDrafts:
                 f"version {self.state.base_version}: start a new draft from the live site",
                 self.state,
             )
-        site = secure(await self.sites.validate(self.state.data))
+        site = await off_loop(secure, await self.sites.validate(self.state.data))
         await self.sites.replace(site, by=by, note=note)
         await self._store(await self._live_doc(), self.sites.version, by)
         return self.sites.version
 
     async def rollback(self, data: dict[str, Any], *, version: int, by: str, secure: Secure) -> int:
         """Publish a kept version's document again (as a new version); the draft follows."""
-        site = secure(await self.sites.validate(data))
+        site = await off_loop(secure, await self.sites.validate(data))
         await self.sites.replace(site, by=by, note=f"rollback to version {version}")
         await self._store(await self._live_doc(), self.sites.version, by)
         return self.sites.version

@@ -170,7 +170,8 @@ class TaskManager(Service):
                 self._idle.add(cfg.name)
             else:
                 info.config = cfg
-        for name in [n for n in self.robots if site.robot(n) is None]:
+        on_site = {cfg.name for cfg in site.robots}  # a set: site.robot() is a scan per name
+        for name in [n for n in self.robots if n not in on_site]:
             info = self.robots[name]
             if info.current is not None:
                 self.requeue(self.tasks[info.current], "robot removed from the site")
