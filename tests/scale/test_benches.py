@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import json
 
+import orjson
 import pytest
 from click.testing import CliRunner
 
 from bench.failover import main as bench_failover
 from bench.hub import hub as bench_hub
+from bench.hub_workers import _state_frame
+from guidebot.messages import Message
+from guidebot.wire import encode
 from tests.server.postgres import PostgresServer
 
 from .redis import RedisServer
@@ -49,3 +53,17 @@ def test_bench_hub_servers_needs_a_database_and_a_broker() -> None:
     result = CliRunner().invoke(bench_hub, ["--servers", "2", "--json"])
     assert result.exit_code == 2
     assert "--servers needs --db" in result.output
+
+
+def test_bench_robots_send_states_as_hub_client_does() -> None:
+    """The bench builds robot_state frames without the model (its CPU is the server's
+    competitor): they must be the frames a robot's HubClient sends, field for field."""
+    sent = orjson.loads(_state_frame("R7", 3))
+    model = Message(type="robot_state", source="R7", payload=sent["payload"])
+    expected = orjson.loads(encode(model))
+    assert list(sent) == list(expected)
+    assert {k: v for k, v in sent.items() if k not in ("id", "timestamp")} == {
+        k: v for k, v in expected.items() if k not in ("id", "timestamp")
+    }
+    assert Message.model_validate(sent).payload["seq"] == 3
+    assert sent["id"] != orjson.loads(_state_frame("R7", 4))["id"]
