@@ -78,12 +78,28 @@ def dumps(value: Any) -> str:
     strings, numbers, booleans, None); numbers may be written differently (``1e-07`` for
     ``1e-7``), their values are the same."""
     encoder = json.JSONEncoder(ensure_ascii=False, separators=(",", ":"), allow_nan=False)
-    if _small(value):
+    if _small(value) or not _ints_fit(value):  # orjson refuses integers beyond 64 bits
         return orjson.dumps(value).decode()
     try:
         return _joined(encoder.iterencode(value))  # not one-shot: the Python iterencoder
     except (TypeError, ValueError):  # not plain JSON data, NaN: orjson decides
         return orjson.dumps(value).decode()
+
+
+def _ints_fit(value: Any) -> bool:
+    """Every integer in ``value`` is one orjson writes (the Python encoder would write any,
+    and orjson would read the too large ones back as floats)."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+        elif isinstance(item, int) and not isinstance(item, bool):
+            if not _INT_MIN <= item <= _INT_MAX:
+                return False
+    return True
 
 
 def _joined(pieces: Iterable[str]) -> str:

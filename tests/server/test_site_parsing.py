@@ -81,6 +81,23 @@ def test_a_large_json_document_parses_and_writes_as_with_orjson(big: Site) -> No
     assert orjson.loads(jsonio.dumps(doc)) == doc
 
 
+@pytest.mark.parametrize("number", [2**64, -(2**63) - 1, 10**30])
+def test_a_large_document_with_an_integer_beyond_64_bits_is_refused_as_orjson_does(
+    big: Site, number: int
+) -> None:
+    """Written, it would come back from the database as a float: refused instead (the
+    server answers 422, docs/server.md "Status codes")."""
+    doc = big.model_dump(mode="json")
+    doc["robots"][0]["params"] = {"serial": number}
+    with pytest.raises(orjson.JSONEncodeError) as expected:
+        orjson.dumps(doc)
+    with pytest.raises(orjson.JSONEncodeError) as got:
+        jsonio.dumps(doc)
+    assert str(got.value) == str(expected.value)
+    doc["robots"][0]["params"] = {"serial": 2**64 - 1, "low": -(2**63), "flag": True}
+    assert orjson.loads(jsonio.dumps(doc)) == doc
+
+
 @pytest.mark.parametrize(
     "tail",
     [
