@@ -51,6 +51,11 @@ def _stop_this_process() -> None:
     os._exit(LOST_LEADERSHIP_EXIT)
 
 
+def _first_line(exc: BaseException) -> str:
+    """The driver's own words (SQLAlchemy's message adds the statement and a link)."""
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+
+
 class _FollowerTokens:
     """Let the site's robots connect to a follower: their token digests, read from the database
     at start and again whenever the leader publishes a new site version (site_changed)."""
@@ -66,7 +71,8 @@ class _FollowerTokens:
             stored = await DbStore(make_sessionmaker(engine)).load_site()
         except Exception as exc:  # no schema yet: the first leader has not migrated the database
             log.warning(
-                "cluster: no site in the database yet (%s): robots connect to the leader", exc
+                "cluster: no site in the database yet (%s): robots connect to the leader",
+                _first_line(getattr(exc, "orig", None) or exc),
             )
             return
         finally:

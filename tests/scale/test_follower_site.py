@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import asyncio
+import logging
+from pathlib import Path
+from types import SimpleNamespace
 
 import httpx
 import orjson
 import pytest
 import websockets
 
+from backend.cluster import _FollowerTokens
 from bench.servers import ADMIN_TOKEN, DEMO, ServerProcess, wait_until
 from guidebot.site.yamlio import load_site_file
 
@@ -57,3 +61,19 @@ async def test_a_follower_refuses_unknown_robot_tokens(
     pair: list[ServerProcess], token: str
 ) -> None:
     assert await _refused(pair[1], token)
+
+
+async def test_a_follower_before_any_schema_says_so_in_one_line(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A follower may start before the first leader has migrated the database: one warning
+    with the driver's reason, not SQLAlchemy's statement dump."""
+    app = SimpleNamespace(state=SimpleNamespace(tokens=None))
+    follower = _FollowerTokens(app, f"sqlite+aiosqlite:///{tmp_path / 'empty.db'}")  # type: ignore[arg-type]
+    with caplog.at_level(logging.WARNING, logger="backend.cluster"):
+        await follower.load()
+    [record] = [r for r in caplog.records if r.name == "backend.cluster"]
+    assert record.getMessage() == (
+        "cluster: no site in the database yet (no such table: site): robots connect to the leader"
+    )
+    assert follower.known == {}
