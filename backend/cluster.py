@@ -14,7 +14,7 @@ import asyncio
 import contextlib
 import logging
 import os
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Coroutine, Sequence
 from contextlib import AbstractAsyncContextManager
 from typing import Any
 
@@ -56,43 +56,67 @@ def _first_line(exc: BaseException) -> str:
     return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
 
 
+FOLLOWER_RETRY_S = 2.0
+"""How often a follower that found no site in the database looks again."""
+
+
 class _FollowerTokens:
     """Let the site's robots connect to a follower: their token digests, read from the database
-    at start and again whenever the leader publishes a new site version (site_changed)."""
+    at start and again whenever the leader publishes a new site version (site_changed). A
+    follower that starts before any site is stored tries again every ``FOLLOWER_RETRY_S``."""
 
     def __init__(self, app: FastAPI, db_url: str) -> None:
         self.app, self.db_url = app, db_url
         self.known: dict[str, str] = {}
+        self.loaded = False
+        self._warned = False
         self._reloads: set[asyncio.Task[None]] = set()
 
-    async def load(self) -> None:
+    async def load(self) -> bool:
+        """Take the stored site's robot tokens; False when the database has no site yet."""
         engine = make_engine(self.db_url)
         try:
             stored = await DbStore(make_sessionmaker(engine)).load_site()
         except Exception as exc:  # no schema yet: the first leader has not migrated the database
-            log.warning(
-                "cluster: no site in the database yet (%s): robots connect to the leader",
-                _first_line(getattr(exc, "orig", None) or exc),
-            )
-            return
+            if not self._warned:
+                self._warned = True
+                log.warning(
+                    "cluster: no site in the database yet (%s): robots connect to the leader",
+                    _first_line(getattr(exc, "orig", None) or exc),
+                )
+            return False
         finally:
             await engine.dispose()
-        if stored is not None:
-            site = hash_robot_tokens(validate_site(stored[1]))
-            _sync_robot_tokens(self.app.state.tokens, site, self.known)
+        if stored is None:
+            return False
+        site = hash_robot_tokens(validate_site(stored[1]))
+        _sync_robot_tokens(self.app.state.tokens, site, self.known)
+        self.loaded = True
+        return True
+
+    def _spawn(self, job: Coroutine[Any, Any, Any]) -> None:
+        task = asyncio.get_running_loop().create_task(job, name="follower-tokens")
+        self._reloads.add(task)
+        task.add_done_callback(self._reloads.discard)
+
+    async def _until_loaded(self, leadership: Leadership) -> None:
+        while True:  # polls the database: nothing to wait on until a leader has stored a site
+            if leadership.leading or await self.load():
+                return
+            await asyncio.sleep(FOLLOWER_RETRY_S)
 
     def watch(self, hub: Any, leadership: Leadership) -> Callable[[], None]:
-        """Reload on every broadcast site_changed while following; returns the stop function."""
+        """Reload on every broadcast site_changed while following (and until a first site is
+        stored); returns the stop function."""
         endpoint = hub.endpoint("follower_site_watcher")
 
         def changed(_message: Any) -> None:
-            if leadership.leading:
-                return  # the leader's own components keep its tokens
-            task = asyncio.get_running_loop().create_task(self.load(), name="follower-tokens")
-            self._reloads.add(task)
-            task.add_done_callback(self._reloads.discard)
+            if not leadership.leading:  # the leader's own components keep its tokens
+                self._spawn(self.load())
 
         endpoint.subscribe("site_changed", changed)
+        if not self.loaded:
+            self._spawn(self._until_loaded(leadership))
 
         def stop() -> None:
             endpoint.close()

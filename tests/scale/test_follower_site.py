@@ -12,7 +12,10 @@ import orjson
 import pytest
 import websockets
 
-from backend.cluster import _FollowerTokens
+from backend import cluster
+from backend.auth import TokenStore
+from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.hub import Hub
 from bench.servers import ADMIN_TOKEN, DEMO, ServerProcess, wait_until
 from guidebot.site.yamlio import load_site_file
 
@@ -63,17 +66,39 @@ async def test_a_follower_refuses_unknown_robot_tokens(
     assert await _refused(pair[1], token)
 
 
-async def test_a_follower_before_any_schema_says_so_in_one_line(
-    tmp_path: Path, caplog: pytest.LogCaptureFixture
+async def test_a_follower_started_before_any_site_takes_the_tokens_once_one_is_stored(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A follower may start before the first leader has migrated the database: one warning
-    with the driver's reason, not SQLAlchemy's statement dump."""
-    app = SimpleNamespace(state=SimpleNamespace(tokens=None))
-    follower = _FollowerTokens(app, f"sqlite+aiosqlite:///{tmp_path / 'empty.db'}")  # type: ignore[arg-type]
+    with the driver's reason (not SQLAlchemy's statement dump), then it looks again until a
+    site is stored, and the site's robots may connect to it."""
+    monkeypatch.setattr(cluster, "FOLLOWER_RETRY_S", 0.05)
+    url = f"sqlite+aiosqlite:///{tmp_path / 'guidebot.db'}"
+    app = SimpleNamespace(state=SimpleNamespace(tokens=TokenStore()))
+    follower = cluster._FollowerTokens(app, url)  # type: ignore[arg-type]
+    hub = Hub()
     with caplog.at_level(logging.WARNING, logger="backend.cluster"):
-        await follower.load()
+        assert not await follower.load()
+        stop = follower.watch(hub, SimpleNamespace(leading=False))  # type: ignore[arg-type]
+        try:
+            await asyncio.sleep(0.2)  # several more tries, no more warnings
+            engine = make_engine(url)
+            await migrate(engine)
+            await DbStore(make_sessionmaker(engine)).save_site(
+                load_site_file(DEMO).model_dump(mode="json")
+            )
+            await engine.dispose()
+
+            async def loaded() -> bool:
+                return follower.loaded
+
+            await wait_until(loaded, 10, "the follower to take the stored site")
+        finally:
+            stop()
+            hub.close()
     [record] = [r for r in caplog.records if r.name == "backend.cluster"]
     assert record.getMessage() == (
         "cluster: no site in the database yet (no such table: site): robots connect to the leader"
     )
-    assert follower.known == {}
+    principal = app.state.tokens.lookup("robot-R3-demo-token")
+    assert principal is not None and principal.name == "R3"
