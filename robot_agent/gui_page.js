@@ -12,10 +12,17 @@ const names = new Map();
 
 const banner = document.getElementById("connection");
 
-/** Shows or hides "connection lost" (the robot's agent restarting); English before any texts. */
-function showReachable(reachable) {
-  banner.dataset.status = reachable ? "open" : "reconnecting";
-  banner.textContent = reachable ? "" : state.texts?.t("connection_lost") ?? "Connection lost: reconnecting…";
+const PROBLEMS = {
+  connection_lost: "Connection lost: reconnecting…",
+  screen_error: "The robot's screen could not be read: trying again…",
+};
+
+/** Shows or hides the banner: "connection lost" (the robot's agent restarting) or, when the
+ * agent answers but not with the screen (an HTTP error), "screen_error"; English before any
+ * texts. */
+function showReachable(reachable, problem = "connection_lost") {
+  banner.dataset.status = reachable ? "open" : problem === "connection_lost" ? "reconnecting" : "error";
+  banner.textContent = reachable ? "" : state.texts?.t(problem) ?? PROBLEMS[problem];
 }
 
 /** POST to the agent; a network failure answers status 0 instead of throwing. */
@@ -36,16 +43,27 @@ async function post(path, body) {
   return { ok: r.ok, status: r.status, data };
 }
 
+const RETRY_MS = 2000;
+let retry = null;
+
 /** Reads the whole screen again; while the agent cannot be reached, the banner says so. */
 async function refresh() {
   const lang = state.chosen ? `?lang=${encodeURIComponent(state.chosen)}` : "";
+  let r;
+  try {
+    r = await fetch(`/api/screen${lang}`);
+  } catch {
+    showReachable(false); // the WebSocket's reconnect reads the screen again
+    return;
+  }
   let screen;
   try {
-    const r = await fetch(`/api/screen${lang}`);
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
     screen = await r.json();
   } catch {
-    showReachable(false); // the WebSocket's reconnect reads the screen again
+    showReachable(false, "screen_error");
+    clearTimeout(retry);
+    retry = setTimeout(refresh, RETRY_MS); // the agent answers: ask again (a push may not come)
     return;
   }
   showReachable(true);

@@ -50,3 +50,35 @@ async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -
         finally:
             await open_page.close()
             await again.stop()
+
+
+async def test_the_touch_screen_says_when_its_agent_answers_with_an_error(open_page: Any) -> None:
+    """An HTTP error from the agent is not a lost connection: the banner says the screen could
+    not be read, the page asks again by itself, and the banner goes once the agent answers."""
+    onboard = OnboardScreen(
+        Bus().endpoint("screen"),
+        Clock(10.0),
+        "R1",
+        site=load_site_file(SITE),
+        site_file=SITE,
+        link_up=lambda: True,
+    )
+    async with onboard:
+        server = ScreenServer(onboard, port=0)
+        await server.start()
+        try:
+            watch = await open_page(server.url, viewport=(1024, 600))
+            watch.expect_error(r"status of 500")
+            page = watch.page
+            banner = page.locator("#connection")
+            await expect(page.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
+            await page.route("**/api/screen*", lambda route: route.fulfill(status=500, body="{}"))
+            await page.get_by_role("button", name="Español").click()
+            await expect(banner).to_have_text("The robot's screen could not be read: trying again…")
+            await expect(banner).to_have_attribute("data-status", "error")
+            await page.unroute("**/api/screen*")
+            await expect(banner).to_be_hidden(timeout=10_000)  # asked again, without a push
+            await expect(page.locator("html")).to_have_attribute("lang", "es")
+        finally:
+            await open_page.close()
+            await server.stop()
