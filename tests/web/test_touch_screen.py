@@ -19,8 +19,9 @@ pytestmark = [pytest.mark.browser, pytest.mark.timeout(60)]
 SITE = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
 
 
-async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -> None:
-    onboard = OnboardScreen(
+def _screen() -> OnboardScreen:
+    """Robot R1's touch screen on the demo site, its link up."""
+    return OnboardScreen(
         Bus().endpoint("screen"),
         Clock(10.0),
         "R1",
@@ -28,6 +29,10 @@ async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -
         site_file=SITE,
         link_up=lambda: True,
     )
+
+
+async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -> None:
+    onboard = _screen()
     async with onboard:
         server = ScreenServer(onboard, port=0)
         await server.start()
@@ -55,14 +60,7 @@ async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -
 async def test_the_touch_screen_says_when_its_agent_answers_with_an_error(open_page: Any) -> None:
     """An HTTP error from the agent is not a lost connection: the banner says the screen could
     not be read, the page asks again by itself, and the banner goes once the agent answers."""
-    onboard = OnboardScreen(
-        Bus().endpoint("screen"),
-        Clock(10.0),
-        "R1",
-        site=load_site_file(SITE),
-        site_file=SITE,
-        link_up=lambda: True,
-    )
+    onboard = _screen()
     async with onboard:
         server = ScreenServer(onboard, port=0)
         await server.start()
