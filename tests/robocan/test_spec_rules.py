@@ -61,10 +61,11 @@ async def test_a_config_block_with_bad_content_is_refused_once(
     # sonar 9 does not exist on an eight-sonar ring
     with pytest.raises(CommandFailed, match="REFUSED"):
         await master.send_block(0x10, p.BlockType.CONFIG, bytes([1, 0, 0, 9]))
+    # The tap reads the bus in its own thread: it may see the answer after the master did.
+    refusal = await tap.expect(0x10, p.Op.BLOCK_END, start)
+    assert refusal == bytes([p.Op.BLOCK_END, p.EndStatus.REFUSED, p.BlockType.CONFIG])
+    assert len(tap.of(0x10, p.Op.BLOCK_END, start)) == 1
     assert len(tap.of(0x11, p.Op.BLOCK_START, start)) == 1  # not sent again
-    assert tap.of(0x10, p.Op.BLOCK_END, start) == [
-        bytes([p.Op.BLOCK_END, p.EndStatus.REFUSED, p.BlockType.CONFIG])
-    ]
     ring = sim_module(stack, 0x10, SonarRing)
     assert ring.firing_sequence == bytes([0, 4, 1, 5, 2, 6, 3, 7])
 
