@@ -181,6 +181,23 @@ def project_containers(project: str, env: dict[str, str]) -> str:
     return run(["docker", "ps", "-a", "-q", "--filter", label], env).strip()
 
 
+def down(compose: list[str], env: dict[str, str], log_lines: int, shown_chars: int) -> int:
+    """Print the project's last log lines (pytest shows them when the test fails), then
+    ``compose down -v``; returns its exit status."""
+    logs = subprocess.run(
+        [*compose, "logs", "--tail", str(log_lines)], env=env, capture_output=True
+    )
+    print(logs.stdout.decode(errors="replace")[-shown_chars:])
+    return subprocess.run([*compose, "down", "-v", "--timeout", "20"], env=env).returncode
+
+
+def assert_nothing_left(project: str, env: dict[str, str]) -> None:
+    """After ``down``: none of the project's containers, and none running on the engine."""
+    left = project_containers(project, env)
+    assert left == "", f"containers left: {left}"
+    assert run(["docker", "ps", "-q"], env).strip() == ""
+
+
 def wait(check: Callable[[], T], timeout: float, what: str) -> T:
     """Poll check() every 0.5 s (HTTP errors count as not yet) until it returns a true value."""
     deadline = time.monotonic() + timeout

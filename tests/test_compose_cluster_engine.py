@@ -26,7 +26,6 @@ Debian's packages.
 from __future__ import annotations
 
 import json
-import subprocess
 import time
 import uuid
 from typing import Any
@@ -36,8 +35,9 @@ import pytest
 from compose_engine import (
     BASE_IMAGE,
     ROOT,
+    assert_nothing_left,
     base_image,
-    project_containers,
+    down,
     run,
     standin_images,
     wait,
@@ -157,13 +157,9 @@ def test_cluster_profile_serves_through_the_proxy_and_fails_over(engine: dict[st
             )
             assert _create_task(http) in _listed_ids(http)
     finally:
-        logs = subprocess.run([*compose, "logs", "--tail", "30"], env=env, capture_output=True)
-        print(logs.stdout.decode(errors="replace")[-8000:])  # shown when the test fails
-        down = subprocess.run([*compose, "down", "-v", "--timeout", "20"], env=env)
-    assert down.returncode == 0
-    left = project_containers(project, engine)
-    assert left == "", f"containers left: {left}"
-    assert run(["docker", "ps", "-q"], engine).strip() == ""
+        status = down(compose, env, 30, 8000)
+    assert status == 0
+    assert_nothing_left(project, engine)
     volumes = run(
         ["docker", "volume", "ls", "-q", "--filter", f"label=com.docker.compose.project={project}"],
         engine,

@@ -19,14 +19,22 @@ the daemon fails to come up).
 from __future__ import annotations
 
 import json
-import subprocess
 import uuid
 from pathlib import Path
 
 import httpx
 import pytest
 import yaml
-from compose_engine import BASE_IMAGE, ROOT, base_image, project_containers, run, wait, wheels
+from compose_engine import (
+    BASE_IMAGE,
+    ROOT,
+    assert_nothing_left,
+    base_image,
+    down,
+    run,
+    wait,
+    wheels,
+)
 from netports import free_ports
 
 ADMIN = {"Authorization": "Bearer dev-admin-token"}
@@ -108,10 +116,6 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
             # The robots' touch screens are up on the host's network too.
             assert httpx.get(f"http://127.0.0.1:{gui1}/api/screen", timeout=5).status_code == 200
     finally:
-        logs = subprocess.run([*compose, "logs", "--tail", "40"], env=env, capture_output=True)
-        print(logs.stdout.decode(errors="replace")[-6000:])  # shown when the test fails
-        down = subprocess.run([*compose, "down", "-v", "--timeout", "20"], env=env)
-    assert down.returncode == 0
-    left = project_containers(project, engine)
-    assert left == "", f"containers left: {left}"
-    assert run(["docker", "ps", "-q"], engine).strip() == ""
+        status = down(compose, env, 40, 6000)
+    assert status == 0
+    assert_nothing_left(project, engine)
