@@ -3,6 +3,7 @@ corridor site (no building), a real server and a simulated robot with its touch 
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -168,3 +169,29 @@ async def test_a_refused_request_says_why_on_the_page(
         # A page opened without its token says how to get one.
         bare = (await open_page(f"{server.url}/visitor/", viewport=PHONE)).page
         await expect(bare.get_by_role("alert")).to_contain_text("has no access key")
+
+
+async def test_a_language_tap_wins_over_a_slower_reload_started_before_it(
+    tmp_path: Path, open_page: Any
+) -> None:
+    """A hub reconnect reloads the page's data in the language of that moment; a visitor who taps
+    another language meanwhile must not be sent back when that older answer arrives last."""
+    async with running_server(settings_for(tmp_path)) as server:
+        page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
+        await expect(page.get_by_role("heading", name="Tours")).to_be_visible()
+        english_answered = asyncio.Event()
+
+        async def slow_english(route: Any) -> None:
+            await asyncio.sleep(1.0)
+            await route.continue_()
+            english_answered.set()
+
+        await page.route("**/api/visitor?lang=en", slow_english)
+        async with page.expect_request("**/api/visitor?lang=en"):
+            server.app.state.hub.clients["panel-kiosk"].request_close(1012, "test: restart")
+        await page.get_by_role("button", name="Español").click()
+        await expect(page.get_by_role("heading", name="Visitas")).to_be_visible()
+        await asyncio.wait_for(english_answered.wait(), 10)
+        await page.wait_for_timeout(500)  # the older reload's draw, if it were kept
+        await expect(page.get_by_role("heading", name="Visitas")).to_be_visible(timeout=100)
+        assert await page.evaluate("document.documentElement.lang") == "es"

@@ -42,15 +42,23 @@ const about = (seconds) => t("about", { t: state.texts.duration(seconds) });
 
 // --- data ---------------------------------------------------------------------------------------
 
+let menuAsked = 0;
+/** Reads the menu and its texts in the chosen language. Loads can overlap (a reconnect's reload and
+ * a language tap): answers may come back in any order, so only the latest load's answer is kept. */
 async function loadMenu() {
-  const lang = state.lang ? `?lang=${encodeURIComponent(state.lang)}` : "";
-  state.menu = await api.get(`/api/visitor${lang}`);
-  if (!state.lang) {
-    state.lang = preferredLanguage(state.menu.languages, state.menu.default_language);
-    if (state.lang !== state.menu.lang) state.menu = await api.get(`/api/visitor?lang=${state.lang}`);
+  const asked = ++menuAsked;
+  let lang = state.lang;
+  let menu = await api.get(`/api/visitor${lang ? `?lang=${encodeURIComponent(lang)}` : ""}`);
+  if (!lang) {
+    lang = preferredLanguage(menu.languages, menu.default_language);
+    if (lang !== menu.lang) menu = await api.get(`/api/visitor?lang=${encodeURIComponent(lang)}`);
   }
-  state.texts = await loadTexts(state.menu.lang);
-  document.documentElement.lang = state.menu.lang;
+  const texts = await loadTexts(menu.lang);
+  if (asked !== menuAsked) return;
+  if (!state.lang) state.lang = lang;
+  state.menu = menu;
+  state.texts = texts;
+  document.documentElement.lang = menu.lang;
 }
 
 function remember() {
