@@ -175,15 +175,7 @@ def _encode(message: Any) -> str:
     return encode(message).decode()
 
 
-async def _drain(ws: Any, errors: list[int]) -> None:
-    """Read what the server sends a robot (welcome, errors) so its buffers never fill."""
-    with contextlib.suppress(Exception):
-        async for frame in ws:
-            if b'"error"' in (frame if isinstance(frame, bytes) else frame.encode()):
-                errors[0] += 1
-
-
-def _state_frame(name: str, seq: int) -> str:
+def _state_frame(name: str, seq: int) -> bytes:
     """A robot_state exactly as HubClient puts it on the wire (``encode(Message(...))``: the
     same fields in the same order), built without the model: a bench process sends thousands
     a second for hundreds of robots, and its CPU is taken from the server it measures."""
@@ -205,11 +197,11 @@ def _state_frame(name: str, seq: int) -> str:
                 "seq": seq,
             },
         }
-    ).decode()
+    )
 
 
 async def _publish_states(
-    sockets: list[Any], first: int, start_at: float, end_at: float, rate: float
+    links: list[Any], first: int, start_at: float, end_at: float, rate: float
 ) -> int:
     """Each robot sends ``rate`` states a second, the robots' phases spread evenly over the
     period, from ``start_at`` to ``end_at``; returns how many were sent.
@@ -218,7 +210,9 @@ async def _publish_states(
     period / count``), woken about once a millisecond to send what is due, rather than a
     sleeping task per robot: a timer and a task switch per message cost the bench process more
     CPU than the send itself. Each state is stamped as it is sent."""
-    count = len(sockets)
+    from picows import WSMsgType
+
+    count = len(links)
     names = [robot_name(first + k) for k in range(count)]
     step = 1.0 / rate / count
     seqs = [0] * count
@@ -233,28 +227,66 @@ async def _publish_states(
             continue
         k = n % count
         seqs[k] += 1
-        await sockets[k].send(_state_frame(names[k], seqs[k]))
+        links[k].send(WSMsgType.TEXT, _state_frame(names[k], seqs[k]))
         n += 1
+
+
+def _listener(on_text: Any) -> Any:
+    """A picows listener that hands every text frame's payload (bytes) to ``on_text``."""
+    from picows import WSFrame, WSListener, WSMsgType, WSTransport
+
+    class Listener(WSListener):  # type: ignore[misc]
+        def on_ws_frame(self, transport: WSTransport, frame: WSFrame) -> None:
+            if frame.msg_type == WSMsgType.TEXT:
+                on_text(frame.get_payload_as_bytes())
+            elif frame.msg_type == WSMsgType.CLOSE:
+                transport.disconnect()
+
+    return Listener
+
+
+async def _close(links: list[Any]) -> None:
+    """Close picows links with the closing handshake: what was sent before is delivered. The
+    code must be given: picows's default (1005, "no status") may not be sent in a close frame,
+    and the server drops such a connection as a protocol error, with the frames before it."""
+    from picows import WSCloseCode
+
+    for link in links:
+        link.send_close(WSCloseCode.OK)
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(10):
+            await asyncio.gather(*(link.wait_disconnected() for link in links))
+    for link in links:
+        link.disconnect()
 
 
 async def _robots(url: str, first: int, count: int, rate: float, peer: bool) -> None:
     """Robot process: connect ``count`` robots, wait for the start time, publish, report.
 
-    The same plain ``websockets`` client against both servers: one connection per robot, each
-    robot_state sent as HubClient sends it (one frame, the JSON envelope).
+    The same client against both servers: one connection per robot, each robot_state sent as
+    HubClient sends it (one text frame, the JSON envelope). The client is picows, a WebSocket
+    client written in Cython: a real robot spends its own computer's CPU on its one link, but
+    here hundreds of links share the machine with the server being measured.
     """
-    from websockets.asyncio.client import connect
+    from picows import ws_connect
+
+    errors = [0]
+
+    def count_errors(payload: bytes) -> None:
+        if b'"error"' in payload:
+            errors[0] += 1
 
     async def open_one(i: int) -> Any:
         headers = None if peer else {"Authorization": f"Bearer {robot_token(i)}"}
-        return await connect(url, additional_headers=headers, open_timeout=60, ping_interval=None)
+        transport, _ = await ws_connect(
+            _listener(count_errors), url, extra_headers=headers, websocket_handshake_timeout=60
+        )
+        return transport
 
-    sockets: list[Any] = []
+    links: list[Any] = []
     for start in range(first, first + count, 50):  # in waves: the accept queue is finite
         end = min(first + count, start + 50)
-        sockets += await asyncio.gather(*(open_one(i) for i in range(start, end)))
-    errors = [0]
-    drains = [asyncio.create_task(_drain(ws, errors)) for ws in sockets]
+        links += await asyncio.gather(*(open_one(i) for i in range(start, end)))
     probe = Probe()
     probe.start(freeze=True)
     print("READY", flush=True)
@@ -263,13 +295,11 @@ async def _robots(url: str, first: int, count: int, rate: float, peer: bool) -> 
     end_at = start_at + seconds
     probe.reset()
     cpu0, t0 = time.process_time(), time.monotonic()
-    published = await _publish_states(sockets, first, start_at, end_at, rate)
+    published = await _publish_states(links, first, start_at, end_at, rate)
     cpu_percent = 100 * (time.process_time() - cpu0) / (time.monotonic() - t0)
     health = probe.report()
     Probe.full_collection(health)
-    await asyncio.gather(*(ws.close() for ws in sockets), return_exceptions=True)
-    for task in drains:
-        task.cancel()
+    await _close(links)
     result = {"published": published, "errors": errors[0], "cpu": cpu_percent, **health}
     print(json.dumps(result), flush=True)
 
@@ -288,33 +318,74 @@ class _Gui:
         self.seqs: dict[str, int] = {}
         self.slow: dict[int, float] = {}  # second of the window -> worst latency over 100 ms
 
-    async def read(self, ws: Any) -> None:
+    def take(self, frame: bytes | str, now: float) -> None:
+        """Account for one frame received at ``now``."""
         window, latencies, seqs = self.window, self.latencies, self.seqs
+        self.last_frame = time.monotonic()
+        self.frames += 1
+        data = orjson.loads(frame)
+        for message in data if isinstance(data, list) else (data,):
+            if message.get("type") != "robot_state":
+                continue
+            self.received += 1
+            payload = message["payload"]
+            robot, seq = payload["robot"], payload["seq"]
+            previous = seqs.get(robot, 0)
+            if seq > previous + 1:
+                self.gaps += seq - previous - 1
+            seqs[robot] = seq
+            stamp = message["timestamp"]
+            if window[0] <= stamp <= window[1]:
+                latency = now - stamp
+                latencies.append(latency)
+                if latency > 0.1:
+                    second = int(stamp - window[0])
+                    self.slow[second] = max(self.slow.get(second, 0.0), latency)
+
+    def on_text(self, frame: bytes) -> None:
+        """A picows GUI's frame, handled as it is read."""
+        self.take(frame, time.time())
+
+    async def read_slowly(self, ws: Any) -> None:
+        """The deliberately slow GUI (a ``websockets`` connection): read one frame, then pause
+        ``slow_s`` before asking for the next, so the server's sends back up behind it."""
         with contextlib.suppress(Exception):
             async for frame in ws:
                 now = time.time()
-                self.last_frame = time.monotonic()
-                self.frames += 1
-                data = orjson.loads(frame)
-                for message in data if isinstance(data, list) else (data,):
-                    if message.get("type") != "robot_state":
-                        continue
-                    self.received += 1
-                    payload = message["payload"]
-                    robot, seq = payload["robot"], payload["seq"]
-                    previous = seqs.get(robot, 0)
-                    if seq > previous + 1:
-                        self.gaps += seq - previous - 1
-                    seqs[robot] = seq
-                    stamp = message["timestamp"]
-                    if window[0] <= stamp <= window[1]:
-                        latency = now - stamp
-                        latencies.append(latency)
-                        if latency > 0.1:
-                            second = int(stamp - window[0])
-                            self.slow[second] = max(self.slow.get(second, 0.0), latency)
-                if self.slow_s and now < window[1]:
-                    await asyncio.sleep(self.slow_s)  # the deliberately slow GUI
+                self.take(frame, now)
+                if now < self.window[1]:
+                    await asyncio.sleep(self.slow_s)
+
+
+async def _open_fast_gui(url: str, peer: bool, gui: _Gui) -> Any:
+    """Connect a GUI over picows (see ``_robots``: the bench's clients must cost the machine
+    little); on the hub, subscribe to robot_state and wait until it is applied."""
+    from picows import WSMsgType, ws_connect
+
+    from guidebot.messages import Message
+
+    if peer:
+        transport, _ = await ws_connect(_listener(gui.on_text), f"{url}/gui")
+        return transport
+    ping = Message(type="ping")
+    applied = asyncio.get_running_loop().create_future()
+
+    def until_pong(frame: bytes) -> None:
+        if applied.done():
+            gui.on_text(frame)
+        elif ping.id.encode() in frame:
+            applied.set_result(None)
+
+    transport, _ = await ws_connect(
+        _listener(until_pong), url, extra_headers={"Authorization": f"Bearer {GUI_TOKEN}"}
+    )
+    transport.send(
+        WSMsgType.TEXT, encode(Message(type="subscribe", payload={"patterns": ["robot_state"]}))
+    )
+    transport.send(WSMsgType.TEXT, encode(ping))
+    async with asyncio.timeout(30):
+        await applied
+    return transport
 
 
 async def _open_gui(url: str, peer: bool, token: str, name: str | None = None) -> Any:
@@ -347,12 +418,14 @@ async def _guis(
     window = [0.0, 0.0]
     latencies: array.array[float] = array.array("d")  # not a list: keeps full GCs cheap
     readers = [_Gui(window, latencies, 0.0) for _ in range(guis)]
-    sockets = [await _open_gui(url, peer, GUI_TOKEN) for _ in range(guis)]
+    links = [await _open_fast_gui(url, peer, g) for g in readers]
     slow_latencies: array.array[float] = array.array("d")
+    tasks = []
     if slow_ms > 0:
-        readers.append(_Gui(window, slow_latencies, slow_ms / 1000))
-        sockets.append(await _open_gui(url, peer, admin_token, SLOW_GUI))
-    tasks = [asyncio.create_task(g.read(ws)) for g, ws in zip(readers, sockets, strict=True)]
+        slow = _Gui(window, slow_latencies, slow_ms / 1000)
+        readers.append(slow)
+        slow_ws = await _open_gui(url, peer, admin_token, SLOW_GUI)
+        tasks.append(asyncio.create_task(slow.read_slowly(slow_ws)))
     probe = Probe()
     probe.start(freeze=True)
     print("READY", flush=True)
@@ -383,8 +456,9 @@ async def _guis(
             who = SLOW_GUI if c["name"] == SLOW_GUI else "gui"
             if c["name"].startswith("gui") or c["name"] == SLOW_GUI:
                 superseded[who] += c["superseded"]
-    for ws in sockets:
-        await ws.close()
+    await _close(links)
+    if slow_ms > 0:
+        await slow_ws.close()
     for task in tasks:
         task.cancel()
     Probe.full_collection(health)

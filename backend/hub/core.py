@@ -78,6 +78,10 @@ ConnectionCallback = Callable[["RemoteClient", bool], None]
 """Called with (client, True) once a client is attached and (client, False) once it is gone."""
 
 
+STREAMING_S = 0.002
+"""Default of ``Hub.streaming_s`` (docs/protocol.md, "Frames")."""
+
+
 def _always() -> bool:
     return True
 
@@ -234,6 +238,9 @@ class Hub:
         self.coalesce_after = coalesce_after
         self.batch_max = batch_max
         self.linger = linger
+        self.streaming_s = STREAMING_S
+        """A client sent a frame less than this long ago is streaming: its writer lets the event
+        loop turn once more before it takes its batch (backend/hub/websocket.py)."""
         self.max_message_bytes = max_message_bytes
         self.refused = 0
         self.overflow_disconnects = 0

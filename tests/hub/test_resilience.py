@@ -246,3 +246,33 @@ async def test_frames_carry_what_is_queued_and_a_lone_message_leaves_alone() -> 
                 assert isinstance(lone, dict) and lone["payload"]["text"] == "alone"
                 # welcome, pong, the burst, the lone message: counted in /api/hub/clients
                 assert server.app.state.hub.clients["gui"].stats()["frames_sent"] == 4
+
+
+async def test_a_streaming_client_gets_what_is_routed_in_the_next_turn_in_the_same_frame() -> None:
+    """A client sent a frame in the last ``streaming_s`` is streaming: its writer lets the loop
+    turn once before taking its batch, so a message routed in that turn rides along. An idle
+    client's message leaves at once, alone."""
+    async with running_server(hub_settings()) as server:
+        hub = server.app.state.hub
+        say = hub.endpoint("announcer")
+        loop = asyncio.get_running_loop()
+
+        def announce_now_and_next_turn(first: str, second: str) -> None:
+            say.publish("say", {"text": first})  # wakes the GUI's writer
+            loop.call_soon(say.publish, "say", {"text": second})
+
+        headers = {"Authorization": f"Bearer {TOKENS['gui'].token}"}
+        async with websockets.connect(server.ws_url, additional_headers=headers) as gui:
+            assert orjson.loads(await gui.recv())["type"] == "welcome"
+            await gui.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["say"]}}))
+            await gui.send(orjson.dumps({"type": "ping", "id": "p"}))
+            assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["type"] == "pong"
+            hub.streaming_s = 0.0  # never streaming: each turn's messages leave in their frame
+            await asyncio.sleep(0.05)
+            announce_now_and_next_turn("a", "b")
+            assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["payload"]["text"] == "a"
+            assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["payload"]["text"] == "b"
+            hub.streaming_s = 60.0  # the last frame was "just now": streaming
+            announce_now_and_next_turn("c", "d")
+            frame = orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))
+            assert [m["payload"]["text"] for m in frame] == ["c", "d"]
