@@ -43,8 +43,11 @@ async def test_short_run_prints_table_json_png_and_csv(tmp_path: Path) -> None:
     steps = result["steps"]
     assert all(set(v) == {"avg", "max", "min", "dev"} for v in steps.values())
     # The floor of the chain: the 200 ms filter from the first changed sample, and a poll wait
-    # that is never more than one period (200 ms) plus scheduling.
-    assert steps["filter"]["min"] >= 195
+    # that is never more than one period (200 ms) plus scheduling. The filter compares the
+    # samples' schedule slots (exactly 200 ms apart), but the step is timed between the wall
+    # clock moments the two samples were handled: a first sample handled late on a busy machine
+    # shortens it by that lateness (a CI run measured 194.8 ms). A missing filter would give ~0.
+    assert steps["filter"]["min"] >= 180
     assert 0 <= steps["modbus_wait"]["min"] and steps["modbus_wait"]["max"] <= 260
     e2e = result["end_to_end_ms"]
     assert e2e["p50"] >= 200 + steps["modbus_wait"]["min"]
