@@ -223,16 +223,23 @@ async def test_offline_queue_keeps_the_newest_state_and_drops_the_oldest(
         await client.close()
 
 
+@contextlib.asynccontextmanager
+async def gui_hearing_say(server: Any) -> AsyncIterator[Any]:
+    """A plain WebSocket GUI subscribed to "say", once the hub has applied the subscription."""
+    headers = {"Authorization": f"Bearer {TOKENS['gui'].token}"}
+    async with websockets.connect(server.ws_url, additional_headers=headers) as gui:
+        assert orjson.loads(await gui.recv())["type"] == "welcome"
+        await gui.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["say"]}}))
+        await gui.send(orjson.dumps({"type": "ping", "id": "p"}))
+        assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["type"] == "pong"
+        yield gui
+
+
 async def test_frames_carry_what_is_queued_and_a_lone_message_leaves_alone() -> None:
     """No linger by default: what queued while the writer waited for its turn leaves in one
     array frame; a message to an idle client leaves at once as a plain object."""
     async with running_server(hub_settings()) as server:
-        headers = {"Authorization": f"Bearer {TOKENS['gui'].token}"}
-        async with websockets.connect(server.ws_url, additional_headers=headers) as gui:
-            assert orjson.loads(await gui.recv())["type"] == "welcome"
-            await gui.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["say"]}}))
-            await gui.send(orjson.dumps({"type": "ping", "id": "p"}))
-            assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["type"] == "pong"
+        async with gui_hearing_say(server) as gui:
             robot = {"Authorization": f"Bearer {TOKENS['R1'].token}"}
             async with websockets.connect(server.ws_url, additional_headers=robot) as r1:
                 await r1.recv()  # welcome
@@ -261,14 +268,8 @@ async def test_a_streaming_client_gets_what_is_routed_in_the_next_turn_in_the_sa
             say.publish("say", {"text": first})  # wakes the GUI's writer
             loop.call_soon(say.publish, "say", {"text": second})
 
-        headers = {"Authorization": f"Bearer {TOKENS['gui'].token}"}
-        async with websockets.connect(server.ws_url, additional_headers=headers) as gui:
-            assert orjson.loads(await gui.recv())["type"] == "welcome"
-            await gui.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["say"]}}))
-            await gui.send(orjson.dumps({"type": "ping", "id": "p"}))
-            assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["type"] == "pong"
+        async with gui_hearing_say(server) as gui:
             hub.streaming_s = 0.0  # never streaming: each turn's messages leave in their frame
-            await asyncio.sleep(0.05)
             announce_now_and_next_turn("a", "b")
             assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["payload"]["text"] == "a"
             assert orjson.loads(await asyncio.wait_for(gui.recv(), WAIT))["payload"]["text"] == "b"
