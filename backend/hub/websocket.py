@@ -133,9 +133,9 @@ async def _watch_stall(client: RemoteClient, timeout: float) -> None:
 async def _write(websocket: WebSocket, client: RemoteClient) -> None:
     """Drain the outbox until the client closes; then send the close code and reason, if any."""
     outbox = client.outbox
-    batch_max = client.hub.batch_max
-    linger = client.hub.linger
-    streaming_s = client.hub.streaming_s
+    hub = client.hub
+    batch_max = hub.batch_max
+    linger = hub.linger
     enough = max(1, min(batch_max, outbox.maxsize // 4))
     loop = asyncio.get_running_loop()
     last_send = 0.0
@@ -147,7 +147,7 @@ async def _write(websocket: WebSocket, client: RemoteClient) -> None:
                 # Streaming: gather what arrives within ``linger`` of the last frame into one
                 # frame, unless a full batch (or a quarter of the queue) is already waiting.
                 await outbox.linger(linger - since, enough)
-            elif since < streaming_s:
+            elif since < hub.streaming_s:
                 # Streaming, no linger: let the loop turn once, so that what the other clients'
                 # readers route in this turn leaves in this frame rather than in the next one.
                 await asyncio.sleep(0)
