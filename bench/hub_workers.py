@@ -170,11 +170,6 @@ async def _read_start_time() -> float:
     return float(line)
 
 
-def _encode(message: Any) -> str:
-    """A message as HubClient puts it on the wire."""
-    return encode(message).decode()
-
-
 def _state_frame(name: str, seq: int) -> bytes:
     """A robot_state exactly as HubClient puts it on the wire (``encode(Message(...))``: the
     same fields in the same order), built without the model: a bench process sends thousands
@@ -357,32 +352,38 @@ class _Gui:
                     await asyncio.sleep(self.slow_s)
 
 
+def _subscription() -> tuple[list[bytes], bytes]:
+    """The frames a GUI sends to follow robot_state (subscribe, then a ping), and what the
+    pong's frame contains (the ping's id): once it comes, the subscription is applied."""
+    from guidebot.messages import Message
+
+    ping = Message(type="ping")
+    subscribe = Message(type="subscribe", payload={"patterns": ["robot_state"]})
+    return [encode(subscribe), encode(ping)], ping.id.encode()
+
+
 async def _open_fast_gui(url: str, peer: bool, gui: _Gui) -> Any:
     """Connect a GUI over picows (see ``_robots``: the bench's clients must cost the machine
     little); on the hub, subscribe to robot_state and wait until it is applied."""
     from picows import WSMsgType, ws_connect
 
-    from guidebot.messages import Message
-
     if peer:
         transport, _ = await ws_connect(_listener(gui.on_text), f"{url}/gui")
         return transport
-    ping = Message(type="ping")
+    frames, pong = _subscription()
     applied = asyncio.get_running_loop().create_future()
 
     def until_pong(frame: bytes) -> None:
         if applied.done():
             gui.on_text(frame)
-        elif ping.id.encode() in frame:
+        elif pong in frame:
             applied.set_result(None)
 
     transport, _ = await ws_connect(
         _listener(until_pong), url, extra_headers={"Authorization": f"Bearer {GUI_TOKEN}"}
     )
-    transport.send(
-        WSMsgType.TEXT, encode(Message(type="subscribe", payload={"patterns": ["robot_state"]}))
-    )
-    transport.send(WSMsgType.TEXT, encode(ping))
+    for frame in frames:
+        transport.send(WSMsgType.TEXT, frame)
     async with asyncio.timeout(30):
         await applied
     return transport
@@ -392,19 +393,17 @@ async def _open_gui(url: str, peer: bool, token: str, name: str | None = None) -
     """Connect a GUI; on the hub, subscribe to robot_state and wait until it is applied."""
     from websockets.asyncio.client import connect
 
-    from guidebot.messages import Message
-
     if peer:
         return await connect(f"{url}/gui", ping_interval=None)
     query = f"?name={name}" if name else ""
     ws = await connect(
         url + query, additional_headers={"Authorization": f"Bearer {token}"}, ping_interval=None
     )
-    await ws.send(_encode(Message(type="subscribe", payload={"patterns": ["robot_state"]})))
-    ping = Message(type="ping")
-    await ws.send(_encode(ping))
+    frames, pong = _subscription()
+    for frame in frames:
+        await ws.send(frame.decode())
     async with asyncio.timeout(30):
-        while ping.id.encode() not in (await ws.recv(decode=False)):
+        while pong not in (await ws.recv(decode=False)):
             pass
     return ws
 
