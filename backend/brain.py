@@ -8,7 +8,6 @@ newest first, when the server stops or when a later part fails to start. The hel
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 from collections.abc import AsyncIterator
 from typing import Any
@@ -29,14 +28,14 @@ from backend.api.component import (
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
-from backend.site.offloop import off_loop, release
+from backend.site.graph_build import build_site_graph
+from backend.site.offloop import release
 from backend.site.service import SiteService
 from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
 from guidebot.service import Service
-from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 
 __all__ = ["ServerBrain", "server_brain"]
@@ -83,8 +82,9 @@ class ServerBrain(Service):
                 "development)"
             )
         sites = SiteService(site, version, store)
-        # Seconds on a large site: built in a thread so the event loop keeps serving.
-        graph = await asyncio.to_thread(SiteGraph, site)
+        # Seconds on a large site: built off the event loop (threads, worker processes).
+        workers = settings.site_graph_workers
+        graph = await build_site_graph(site, workers)
 
         def log_event(kind: str, data: dict[str, Any]) -> None:
             store.record_event(kind, "traffic_manager", data)
@@ -109,7 +109,7 @@ class ServerBrain(Service):
         _sync_robot_tokens(app.state.tokens, site, known_tokens)
 
         async def on_site(new: Site) -> None:
-            new_graph = await off_loop(SiteGraph, new)
+            new_graph = await build_site_graph(new, workers)
             retired = [traffic.graph, tasks.graph]  # freed in a thread, not on the loop
             # One synchronous block: every module switches to the new site at once.
             traffic.load_site(new, new_graph)

@@ -29,17 +29,19 @@ def print_result(result: dict[str, Any]) -> None:
 
 
 class LoopStall:
-    """The longest time the running event loop went without running a 1 ms ticker (its
-    lateness), while the block runs: how long anything else on that loop would have waited.
+    """How late a 1 ms ticker on the running event loop ran while the block ran: how long
+    anything else on that loop would have waited (the longest, and every tick's lateness).
 
         async with LoopStall() as probe:
             await something()
-        probe.max_ms
+        probe.max_ms, probe.over(20.0), probe.seconds
     """
 
     def __init__(self, tick_s: float = 0.001) -> None:
         self.tick_s = tick_s
         self.max_ms = 0.0
+        self.lates_ms: list[float] = []
+        self.seconds = 0.0
         self._task: asyncio.Task[None] | None = None
 
     async def _tick(self) -> None:
@@ -48,15 +50,22 @@ class LoopStall:
             t0 = clock()
             await asyncio.sleep(self.tick_s)
             late = (clock() - t0 - self.tick_s) * 1000
+            self.lates_ms.append(late)
             if late > self.max_ms:
                 self.max_ms = late
+
+    def over(self, ms: float) -> int:
+        """Ticks later than ``ms``."""
+        return sum(1 for late in self.lates_ms if late > ms)
 
     async def __aenter__(self) -> LoopStall:
         self._task = asyncio.get_running_loop().create_task(self._tick())
         await asyncio.sleep(0)  # the ticker is running before the measured work starts
+        self.seconds = time.perf_counter()
         return self
 
     async def __aexit__(self, *exc: object) -> None:
+        self.seconds = time.perf_counter() - self.seconds
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):

@@ -10,8 +10,10 @@ magnitude on large sites. Between nodes that only an elevator ride connects (flo
 the path is read, not searched: distances to and from every elevator stop are kept, the best
 stop is the minimum of (start to stop) + (stop to goal), and both halves are walked down those
 distance fields (transit nodes; exact, a fraction of a millisecond). Lengths are exact sums of
-edge costs; round them only for display. Building takes seconds on a 10 000-node site: the
-server builds in a thread and swaps.
+edge costs; round them only for display. Building takes seconds on a 10 000-node site, nearly
+all of it the tables (guidebot/route_tables.py): the server builds the structure in a thread
+(``tables=False``), has ``plan()`` computed in worker processes, ``install``s the answer and
+swaps (backend/site/graph_build.py).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+from guidebot.route_tables import TablePlan, Tables, Topology, compute_tables, dijkstra
 from guidebot.site.schema import Site
 from guidebot.site.steps import PathStep
 from guidebot.site.validate import cabin_through_ways
@@ -69,7 +72,10 @@ class SiteGraph:
         nominal_speed_mps: float = NOMINAL_SPEED_MPS,
         warm: bool = True,
         landmarks: int = LANDMARKS,
+        tables: bool = True,
     ) -> None:
+        """``tables=False``: the structure only; compute ``plan()`` elsewhere and ``install``
+        the answer before the first query."""
         self.floor_of: dict[str, str] = {}
         self.xy: dict[str, tuple[float, float]] = {}
         self.passing: set[str] = set()
@@ -126,22 +132,43 @@ class SiteGraph:
         self._fields: dict[str, array[float]] = {}
         self._pinned: set[str] = set()
         self.field_cache_size = 256
+        self._component = self._floor_components(set(self.elevator_at))
+        self._landmark_count = landmarks
+        self._warm_goals = list(
+            dict.fromkeys(
+                n
+                for n in [p.node for p in site.pois]
+                + [c.node for c in site.charging_stations]
+                + [w.node for w in site.wait_points]
+                if warm and n in self.index
+            )
+        )
         # ALT: distance from each landmark to every node, and from every node to it.
         self._lm_from: list[array[float]] = []
         self._lm_to: list[array[float]] = []
-        self._component = self._floor_components(set(self.elevator_at))
-        self._choose_landmarks(landmarks)
         # Transit through elevators: distances to and from every elevator stop.
-        self._transit = [
-            (i, self._dijkstra(i, self._radj_i), self._dijkstra(i, self._adj_i))
-            for i in sorted(self.index[n] for n in self.elevator_at)
-        ]
-        if warm:
-            self.warm(
-                [p.node for p in site.pois]
-                + [c.node for c in site.charging_stations]
-                + [w.node for w in site.wait_points]
-            )
+        self._transit: list[tuple[int, array[float], array[float]]] = []
+        if tables:
+            self.install(compute_tables(self.plan(), (self._adj_i, self._radj_i)))
+
+    def plan(self) -> TablePlan:
+        """The searches of this graph's tables: the landmarks, the elevator stops' fields and
+        the usual destinations' fields (``compute_tables``, here or in another process)."""
+        return TablePlan(
+            Topology.of(self._adj_i, self._xs, self._ys),
+            landmarks=self._landmark_count,
+            stops=tuple(sorted(self.index[n] for n in self.elevator_at)),
+            goals=tuple(self.index[n] for n in self._warm_goals),
+        )
+
+    def install(self, tables: Tables) -> None:
+        """Take the tables computed for ``plan()`` (before the graph answers any query)."""
+        self._lm_from, self._lm_to = tables.lm_from, tables.lm_to
+        self._transit = tables.transit
+        for goal, costs in tables.fields.items():
+            name = self.names[goal]
+            self._fields[name] = costs
+            self._pinned.add(name)
 
     def _add(self, a: str, b: str, cost: float) -> None:
         self.adj[a].append((b, cost))
@@ -240,45 +267,6 @@ class SiteGraph:
             node = best
         return path
 
-    def _dijkstra(self, source: int, adj: list[list[tuple[int, float]]]) -> array[float]:
-        """Costs from ``source`` over ``adj`` (or, given the reverse lists, to ``source``)."""
-        dist = [math.inf] * len(self.names)
-        dist[source] = 0.0
-        heap = [(0.0, source)]
-        pop, push = heapq.heappop, heapq.heappush
-        while heap:
-            d, node = pop(heap)
-            if d > dist[node]:
-                continue
-            for nxt, cost in adj[node]:
-                nd = d + cost
-                if nd < dist[nxt]:
-                    dist[nxt] = nd
-                    push(heap, (nd, nxt))
-        return array("d", dist)
-
-    def _choose_landmarks(self, count: int) -> None:
-        """Farthest-point landmarks: each new one is the node farthest (by path cost, among
-        those reachable) from the landmarks already chosen, so they sit on the map's rim."""
-        n = len(self.names)
-        if n < 3 or count < 1:
-            return
-        nearest = [math.inf] * n
-        landmark = max(range(n), key=lambda i: self._xs[i] + self._ys[i])
-        for _ in range(min(count, n)):
-            from_lm = self._dijkstra(landmark, self._adj_i)
-            self._lm_from.append(from_lm)
-            self._lm_to.append(self._dijkstra(landmark, self._radj_i))
-            best, landmark = -1.0, -1
-            for i in range(n):
-                d = from_lm[i]
-                if d < nearest[i]:
-                    nearest[i] = d
-                if nearest[i] != math.inf and nearest[i] > best:
-                    best, landmark = nearest[i], i
-            if best <= 0.0:
-                break
-
     def _alt_bounds(self, s: int, g: int) -> list[tuple[array[float], array[float], float, float]]:
         """The ACTIVE_LANDMARKS landmarks with the best lower bound from ``s`` to ``g``, as
         (from landmark, to landmark, cost landmark->g, cost g->landmark)."""
@@ -364,21 +352,13 @@ class SiteGraph:
             area=self.area_at.get(node),
         )
 
-    def warm(self, goals: Iterable[str]) -> None:
-        """Precompute and keep the distance fields of the site's usual destinations (points
-        of interest, stations, wait points): paths to them then cost a walk down the field."""
-        for goal in goals:
-            if goal in self.index:
-                self._field(goal)
-                self._pinned.add(goal)
-
     def _field(self, goal: str) -> array[float]:
         """Cost from every node to ``goal``: one reverse Dijkstra, cached per goal."""
         field = self._fields.get(goal)
         if field is not None:
             return field
         self.check(goal)
-        field = self._dijkstra(self.index[goal], self._radj_i)
+        field = dijkstra(self.index[goal], self._radj_i)
         unpinned = [k for k in self._fields if k not in self._pinned]
         if len(unpinned) >= self.field_cache_size:
             del self._fields[unpinned[0]]

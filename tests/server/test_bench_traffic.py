@@ -19,3 +19,11 @@ def test_bench_traffic_reports_paths_and_loop_stalls() -> None:
         assert figures[key]["p50"] is not None and figures[key]["p99"] >= figures[key]["p50"]
     for key in ("idle_max_stall_ms", "publish_max_stall_ms", "load_max_stall_ms"):
         assert figures[key] >= 0.0
+    windows = figures["stalls"]
+    for name in ("publish", "load", "idle"):
+        assert windows[name]["max"] >= windows[name]["p999"] and windows[name]["over_20"] >= 0
+    # the idle reference lasts as long as the longer of the two reloads
+    assert windows["idle"]["seconds"] >= max(
+        windows["publish"]["seconds"], windows["load"]["seconds"]
+    )
+    assert figures["build_workers_s"] > 0.0

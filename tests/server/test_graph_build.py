@@ -1,0 +1,83 @@
+"""The route tables computed in worker processes: the same graph as one built in place, and a
+worker that dies costs time, not the graph."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import random
+import signal
+from pathlib import Path
+
+import pytest
+
+from backend.site.graph_build import build_site_graph, compute_in_processes
+from guidebot.route_tables import compute_tables, split
+from guidebot.site.graph import SiteGraph
+from guidebot.site.synthetic import synthetic_site
+
+
+def spawned_workers() -> list[int]:
+    """Process ids of this process's children started by multiprocessing's spawn (read from
+    /proc; its resource tracker is not one of them)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            parent = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+            command = (stat.parent / "cmdline").read_bytes()
+        except OSError:
+            continue
+        if parent == os.getpid() and b"spawn_main" in command:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def same_answers(ours: SiteGraph, reference: SiteGraph, pairs: int = 200) -> None:
+    rng = random.Random(4)
+    for _ in range(pairs):
+        start, goal = rng.sample(reference.names, 2)
+        assert ours.shortest_path(start, goal) == reference.shortest_path(start, goal)
+
+
+def test_a_plan_split_over_worker_processes_gives_the_tables_computed_in_place() -> None:
+    site = synthetic_site(nodes=600, robots=2, areas=2, pois=9, floors=3)
+    plan = SiteGraph(site, tables=False).plan()
+    assert len(split(plan, 4)) == 5  # the landmark chain, then stops and goals dealt out
+    here = compute_tables(plan)
+    there = asyncio.run(compute_in_processes(plan, 2))
+    assert there.lm_from == here.lm_from and there.lm_to == here.lm_to
+    assert there.transit == here.transit
+    assert there.fields == here.fields and len(here.fields) == len(plan.goals) >= 9
+
+
+def test_a_site_graph_built_with_workers_answers_as_one_built_in_place() -> None:
+    site = synthetic_site(nodes=600, robots=2, areas=2, pois=6, floors=3)
+    built = asyncio.run(build_site_graph(site, 2, min_nodes=0))
+    same_answers(built, SiteGraph(site))
+    goal = site.pois[0].node
+    assert (
+        built.distances_to(goal)[site.nodes[0].id]
+        == SiteGraph(site).distances_to(goal)[site.nodes[0].id]
+    )
+
+
+def test_a_killed_worker_falls_back_to_the_thread_and_the_graph_is_whole(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    site = synthetic_site(nodes=3000, robots=2, areas=2, pois=40, floors=3)
+
+    async def build_and_kill() -> SiteGraph:
+        build = asyncio.create_task(build_site_graph(site, 2, min_nodes=0))
+        for _ in range(1000):
+            await asyncio.sleep(0.01)
+            if workers := spawned_workers():
+                for pid in workers:
+                    os.kill(pid, signal.SIGKILL)
+                break
+        else:
+            raise AssertionError("no worker process was started")
+        return await build
+
+    built = asyncio.run(build_and_kill())
+    assert "worker process failed" in caplog.text
+    same_answers(built, SiteGraph(site), pairs=60)
