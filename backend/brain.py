@@ -83,7 +83,7 @@ class ServerBrain(Service):
             )
         sites = SiteService(site, version, store)
         # Seconds on a large site: built off the event loop (threads, worker processes).
-        workers = settings.site_graph_workers
+        workers = settings.site_workers
         graph = await build_site_graph(site, workers)
 
         def log_event(kind: str, data: dict[str, Any]) -> None:

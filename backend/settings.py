@@ -99,8 +99,9 @@ class Settings(BaseSettings):
     hub_max_message_bytes: int = Field(default=1 << 20, ge=1024)
     hub_send_timeout_s: float = Field(default=10.0, gt=0, le=300)
     log_level: str = "info"
-    # Worker processes computing a large site's route tables (0: in a thread, docs/server.md).
-    site_graph_workers: int = Field(default=2, ge=0, le=32)
+    # Worker processes for a large site's route tables and YAML import (0: threads only,
+    # docs/server.md "Path search").
+    site_workers: int = Field(default=2, ge=0, le=32)
     # BuildingInterface (docs/building.md): poll the site's Modbus modules; input filter.
     building_enabled: bool = True
     building_filter_ms: float = Field(default=200.0, ge=0, le=5000)

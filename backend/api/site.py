@@ -11,11 +11,12 @@ from backend.api.component import hash_robot_tokens, weak_robot_tokens
 from backend.api.deps import Admin, Requester, Sites, Staff, Traffic, forbid
 from backend.auth import Role
 from backend.site.offloop import off_loop, release
+from backend.site.yaml_import import read_site_yaml
 from guidebot.site import jsonio
 from guidebot.site.graph import NoPath, UnknownNode
 from guidebot.site.schema import Site
 from guidebot.site.validate import SiteInvalid, SiteIssue
-from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
+from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site
 
 __all__ = ["router"]
 
@@ -104,7 +105,8 @@ async def import_site(request: Request, _: Admin, service: Sites) -> dict[str, A
     if len(raw) > MAX_SITE_BYTES:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site file too large")
     try:
-        site = await off_loop(load_site_text, raw.decode("utf-8", errors="replace"))
+        text = raw.decode("utf-8", errors="replace")
+        site = await read_site_yaml(text, request.app.state.settings.site_workers)
         await service.replace(await off_loop(_secured, request, site))
     except SiteInvalid as exc:
         raise invalid(exc) from None

@@ -23,12 +23,15 @@ from backend.auth import token_digest
 from backend.db.store import DbStore
 from backend.site.diff import site_diff
 from backend.site.draft import SiteDrafts, StaleDraft, check_document
+from backend.site.offloop import off_loop
 from backend.site.rollout import RolloutTracker
 from backend.site.service import SiteService
+from backend.site.yaml_import import read_site_yaml
 from guidebot.payloads.site import SiteRollout
+from guidebot.site.bulk import dump_site_doc
 from guidebot.site.schema import Site
 from guidebot.site.validate import SiteInvalid, validate_site
-from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site, load_site_text
+from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site
 
 __all__ = ["MAX_MEDIA_BYTES", "MAX_PLAN_BYTES", "router"]
 
@@ -140,8 +143,10 @@ async def import_draft(
     if len(raw) > MAX_SITE_BYTES:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "site file too large")
     try:
-        site = hash_robot_tokens(load_site_text(raw.decode("utf-8", errors="replace")))
-        await d.save(site.model_dump(mode="json"), revision=revision, by=who.name)
+        text = raw.decode("utf-8", errors="replace")
+        site = await read_site_yaml(text, request.app.state.settings.site_workers)
+        site = await off_loop(hash_robot_tokens, site)
+        await d.save(await off_loop(dump_site_doc, site), revision=revision, by=who.name)
     except SiteInvalid as exc:
         raise invalid(exc) from None
     except StaleDraft as exc:

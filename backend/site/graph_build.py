@@ -2,23 +2,20 @@
 
 The graph's structure is built in a thread (``off_loop``); its tables (hundreds of Dijkstra
 searches, seconds of plain Python on a 10 000-node site) are computed in worker processes on
-large sites. In a thread they would share the GIL with the event loop for all those seconds:
-every message to a robot or a GUI would wait for the hand-over (1 ms at a time, longer when
-the machine is busy). The workers are started for one build and stopped after it, so an idle
-server runs no extra process. Should a worker fail (killed, out of memory), the tables are
-computed in a thread instead: slower for the loop, same graph.
+large sites (``in_processes``). In a thread they would share the GIL with the event loop for
+all those seconds: every message to a robot or a GUI would wait for the hand-over (1 ms at a
+time, longer when the machine is busy). The workers are started for one build and stopped
+after it, so an idle server runs no extra process. Should a worker fail (killed, out of
+memory), the tables are computed in a thread instead: slower for the loop, same graph.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
-import multiprocessing
 import os
-from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
-from backend.site.offloop import off_loop
+from backend.site.offloop import in_processes, off_loop
 from guidebot.route_tables import TablePlan, Tables, compute_tables, merge, split
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
@@ -57,19 +54,5 @@ def _structure(site: Site) -> tuple[SiteGraph, TablePlan]:
 
 
 async def compute_in_processes(plan: TablePlan, workers: int) -> Tables:
-    """``compute_tables(plan)``, split over ``workers`` new processes (spawned: the server's
-    threads are not forked), which end with the call. Starting the processes and handing them
-    their parts is done in a thread too (a few milliseconds of forking and pickling)."""
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-
-    def submit() -> list[Future[Tables]]:
-        return [pool.submit(compute_tables, part) for part in split(plan, 2 * workers)]
-
-    try:
-        futures = await asyncio.to_thread(submit)
-        answers = await asyncio.gather(*(asyncio.wrap_future(f) for f in futures))
-    except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    await asyncio.to_thread(pool.shutdown)
-    return merge(list(answers))
+    """``compute_tables(plan)``, split over ``workers`` new processes."""
+    return merge(await in_processes(compute_tables, split(plan, 2 * workers), workers))

@@ -11,6 +11,10 @@ only reference cycles made meanwhile wait for the next unfreeze (the hub's, when
 Nor is a thread enough for single native calls that hold the GIL throughout: freeing a whole
 site at once is one (``release`` takes it apart in a thread, guidebot/site/dispose.py), and so
 are libyaml's composer and orjson on megabytes (guidebot/site/yamlio.py, jsonio.py).
+
+Work that is seconds of plain Python and whose answer is small to send back (the route
+tables, a large YAML file read as JSON) runs in worker processes instead (``in_processes``):
+there it takes no GIL from the loop at all.
 """
 
 from __future__ import annotations
@@ -18,16 +22,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import multiprocessing
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Any, ParamSpec, TypeVar
 
 from guidebot.site.dispose import dispose
 
-__all__ = ["gc_paused", "off_loop", "release"]
+__all__ = ["gc_paused", "in_processes", "off_loop", "release"]
 
 P = ParamSpec("P")
 T = TypeVar("T")
+A = TypeVar("A")
 
 SWITCH_INTERVAL_S = 0.001
 """The GIL's switch interval while site work runs in a thread (Python's default is 5 ms): the
@@ -71,3 +78,26 @@ async def release(box: list[Any]) -> None:
     reference to them: dropping the last one on the loop would free them there in one go)."""
     if box:
         await off_loop(dispose, box)
+
+
+async def in_processes(fn: Callable[[A], T], args: Sequence[A], workers: int) -> list[T]:
+    """``[fn(a) for a in args]`` in ``workers`` new processes, which end with the call.
+
+    They are spawned, not forked (the server's threads are not copied), and import ``fn``'s
+    module and the main module again: a program that embeds the server must guard its main
+    module with ``if __name__ == "__main__":``. Starting them and handing them ``args`` is
+    done in a thread too (a few milliseconds of forking and pickling). A worker that dies
+    raises ``BrokenProcessPool``; one that cannot start, ``OSError``."""
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def submit() -> list[Future[T]]:
+        return [pool.submit(fn, a) for a in args]
+
+    try:
+        futures = await asyncio.to_thread(submit)
+        answers = await asyncio.gather(*(asyncio.wrap_future(f) for f in futures))
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    await asyncio.to_thread(pool.shutdown)
+    return list(answers)

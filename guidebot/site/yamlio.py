@@ -13,16 +13,25 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import orjson
 import yaml
 from yaml.composer import Composer
 from yaml.constructor import SafeConstructor
 from yaml.resolver import Resolver
 
+from guidebot.site import jsonio
 from guidebot.site.dispose import dispose
 from guidebot.site.schema import Site
 from guidebot.site.validate import SiteInvalid, SiteIssue, validate_site
 
-__all__ = ["MAX_SITE_BYTES", "dump_site", "load_site_file", "load_site_text", "load_yaml"]
+__all__ = [
+    "MAX_SITE_BYTES",
+    "dump_site",
+    "load_site_file",
+    "load_site_text",
+    "load_yaml",
+    "yaml_as_json",
+]
 
 MAX_SITE_BYTES = 5_000_000
 MAX_ALIASES = 100
@@ -127,18 +136,24 @@ def _line_finder(root: yaml.Node | None) -> Any:
     return find
 
 
-def load_site_text(text: str) -> Site:
-    """Parse a YAML site; raises SiteInvalid listing every problem with its line."""
+def load_site_text(text: str, parsed: bytes | None = None) -> Site:
+    """Parse a YAML site; raises SiteInvalid listing every problem with its line.
+
+    ``parsed``: the same document already read as JSON by ``yaml_as_json`` (in another
+    process); it is only decoded and validated here."""
     if len(text.encode()) > MAX_SITE_BYTES:
         raise SiteInvalid([SiteIssue("(document)", f"larger than {MAX_SITE_BYTES} bytes")])
     loader_class = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when present
-    try:
-        _check_structure(text, loader_class)
-        data = load_yaml(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        raise SiteInvalid([SiteIssue("(document)", f"not valid YAML: {exc}", line)]) from None
+    if parsed is not None:
+        data = jsonio.loads(parsed)
+    else:
+        try:
+            _check_structure(text, loader_class)
+            data = load_yaml(text)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            line = mark.line + 1 if mark is not None else None
+            raise SiteInvalid([SiteIssue("(document)", f"not valid YAML: {exc}", line)]) from None
     if not isinstance(data, dict):
         raise SiteInvalid([SiteIssue("(document)", "a site file is a mapping at top level", 1)])
 
@@ -156,6 +171,24 @@ def load_site_text(text: str) -> Site:
         return validate_site(box[0], lines=lines)
     finally:
         dispose(box)
+
+
+def yaml_as_json(text: str) -> bytes | None:
+    """The YAML site document as JSON (to be read with ``load_site_text(text, parsed)``), or
+    None when ``load_site_text`` must read it itself: a file it would refuse (alias bomb,
+    nesting, broken YAML, not a mapping: the errors and their lines come from there) or data
+    that JSON would not carry exactly (dates, sets, non-string keys, NaN).
+
+    Meant for a worker process, where libyaml's one-call composer holds no one's GIL."""
+    try:
+        _check_structure(text, getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        if not isinstance(data, dict):
+            return None
+        raw = orjson.dumps(data, option=orjson.OPT_PASSTHROUGH_DATETIME)
+        return raw if orjson.loads(raw) == data else None
+    except (yaml.YAMLError, SiteInvalid, TypeError, orjson.JSONEncodeError):
+        return None
 
 
 def load_site_file(path: str | Path) -> Site:

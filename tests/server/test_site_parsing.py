@@ -3,6 +3,7 @@ and errors), and large objects are freed a piece at a time only when nobody else
 
 from __future__ import annotations
 
+import asyncio
 import json
 
 import orjson
@@ -11,12 +12,13 @@ import yaml
 from yaml.composer import Composer
 
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.site.yaml_import import read_site_yaml
 from guidebot.site import jsonio
 from guidebot.site.dispose import dispose
 from guidebot.site.schema import Site
 from guidebot.site.synthetic import synthetic_site
 from guidebot.site.validate import SiteInvalid
-from guidebot.site.yamlio import LOADER, dump_site, load_site_text, load_yaml
+from guidebot.site.yamlio import LOADER, dump_site, load_site_text, load_yaml, yaml_as_json
 
 
 @pytest.fixture(scope="module")
@@ -153,3 +155,41 @@ async def test_a_large_site_stored_is_read_back_the_same(db_url: str, big: Site)
         assert await store.site_version(1) == doc
     finally:
         await engine.dispose()
+
+
+def test_a_large_yaml_site_read_as_json_by_a_worker_loads_the_same(
+    big: Site, caplog: pytest.LogCaptureFixture
+) -> None:
+    text = dump_site(big)
+    parsed = yaml_as_json(text)
+    assert parsed is not None and orjson.loads(parsed) == _c_load(text)
+    assert load_site_text(text, parsed) == big
+    # in a real worker process, as the import endpoints read a file above jsonio.LARGE
+    assert len(text) > jsonio.LARGE
+    assert asyncio.run(read_site_yaml(text, workers=1)) == big
+    assert "worker process failed" not in caplog.text
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "a: [1, 2\nb: 3\n",  # broken: load_site_text words the error, with its line
+        "- a\n- b\n",  # not a mapping
+        "a: &x [1]\n" + "".join(f"b{i}: *x\n" for i in range(101)),  # too many aliases
+        "name: x\nopened: 2001-12-14\n",  # a date: JSON would make it a string
+        "name: x\nscale: .nan\n",  # NaN: JSON has none
+        "name: x\n1: one\n",  # a key that is not a string
+    ],
+)
+def test_yaml_that_json_would_not_carry_exactly_is_left_to_load_site_text(text: str) -> None:
+    assert yaml_as_json(text) is None
+
+
+def test_a_refused_large_yaml_site_read_by_a_worker_gives_the_same_lines(big: Site) -> None:
+    head, sep, nodes = dump_site(big).partition("\nnodes:\n")
+    text = head + sep + nodes.replace("  x: ", "  x: east  # ", 1)
+    with pytest.raises(SiteInvalid) as in_thread:
+        load_site_text(text)
+    with pytest.raises(SiteInvalid) as with_worker:
+        asyncio.run(read_site_yaml(text, workers=1))
+    assert with_worker.value.issues == in_thread.value.issues
