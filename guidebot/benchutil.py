@@ -39,7 +39,6 @@ class LoopStall:
 
     def __init__(self, tick_s: float = 0.001) -> None:
         self.tick_s = tick_s
-        self.max_ms = 0.0
         self.lates_ms: list[float] = []
         self.seconds = 0.0
         self._task: asyncio.Task[None] | None = None
@@ -51,8 +50,16 @@ class LoopStall:
             await asyncio.sleep(self.tick_s)
             late = (clock() - t0 - self.tick_s) * 1000
             self.lates_ms.append(late)
-            if late > self.max_ms:
-                self.max_ms = late
+
+    @property
+    def max_ms(self) -> float:
+        """The longest stall (0 when no tick ran)."""
+        return max(self.lates_ms, default=0.0)
+
+    def percentile(self, q: float) -> float:
+        """The tick lateness below which a fraction ``q`` of the ticks stayed (ms)."""
+        ordered = sorted(self.lates_ms) or [0.0]
+        return ordered[int(q * (len(ordered) - 1))]
 
     def over(self, ms: float) -> int:
         """Ticks later than ``ms``."""

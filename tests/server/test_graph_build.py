@@ -4,10 +4,7 @@ worker that dies costs time, not the graph."""
 from __future__ import annotations
 
 import asyncio
-import os
 import random
-import signal
-from pathlib import Path
 
 import pytest
 
@@ -15,21 +12,7 @@ from backend.site.graph_build import build_site_graph, compute_in_processes
 from guidebot.route_tables import compute_tables, split
 from guidebot.site.graph import SiteGraph
 from guidebot.site.synthetic import synthetic_site
-
-
-def spawned_workers() -> list[int]:
-    """Process ids of this process's children started by multiprocessing's spawn (read from
-    /proc; its resource tracker is not one of them)."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            parent = int(stat.read_text().rsplit(")", 1)[1].split()[1])
-            command = (stat.parent / "cmdline").read_bytes()
-        except OSError:
-            continue
-        if parent == os.getpid() and b"spawn_main" in command:
-            found.append(int(stat.parent.name))
-    return found
+from tests.server.workers import killing_new_workers
 
 
 def same_answers(ours: SiteGraph, reference: SiteGraph, pairs: int = 200) -> None:
@@ -66,19 +49,6 @@ def test_a_killed_worker_falls_back_to_the_thread_and_the_graph_is_whole(
 ) -> None:
     site = synthetic_site(nodes=3000, robots=2, areas=2, pois=40, floors=3)
 
-    async def build_and_kill() -> SiteGraph:
-        earlier = set(spawned_workers())  # other pools' workers may still be exiting
-        build = asyncio.create_task(build_site_graph(site, 2, min_nodes=0))
-        for _ in range(1000):
-            await asyncio.sleep(0.01)
-            if workers := set(spawned_workers()) - earlier:
-                for pid in workers:
-                    os.kill(pid, signal.SIGKILL)
-                break
-        else:
-            raise AssertionError("no worker process was started")
-        return await build
-
-    built = asyncio.run(build_and_kill())
+    built = asyncio.run(killing_new_workers(build_site_graph(site, 2, min_nodes=0)))
     assert "worker process failed" in caplog.text
     same_answers(built, SiteGraph(site), pairs=60)

@@ -19,6 +19,7 @@ from guidebot.site.schema import Site
 from guidebot.site.synthetic import synthetic_site
 from guidebot.site.validate import SiteInvalid
 from guidebot.site.yamlio import LOADER, dump_site, load_site_text, load_yaml, yaml_as_json
+from tests.server.workers import killing_new_workers
 
 
 @pytest.fixture(scope="module")
@@ -193,3 +194,11 @@ def test_a_refused_large_yaml_site_read_by_a_worker_gives_the_same_lines(big: Si
     with pytest.raises(SiteInvalid) as with_worker:
         asyncio.run(read_site_yaml(text, workers=1))
     assert with_worker.value.issues == in_thread.value.issues
+
+
+def test_a_killed_yaml_worker_falls_back_to_the_thread_and_loads_the_same(
+    big: Site, caplog: pytest.LogCaptureFixture
+) -> None:
+    text = dump_site(big)
+    assert asyncio.run(killing_new_workers(read_site_yaml(text, workers=1))) == big
+    assert "worker process failed" in caplog.text
