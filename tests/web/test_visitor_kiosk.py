@@ -179,6 +179,9 @@ async def test_a_language_tap_wins_over_a_slower_reload_started_before_it(
     async with running_server(settings_for(tmp_path)) as server:
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await expect(page.get_by_role("heading", name="Tours")).to_be_visible()
+        async with asyncio.timeout(10):  # the page draws before its hub link is up
+            while "panel-kiosk" not in server.app.state.hub.clients:  # noqa: ASYNC110
+                await asyncio.sleep(0.05)
         english_answered = asyncio.Event()
 
         async def slow_english(route: Any) -> None:
