@@ -4,11 +4,13 @@ worker that dies costs time, not the graph."""
 from __future__ import annotations
 
 import asyncio
+import os
 import random
 
 import pytest
 
 from backend.site.graph_build import build_site_graph, compute_in_processes
+from backend.site.offloop import WORKER_NICE, in_processes
 from guidebot.route_tables import compute_tables, split
 from guidebot.site.graph import SiteGraph
 from guidebot.site.synthetic import synthetic_site
@@ -31,6 +33,13 @@ def test_a_plan_split_over_worker_processes_gives_the_tables_computed_in_place()
     assert there.lm_from == here.lm_from and there.lm_to == here.lm_to
     assert there.transit == here.transit
     assert there.fields == here.fields and len(here.fields) == len(plan.goals) >= 9
+
+
+@pytest.mark.skipif(not hasattr(os, "nice"), reason="POSIX priorities")
+def test_workers_run_at_a_lower_priority_than_the_server() -> None:
+    """A busy worker must not keep the server's loop waiting for a CPU."""
+    (theirs,) = asyncio.run(in_processes(os.nice, [0], 1))  # os.nice(0): the current value
+    assert theirs == min(os.nice(0) + WORKER_NICE, 19)
 
 
 def test_a_site_graph_built_with_workers_answers_as_one_built_in_place() -> None:
