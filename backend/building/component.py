@@ -1,8 +1,10 @@
 """The BuildingInterface as a server component (listed in backend.app.COMPONENTS).
 
 Runs after the server brain (it needs ``app.state.sites``), on hub endpoint "building", and
-restarts with the new module list whenever the site changes. ``app.state.building`` holds the
-running interface (None when the site has no modules or the building is disabled).
+restarts with the new module list when the site's building part changes (other edits leave it
+running: a restart reconnects every module and forgets who holds which door open).
+``app.state.building`` holds the running interface (None when the site has no modules or the
+building is disabled).
 """
 
 from __future__ import annotations
@@ -31,6 +33,19 @@ def _node_floors(site: Any) -> dict[str, str]:
     return {node.id: node.floor for node in getattr(site, "nodes", [])}
 
 
+def _building_part(site: Any, floors: dict[str, str]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """What the interface is built from: the site's building sections, and the floor of each
+    node that one of their points names. Two sites with the same part run the same interface."""
+    data = site.model_dump(mode="json", include=set(BUILDING_KEYS))
+    named = {
+        point["node"]
+        for module in data.get("modules") or []
+        for point in module.get("points") or []
+        if point.get("node") is not None
+    }
+    return data, {node: floors.get(node) for node in sorted(named)}
+
+
 class _Runner:
     """Holds the current interface; a site change swaps it for one built from the new site."""
 
@@ -41,10 +56,10 @@ class _Runner:
         self.current: BuildingInterface | None = None
         self._lock = asyncio.Lock()
         self._reloads: set[asyncio.Task[None]] = set()
+        self._part: tuple[dict[str, Any], dict[str, Any]] | None = None
+        """The building part the current interface was built from."""
 
-    def _build(self, site: Any, floors: dict[str, str]) -> BuildingInterface | None:
-        # Only the building part: a whole 10 000-node site takes tens of ms to dump.
-        data = site.model_dump(mode="json", include=set(BUILDING_KEYS))
+    def _build(self, data: dict[str, Any], floors: dict[str, str]) -> BuildingInterface | None:
         config = load_building(data)
         if self.settings.environment != "development":
             config.check_production()
@@ -62,14 +77,23 @@ class _Runner:
         error (the server refuses to start), in development it is reported on /api/health."""
         health = self.app.state.health
         async with self._lock:
+            # Off the loop: on a 10 000-node site the table costs a few ms of GIL time. Only
+            # the building part is dumped (the whole site takes tens of ms).
+            floors = await off_loop(_node_floors, site)
+            part = _building_part(site, floors)
+            if self.current is not None and part == self._part:
+                # Nothing the building runs on changed (a tour, a label, a node moved): the
+                # interface goes on as it is. Restarting it would drop every module's
+                # connection and forget which robots hold which doors open.
+                return
             if self.current is not None:
                 await self.current.stop()
                 self.current = None
             self.app.state.building = None
+            self._part = None
             try:
-                # Off the loop: on a 10 000-node site the table costs a few ms of GIL time.
-                floors = await off_loop(_node_floors, site)
-                self.current = self._build(site, floors)
+                self.current = self._build(part[0], floors)
+                self._part = part
                 if self.current is not None:
                     await self.current.start()
             except (BuildingConfigError, OSError) as exc:

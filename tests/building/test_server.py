@@ -3,16 +3,19 @@
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import httpx
 import yaml
 
+from backend.building.component import _building_part
 from backend.settings import Settings
 from backend.testing import running_server
 from building_sim.simulator import BuildingSimulator
 from guidebot.messages import Message
 from guidebot.site.building_config import load_building
+from guidebot.site.yamlio import load_site_text
 from guidebot.testing import Recorder, wait_until
 
 DEMO_SITE = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
@@ -76,3 +79,47 @@ async def test_site_change_restarts_the_interface_with_the_new_modules(tmp_path:
             assert new.pollers["otb_ground"].period_s == 0.1
             await wait_until(lambda: new.pollers["otb_ground"].health.polls > 0)
             assert not any(p.running for p in old.pollers.values())  # the old one stopped
+
+
+async def test_a_site_edit_outside_the_building_leaves_the_interface_running(
+    tmp_path: Path,
+) -> None:
+    """Moving a node must not reconnect every module nor forget the doors held for robots."""
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        site_file = tmp_path / "site.yaml"
+        site_file.write_text(yaml.safe_dump(site), encoding="utf-8")
+        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=site_file)
+        async with running_server(settings) as server:
+            state = server.app.state
+            old = state.building
+            await wait_until(lambda: all(p.health.polls > 0 for p in old.pollers.values()))
+            robot = state.hub.endpoint("R1")
+            reply = await robot.request("open_door", {"door": "door_gallery"}, timeout=10)
+            assert reply.type == "door_opened"
+            assert "R1" in old.doors["door_gallery"].holders
+
+            site["nodes"][0]["x"] += 1.0
+            await state.sites.replace(site)
+            await asyncio.sleep(1.0)  # a restart starts at once (see the test above)
+
+            assert state.building is old
+            assert all(p.running for p in old.pollers.values())
+            assert "R1" in old.doors["door_gallery"].holders
+            polls = old.pollers["otb_ground"].health.polls
+            await wait_until(lambda: old.pollers["otb_ground"].health.polls > polls)
+
+
+def test_the_building_part_names_the_floors_of_the_nodes_its_points_name() -> None:
+    """A new floor for a node that a point names (a call button's) rebuilds the interface; a
+    new floor for any other node does not."""
+    site = load_site_text(DEMO_SITE.read_text(encoding="utf-8"))
+    floors = {node.id: node.floor for node in site.nodes}
+    named = next(p.node for m in site.modules for p in m.points if p.node is not None)
+    other = next(n.id for n in site.nodes if n.id != named)
+    part = _building_part(site, floors)
+    assert part[1][named] == floors[named]
+    assert _building_part(site, {**floors, other: "elsewhere"}) == part
+    assert _building_part(site, {**floors, named: "elsewhere"}) != part
