@@ -100,12 +100,27 @@ class Fleet:
                         await http.post("/api/answer", json={"answer": "yes"})
 
     async def wait_for(self, predicate: Callable[[], Any], timeout: float = 60.0) -> None:
-        async with asyncio.timeout(timeout):
-            while not predicate():
-                self.changed.clear()
-                if predicate():
-                    return
-                await self.changed.wait()
+        try:
+            async with asyncio.timeout(timeout):
+                while not predicate():
+                    self.changed.clear()
+                    if predicate():
+                        return
+                    await self.changed.wait()
+        except TimeoutError:
+            raise AssertionError(f"not reached within {timeout:g} s: {self.story()}") from None
+
+    def story(self) -> str:
+        """What happened so far, for a time-out's message: a flake must explain itself."""
+        hub, link = self.agent.hub, self.agent.link
+        counts = {t: len(ms) for t, ms in sorted(self.seen.items())}
+        onboard = {t: len(ms) for t, ms in sorted(self.onboard.items())}
+        return (
+            f"hub link connected={hub.connected.is_set()} connections={hub.connections}"
+            f" last error={hub.last_error!r}"
+            f" link={getattr(link, 'connections', None)} cuts={getattr(self.cutter, 'cuts', 0)};"
+            f" on the hub {counts}; on board {onboard}"
+        )
 
     async def request_task(self, kind: str, params: dict[str, Any]) -> str:
         async with httpx.AsyncClient(base_url=self.server.url) as http:
