@@ -33,7 +33,7 @@ def _node_floors(site: Any) -> dict[str, str]:
     return {node.id: node.floor for node in getattr(site, "nodes", [])}
 
 
-def _building_part(site: Any, floors: dict[str, str]) -> tuple[dict[str, Any], dict[str, Any]]:
+def _building_part(site: Any, floors: dict[str, str]) -> tuple[dict[str, Any], dict[str, str]]:
     """What the interface is built from: the site's building sections, and the floor of each
     node that one of their points names. Two sites with the same part run the same interface."""
     data = site.model_dump(mode="json", include=set(BUILDING_KEYS))
@@ -43,7 +43,7 @@ def _building_part(site: Any, floors: dict[str, str]) -> tuple[dict[str, Any], d
         for point in module.get("points") or []
         if point.get("node") is not None
     }
-    return data, {node: floors.get(node) for node in sorted(named)}
+    return data, {node: floors[node] for node in sorted(named) if node in floors}
 
 
 class _Runner:
@@ -56,7 +56,7 @@ class _Runner:
         self.current: BuildingInterface | None = None
         self._lock = asyncio.Lock()
         self._reloads: set[asyncio.Task[None]] = set()
-        self._part: tuple[dict[str, Any], dict[str, Any]] | None = None
+        self._part: tuple[dict[str, Any], dict[str, str]] | None = None
         """The building part the current interface was built from."""
 
     def _build(self, data: dict[str, Any], floors: dict[str, str]) -> BuildingInterface | None:
@@ -92,7 +92,7 @@ class _Runner:
             self.app.state.building = None
             self._part = None
             try:
-                self.current = self._build(part[0], floors)
+                self.current = self._build(*part)
                 self._part = part
                 if self.current is not None:
                     await self.current.start()

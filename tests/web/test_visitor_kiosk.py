@@ -17,6 +17,7 @@ from playwright.async_api import expect
 from backend.auth import Role
 from backend.settings import Settings, StaticToken
 from backend.testing import RunningServer, running_server
+from guidebot.testing import wait_until
 from robot_agent.agent import RobotAgent
 from robot_agent.testing import light_robot
 
@@ -179,9 +180,8 @@ async def test_a_language_tap_wins_over_a_slower_reload_started_before_it(
     async with running_server(settings_for(tmp_path)) as server:
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await expect(page.get_by_role("heading", name="Tours")).to_be_visible()
-        async with asyncio.timeout(10):  # the page draws before its hub link is up
-            while "panel-kiosk" not in server.app.state.hub.clients:  # noqa: ASYNC110
-                await asyncio.sleep(0.05)
+        # The page draws before its hub link is up.
+        await wait_until(lambda: "panel-kiosk" in server.app.state.hub.clients)
         english_answered = asyncio.Event()
 
         async def slow_english(route: Any) -> None:
