@@ -46,11 +46,14 @@ from backend.settings import Settings
 from backend.site.graph_build import build_site_graph
 from backend.testing import RunningServer, running_server
 from backend.traffic.manager import TrafficManager
+from building_sim.simulator import BuildingSimulator
 from guidebot.benchutil import LoopStall, percentiles, print_result
 from guidebot.client import HubClient
+from guidebot.site.building_config import load_building
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 from guidebot.site.synthetic import synthetic_site
+from guidebot.site.validate import validate_site
 from guidebot.site.yamlio import dump_site
 
 __all__ = ["main"]
@@ -165,56 +168,70 @@ async def bench_locks(
     reaching restricted areas do. The first ``ws_robots`` robots are real WebSocket clients
     of a real server (uvicorn on 127.0.0.1); the others are in-process hub endpoints of that
     same server. Returns (in-process round trips, WebSocket round trips, requests made),
-    measured after a 1 s warm-up."""
-    site_file = tmp / "site.yaml"
-    site_file.write_text(dump_site(site))
-    settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp / 'bench.db'}", site=site_file)
+    measured after a 1 s warm-up. The site's elevator modules run on a Modbus simulator, so
+    that the server polls its building as a deployed one does."""
+    doc = site.model_dump(mode="json")
+    async with BuildingSimulator(load_building(doc), port_zero=True) as building:
+        for module in doc["modules"]:
+            module["port"] = building.ports[module["id"]]
+        site = validate_site(doc)
+        site_file = tmp / "site.yaml"
+        site_file.write_text(dump_site(site))
+        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp / 'bench.db'}", site=site_file)
+        async with running_server(settings, start_timeout=300) as server:
+            return await _ask_for_locks(server, site, robots, rate, seconds, ws_robots)
+
+
+async def _ask_for_locks(
+    server: RunningServer, site: Site, robots: int, rate: float, seconds: float, ws_robots: int
+) -> tuple[list[float], list[float], int, dict[str, dict[str, float]]]:
+    """The robots' requests against the running ``server`` (``bench_locks``), then the
+    reload probes."""
     hub_samples: list[float] = []
     ws_samples: list[float] = []
     asked = 0
-    async with running_server(settings, start_timeout=300) as server:
-        hub = server.app.state.hub
-        areas = server.app.state.traffic.locks.areas
-        loop = asyncio.get_running_loop()
-        clients = [
-            HubClient(server.ws_url, site.robots[k].token) for k in range(min(ws_robots, robots))
-        ]
-        for client in clients:
-            await client.start()
-        for client in clients:
-            await asyncio.wait_for(client.connected.wait(), 30)
-        start = loop.time()
-        warm_until, stop_at = start + 1.0, start + 1.0 + seconds
+    hub = server.app.state.hub
+    areas = server.app.state.traffic.locks.areas
+    loop = asyncio.get_running_loop()
+    clients = [
+        HubClient(server.ws_url, site.robots[k].token) for k in range(min(ws_robots, robots))
+    ]
+    for client in clients:
+        await client.start()
+    for client in clients:
+        await asyncio.wait_for(client.connected.wait(), 30)
+    start = loop.time()
+    warm_until, stop_at = start + 1.0, start + 1.0 + seconds
 
-        async def robot(k: int) -> None:
-            nonlocal asked
-            rng = random.Random(k)
-            name = site.robots[k].name
-            endpoint = clients[k] if k < len(clients) else hub.endpoint(name)
-            samples = ws_samples if k < len(clients) else hub_samples
-            area = areas[k % len(areas)]
-            while True:
-                await asyncio.sleep(rng.expovariate(rate))
-                if loop.time() >= stop_at:
-                    return
-                t0 = time.perf_counter()
-                reply = await endpoint.request(
-                    "request_area", {"robot": name, "area": area}, timeout=30.0
-                )
-                rtt = (time.perf_counter() - t0) * 1000
-                if reply.type != "area_granted":
-                    raise RuntimeError(f"refused: {reply.payload}")
-                endpoint.publish("release_area", {"robot": name, "area": area})
-                asked += 1
-                if loop.time() >= warm_until:
-                    samples.append(rtt)
+    async def robot(k: int) -> None:
+        nonlocal asked
+        rng = random.Random(k)
+        name = site.robots[k].name
+        endpoint = clients[k] if k < len(clients) else hub.endpoint(name)
+        samples = ws_samples if k < len(clients) else hub_samples
+        area = areas[k % len(areas)]
+        while True:
+            await asyncio.sleep(rng.expovariate(rate))
+            if loop.time() >= stop_at:
+                return
+            t0 = time.perf_counter()
+            reply = await endpoint.request(
+                "request_area", {"robot": name, "area": area}, timeout=30.0
+            )
+            rtt = (time.perf_counter() - t0) * 1000
+            if reply.type != "area_granted":
+                raise RuntimeError(f"refused: {reply.payload}")
+            endpoint.publish("release_area", {"robot": name, "area": area})
+            asked += 1
+            if loop.time() >= warm_until:
+                samples.append(rtt)
 
-        try:
-            await asyncio.gather(*(robot(k) for k in range(robots)))
-        finally:
-            for client in clients:
-                await client.close()
-        stalls = await bench_reload(server, site)
+    try:
+        await asyncio.gather(*(robot(k) for k in range(robots)))
+    finally:
+        for client in clients:
+            await client.close()
+    stalls = await bench_reload(server, site)
     return hub_samples, ws_samples, asked, stalls
 
 
