@@ -29,7 +29,8 @@ connections, a real robot holds one. ``BENCH_NO_GC_FREEZE=1`` runs the server wi
 hub's GC policy (backend/hub/memory.py), for comparison.
 
 The last line printed is one JSON object with the keys of issue 2. This module runs the
-benchmark; the worker processes are in bench/hub_workers.py, the peer in bench/hub_peer.py.
+benchmark; the worker processes are in bench/hub_workers.py, the peers (``--peer``, with
+``--peer-server fastapi`` or ``picows``) in bench/hub_peer.py.
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ import click
 from guidebot.benchutil import print_result
 
 from .hub_workers import GUI_TOKEN as GUI_TOKEN
-from .hub_workers import WARMUP_S, _log
+from .hub_workers import PEER_SERVERS, WARMUP_S, _log
 from .hub_workers import _open_gui as _open_gui
 from .hub_workers import robot_name as robot_name
 from .hub_workers import robot_token as robot_token
@@ -91,14 +92,14 @@ def run_benchmark(
     seconds: float,
     robot_procs: int,
     full_app: bool,
-    peer: bool = False,
+    peer: str | None = None,
     slow_gui_ms: float = 0.0,
 ) -> dict[str, Any]:
-    """One run against the hub, or with ``peer`` against the plain FastAPI broadcast."""
+    """One run against the hub, or against the ``peer`` broadcast named (PEER_SERVERS)."""
     import psutil
 
     who = "peer" if peer else "hub"
-    flags = (["--full-app"] if full_app else []) + (["--peer"] if peer else [])
+    flags = (["--full-app"] if full_app else []) + (["--peer", peer] if peer else [])
     server = _spawn(["server", "--robots", str(robots), *flags])
     workers: list[subprocess.Popen[str]] = []
     try:
@@ -249,8 +250,13 @@ def compare(ours: dict[str, Any], peer: dict[str, Any]) -> dict[str, Any]:
 @click.option("--seconds", default=10.0, show_default=True, help="Measured duration.")
 @click.option("--robot-procs", default=2, show_default=True, help="Processes for the robots.")
 @click.option("--full-app", is_flag=True, help="Run every server component, not the hub alone.")
+@click.option("--peer", is_flag=True, help="Also run a plain broadcast, interleaved with the hub.")
 @click.option(
-    "--peer", is_flag=True, help="Also run FastAPI's plain broadcast, interleaved with the hub."
+    "--peer-server",
+    type=click.Choice(PEER_SERVERS),
+    default="fastapi",
+    show_default=True,
+    help="The broadcast --peer runs: FastAPI's tutorial, or a picows (Cython) server.",
 )
 @click.option(
     "--rounds",
@@ -279,6 +285,7 @@ def hub(
     robot_procs: int,
     full_app: bool,
     peer: bool,
+    peer_server: str,
     rounds: int,
     slow_gui_ms: float,
     servers: int | None,
@@ -302,12 +309,12 @@ def hub(
     for _ in range(rounds):
         ours.append(run_benchmark(*args, slow_gui_ms=slow_gui_ms))
         if peer:
-            theirs.append(run_benchmark(*args, peer=True, slow_gui_ms=slow_gui_ms))
+            theirs.append(run_benchmark(*args, peer=peer_server, slow_gui_ms=slow_gui_ms))
     result = median_of_runs(ours)
     if rounds > 1:
         result["rounds"] = rounds
     if peer:
-        result.update(compare(result, median_of_runs(theirs)))
+        result.update(compare(result, {"server": peer_server, **median_of_runs(theirs)}))
     if not as_json:
         for who, r in [("hub", result), *([("peer", result["peer"])] if peer else [])]:
             click.echo(

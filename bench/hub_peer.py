@@ -1,16 +1,22 @@
-"""The peer of ``guidebot bench hub --peer``: FastAPI's documented WebSocket broadcast.
+"""The peers of ``guidebot bench hub --peer``: broadcasts with none of the hub's work.
 
-The ``ConnectionManager`` of FastAPI's "WebSockets" tutorial, as a user would copy it: a list
-of sockets, ``send_text`` to each in turn. Robots send on ``/ws/robot``; every frame goes to
-every socket of ``/ws/gui``. No authentication, validation, routing or per-client queue, and
-one GUI that reads slowly holds up the loop over all of them: that is what the hub adds.
+``fastapi`` (the default): the ``ConnectionManager`` of FastAPI's "WebSockets" tutorial, as a
+user would copy it: a list of sockets, ``send_text`` to each in turn. ``picows``: the least a
+broadcast costs on the machine, a WebSocket server written in Cython that sends each robot frame
+to every GUI from the callback that received it, so one frame costs a few microseconds of
+Python. Robots send on ``/ws/robot``; every frame goes to every socket of ``/ws/gui``. Neither
+has authentication, validation, routing or per-client queues, and one GUI that reads slowly
+holds up the broadcast to all of them: that is what the hub adds.
 """
 
 from __future__ import annotations
 
+import asyncio
+from typing import Any
+
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 
-__all__ = ["ConnectionManager", "create_peer_app"]
+__all__ = ["ConnectionManager", "create_peer_app", "serve_picows_broadcast"]
 
 
 class ConnectionManager:
@@ -54,3 +60,31 @@ def create_peer_app() -> FastAPI:
             pass
 
     return app
+
+
+async def serve_picows_broadcast() -> tuple[asyncio.AbstractServer, int]:
+    """The picows broadcast on 127.0.0.1 (a free port): (server, port)."""
+    from picows import WSListener, WSMsgType, WSTransport, WSUpgradeRequest, ws_create_server
+
+    guis: list[WSTransport] = []
+
+    class Gui(WSListener):  # type: ignore[misc]
+        def on_ws_connected(self, transport: WSTransport) -> None:
+            guis.append(transport)
+
+        def on_ws_disconnected(self, transport: WSTransport) -> None:
+            if transport in guis:
+                guis.remove(transport)
+
+    class Robot(WSListener):  # type: ignore[misc]
+        def on_ws_frame(self, transport: WSTransport, frame: Any) -> None:
+            if frame.msg_type == WSMsgType.TEXT:
+                data = frame.get_payload_as_bytes()
+                for gui in guis:
+                    gui.send(WSMsgType.TEXT, data)
+
+    def route(request: WSUpgradeRequest) -> WSListener:
+        return Gui() if bytes(request.path).endswith(b"/gui") else Robot()
+
+    server = await ws_create_server(route, "127.0.0.1", 0)
+    return server, server.sockets[0].getsockname()[1]

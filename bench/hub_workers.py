@@ -26,6 +26,9 @@ from guidebot.benchutil import percentiles
 from guidebot.messages import new_message_id
 from guidebot.wire import encode
 
+PEER_SERVERS = ("fastapi", "picows")
+"""The broadcasts ``--peer`` can run (bench/hub_peer.py)."""
+
 __all__ = ["GUI_TOKEN", "SLOW_GUI", "WARMUP_S", "Probe", "robot_name", "robot_token"]
 
 GUI_TOKEN = "bench-gui-token"
@@ -127,15 +130,15 @@ class Probe:
 
 
 # -- worker processes ----------------------------------------------------------------------------
-async def _serve(robots: int, full_app: bool, peer: bool) -> None:
-    """Server process (the hub, or with ``peer`` the plain broadcast): print the bound port,
-    then serve until killed."""
+async def _serve(robots: int, full_app: bool, peer: str | None) -> None:
+    """Server process (the hub, or the ``peer`` broadcast named): print the bound port, then
+    serve until killed."""
     import backend.app
     from backend.auth import Role
     from backend.settings import Settings, StaticToken
     from backend.testing import running_server
 
-    from .hub_peer import create_peer_app
+    from .hub_peer import create_peer_app, serve_picows_broadcast
 
     if not full_app:
         backend.app.COMPONENTS = []
@@ -147,22 +150,32 @@ async def _serve(robots: int, full_app: bool, peer: bool) -> None:
     settings = Settings(
         tokens=tokens, db_url=f"sqlite+aiosqlite:///{os.getcwd()}/.bench-hub-{os.getpid()}.db"
     )
+    if peer == "picows":
+        _server, port = await serve_picows_broadcast()
+        await _report_health(port)
+        return
     app = create_peer_app() if peer else None
     async with running_server(settings, app=app) as server:
         if os.environ.get("BENCH_NO_GC_FREEZE") and not peer:  # the hub without its GC policy
             server.app.state.hub.memory.enabled = False
-        print(f"PORT {server.port}", flush=True)
-        probe = Probe()
-        probe.start()
-        start_at = await _read_start_time()
-        seconds = await _read_start_time()
-        await asyncio.sleep(max(0.0, start_at + WARMUP_S - time.time()))
-        probe.reset()
-        await asyncio.sleep(max(0.0, start_at + seconds - time.time()))
-        health = probe.report()
-        await _read_start_time()  # the GUIs are done
-        print(json.dumps(Probe.full_collection(health)), flush=True)
-        await asyncio.Event().wait()
+        await _report_health(server.port)
+
+
+async def _report_health(port: int) -> None:
+    """Print the port, follow the run's start and length from stdin, print the loop's health
+    over the measured window once the GUIs are done, then wait to be killed."""
+    print(f"PORT {port}", flush=True)
+    probe = Probe()
+    probe.start()
+    start_at = await _read_start_time()
+    seconds = await _read_start_time()
+    await asyncio.sleep(max(0.0, start_at + WARMUP_S - time.time()))
+    probe.reset()
+    await asyncio.sleep(max(0.0, start_at + seconds - time.time()))
+    health = probe.report()
+    await _read_start_time()  # the GUIs are done
+    print(json.dumps(Probe.full_collection(health)), flush=True)
+    await asyncio.Event().wait()
 
 
 async def _read_start_time() -> float:
@@ -492,7 +505,7 @@ def _worker_main(argv: Sequence[str]) -> None:
     s = sub.add_parser("server")
     s.add_argument("--robots", type=int, required=True)
     s.add_argument("--full-app", action="store_true")
-    s.add_argument("--peer", action="store_true")
+    s.add_argument("--peer", choices=PEER_SERVERS)
     r = sub.add_parser("robots")
     r.add_argument("--url", required=True)
     r.add_argument("--first", type=int, required=True)

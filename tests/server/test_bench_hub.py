@@ -24,6 +24,7 @@ def run(*args: str) -> dict[str, Any]:
 
 def test_every_state_reaches_every_gui_of_the_hub_and_of_the_plain_broadcast() -> None:
     last = run("--robots", "20", "--rate", "5", "--guis", "2", "--seconds", "3", "--peer")
+    assert last["peer"]["server"] == "fastapi"
     for result in (last, last["peer"]):
         assert result["dropped"] == 0 and result["refused"] == 0
         assert result["msgs_in_per_s"] == pytest.approx(100, rel=0.05)  # 20 robots x 5 Hz
@@ -36,6 +37,18 @@ def test_every_state_reaches_every_gui_of_the_hub_and_of_the_plain_broadcast() -
         "server_cpu_percent",
         "frames_out_per_s",
     }
+
+
+def test_the_picows_broadcast_is_the_peer_on_request() -> None:
+    last = run(
+        *("--robots", "20", "--rate", "5", "--guis", "2", "--seconds", "3"),
+        *("--peer", "--peer-server", "picows"),
+    )
+    peer = last["peer"]
+    assert peer["server"] == "picows"
+    assert peer["dropped"] == 0 and peer["msgs_out_per_s"] == 2 * peer["msgs_in_per_s"] > 0
+    assert peer["msgs_per_frame"] == 1.0  # it sends each frame on as it came
+    assert last["agree"] is True
 
 
 def test_a_slow_gui_gets_the_newest_states_and_is_reported_apart() -> None:
