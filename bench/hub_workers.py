@@ -140,6 +140,11 @@ async def _serve(robots: int, full_app: bool, peer: str | None) -> None:
 
     from .hub_peer import create_peer_app, serve_picows_broadcast
 
+    if peer == "picows":  # no app: the listener serves until the process is killed
+        listener, port = await serve_picows_broadcast()
+        async with listener:
+            await _report_health(port)
+        return
     if not full_app:
         backend.app.COMPONENTS = []
     tokens = [StaticToken(token=GUI_TOKEN, name="gui", role=Role.GUI)]
@@ -150,10 +155,6 @@ async def _serve(robots: int, full_app: bool, peer: str | None) -> None:
     settings = Settings(
         tokens=tokens, db_url=f"sqlite+aiosqlite:///{os.getcwd()}/.bench-hub-{os.getpid()}.db"
     )
-    if peer == "picows":
-        _server, port = await serve_picows_broadcast()
-        await _report_health(port)
-        return
     app = create_peer_app() if peer else None
     async with running_server(settings, app=app) as server:
         if os.environ.get("BENCH_NO_GC_FREEZE") and not peer:  # the hub without its GC policy
