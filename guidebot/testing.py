@@ -14,7 +14,7 @@ from typing import Any
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
 
-__all__ = ["Recorder", "wait_until"]
+__all__ = ["Recorder", "wait_on", "wait_until"]
 
 
 class Recorder:
@@ -40,12 +40,7 @@ class Recorder:
 
     async def wait_for(self, predicate: Callable[[], bool], timeout: float = 20.0) -> None:
         """Until ``predicate()`` holds, checked after every message; TimeoutError after that."""
-        async with asyncio.timeout(timeout):
-            while not predicate():
-                self._changed.clear()
-                if predicate():
-                    return
-                await self._changed.wait()
+        await wait_on(self._changed, predicate, timeout)
 
     async def wait(
         self,
@@ -67,6 +62,17 @@ class Recorder:
         except TimeoutError:
             raise TimeoutError(f"no {type_} matching the condition within {timeout} s") from None
         return found[0]
+
+
+async def wait_on(changed: asyncio.Event, predicate: Callable[[], Any], timeout: float) -> None:
+    """Until ``predicate()`` holds, checked each time ``changed`` is set (by whoever records
+    what the predicate reads); TimeoutError after ``timeout`` seconds."""
+    async with asyncio.timeout(timeout):
+        while not predicate():
+            changed.clear()
+            if predicate():
+                return
+            await changed.wait()
 
 
 async def wait_until(condition: Callable[[], bool], timeout: float = 10.0) -> None:

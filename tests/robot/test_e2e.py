@@ -29,6 +29,7 @@ from building_sim.simulator import BuildingSimulator
 from guidebot.messages import Message
 from guidebot.site.building_config import BuildingConfig
 from guidebot.site.schema import Site
+from guidebot.testing import wait_on
 from robot_agent.agent import AgentConfig, RobotAgent
 from robot_agent.robocan import protocol as p
 
@@ -101,12 +102,7 @@ class Fleet:
 
     async def wait_for(self, predicate: Callable[[], Any], timeout: float = 60.0) -> None:
         try:
-            async with asyncio.timeout(timeout):
-                while not predicate():
-                    self.changed.clear()
-                    if predicate():
-                        return
-                    await self.changed.wait()
+            await wait_on(self.changed, predicate, timeout)
         except TimeoutError:
             raise AssertionError(f"not reached within {timeout:g} s: {self.story()}") from None
 
