@@ -1,8 +1,9 @@
 """The FastAPI application factory of the central server.
 
-``create_app(settings)`` builds nothing until the lifespan starts: then the hub, the token store
-and every component of ``COMPONENTS`` (Task Manager, Traffic Manager, BuildingInterface, ...)
-in order, torn down in reverse. Routers of ``ROUTERS`` are included by the factory.
+``create_app(settings)`` builds nothing until the lifespan starts: then the hub, the token store,
+every component of ``COMPONENTS`` (Task Manager, Traffic Manager, BuildingInterface, ...) in
+order and, with ``hub_ws_port`` set, the hub's own listener; torn down in reverse. Routers of
+``ROUTERS`` are included by the factory.
 
 To add a server module, append ONE line to the list it belongs to:
 - ``COMPONENTS``: a callable taking the app and returning an async context manager; it runs
@@ -38,6 +39,7 @@ from backend.health import ComponentState, HealthBoard
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
+from backend.hub.listener import hub_listener
 from backend.metrics import routes as metrics_routes
 from backend.metrics.component import metrics
 from backend.ratelimit import RateLimiter
@@ -117,6 +119,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             else:
                 for component in COMPONENTS:
                     await stack.enter_async_context(component(app))
+            app.state.hub_ws_port = None
+            if settings.hub_ws_port is not None:  # opened last, as uvicorn opens /ws: all is up
+                app.state.hub_ws_port = await stack.enter_async_context(
+                    hub_listener(app, settings.host, settings.hub_ws_port)
+                )
             log.info("GuideBot server ready (%d components)", len(COMPONENTS))
             yield
 

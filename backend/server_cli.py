@@ -46,6 +46,13 @@ def refuse_broken_site(path: Path) -> None:
     help="redis://host:port: run as one of several processes (GUIDEBOT_BROKER_URL; needs a "
     "PostgreSQL --db; docs/scaling.md).",
 )
+@click.option(
+    "--hub-ws-port",
+    type=int,
+    default=None,
+    help="Also serve the hub on this port without ASGI, for robots and modules "
+    "(GUIDEBOT_HUB_WS_PORT; docs/protocol.md).",
+)
 @click.option("--log-level", default=None, help="uvicorn log level (default info).")
 def server(
     host: str | None,
@@ -53,6 +60,7 @@ def server(
     db_url: str | None,
     site: Path | None,
     broker_url: str | None,
+    hub_ws_port: int | None,
     log_level: str | None,
 ) -> None:
     """Run the central server: hub at /ws, REST API at /api, docs at /docs, web pages at /."""
@@ -69,6 +77,7 @@ def server(
             "db_url": db_url,
             "site": site,
             "broker_url": broker_url,
+            "hub_ws_port": hub_ws_port,
             "log_level": log_level,
         }.items()
         if value is not None
@@ -80,9 +89,10 @@ def server(
     if settings.site is not None:
         refuse_broken_site(settings.site)
     app = create_app(settings)
+    listener = f", ws://{settings.host}:{settings.hub_ws_port}/ws" if settings.hub_ws_port else ""
     click.echo(
         f"GuideBot server on http://{settings.host}:{settings.port} "
-        f"(docs /docs, hub ws://{settings.host}:{settings.port}/ws)"
+        f"(docs /docs, hub ws://{settings.host}:{settings.port}/ws{listener})"
     )
     try:
         uvicorn.Server(uvicorn_config(app, settings.host, settings.port, settings.log_level)).run()

@@ -98,6 +98,9 @@ class Settings(BaseSettings):
     hub_linger_ms: float = Field(default=0.0, ge=0, le=100)
     hub_max_message_bytes: int = Field(default=1 << 20, ge=1024)
     hub_send_timeout_s: float = Field(default=10.0, gt=0, le=300)
+    # The hub's own WebSocket listener (docs/protocol.md "Connecting"): /ws without ASGI, for
+    # robots and modules; None: off, 0: any free port (tests).
+    hub_ws_port: int | None = Field(default=None, ge=0, le=65535)
     log_level: str = "info"
     # Worker processes for a large site's route tables and YAML import (0: threads only,
     # docs/server.md "Path search").

@@ -10,6 +10,7 @@ Usage (any team's tests)::
         async with running_server(settings) as server:
             server.url        # "http://127.0.0.1:<port>"
             server.ws_url     # "ws://127.0.0.1:<port>/ws"
+            server.hub_url    # the hub listener's /ws with hub_ws_port=0 set, else ws_url
             server.app.state  # hub, tokens, settings, your component's state
             server.admin_token
 
@@ -50,6 +51,17 @@ class RunningServer:
     @property
     def ws_url(self) -> str:
         return f"ws://{self.host}:{self.port}/ws"
+
+    @property
+    def hub_port(self) -> int:
+        """The port hub clients use: the hub's own listener's with ``hub_ws_port`` set, else
+        the HTTP port (the /ws route)."""
+        listener: int | None = getattr(self.app.state, "hub_ws_port", None)
+        return self.port if listener is None else listener
+
+    @property
+    def hub_url(self) -> str:
+        return f"ws://{self.host}:{self.hub_port}/ws"
 
 
 class _Server(uvicorn.Server):

@@ -36,7 +36,6 @@ benchmark; the worker processes are in bench/hub_workers.py, the peers (``--peer
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import json
 import os
 import statistics
@@ -51,7 +50,7 @@ import click
 from guidebot.benchutil import print_result
 
 from .hub_workers import GUI_TOKEN as GUI_TOKEN
-from .hub_workers import PEER_SERVERS, WARMUP_S, _log
+from .hub_workers import HUB_LISTENERS, PEER_SERVERS, WARMUP_S, _log
 from .hub_workers import _open_gui as _open_gui
 from .hub_workers import robot_name as robot_name
 from .hub_workers import robot_token as robot_token
@@ -94,18 +93,21 @@ def run_benchmark(
     full_app: bool,
     peer: str | None = None,
     slow_gui_ms: float = 0.0,
+    listener: str = "picows",
 ) -> dict[str, Any]:
-    """One run against the hub, or against the ``peer`` broadcast named (PEER_SERVERS)."""
+    """One run against the hub (its clients on the ``listener`` of HUB_LISTENERS), or against
+    the ``peer`` broadcast named (PEER_SERVERS)."""
     import psutil
 
     who = "peer" if peer else "hub"
     flags = (["--full-app"] if full_app else []) + (["--peer", peer] if peer else [])
+    flags += [] if peer else ["--listener", listener]
     server = _spawn(["server", "--robots", str(robots), *flags])
     workers: list[subprocess.Popen[str]] = []
     try:
-        port = int(_expect(server, "PORT").split()[1])
-        url = f"ws://127.0.0.1:{port}/ws"
-        _log(f"{who}: server pid {server.pid} on port {port}")
+        _, port, hub_port = _expect(server, "PORT").split()
+        url = f"ws://127.0.0.1:{hub_port}/ws"
+        _log(f"{who}: server pid {server.pid} on port {port}, hub clients on {url}")
         from backend.settings import DEFAULT_ADMIN_TOKEN
 
         peer_flag = ["--peer"] if peer else []
@@ -185,6 +187,7 @@ def run_benchmark(
     ]:
         _log(f"{who} {part}: loop lag ms {health['lag_ms']}, gc {health['gc']}")
     result: dict[str, Any] = {
+        **({} if peer else {"listener": listener}),
         "robots": robots,
         "rate_hz": rate,
         "guis": guis,
@@ -259,6 +262,13 @@ def compare(ours: dict[str, Any], peer: dict[str, Any]) -> dict[str, Any]:
     help="The broadcast --peer runs: FastAPI's tutorial, or a picows (Cython) server.",
 )
 @click.option(
+    "--listener",
+    type=click.Choice(HUB_LISTENERS),
+    default="picows",
+    show_default=True,
+    help="Where the hub's clients connect: its own listener (hub_ws_port), or /ws via uvicorn.",
+)
+@click.option(
     "--rounds",
     default=1,
     show_default=True,
@@ -286,6 +296,7 @@ def hub(
     full_app: bool,
     peer: bool,
     peer_server: str,
+    listener: str,
     rounds: int,
     slow_gui_ms: float,
     servers: int | None,
@@ -296,8 +307,6 @@ def hub(
     """Hub throughput and publish-to-GUI latency over real WebSockets."""
     if robots < 1 or guis < 1 or rate <= 0 or seconds <= WARMUP_S:
         raise click.UsageError(f"need robots >= 1, guis >= 1, rate > 0, seconds > {WARMUP_S}")
-    if importlib.util.find_spec("picows") is None:
-        raise click.UsageError("bench hub needs picows: pip install -e '.[bench]'")
     if servers is not None:  # several processes on a broker: bench/hub_cluster.py
         from .hub_cluster import cluster_command
 
@@ -307,7 +316,7 @@ def hub(
     ours: list[dict[str, Any]] = []
     theirs: list[dict[str, Any]] = []
     for _ in range(rounds):
-        ours.append(run_benchmark(*args, slow_gui_ms=slow_gui_ms))
+        ours.append(run_benchmark(*args, slow_gui_ms=slow_gui_ms, listener=listener))
         if peer:
             theirs.append(run_benchmark(*args, peer=peer_server, slow_gui_ms=slow_gui_ms))
     result = median_of_runs(ours)

@@ -29,6 +29,9 @@ from guidebot.wire import encode
 PEER_SERVERS = ("fastapi", "picows")
 """The broadcasts ``--peer`` can run (bench/hub_peer.py)."""
 
+HUB_LISTENERS = ("picows", "asgi")
+"""Where the hub's clients connect: its own listener (``hub_ws_port``), or /ws through uvicorn."""
+
 __all__ = ["GUI_TOKEN", "SLOW_GUI", "WARMUP_S", "Probe", "robot_name", "robot_token"]
 
 GUI_TOKEN = "bench-gui-token"
@@ -130,9 +133,9 @@ class Probe:
 
 
 # -- worker processes ----------------------------------------------------------------------------
-async def _serve(robots: int, full_app: bool, peer: str | None) -> None:
-    """Server process (the hub, or the ``peer`` broadcast named): print the bound port, then
-    serve until killed."""
+async def _serve(robots: int, full_app: bool, peer: str | None, listener: str) -> None:
+    """Server process (the hub with its clients on ``listener``, or the ``peer`` broadcast
+    named): print the bound ports, then serve until killed."""
     import backend.app
     from backend.auth import Role
     from backend.settings import Settings, StaticToken
@@ -141,8 +144,8 @@ async def _serve(robots: int, full_app: bool, peer: str | None) -> None:
     from .hub_peer import create_peer_app, serve_picows_broadcast
 
     if peer == "picows":  # no app: the listener serves until the process is killed
-        listener, port = await serve_picows_broadcast()
-        async with listener:
+        broadcast, port = await serve_picows_broadcast()
+        async with broadcast:
             await _report_health(port)
         return
     if not full_app:
@@ -153,19 +156,22 @@ async def _serve(robots: int, full_app: bool, peer: str | None) -> None:
         for i in range(robots)
     ]
     settings = Settings(
-        tokens=tokens, db_url=f"sqlite+aiosqlite:///{os.getcwd()}/.bench-hub-{os.getpid()}.db"
+        tokens=tokens,
+        db_url=f"sqlite+aiosqlite:///{os.getcwd()}/.bench-hub-{os.getpid()}.db",
+        hub_ws_port=0 if listener == "picows" and not peer else None,
     )
     app = create_peer_app() if peer else None
     async with running_server(settings, app=app) as server:
         if os.environ.get("BENCH_NO_GC_FREEZE") and not peer:  # the hub without its GC policy
             server.app.state.hub.memory.enabled = False
-        await _report_health(server.port)
+        await _report_health(server.port, server.hub_port)
 
 
-async def _report_health(port: int) -> None:
-    """Print the port, follow the run's start and length from stdin, print the loop's health
-    over the measured window once the GUIs are done, then wait to be killed."""
-    print(f"PORT {port}", flush=True)
+async def _report_health(port: int, hub_port: int | None = None) -> None:
+    """Print the HTTP port and the hub clients' port, follow the run's start and length from
+    stdin, print the loop's health over the measured window once the GUIs are done, then wait
+    to be killed."""
+    print(f"PORT {port} {hub_port or port}", flush=True)
     probe = Probe()
     probe.start()
     start_at = await _read_start_time()
@@ -507,6 +513,7 @@ def _worker_main(argv: Sequence[str]) -> None:
     s.add_argument("--robots", type=int, required=True)
     s.add_argument("--full-app", action="store_true")
     s.add_argument("--peer", choices=PEER_SERVERS)
+    s.add_argument("--listener", choices=HUB_LISTENERS, default="picows")
     r = sub.add_parser("robots")
     r.add_argument("--url", required=True)
     r.add_argument("--first", type=int, required=True)
@@ -528,7 +535,7 @@ def _worker_main(argv: Sequence[str]) -> None:
     except ImportError:  # pragma: no cover - uvloop comes with uvicorn[standard]
         runner = asyncio.run
     if args.role == "server":
-        runner(_serve(args.robots, args.full_app, args.peer))
+        runner(_serve(args.robots, args.full_app, args.peer, args.listener))
     elif args.role == "robots":
         runner(_robots(args.url, args.first, args.count, args.rate, args.peer))
     else:

@@ -3,7 +3,7 @@
 In-process modules (Task Manager, Traffic Manager, ...) take ``hub.endpoint(name)``, a plain
 ``guidebot.bus.Endpoint``. Each WebSocket client is a ``RemoteClient``: a bus endpoint whose
 handlers serialise the message (once per message, shared by every subscriber) into the client's
-bounded ``Outbox``. A writer task per client drains it (see backend/hub/websocket.py), so a slow
+bounded ``Outbox``. A writer task per client drains it (see backend/hub/session.py), so a slow
 or dead client only ever fills its own queue.
 
 This module knows nothing about FastAPI: the transport feeds ``Hub.receive`` with raw frames and
@@ -240,7 +240,7 @@ class Hub:
         self.linger = linger
         self.streaming_s = STREAMING_S
         """A client sent a frame less than this long ago is streaming: its writer lets the event
-        loop turn once more before it takes its batch (backend/hub/websocket.py)."""
+        loop turn once more before it takes its batch (backend/hub/session.py)."""
         self.max_message_bytes = max_message_bytes
         self.refused = 0
         self.overflow_disconnects = 0

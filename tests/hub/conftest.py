@@ -27,7 +27,14 @@ TOKENS = {
 }
 
 
-def hub_settings(**overrides: Any) -> Settings:
+LISTENERS = ("asgi", "picows")
+"""Where hub clients connect: /ws through uvicorn, or the hub's own listener (hub_ws_port)."""
+
+
+def hub_settings(listener: str = "asgi", **overrides: Any) -> Settings:
+    """The test tokens; with ``listener="picows"`` the hub's own listener on a free port."""
+    if listener == "picows":
+        overrides.setdefault("hub_ws_port", 0)
     return Settings(tokens=list(TOKENS.values()), **overrides)
 
 
@@ -38,9 +45,15 @@ def hub_only(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv("GUIDEBOT_DB_URL", f"sqlite+aiosqlite:///{tmp_path}/hub.db")
 
 
+@pytest.fixture(params=LISTENERS)
+def listener(request: pytest.FixtureRequest) -> str:
+    """Each hub test runs over both listeners: the protocol is the same on either."""
+    return str(request.param)
+
+
 @pytest.fixture
-async def server() -> AsyncIterator[RunningServer]:
-    async with running_server(hub_settings()) as running:
+async def server(listener: str) -> AsyncIterator[RunningServer]:
+    async with running_server(hub_settings(listener)) as running:
         yield running
 
 
@@ -54,7 +67,7 @@ async def connect(server: RunningServer) -> AsyncIterator[ClientFactory]:
 
     async def factory(who: str, **kwargs: Any) -> HubClient:
         token = TOKENS[who].token if who in TOKENS else who
-        client = HubClient(server.ws_url, token, **kwargs)
+        client = HubClient(server.hub_url, token, **kwargs)
         await client.start()
         clients.append(client)
         return client
@@ -69,9 +82,9 @@ async def never_reading_client(server: RunningServer, token: str) -> ClientConne
     welcome, the kernel buffers between it and the server fill and the server's sends block."""
     sock = socket.socket()
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.connect(("127.0.0.1", server.port))
+    sock.connect(("127.0.0.1", server.hub_port))
     client = await websockets.connect(
-        server.ws_url,
+        server.hub_url,
         sock=sock,
         additional_headers={"Authorization": f"Bearer {token}"},
         proxy=None,

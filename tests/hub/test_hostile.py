@@ -101,8 +101,8 @@ async def test_panels_and_displays_publish_nothing_but_control_messages(
     await panel.sync()  # ping still answered
 
 
-async def test_robot_task_requests_are_rate_limited_on_the_hub() -> None:
-    settings = hub_settings(task_requests_per_minute=1.0, task_request_burst=2)
+async def test_robot_task_requests_are_rate_limited_on_the_hub(listener: str) -> None:
+    settings = hub_settings(listener, task_requests_per_minute=1.0, task_request_burst=2)
     async with running_server(settings) as server:
         async for ws in authenticated(server, "R1"):
             for i in range(3):
@@ -167,13 +167,15 @@ async def test_one_client_flooding_garbage_does_not_stall_the_others(
     assert during and statistics.median(during) < max(0.5, 20 * statistics.median(quiet))
 
 
-async def test_a_client_that_never_reads_is_dropped_after_the_send_timeout() -> None:
-    settings = hub_settings(hub_send_timeout_s=1.0)
+async def test_a_client_that_never_reads_is_dropped_after_the_send_timeout(
+    listener: str,
+) -> None:
+    settings = hub_settings(listener, hub_send_timeout_s=1.0)
     async with running_server(settings) as server:
         silent = await never_reading_client(server, TOKENS["op"].token)
         await silent.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["say"]}}))
         hub = server.app.state.hub
-        async with HubClient(server.ws_url, TOKENS["R1"].token) as r1:
+        async with HubClient(server.hub_url, TOKENS["R1"].token) as r1:
             await r1.sync()
             text = "x" * 65536
             for i in range(150):  # 10 MB, far below the 4096-message queue bound

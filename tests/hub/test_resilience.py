@@ -25,8 +25,8 @@ from .test_routing import Inbox
 WAIT = 15.0
 
 
-async def test_a_client_that_never_reads_does_not_slow_the_others() -> None:
-    settings = hub_settings(hub_queue_size=64, hub_coalesce_after=16)
+async def test_a_client_that_never_reads_does_not_slow_the_others(listener: str) -> None:
+    settings = hub_settings(listener, hub_queue_size=64, hub_coalesce_after=16)
     async with running_server(settings) as server:
         # The slow client: a tiny receive buffer, and it never reads after subscribing.
         slow = await never_reading_client(server, TOKENS["op"].token)
@@ -35,8 +35,8 @@ async def test_a_client_that_never_reads_does_not_slow_the_others() -> None:
         assert orjson.loads(await asyncio.wait_for(slow.recv(), WAIT))["type"] == "pong"
 
         async with (
-            HubClient(server.ws_url, TOKENS["gui"].token) as gui,
-            HubClient(server.ws_url, TOKENS["R1"].token) as r1,
+            HubClient(server.hub_url, TOKENS["gui"].token) as gui,
+            HubClient(server.hub_url, TOKENS["R1"].token) as r1,
         ):
             inbox = Inbox()
             gui.subscribe("say", inbox)
@@ -79,15 +79,17 @@ def _recorder(app: FastAPI) -> contextlib.AbstractAsyncContextManager[None]:
 
 
 async def test_clients_reconnect_resubscribe_and_flush_after_server_restart(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, listener: str
 ) -> None:
     monkeypatch.setattr(backend.app, "COMPONENTS", [_recorder])
-    settings = hub_settings()
+    # The second server comes back on the ports of the first: the clients keep their URL.
+    fixed = {"hub_ws_port": _free_port()} if listener == "picows" else {}
+    settings = hub_settings(listener, **fixed)
     fast = {"backoff_initial": 0.05, "backoff_max": 0.5}
     async with running_server(settings) as first:
         port = first.port
-        gui = HubClient(first.ws_url, TOKENS["gui"].token, **fast)  # type: ignore[arg-type]
-        r1 = HubClient(first.ws_url, TOKENS["R1"].token, **fast)  # type: ignore[arg-type]
+        gui = HubClient(first.hub_url, TOKENS["gui"].token, **fast)  # type: ignore[arg-type]
+        r1 = HubClient(first.hub_url, TOKENS["R1"].token, **fast)  # type: ignore[arg-type]
         await gui.start()
         await r1.start()
         resynchronised: list[int] = []
@@ -163,8 +165,9 @@ class Blackhole:
                 await writer.drain()
 
 
-async def test_heartbeat_detects_a_silent_link_and_reconnects() -> None:
-    async with running_server(hub_settings()) as server, Blackhole(server.port) as relay:
+async def test_heartbeat_detects_a_silent_link_and_reconnects(listener: str) -> None:
+    settings = hub_settings(listener)
+    async with running_server(settings) as server, Blackhole(server.hub_port) as relay:
         client = HubClient(
             f"ws://127.0.0.1:{relay.port}/ws",
             TOKENS["R1"].token,
@@ -227,7 +230,7 @@ async def test_offline_queue_keeps_the_newest_state_and_drops_the_oldest(
 async def gui_hearing_say(server: Any) -> AsyncIterator[Any]:
     """A plain WebSocket GUI subscribed to "say", once the hub has applied the subscription."""
     headers = {"Authorization": f"Bearer {TOKENS['gui'].token}"}
-    async with websockets.connect(server.ws_url, additional_headers=headers) as gui:
+    async with websockets.connect(server.hub_url, additional_headers=headers) as gui:
         assert orjson.loads(await gui.recv())["type"] == "welcome"
         await gui.send(orjson.dumps({"type": "subscribe", "payload": {"patterns": ["say"]}}))
         await gui.send(orjson.dumps({"type": "ping", "id": "p"}))
@@ -235,13 +238,13 @@ async def gui_hearing_say(server: Any) -> AsyncIterator[Any]:
         yield gui
 
 
-async def test_frames_carry_what_is_queued_and_a_lone_message_leaves_alone() -> None:
+async def test_frames_carry_what_is_queued_and_a_lone_message_leaves_alone(listener: str) -> None:
     """No linger by default: what queued while the writer waited for its turn leaves in one
     array frame; a message to an idle client leaves at once as a plain object."""
-    async with running_server(hub_settings()) as server:
+    async with running_server(hub_settings(listener)) as server:
         async with gui_hearing_say(server) as gui:
             robot = {"Authorization": f"Bearer {TOKENS['R1'].token}"}
-            async with websockets.connect(server.ws_url, additional_headers=robot) as r1:
+            async with websockets.connect(server.hub_url, additional_headers=robot) as r1:
                 await r1.recv()  # welcome
                 burst = [{"type": "say", "payload": {"text": str(i)}} for i in range(50)]
                 await r1.send(orjson.dumps(burst))  # one frame in: 50 messages queued at once
@@ -255,11 +258,13 @@ async def test_frames_carry_what_is_queued_and_a_lone_message_leaves_alone() -> 
                 assert server.app.state.hub.clients["gui"].stats()["frames_sent"] == 4
 
 
-async def test_a_streaming_client_gets_what_is_routed_in_the_next_turn_in_the_same_frame() -> None:
+async def test_a_streaming_client_gets_what_is_routed_in_the_next_turn_in_the_same_frame(
+    listener: str,
+) -> None:
     """A client sent a frame in the last ``streaming_s`` is streaming: its writer lets the loop
     turn once before taking its batch, so a message routed in that turn rides along. An idle
     client's message leaves at once, alone."""
-    async with running_server(hub_settings()) as server:
+    async with running_server(hub_settings(listener)) as server:
         hub = server.app.state.hub
         say = hub.endpoint("announcer")
         loop = asyncio.get_running_loop()

@@ -3,7 +3,6 @@ processes over real WebSockets on loopback (picows clients), every state counted
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from typing import Any
 
@@ -60,13 +59,3 @@ def test_a_slow_gui_gets_the_newest_states_and_is_reported_apart() -> None:
     assert slow["read_delay_ms"] == 300
     # It reads about 3 frames a second: fewer frames than states, each robot's newest kept.
     assert slow["frames"] < slow["received"] + slow["superseded"]
-
-
-def test_without_picows_it_says_which_extra_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
-    real = importlib.util.find_spec
-    monkeypatch.setattr(
-        importlib.util, "find_spec", lambda name, *a: None if name == "picows" else real(name, *a)
-    )
-    result = CliRunner().invoke(bench_hub, ["--robots", "2", "--json"])
-    assert result.exit_code == 2
-    assert "bench hub needs picows: pip install -e '.[bench]'" in result.output
