@@ -72,6 +72,17 @@ class _Server(uvicorn.Server):
         yield
 
 
+async def _serve(server: uvicorn.Server) -> None:
+    """uvicorn exits (SystemExit) when its start fails: a SystemExit in a task ends the whole
+    event loop, the test's and the servers' cleanup with it; make it a plain error."""
+    try:
+        await server.serve()
+    except SystemExit as exc:
+        raise RuntimeError(
+            f"uvicorn stopped before it started (exit {exc.code}): see its log"
+        ) from None
+
+
 @contextlib.asynccontextmanager
 async def running_server(
     settings: Settings | None = None,
@@ -84,7 +95,7 @@ async def running_server(
     settings = settings if settings is not None else Settings()
     app = app if app is not None else create_app(settings)
     server = _Server(uvicorn_config(app, "127.0.0.1", port))
-    task = asyncio.create_task(server.serve(), name="uvicorn")
+    task = asyncio.create_task(_serve(server), name="uvicorn")
     loop = asyncio.get_running_loop()
     deadline = loop.time() + start_timeout
     while not server.started:

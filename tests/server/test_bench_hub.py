@@ -23,6 +23,7 @@ def run(*args: str) -> dict[str, Any]:
 
 def test_every_state_reaches_every_gui_of_the_hub_and_of_the_plain_broadcast() -> None:
     last = run("--robots", "20", "--rate", "5", "--guis", "2", "--seconds", "3", "--peer")
+    assert last["listener"] == "picows"  # the hub's own listener (hub_ws_port) by default
     assert last["peer"]["server"] == "fastapi"
     for result in (last, last["peer"]):
         assert result["dropped"] == 0 and result["refused"] == 0
@@ -38,11 +39,13 @@ def test_every_state_reaches_every_gui_of_the_hub_and_of_the_plain_broadcast() -
     }
 
 
-def test_the_picows_broadcast_is_the_peer_on_request() -> None:
+def test_the_picows_broadcast_is_the_peer_and_asgi_the_listener_on_request() -> None:
     last = run(
         *("--robots", "20", "--rate", "5", "--guis", "2", "--seconds", "3"),
-        *("--peer", "--peer-server", "picows"),
+        *("--peer", "--peer-server", "picows", "--listener", "asgi"),
     )
+    assert last["listener"] == "asgi"  # the hub's clients on /ws through uvicorn
+    assert last["dropped"] == 0 and last["msgs_out_per_s"] == 2 * last["msgs_in_per_s"] > 0
     peer = last["peer"]
     assert peer["server"] == "picows"
     assert peer["dropped"] == 0 and peer["msgs_out_per_s"] == 2 * peer["msgs_in_per_s"] > 0

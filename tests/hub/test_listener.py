@@ -1,0 +1,78 @@
+"""What the hub's own listener (hub_ws_port) adds to the protocol, and where both listeners must
+agree on WebSocket details the hub tests do not reach: fragments, size limits, closing."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+
+import orjson
+import pytest
+import websockets
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+from backend.testing import RunningServer, running_server
+
+from .conftest import TOKENS, hub_settings
+from .test_security import authenticated, close_of, receive
+
+WAIT = 10.0
+
+
+async def test_a_message_sent_in_several_frames_is_read_as_one(server: RunningServer) -> None:
+    async for ws in authenticated(server, "R1"):
+        await ws.send(['{"type": "ping",', ' "id": "in-parts"', "}"])
+        pong = await receive(ws)
+        assert pong["type"] == "pong" and pong["correlation_id"] == "in-parts"
+
+
+async def test_a_message_over_16_mib_closes_the_connection_with_1009(
+    server: RunningServer,
+) -> None:
+    async for ws in authenticated(server, "R1"):
+        part = " " * (4 * 1024 * 1024)
+        with contextlib.suppress(ConnectionClosed):  # it may close while we still send
+            await ws.send(["[", *[part] * 4, "]"])  # 16 MiB and 2 bytes
+        code, _ = await close_of(ws)
+        assert code == 1009
+    assert "R1" not in server.app.state.hub.clients
+
+
+async def test_a_client_that_closes_is_forgotten(server: RunningServer) -> None:
+    hub = server.app.state.hub
+    async for ws in authenticated(server, "R1"):
+        assert "R1" in hub.clients
+        await ws.close()
+        assert ws.close_code == 1000  # the listener answered the close handshake
+    for _ in range(200):
+        if "R1" not in hub.clients:
+            break
+        await asyncio.sleep(0.01)
+    assert "R1" not in hub.clients
+
+
+async def test_the_listener_serves_the_hub_at_ws_only() -> None:
+    async with running_server(hub_settings("picows")) as server:
+        with pytest.raises(InvalidStatus) as refused:
+            await websockets.connect(f"ws://127.0.0.1:{server.hub_port}/api/ws", proxy=None)
+        assert refused.value.response.status_code == 404
+        assert server.hub_port != server.port  # /ws on the HTTP port is there too
+        async with websockets.connect(server.ws_url, proxy=None) as ws:
+            code, _ = await close_of(ws)
+            assert code == 4001
+
+
+async def test_shutdown_tells_the_listener_clients_why() -> None:
+    async with running_server(hub_settings("picows")) as server:
+        headers = {"Authorization": f"Bearer {TOKENS['gui'].token}"}
+        ws = await websockets.connect(server.hub_url, additional_headers=headers, proxy=None)
+        assert orjson.loads(await asyncio.wait_for(ws.recv(), WAIT))["type"] == "welcome"
+    code, reason = await close_of(ws)
+    assert (code, reason) == (1001, "server shutting down")
+
+
+async def test_the_listener_port_is_refused_when_taken() -> None:
+    async with running_server(hub_settings("picows")) as first:
+        with pytest.raises(RuntimeError, match="stopped before it started"):
+            async with running_server(hub_settings(hub_ws_port=first.hub_port)):
+                pass
