@@ -137,7 +137,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.get("/api/health", tags=["server"])
     async def health() -> dict[str, Any]:
         """Each component's state ("degraded" when one failed) and a glance at the hub: for
-        load balancers, tests and the admin page. Always 200: read ``status``."""
+        load balancers, tests and the admin page; ``hub_ws_port`` is the hub's own listener's
+        port (null: off). Always 200: read ``status``."""
         hub: Hub = app.state.hub
         building = getattr(app.state, "building", None)
         if building is not None:
@@ -148,6 +149,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "clients": len(hub.clients),
             "endpoints": len(hub.bus.endpoint_names),
             "published": hub.bus.published,
+            "hub_ws_port": getattr(app.state, "hub_ws_port", None),
             **({"cluster": cluster} if (cluster := cluster_report(app)) else {}),
         }
 

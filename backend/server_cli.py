@@ -89,7 +89,10 @@ def server(
     if settings.site is not None:
         refuse_broken_site(settings.site)
     app = create_app(settings)
-    listener = f", ws://{settings.host}:{settings.hub_ws_port}/ws" if settings.hub_ws_port else ""
+    listener = {
+        None: "",
+        0: ", its own listener on a free port: /api/health",
+    }.get(settings.hub_ws_port, f", ws://{settings.host}:{settings.hub_ws_port}/ws")
     click.echo(
         f"GuideBot server on http://{settings.host}:{settings.port} "
         f"(docs /docs, hub ws://{settings.host}:{settings.port}/ws{listener})"

@@ -106,14 +106,17 @@ class Fleet:
                 )
 
 
-def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> None:
+def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> dict[str, Any]:
+    """The server's /api/health once it answers."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if fleet.dead():
             raise click.ClickException(f"{fleet.dead()[0].name} exited during start-up")
         try:
-            if httpx.get(f"{url}/api/health", timeout=1.0).status_code == 200:
-                return
+            answer = httpx.get(f"{url}/api/health", timeout=1.0)
+            if answer.status_code == 200:
+                health: dict[str, Any] = answer.json()
+                return health
         except httpx.HTTPError:
             pass
         time.sleep(0.2)
@@ -303,13 +306,15 @@ def demo(
         control = str(ready["control"])
         served = _site_with_ports(site, dict(ready["modules"]), folder)
         fleet.env = _server_env(panel_token, control)
-        fleet.spawn("server", "server", "--port", str(port), "--site", str(served), "--db", db)
+        # The robots connect to the hub's own listener (any free port; /api/health names it).
+        server_args = ["--port", str(port), "--hub-ws-port", "0", "--site", str(served)]
+        fleet.spawn("server", "server", *server_args, "--db", db)
         fleet.env = None
-        _wait_healthy(url, fleet)
+        hub_url = f"ws://127.0.0.1:{_wait_healthy(url, fleet)['hub_ws_port']}/ws"
         screens = []
         robot_children = set()
         for index, robot in enumerate(known[:robots]):
-            args = ["robot", "--name", robot.name, "--server", url, "--token", robot.token]
+            args = ["robot", "--name", robot.name, "--server", hub_url, "--token", robot.token]
             args += ["--time-scale", scale, "--site", str(served)]
             args += ["--gui-port", str(gui_port + index)]
             args += ["--visitor", "yes"] if visitors and scenario == "quiet" else []

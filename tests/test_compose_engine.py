@@ -73,7 +73,7 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
     wheels(engine)
     override = tmp_path / "host-network.yml"
     _host_network_override(override)
-    port, control, gui1, gui2, gui3 = free_ports(5)
+    port, hub_port, control, gui1, gui2, gui3 = free_ports(6)
     project = f"guidebot-test-{uuid.uuid4().hex[:6]}"
     env = {
         **engine,
@@ -82,6 +82,7 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
         "GUIDEBOT_WHEELS": ".cache/wheels",
         "GUIDEBOT_APT_PACKAGES": "",
         "GUIDEBOT_PORT": str(port),
+        "GUIDEBOT_HUB_WS_PORT": str(hub_port),
         "GUIDEBOT_SIM_CONTROL_PORT": str(control),
         "GUIDEBOT_GUI_PORT_R1": str(gui1),
         "GUIDEBOT_GUI_PORT_R2": str(gui2),
