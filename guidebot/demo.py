@@ -2,7 +2,8 @@
 
 The building simulator (the site's Modbus modules on free ports of 127.0.0.1, its control API
 on ``--sim-control-port``), the central server (SQLite, a copy of the site with the simulator's
-ports) and N robot agents with simulated RoboCAN hardware. It prints the URLs and tokens of
+ports, the hub's own listener on a free port) and N robot agents with simulated RoboCAN
+hardware, connected to that listener. It prints the URLs and tokens of
 every page in one block. With ``--scenario busy`` (the default) seeded simulated visitors press
 buttons, ask for tours at the visitor panel and answer "continue the tour?" (demo_visitors.py).
 

@@ -206,23 +206,23 @@ class _Connection(WSListener):
             self._release_next_turn()
 
     async def _serve(self, client: RemoteClient) -> None:
+        """Serve the client until it goes or the hub closes it; then say why, if it listens."""
         transport = self.transport
         assert transport is not None
         stall = self.listener.app.state.settings.hub_send_timeout_s
         try:
             wrote_all = await serve_client(client, self._send, self.gone.wait(), stall)
-            if client.close_code is not None and not self.gone.is_set():
-                if wrote_all:
-                    transport.send_close(
-                        WSCloseCode(client.close_code), client.close_reason.encode()
-                    )
-                    # The peer answers the close frame, then we drop the socket.
-                    with contextlib.suppress(asyncio.TimeoutError):
-                        await asyncio.wait_for(self.gone.wait(), CLOSE_SEND_TIMEOUT_S)
-                transport.disconnect(graceful=wrote_all)
-        finally:
-            if not self.gone.is_set():
-                transport.disconnect(graceful=False)
+        except BaseException:  # cancelled (shutdown ran out of time): drop the socket
+            transport.disconnect(graceful=False)
+            raise
+        if client.close_code is None or self.gone.is_set():
+            return  # the client went
+        if wrote_all:
+            transport.send_close(WSCloseCode(client.close_code), client.close_reason.encode())
+            # The peer answers the close frame, then we drop the socket.
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(self.gone.wait(), CLOSE_SEND_TIMEOUT_S)
+        transport.disconnect(graceful=wrote_all)
 
 
 class _Listener:
