@@ -68,8 +68,7 @@ class _Connection(WSListener):
         self.fragments_size = 0
         self.session: asyncio.Task[None] | None = None
         self.held: deque[bytes] = deque()
-        """Frames received while this client's replies filled ``hold_at`` of its queue."""
-        self.hold_at = 1
+        """Frames of one read waiting for their turn (reading is paused meanwhile)."""
         self.turn_taken = False
         """A frame of the current read was handed over: the others wait for their turn."""
         self.releasing = False
@@ -89,7 +88,6 @@ class _Connection(WSListener):
             transport.send_close(WSCloseCode(exc.code), exc.reason.encode())
             transport.disconnect()
             return
-        self.hold_at = max(1, self.client.outbox.maxsize // 4)
         self.session = asyncio.get_running_loop().create_task(
             self._serve(self.client), name=f"hub-listener-{self.client.name}"
         )
@@ -106,7 +104,9 @@ class _Connection(WSListener):
             transport.disconnect()
             return
         if kind not in (WSMsgType.TEXT, WSMsgType.BINARY, WSMsgType.CONTINUATION):
-            return  # pings are answered by picows; pongs need nothing
+            if frame.last_in_buffer:  # pings are answered by picows; pongs need nothing
+                self.turn_taken = False
+            return
         client = self.client
         if client is None or client.close_code is not None:
             return
@@ -153,38 +153,34 @@ class _Connection(WSListener):
     def _hand_over(self, client: RemoteClient, raw: bytes) -> None:
         """Give a frame to the hub: the first of each read at once, the others of that read
         one per turn of the event loop, so the other clients' readers and writers run between
-        them (as /ws reads one frame per turn). And while the replies to this client fill a
-        quarter of its queue, keep its frames until the writer has sent them. Reading stops
-        while frames are kept, so a flooding client is held back by TCP."""
-        if self.held or self.turn_taken or len(client.outbox) >= self.hold_at:
+        them, as /ws reads one frame per turn. Reading stops while frames wait their turn, so
+        a client flooding frames is held back by TCP."""
+        if self.held or self.turn_taken:
             self.held.append(raw)
             if not self.reading_paused and self.transport is not None:
                 self.reading_paused = True
                 self.transport.underlying_transport.pause_reading()
-            self._release_next_turn()
+            if not self.releasing:
+                self.releasing = True
+                asyncio.get_running_loop().call_soon(self._release_held)
             return
         self.turn_taken = True
         self._receive(client, raw)
 
-    def _release_next_turn(self) -> None:
-        if not self.releasing:
-            self.releasing = True
-            asyncio.get_running_loop().call_soon(self._release_held)
-
     def _release_held(self) -> None:
-        """One kept frame per turn while the client's queue has room; reading resumes once
-        none is left. A full queue waits for the writer's next send, which calls again."""
+        """Hand over the next kept frame, one per turn; reading resumes once none is left."""
         self.releasing = False
         self.turn_taken = False
         client, held = self.client, self.held
         if client is None or client.close_code is not None or self.gone.is_set():
             held.clear()
             return
-        if held and len(client.outbox) < self.hold_at:
+        if held:
             self._receive(client, held.popleft())
-            if held and len(client.outbox) < self.hold_at:
-                self._release_next_turn()
-        if not held and self.reading_paused and self.transport is not None:
+        if held:
+            self.releasing = True
+            asyncio.get_running_loop().call_soon(self._release_held)
+        elif self.reading_paused and self.transport is not None:
             self.reading_paused = False
             self.transport.underlying_transport.resume_reading()
 
@@ -202,8 +198,6 @@ class _Connection(WSListener):
         if transport is None or self.gone.is_set():
             raise ConnectionResetError("the client is gone")
         transport.send(WSMsgType.TEXT, frame)
-        if self.held:
-            self._release_next_turn()
 
     async def _serve(self, client: RemoteClient) -> None:
         """Serve the client until it goes or the hub closes it; then say why, if it listens."""
