@@ -1,8 +1,9 @@
 """The hub's own WebSocket listener on ``hub_ws_port``: the /ws protocol without ASGI.
 
 uvicorn hands every frame to the app through ASGI: a parse, a queue, a task switch to the
-route's reader, Starlette's wrappers, and the same again for every frame sent. That is about
-0.6 ms of a 1 ms median at 1000 robots x 5 Hz, and 30 % of a core. This listener (picows, a
+route's reader, Starlette's wrappers, and the same again for every frame sent. At 1000 robots x
+5 Hz that is about 0.3 ms of the median and a quarter of the server's CPU (docs/protocol.md
+"Measured"). This listener (picows, a
 WebSocket server written in Cython) hands each received frame to ``Hub.receive`` from the
 callback that parsed it and writes each batch straight to the socket; admission, batching,
 the stall watchdog and the close codes are session.py's, the same as /ws. Robots, modules and
@@ -10,7 +11,7 @@ integrators that can reach the port use it; web pages keep /ws on the HTTP port.
 
 Differences a client can see (docs/protocol.md "Connecting"): only the path /ws is served (any
 other path: HTTP 404); a frame or message over 16 MiB closes with 1009; a dead peer is found by
-a ping after 20 s of silence, answered within 20 s (as uvicorn's defaults).
+a ping after 20 s of silence, answered within 20 s (uvicorn's figures).
 """
 
 from __future__ import annotations
