@@ -133,7 +133,7 @@ class _Connection(WSListener):
         """A message sent in several frames: keep the parts until the final one."""
         starts = frame.msg_type is not WSMsgType.CONTINUATION
         if starts == (self.fragments is not None):  # a new message inside one, or a stray part
-            transport.send_close(WSCloseCode.PROTOCOL_ERROR, b"unexpected continuation frame")
+            transport.send_close(WSCloseCode.PROTOCOL_ERROR, b"fragments out of order")
             transport.disconnect()
             return
         if starts:
