@@ -9,6 +9,7 @@ import contextlib
 import orjson
 import pytest
 import websockets
+from picows import WSFrame, WSListener, WSMsgType, WSTransport, ws_connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from backend.testing import RunningServer, running_server
@@ -17,6 +18,15 @@ from .conftest import TOKENS, hub_settings
 from .test_security import authenticated, close_of, receive
 
 WAIT = 10.0
+
+
+async def forgotten(server: RunningServer, name: str) -> None:
+    """The hub lets go of a client a moment after its socket ends."""
+    for _ in range(200):
+        if name not in server.app.state.hub.clients:
+            return
+        await asyncio.sleep(0.01)
+    raise AssertionError(f"{name} still attached")
 
 
 async def test_a_message_sent_in_several_frames_is_read_as_one(server: RunningServer) -> None:
@@ -44,11 +54,7 @@ async def test_a_client_that_closes_is_forgotten(server: RunningServer) -> None:
         assert "R1" in hub.clients
         await ws.close()
         assert ws.close_code == 1000  # the listener answered the close handshake
-    for _ in range(200):
-        if "R1" not in hub.clients:
-            break
-        await asyncio.sleep(0.01)
-    assert "R1" not in hub.clients
+    await forgotten(server, "R1")
 
 
 async def test_the_listener_serves_the_hub_at_ws_only() -> None:
@@ -76,3 +82,20 @@ async def test_the_listener_port_is_refused_when_taken() -> None:
         with pytest.raises(RuntimeError, match="stopped before it started"):
             async with running_server(hub_settings(hub_ws_port=first.hub_port)):
                 pass
+
+
+async def test_fragments_out_of_order_close_the_connection_with_1002() -> None:
+    closes: list[tuple[int, bytes]] = []
+
+    class Client(WSListener):
+        def on_ws_frame(self, transport: WSTransport, frame: WSFrame) -> None:
+            if frame.msg_type is WSMsgType.CLOSE:
+                closes.append((int(frame.get_close_code()), frame.get_close_message() or b""))
+
+    async with running_server(hub_settings("picows")) as server:
+        headers = {"Authorization": f"Bearer {TOKENS['R1'].token}"}
+        transport, _ = await ws_connect(Client, server.hub_url, extra_headers=headers)
+        transport.send(WSMsgType.CONTINUATION, b'"a part of nothing"')  # no message to continue
+        await asyncio.wait_for(transport.wait_disconnected(), WAIT)
+        assert closes == [(1002, b"fragments out of order")]
+        await forgotten(server, "R1")
