@@ -171,6 +171,7 @@ def url_block(
     control: str,
     scenario: str,
     seed: int,
+    hub_url: str,
 ) -> str:
     """Every page's URL and token, in one short block."""
     lines = [
@@ -181,6 +182,7 @@ def url_block(
         f"  site editor    {url}/config/         admin token {admin}",
         *(f"  robot {n:<8} {s}   touch screen (robot token {t})" for n, t, s in screens),
         f"  API docs       {url}/docs   metrics {url}/metrics (admin token)",
+        f"  hub            {hub_url}   the robots' link (pages: /ws on {url})",
         f"  building sim   {control}/state",
     ]
     if scenario == "busy":
@@ -323,7 +325,7 @@ def demo(
             robot_children.add(robot.name)
             fleet.spawn(robot.name, *args)
             screens.append((robot.name, robot.token, f"http://127.0.0.1:{gui_port + index}"))
-        click.echo(url_block(url, admin, panel_token, screens, control, scenario, seed))
+        click.echo(url_block(url, admin, panel_token, screens, control, scenario, seed, hub_url))
         crowd = None
         if scenario == "busy":
             crowd = Visitors(

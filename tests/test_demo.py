@@ -87,6 +87,8 @@ async def test_busy_demo_survives_a_robot_crash_beside_a_second_fleet(tmp_path: 
         assert f"{busy.url}/admin" in text and f"{busy.url}/config" in text
         assert f"{busy.url}/visitor/#token=dev-panel-token" in text
         assert re.search(r"robot R2\s+http://127\.0\.0\.1:\d+\s+touch screen", text)
+        hub_line = re.search(r"hub\s+ws://127\.0\.0\.1:(\d+)/ws\s+the robots' link", text)
+        assert hub_line is not None, text
         busy.control = block.split()[-1].removesuffix("/state")
         await quiet.wait_line(r"building sim\s+http", quiet.out)
         assert busy.control not in "\n".join(quiet.out)  # two simulators, two control ports
@@ -116,7 +118,7 @@ async def test_busy_demo_survives_a_robot_crash_beside_a_second_fleet(tmp_path: 
                 await asyncio.sleep(0.1)
             assert robot["online"]
             health = (await http.get("/api/health")).json()
-            assert health["hub_ws_port"] > 0  # the robots are on the hub's own listener
+            assert health["hub_ws_port"] == int(hub_line[1])  # the robots' listener, printed
         async with httpx.AsyncClient(timeout=10) as http:
             assert (await http.get(f"{quiet.url}/api/health")).status_code == 200
 
