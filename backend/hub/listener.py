@@ -49,6 +49,7 @@ MAX_MESSAGE_BYTES = 16 * 1024 * 1024
 """The largest frame, or message of several frames, the listener reads (uvicorn's limit on /ws)."""
 
 _PING_AFTER_S = 20.0
+_DATA = (WSMsgType.TEXT, WSMsgType.BINARY, WSMsgType.CONTINUATION)
 
 
 class _Connection(WSListener):
@@ -72,8 +73,6 @@ class _Connection(WSListener):
         """Frames of one read waiting for their turn (reading is paused meanwhile)."""
         self.turn_taken = False
         """A frame of the current read was handed over: the others wait for their turn."""
-        self.releasing = False
-        self.reading_paused = False
 
     # -- picows callbacks (on the event loop, one frame at a time) ---------------------------
     def on_ws_connected(self, transport: WSTransport) -> None:
@@ -104,17 +103,13 @@ class _Connection(WSListener):
                 transport.send_close(code if code != WSCloseCode.NO_INFO else WSCloseCode.OK)
             transport.disconnect()
             return
-        if kind not in (WSMsgType.TEXT, WSMsgType.BINARY, WSMsgType.CONTINUATION):
-            if frame.last_in_buffer:  # pings are answered by picows; pongs need nothing
-                self.turn_taken = False
-            return
         client = self.client
-        if client is None or client.close_code is not None:
-            return
-        if kind is WSMsgType.CONTINUATION or not frame.fin:
-            self._gather(transport, frame)
-        else:
-            self._hand_over(client, frame.get_payload_as_bytes())
+        if kind in _DATA and client is not None and client.close_code is None:
+            if kind is WSMsgType.CONTINUATION or not frame.fin:
+                self._gather(transport, frame)
+            else:
+                self._hand_over(client, frame.get_payload_as_bytes())
+        # (pings are answered by picows; pongs need nothing)
         if frame.last_in_buffer:
             self.turn_taken = False  # the next read's first frame is handed over at once
 
@@ -156,33 +151,28 @@ class _Connection(WSListener):
         one per turn of the event loop, so the other clients' readers and writers run between
         them, as /ws reads one frame per turn. Reading stops while frames wait their turn, so
         a client flooding frames is held back by TCP."""
-        if self.held or self.turn_taken:
-            self.held.append(raw)
-            if not self.reading_paused and self.transport is not None:
-                self.reading_paused = True
-                self.transport.underlying_transport.pause_reading()
-            if not self.releasing:
-                self.releasing = True
-                asyncio.get_running_loop().call_soon(self._release_held)
+        if not (self.held or self.turn_taken):
+            self.turn_taken = True
+            self._receive(client, raw)
             return
-        self.turn_taken = True
-        self._receive(client, raw)
+        if not self.held:  # the first to wait: stop reading; one release runs per turn
+            assert self.transport is not None
+            self.transport.underlying_transport.pause_reading()
+            asyncio.get_running_loop().call_soon(self._release_held)
+        self.held.append(raw)
 
     def _release_held(self) -> None:
-        """Hand over the next kept frame, one per turn; reading resumes once none is left."""
-        self.releasing = False
+        """Hand over the next kept frame; again next turn while any are left, else read on.
+        (A release is scheduled exactly while frames are kept.)"""
         self.turn_taken = False
         client, held = self.client, self.held
         if client is None or client.close_code is not None or self.gone.is_set():
-            held.clear()
+            held.clear()  # closing: nothing more is read
             return
+        self._receive(client, held.popleft())
         if held:
-            self._receive(client, held.popleft())
-        if held:
-            self.releasing = True
             asyncio.get_running_loop().call_soon(self._release_held)
-        elif self.reading_paused and self.transport is not None:
-            self.reading_paused = False
+        elif self.transport is not None:
             self.transport.underlying_transport.resume_reading()
 
     def _receive(self, client: RemoteClient, raw: bytes) -> None:
