@@ -9,9 +9,10 @@ Last line: {"destination_lookup_ms", "any_pair_path_ms", "any_pair_path_cpu_ms",
 destination_lookup_ms: a robot's position (any node) to a site destination (point of interest,
 charging station, wait point), the queries robots make: a walk down a distance field
 precomputed when the site is built (a table lookup, not a search). any_pair_path_ms: between
-two random nodes, the elevator transit read or the A* search (landmark heuristic), in wall
-and in CPU time (the CPU figure is what a preempting neighbour process does not change).
-build_s: SiteGraph construction (ALT landmarks, elevator stops' distances, the destinations'
+two random nodes, the elevator transit read or the search of one floor (SciPy's Dijkstra,
+guidebot/site/floor_paths.py), in wall and in CPU time (the CPU figure is what a preempting
+neighbour process does not change).
+build_s: SiteGraph construction (landmarks, elevator stops' distances, the destinations'
 distance fields) in this process; build_workers_s: the same as the server builds it, the tables
 in two worker processes (backend/site/graph_build.py). With ``--peer``, networkx (building its
 DiGraph, bidirectional Dijkstra per query) runs the same queries interleaved with ours, and
@@ -344,7 +345,7 @@ def main(
             f"{queries} queries"
         )
         click.echo(
-            f"path between any two nodes (elevator transit or A* with landmarks): "
+            f"path between any two nodes (elevator transit or a search of one floor): "
             f"{percentiles(any_pair)} ms, CPU {percentiles(any_pair_cpu)} ms"
         )
         click.echo(

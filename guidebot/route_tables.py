@@ -1,4 +1,4 @@
-"""The route graph's precomputed tables (ALT landmarks, elevator-stop distances, destination
+"""The route graph's precomputed tables (landmarks, elevator-stop distances, destination
 distance fields): many Dijkstra searches over one topology, independent of each other.
 
 They are pure functions of integer arrays, so a server can compute them in other processes
@@ -68,7 +68,7 @@ class Topology:
 
 @dataclass(frozen=True)
 class TablePlan:
-    """What to compute: ``landmarks`` ALT landmarks, both distance fields of each elevator
+    """What to compute: ``landmarks`` landmarks, both distance fields of each elevator
     stop in ``stops`` and the field to each node of ``goals`` (all as node indexes)."""
 
     topology: Topology

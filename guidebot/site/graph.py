@@ -2,29 +2,29 @@
 
 Edges come from the site (two-way unless one-way); each elevator adds edges between its stops
 costing its travel time at a nominal speed. Paths to the site's usual destinations walk down a
-precomputed distance field; paths between any two nodes are found with A* whose heuristic is the
-larger of the straight-line bound (scaled to the shortest edge-length/straight-line ratio of
-the map) and the ALT landmark bound (triangle inequality over distances to and from a few far
-apart landmarks, Goldberg and Harrelson 2005), which cuts the nodes A* visits by an order of
-magnitude on large sites. Between nodes that only an elevator ride connects (floors apart),
+precomputed distance field. Between nodes that only an elevator ride connects (floors apart),
 the path is read, not searched: distances to and from every elevator stop are kept, the best
 stop is the minimum of (start to stop) + (stop to goal), and both halves are walked down those
-distance fields (transit nodes; exact, a fraction of a millisecond). Lengths are exact sums of
-edge costs; round them only for display. Building takes seconds on a 10 000-node site, nearly
-all of it the tables (guidebot/route_tables.py): the server builds the structure in a thread
-(``tables=False``), has ``plan()`` computed in worker processes, ``install``s the answer and
-swaps (backend/site/graph_build.py).
+distance fields (transit nodes; exact, a fraction of a millisecond). Between two nodes of one
+floor, SciPy's compiled Dijkstra searches that floor alone (guidebot/site/floor_paths.py),
+stopped at an upper bound of the answer: the best way through an elevator stop (riding up
+and back might be shorter) or the best detour through a landmark, d(start, L) + d(L, goal),
+whichever is smaller. Lengths are exact sums of edge costs; round them only for display.
+Building takes seconds on a 10 000-node site, nearly all of it the tables
+(guidebot/route_tables.py): the server builds the structure in a thread (``tables=False``),
+has ``plan()`` computed in worker processes, ``install``s the answer and swaps
+(backend/site/graph_build.py).
 """
 
 from __future__ import annotations
 
-import heapq
 import math
 from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from guidebot.route_tables import TablePlan, Tables, Topology, compute_tables, dijkstra
+from guidebot.site.floor_paths import FloorPaths
 from guidebot.site.schema import Site
 from guidebot.site.steps import PathStep
 from guidebot.site.validate import cabin_through_ways
@@ -33,9 +33,11 @@ __all__ = ["NoPath", "PathResult", "PathStep", "SiteGraph", "UnknownNode"]
 
 NOMINAL_SPEED_MPS = 0.7
 LANDMARKS = 12
-"""Landmarks of the ALT heuristic (each costs two Dijkstra searches at build time)."""
-ACTIVE_LANDMARKS = 4
-"""Landmarks used per query: those giving the best bound at the start."""
+"""Landmarks whose distances bound a floor search from above (each costs two Dijkstra searches
+at build time)."""
+UPPER_BOUND_SLACK = 1e-9
+"""Relative margin on a floor search's upper bound: a bound summed in another order than the
+path may come out a rounding error below the path's own length."""
 
 
 class NoPath(LookupError):
@@ -86,22 +88,17 @@ class SiteGraph:
                 self.passing.add(n.id)
         self.adj: dict[str, list[tuple[str, float]]] = {n: [] for n in self.floor_of}
         self.radj: dict[str, list[tuple[str, float]]] = {n: [] for n in self.floor_of}
-        ratio = 1.0
         # A cabin node is entered only to ride: edges that make it a through-way are not used.
         through = {way.edge for way in cabin_through_ways(site)}
         for i, e in enumerate(site.edges):
             if i in through:
                 continue
-            straight = self._dist(e.a, e.b)
-            length = e.length_m if e.length_m is not None else max(straight, 1e-6)
-            if straight > 0:
-                ratio = min(ratio, length / straight)
+            length = e.length_m if e.length_m is not None else max(self._dist(e.a, e.b), 1e-6)
             self._add(e.a, e.b, length)
             if not e.one_way:
                 self._add(e.b, e.a, length)
         self.door_at = {d.node: d.id for d in site.doors}
         self.elevator_at: dict[str, str] = {}
-        shift = 0.0
         for el in site.elevators:
             cost = el.travel_time_s * nominal_speed_mps
             for s in el.stops:
@@ -110,7 +107,6 @@ class SiteGraph:
                 for t in el.stops:
                     if s.node != t.node:
                         self._add(s.node, t.node, cost)
-                        shift = max(shift, self._dist(s.node, t.node))
         self.area_at: dict[str, str] = {}
         self.area_nodes: dict[str, list[str]] = {}
         self.area_passing: dict[str, str | None] = {}
@@ -119,8 +115,6 @@ class SiteGraph:
             self.area_passing[a.id] = a.passing_place
             for node in a.nodes:
                 self.area_at[node] = a.id
-        self._h_scale = ratio
-        self._h_shift = shift * len(site.elevators)
         # Integer-indexed copies for the hot loops.
         self.names: list[str] = list(self.floor_of)
         self.index: dict[str, int] = {n: i for i, n in enumerate(self.names)}
@@ -133,6 +127,7 @@ class SiteGraph:
         self._pinned: set[str] = set()
         self.field_cache_size = 256
         self._component = self._floor_components(set(self.elevator_at))
+        self._floors = FloorPaths(self._adj_i, self._component)
         self._landmark_count = landmarks
         self._warm_goals = list(
             dict.fromkeys(
@@ -143,7 +138,7 @@ class SiteGraph:
                 if warm and n in self.index
             )
         )
-        # ALT: distance from each landmark to every node, and from every node to it.
+        # Landmarks: distance from each landmark to every node, and from every node to it.
         self._lm_from: list[array[float]] = []
         self._lm_to: list[array[float]] = []
         # Transit through elevators: distances to and from every elevator stop.
@@ -187,7 +182,7 @@ class SiteGraph:
                 raise UnknownNode(node)
 
     def shortest_path(self, start: str, goal: str) -> PathResult:
-        """A* from start to goal; raises UnknownNode or NoPath."""
+        """The shortest path from start to goal; raises UnknownNode or NoPath."""
         self.check(start, goal)
         if start == goal:
             return PathResult([start], 0.0, [self.step(start)])
@@ -197,7 +192,7 @@ class SiteGraph:
         s, g = self.index[start], self.index[goal]
         if self._transit and self._component[s] != self._component[g]:
             return self._via_transit(s, g)
-        return self._astar(s, g)
+        return self._on_floor(s, g)
 
     def _floor_components(self, stops: set[str]) -> list[int]:
         """Component of each node over the edges that are not elevator rides (undirected):
@@ -225,15 +220,24 @@ class SiteGraph:
             label += 1
         return comp
 
-    def _via_transit(self, s: int, g: int) -> PathResult:
-        """Exact path between nodes that only an elevator ride connects: the shortest is the
-        best of (s to a stop) + (that stop to g) over the stops, both read from the stops'
-        precomputed distances, then walked down and up those distance fields."""
+    def _best_stop(
+        self, s: int, g: int
+    ) -> tuple[float, tuple[int, array[float], array[float]] | None]:
+        """The shortest path from ``s`` to ``g`` through an elevator stop: its length and stop
+        (inf and None when no stop is on a way between them)."""
         best, via = math.inf, None
         for entry in self._transit:
             total = entry[1][s] + entry[2][g]
             if total < best:
                 best, via = total, entry
+        return best, via
+
+    def _via_transit(self, s: int, g: int) -> PathResult:
+        """Exact path through an elevator stop: the best of (s to a stop) + (that stop to g)
+        over the stops, both read from the stops' precomputed distances, then walked down and
+        up those distance fields. Exact between nodes that only an elevator ride connects:
+        every path between them passes a stop."""
+        best, via = self._best_stop(s, g)
         if via is None:
             raise NoPath(f"no path from {self.names[s]} to {self.names[g]}")
         stop, to_stop, from_stop = via
@@ -242,6 +246,26 @@ class SiteGraph:
         second.reverse()
         nodes = [self.names[i] for i in first + second[1:]]
         return PathResult(nodes, best, [self.step(n) for n in nodes])
+
+    def _on_floor(self, s: int, g: int) -> PathResult:
+        """Between two nodes of one floor: the floor's own shortest path, unless riding an
+        elevator is shorter (a corridor closed off on this floor). The floor search stops at
+        the smaller of the two upper bounds, the best transit and the landmarks' detour."""
+        via_stop, _ = self._best_stop(s, g)
+        detour = min(
+            (
+                to_lm[s] + from_lm[g]
+                for from_lm, to_lm in zip(self._lm_from, self._lm_to, strict=True)
+            ),
+            default=math.inf,
+        )
+        bound = min(via_stop, detour)
+        found = self._floors.search(s, g, bound * (1 + UPPER_BOUND_SLACK) + UPPER_BOUND_SLACK)
+        if found is None or found[1] > via_stop:
+            return self._via_transit(s, g)
+        path, length = found
+        nodes = [self.names[i] for i in path]
+        return PathResult(nodes, length, [self.step(n) for n in nodes])
 
     def _walk(
         self, s: int, g: int, field: array[float], adj: list[list[tuple[int, float]]]
@@ -266,79 +290,6 @@ class SiteGraph:
             path.append(best)
             node = best
         return path
-
-    def _alt_bounds(self, s: int, g: int) -> list[tuple[array[float], array[float], float, float]]:
-        """The ACTIVE_LANDMARKS landmarks with the best lower bound from ``s`` to ``g``, as
-        (from landmark, to landmark, cost landmark->g, cost g->landmark)."""
-        scored = []
-        for from_lm, to_lm in zip(self._lm_from, self._lm_to, strict=True):
-            lg, gl = from_lm[g], to_lm[g]
-            bound = 0.0
-            if lg != math.inf and from_lm[s] != math.inf:
-                bound = lg - from_lm[s]
-            if to_lm[s] != math.inf and gl != math.inf:
-                bound = max(bound, to_lm[s] - gl)
-            scored.append((bound, from_lm, to_lm, lg, gl))
-        scored.sort(key=lambda t: t[0], reverse=True)
-        return [(f, t, lg, gl) for _, f, t, lg, gl in scored[:ACTIVE_LANDMARKS]]
-
-    def _astar(self, s: int, g: int) -> PathResult:
-        """A* over integer node indexes (targets without a precomputed distance field).
-
-        The heuristic is computed once per node: on grid-like floors every node of the
-        rectangle between start and goal is nearly on a shortest path, so the cost per node,
-        not their count, decides the time."""
-        xs, ys, adj = self._xs, self._ys, self._adj_i
-        n = len(xs)
-        gx, gy = xs[g], ys[g]
-        scale, shift = self._h_scale, self._h_shift
-        hypot, pop, push = math.hypot, heapq.heappop, heapq.heappush
-        inf = math.inf
-        active = self._alt_bounds(s, g)
-        heur = [-1.0] * n
-
-        def bound(v: int) -> float:
-            # A bound of +inf (the landmark reaches v but not g, or g reaches it but v does
-            # not) is exact: v cannot reach g.
-            h = hypot(xs[v] - gx, ys[v] - gy) * scale - shift
-            for from_lm, to_lm, lg, gl in active:
-                x = lg - from_lm[v]
-                if x > h:
-                    h = x
-                x = to_lm[v] - gl
-                if x > h:
-                    h = x
-            h = h if h > 0 else 0.0
-            heur[v] = h
-            return h
-
-        best = [inf] * n
-        came = [-1] * n
-        best[s] = 0.0
-        # Ties on f go to the node farther along (-g first): on grid-like maps many nodes
-        # share an f, and taking the deepest first walks straight to the goal.
-        heap = [(bound(s), -0.0, s)]
-        while heap:
-            _, neg_cost, node = pop(heap)
-            cost_here = -neg_cost
-            if node == g:
-                break
-            if cost_here > best[node]:
-                continue
-            for nxt, cost in adj[node]:
-                ng = cost_here + cost
-                if ng < best[nxt]:
-                    best[nxt] = ng
-                    came[nxt] = node
-                    h = heur[nxt]
-                    push(heap, (ng + (h if h >= 0.0 else bound(nxt)), -ng, nxt))
-        else:
-            raise NoPath(f"no path from {self.names[s]} to {self.names[g]}")
-        path = [g]
-        while path[-1] != s:
-            path.append(came[path[-1]])
-        nodes = [self.names[i] for i in reversed(path)]
-        return PathResult(nodes, best[g], [self.step(n) for n in nodes])
 
     def step(self, node: str) -> PathStep:
         x, y = self.xy[node]

@@ -2,7 +2,7 @@
 
 The one definition of ``PathStep``: the site graph builds it, the ``path`` payload carries it
 (pydantic validates it as a dataclass field), and the robot's navigation follows it. A plain
-frozen dataclass with slots, because A* builds one per node of every path it returns.
+frozen dataclass with slots, because the graph builds one per node of every path it returns.
 """
 
 from __future__ import annotations

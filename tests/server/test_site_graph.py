@@ -1,5 +1,6 @@
 """Any-pair paths of the site graph are exact: against a plain Dijkstra, on floors joined only
-by elevators (the transit search) and within a floor (A* with landmarks)."""
+by elevators (the transit search) and within a floor (the floor search, riding up and back
+when that is shorter)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import random
 import pytest
 
 from guidebot.site import validate_site
+from guidebot.site.floor_paths import FloorPaths
 from guidebot.site.graph import NoPath, SiteGraph
 from guidebot.site.synthetic import synthetic_site
 
@@ -83,3 +85,54 @@ def test_a_node_no_ride_reaches_is_no_path_from_another_floor() -> None:
     with pytest.raises(NoPath):
         graph.shortest_path("island", "n0_1_1")
     assert graph.shortest_path("n0_0_0", "n1_1_1").nodes[-1] == "n1_1_1"
+
+
+def test_a_path_within_a_floor_rides_up_and_back_when_that_is_shorter() -> None:
+    """F0's corridors are long, F1's short: from one lift's landing to the other's, the way
+    over F1 (two rides) beats F0's own corridors, and the floor search must not keep F0's."""
+    doc = synthetic_site(nodes=50, robots=1, areas=1, pois=2, floors=2).model_dump(mode="json")
+    for edge in doc["edges"]:
+        if edge["a"].startswith("n0_") and edge["b"].startswith("n0_"):
+            edge["length_m"] = 100.0
+    graph = SiteGraph(validate_site(doc), warm=False)
+    start, goal = "n0_0_0", "n0_4_4"  # the landings of lift0 and lift1 on F0
+    path = graph.shortest_path(start, goal)
+    assert path.length_m == pytest.approx(reference_length(graph, start, goal), rel=1e-12)
+    assert {graph.floor_of[n] for n in path.nodes} == {"F0", "F1"}
+    assert walked_length(graph, path.nodes) == pytest.approx(path.length_m, rel=1e-12)
+    # Two nodes one corridor apart stay on their floor.
+    near = graph.shortest_path("n0_0_0", "n0_0_1")
+    assert near.nodes == ["n0_0_0", "n0_0_1"] and near.length_m == 100.0
+
+
+def test_one_floor_without_elevators_and_a_one_way_street() -> None:
+    """No elevator (no transit bound): the search is bounded by the landmarks alone; a one-way
+    street is not walked backwards."""
+    doc = {
+        "name": "hall",
+        "floors": [{"id": "F0", "level": 0}],
+        "nodes": [{"id": k, "floor": "F0", "x": float(i), "y": 0.0} for i, k in enumerate("abcde")],
+        "edges": [
+            {"a": "a", "b": "b", "length_m": 3.0},
+            {"a": "b", "b": "c", "length_m": 2.0},
+            {"a": "c", "b": "d", "length_m": 2.0, "one_way": True},
+        ],
+    }
+    graph = SiteGraph(validate_site(doc), warm=False)
+    forward = graph.shortest_path("a", "d")
+    assert forward.nodes == ["a", "b", "c", "d"] and forward.length_m == 7.0
+    with pytest.raises(NoPath):
+        graph.shortest_path("d", "a")  # against the one-way street
+    with pytest.raises(NoPath):
+        graph.shortest_path("a", "e")  # a node no corridor reaches
+
+
+def test_the_floor_search_takes_the_shorter_of_parallel_edges_and_honours_its_limit() -> None:
+    """Sites refuse duplicate corridors, but an adjacency may still list two edges between the
+    same nodes: the matrix keeps the shorter (SciPy would add them up)."""
+    adj = [[(1, 3.0), (1, 5.0)], [(2, 2.0)], [], []]
+    floors = FloorPaths(adj, [0, 0, 0, 1])
+    assert floors.search(0, 2, math.inf) == ([0, 1, 2], 5.0)
+    assert floors.search(0, 2, 4.9) is None  # longer than the caller's bound
+    assert floors.search(2, 0, math.inf) is None  # no way back
+    assert floors.search(0, 3, math.inf) is None  # another component
