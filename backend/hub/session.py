@@ -68,16 +68,26 @@ def admit(
     hub: Hub, auth: Authenticator, token: str | None, address: str, requested_name: str | None
 ) -> RemoteClient:
     """Sign a connection in and attach it to the hub (its welcome is queued), or raise Refused:
-    4001 unknown token, 4029 too many failures from ``address``, 4003 a name not allowed."""
+    4001 unknown token, 4029 too many failures from ``address``, 4003 a name not allowed.
+
+    Each 4001 and 4003 is logged as a warning (address and reason, never the token): the
+    failure limit per address bounds how many lines one address can cause. A 4029 (an address
+    already locked out) is logged at debug level only."""
     try:
         principal = auth.authenticate(token, address)
     except SignInRefused as exc:
-        code = CLOSE_TOO_MANY_FAILURES if exc.status_code == 429 else CLOSE_UNAUTHORIZED
-        raise Refused(code, exc.reason) from exc
+        if exc.status_code == 429:
+            log.debug("hub: sign-in refused from %s: 4029 %s", address, exc.reason)
+            raise Refused(CLOSE_TOO_MANY_FAILURES, exc.reason) from exc
+        log.warning("hub: sign-in refused from %s: 4001 %s", address, exc.reason)
+        raise Refused(CLOSE_UNAUTHORIZED, exc.reason) from exc
     try:
         name = hub.resolve_name(principal.name, principal.role, requested_name)
         return hub.attach(name, principal.role)
     except PermissionError as exc:
+        log.warning(
+            "hub: sign-in refused from %s (token of %r): 4003 %s", address, principal.name, exc
+        )
         raise Refused(CLOSE_FORBIDDEN, str(exc)) from exc
 
 

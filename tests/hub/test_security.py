@@ -79,6 +79,26 @@ async def test_unknown_token_is_refused_and_client_does_not_retry(server: Runnin
     assert refused.value.code == 4001
 
 
+async def test_refused_sign_ins_are_logged_without_the_token(
+    server: RunningServer, caplog: pytest.LogCaptureFixture
+) -> None:
+    """An operator sees who was turned away and why in the server's log, never the token."""
+    caplog.set_level(logging.WARNING, logger="backend.hub.session")
+    wrong = "wrong-token-do-not-log"
+    async with raw_socket(server.hub_url, wrong) as ws:
+        assert (await close_of(ws))[0] == 4001
+    client = HubClient(server.hub_url, TOKENS["gui"].token, name="R1")
+    with pytest.raises(HubRefused):
+        await client.start()
+    lines = [r.getMessage() for r in caplog.records if r.name == "backend.hub.session"]
+    assert len(lines) == 2, lines
+    assert lines[0] == "hub: sign-in refused from 127.0.0.1: 4001 missing or unknown bearer token"
+    assert lines[1].startswith("hub: sign-in refused from 127.0.0.1 (token of 'gui'): 4003 ")
+    assert "may only connect as 'gui'" in lines[1]
+    tokens = (wrong, TOKENS["gui"].token)
+    assert not any(token in r.getMessage() for r in caplog.records for token in tokens)
+
+
 async def test_token_in_query_string_is_accepted(server: RunningServer) -> None:
     async with raw_socket(f"{server.hub_url}?token={TOKENS['gui'].token}") as ws:
         welcome = await receive(ws)
