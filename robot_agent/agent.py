@@ -330,7 +330,9 @@ class RobotAgent(Service):
         )
         state = self.state
         assert state is not None
-        follower = SiteFollower(self.bus.endpoint("site"), c.name, self._use_site)
+        follower = SiteFollower(
+            self.bus.endpoint("site"), c.name, self._use_site, prepare=onboard_site
+        )
         await self.enter(follower)
         self.site_follower = follower
         navigator = self.navigator
@@ -352,9 +354,9 @@ class RobotAgent(Service):
         await self.hub.start()
         self.on_cleanup(self.hub.close)
 
-    def _use_site(self, site: Any) -> None:
-        """A new live site: the fallback planner and the screen's menu follow it."""
-        view = onboard_site(site)
+    def _use_site(self, view: OnboardSite) -> None:
+        """A new live site (read in a thread): the fallback planner and the screen's menu
+        follow it."""
         if self.navigator is not None:
             self.navigator.planner = view.planner
             self.navigator.plan_on_board = True  # the server's live version: plan on board

@@ -1,9 +1,17 @@
 """The robot follows the live site: ``site_changed`` from the server replaces its on-board
 site (the fallback planner and the touch screen's menu); ``site_loaded`` says which version it
-now runs (also on every connect, so a robot that was away gets the current version)."""
+now runs (also on every connect, so a robot that was away gets the current version).
+
+Validating a site and building its route graph takes from milliseconds (the demo museum) to
+seconds (a 10 000-node site), and the first one imports SciPy (about 0.3 s): done on the
+robot's event loop it would stall the loop that feeds RoboCAN's 350 ms watchdogs. So a new
+version is read in a thread, one at a time, and only the result is applied on the loop; a
+version that arrives meanwhile waits, and of several waiting only the newest is read.
+"""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import Callable
 from typing import Any
@@ -18,14 +26,34 @@ __all__ = ["SiteFollower"]
 log = logging.getLogger(__name__)
 
 
+def _read_site(payload: dict[str, Any]) -> Any:
+    """The validated ``Site`` of a site_changed payload (raises SiteInvalid)."""
+    from guidebot.site.validate import validate_site
+
+    data = dict(payload.get("site") or {})
+    # The robots' view leaves the tokens out; the schema wants one per robot.
+    data["robots"] = [{**r, "token": "x" * 8} for r in data.get("robots", [])]
+    return validate_site(data)
+
+
 class SiteFollower(Service):
-    def __init__(self, endpoint: Endpoint, robot: str, apply: Callable[[Any], None]) -> None:
-        """``apply`` receives the validated ``Site`` of each new version."""
+    def __init__(
+        self,
+        endpoint: Endpoint,
+        robot: str,
+        apply: Callable[[Any], None],
+        prepare: Callable[[Any], Any] = lambda site: site,
+    ) -> None:
+        """``prepare`` receives the validated ``Site`` of each new version, in a thread;
+        ``apply`` receives what it returns, on the event loop."""
         super().__init__()
         self.ep = endpoint
         self.robot = robot
         self.apply = apply
+        self.prepare = prepare
         self.version = 0
+        self._waiting: Message | None = None
+        self._reader: asyncio.Task[None] | None = None
 
     async def on_start(self) -> None:
         self.subscribe(self.ep, "site_changed", self._on_changed)
@@ -35,20 +63,27 @@ class SiteFollower(Service):
         self.ep.publish(SiteLoaded(robot=self.robot, version=self.version))
 
     def _on_changed(self, message: Message) -> None:
-        from guidebot.site.validate import SiteInvalid, validate_site
+        self._waiting = message
+        if self._reader is None or self._reader.done():
+            self._reader = self.spawn(self._read_waiting(), name=f"{self.robot}-site")
 
-        version = int(message.payload.get("version", 0))
-        if version == self.version:
-            return
-        data = dict(message.payload.get("site") or {})
-        # The robots' view leaves the tokens out; the schema wants one per robot.
-        data["robots"] = [{**r, "token": "x" * 8} for r in data.get("robots", [])]
-        try:
-            site = validate_site(data)
-        except SiteInvalid as exc:
-            log.error("%s: site version %d refused: %s", self.robot, version, exc)
-            return
-        self.apply(site)
-        self.version = version
-        log.info("%s: now on site version %d", self.robot, version)
-        self.announce()
+    async def _read_waiting(self) -> None:
+        from guidebot.site.validate import SiteInvalid
+
+        while (message := self._waiting) is not None:
+            self._waiting = None
+            version = int(message.payload.get("version", 0))
+            if version == self.version:
+                continue
+            try:
+                prepared = await asyncio.to_thread(self._read, message.payload)
+            except SiteInvalid as exc:
+                log.error("%s: site version %d refused: %s", self.robot, version, exc)
+                continue
+            self.apply(prepared)
+            self.version = version
+            log.info("%s: now on site version %d", self.robot, version)
+            self.announce()
+
+    def _read(self, payload: dict[str, Any]) -> Any:
+        return self.prepare(_read_site(payload))

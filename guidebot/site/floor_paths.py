@@ -4,9 +4,9 @@ A floor component is a set of nodes joined by corridors without riding an elevat
 (``SiteGraph`` labels them). Each is kept as a compressed sparse row matrix of its edges
 (parallel edges reduced to the shortest), and a query runs ``scipy.sparse.csgraph.dijkstra``
 from the start inside it, stopping at ``limit`` (the caller's upper bound of the answer: nodes
-farther than that are left unsettled). The path is read back from
-the predecessors. A* in Python visited fewer nodes but paid about 2.5 µs for each; the
-compiled search settles a whole 2 500-node floor in about 0.35 ms (docs/server.md).
+farther than that are left unsettled). The path is read back from the predecessors. A* in
+Python visited fewer nodes but paid about 2.5 µs for each; the compiled search settles a whole
+2 500-node floor in about 0.35 ms (docs/server.md).
 
 Lengths are exact: each is the sum of the path's edge costs in path order, as a walk along it
 adds them up.
