@@ -53,25 +53,29 @@ class SiteFollower(Service):
         self.prepare = prepare
         self.version = 0
         self._waiting: Message | None = None
-        self._reader: asyncio.Task[None] | None = None
+        self._arrived = asyncio.Event()
 
     async def on_start(self) -> None:
         self.subscribe(self.ep, "site_changed", self._on_changed)
+        self.spawn(self._follow(), name=f"{self.robot}-site")
 
     def announce(self) -> None:
         """Tell the server which version this robot runs (0: none from the server yet)."""
         self.ep.publish(SiteLoaded(robot=self.robot, version=self.version))
 
     def _on_changed(self, message: Message) -> None:
-        self._waiting = message
-        if self._reader is None or self._reader.done():
-            self._reader = self.spawn(self._read_waiting(), name=f"{self.robot}-site")
+        self._waiting = message  # replaces one that was waiting: the newest is read next
+        self._arrived.set()
 
-    async def _read_waiting(self) -> None:
+    async def _follow(self) -> None:
         from guidebot.site.validate import SiteInvalid
 
-        while (message := self._waiting) is not None:
-            self._waiting = None
+        while True:
+            await self._arrived.wait()
+            self._arrived.clear()
+            message, self._waiting = self._waiting, None
+            if message is None:
+                continue
             version = int(message.payload.get("version", 0))
             if version == self.version:
                 continue
@@ -79,6 +83,9 @@ class SiteFollower(Service):
                 prepared = await asyncio.to_thread(self._read, message.payload)
             except SiteInvalid as exc:
                 log.error("%s: site version %d refused: %s", self.robot, version, exc)
+                continue
+            except Exception:
+                log.exception("%s: site version %d could not be read", self.robot, version)
                 continue
             self.apply(prepared)
             self.version = version

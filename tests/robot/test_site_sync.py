@@ -8,6 +8,8 @@ import threading
 import time
 from typing import Any
 
+import pytest
+
 from guidebot.bus import Bus
 from guidebot.site.schema import Site
 from guidebot.site.synthetic import synthetic_site
@@ -83,3 +85,25 @@ async def test_a_refused_version_keeps_the_one_running() -> None:
         await until(lambda: follower.version == 3)
     assert loaded == [1, 3]
     assert [type(site) for site in applied] == [Site, Site]
+
+
+async def test_a_version_that_breaks_the_reading_is_logged_and_the_next_still_read(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    bus = Bus()
+    server = bus.endpoint("server")
+    calls: list[int] = []
+
+    def prepare(site: Site) -> Site:
+        calls.append(len(calls) + 1)
+        if len(calls) == 1:
+            raise RuntimeError("graph build failed")
+        return site
+
+    follower = SiteFollower(bus.endpoint("site"), "R0", lambda _: None, prepare=prepare)
+    async with follower:
+        server.publish("site_changed", {"version": 1, "site": site_doc()})
+        await until(lambda: len(calls) == 1)
+        server.publish("site_changed", {"version": 2, "site": site_doc()})
+        await until(lambda: follower.version == 2)
+    assert "R0: site version 1 could not be read" in caplog.text
