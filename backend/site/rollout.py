@@ -4,6 +4,12 @@ Each version is sent once to every robot (broadcast); a robot that connects late
 version it runs (``site_loaded`` on connect) and gets the current one if it is behind. Staff
 pages see ``site_rollout``: which of the robots connected at publish time run the new version
 and how many milliseconds each took.
+
+The site in the payload is JSON already (an ``orjson.Fragment``), written in a thread in short
+calls (``jsonio.dumps_bytes``): the hub copies it into each message it encodes, where writing
+a 10 000-node site (2.4 MB) took one 6-25 ms native call on the event loop, once per broadcast
+and again for each robot that was behind. In-process subscribers of ``site_changed`` get the
+fragment, not a dict: the robots read it from the wire.
 """
 
 from __future__ import annotations
@@ -12,13 +18,17 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import orjson
+
 from backend.site.offloop import off_loop, release
 from backend.site.service import SiteService
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
 from guidebot.payloads.site import SiteRollout
 from guidebot.service import Service
+from guidebot.site import jsonio
 from guidebot.site.bulk import dump_site_doc
+from guidebot.site.dispose import dispose
 from guidebot.site.schema import Site
 
 __all__ = ["RolloutTracker", "robot_view"]
@@ -50,15 +60,19 @@ class RolloutTracker(Service):
         self._payload: dict[str, Any] = {}
 
     async def on_start(self) -> None:
-        self._payload = self._make_payload(self.sites.site)
+        self._payload = await off_loop(self._make_payload, self.sites.site)
         self.version = self.sites.version
         self.subscribe(self.ep, "site_loaded", self._on_loaded)
 
     def _make_payload(self, site: Site) -> dict[str, Any]:
+        """The payload of site_changed, the site written as JSON (call it in a thread)."""
+        view = [robot_view(site)]
+        encoded = jsonio.dumps_bytes(view[0])
+        dispose(view)  # the dict of a large site, freed a piece at a time
         return {
             "version": self.sites.version,
             "published_by": self.sites.published_by,
-            "site": robot_view(site),
+            "site": orjson.Fragment(encoded),
         }
 
     async def on_site(self, site: Site) -> None:

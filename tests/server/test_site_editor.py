@@ -14,6 +14,8 @@ import pytest
 import yaml
 
 from backend.testing import RunningServer, running_server
+from guidebot.client import HubClient
+from guidebot.messages import Message
 from guidebot.site.yamlio import load_site_text
 from robot_agent.agent import AgentConfig, RobotAgent
 from tests.server.conftest import OPERATOR_TOKEN, server_settings
@@ -262,3 +264,39 @@ async def test_a_draft_the_database_cannot_store_is_refused_and_nothing_changes(
         "/api/site/draft", json={"draft": after["draft"], "revision": after["revision"]}
     )
     assert saved.status_code == 200 and saved.json()["revision"] == state["revision"] + 1
+
+
+async def test_a_robot_gets_the_published_site_whole_and_without_tokens(tmp_path: Path) -> None:
+    """The rollout sends the site JSON written off the loop (a fragment): on the wire it is the
+    site document itself, every node of it, the robots' tokens left out."""
+    settings = server_settings(tmp_path)
+    async with running_server(settings) as server:
+        site = load_site_text(DEMO_TEXT)
+        robot = HubClient(server.ws_url, site.robots[0].token)
+        seen: list[Message] = []
+        robot.subscribe("site_changed", seen.append)
+        await robot.start()
+        try:
+            await robot.sync()
+            headers = {"Authorization": f"Bearer {server.admin_token}"}
+            async with httpx.AsyncClient(base_url=server.url, headers=headers) as admin:
+                document = (await admin.get("/api/site")).json()["site"]
+                _move_welcome(document)
+                reply = await admin.put("/api/site", json=document)
+                assert reply.status_code == 200, reply.text
+                version = reply.json()["version"]
+
+                async def arrived() -> Message:
+                    while not any(m.payload["version"] == version for m in seen):  # noqa: ASYNC110
+                        await asyncio.sleep(0.02)
+                    return next(m for m in seen if m.payload["version"] == version)
+
+                message = await asyncio.wait_for(arrived(), 10)
+        finally:
+            await robot.close()
+    sent = message.payload["site"]
+    assert isinstance(sent, dict)
+    assert [n["id"] for n in sent["nodes"]] == [n["id"] for n in document["nodes"]]
+    assert "stand_new" in {n["id"] for n in sent["nodes"]}
+    assert all("token" not in r for r in sent["robots"])
+    assert [r["name"] for r in sent["robots"]] == [r.name for r in site.robots]
