@@ -237,21 +237,25 @@ class SiteGraph:
         over the stops, both read from the stops' precomputed distances, then walked down and
         up those distance fields. Exact between nodes that only an elevator ride connects:
         every path between them passes a stop."""
-        best, via = self._best_stop(s, g)
+        return self._through_stop(s, g, *self._best_stop(s, g))
+
+    def _through_stop(
+        self, s: int, g: int, best: float, via: tuple[int, array[float], array[float]] | None
+    ) -> PathResult:
+        """The path of ``_best_stop``'s answer: down to the stop, then up to ``g``."""
         if via is None:
             raise NoPath(f"no path from {self.names[s]} to {self.names[g]}")
         stop, to_stop, from_stop = via
         first = self._walk(s, stop, to_stop, self._adj_i)
         second = self._walk(g, stop, from_stop, self._radj_i)
         second.reverse()
-        nodes = [self.names[i] for i in first + second[1:]]
-        return PathResult(nodes, best, [self.step(n) for n in nodes])
+        return self._result(first + second[1:], best)
 
     def _on_floor(self, s: int, g: int) -> PathResult:
         """Between two nodes of one floor: the floor's own shortest path, unless riding an
         elevator is shorter (a corridor closed off on this floor). The floor search stops at
         the smaller of the two upper bounds, the best transit and the landmarks' detour."""
-        via_stop, _ = self._best_stop(s, g)
+        via_stop, stop = self._best_stop(s, g)
         detour = min(
             (
                 to_lm[s] + from_lm[g]
@@ -262,8 +266,11 @@ class SiteGraph:
         bound = min(via_stop, detour)
         found = self._floors.search(s, g, bound * (1 + UPPER_BOUND_SLACK) + UPPER_BOUND_SLACK)
         if found is None or found[1] > via_stop:
-            return self._via_transit(s, g)
-        path, length = found
+            return self._through_stop(s, g, via_stop, stop)
+        return self._result(*found)
+
+    def _result(self, path: list[int], length: float) -> PathResult:
+        """The answer for a path of node indexes: names and each node's step."""
         nodes = [self.names[i] for i in path]
         return PathResult(nodes, length, [self.step(n) for n in nodes])
 
@@ -319,8 +326,7 @@ class SiteGraph:
     def _descend(self, start: str, goal: str, field: array[float]) -> PathResult:
         """Follow the distance field downhill: each step takes the edge on a shortest path."""
         s, g = self.index[start], self.index[goal]
-        nodes = [self.names[i] for i in self._walk(s, g, field, self._adj_i)]
-        return PathResult(nodes, field[s], [self.step(n) for n in nodes])
+        return self._result(self._walk(s, g, field, self._adj_i), field[s])
 
     def distances_to(self, goal: str) -> _FieldView:
         """Path cost from every node to ``goal`` (mapping node -> metres; cached per goal).
