@@ -5,7 +5,7 @@ hub while many robots ask at once.
 
 Last line: {"destination_lookup_ms", "any_pair_path_ms", "any_pair_path_cpu_ms", "build_s",
 "build_workers_s", "lock_rtt_ms", "idle_max_stall_ms", "publish_max_stall_ms",
-"load_max_stall_ms", "stalls", and with ``--peer`` "peer", "ratio", "agree"}.
+"load_max_stall_ms", "stalls", "rollout_ms", and with ``--peer`` "peer", "ratio", "agree"}.
 destination_lookup_ms: a robot's position (any node) to a site destination (point of interest,
 charging station, wait point), the queries robots make: a walk down a distance field
 precomputed when the site is built (a table lookup, not a search). any_pair_path_ms: between
@@ -24,17 +24,22 @@ asking at random times at ``--rate`` per second (open loop). The closed-loop sat
 (every robot asking again the moment it is answered) is printed as information.
 *_max_stall_ms: the longest event-loop stall (a 1 ms ticker's lateness) of that running server
 while it takes the site again by PUT /api/site (publish) and by POST /api/site/import (load,
-YAML), and while idle as long as the longer of the two; "stalls" gives per window also the
-99.9th percentile of the ticks' lateness and the ticks more than 20 ms late.
+YAML), each until ``--followers`` robots in another process have the new version, and while
+idle as long as the longer of the two; "stalls" gives per window also the 99.9th percentile of
+the ticks' lateness and the ticks more than 20 ms late. rollout_ms: per reload, publish to the
+last follower's site_loaded.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import gc
 import random
+import sys
 import tempfile
 import time
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +63,9 @@ from guidebot.site.validate import validate_site
 from guidebot.site.yamlio import dump_site
 
 __all__ = ["main"]
+
+ROLLOUT_TIMEOUT_S = 120.0
+"""How long a reload window waits for the following robots to confirm the new site."""
 
 
 def bench_paths(graph: SiteGraph, nodes: list[str], goals: list[str], queries: int) -> list[float]:
@@ -120,12 +128,19 @@ def bench_peer(
     return ours, theirs, disagree
 
 
-async def bench_reload(server: RunningServer, site: Site) -> dict[str, dict[str, float]]:
+Reload = tuple[dict[str, dict[str, float]], dict[str, float | None]]
+"""Per reload window its loop stalls, and per reload its rollout's ms (``bench_reload``)."""
+
+
+async def bench_reload(server: RunningServer, site: Site, followers: int) -> Reload:
     """Event-loop stalls while the running server takes the site again by PUT /api/site (JSON,
     a node moved) and POST /api/site/import (YAML), then over an idle window as long as the
     longer of the two (the machine's own noise over the same time): per window the longest
     stall ("max"), the 99.9th percentile of the ticks' lateness ("p999") and the ticks more
-    than 20 ms late ("over_20"). The bodies are encoded before the probe starts (the client's
+    than 20 ms late ("over_20"). The first ``followers`` robots follow the site from another
+    process (bench/site_followers.py): a reload window lasts until every one of them has
+    confirmed the new version, and the rollout's time (publish to the last site_loaded, ms)
+    is returned per window. The bodies are encoded before the probe starts (the client's
     work is not the server's), and the client makes one request before (its first imports
     anyio's backend, 20-30 ms on the loop); the client shares the server's loop, as a robot's
     would."""
@@ -135,23 +150,30 @@ async def bench_reload(server: RunningServer, site: Site) -> dict[str, dict[str,
     yaml_text = dump_site(site).encode()
     headers = {"Authorization": f"Bearer {server.admin_token}"}
     probes: dict[str, LoopStall] = {}
-    async with httpx.AsyncClient(base_url=server.url, headers=headers, timeout=300) as http:
+    rollout: dict[str, float | None] = {}
+    robots = [(r.name, r.token) for r in site.robots[:followers]]
+    async with (
+        httpx.AsyncClient(base_url=server.url, headers=headers, timeout=300) as http,
+        site_followers(server.ws_url, robots),
+    ):
         (await http.get("/api/health")).raise_for_status()
         async with LoopStall() as probes["publish"]:
             reply = await http.put(
                 "/api/site", content=body, headers={"Content-Type": "application/json"}
             )
-        reply.raise_for_status()
+            reply.raise_for_status()
+            rollout["publish"] = await _rolled_out(http, reply.json()["version"], len(robots))
         async with LoopStall() as probes["load"]:
             reply = await http.post(
                 "/api/site/import",
                 content=yaml_text,
                 headers={"Content-Type": "application/yaml"},
             )
-        reply.raise_for_status()
+            reply.raise_for_status()
+            rollout["load"] = await _rolled_out(http, reply.json()["version"], len(robots))
         async with LoopStall() as probes["idle"]:
             await asyncio.sleep(max(probes["publish"].seconds, probes["load"].seconds))
-    return {
+    stalls = {
         name: {
             "max": round(probe.max_ms, 2),
             "p999": round(probe.percentile(0.999), 2),
@@ -160,17 +182,66 @@ async def bench_reload(server: RunningServer, site: Site) -> dict[str, dict[str,
         }
         for name, probe in probes.items()
     }
+    return stalls, rollout
+
+
+@contextlib.asynccontextmanager
+async def site_followers(url: str, robots: list[tuple[str, str]]) -> AsyncIterator[None]:
+    """``robots`` (name, token) following the site from a process of their own, connected
+    (welcomed) when the block starts; the process ends with the block."""
+    if not robots:
+        yield
+        return
+    process = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "bench.site_followers",
+        stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE,
+    )
+    assert process.stdin is not None and process.stdout is not None
+    try:
+        process.stdin.write(orjson.dumps({"url": url, "robots": robots}) + b"\n")
+        await process.stdin.drain()
+        line = await asyncio.wait_for(process.stdout.readline(), 120)
+        if line.strip() != b"ready":
+            raise RuntimeError(f"site followers did not start (said {line!r})")
+        yield
+    finally:
+        process.stdin.close()
+        try:
+            await asyncio.wait_for(process.wait(), 30)
+        except TimeoutError:
+            process.kill()
+            await process.wait()
+
+
+async def _rolled_out(http: httpx.AsyncClient, version: int, robots: int) -> float | None:
+    """Wait until ``robots`` robots have confirmed ``version``: the rollout's ms (None when
+    no robot follows the site; RuntimeError after ``ROLLOUT_TIMEOUT_S``)."""
+    if robots == 0:
+        return None
+    deadline = time.monotonic() + ROLLOUT_TIMEOUT_S
+    while time.monotonic() < deadline:
+        status = (await http.get("/api/site/rollout")).raise_for_status().json()
+        if status["version"] == version and status["complete"]:
+            if len(status["expected"]) != robots:
+                raise RuntimeError(f"rollout expected {status['expected']}, not {robots} robots")
+            return float(status["ms"])
+        await asyncio.sleep(0.02)
+    raise RuntimeError(f"version {version} not confirmed by {robots} robots: {status}")
 
 
 async def bench_locks(
-    site: Site, robots: int, rate: float, seconds: float, ws_robots: int, tmp: Path
-) -> tuple[list[float], list[float], int, dict[str, dict[str, float]]]:
+    site: Site, robots: int, rate: float, seconds: float, ws_robots: int, followers: int, tmp: Path
+) -> tuple[list[float], list[float], int, Reload]:
     """Open loop: each robot asks at random times (Poisson, ``rate`` per second), as robots
     reaching restricted areas do. The first ``ws_robots`` robots are real WebSocket clients
     of a real server (uvicorn on 127.0.0.1); the others are in-process hub endpoints of that
     same server. Returns (in-process round trips, WebSocket round trips, requests made),
-    measured after a 1 s warm-up. The site's elevator modules run on a Modbus simulator, so
-    that the server polls its building as a deployed one does."""
+    measured after a 1 s warm-up, and the reloads (``bench_reload``, ``followers`` robots
+    following the site). The site's elevator modules run on a Modbus simulator, so that the
+    server polls its building as a deployed one does."""
     doc = site.model_dump(mode="json")
     async with BuildingSimulator(load_building(doc), port_zero=True) as building:
         for module in doc["modules"]:
@@ -180,14 +251,14 @@ async def bench_locks(
         site_file.write_text(dump_site(site))
         settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp / 'bench.db'}", site=site_file)
         async with running_server(settings, start_timeout=300) as server:
-            return await _ask_for_locks(server, site, robots, rate, seconds, ws_robots)
+            locks = await _ask_for_locks(server, site, robots, rate, seconds, ws_robots)
+            return (*locks, await bench_reload(server, site, followers))
 
 
 async def _ask_for_locks(
     server: RunningServer, site: Site, robots: int, rate: float, seconds: float, ws_robots: int
-) -> tuple[list[float], list[float], int, dict[str, dict[str, float]]]:
-    """The robots' requests against the running ``server`` (``bench_locks``), then the
-    reload probes."""
+) -> tuple[list[float], list[float], int]:
+    """The robots' requests against the running ``server`` (``bench_locks``)."""
     hub_samples: list[float] = []
     ws_samples: list[float] = []
     asked = 0
@@ -232,8 +303,7 @@ async def _ask_for_locks(
     finally:
         for client in clients:
             await client.close()
-    stalls = await bench_reload(server, site)
-    return hub_samples, ws_samples, asked, stalls
+    return hub_samples, ws_samples, asked
 
 
 async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
@@ -267,6 +337,12 @@ async def saturation(site: Site, robots: int, rounds: int = 3) -> float:
 @click.option(
     "--ws-robots", default=20, show_default=True, help="Robots that are WebSocket clients."
 )
+@click.option(
+    "--followers",
+    default=20,
+    show_default=True,
+    help="Robots (at most --robots) following the site from another process in the reloads.",
+)
 @click.option("--destinations", default=200, show_default=True, help="Points of interest.")
 @click.option("--peer", is_flag=True, help="Also run networkx on the same queries, interleaved.")
 @click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
@@ -277,6 +353,7 @@ def main(
     rate: float,
     seconds: float,
     ws_robots: int,
+    followers: int,
     destinations: int,
     peer: bool,
     as_json: bool,
@@ -284,6 +361,9 @@ def main(
     """Path and lock latency of the Traffic Manager."""
     if nodes < 4 or robots < 1 or queries < 1 or rate <= 0 or seconds <= 0:
         raise click.UsageError("need nodes >= 4, robots and queries >= 1, rate and seconds > 0")
+    if followers < 0:
+        raise click.UsageError("--followers is 0 or more")
+    followers = min(followers, robots)
     if peer:
         try:
             import networkx  # noqa: F401
@@ -330,8 +410,8 @@ def main(
             "agree": bad_any == 0 and bad_dest == 0,
         }
     with tempfile.TemporaryDirectory(prefix="guidebot-bench-") as tmp:
-        locks, ws_locks, asked, stalls = asyncio.run(
-            bench_locks(site, robots, rate, seconds, ws_robots, Path(tmp))
+        locks, ws_locks, asked, (stalls, rollout) = asyncio.run(
+            bench_locks(site, robots, rate, seconds, ws_robots, followers, Path(tmp))
         )
     ceiling = asyncio.run(saturation(site, robots))
     if not as_json:
@@ -367,6 +447,11 @@ def main(
                 )
             )
         )
+        if followers:
+            click.echo(
+                f"site rollout to {followers} robots in another process (publish to the last "
+                f"site_loaded): PUT {rollout['publish']} ms, import {rollout['load']} ms"
+            )
         click.echo(
             "goals: path p99 < 2 ms, lock round trip p99 < 10 ms, loop stall during a site "
             "load or publish < 20 ms"
@@ -383,6 +468,7 @@ def main(
             "publish_max_stall_ms": stalls["publish"]["max"],
             "load_max_stall_ms": stalls["load"]["max"],
             "stalls": stalls,
+            "rollout_ms": rollout,
             **comparison,
         }
     )

@@ -1,5 +1,6 @@
 """bench traffic, briefly: its JSON names every figure, including the loop stalls of a site
-publish and load on the running server (both must succeed, or the bench fails)."""
+publish and load on the running server (both must succeed, or the bench fails) and how long
+the robots following the site from another process took to confirm each version."""
 
 from __future__ import annotations
 
@@ -27,3 +28,5 @@ def test_bench_traffic_reports_paths_and_loop_stalls() -> None:
         windows["publish"]["seconds"], windows["load"]["seconds"]
     )
     assert figures["build_workers_s"] > 0.0
+    # --followers defaults to 20, at most --robots: all five confirmed both versions
+    assert figures["rollout_ms"]["publish"] > 0.0 and figures["rollout_ms"]["load"] > 0.0
