@@ -242,6 +242,9 @@ class Hub:
         """A client sent a frame less than this long ago is streaming: its writer lets the event
         loop turn once more before it takes its batch (backend/hub/session.py)."""
         self.max_message_bytes = max_message_bytes
+        self.large_frames = asyncio.Lock()
+        """Taken for one loop turn by a writer before it sends one message of
+        ``LARGE_FRAME_BYTES`` or more (backend/hub/session.py): one per turn of the loop."""
         self.refused = 0
         self.overflow_disconnects = 0
         self.task_requests = task_requests
