@@ -28,6 +28,7 @@ from backend.api import ROUTERS as api_routers
 from backend.api.deps import ERRORS
 from backend.api.errors import install_error_handlers
 from backend.api.limits import BodyLimit
+from backend.api.warmup import warm_routes
 from backend.auth import Authenticator, Role, TokenStore
 from backend.brain import server_brain
 from backend.building import routes as building_routes
@@ -124,6 +125,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 app.state.hub_ws_port = await stack.enter_async_context(
                     hub_listener(app, settings.host, settings.hub_ws_port)
                 )
+            await warm_routes(app)
             log.info("GuideBot server ready (%d components)", len(COMPONENTS))
             yield
 
