@@ -16,7 +16,7 @@ from __future__ import annotations
 import asyncio
 import os
 import sys
-from typing import Any
+from collections.abc import Callable
 
 import orjson
 
@@ -32,7 +32,7 @@ async def follow(url: str, robots: list[tuple[str, str]], until: asyncio.Event) 
     """Connect every (name, token) robot, answer site_changed until ``until`` is set."""
     clients = [HubClient(url, token, name=name) for name, token in robots]
 
-    def answer(client: HubClient) -> Any:
+    def answer(client: HubClient) -> Callable[[Message], None]:
         def on_changed(message: Message) -> None:
             client.publish("site_loaded", {"version": int(message.payload["version"])})
 

@@ -222,6 +222,7 @@ async def _rolled_out(http: httpx.AsyncClient, version: int, robots: int) -> flo
     if robots == 0:
         return None
     deadline = time.monotonic() + ROLLOUT_TIMEOUT_S
+    status: dict[str, Any] = {}
     while time.monotonic() < deadline:
         status = (await http.get("/api/site/rollout")).raise_for_status().json()
         if status["version"] == version and status["complete"]:
