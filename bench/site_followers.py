@@ -8,7 +8,8 @@ They stand for robots on machines of their own, so the process runs at a lower p
 
     python -m bench.site_followers < {"url": "ws://...", "robots": [[name, token], ...]}
 
-prints ``ready`` once every robot is welcomed and runs until its standard input closes.
+prints ``ready`` once every robot is welcomed and runs until its standard input closes; a
+robot the hub refuses ends it at once (exit status 1, the reason on standard error).
 """
 
 from __future__ import annotations

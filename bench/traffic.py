@@ -205,7 +205,10 @@ async def site_followers(url: str, robots: list[tuple[str, str]]) -> AsyncIterat
         await process.stdin.drain()
         line = await asyncio.wait_for(process.stdout.readline(), 120)
         if line.strip() != b"ready":
-            raise RuntimeError(f"site followers did not start (said {line!r})")
+            code = await asyncio.wait_for(process.wait(), 30)
+            raise RuntimeError(
+                f"site followers did not start (exit status {code}; why: on standard error)"
+            )
         yield
     finally:
         process.stdin.close()

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from click.testing import CliRunner
 
-from bench.traffic import main
+from backend.testing import RunningServer
+from bench.traffic import main, site_followers
 
 
 def test_bench_traffic_reports_paths_and_loop_stalls() -> None:
@@ -30,3 +32,11 @@ def test_bench_traffic_reports_paths_and_loop_stalls() -> None:
     assert figures["build_workers_s"] > 0.0
     # --followers defaults to 20, at most --robots: all five confirmed both versions
     assert figures["rollout_ms"]["publish"] > 0.0 and figures["rollout_ms"]["load"] > 0.0
+
+
+async def test_site_followers_refused_by_the_hub_stop_the_bench(server: RunningServer) -> None:
+    """A follower whose token the hub refuses ends the followers' process (HubClient.start
+    raises the refusal), and the bench fails saying so instead of measuring without it."""
+    with pytest.raises(RuntimeError, match="did not start"):
+        async with site_followers(server.ws_url, [("R1", "not-a-token-of-this-site")]):
+            pass
