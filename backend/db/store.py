@@ -105,11 +105,10 @@ class DbStore(Service):
                 "reason": task.reason,
             },
         )
-        self.record_event(
-            "task_" + event,
-            "task_manager",
-            {"task_id": task.id, "state": task.state.value, "robot": task.robot},
-        )
+        data: dict[str, Any] = {"task_id": task.id, "state": task.state.value, "robot": task.robot}
+        if event == "created":  # who asked: a person's token name, a panel, a robot, a button
+            data["requester"] = task.requester
+        self.record_event("task_" + event, "task_manager", data)
 
     def record_event(self, kind: str, source: str, data: dict[str, Any]) -> None:
         row = {"at": time.time(), "kind": kind[:64], "source": source, "data": data}

@@ -332,15 +332,21 @@ class Hub:
     def resolve_name(self, principal_name: str, role: Role, requested: str | None) -> str:
         """The hub name of a new connection; raises PermissionError for a name not allowed.
 
-        Robots are their token's name; modules and admins may pick one; GUIs, panels and
-        operators share a token, so a second tab gets ``name#2``, ``name#3``, ...
+        Robots are their token's name, and so are modules and admins that pick one with
+        ``?name=``: a reconnection takes the name back. A person's pages (GUI, panel, operator
+        tokens, and an admin token that asks for no name) are many at once: a console in a
+        second tab gets a name of its own (``admin#1``, ``admin#2``, ...) instead of closing
+        the first.
         """
         if requested and requested != principal_name and role not in (Role.ADMIN, Role.MODULE):
             raise PermissionError(
                 f"a {role.value} token may only connect as {principal_name!r}, not {requested!r}"
             )
         name = requested or principal_name
-        if role in (Role.GUI, Role.PANEL, Role.OPERATOR) and self._taken(name):
+        pages = role in (Role.GUI, Role.PANEL, Role.OPERATOR) or (
+            role is Role.ADMIN and not requested
+        )
+        if pages and self._taken(name):
             base = name
             while self._taken(name):
                 self._gui_counter += 1

@@ -119,6 +119,26 @@ async def test_second_gui_tab_gets_its_own_name(connect: ClientFactory) -> None:
     assert second.name.startswith("gui#")
 
 
+async def test_a_second_admin_page_gets_its_own_name_and_the_first_stays(
+    server: RunningServer, connect: ClientFactory
+) -> None:
+    first = await connect(server.admin_token, backoff_initial=0.01)
+    second = await connect(server.admin_token)
+    assert first.name == "admin" and second.name.startswith("admin#")
+    await first.sync()  # still open: not replaced by the second page
+    await second.sync()
+
+
+async def test_an_admin_asking_for_its_name_takes_it_back(
+    server: RunningServer, connect: ClientFactory
+) -> None:
+    old = await connect(server.admin_token, name="rgm", backoff_initial=0.01)
+    new = await connect(server.admin_token, name="rgm")
+    assert new.name == "rgm"
+    failure = await asyncio.wait_for(old.wait_stopped(), WAIT)
+    assert failure is not None and failure.code == 4000
+
+
 async def test_reconnecting_robot_replaces_its_stale_connection(connect: ClientFactory) -> None:
     old = await connect("R1", backoff_initial=0.01)
     new = await connect("R1")
