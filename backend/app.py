@@ -169,17 +169,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
 
 def uvicorn_config(
-    app: FastAPI, host: str, port: int, log_level: str = "warning"
+    app: FastAPI, host: str, port: int, log_level: str = "warning", access_log: bool = True
 ) -> uvicorn.Config:
     """The server's uvicorn settings: sans-I/O websockets without compression (CPU matters).
 
-    Browsers pass the hub token as ``?token=``: uvicorn's log lines are redacted.
+    Browsers pass the hub token as ``?token=``: uvicorn's log lines are redacted. Without
+    ``access_log`` no line per request is written (the demo's console stays readable).
     """
     config = uvicorn.Config(
         app,
         host=host,
         port=port,
         log_level=log_level,
+        access_log=access_log,
         lifespan="on",
         ws="websockets-sansio",
         ws_per_message_deflate=False,
