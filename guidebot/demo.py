@@ -45,6 +45,7 @@ GRACE_S = 10.0
 RESTART_MAX_S = 30.0
 HEALTHY_RUN_S = 60.0  # a robot that ran this long before dying restarts at once again
 DEFAULT_CONTROL_PORT = 15080
+ROBOTS_ONLINE_S = 30.0  # the URL block waits this long at most for the robots to connect
 
 
 @dataclass
@@ -159,6 +160,26 @@ def _server_env(panel_token: str, operator_token: str, control: str) -> dict[str
             tokens.append({"token": token, "name": name, "role": role})
     env["GUIDEBOT_TOKENS"] = json.dumps(tokens)
     return env
+
+
+def _wait_robots_online(
+    url: str, admin: str, names: list[str], fleet: Fleet, timeout_s: float = ROBOTS_ONLINE_S
+) -> list[str]:
+    """Wait until the robots are online (their start-up lines come before the URL block, which
+    then stays the last thing printed); returns those still offline after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    offline = list(names)
+    with httpx.Client(timeout=2.0, headers={"Authorization": f"Bearer {admin}"}) as http:
+        while offline and time.monotonic() < deadline and not fleet.dead():
+            try:
+                robots = http.get(f"{url}/api/robots").json()
+                online = {r["name"] for r in robots if r.get("online")}
+                offline = [n for n in names if n not in online]
+            except (httpx.HTTPError, ValueError, TypeError, KeyError):
+                pass
+            if offline:
+                time.sleep(0.2)
+    return offline
 
 
 def _live_version(url: str, admin: str) -> tuple[int, dict[str, Any]] | None:
@@ -404,6 +425,9 @@ def demo(
             robot_children.add(robot.name)
             fleet.spawn(robot.name, *args)
             screens.append((robot.name, robot.token, f"http://127.0.0.1:{gui_port + index}"))
+        late = _wait_robots_online(url, admin, sorted(robot_children), fleet)
+        if late:
+            click.echo(f"demo: not online yet: {', '.join(late)}", err=True)
         click.echo(
             url_block(
                 url, admin, panel_token, screens, control, scenario, seed, hub_url, operator_token

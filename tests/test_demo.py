@@ -195,6 +195,9 @@ async def test_a_second_demo_in_the_same_folder_is_as_good_as_the_first(tmp_path
         assert any("starting from" in line and "demo_museum.yaml" in line for line in second.out)
         text = "\n".join(second.out)
         assert "operator token dev-operator-token" in text
+        # The robots' start-up lines come first: the block is the last thing printed.
+        ready = next(i for i, line in enumerate(second.out) if line.startswith("robot R1 ready"))
+        assert ready < second.out.index("GuideBot demo is running (Ctrl-C stops everything).")
         async with httpx.AsyncClient(base_url=second.url, headers=ADMIN, timeout=10) as http:
             await _modules_online(http)
             live = (await http.get("/api/site")).json()
