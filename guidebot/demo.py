@@ -24,6 +24,7 @@ import select
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -109,6 +110,32 @@ class Fleet:
                 click.echo(
                     f"demo: {child.name} ignored SIGTERM for {GRACE_S:g} s: killed", err=True
                 )
+
+
+class Keys:
+    """The terminal the demo runs in: Enter shows the URL block again (the robots' log scrolls
+    it away). A stream that ends (no terminal, </dev/null) is no longer watched."""
+
+    def __init__(self, stream: IO[str] | None) -> None:
+        self.stream = stream
+        try:
+            if stream is not None:
+                stream.fileno()
+        except (OSError, ValueError):
+            self.stream = None
+
+    def enter_pressed(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for a line; True when one came."""
+        if self.stream is None:
+            time.sleep(timeout_s)
+            return False
+        ready, _, _ = select.select([self.stream], [], [], timeout_s)
+        if not ready:
+            return False
+        if not self.stream.readline():
+            self.stream = None  # end of input
+            return False
+        return True
 
 
 def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> dict[str, Any]:
@@ -243,7 +270,7 @@ def url_block(
     """Every page's URL and token, in one short block."""
     lines = [
         "",
-        "GuideBot demo is running (Ctrl-C stops everything).",
+        "GuideBot demo is running (Ctrl-C stops everything; Enter shows this block again).",
         f"  staff console  {url}/admin/          admin token {admin}",
         *(
             [f"                 operator token {operator} (staff, no site edits)"]
@@ -428,11 +455,11 @@ def demo(
         late = _wait_robots_online(url, admin, sorted(robot_children), fleet)
         if late:
             click.echo(f"demo: not online yet: {', '.join(late)}", err=True)
-        click.echo(
-            url_block(
-                url, admin, panel_token, screens, control, scenario, seed, hub_url, operator_token
-            )
+        block = url_block(
+            url, admin, panel_token, screens, control, scenario, seed, hub_url, operator_token
         )
+        click.echo(block)
+        keys = Keys(sys.stdin)
         crowd = None
         if scenario == "busy":
             crowd = Visitors(
@@ -463,7 +490,8 @@ def demo(
                 if crowd is not None:
                     for action in crowd.tick(http, now):
                         click.echo(f"demo: {action}")
-                time.sleep(0.5)
+                if keys.enter_pressed(0.5):
+                    click.echo(block)
     except KeyboardInterrupt:
         click.echo("\ndemo: stopping robots, server and building simulator ...")
         _say_edits(url, admin, started_version, site, own_db)

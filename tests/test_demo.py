@@ -25,6 +25,7 @@ from guidebot.demo_site import mismatched_modules, site_with_ports
 ADMIN = {"Authorization": "Bearer dev-admin-token"}
 ROOT = Path(__file__).resolve().parents[1]
 PYTHONPATH = os.environ.get("PYTHONPATH", "")
+BLOCK_TITLE = "GuideBot demo is running"
 ACCESS_LOG = re.compile(r'"(GET|POST|PUT|DELETE|HEAD) /\S* HTTP/1\.[01]" \d{3}')
 
 
@@ -39,12 +40,15 @@ class Demo:
     def descendants(self) -> list[psutil.Process]:
         return psutil.Process(self.process.pid).children(recursive=True)
 
-    async def wait_line(self, pattern: str, stream: list[str], timeout: float = 60) -> str:
+    async def wait_line(
+        self, pattern: str, stream: list[str], timeout: float = 60, times: int = 1
+    ) -> str:
+        """The ``times``-th line of ``stream`` matching ``pattern``, once it came."""
         async with asyncio.timeout(timeout):
             while True:
-                for line in stream:
-                    if re.search(pattern, line):
-                        return line
+                found = [line for line in stream if re.search(pattern, line)]
+                if len(found) >= times:
+                    return found[times - 1]
                 if self.process.returncode is not None:
                     raise AssertionError(f"demo exited: {self.err[-5:]}")
                 await asyncio.sleep(0.1)
@@ -71,6 +75,7 @@ async def demo(
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), PYTHONPATH]))}
     process = await asyncio.create_subprocess_exec(
         *command,
+        stdin=asyncio.subprocess.PIPE,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,
         cwd=cwd,
@@ -197,7 +202,8 @@ async def test_a_second_demo_in_the_same_folder_is_as_good_as_the_first(tmp_path
         assert "operator token dev-operator-token" in text
         # The robots' start-up lines come first: the block is the last thing printed.
         ready = next(i for i, line in enumerate(second.out) if line.startswith("robot R1 ready"))
-        assert ready < second.out.index("GuideBot demo is running (Ctrl-C stops everything).")
+        title = next(i for i, line in enumerate(second.out) if line.startswith(BLOCK_TITLE))
+        assert ready < title
         async with httpx.AsyncClient(base_url=second.url, headers=ADMIN, timeout=10) as http:
             await _modules_online(http)
             live = (await http.get("/api/site")).json()
@@ -214,6 +220,11 @@ async def test_a_second_demo_in_the_same_folder_is_as_good_as_the_first(tmp_path
             operator = {"Authorization": "Bearer dev-operator-token"}
             me = await http.get("/api/me", headers=operator)
             assert me.json() == {"name": "operator", "role": "operator"}
+            # Enter shows the block again, once the robots' log has scrolled it away.
+            assert second.process.stdin is not None
+            second.process.stdin.write(b"\n")
+            await second.process.stdin.drain()
+            await second.wait_line(BLOCK_TITLE, second.out, times=2)
     logged = [line for line in second.out + second.err if ACCESS_LOG.search(line)]
     assert not logged, logged
 
