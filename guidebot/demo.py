@@ -209,7 +209,7 @@ def _wait_robots_online(
     return offline
 
 
-def _live_version(url: str, admin: str) -> tuple[int, dict[str, Any]] | None:
+def _live_site(url: str, admin: str) -> tuple[int, dict[str, Any]] | None:
     """The server's live site and its version; None when it cannot be read."""
     try:
         answer = httpx.get(
@@ -226,7 +226,7 @@ def _live_version(url: str, admin: str) -> tuple[int, dict[str, Any]] | None:
 def _check_live_site(url: str, admin: str, ports: dict[str, int]) -> tuple[int | None, str]:
     """The live site's version, and a warning when it is not this run's (a ``--db`` that
     already held a site is kept over the site file): its modules would stay offline."""
-    live = _live_version(url, admin)
+    live = _live_site(url, admin)
     if live is None:
         return None, "demo: could not read the server's live site: its modules are not checked"
     version, site = live
@@ -243,7 +243,7 @@ def _check_live_site(url: str, admin: str, ports: dict[str, int]) -> tuple[int |
 
 def _say_edits(url: str, admin: str, started: int | None, site: Path, own_db: bool) -> None:
     """At the end: whether the site was edited during the run, and what becomes of the edits."""
-    live = _live_version(url, admin)
+    live = _live_site(url, admin)
     if started is None or live is None or live[0] == started:
         return
     fate = (
