@@ -46,6 +46,7 @@ GRACE_S = 10.0
 RESTART_MAX_S = 30.0
 HEALTHY_RUN_S = 60.0  # a robot that ran this long before dying restarts at once again
 DEFAULT_CONTROL_PORT = 15080
+OLD_DEMO_DB = "guidebot-demo.db"  # every demo's database until each run got its own
 ROBOTS_ONLINE_S = 30.0  # the URL block waits this long at most for the robots to connect
 
 
@@ -414,6 +415,11 @@ def demo(
             f"demo: starting from {site} on a database of this run: site edits made in the "
             "editor last until Ctrl-C (export the YAML from the editor to keep them)"
         )
+        if Path(OLD_DEMO_DB).exists():
+            click.echo(
+                f"demo: ./{OLD_DEMO_DB}, the database of a demo before this version, is not "
+                "used (nor changed): delete it when you no longer need it"
+            )
     started_version: int | None = None
     try:
         building = fleet.spawn(

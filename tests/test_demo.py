@@ -180,10 +180,12 @@ async def test_a_second_demo_in_the_same_folder_is_as_good_as_the_first(tmp_path
     """``make demo`` twice in one checkout: the second starts from the shipped site with its own
     simulator's ports (a database of its own), says what became of the first one's site edit,
     shows every plan and picture and keeps the URL block readable (no access log)."""
+    (tmp_path / "guidebot-demo.db").write_bytes(b"")  # an older demo's, in the checkout
     async with demo(
         tmp_path, "--robots", "1", "--scenario", "quiet", own_db=True, cwd=tmp_path
     ) as first:
         await first.wait_line(r"building sim\s+http", first.out)
+        assert any("guidebot-demo.db, the database of a demo before" in x for x in first.out)
         async with httpx.AsyncClient(base_url=first.url, headers=ADMIN, timeout=10) as http:
             await _modules_online(http)
             live = (await http.get("/api/site")).json()
