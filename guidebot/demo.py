@@ -125,9 +125,19 @@ class Keys:
         except (OSError, ValueError):
             self.stream = None
 
+    def _foreground(self) -> bool:
+        """Not a terminal, or one whose foreground we are (a read in the background of a
+        terminal would stop the demo: SIGTTIN)."""
+        assert self.stream is not None
+        fd = self.stream.fileno()
+        try:
+            return not os.isatty(fd) or os.tcgetpgrp(fd) == os.getpgrp()
+        except OSError:
+            return False
+
     def enter_pressed(self, timeout_s: float) -> bool:
         """Wait up to ``timeout_s`` for a line; True when one came."""
-        if self.stream is None:
+        if self.stream is None or not self._foreground():
             time.sleep(timeout_s)
             return False
         ready, _, _ = select.select([self.stream], [], [], timeout_s)
