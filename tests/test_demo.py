@@ -217,8 +217,12 @@ async def test_a_second_demo_in_the_same_folder_is_as_good_as_the_first(tmp_path
                 assert plan.status_code == 200, floor
             pictures = [m for p in live["site"]["pois"] for m in p["media"] if m.endswith(".svg")]
             assert pictures
+            screen = re.search(r"robot R1\s+(http://127\.0\.0\.1:\d+)", text)
+            assert screen is not None, text
             for name in pictures:
                 assert (await http.get(f"/media/{name}")).status_code == 200, name
+                on_robot = await http.get(f"{screen[1]}/media/{name}")  # its touch screen
+                assert on_robot.status_code == 200, name
             operator = {"Authorization": "Bearer dev-operator-token"}
             me = await http.get("/api/me", headers=operator)
             assert me.json() == {"name": "operator", "role": "operator"}
