@@ -21,7 +21,8 @@ from contextlib import AbstractAsyncContextManager
 from typing import Any
 
 import uvicorn
-from fastapi import APIRouter, FastAPI
+from fastapi import APIRouter, FastAPI, HTTPException
+from fastapi.responses import Response
 
 import guidebot
 from backend.api import ROUTERS as api_routers
@@ -47,7 +48,7 @@ from backend.ratelimit import RateLimiter
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
-from backend.webpages import WebFiles
+from backend.webpages import WebFiles, page
 
 __all__ = ["COMPONENTS", "ROUTERS", "create_app", "uvicorn_config"]
 
@@ -129,10 +130,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             log.info("GuideBot server ready (%d components)", len(COMPONENTS))
             yield
 
+    # /docs is Swagger UI served from web/ (web/api-docs, web/vendor/swagger-ui): FastAPI's own
+    # pages load it from a CDN (blank offline) with an inline script (no CSP).
     app = FastAPI(
         title="GuideBot central server (JCentral)",
         version=guidebot.__version__,
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.settings = settings
 
@@ -155,6 +160,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             **({"cluster": cluster} if (cluster := cluster_report(app)) else {}),
         }
 
+    @app.get("/docs", include_in_schema=False)
+    async def api_docs() -> Response:
+        """The API documentation (Swagger UI on /openapi.json), from this server only."""
+        path = settings.web_dir / "api-docs" / "index.html"
+        if not path.is_file():
+            raise HTTPException(404, f"{path} not found: no API docs page")
+        return page(path)
+
     install_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     if settings.broker_url:
@@ -169,17 +182,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
 
 def uvicorn_config(
-    app: FastAPI, host: str, port: int, log_level: str = "warning"
+    app: FastAPI, host: str, port: int, log_level: str = "warning", access_log: bool = True
 ) -> uvicorn.Config:
     """The server's uvicorn settings: sans-I/O websockets without compression (CPU matters).
 
-    Browsers pass the hub token as ``?token=``: uvicorn's log lines are redacted.
+    Browsers pass the hub token as ``?token=``: uvicorn's log lines are redacted. Without
+    ``access_log`` no line per request is written (the demo's console stays readable).
     """
     config = uvicorn.Config(
         app,
         host=host,
         port=port,
         log_level=log_level,
+        access_log=access_log,
         lifespan="on",
         ws="websockets-sansio",
         ws_per_message_deflate=False,

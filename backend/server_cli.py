@@ -40,6 +40,13 @@ def refuse_broken_site(path: Path) -> None:
     help="Site YAML file (GUIDEBOT_SITE).",
 )
 @click.option(
+    "--site-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Site folder: plans, media and uploads (GUIDEBOT_SITE_DIR; default the site file's "
+    "folder, else ./guidebot-site).",
+)
+@click.option(
     "--broker",
     "broker_url",
     default=None,
@@ -54,14 +61,21 @@ def refuse_broken_site(path: Path) -> None:
     "(GUIDEBOT_HUB_WS_PORT; docs/protocol.md).",
 )
 @click.option("--log-level", default=None, help="uvicorn log level (default info).")
+@click.option(
+    "--access-log/--no-access-log",
+    default=None,
+    help="A log line per HTTP request (default on, GUIDEBOT_ACCESS_LOG).",
+)
 def server(
     host: str | None,
     port: int | None,
     db_url: str | None,
     site: Path | None,
+    site_dir: Path | None,
     broker_url: str | None,
     hub_ws_port: int | None,
     log_level: str | None,
+    access_log: bool | None,
 ) -> None:
     """Run the central server: hub at /ws, REST API at /api, docs at /docs, web pages at /."""
     import uvicorn
@@ -76,9 +90,11 @@ def server(
             "port": port,
             "db_url": db_url,
             "site": site,
+            "site_dir": site_dir,
             "broker_url": broker_url,
             "hub_ws_port": hub_ws_port,
             "log_level": log_level,
+            "access_log": access_log,
         }.items()
         if value is not None
     }
@@ -97,7 +113,10 @@ def server(
         f"GuideBot server on http://{settings.host}:{settings.port} "
         f"(docs /docs, hub ws://{settings.host}:{settings.port}/ws{listener})"
     )
+    config = uvicorn_config(
+        app, settings.host, settings.port, settings.log_level, settings.access_log
+    )
     try:
-        uvicorn.Server(uvicorn_config(app, settings.host, settings.port, settings.log_level)).run()
+        uvicorn.Server(config).run()
     except KeyboardInterrupt:
         pass  # uvicorn re-raises the Ctrl-C it already handled with a clean shutdown

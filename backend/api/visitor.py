@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse
 
 from backend.api.deps import Anyone, Requester, Sites, Tasks, not_found
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
-from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_in
 from guidebot.site.schema import Site
 
 __all__ = ["media_url", "router"]
@@ -93,7 +93,7 @@ async def my_requests(who: Requester, manager: Tasks) -> list[dict[str, Any]]:
 async def media(request: Request, name: Annotated[str, Path(max_length=300)]) -> FileResponse:
     """A picture of the site (public, like the museum's own leaflets); 404 when missing,
     and the pages show a placeholder."""
-    path = media_file(request.app.state.settings.site, name)
+    path = media_in(request.app.state.settings.files_dir(), name)
     if path is None:
         raise not_found(f"media {name!r}")
     return FileResponse(path, media_type=MEDIA_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS)

@@ -42,9 +42,12 @@ async def site_map(_: Anyone, service: Sites) -> dict[str, Any]:
 
 def plan_file(site_file: FsPath | None, image: str) -> FsPath | None:
     """The plan image's path, relative to the site file's folder and never outside it."""
-    if site_file is None:
-        return None
-    folder = site_file.resolve().parent
+    return None if site_file is None else plan_in(site_file.resolve().parent, image)
+
+
+def plan_in(folder: FsPath, image: str) -> FsPath | None:
+    """The plan image's path, relative to the site folder and never outside it."""
+    folder = folder.resolve()
     path = (folder / image).resolve()
     if not path.is_relative_to(folder) or path.suffix.lower() not in PLAN_TYPES:
         return None
@@ -59,7 +62,7 @@ async def floor_plan(
     floor = next((f for f in service.site.floors if f.id == floor_id), None)
     if floor is None or not floor.plan_image:
         raise not_found(f"plan of floor {floor_id!r}")
-    path = plan_file(request.app.state.settings.site, floor.plan_image)
+    path = plan_in(request.app.state.settings.files_dir(), floor.plan_image)
     if path is None:
         raise not_found(f"plan image {floor.plan_image!r}")
     return FileResponse(path, media_type=PLAN_TYPES[path.suffix.lower()], headers=PLAN_HEADERS)

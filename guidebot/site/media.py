@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["MEDIA_HEADERS", "MEDIA_TYPES", "media_file"]
+__all__ = ["MEDIA_HEADERS", "MEDIA_TYPES", "media_file", "media_in"]
 
 MEDIA_TYPES = {
     ".svg": "image/svg+xml",
@@ -28,9 +28,14 @@ MEDIA_HEADERS = {
 def media_file(site_file: Path | None, name: str) -> Path | None:
     """The file of media ``name``, or None when there is no site file, the name leaves the
     site's folder, is not a picture, or the file is missing (pages then show a placeholder)."""
-    if site_file is None or not name or "\x00" in name:
+    return None if site_file is None else media_in(site_file.resolve().parent, name)
+
+
+def media_in(folder: Path, name: str) -> Path | None:
+    """The file of media ``name`` in the site folder ``folder`` (see ``media_file``)."""
+    if not name or "\x00" in name:
         return None
-    folder = site_file.resolve().parent
+    folder = folder.resolve()
     path = (folder / name).resolve()
     if not path.is_relative_to(folder) or path.suffix.lower() not in MEDIA_TYPES:
         return None

@@ -300,3 +300,38 @@ async def test_a_robot_gets_the_published_site_whole_and_without_tokens(tmp_path
     assert "stand_new" in {n["id"] for n in sent["nodes"]}
     assert all("token" not in r for r in sent["robots"])
     assert [r["name"] for r in sent["robots"]] == [r.name for r in site.robots]
+
+
+async def test_a_server_without_a_site_file_keeps_uploads_in_its_site_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """No --site: uploads go to ./guidebot-site/uploads/ and are served as plans and media."""
+    monkeypatch.chdir(tmp_path)
+    settings = server_settings(tmp_path).model_copy(update={"site": None})
+    async with (
+        running_server(settings) as server,
+        httpx.AsyncClient(
+            base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
+        ) as admin,
+    ):
+        png = b"\x89PNG\r\n\x1a\n" + b"\1" * 64
+        plan = await admin.post(
+            "/api/site/uploads/plan", content=png, headers={"Content-Type": "image/png"}
+        )
+        assert plan.status_code == 200, plan.text
+        svg = b'<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4"/>'
+        media = await admin.post(
+            "/api/site/uploads/media", content=svg, headers={"Content-Type": "image/svg+xml"}
+        )
+        assert media.status_code == 200, media.text
+        stored = tmp_path / "guidebot-site" / plan.json()["path"]
+        assert await asyncio.to_thread(stored.read_bytes) == png
+        doc = yaml.safe_load(DEMO_TEXT)
+        doc["floors"][0]["plan_image"] = plan.json()["path"]
+        next(p for p in doc["pois"] if p["id"] == "welcome")["media"] = [media.json()["path"]]
+        put = await admin.put("/api/site", json=doc)
+        assert put.status_code == 200, put.text
+        shown = await admin.get(f"/api/site/plans/{doc['floors'][0]['id']}")
+        assert shown.status_code == 200 and shown.content == png
+        picture = await admin.get(f"/media/{media.json()['path']}")
+        assert picture.status_code == 200 and picture.content == svg
