@@ -7,7 +7,8 @@ from typing import Annotated, Any, TypeVar
 
 from fastapi import Depends, HTTPException, Request, status
 
-from backend.auth import Principal, Role, require_roles
+from backend.actions import require_action
+from backend.auth import Principal
 from backend.db.store import DbStore
 from backend.ratelimit import RateLimited
 from backend.site.service import SiteService
@@ -18,30 +19,39 @@ __all__ = [
     "ERRORS",
     "Admin",
     "Anyone",
+    "NetKiller",
+    "PlanPath",
     "Requester",
+    "SeeRobot",
     "Sites",
     "Staff",
     "Store",
+    "TaskRequester",
     "Tasks",
     "Traffic",
     "app_service",
     "forbid",
     "not_found",
     "rate_limited",
+    "require_action",
     "sites",
     "store",
     "task_manager",
     "traffic",
 ]
 
-Admin = Annotated[Principal, Depends(require_roles(Role.ADMIN))]
-Staff = Annotated[Principal, Depends(require_roles(Role.OPERATOR))]
+Admin = Annotated[Principal, Depends(require_action("administer"))]
+Staff = Annotated[Principal, Depends(require_action("operate"))]
 """Operators (and admins): tasks, locks, robots, events."""
-Requester = Annotated[Principal, Depends(require_roles(Role.OPERATOR, Role.PANEL, Role.ROBOT))]
-"""Who may request a task and follow it."""
-Anyone = Annotated[
-    Principal, Depends(require_roles(Role.OPERATOR, Role.PANEL, Role.ROBOT, Role.GUI))
-]
+Requester = Annotated[Principal, Depends(require_action("follow_tasks"))]
+"""Who may follow (and cancel) the tasks it requested: staff see them all."""
+TaskRequester = Annotated[Principal, Depends(require_action("task_request"))]
+"""Who may request a task: the same rule as the hub's ``task_request``."""
+SeeRobot = Annotated[Principal, Depends(require_action("see_robot"))]
+PlanPath = Annotated[Principal, Depends(require_action("plan_path"))]
+NetKiller = Annotated[Principal, Depends(require_action("kill_petri_net"))]
+"""Who may stop a running net: the same rule as the hub's ``kill_petri_net``."""
+Anyone = Annotated[Principal, Depends(require_action("read"))]
 """Any known token: reading tours and points of interest."""
 
 

@@ -12,10 +12,12 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Path, Query, Request, status
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from backend.actions import TASK_RATE_LIMITED, task_request_refusal
 from backend.api.deps import (
     Requester,
     Staff,
     Store,
+    TaskRequester,
     Tasks,
     forbid,
     not_found,
@@ -34,17 +36,13 @@ from backend.tasks.model import (
     TaskState,
 )
 from backend.tasks.params import validate_params
-from guidebot.task_kinds import VISITOR_KINDS, TaskKind
+from guidebot.task_kinds import TaskKind
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/api/tasks", tags=["tasks"])
 
 TaskId = Annotated[str, Path(max_length=64)]
-PANEL_KINDS = VISITOR_KINDS
-PANEL_MAX_PRIORITY = 5
-RATE_LIMITED_ROLES = frozenset({Role.PANEL, Role.ROBOT})
-"""Visitor-facing requesters (kiosks, robot screens); staff are not limited."""
 
 
 class TaskCreate(BaseModel):
@@ -153,22 +151,18 @@ def _refuse_finished(task: Task) -> None:
 
 @router.post("", status_code=status.HTTP_201_CREATED)
 async def create_task(
-    request: Request, who: Requester, manager: Tasks, body: Annotated[TaskCreate, Body()]
+    request: Request, who: TaskRequester, manager: Tasks, body: Annotated[TaskCreate, Body()]
 ) -> TaskStatus:
     """Request a task. Panels: tours and points of interest, priority up to 5. Robots: a
     visitor at the robot's screen, so that robot takes it. Panels and robots are rate-limited
     per requester (429)."""
-    robot = body.robot
-    if who.role is Role.PANEL:
-        if body.kind not in PANEL_KINDS or body.robot is not None:
-            raise forbid("panels may request tours and points of interest only")
-        if body.priority > PANEL_MAX_PRIORITY:
-            raise forbid(f"panels may not ask for priority above {PANEL_MAX_PRIORITY}")
-    if who.role is Role.ROBOT:
-        if body.robot not in (None, who.name):
-            raise forbid("a robot may request tasks only for itself")
-        robot = who.name
-    if who.role in RATE_LIMITED_ROLES:
+    refusal = task_request_refusal(
+        who.role, who.name, kind=body.kind, priority=body.priority, robot=body.robot
+    )
+    if refusal is not None:
+        raise forbid(refusal)
+    robot = who.name if who.role is Role.ROBOT else body.robot
+    if who.role in TASK_RATE_LIMITED:
         try:
             request.app.state.task_limits.spend(who.name, f"too many task requests from {who.name}")
         except RateLimited as exc:

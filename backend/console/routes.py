@@ -9,7 +9,7 @@ import httpx
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import Admin, Staff, Tasks, app_service, not_found
+from backend.api.deps import NetKiller, Staff, Tasks, app_service, not_found
 from backend.console.alerts import AlertBook, AlertNotFound
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
@@ -139,9 +139,10 @@ async def running_nets(
 
 @router.post("/nets/kill")
 async def kill_net(
-    request: Request, who: Admin, feed: Feed, body: Annotated[Kill, Body()]
+    request: Request, who: NetKiller, feed: Feed, body: Annotated[Kill, Body()]
 ) -> dict[str, Any]:
-    """Admin only: stop one running net instance on a robot or on the server."""
+    """Admin only (the hub's ``kill_petri_net`` rule): stop one running net instance on a
+    robot or on the server."""
     known = {n["instance_id"] for n in feed.running_nets(body.target)}
     if body.instance_id not in known:
         raise not_found(f"net instance {body.instance_id!r} on {body.target!r}")
