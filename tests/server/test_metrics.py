@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import re
+import shutil
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -113,6 +114,7 @@ async def test_metrics_of_a_live_button_press(tmp_path: Path) -> None:
                     "/metrics", headers={"Authorization": f"Bearer {METRICS}"}
                 )
                 assert by_token.status_code == 200
+            await promtool_accepts(by_token.text)
             values = samples(by_token.text)
             assert values[("guidebot_reaction_step_seconds_count", (("step", "filter"),))] == 1
             assert values[("guidebot_reaction_step_seconds_count", (("step", "can"),))] == 1
@@ -123,6 +125,8 @@ async def test_metrics_of_a_live_button_press(tmp_path: Path) -> None:
             assert values[("guidebot_modbus_polls_total", (("module", "otb"),))] > 0
             assert values[("guidebot_modbus_poll_period_seconds", (("module", "otb"),))] == 0.05
             assert values[("guidebot_modbus_online", (("module", "otb"),))] == 1
+            jitter = (("module", "otb"), ("percentile", "99"))
+            assert values[("guidebot_modbus_poll_jitter_seconds", jitter)] >= 0
             assert values[("guidebot_tasks", (("state", "running"),))] == 1
             assert values[("guidebot_hub_delivery_latency_seconds_count", ())] > 0
             # Docs are the contract: every family the server exposes is in docs/metrics.md.
@@ -130,6 +134,23 @@ async def test_metrics_of_a_live_button_press(tmp_path: Path) -> None:
             for family in text_string_to_metric_families(by_token.text):
                 if family.name.startswith("guidebot_") and not family.name.endswith("_created"):
                     assert family.name in documented, family.name
+
+
+async def promtool_accepts(scrape: str) -> None:
+    """Prometheus's own linter (``promtool check metrics``, Debian's ``prometheus`` package:
+    scripts/system-deps.sh) finds no problem in a scrape."""
+    promtool = shutil.which("promtool")
+    assert promtool, "promtool not found: scripts/system-deps.sh installs Debian's prometheus"
+    check = await asyncio.create_subprocess_exec(
+        promtool,
+        "check",
+        "metrics",
+        stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT,
+    )
+    output, _ = await check.communicate(scrape.encode())
+    assert check.returncode == 0, output.decode()
 
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "metrics.md"
