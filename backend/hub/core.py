@@ -334,7 +334,8 @@ class Hub:
         """The hub name of a new connection; raises PermissionError for a name not allowed.
 
         Robots are their token's name; modules and admins may pick one; GUIs, panels and
-        operators share a token, so a second tab gets ``name#2``, ``name#3``, ...
+        operators share a token, so a tab whose name is taken gets ``name#n``, n counted over
+        the whole hub (docs/protocol.md, "Connecting").
         """
         if requested and requested != principal_name and role not in (Role.ADMIN, Role.MODULE):
             raise PermissionError(
