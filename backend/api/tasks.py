@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Path, Query, Request, status
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, Field, model_validator
 
 from backend.actions import TASK_RATE_LIMITED, task_request_refusal
 from backend.api.deps import (
@@ -23,6 +23,7 @@ from backend.api.deps import (
     not_found,
     rate_limited,
 )
+from backend.api.models import RequestBody
 from backend.auth import Principal, Role
 from backend.db.store import DbStore
 from backend.ratelimit import RateLimited
@@ -45,8 +46,7 @@ router = APIRouter(prefix="/api/tasks", tags=["tasks"])
 TaskId = Annotated[str, Path(max_length=64)]
 
 
-class TaskCreate(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class TaskCreate(RequestBody):
     kind: TaskKind
     params: dict[str, Any] = Field(default_factory=dict)
     """tour: {tour}; go_to_poi: {poi}; charge: {station} (optional); go_to: {node}."""
@@ -63,19 +63,16 @@ class TaskCreate(BaseModel):
         return self
 
 
-class Cancel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Cancel(RequestBody):
     reason: str = Field(default="cancelled", max_length=200)
 
 
-class Reassign(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Reassign(RequestBody):
     robot: str | None = Field(default=None, max_length=64)
     """None: the next free robot other than the current one."""
 
 
-class Priority(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Priority(RequestBody):
     priority: int = Field(ge=0, le=100)
 
 

@@ -7,9 +7,10 @@ from typing import Annotated, Any
 
 import httpx
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from backend.api.deps import NetKiller, Staff, Tasks, app_service, not_found
+from backend.api.models import RequestBody
 from backend.console.alerts import AlertBook, AlertNotFound
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
@@ -22,20 +23,17 @@ router = APIRouter(prefix="/api", tags=["console"])
 Name = Annotated[str, Path(max_length=64)]
 
 
-class Service(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Service(RequestBody):
     out_of_service: bool
 
 
-class Kill(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Kill(RequestBody):
     target: str = Field(min_length=1, max_length=64)
     """A robot name, or "rgm" for the server's own nets."""
     instance_id: str = Field(min_length=1, max_length=64)
 
 
-class Press(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Press(RequestBody):
     button: str = Field(min_length=1, max_length=64)
     ms: float = Field(default=300.0, gt=0, le=10_000)
 

@@ -5,7 +5,7 @@ all say the same (backend/actions.py)."""
 from __future__ import annotations
 
 import re
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,17 +17,15 @@ from fastapi.routing import APIRoute, iter_route_contexts
 from backend.actions import RULES, SERVER_ROLES, allowed_roles
 from backend.auth import Role, RoleCheck
 from backend.hub.permissions import ALWAYS, may_publish
-from backend.settings import StaticToken
-from backend.testing import RunningServer, running_server
+from backend.testing import RunningServer
 from guidebot.client import HubClient, HubError
 from guidebot.messages import known_types
 from guidebot.paths import ROOT
 
-from .conftest import GUI_TOKEN, OPERATOR_TOKEN, PANEL_TOKEN, server_settings
+from .conftest import GUI_TOKEN, MODULE_TOKEN, OPERATOR_TOKEN, PANEL_TOKEN, server_settings
 
 ROLES = (Role.ADMIN, Role.OPERATOR, Role.PANEL, Role.ROBOT, Role.GUI, Role.MODULE)
 """The role columns of docs/server.md's table, in order."""
-MODULE_TOKEN = "module-token-12345678"
 ROBOT_NAME = "R1"
 TOKENS = {
     Role.OPERATOR: OPERATOR_TOKEN,
@@ -150,30 +148,19 @@ def test_an_action_over_rest_and_over_the_hub_is_allowed_to_the_same_roles() -> 
     assert set(RULES) >= {row.rule for row in rest_table() if row.rule != "public"}
 
 
-@pytest.fixture
-async def everyone(tmp_path: Path) -> AsyncIterator[RunningServer]:
-    """A server with a token of every role (failed sign-ins are not limited here: every
-    operation is called once without a token)."""
-    settings = server_settings(tmp_path)
-    settings.tokens.append(StaticToken(token=MODULE_TOKEN, name="module-1", role=Role.MODULE))
-    settings.sign_in_failure_burst = 10_000
-    async with running_server(settings) as srv:
-        yield srv
-
-
 def concrete(path: str) -> str:
     """A path with its parameters filled: ids that exist nowhere, the robot's own name."""
     path = path.replace("{name}", ROBOT_NAME).replace("{version}", "999")
     return re.sub(r"\{[a-z_]+\}", "zz-none", path)
 
 
-async def test_the_server_answers_each_role_as_the_docs_say(everyone: RunningServer) -> None:
+async def test_the_server_answers_each_role_as_the_docs_say(lenient: RunningServer) -> None:
     """Every documented operation, called with a token of every role and with none: 403
     exactly for the roles the docs leave out, 401 without a token unless public. Bodies are
     an empty object: nothing is changed."""
-    tokens = {**TOKENS, Role.ADMIN: everyone.admin_token}
+    tokens = {**TOKENS, Role.ADMIN: lenient.admin_token}
     wrong: list[str] = []
-    async with httpx.AsyncClient(base_url=everyone.url, timeout=10) as http:
+    async with httpx.AsyncClient(base_url=lenient.url, timeout=10) as http:
         for row in rest_table():
             for method, path in row.operations:
                 url = concrete(path)
@@ -193,15 +180,15 @@ async def test_the_server_answers_each_role_as_the_docs_say(everyone: RunningSer
 
 
 async def test_an_operator_may_not_kill_a_net_over_the_hub_as_over_rest(
-    everyone: RunningServer,
+    lenient: RunningServer,
 ) -> None:
-    async with HubClient(everyone.ws_url, OPERATOR_TOKEN) as operator:
+    async with HubClient(lenient.ws_url, OPERATOR_TOKEN) as operator:
         with pytest.raises(HubError) as refused:
             await operator.request(
                 "kill_petri_net", {"instance_id": "R1-waiting-1"}, destination=ROBOT_NAME
             )
     assert refused.value.code == "forbidden_type"
-    async with httpx.AsyncClient(base_url=everyone.url, timeout=10) as http:
+    async with httpx.AsyncClient(base_url=lenient.url, timeout=10) as http:
         answer = await http.post(
             "/api/nets/kill",
             json={"target": ROBOT_NAME, "instance_id": "R1-waiting-1"},
@@ -210,9 +197,9 @@ async def test_an_operator_may_not_kill_a_net_over_the_hub_as_over_rest(
     assert answer.status_code == 403
 
 
-async def test_a_panel_requests_over_the_hub_on_the_rest_terms(everyone: RunningServer) -> None:
-    poi = everyone.app.state.sites.site.pois[0].id
-    async with HubClient(everyone.ws_url, PANEL_TOKEN) as panel:
+async def test_a_panel_requests_over_the_hub_on_the_rest_terms(lenient: RunningServer) -> None:
+    poi = lenient.app.state.sites.site.pois[0].id
+    async with HubClient(lenient.ws_url, PANEL_TOKEN) as panel:
         answer = await panel.request("task_request", {"kind": "go_to_poi", "params": {"poi": poi}})
         assert answer.type == "task_event"
         for payload, code in [
@@ -223,5 +210,5 @@ async def test_a_panel_requests_over_the_hub_on_the_rest_terms(everyone: Running
             with pytest.raises(HubError) as refused:
                 await panel.request("task_request", payload)
             assert refused.value.code == code, payload
-    task = everyone.app.state.task_manager.get(answer.payload["task_id"])
+    task = lenient.app.state.task_manager.get(answer.payload["task_id"])
     assert task.requester == "panel-1"
