@@ -24,7 +24,7 @@ def methods_of(app: FastAPI, path: str) -> set[str]:
     for context in iter_route_contexts(app.routes):
         route = getattr(context, "original_route", context)
         if isinstance(route, APIRoute) and route.path_regex.match(path):
-            methods |= route.methods
+            methods |= route.methods or set()
     if "GET" in methods:
         methods.add("HEAD")
     return methods

@@ -26,7 +26,7 @@ def _public_operations(app: FastAPI) -> set[tuple[str, str]]:
     for context in iter_route_contexts(app.routes):
         route = getattr(context, "original_route", context)
         if isinstance(route, APIRoute) and role_check(route) is None:
-            public |= {(route.path_format, method.lower()) for method in route.methods}
+            public |= {(route.path_format, m.lower()) for m in route.methods or ()}
     return public
 
 
