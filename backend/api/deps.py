@@ -138,6 +138,8 @@ ERRORS: dict[int | str, dict[str, Any]] = {
     413: error_response("request body too large"),
     422: error_response("bad input: each problem with its place"),
     429: error_response("too many requests or failed sign-ins; Retry-After says when to try again"),
-    503: error_response("the task queue is full"),
+    503: error_response(
+        "the task queue is full; or, with several server processes, this one is not the leader"
+    ),
 }
 """Every error status the API answers, documented on every route (docs/server.md)."""

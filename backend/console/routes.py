@@ -9,7 +9,7 @@ import httpx
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
 from pydantic import Field
 
-from backend.api.deps import NetKiller, Staff, Tasks, app_service, not_found
+from backend.api.deps import NetKiller, Staff, Tasks, app_service, error_response, not_found
 from backend.api.models import RequestBody
 from backend.console.alerts import AlertBook, AlertNotFound
 from backend.console.feed import ConsoleFeed
@@ -159,7 +159,10 @@ async def simulator_config(request: Request, _: Staff) -> dict[str, bool]:
     return {"configured": bool(request.app.state.settings.building_sim_url)}
 
 
-@router.post("/building/simulator/press")
+@router.post(
+    "/building/simulator/press",
+    responses={502: error_response("the building simulator did not answer, or failed")},
+)
 async def press_simulated(
     request: Request, _: Staff, body: Annotated[Press, Body()]
 ) -> dict[str, Any]:

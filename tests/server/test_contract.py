@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import httpx
 
-from backend.testing import RunningServer
+from backend.testing import RunningServer, running_server
 
-from .conftest import PANEL_TOKEN
+from .conftest import PANEL_TOKEN, server_settings
 
 METHODS = ("get", "put", "post", "delete", "patch")
 Schema = dict[str, Any]
@@ -187,3 +188,18 @@ async def test_each_operation_lists_the_statuses_of_its_kind(lenient: RunningSer
         assert (await http.get("/media/no-such-picture.png")).status_code == 404
         untyped = await http.post("/api/site/uploads/plan", content=b"\x89PNG", headers=admin)
     assert untyped.status_code == 415
+
+
+async def test_a_simulator_that_does_not_answer_is_a_documented_502(tmp_path: Path) -> None:
+    settings = server_settings(tmp_path)
+    settings.building_sim_url = "http://127.0.0.1:1"  # nothing listens on port 1
+    async with running_server(settings) as server:
+        responses = server.app.openapi()["paths"]["/api/building/simulator/press"]["post"]
+        async with httpx.AsyncClient(base_url=server.url, timeout=10) as http:
+            answer = await http.post(
+                "/api/building/simulator/press",
+                json={"button": "b1"},
+                headers={"Authorization": f"Bearer {server.admin_token}"},
+            )
+    assert answer.status_code == 502
+    assert "502" in responses["responses"]
