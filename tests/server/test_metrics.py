@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import json
 import re
-import shutil
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -25,6 +24,7 @@ from building_sim.simulator import BuildingSimulator
 from guidebot.client import HubClient
 from guidebot.messages import Message
 from guidebot.site.building_config import load_building
+from tests.promtool import promtool_accepts
 
 PANEL = "panel-token-1234"
 OPERATOR = "operator-token-1234"
@@ -134,23 +134,6 @@ async def test_metrics_of_a_live_button_press(tmp_path: Path) -> None:
             for family in text_string_to_metric_families(by_token.text):
                 if family.name.startswith("guidebot_") and not family.name.endswith("_created"):
                     assert family.name in documented, family.name
-
-
-async def promtool_accepts(scrape: str) -> None:
-    """Prometheus's own linter (``promtool check metrics``, Debian's ``prometheus`` package:
-    scripts/system-deps.sh) finds no problem in a scrape."""
-    promtool = shutil.which("promtool")
-    assert promtool, "promtool not found: scripts/system-deps.sh installs Debian's prometheus"
-    check = await asyncio.create_subprocess_exec(
-        promtool,
-        "check",
-        "metrics",
-        stdin=asyncio.subprocess.PIPE,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.STDOUT,
-    )
-    output, _ = await check.communicate(scrape.encode())
-    assert check.returncode == 0, output.decode()
 
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "metrics.md"
