@@ -29,6 +29,8 @@ from backend.api import ROUTERS as api_routers
 from backend.api.deps import ERRORS
 from backend.api.errors import install_error_handlers
 from backend.api.limits import BodyLimit
+from backend.api.methods import install_method_answers
+from backend.api.openapi import install_contract_openapi
 from backend.api.warmup import warm_routes
 from backend.auth import Authenticator, Role, TokenStore
 from backend.brain import server_brain
@@ -174,6 +176,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.add_middleware(FollowerRest)
     for router in ROUTERS:
         app.include_router(router, responses=ERRORS)
+    install_method_answers(app)  # after every route: what /api answers that none took
+    install_contract_openapi(app)
     if settings.web_dir.is_dir():
         app.mount("/", WebFiles(directory=settings.web_dir, html=True), name="web")
     else:

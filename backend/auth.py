@@ -16,8 +16,9 @@ import enum
 import hashlib
 import re
 import secrets
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable
 from dataclasses import dataclass
+from typing import Protocol, cast
 
 from fastapi import HTTPException, Request, status
 
@@ -27,6 +28,7 @@ __all__ = [
     "Authenticator",
     "Principal",
     "Role",
+    "RoleCheck",
     "SignInRefused",
     "TokenStore",
     "bearer_token",
@@ -157,10 +159,20 @@ def client_address(request_client: object) -> str:
     return str(host) if host else "unknown"
 
 
-def require_roles(*roles: Role) -> Callable[[Request], Awaitable[Principal]]:
+class RoleCheck(Protocol):
+    """A route's token check; ``roles`` and ``action`` say what it lets through (the docs'
+    tables are tested against them)."""
+
+    roles: frozenset[Role]
+    action: str | None
+
+    def __call__(self, request: Request) -> Awaitable[Principal]: ...
+
+
+def require_roles(*roles: Role, action: str | None = None) -> RoleCheck:
     """FastAPI dependency: 401 without a known token, 429 after too many failed attempts,
-    403 for another role; admin passes all."""
-    allowed = frozenset(roles)
+    403 for another role; admin passes all. ``action``: the rule these roles come from."""
+    allowed = frozenset(roles) | {Role.ADMIN}
 
     async def dependency(request: Request) -> Principal:
         auth: Authenticator = request.app.state.auth
@@ -181,4 +193,7 @@ def require_roles(*roles: Role) -> Callable[[Request], Awaitable[Principal]]:
             )
         return principal
 
-    return dependency
+    check = cast(RoleCheck, dependency)
+    check.roles = allowed
+    check.action = action
+    return check

@@ -7,7 +7,7 @@
 # redis-server: the broker between server processes; tests run a private one (tests/scale).
 # nginx-light: tests/scale/test_proxy.py runs deploy/cluster/nginx.conf in front of two servers.
 set -euo pipefail
-wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light)
+wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light prometheus)
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -3,11 +3,13 @@ as typed Annotated dependencies (``manager: Tasks``)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, TypeVar, cast
 
 from fastapi import Depends, HTTPException, Request, status
+from fastapi.routing import APIRoute
 
-from backend.auth import Principal, Role, require_roles
+from backend.actions import require_action
+from backend.auth import Principal, RoleCheck
 from backend.db.store import DbStore
 from backend.ratelimit import RateLimited
 from backend.site.service import SiteService
@@ -18,30 +20,41 @@ __all__ = [
     "ERRORS",
     "Admin",
     "Anyone",
+    "NetKiller",
+    "PlanPath",
     "Requester",
+    "SeeRobot",
     "Sites",
     "Staff",
     "Store",
+    "TaskRequester",
     "Tasks",
     "Traffic",
     "app_service",
+    "error_response",
     "forbid",
     "not_found",
     "rate_limited",
+    "require_action",
+    "role_check",
     "sites",
     "store",
     "task_manager",
     "traffic",
 ]
 
-Admin = Annotated[Principal, Depends(require_roles(Role.ADMIN))]
-Staff = Annotated[Principal, Depends(require_roles(Role.OPERATOR))]
+Admin = Annotated[Principal, Depends(require_action("administer"))]
+Staff = Annotated[Principal, Depends(require_action("operate"))]
 """Operators (and admins): tasks, locks, robots, events."""
-Requester = Annotated[Principal, Depends(require_roles(Role.OPERATOR, Role.PANEL, Role.ROBOT))]
-"""Who may request a task and follow it."""
-Anyone = Annotated[
-    Principal, Depends(require_roles(Role.OPERATOR, Role.PANEL, Role.ROBOT, Role.GUI))
-]
+Requester = Annotated[Principal, Depends(require_action("follow_tasks"))]
+"""Who may follow (and cancel) the tasks it requested: staff see them all."""
+TaskRequester = Annotated[Principal, Depends(require_action("task_request"))]
+"""Who may request a task: the same rule as the hub's ``task_request``."""
+SeeRobot = Annotated[Principal, Depends(require_action("see_robot"))]
+PlanPath = Annotated[Principal, Depends(require_action("plan_path"))]
+NetKiller = Annotated[Principal, Depends(require_action("kill_petri_net"))]
+"""Who may stop a running net: the same rule as the hub's ``kill_petri_net``."""
+Anyone = Annotated[Principal, Depends(require_action("read"))]
 """Any known token: reading tours and points of interest."""
 
 
@@ -79,6 +92,17 @@ Sites = Annotated[SiteService, Depends(sites)]
 Store = Annotated[DbStore, Depends(store)]
 
 
+def role_check(route: APIRoute) -> RoleCheck | None:
+    """The token check among a route's dependencies; None for a public route."""
+    pending = list(route.dependant.dependencies)
+    while pending:
+        dependant = pending.pop()
+        if hasattr(dependant.call, "roles") and hasattr(dependant.call, "action"):
+            return cast(RoleCheck, dependant.call)
+        pending.extend(dependant.dependencies)
+    return None
+
+
 def not_found(what: str) -> HTTPException:
     return HTTPException(status.HTTP_404_NOT_FOUND, f"{what} not found")
 
@@ -94,7 +118,8 @@ def rate_limited(exc: RateLimited) -> HTTPException:
     )
 
 
-def _error(description: str) -> dict[str, Any]:
+def error_response(description: str) -> dict[str, Any]:
+    """An error status's OpenAPI entry: ``{"detail": ...}`` with what it means."""
     return {
         "description": description,
         "content": {
@@ -106,13 +131,15 @@ def _error(description: str) -> dict[str, Any]:
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {
-    401: _error("missing or unknown bearer token"),
-    403: _error("the token's role may not do this"),
-    404: _error("no such id in the path (or not yours to see)"),
-    409: _error("the thing cannot change any more (a finished task)"),
-    413: _error("request body too large"),
-    422: _error("bad input: each problem with its place"),
-    429: _error("too many requests or failed sign-ins; Retry-After says when to try again"),
-    503: _error("the task queue is full"),
+    401: error_response("missing or unknown bearer token"),
+    403: error_response("the token's role may not do this"),
+    404: error_response("no such id in the path (or not yours to see)"),
+    409: error_response("the thing cannot change any more (a finished task)"),
+    413: error_response("request body too large"),
+    422: error_response("bad input: each problem with its place"),
+    429: error_response("too many requests or failed sign-ins; Retry-After says when to try again"),
+    503: error_response(
+        "the task queue is full; or, with several server processes, this one is not the leader"
+    ),
 }
 """Every error status the API answers, documented on every route (docs/server.md)."""

@@ -13,8 +13,10 @@ from fastapi import FastAPI, Request, status
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
+from fastapi.routing import APIRoute
 from starlette.exceptions import HTTPException
 
+from backend.api.deps import role_check
 from backend.db.session import UnstorableJson
 from backend.tasks.model import IllegalTransition, QueueFull, TaskError, TaskFinished, TaskNotFound
 
@@ -46,8 +48,26 @@ def _clean(errors: Any) -> list[dict[str, Any]]:
     ]
 
 
-async def _validation_error(_: Request, exc: Exception) -> JSONResponse:
+async def _token_first(request: Request) -> Response | None:
+    """The answer to the route's token check when it refuses the caller (401, 403, 429), else
+    None. FastAPI decodes a JSON body before it runs a route's dependencies, so a body that is
+    not JSON would otherwise be answered 422 before the token is looked at (docs/server.md,
+    "Status codes": the token is checked first)."""
+    route = request.scope.get("route")
+    check = role_check(route) if isinstance(route, APIRoute) else None
+    if check is None:
+        return None
+    try:
+        await check(request)
+    except HTTPException as refused:
+        return await http_exception_handler(request, refused)
+    return None
+
+
+async def _validation_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, RequestValidationError)
+    if (refused := await _token_first(request)) is not None:
+        return refused
     return JSONResponse(
         {"detail": _clean(exc.errors())}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT
     )
@@ -62,6 +82,8 @@ async def _http_error(request: Request, exc: Exception) -> Response:
     ``json_invalid``, not an undocumented 400 (found by the stateful fuzz)."""
     assert isinstance(exc, HTTPException)
     if exc.status_code == status.HTTP_400_BAD_REQUEST and exc.detail == UNPARSABLE_BODY:
+        if (refused := await _token_first(request)) is not None:
+            return refused
         error = {"loc": ["body"], "msg": "the body is not JSON text", "type": "json_invalid"}
         return JSONResponse({"detail": [error]}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
     return await http_exception_handler(request, exc)

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path
 
-from backend.api.deps import Requester, Staff, Tasks, Traffic, forbid, not_found
+from backend.api.deps import SeeRobot, Staff, Tasks, Traffic, forbid, not_found
 from backend.auth import Role
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
@@ -28,10 +28,10 @@ async def list_robots(_: Staff, manager: Tasks, traffic: Traffic) -> list[dict[s
 
 @router.get("/{name}")
 async def get_robot(
-    who: Requester, manager: Tasks, traffic: Traffic, name: Annotated[str, Path(max_length=64)]
+    who: SeeRobot, manager: Tasks, traffic: Traffic, name: Annotated[str, Path(max_length=64)]
 ) -> dict[str, Any]:
     """Staff see any robot; a robot only itself."""
-    if who.role is Role.PANEL or (who.role is Role.ROBOT and who.name != name):
+    if who.role is Role.ROBOT and who.name != name:
         raise forbid("a robot may only see itself")
     if name not in manager.robots:
         raise not_found(f"robot {name!r}")

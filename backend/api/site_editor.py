@@ -15,9 +15,11 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, Response, status
 from fastapi.responses import FileResponse
+from pydantic import Field
 
 from backend.api.component import hash_robot_tokens
-from backend.api.deps import Admin, Sites, Store, app_service, not_found
+from backend.api.deps import Admin, Sites, Store, app_service, error_response, not_found
+from backend.api.models import RequestBody
 from backend.api.site import _secured, invalid, yaml_download
 from backend.auth import token_digest
 from backend.db.store import DbStore
@@ -85,6 +87,27 @@ def _state(d: SiteDrafts, live: SiteService) -> dict[str, Any]:
     }
 
 
+MAX_VERSION = 2**63 - 1
+"""The largest version number a database integer holds: larger ones are refused (422)."""
+
+
+class Revision(RequestBody):
+    revision: int = Field(ge=0)
+    """The draft's revision this change is made on (409 when it moved on)."""
+
+
+class DraftSave(Revision):
+    draft: dict[str, Any]
+
+
+class Publish(Revision):
+    note: str = Field(default="", max_length=500)
+
+
+class Rollback(RequestBody):
+    version: int = Field(ge=1, le=MAX_VERSION)
+
+
 @router.get("/draft")
 async def get_draft(_: Admin, d: Drafts, live: Sites) -> dict[str, Any]:
     """The shared draft, its revision (send it back with every save), the live version and
@@ -96,12 +119,11 @@ async def get_draft(_: Admin, d: Drafts, live: Sites) -> dict[str, Any]:
 async def put_draft(
     who: Admin,
     d: Drafts,
-    draft: Annotated[dict[str, Any], Body()],
-    revision: Annotated[int, Body(ge=0)],
+    body: Annotated[DraftSave, Body()],
 ) -> dict[str, Any]:
     """Save the draft (it may have problems: they come back in ``issues``); 409 if stale."""
     try:
-        state = await d.save(draft, revision=revision, by=who.name)
+        state = await d.save(body.draft, revision=body.revision, by=who.name)
     except StaleDraft as exc:
         raise stale(exc) from None
     return {"revision": state.revision, "issues": _issues(state.data)}
@@ -159,8 +181,7 @@ async def publish(
     request: Request,
     who: Admin,
     d: Drafts,
-    revision: Annotated[int, Body(ge=0)],
-    note: Annotated[str, Body(max_length=500)] = "",
+    body: Annotated[Publish, Body()],
 ) -> dict[str, Any]:
     """Make the draft live without a restart: Task Manager, Traffic Manager,
     BuildingInterface and every connected robot get it (``site_changed``)."""
@@ -169,7 +190,9 @@ async def publish(
         return _secured(request, site)
 
     try:
-        version = await d.publish(revision=revision, by=who.name, secure=secure, note=note)
+        version = await d.publish(
+            revision=body.revision, by=who.name, secure=secure, note=body.note
+        )
     except SiteInvalid as exc:
         raise invalid(exc) from None
     except StaleDraft as exc:
@@ -181,10 +204,6 @@ async def publish(
 async def versions(_: Admin, db: Store) -> list[dict[str, Any]]:
     """Every published version, newest first: who published it, when, and a note."""
     return await db.site_versions()
-
-
-MAX_VERSION = 2**63 - 1
-"""The largest version number a database integer holds: larger ones are refused (422)."""
 
 
 async def _version_data(db: DbStore, version: int) -> dict[str, Any]:
@@ -221,9 +240,10 @@ async def rollback(
     who: Admin,
     d: Drafts,
     db: Store,
-    version: Annotated[int, Body(embed=True, ge=1, le=MAX_VERSION)],
+    body: Annotated[Rollback, Body()],
 ) -> dict[str, Any]:
     """Publish a kept version again (as a new version); the draft becomes that site."""
+    version = body.version
     data = await _version_data(db, version)
 
     def secure(site: Site) -> Site:
@@ -247,7 +267,7 @@ async def regenerate_token(
     who: Admin,
     d: Drafts,
     name: Annotated[str, Path(max_length=64)],
-    revision: Annotated[int, Body(embed=True, ge=0)],
+    body: Annotated[Revision, Body()],
 ) -> dict[str, Any]:
     """A new token for a robot: returned once, only its digest is kept (in the draft; live on
     publish)."""
@@ -262,7 +282,7 @@ async def regenerate_token(
     token = secrets.token_urlsafe(24)
     robot["token"] = token_digest(token)
     try:
-        state = await d.save(data, revision=revision, by=who.name)
+        state = await d.save(data, revision=body.revision, by=who.name)
     except StaleDraft as exc:
         raise stale(exc) from None
     return {"robot": name, "token": token, "revision": state.revision}
@@ -295,14 +315,20 @@ async def _store_upload(request: Request, types: dict[str, str], limit: int) -> 
     return f"uploads/{name}"
 
 
-@router.post("/uploads/plan")
+UPLOAD_ERRORS: dict[int | str, dict[str, Any]] = {
+    415: error_response("the Content-Type is missing or not one of the accepted file types"),
+    409: error_response("this server has no site folder for uploads (started without --site)"),
+}
+
+
+@router.post("/uploads/plan", responses=UPLOAD_ERRORS)
 async def upload_plan(request: Request, _: Admin) -> dict[str, str]:
     """Store a floor plan (PNG, JPEG or SVG, at most MAX_PLAN_BYTES); returns the path to put
     in the floor's ``plan_image``."""
     return {"path": await _store_upload(request, PLAN_TYPES, MAX_PLAN_BYTES)}
 
 
-@router.post("/uploads/media")
+@router.post("/uploads/media", responses=UPLOAD_ERRORS)
 async def upload_media(request: Request, _: Admin) -> dict[str, str]:
     """Store a point of interest's media file; returns the path to add to its ``media``."""
     return {"path": await _store_upload(request, MEDIA_TYPES, MAX_MEDIA_BYTES)}

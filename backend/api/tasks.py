@@ -10,17 +10,20 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Path, Query, Request, status
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, Field, model_validator
 
+from backend.actions import TASK_RATE_LIMITED, task_request_refusal
 from backend.api.deps import (
     Requester,
     Staff,
     Store,
+    TaskRequester,
     Tasks,
     forbid,
     not_found,
     rate_limited,
 )
+from backend.api.models import RequestBody
 from backend.auth import Principal, Role
 from backend.db.store import DbStore
 from backend.ratelimit import RateLimited
@@ -34,21 +37,16 @@ from backend.tasks.model import (
     TaskState,
 )
 from backend.tasks.params import validate_params
-from guidebot.task_kinds import VISITOR_KINDS, TaskKind
+from guidebot.task_kinds import TaskKind
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/api/tasks", tags=["tasks"])
 
 TaskId = Annotated[str, Path(max_length=64)]
-PANEL_KINDS = VISITOR_KINDS
-PANEL_MAX_PRIORITY = 5
-RATE_LIMITED_ROLES = frozenset({Role.PANEL, Role.ROBOT})
-"""Visitor-facing requesters (kiosks, robot screens); staff are not limited."""
 
 
-class TaskCreate(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class TaskCreate(RequestBody):
     kind: TaskKind
     params: dict[str, Any] = Field(default_factory=dict)
     """tour: {tour}; go_to_poi: {poi}; charge: {station} (optional); go_to: {node}."""
@@ -65,19 +63,16 @@ class TaskCreate(BaseModel):
         return self
 
 
-class Cancel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Cancel(RequestBody):
     reason: str = Field(default="cancelled", max_length=200)
 
 
-class Reassign(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Reassign(RequestBody):
     robot: str | None = Field(default=None, max_length=64)
     """None: the next free robot other than the current one."""
 
 
-class Priority(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Priority(RequestBody):
     priority: int = Field(ge=0, le=100)
 
 
@@ -153,22 +148,18 @@ def _refuse_finished(task: Task) -> None:
 
 @router.post("", status_code=status.HTTP_201_CREATED)
 async def create_task(
-    request: Request, who: Requester, manager: Tasks, body: Annotated[TaskCreate, Body()]
+    request: Request, who: TaskRequester, manager: Tasks, body: Annotated[TaskCreate, Body()]
 ) -> TaskStatus:
     """Request a task. Panels: tours and points of interest, priority up to 5. Robots: a
     visitor at the robot's screen, so that robot takes it. Panels and robots are rate-limited
     per requester (429)."""
-    robot = body.robot
-    if who.role is Role.PANEL:
-        if body.kind not in PANEL_KINDS or body.robot is not None:
-            raise forbid("panels may request tours and points of interest only")
-        if body.priority > PANEL_MAX_PRIORITY:
-            raise forbid(f"panels may not ask for priority above {PANEL_MAX_PRIORITY}")
-    if who.role is Role.ROBOT:
-        if body.robot not in (None, who.name):
-            raise forbid("a robot may request tasks only for itself")
-        robot = who.name
-    if who.role in RATE_LIMITED_ROLES:
+    refusal = task_request_refusal(
+        who.role, who.name, kind=body.kind, priority=body.priority, robot=body.robot
+    )
+    if refusal is not None:
+        raise forbid(refusal)
+    robot = who.name if who.role is Role.ROBOT else body.robot
+    if who.role in TASK_RATE_LIMITED:
         try:
             request.app.state.task_limits.spend(who.name, f"too many task requests from {who.name}")
         except RateLimited as exc:

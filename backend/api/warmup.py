@@ -14,7 +14,8 @@ from starlette.types import Message, Scope
 __all__ = ["WARM_UP_PATH", "warm_routes"]
 
 WARM_UP_PATH = "/api/.warm-up"
-"""A path no route answers: matching it walks every route (it ends as a 404 of the web files)."""
+"""A path no route answers: matching it walks every route (it ends as the JSON 404 of
+``backend/api/methods.py``)."""
 
 
 async def warm_routes(app: FastAPI) -> None:

@@ -7,9 +7,10 @@ from typing import Annotated, Any
 
 import httpx
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-from backend.api.deps import Admin, Staff, Tasks, app_service, not_found
+from backend.api.deps import NetKiller, Staff, Tasks, app_service, error_response, not_found
+from backend.api.models import RequestBody
 from backend.console.alerts import AlertBook, AlertNotFound
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
@@ -22,20 +23,17 @@ router = APIRouter(prefix="/api", tags=["console"])
 Name = Annotated[str, Path(max_length=64)]
 
 
-class Service(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Service(RequestBody):
     out_of_service: bool
 
 
-class Kill(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Kill(RequestBody):
     target: str = Field(min_length=1, max_length=64)
     """A robot name, or "rgm" for the server's own nets."""
     instance_id: str = Field(min_length=1, max_length=64)
 
 
-class Press(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class Press(RequestBody):
     button: str = Field(min_length=1, max_length=64)
     ms: float = Field(default=300.0, gt=0, le=10_000)
 
@@ -139,9 +137,10 @@ async def running_nets(
 
 @router.post("/nets/kill")
 async def kill_net(
-    request: Request, who: Admin, feed: Feed, body: Annotated[Kill, Body()]
+    request: Request, who: NetKiller, feed: Feed, body: Annotated[Kill, Body()]
 ) -> dict[str, Any]:
-    """Admin only: stop one running net instance on a robot or on the server."""
+    """Admin only (the hub's ``kill_petri_net`` rule): stop one running net instance on a
+    robot or on the server."""
     known = {n["instance_id"] for n in feed.running_nets(body.target)}
     if body.instance_id not in known:
         raise not_found(f"net instance {body.instance_id!r} on {body.target!r}")
@@ -160,7 +159,10 @@ async def simulator_config(request: Request, _: Staff) -> dict[str, bool]:
     return {"configured": bool(request.app.state.settings.building_sim_url)}
 
 
-@router.post("/building/simulator/press")
+@router.post(
+    "/building/simulator/press",
+    responses={502: error_response("the building simulator did not answer, or failed")},
+)
 async def press_simulated(
     request: Request, _: Staff, body: Annotated[Press, Body()]
 ) -> dict[str, Any]:

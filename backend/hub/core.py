@@ -23,6 +23,7 @@ from typing import Any
 import orjson
 from pydantic import BaseModel, ValidationError
 
+from backend.actions import TASK_RATE_LIMITED
 from backend.auth import Role
 from backend.ratelimit import RateLimited, RateLimiter
 from guidebot.bus import Bus, Endpoint
@@ -33,7 +34,7 @@ from guidebot.wire import encode
 from .acks import InboundAcks
 from .memory import GcFreezer
 from .outbox import Outbox, OutboxOverflow
-from .permissions import may_publish
+from .permissions import may_publish, publish_refusal
 
 __all__ = [
     "CLOSE_NAME_IN_USE",
@@ -457,15 +458,10 @@ class Hub:
                 message.id,
             )
             return
-        if client.role is Role.ROBOT:
-            robot = message.payload.get("robot")
-            if robot is not None and robot != client.name:
-                client.error(
-                    "impersonation",
-                    f"robot {client.name!r} may not publish for robot {robot!r}",
-                    message.id,
-                )
-                return
+        refusal = publish_refusal(client.role, client.name, type_, message.payload)
+        if refusal is not None:
+            client.error(*refusal, message.id)
+            return
         message.source = client.name
         if type_ in CONTROL_TYPES and message.destination in (None, HUB_NAME):
             self._control(client, message)
@@ -488,7 +484,7 @@ class Hub:
         if (
             type_ == "task_request"
             and self.task_requests is not None
-            and client.role is not Role.ADMIN
+            and client.role in TASK_RATE_LIMITED
             and not self.acks.is_repeat_request(client.name, message)
         ):
             try:

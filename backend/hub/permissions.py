@@ -1,8 +1,8 @@
-"""Who may publish what on the hub: one table of message types per role (docs/protocol.md,
-"Publish permissions").
+"""Who may publish what on the hub (docs/protocol.md, "Publish permissions"), read from the one
+table of actions the REST routes read too (``backend/actions.py``).
 
-The hub stamps ``source`` with the client's name, so nobody can speak as someone else; this
-table adds *what* each role may say. Authority messages (task_assigned, area_granted, door and
+The hub stamps ``source`` with the client's name, so nobody can speak as someone else; the table
+adds *what* each role may say. Authority messages (task_assigned, area_granted, door and
 elevator answers, the hub's own replies) come only from the server: its in-process modules, and
 the admin and module tokens (server extensions). Control messages (subscribe, unsubscribe,
 ping) and pong are open to every role.
@@ -10,109 +10,42 @@ ping) and pong are open to every role.
 
 from __future__ import annotations
 
+from typing import Any
+
+from backend.actions import RULES, SERVER_ROLES, task_request_refusal
 from backend.auth import Role
 
-__all__ = ["ALWAYS", "PUBLISH", "SERVER_ONLY", "may_publish"]
+__all__ = ["ALWAYS", "may_publish", "publish_refusal"]
 
 ALWAYS = frozenset({"subscribe", "unsubscribe", "ping", "pong"})
 """Control messages and heartbeats: every role."""
 
-SERVER_ONLY = frozenset(
-    {
-        # tasks and traffic: decisions of the Task and Traffic Managers
-        "task_assigned",
-        "task_cancel",
-        "task_event",
-        "robot_connected",
-        "robot_disconnected",
-        "robot_service",
-        "path",
-        "area_granted",
-        "area_yield",
-        "staff_alert",
-        # site: a published version and how far it reached the robots
-        "site_changed",
-        "site_rollout",
-        # building: what the BuildingInterface saw or did
-        "door_opened",
-        "door_closed",
-        "elevator_in_position",
-        "command_failed",
-        "building_input_changed",
-        "building_module_health",
-        # staff console: lock views, its alert book, the event log as written
-        "lock_changed",
-        "alert_raised",
-        "alert_acked",
-        "event_logged",
-        # the hub's own answers
-        "welcome",
-        "error",
-    }
-)
-"""Types only the server may publish: its in-process modules, and the admin and module tokens
-(server extensions run out of process)."""
-
-_ROBOT = frozenset(
-    {
-        "robot_state",
-        "battery_low",
-        "battery_panic",
-        "robot_fault",
-        "task_request",
-        "task_started",
-        "task_ended",
-        "petri_net_ended",
-        "tour_progress",
-        "task_reaction",  # the reaction chain's robot-side stamps (docs/reaction.md)
-        "petri_net_event",  # markings for the console's RoboGraph monitor
-        "site_loaded",
-        "get_path",
-        "request_area",
-        "release_area",
-        "open_door",
-        "release_door",
-        "close_door",
-        "call_elevator",
-        "node_reached",  # what the fleet's safety invariants are checked on
-        "say",  # what it says, for consoles; nothing on the server acts on it
-        "ack",  # receipt of a must-arrive message (task_assigned, area_granted, ...)
-        # answers to on-board requests a server module or tool may send it
-        "goal_reached",
-        "navigation_failed",
-        "people_faced",
-        "servo_in_position",
-        "speech_started",
-        "speech_ended",
-        "continue_answer",
-        "docked",
-        "charged",
-    }
-)
-
-_STAFF = frozenset(
-    {
-        "task_request",
-        "open_door",
-        "close_door",
-        "call_elevator",
-        "set_output",
-        "run_petri_net",
-        "kill_petri_net",
-    }
-)
-
-PUBLISH: dict[Role, frozenset[str] | None] = {
-    Role.ADMIN: None,  # None: every registered type
-    Role.OPERATOR: _STAFF,
-    Role.MODULE: None,  # a server extension run out of process (e.g. a tour module)
-    Role.ROBOT: _ROBOT,
-    Role.PANEL: frozenset(),  # panels request tours over REST (rate-limited, own requests only)
-    Role.GUI: frozenset(),  # displays: watch only
-}
-"""Role -> the message types its clients may publish (besides subscribe, unsubscribe, ping)."""
-
 
 def may_publish(role: Role, type_: str) -> bool:
-    allowed = PUBLISH[role]
-    return allowed is None or type_ in allowed or type_ in ALWAYS
+    """Whether a client of ``role`` may publish messages of ``type_`` (a registered type)."""
+    return role in SERVER_ROLES or type_ in ALWAYS or role in RULES.get(type_, frozenset())
+
+
+def publish_refusal(
+    role: Role, name: str, type_: str, payload: dict[str, Any]
+) -> tuple[str, str] | None:
+    """Why a message this client may publish by its type is refused all the same, as (error
+    code, reason); None when it is not. A robot speaking for another robot and a task requested
+    in another's name are ``impersonation``; a task request the role may not make (a panel's
+    charge, its priority above 5) is ``forbidden_request``, as REST answers it 403."""
+    if role in SERVER_ROLES:
+        return None
+    if role is Role.ROBOT:
+        robot = payload.get("robot")
+        if robot is not None and robot != name:
+            return "impersonation", f"robot {name!r} may not publish for robot {robot!r}"
+    if type_ == "task_request":
+        requester = payload.get("requester", "")
+        if requester not in ("", name):
+            return "impersonation", f"you are {name!r}; you may not request tasks as {requester!r}"
+        kind, priority = payload.get("kind"), payload.get("priority", 5)
+        if isinstance(kind, str) and isinstance(priority, int):
+            reason = task_request_refusal(role, name, kind=kind, priority=priority, robot=None)
+            if reason is not None:
+                return "forbidden_request", reason
+    return None

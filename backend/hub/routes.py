@@ -6,7 +6,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Request
 
-from backend.auth import Principal, Role, require_roles
+from backend.actions import require_action
+from backend.auth import Principal
 
 from .core import HUB_NAME, Hub
 
@@ -14,7 +15,7 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/api/hub", tags=["hub"])
 
-Operator = Annotated[Principal, Depends(require_roles(Role.OPERATOR))]
+Operator = Annotated[Principal, Depends(require_action("operate"))]
 
 
 @router.get("/clients")

@@ -282,8 +282,9 @@ class _ScrapeCollector(Collector):
         )
         jitter = GaugeMetricFamily(
             "guidebot_modbus_poll_jitter_seconds",
-            "Poll start minus its slot on the schedule (recent polls)",
-            labels=["module", "quantile"],
+            "Poll start minus its slot on the schedule (recent polls), by percentile",
+            # Not "quantile": Prometheus reserves it for summaries (promtool refuses it here).
+            labels=["module", "percentile"],
         )
         rtt = GaugeMetricFamily(
             "guidebot_modbus_rtt_seconds", "Round trip of the last poll", labels=["module"]
@@ -303,8 +304,8 @@ class _ScrapeCollector(Collector):
             period.add_metric(name, poller.period_s)
             samples = sorted(poller.jitter_s)
             if samples:
-                jitter.add_metric([*name, "0.5"], statistics.median(samples))
-                jitter.add_metric([*name, "0.99"], samples[int(0.99 * (len(samples) - 1))])
+                jitter.add_metric([*name, "50"], statistics.median(samples))
+                jitter.add_metric([*name, "99"], samples[int(0.99 * (len(samples) - 1))])
             health = poller.health
             if health.rtt_ms is not None:
                 rtt.add_metric(name, health.rtt_ms / 1000)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt
 
 from guidebot.site.io_rules import PointKind
 from guidebot.task_kinds import TaskKind
@@ -29,7 +29,8 @@ ID_PATTERN = r"^[A-Za-z0-9_.\-]+$"
 
 
 class StrictModel(BaseModel):
-    """Unknown keys are refused so typos in a site file surface with their place."""
+    """Unknown keys are refused so typos in a site file surface with their place; numbers and
+    flags are taken as such only (``true`` is not 1)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -38,7 +39,7 @@ class IOPoint(StrictModel):
     """One input or output of a module; ``node`` places it on the map (a button, a sensor)."""
 
     name: str = Field(min_length=1, max_length=64, pattern=ID_PATTERN)
-    address: int = Field(ge=0, le=65535)
+    address: StrictInt = Field(ge=0, le=65535)
     kind: PointKind
     node: str | None = None
     description: str = ""
@@ -49,10 +50,10 @@ class BuildingModule(StrictModel):
 
     id: str = Field(min_length=1, max_length=64, pattern=ID_PATTERN)
     host: str = "127.0.0.1"
-    port: int = Field(default=502, ge=0, le=65535)
-    unit_id: int = Field(default=1, ge=0, le=247)
-    sampling_period_ms: int = Field(default=200, ge=10, le=60_000)
-    timeout_ms: int = Field(default=500, ge=10, le=60_000)
+    port: StrictInt = Field(default=502, ge=0, le=65535)
+    unit_id: StrictInt = Field(default=1, ge=0, le=247)
+    sampling_period_ms: StrictInt = Field(default=200, ge=10, le=60_000)
+    timeout_ms: StrictInt = Field(default=500, ge=10, le=60_000)
     points: list[IOPoint] = Field(default_factory=list)
 
     def point(self, name: str) -> IOPoint | None:
@@ -75,8 +76,8 @@ class Door(StrictModel):
     """Output (coil) that opens the door while set."""
     is_open: IORef | None = None
     """Input that reports the door fully open; without it, ``open_time_s`` is waited."""
-    open_time_s: float = Field(default=2.0, ge=0, le=120)
-    max_hold_s: float = Field(default=120.0, gt=0, le=3600)
+    open_time_s: StrictFloat = Field(default=2.0, ge=0, le=120)
+    max_hold_s: StrictFloat = Field(default=120.0, gt=0, le=3600)
     """A robot holding the door longer than this is dropped (a robot lost mid-door must not
     keep it open for ever); the door closes when no holder is left."""
 
@@ -97,7 +98,7 @@ class Elevator(StrictModel):
 
     id: str = Field(min_length=1, max_length=64, pattern=ID_PATTERN)
     stops: list[ElevatorStop] = Field(min_length=2)
-    travel_time_s: float = Field(default=10.0, ge=0, le=600)
+    travel_time_s: StrictFloat = Field(default=10.0, ge=0, le=600)
     """Used by path cost: riding the elevator costs this much, converted to metres."""
 
 
@@ -106,7 +107,7 @@ class ButtonTask(StrictModel):
 
     kind: TaskKind
     params: dict[str, Any] = Field(default_factory=dict)
-    priority: int = Field(default=5, ge=0, le=100)
+    priority: StrictInt = Field(default=5, ge=0, le=100)
 
 
 class Button(StrictModel):

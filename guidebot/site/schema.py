@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
 
 from guidebot.site.building import ID_PATTERN, BuildingModule, Button, Door, Elevator
 
@@ -32,6 +32,9 @@ Id = str
 
 
 class StrictModel(BaseModel):
+    """Unknown keys are refused, and numbers and flags are taken as such only (``true`` is not
+    1, ``"2"`` not 2): a site arrives from files and from the REST API alike."""
+
     model_config = ConfigDict(extra="forbid")
 
 
@@ -44,11 +47,11 @@ class Floor(StrictModel):
 
     id: Id = _id()
     name: str = ""
-    level: int = 0
+    level: StrictInt = 0
     plan_image: str | None = None
     """Floor-plan image (SVG or PNG), relative to the site file's folder."""
-    scale_px_per_m: float = Field(default=20.0, gt=0)
-    plan_origin: tuple[float, float] = (0.0, 0.0)
+    scale_px_per_m: StrictFloat = Field(default=20.0, gt=0)
+    plan_origin: tuple[StrictFloat, StrictFloat] = (0.0, 0.0)
     """Site coordinates (metres) of the plan image's bottom-left corner."""
 
 
@@ -57,9 +60,9 @@ class Node(StrictModel):
 
     id: Id = _id()
     floor: Id
-    x: float
-    y: float
-    passing_place: bool = False
+    x: StrictFloat
+    y: StrictFloat
+    passing_place: StrictBool = False
     """A place wide enough for a robot to wait while another passes (deadlock resolution)."""
 
 
@@ -68,8 +71,8 @@ class Edge(StrictModel):
 
     a: Id
     b: Id
-    length_m: float | None = Field(default=None, gt=0)
-    one_way: bool = False
+    length_m: StrictFloat | None = Field(default=None, gt=0)
+    one_way: StrictBool = False
     """Only from ``a`` to ``b``."""
 
 
@@ -141,9 +144,9 @@ class RobotConfig(StrictModel):
     name: Id = _id()
     token: str = Field(min_length=8, max_length=256)
     start_node: Id | None = None
-    max_speed_mps: float = Field(default=0.7, gt=0, le=5)
-    battery_low: float = Field(default=0.3, ge=0, le=1)
-    battery_panic: float = Field(default=0.1, ge=0, le=1)
+    max_speed_mps: StrictFloat = Field(default=0.7, gt=0, le=5)
+    battery_low: StrictFloat = Field(default=0.3, ge=0, le=1)
+    battery_panic: StrictFloat = Field(default=0.1, ge=0, le=1)
     params: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -151,7 +154,7 @@ class Site(StrictModel):
     """The whole site document (what sites/*.yaml holds)."""
 
     name: str = Field(min_length=1, max_length=200)
-    version: int = Field(default=1, ge=1)
+    version: StrictInt = Field(default=1, ge=1)
     default_language: str = Field(default="en", pattern=LANG_PATTERN)
     """The language of the texts given without a translation, and the fallback."""
     languages: list[Lang] = Field(default_factory=list)

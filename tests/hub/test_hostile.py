@@ -14,7 +14,7 @@ import pytest
 from websockets.asyncio.client import ClientConnection
 from websockets.exceptions import ConnectionClosed
 
-from backend.hub.permissions import PUBLISH, SERVER_ONLY
+from backend.actions import REST_ONLY, RULES
 from backend.testing import RunningServer, running_server
 from guidebot.client import HubClient, HubError
 from guidebot.messages import known_types
@@ -45,22 +45,7 @@ async def until_pong(ws: ClientConnection) -> list[dict[str, Any]]:
 
 
 def test_the_permission_table_names_only_registered_types() -> None:
-    registered = known_types()
-    assert SERVER_ONLY <= registered
-    for role, allowed in PUBLISH.items():
-        assert allowed is None or allowed <= registered, role
-        assert allowed is None or not (allowed & SERVER_ONLY), role
-
-
-def test_a_robot_may_publish_everything_its_link_sends_up() -> None:
-    """The robot's link and the hub's table must agree: a type the link forwards but the hub
-    refuses is lost on every send (release_door and node_reached were, found by the soak)."""
-    from backend.auth import Role
-    from robot_agent.link import UP_TYPES
-
-    allowed = PUBLISH[Role.ROBOT]
-    assert allowed is not None
-    assert set(UP_TYPES) <= allowed, sorted(set(UP_TYPES) - allowed)
+    assert set(RULES) - REST_ONLY <= known_types(), sorted(set(RULES) - REST_ONLY - known_types())
 
 
 @pytest.mark.parametrize("who", ["panel", "gui", "R1", "op"])

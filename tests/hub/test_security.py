@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
@@ -22,6 +23,7 @@ from backend.settings import Settings
 from backend.testing import RunningServer
 from guidebot.client import HubClient, HubRefused
 from guidebot.messages import Message
+from guidebot.paths import ROOT
 from robot_agent.link import UP_TYPES
 
 from .conftest import TOKENS, ClientFactory
@@ -114,9 +116,23 @@ async def test_gui_token_cannot_connect_as_a_robot(server: RunningServer) -> Non
 
 
 async def test_second_gui_tab_gets_its_own_name(connect: ClientFactory) -> None:
+    """As docs/protocol.md says: the taken name with ``#n``, n counted over the whole hub."""
     first, second = await connect("gui"), await connect("gui")
     assert first.name == "gui"
-    assert second.name.startswith("gui#")
+    assert second.name == "gui#1"
+    operator, other_operator, third = await connect("op"), await connect("op"), await connect("gui")
+    assert (operator.name, other_operator.name, third.name) == ("ann", "ann#2", "gui#3")
+    documented = (ROOT / "docs" / "protocol.md").read_text()
+    assert "the second tab of `gui_rc` is `gui_rc#1`" in " ".join(documented.split())
+
+
+def test_the_demo_panel_token_docs_robot_names_is_the_demos() -> None:
+    from guidebot.demo import demo
+
+    default = next(p.default for p in demo.params if p.name == "panel_token")
+    robot_md = (ROOT / "docs" / "robot.md").read_text()
+    named = set(re.findall(r"`([a-z][a-z-]*panel-token)`", robot_md))
+    assert named == {default}, named
 
 
 async def test_a_second_admin_page_gets_its_own_name_and_the_first_stays(

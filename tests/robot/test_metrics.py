@@ -9,6 +9,7 @@ import httpx
 from prometheus_client.parser import text_string_to_metric_families
 
 from robot_agent.agent import AgentConfig, RobotAgent
+from tests.promtool import promtool_accepts
 
 
 def values(text: str) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
@@ -22,6 +23,7 @@ def values(text: str) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
 async def scrape(http: httpx.AsyncClient) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
     reply = await http.get("/metrics")
     assert reply.status_code == 200
+    await promtool_accepts(reply.text)
     return values(reply.text)
 
 

@@ -21,6 +21,7 @@ from .postgres import PostgresServer, postgres_server
 PANEL_TOKEN = "panel-token-1234"
 OPERATOR_TOKEN = "operator-token-1234"
 GUI_TOKEN = "gui-token-12345678"
+MODULE_TOKEN = "module-token-12345678"
 
 
 def server_settings(tmp_path: Path, db_url: str | None = None) -> Settings:
@@ -53,6 +54,17 @@ def db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
 @pytest.fixture
 async def server(tmp_path: Path) -> AsyncIterator[RunningServer]:
     async with running_server(server_settings(tmp_path)) as srv:
+        yield srv
+
+
+@pytest.fixture
+async def lenient(tmp_path: Path) -> AsyncIterator[RunningServer]:
+    """The server with a module token too, and failed sign-ins not limited: for tests that
+    call every operation without a token (else the 11th answer is 429)."""
+    settings = server_settings(tmp_path)
+    settings.tokens.append(StaticToken(token=MODULE_TOKEN, name="module-1", role=Role.MODULE))
+    settings.sign_in_failure_burst = 1_000_000
+    async with running_server(settings) as srv:
         yield srv
 
 

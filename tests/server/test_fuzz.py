@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import asyncio
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any, cast
 
 import requests
 import schemathesis
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.errors import FlakyStrategyDefinition
+from schemathesis import GenerationMode
+from schemathesis.checks import not_a_server_error
+from schemathesis.specs.openapi.checks import negative_data_rejection, status_code_conformance
 
 from backend.testing import RunningServer
 
@@ -142,3 +146,68 @@ async def test_chained_task_calls_give_no_server_error_and_no_undocumented_statu
     assert found["failures"] == []
     # The links did their job: calls on tasks that exist, not only 404s on random ids.
     assert found["linked"], "no call reached a task created earlier in the sequence"
+
+
+CONTRACT_EXAMPLES = 200
+"""Cases per run of the contract fuzz (positive and negative, three callers): about 10 s."""
+
+
+def contract_fuzz(base_url: str, openapi: dict[str, object], admin: str) -> list[str]:
+    """What a third-party client reads from the schema, checked on every operation (the
+    site's pictures included) as the admin, a panel and with no token: only documented
+    statuses (schemathesis's status_code_conformance), no body the schema refuses accepted
+    (negative_data_rejection), and without a token 401 before anything else. Runs in a worker
+    thread; returns the failures found."""
+    schema = schemathesis.openapi.from_dict(openapi).include(path_regex="^/(api/(?!hub)|media/)")
+    operations = cast(dict[str, Any], openapi["paths"])
+    failures: list[str] = []
+    session = requests.Session()
+    callers = [{"Authorization": f"Bearer {admin}"}, {"Authorization": f"Bearer {PANEL_TOKEN}"}, {}]
+    strategy = schema.as_strategy(generation_mode=GenerationMode.POSITIVE) | schema.as_strategy(
+        generation_mode=GenerationMode.NEGATIVE
+    )
+
+    @settings(
+        max_examples=CONTRACT_EXAMPLES,
+        deadline=None,
+        suppress_health_check=list(HealthCheck),
+        database=None,
+    )
+    @given(case=strategy, caller=st.sampled_from(callers))
+    def check(case: schemathesis.Case, caller: dict[str, str]) -> None:
+        response = case.call(base_url=base_url, session=session, headers=caller, timeout=10)
+        call = f"{case.method} {case.formatted_path} ({'token' if caller else 'no token'})"
+        try:
+            case.validate_response(
+                response,
+                checks=[not_a_server_error, status_code_conformance, negative_data_rejection],
+                headers=caller,
+            )
+        except Exception as exc:  # schemathesis's failure group: one line per check that failed
+            failures.append(f"{call} -> {response.status_code}: {str(exc).splitlines()[0]}")
+        documented = operations[case.path][case.method.lower()]["responses"]
+        unrouted = response.status_code in (404, 405) and response.text in (
+            '{"detail":"Not Found"}',
+            '{"detail":"Method Not Allowed"}',
+        )  # a path parameter that changes the path (a "/" in it): no route, no token asked
+        if not caller and "401" in documented and response.status_code != 401 and not unrouted:
+            failures.append(f"{call} -> {response.status_code}: not 401 first")
+
+    try:
+        check()
+    finally:
+        session.close()
+    return failures
+
+
+async def test_a_third_party_client_reads_the_contract_right(lenient: RunningServer) -> None:
+    openapi = lenient.app.openapi()
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fuzz")
+    try:
+        loop = asyncio.get_running_loop()
+        failures = await loop.run_in_executor(
+            executor, contract_fuzz, lenient.url, openapi, lenient.admin_token
+        )
+    finally:
+        executor.shutdown(wait=True)
+    assert sorted(set(failures)) == []

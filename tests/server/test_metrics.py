@@ -24,6 +24,7 @@ from building_sim.simulator import BuildingSimulator
 from guidebot.client import HubClient
 from guidebot.messages import Message
 from guidebot.site.building_config import load_building
+from tests.promtool import promtool_accepts
 
 PANEL = "panel-token-1234"
 OPERATOR = "operator-token-1234"
@@ -113,6 +114,7 @@ async def test_metrics_of_a_live_button_press(tmp_path: Path) -> None:
                     "/metrics", headers={"Authorization": f"Bearer {METRICS}"}
                 )
                 assert by_token.status_code == 200
+            await promtool_accepts(by_token.text)
             values = samples(by_token.text)
             assert values[("guidebot_reaction_step_seconds_count", (("step", "filter"),))] == 1
             assert values[("guidebot_reaction_step_seconds_count", (("step", "can"),))] == 1
@@ -123,6 +125,8 @@ async def test_metrics_of_a_live_button_press(tmp_path: Path) -> None:
             assert values[("guidebot_modbus_polls_total", (("module", "otb"),))] > 0
             assert values[("guidebot_modbus_poll_period_seconds", (("module", "otb"),))] == 0.05
             assert values[("guidebot_modbus_online", (("module", "otb"),))] == 1
+            jitter = (("module", "otb"), ("percentile", "99"))
+            assert values[("guidebot_modbus_poll_jitter_seconds", jitter)] >= 0
             assert values[("guidebot_tasks", (("state", "running"),))] == 1
             assert values[("guidebot_hub_delivery_latency_seconds_count", ())] > 0
             # Docs are the contract: every family the server exposes is in docs/metrics.md.

@@ -7,7 +7,7 @@ from typing import get_args
 
 import pytest
 
-from backend.api.tasks import PANEL_KINDS, TaskCreate
+from backend.api.tasks import TaskCreate
 from guidebot.paths import ROOT
 from guidebot.payloads.tasks import TaskRequest
 from guidebot.site import SiteInvalid, load_site_text
@@ -20,6 +20,7 @@ from guidebot.task_kinds import (
     UnknownTarget,
     check_params,
 )
+from guidebot.task_kinds import VISITOR_KINDS as PANEL_KINDS
 
 from .helpers import DEMO, demo_site
 
