@@ -3,6 +3,8 @@ layout for a PNML file without graphics."""
 
 from __future__ import annotations
 
+import itertools
+
 from petri_nets.layout import LABEL_CHAR_PX, layered, net_drawing
 from petri_nets.library import NetLibrary
 
@@ -22,7 +24,7 @@ def test_labels_written_to_the_right_fit_before_the_next_column() -> None:
     arcs = [("a", "b"), ("a", "c"), ("a", "d")]  # b, c and d share a layer
     at = layered(nodes, arcs, starts=["a"])
     row = sorted((at[n][0], n) for n in "bcd")
-    for (x0, n), (x1, _) in zip(row, row[1:], strict=False):
+    for (x0, n), (x1, _) in itertools.pairwise(row):
         assert x1 - x0 >= LABEL_CHAR_PX * len(dict(nodes)[n])
 
 
