@@ -37,6 +37,7 @@ SERVER_ONLY = frozenset(
         "door_opened",
         "door_closed",
         "elevator_in_position",
+        "elevator_state",
         "command_failed",
         "building_input_changed",
         "building_module_health",

@@ -17,7 +17,7 @@ export class Store extends EventTarget {
     this.events = []; // newest last, at most MAX_EVENTS
     this.building = { enabled: false, modules: new Map(), points: new Map() };
     this.doors = new Map(); // door id -> open (bool)
-    this.lifts = new Map(); // elevator id -> {floor, door_open}
+    this.lifts = new Map(); // elevator id -> elevator_state {floor, door_open, state, calls}
     this.simulator = false;
     this.frame = 0;
   }
@@ -89,15 +89,12 @@ export class Store extends EventTarget {
     on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
     on("door_opened", (m) => this.#door(m.payload.door, true));
     on("door_closed", (m) => this.#door(m.payload.door, false));
-    on("elevator_in_position", (m) => {
-      this.lifts.set(m.payload.elevator, { floor: m.payload.floor, door_open: m.payload.door_open });
-      this.emit("lift", m.payload.elevator);
-    });
+    on("elevator_state", (m) => this.#lift(m.payload));
     this.hub.subscribe(
       "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault",
       "lock_changed", "task_event", "alert_raised", "alert_acked", "event_logged",
       "building_input_changed", "building_module_health", "door_opened", "door_closed",
-      "elevator_in_position",
+      "elevator_state",
     );
     this.hub.addEventListener("connect", () => this.reload().catch(() => {}));
     const [site, simulator] = await Promise.all([
@@ -145,6 +142,7 @@ export class Store extends EventTarget {
     this.building.enabled = building.enabled;
     for (const m of building.modules) this.building.modules.set(m.module, m);
     for (const p of building.points) this.#point(p.module, p.point, p.value);
+    for (const car of building.elevators ?? []) this.#lift(car);
     this.changed();
   }
 
@@ -185,15 +183,11 @@ export class Store extends EventTarget {
     for (const door of this.site?.doors ?? []) {
       if (door.is_open && door.is_open.module === module && door.is_open.point === point) this.#door(door.id, Boolean(value));
     }
-    for (const lift of this.site?.elevators ?? []) {
-      for (const stop of lift.stops) {
-        const ref = stop.in_position;
-        if (ref && ref.module === module && ref.point === point && value) {
-          this.lifts.set(lift.id, { floor: stop.floor, door_open: true });
-          this.emit("lift", lift.id);
-        }
-      }
-    }
+  }
+
+  #lift(car) {
+    this.lifts.set(car.elevator, car);
+    if (car.floor) this.emit("lift", car.elevator);
   }
 
   #door(id, open) {
