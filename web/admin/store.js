@@ -10,7 +10,7 @@ export class Store extends EventTarget {
     this.api = api;
     this.hub = hub;
     this.site = null;
-    this.robots = new Map(); // name -> {name, info (GET /api/robots), state (robot_state), online, faults}
+    this.robots = new Map(); // name -> {name, info (GET /api/robots), state (robot_state), online, faults, robocan}
     this.locks = new Map(); // area -> lock view
     this.tasks = new Map(); // id -> task status (GET /api/tasks)
     this.alerts = new Map(); // id -> alert
@@ -38,7 +38,7 @@ export class Store extends EventTarget {
   robot(name) {
     let robot = this.robots.get(name);
     if (!robot) {
-      robot = { name, info: null, state: null, online: false, faults: [] };
+      robot = { name, info: null, state: null, online: false, faults: [], robocan: null };
       this.robots.set(name, robot);
     }
     return robot;
@@ -67,6 +67,9 @@ export class Store extends EventTarget {
       const robot = this.robot(m.payload.robot);
       robot.info = { ...(robot.info ?? {}), out_of_service: m.payload.out_of_service };
     });
+    on("robocan_status", (m) => {
+      this.robot(m.payload.robot).robocan = { ...m.payload, at: m.timestamp };
+    });
     on("robot_fault", (m) => {
       const robot = this.robot(m.payload.robot);
       robot.faults = [{ at: m.timestamp, kind: m.payload.kind, detail: m.payload.detail }, ...robot.faults].slice(0, 5);
@@ -91,7 +94,7 @@ export class Store extends EventTarget {
     on("door_closed", (m) => this.#door(m.payload.door, false));
     on("elevator_state", (m) => this.#lift(m.payload));
     this.hub.subscribe(
-      "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault",
+      "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault", "robocan_status",
       "lock_changed", "task_event", "alert_raised", "alert_acked", "event_logged",
       "building_input_changed", "building_module_health", "door_opened", "door_closed",
       "elevator_state",
@@ -120,6 +123,7 @@ export class Store extends EventTarget {
       const robot = this.robot(info.name);
       robot.info = info;
       robot.online = info.online;
+      if (info.robocan && !(robot.robocan?.at > info.robocan.at)) robot.robocan = info.robocan;
     }
     for (const view of locks) {
       this.locks.set(view.area, view);
