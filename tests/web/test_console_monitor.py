@@ -116,10 +116,11 @@ async def test_a_tour_net_is_drawn_from_its_pnml_file_with_no_label_over_another
             await net.get_by_role("button", name="Whole net").click()
             whole = await drawing.get_attribute("viewBox")
             assert float(whole.split()[3]) >= float(start.split()[3])  # type: ignore[union-attr]
+            await drawing.scroll_into_view_if_needed()
+            await web.screenshot(page, "monitor-tour")
             await net.get_by_role("button", name="Actual size").click()
             await expect(drawing).to_have_attribute("viewBox", start or "")
         await web.axe_check(page)
-        await web.screenshot(page, "monitor-tour")
 
 
 def plain_net(folder: Path) -> Path:

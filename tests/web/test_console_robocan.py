@@ -68,7 +68,7 @@ async def test_the_robot_view_shows_the_can_modules_a_robot_reports(
         agent.bus.endpoint("operator").publish("module_plug", {"module_id": 0x20, "plugged": False})
         sonar = table.locator('tr[data-module="32"]')
         await expect(sonar).to_contain_text("lost", timeout=20_000)
-        await expect(table.locator("caption")).to_contain_text("1 modules lost")
+        await expect(table.locator("caption")).to_contain_text("modules lost: 1")
         link = agent.link
         assert link is not None
         assert link.robocan.held > 0  # on board every second; not every one went up

@@ -106,8 +106,30 @@ export function drawing(structure) {
   return { nodes: byId, arcs, bounds, across, layout: structure.layout, spread: scale };
 }
 
-/** An arc from border to border: straight, or bent round the nodes a straight line would cross
- * (a loop back to the start of a tour). */
+/** Whether the segment p-q crosses the box (Liang-Barsky clipping). */
+function segmentHits(p, q, box) {
+  let t0 = 0;
+  let t1 = 1;
+  const dx = q.x - p.x;
+  const dy = q.y - p.y;
+  for (const [num, den] of [[p.x - box.x, -dx], [box.x + box.w - p.x, dx], [p.y - box.y, -dy], [box.y + box.h - p.y, dy]]) {
+    if (den === 0) {
+      if (num < 0) return false;
+    } else {
+      const t = num / den;
+      if (den < 0) t0 = Math.max(t0, t);
+      else t1 = Math.min(t1, t);
+      if (t0 > t1) return false;
+    }
+  }
+  return true;
+}
+
+const BENDS = [0, 30, 60, 100, 150, 220, 320];
+
+/** An arc from border to border: straight when that crosses nothing, else the least bent curve
+ * (a loop back to the start of a tour, a way out that skips steps) that crosses the fewest
+ * nodes, then labels; left (or up) first, away from the labels written right of the nodes. */
 function arcPath(a, byId, nodes) {
   const s = byId.get(a.source);
   const t = byId.get(a.target);
@@ -115,18 +137,33 @@ function arcPath(a, byId, nodes) {
   const dx = t.x - s.x;
   const dy = t.y - s.y;
   const len = Math.hypot(dx, dy) || 1;
-  const crosses = nodes.some((n) => {
-    if (n.id === s.id || n.id === t.id) return false;
-    const k = Math.max(0, Math.min(1, ((n.x - s.x) * dx + (n.y - s.y) * dy) / (len * len)));
-    return Math.hypot(s.x + k * dx - n.x, s.y + k * dy - n.y) < Math.max(n.hw, n.hh) + 4;
-  });
-  const bend = crosses ? Math.min(120, 30 + len / 4) : 0;
-  const cx = (s.x + t.x) / 2 + (dy / len) * bend;
-  const cy = (s.y + t.y) / 2 - (dx / len) * bend;
-  const from = toward(s, crosses ? { x: cx, y: cy } : t);
-  const to = toward(t, crosses ? { x: cx, y: cy } : s);
-  const d = crosses ? `M ${from.x} ${from.y} Q ${cx} ${cy} ${to.x} ${to.y}` : `M ${from.x} ${from.y} L ${to.x} ${to.y}`;
-  return { source: a.source, target: a.target, weight: a.weight, d, cx, cy };
+  let normal = { x: dy / len, y: -dx / len };
+  if (normal.x > 0.1 || (Math.abs(normal.x) <= 0.1 && normal.y > 0)) normal = { x: -normal.x, y: -normal.y };
+  const others = nodes.filter((n) => n.id !== s.id && n.id !== t.id);
+  const shapes = others.map((n) => ({ x: n.x - n.hw - 4, y: n.y - n.hh - 4, w: 2 * n.hw + 8, h: 2 * n.hh + 8 }));
+  const labels = [...byId.values()].filter((n) => n.id !== s.id && n.id !== t.id).map((n) => n.box);
+  let best = null;
+  for (const bend of BENDS.flatMap((b) => (b ? [b, -b] : [0]))) {
+    const c = { x: (s.x + t.x) / 2 + normal.x * bend, y: (s.y + t.y) / 2 + normal.y * bend };
+    const from = toward(s, bend ? c : t);
+    const to = toward(t, bend ? c : s);
+    const points = [];
+    for (let i = 0; i <= 24; i += 1) {
+      const u = i / 24;
+      points.push({
+        x: (1 - u) * (1 - u) * from.x + 2 * u * (1 - u) * c.x + u * u * to.x,
+        y: (1 - u) * (1 - u) * from.y + 2 * u * (1 - u) * c.y + u * u * to.y,
+      });
+    }
+    const hits = (boxes) => boxes.filter((b) => points.some((p, i) => i > 0 && segmentHits(points[i - 1], p, b))).length;
+    const cost = hits(shapes) * 100 + hits(labels);
+    if (!best || cost < best.cost) best = { cost, bend, c, from, to };
+    if (cost === 0) break;
+  }
+  const { bend, c, from, to } = best;
+  const d = bend ? `M ${from.x} ${from.y} Q ${c.x} ${c.y} ${to.x} ${to.y}` : `M ${from.x} ${from.y} L ${to.x} ${to.y}`;
+  // The curve's own extreme (its middle) bounds the drawing, not its control point.
+  return { source: a.source, target: a.target, d, cx: (s.x + t.x) / 2 + (normal.x * bend) / 2, cy: (s.y + t.y) / 2 + (normal.y * bend) / 2 };
 }
 
 /** Where the line from node n to point p leaves n's shape. */

@@ -52,7 +52,7 @@ function robocanView(robot) {
       const errors = Object.entries(bus.counters).filter(([k, v]) => !TRAFFIC.has(k) && v > 0);
       return html`<table class="robocan" aria-label=${`RoboCAN modules of ${robot.name} on ${bus.bus}`}>
         <caption>Bus ${bus.bus}: ${bus.counters.frames_rx} frames received, ${bus.counters.frames_tx} sent;
-          ${errors.length ? errors.map(([k, v]) => html`<span class="badge bad">${v} ${COUNTER_TEXT[k] ?? k}</span> `) : "no errors"}</caption>
+          ${errors.length ? errors.map(([k, v]) => html`<span class="badge bad">${COUNTER_TEXT[k] ?? k}: ${v}</span> `) : "no errors"}</caption>
         <thead><tr><th scope="col">Module</th><th scope="col">Kind</th><th scope="col">Firmware</th><th scope="col">State</th>
           <th scope="col">Frames in / out</th><th scope="col">Errors</th><th scope="col">Faults</th><th scope="col">Lost</th><th scope="col">Queried again</th></tr></thead>
         <tbody>${bus.modules.map((m) => html`<tr data-module=${m.module_id}>
