@@ -100,6 +100,11 @@ export function drawing(structure) {
     ys.push(a.cy);
   }
   const margin = 10;
+  if (!xs.length) {
+    // A net with nothing to draw still gets a frame.
+    xs.push(0, 100);
+    ys.push(0, 40);
+  }
   const bounds = { x: Math.min(...xs) - margin, y: Math.min(...ys) - margin };
   bounds.w = Math.max(...xs) + margin - bounds.x;
   bounds.h = Math.max(...ys) + margin - bounds.y;
