@@ -64,6 +64,7 @@ RULES: dict[str, frozenset[Role]] = {
             "tour_progress",
             "task_reaction",  # the reaction chain's robot-side stamps (docs/reaction.md)
             "petri_net_event",  # markings for the console's RoboGraph monitor
+            "robocan_status",  # CAN modules and counters for the console's robot view
             "site_loaded",
             "get_path",
             "request_area",

@@ -1,6 +1,6 @@
 """Build nets in Python (library sources, tests, benchmarks) and get the same NetDoc a PNML
-file gives; ``write_pnml`` turns it into a file. Places and transitions get a simple grid
-layout so graphical editors show something sensible.
+file gives; ``write_pnml`` turns it into a file. Places and transitions get a layered drawing
+(petri_nets.layout) so graphical editors and the console's monitor show a net one can follow.
 """
 
 from __future__ import annotations
@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from petri_nets.layout import layered
 from petri_nets.model import (
     REQUIRED,
     ActionSpec,
@@ -84,8 +85,8 @@ def guard(var: str, test: str, value: str | None = None) -> ConditionSpec:
     return ConditionSpec("guard", 0, var=var, test=test, value=value)
 
 
-def _position(index: int, column: int) -> Node:
-    position = Node("position", {"x": str(40 + 80 * column), "y": str(40 + 60 * index)}, 0)
+def _graphics(x: float, y: float) -> Node:
+    position = Node("position", {"x": str(round(x)), "y": str(round(y))}, 0)
     return Node("graphics", {}, 0, [position])
 
 
@@ -135,7 +136,6 @@ class NetBuilder:
                 action=action,
                 final=final,
                 outcome=outcome,
-                graphics=_position(len(self.doc.places), 0),
             )
         )
         return self
@@ -158,7 +158,6 @@ class NetBuilder:
                 name=(name or trans_id.replace("_", " ")).strip(),
                 condition=condition,
                 priority=priority,
-                graphics=_position(len(self.doc.transitions), 1),
             )
         )
         ins = inputs if isinstance(inputs, dict) else dict.fromkeys(inputs, 1)
@@ -175,4 +174,14 @@ class NetBuilder:
         )
 
     def build(self) -> NetDoc:
-        return self.doc
+        """The net, drawn: every place and transition gets a layered position."""
+        doc = self.doc
+        nodes = [(p.id, p.name or p.id) for p in doc.places]
+        nodes += [(t.id, t.name or t.id) for t in doc.transitions]
+        starts = [p.id for p in doc.places if p.initial > 0]
+        at = layered(nodes, [(a.source, a.target) for a in doc.arcs], starts)
+        for place in doc.places:
+            place.graphics = _graphics(*at[place.id])
+        for transition in doc.transitions:
+            transition.graphics = _graphics(*at[transition.id])
+        return doc

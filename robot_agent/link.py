@@ -22,17 +22,21 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
+from pydantic import ValidationError
+
 from guidebot.bus import Endpoint, Handler
 from guidebot.delivery import ACK, MUST_ARRIVE_DOWN, MUST_ARRIVE_UP, Courier, Seen, ack_for
 from guidebot.messages import Message
+from guidebot.payloads.robot import RobocanStatus
 from guidebot.service import Service
 
-__all__ = ["DOWN_TYPES", "UP_TYPES", "Link", "Upstream"]
+__all__ = ["DOWN_TYPES", "ROBOCAN_EVERY_S", "UP_TYPES", "Link", "StatusThrottle", "Upstream"]
 
 log = logging.getLogger(__name__)
 
@@ -56,12 +60,19 @@ UP_TYPES: tuple[str, ...] = (
     "petri_net_ended",
     "site_loaded",
     "petri_net_event",
+    "robocan_status",
 )
-"""On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor)."""
+"""On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor;
+robocan_status: its robot view's CAN modules and counters)."""
 
-LIVE_ONLY = frozenset({"petri_net_event"})
+LIVE_ONLY = frozenset({"petri_net_event", "robocan_status"})
 """Up types sent only while the link is up (never queued offline): the console's monitor
-follows live markings; queued, they would push reports out of the bounded offline queue."""
+follows live markings and CAN counters; queued, they would push reports out of the bounded
+offline queue (a stale status is worth nothing: the next one is a second away)."""
+
+ROBOCAN_EVERY_S = 5.0
+"""robocan_status goes up at most this often (on board it comes every second: its counters
+change with every frame), and at once when a module changes state or the link comes back."""
 
 DOWN_TYPES: tuple[str, ...] = (
     "task_assigned",
@@ -86,6 +97,34 @@ MAX_PENDING_REPLIES = 1000
 
 SEEN_IDS = 1024
 """Must-arrive ids remembered for de-duplication (a repeat comes within seconds)."""
+
+
+class StatusThrottle:
+    """Lets ``robocan_status`` through at most every ``every_s``, but at once when a module's
+    state changed (a module lost is news; a frame counter is not)."""
+
+    def __init__(self, every_s: float) -> None:
+        self.every_s = every_s
+        self.last_sent = -math.inf
+        self.last_states: tuple[tuple[str, int, str], ...] | None = None
+        self.held = 0
+        """Statuses not sent (the next one carries newer counters)."""
+
+    def allow(self, message: Message, now: float) -> bool:
+        try:
+            states = message.payload_as(RobocanStatus).module_states()
+        except ValidationError as exc:
+            log.warning("robocan_status not sent: %s", exc.errors()[0]["msg"])
+            return False
+        if states == self.last_states and now - self.last_sent < self.every_s:
+            self.held += 1
+            return False
+        self.last_states, self.last_sent = states, now
+        return True
+
+    def reset(self) -> None:
+        """The link is back: the next status goes at once."""
+        self.last_states = None
 
 
 class Upstream(Protocol):
@@ -117,6 +156,7 @@ class Link(Service):
         on_disconnect: Callable[[], Any] | None = None,
         retry_initial_s: float = 1.0,
         retry_max_s: float = 8.0,
+        robocan_every_s: float = ROBOCAN_EVERY_S,
     ) -> None:
         super().__init__()
         self.onboard = onboard
@@ -141,6 +181,8 @@ class Link(Service):
         self.seen = Seen(SEEN_IDS)
         """Must-arrive ids that came down, handled once each."""
         self._down_since: float | None = None
+        self.robocan = StatusThrottle(robocan_every_s)
+        """Rate of robocan_status going up."""
         self._watch: asyncio.Task[None] | None = None
 
     async def on_start(self) -> None:
@@ -187,6 +229,7 @@ class Link(Service):
         self.connections += 1
         log.info("%s: link up (connection %d)", self.robot, self.connections)
         self._down_since = None
+        self.robocan.reset()
         # Unacknowledged messages sent before the drop go again; those queued offline were
         # just flushed by the hub client.
         self.courier.resume()
@@ -202,6 +245,8 @@ class Link(Service):
                 self._requesters.popitem(last=False)
         if message.type in LIVE_ONLY and not self.upstream.connected.is_set():
             return  # monitoring would crowd the reports out of the bounded offline queue
+        if message.type == "robocan_status" and not self.robocan.allow(message, time.monotonic()):
+            return
         self.sent_up += 1
         if message.type in MUST_ARRIVE_UP:
             self.courier.post(message)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Path
+from fastapi import APIRouter, Path, Request
 
 from backend.api.deps import SeeRobot, Staff, Tasks, Traffic, forbid, not_found
 from backend.auth import Role
@@ -16,23 +16,37 @@ __all__ = ["router"]
 router = APIRouter(prefix="/api/robots", tags=["robots"])
 
 
-def _view(manager: TaskManager, traffic: TrafficManager, name: str) -> dict[str, Any]:
+def _view(
+    request: Request, manager: TaskManager, traffic: TrafficManager, name: str
+) -> dict[str, Any]:
     info = manager.robots[name]
-    return {**info.as_dict(), "areas": traffic.locks.held_by(name)}
+    robocan = getattr(request.app.state, "robocan", None)
+    return {
+        **info.as_dict(),
+        "areas": traffic.locks.held_by(name),
+        "robocan": robocan.view(name) if robocan is not None else None,
+    }
 
 
 @router.get("")
-async def list_robots(_: Staff, manager: Tasks, traffic: Traffic) -> list[dict[str, Any]]:
-    return [_view(manager, traffic, name) for name in manager.robots]
+async def list_robots(
+    request: Request, _: Staff, manager: Tasks, traffic: Traffic
+) -> list[dict[str, Any]]:
+    """Every robot, with its last ``robocan_status`` (``robocan``, null if none came)."""
+    return [_view(request, manager, traffic, name) for name in manager.robots]
 
 
 @router.get("/{name}")
 async def get_robot(
-    who: SeeRobot, manager: Tasks, traffic: Traffic, name: Annotated[str, Path(max_length=64)]
+    request: Request,
+    who: SeeRobot,
+    manager: Tasks,
+    traffic: Traffic,
+    name: Annotated[str, Path(max_length=64)],
 ) -> dict[str, Any]:
     """Staff see any robot; a robot only itself."""
     if who.role is Role.ROBOT and who.name != name:
         raise forbid("a robot may only see itself")
     if name not in manager.robots:
         raise not_found(f"robot {name!r}")
-    return _view(manager, traffic, name)
+    return _view(request, manager, traffic, name)

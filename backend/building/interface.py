@@ -27,6 +27,7 @@ from pydantic import ValidationError
 
 from backend.building._modbus import ModbusIOError
 from backend.building.doors import DoorKeeper
+from backend.building.elevators import ElevatorWatch
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
 from backend.health import ComponentState
@@ -118,6 +119,8 @@ class BuildingInterface(Service):
             for s in e.stops
         }
         self._cabin: dict[tuple[str, str], bool] = {}
+        self.elevators = ElevatorWatch(config)
+        """Where each car is (``elevator_state``), for the console."""
         self._commands: set[asyncio.Task[None]] = set()
         self.events = 0
 
@@ -211,6 +214,9 @@ class BuildingInterface(Service):
         keeper = self._door_coils.get(key)
         if keeper is not None:
             keeper.coil(value, t)
+        car = self.elevators.observe(key, value)
+        if car is not None:
+            self.endpoint.publish(car)
         stop = self._stops.get(key)
         if stop is not None and self._cabin.get(key) != bool(value):
             self._cabin[key] = bool(value)

@@ -15,13 +15,14 @@ router = APIRouter(prefix="/api/building", tags=["building"])
 
 @router.get("")
 async def building_state(request: Request, _: Staff) -> dict[str, Any]:
-    """Each module's health (online, round-trip, errors, last error) and every point's value.
+    """Each module's health (online, round-trip, errors, last error), every point's value and
+    where each elevator car is.
 
     ``enabled`` is false when the site has no modules or the building interface is off.
     """
     building = getattr(request.app.state, "building", None)
     if building is None:
-        return {"enabled": False, "modules": [], "points": []}
+        return {"enabled": False, "modules": [], "points": [], "elevators": []}
     return {
         "enabled": True,
         "modules": building.health(),
@@ -29,4 +30,5 @@ async def building_state(request: Request, _: Staff) -> dict[str, Any]:
             {"module": module, "point": point, "value": value}
             for (module, point), value in sorted(building.values.items())
         ],
+        "elevators": [car.model_dump(mode="json") for car in building.elevators.states()],
     }

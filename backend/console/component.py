@@ -9,6 +9,7 @@ from fastapi import FastAPI
 
 from backend.console.alerts import AlertBook
 from backend.console.feed import ConsoleFeed, relay_events
+from backend.console.robocan import RobocanBook
 
 __all__ = ["console"]
 
@@ -29,11 +30,15 @@ async def console(app: FastAPI) -> AsyncIterator[None]:
     listener = relay_events(endpoint)
     store.listeners.append(listener)
     await feed.start()
+    robocan = RobocanBook(endpoint)
+    await robocan.start()
     app.state.console = feed
     app.state.alerts = alerts
+    app.state.robocan = robocan
     try:
         yield
     finally:
+        await robocan.stop()
         await feed.stop()
         store.listeners.remove(listener)
         endpoint.close()

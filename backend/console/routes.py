@@ -14,6 +14,7 @@ from backend.api.models import RequestBody
 from backend.console.alerts import AlertBook, AlertNotFound
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
+from petri_nets.layout import net_drawing
 from petri_nets.library import UnknownNet
 
 __all__ = ["router"]
@@ -101,26 +102,26 @@ def _position(graphics: Any) -> tuple[float, float] | None:
 
 @router.get("/nets/{net}/structure")
 async def net_structure(request: Request, _: Staff, net: Name) -> dict[str, Any]:
-    """Places, transitions and arcs of a library net, with PNML positions where it has them
-    (``x``/``y`` null otherwise: the page lays the net out itself)."""
+    """Places, transitions and arcs of a library net with positions: the PNML drawing where
+    the file has one (``layout`` "pnml"), a layered one otherwise ("layered")."""
     try:
         doc = _library(request).get(net).doc
     except UnknownNet:
         raise not_found(f"net {net!r}") from None
+    drawing = net_drawing(
+        [(p.id, p.name or p.id, _position(p.graphics), p.initial) for p in doc.places],
+        [(t.id, t.name or t.id, _position(t.graphics)) for t in doc.transitions],
+        [(a.source, a.target) for a in doc.arcs],
+    )
 
     def node(item: Any, **extra: Any) -> dict[str, Any]:
-        xy = _position(item.graphics)
-        return {
-            "id": item.id,
-            "name": item.name or item.id,
-            "x": xy[0] if xy else None,
-            "y": xy[1] if xy else None,
-            **extra,
-        }
+        x, y = drawing.positions[item.id]
+        return {"id": item.id, "name": item.name or item.id, "x": x, "y": y, **extra}
 
     return {
         "net": net,
         "description": doc.description,
+        "layout": drawing.source,
         "places": [node(p, initial=p.initial, final=p.final) for p in doc.places],
         "transitions": [node(t) for t in doc.transitions],
         "arcs": [{"source": a.source, "target": a.target, "weight": a.weight} for a in doc.arcs],

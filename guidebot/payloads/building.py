@@ -7,6 +7,8 @@ module health. Field names are the contract in docs/messages.md.
 
 from __future__ import annotations
 
+from enum import StrEnum
+
 from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
@@ -14,12 +16,14 @@ from guidebot.messages import PayloadModel, register_payload
 __all__ = [
     "BuildingInputChanged",
     "BuildingModuleHealth",
+    "CabinState",
     "CallElevator",
     "CloseDoor",
     "CommandFailed",
     "DoorClosed",
     "DoorOpened",
     "ElevatorInPosition",
+    "ElevatorState",
     "OpenDoor",
     "ReleaseDoor",
     "SetOutput",
@@ -67,6 +71,28 @@ class ElevatorInPosition(PayloadModel):
     elevator: str
     floor: str
     door_open: bool = True
+
+
+class CabinState(StrEnum):
+    """What an elevator car is doing, as far as the building's inputs tell."""
+
+    unknown = "unknown"  # not seen at a floor yet (no floor register, never stood open)
+    idle = "idle"  # at its floor, door closed
+    door_open = "door_open"
+    moving = "moving"  # called to another floor than the one it was last seen at
+
+
+@register_payload("elevator_state")
+class ElevatorState(PayloadModel):
+    """Where a car is, on every change (backend.building.elevators): for the staff console."""
+
+    elevator: str
+    floor: str | None
+    """Its floor, or the last one it was seen at while moving; None before any."""
+    door_open: bool
+    state: CabinState
+    calls: list[str] = Field(default_factory=list)
+    """Floors it is called to (their call coils are set)."""
 
 
 @register_payload("set_output")

@@ -13,7 +13,18 @@ from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["BatteryAlarm", "NodeReached", "RobotFault", "RobotMode", "RobotState"]
+__all__ = [
+    "BatteryAlarm",
+    "CanModuleState",
+    "NodeReached",
+    "RobocanBus",
+    "RobocanCounters",
+    "RobocanModule",
+    "RobocanStatus",
+    "RobotFault",
+    "RobotMode",
+    "RobotState",
+]
 
 
 class RobotMode(StrEnum):
@@ -76,3 +87,73 @@ class NodeReached(PayloadModel):
     at: float | None = None
     """When the robot reached it (Unix seconds, the robot's clock): a report held back while
     the link was down arrives late, and the invariants are checked at this time."""
+
+
+class CanModuleState(StrEnum):
+    """A RoboCAN module's state in its master's table (docs/robocan.md, section 8)."""
+
+    querying = "querying"
+    configuring = "configuring"
+    online = "online"
+    disabled = "disabled"
+    lost = "lost"
+    failed = "failed"
+
+
+class RobocanCounters(PayloadModel):
+    """What the master of one bus counted (docs/robocan.md, section 7 says when each counts)."""
+
+    frames_rx: int = Field(ge=0)
+    frames_tx: int = Field(ge=0)
+    unknown_id: int = Field(ge=0)
+    bad_frame: int = Field(ge=0)
+    overflow: int = Field(ge=0)
+    block_errors: int = Field(ge=0)
+    send_errors: int = Field(ge=0)
+    driver_errors: int = Field(ge=0)
+    record_errors: int = Field(ge=0)
+    stalls: int = Field(ge=0)
+    not_online: int = Field(ge=0)
+    modules_lost: int = Field(ge=0)
+    modules_requeried: int = Field(ge=0)
+
+
+class RobocanModule(PayloadModel):
+    """One row of a master's module table."""
+
+    module_id: int = Field(ge=0, le=0x7F)
+    name: str
+    kind: str | None
+    """motor_controller, sonar_ring, head_io, battery_monitor, other or kind_N; None before the
+    module described itself."""
+    firmware: str | None
+    state: CanModuleState
+    critical: bool
+    elements: list[str] = Field(default_factory=list)
+    frames_rx: int = Field(ge=0)
+    frames_tx: int = Field(ge=0)
+    errors: int = Field(ge=0)
+    faults: int = Field(ge=0)
+    lost: int = Field(ge=0)
+    requeried: int = Field(ge=0)
+
+
+class RobocanBus(PayloadModel):
+    bus: str
+    counters: RobocanCounters
+    modules: list[RobocanModule] = Field(default_factory=list)
+
+
+@register_payload("robocan_status")
+class RobocanStatus(PayloadModel):
+    """A robot's CAN buses, their counters and module tables: on board every second, to the
+    server at most every few seconds and at once when a module changes state (the link)."""
+
+    robot: str
+    buses: list[RobocanBus] = Field(default_factory=list)
+
+    def module_states(self) -> tuple[tuple[str, int, str], ...]:
+        """What a person must see at once when it changes: every module's state."""
+        return tuple(
+            (bus.bus, m.module_id, m.state.value) for bus in self.buses for m in bus.modules
+        )

@@ -17,6 +17,7 @@ import can
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.payloads.robot import RobocanStatus
 from guidebot.service import Service
 from robot_agent.robocan.busopen import open_bus, parse_bus_spec
 from robot_agent.robocan.drivers import DriverConfig, DriverRegistry
@@ -195,7 +196,7 @@ class RoboCanStack(Service):
         console); a period, not a reaction: nothing waits on it."""
         while True:
             await asyncio.sleep(self.status_period_s)
-            self.endpoint.publish("robocan_status", self.status())
+            self.endpoint.publish(RobocanStatus.model_validate(self.status()))
 
     def online(self) -> set[int]:
         return set().union(*(m.online() for m in self.masters)) if self.masters else set()

@@ -258,7 +258,7 @@ async function start() {
   }
   for (const view of store.locks.values()) map.setAreaState(view);
   for (const [id, open] of store.doors) map.setDoor(id, open);
-  for (const [id, lift] of store.lifts) map.setElevator(id, lift.floor, lift.door_open);
+  for (const [id, lift] of store.lifts) if (lift.floor) map.setElevator(id, lift.floor, lift.door_open);
 }
 
 const SERVER_REFRESH_MS = 15000;

@@ -10,14 +10,14 @@ export class Store extends EventTarget {
     this.api = api;
     this.hub = hub;
     this.site = null;
-    this.robots = new Map(); // name -> {name, info (GET /api/robots), state (robot_state), online, faults}
+    this.robots = new Map(); // name -> {name, info (GET /api/robots), state (robot_state), online, faults, robocan}
     this.locks = new Map(); // area -> lock view
     this.tasks = new Map(); // id -> task status (GET /api/tasks)
     this.alerts = new Map(); // id -> alert
     this.events = []; // newest last, at most MAX_EVENTS
     this.building = { enabled: false, modules: new Map(), points: new Map() };
     this.doors = new Map(); // door id -> open (bool)
-    this.lifts = new Map(); // elevator id -> {floor, door_open}
+    this.lifts = new Map(); // elevator id -> elevator_state {floor, door_open, state, calls}
     this.simulator = false;
     this.frame = 0;
   }
@@ -38,7 +38,7 @@ export class Store extends EventTarget {
   robot(name) {
     let robot = this.robots.get(name);
     if (!robot) {
-      robot = { name, info: null, state: null, online: false, faults: [] };
+      robot = { name, info: null, state: null, online: false, faults: [], robocan: null };
       this.robots.set(name, robot);
     }
     return robot;
@@ -67,6 +67,9 @@ export class Store extends EventTarget {
       const robot = this.robot(m.payload.robot);
       robot.info = { ...(robot.info ?? {}), out_of_service: m.payload.out_of_service };
     });
+    on("robocan_status", (m) => {
+      this.robot(m.payload.robot).robocan = { ...m.payload, at: m.timestamp };
+    });
     on("robot_fault", (m) => {
       const robot = this.robot(m.payload.robot);
       robot.faults = [{ at: m.timestamp, kind: m.payload.kind, detail: m.payload.detail }, ...robot.faults].slice(0, 5);
@@ -89,15 +92,12 @@ export class Store extends EventTarget {
     on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
     on("door_opened", (m) => this.#door(m.payload.door, true));
     on("door_closed", (m) => this.#door(m.payload.door, false));
-    on("elevator_in_position", (m) => {
-      this.lifts.set(m.payload.elevator, { floor: m.payload.floor, door_open: m.payload.door_open });
-      this.emit("lift", m.payload.elevator);
-    });
+    on("elevator_state", (m) => this.#lift(m.payload));
     this.hub.subscribe(
-      "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault",
+      "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault", "robocan_status",
       "lock_changed", "task_event", "alert_raised", "alert_acked", "event_logged",
       "building_input_changed", "building_module_health", "door_opened", "door_closed",
-      "elevator_in_position",
+      "elevator_state",
     );
     this.hub.addEventListener("connect", () => this.reload().catch(() => {}));
     const [site, simulator] = await Promise.all([
@@ -123,6 +123,7 @@ export class Store extends EventTarget {
       const robot = this.robot(info.name);
       robot.info = info;
       robot.online = info.online;
+      if (info.robocan && !(robot.robocan?.at > info.robocan.at)) robot.robocan = info.robocan;
     }
     for (const view of locks) {
       this.locks.set(view.area, view);
@@ -145,6 +146,7 @@ export class Store extends EventTarget {
     this.building.enabled = building.enabled;
     for (const m of building.modules) this.building.modules.set(m.module, m);
     for (const p of building.points) this.#point(p.module, p.point, p.value);
+    for (const car of building.elevators ?? []) this.#lift(car);
     this.changed();
   }
 
@@ -185,15 +187,11 @@ export class Store extends EventTarget {
     for (const door of this.site?.doors ?? []) {
       if (door.is_open && door.is_open.module === module && door.is_open.point === point) this.#door(door.id, Boolean(value));
     }
-    for (const lift of this.site?.elevators ?? []) {
-      for (const stop of lift.stops) {
-        const ref = stop.in_position;
-        if (ref && ref.module === module && ref.point === point && value) {
-          this.lifts.set(lift.id, { floor: stop.floor, door_open: true });
-          this.emit("lift", lift.id);
-        }
-      }
-    }
+  }
+
+  #lift(car) {
+    this.lifts.set(car.elevator, car);
+    if (car.floor) this.emit("lift", car.elevator);
   }
 
   #door(id, open) {

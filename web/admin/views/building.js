@@ -1,8 +1,18 @@
-// Building: every Modbus module with health and live inputs/outputs; doors and elevators;
-// the building simulator's buttons when one is configured.
+// Building: every Modbus module with health and live inputs/outputs; doors and elevators (where
+// each car is, from the server's elevator_state); the building simulator's buttons when one is
+// configured.
 import { html } from "lit-html";
 
 const BITS = new Set(["discrete_input", "coil"]);
+
+/** Where a car is (elevator_state): its floor and door, or where it is called to. */
+export function carText(car) {
+  if (!car || car.state === "unknown") return "not seen at a floor yet";
+  const to = car.calls.filter((f) => f !== car.floor);
+  if (car.state === "moving") return `moving to ${to.join(", ")}${car.floor ? ` (last at ${car.floor})` : ""}`;
+  const called = car.calls.length ? `, called to ${car.calls.join(", ")}` : "";
+  return `at ${car.floor}, door ${car.door_open ? "open" : "closed"}${called}`;
+}
 
 function moduleSection(ui, module) {
   const health = ui.store.building.modules.get(module.id);
@@ -38,8 +48,8 @@ export function buildingView(ui) {
     <table aria-label="Elevators">
       <thead><tr><th scope="col">Elevator</th><th scope="col">Stops</th><th scope="col">Car</th></tr></thead>
       <tbody>${site.elevators.map((e) => {
-        const lift = ui.store.lifts.get(e.id);
-        return html`<tr><td>${e.id}</td><td>${e.stops.map((s) => s.floor).join(", ")}</td><td>${lift ? `at ${lift.floor}${lift.door_open ? ", door open" : ""}` : "unknown"}</td></tr>`;
+        const car = ui.store.lifts.get(e.id);
+        return html`<tr><td>${e.id}</td><td>${e.stops.map((s) => s.floor).join(", ")}</td><td data-elevator=${e.id} data-floor=${car?.floor ?? ""} data-state=${car?.state ?? "unknown"}>${carText(car)}</td></tr>`;
       })}</tbody>
     </table>
     ${ui.store.simulator

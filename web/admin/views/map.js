@@ -1,5 +1,6 @@
 // The map view's toolbar (floor switch, legend) and details panel (what was clicked).
 import { html } from "lit-html";
+import { carText } from "/admin/views/building.js";
 import { duration, percent } from "/lib/dom.js";
 
 export function toolbarView(ui) {
@@ -43,7 +44,7 @@ function plainDetails(ui, kind, id) {
     ${item?.node ? html`<p>At node ${item.node}</p>` : ""}
     ${kind === "node" ? html`<p>Floor ${item.floor}, x ${item.x} m, y ${item.y} m${item.passing_place ? ", passing place" : ""}</p>` : ""}
     ${kind === "door" ? html`<p>State: ${ui.store.doors.has(id) ? (ui.store.doors.get(id) ? "open" : "closed") : "unknown"}</p>` : ""}
-    ${kind === "elevator" ? html`<p>Car: ${ui.store.lifts.has(id) ? `at ${ui.store.lifts.get(id).floor}${ui.store.lifts.get(id).door_open ? ", door open" : ""}` : "unknown"}</p>` : ""}
+    ${kind === "elevator" ? html`<p>Car: ${carText(ui.store.lifts.get(id))}</p>` : ""}
     ${kind === "button" && item?.task ? html`<p>Requests: ${item.task.kind} ${Object.values(item.task.params ?? {}).join(" ")}</p>` : ""}
     ${lock
       ? html`<dl><dt>State</dt><dd class=${`state-${lock.state}`}>${lock.state.replace("_", " ")}</dd>

@@ -34,6 +34,36 @@ function actions(ui, robot) {
   </div>`;
 }
 
+const COUNTER_TEXT = {
+  frames_rx: "frames received", frames_tx: "frames sent", unknown_id: "unknown ids", bad_frame: "bad frames",
+  overflow: "overflows", block_errors: "block errors", send_errors: "send errors", driver_errors: "driver errors",
+  record_errors: "record errors", stalls: "stalls", not_online: "frames from modules not online",
+  modules_lost: "modules lost", modules_requeried: "modules queried again",
+};
+const TRAFFIC = new Set(["frames_rx", "frames_tx"]);
+const hex = (id) => `0x${id.toString(16).toUpperCase().padStart(2, "0")}`;
+
+/** The robot's CAN buses (its last robocan_status): counters, then one row per module. */
+function robocanView(robot) {
+  const status = robot.robocan;
+  if (!status) return html`<p class="muted">No RoboCAN status received from ${robot.name}.</p>`;
+  return html`<p class="muted">RoboCAN status of ${clock(status.at)}.</p>
+    ${status.buses.map((bus) => {
+      const errors = Object.entries(bus.counters).filter(([k, v]) => !TRAFFIC.has(k) && v > 0);
+      return html`<table class="robocan" aria-label=${`RoboCAN modules of ${robot.name} on ${bus.bus}`}>
+        <caption>Bus ${bus.bus}: ${bus.counters.frames_rx} frames received, ${bus.counters.frames_tx} sent;
+          ${errors.length ? errors.map(([k, v]) => html`<span class="badge bad">${COUNTER_TEXT[k] ?? k}: ${v}</span> `) : "no errors"}</caption>
+        <thead><tr><th scope="col">Module</th><th scope="col">Kind</th><th scope="col">Firmware</th><th scope="col">State</th>
+          <th scope="col">Frames in / out</th><th scope="col">Errors</th><th scope="col">Faults</th><th scope="col">Lost</th><th scope="col">Queried again</th></tr></thead>
+        <tbody>${bus.modules.map((m) => html`<tr data-module=${m.module_id}>
+          <td>${m.name} (${hex(m.module_id)})${m.critical ? html` <span class="badge warn">critical</span>` : ""}</td>
+          <td>${m.kind ?? "—"}</td><td>${m.firmware ?? "—"}</td>
+          <td><span class=${`badge ${m.state === "online" ? "ok" : m.state === "lost" || m.state === "failed" ? "bad" : "warn"}`}>${m.state}</span></td>
+          <td>${m.frames_rx} / ${m.frames_tx}</td><td>${m.errors}</td><td>${m.faults}</td><td>${m.lost}</td><td>${m.requeried}</td></tr>`)}</tbody>
+      </table>`;
+    })}`;
+}
+
 export function robotsView(ui) {
   const robots = [...ui.store.robots.values()].sort((a, b) => a.name.localeCompare(b.name));
   return html`<h2>Robots</h2>
@@ -58,6 +88,8 @@ export function robotsView(ui) {
           <dt>RoboCAN modules</dt><dd>${modules.length ? modules.map(([m, st]) => html`<span class=${`badge ${st === "ok" ? "ok" : "bad"}`}>${m}: ${st}</span> `) : "none reported"}</dd>
           <dt>Last errors</dt><dd>${robot.faults.length ? robot.faults.map((f) => html`<div>${clock(f.at)} ${f.kind} ${f.detail ?? ""}</div>`) : "none"}</dd>
         </dl>
+        <h4>RoboCAN</h4>
+        ${robocanView(robot)}
         ${actions(ui, robot)}
       </section>`;
     })}`;
