@@ -23,6 +23,7 @@ SERVER_ONLY = frozenset(
         "task_assigned",
         "task_cancel",
         "task_event",
+        "visitor_service",
         "robot_connected",
         "robot_disconnected",
         "robot_service",
