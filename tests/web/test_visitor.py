@@ -178,10 +178,14 @@ async def test_a_visitor_cancels_and_a_second_panel_cannot_see_or_cancel_it(
         page = (await open_page(vf.panel_url(), viewport=PHONE)).page
         await expect(page.get_by_role("status").first).to_contain_text("No robot is in service")
         await expect(page.get_by_role("button", name="Take this tour").first).to_be_disabled()
-        # Staff bring a robot in later; the request waits for it meanwhile.
+        # Staff bring a robot in later; the request waits for it meanwhile. (Made over REST
+        # as this page's device: its device id, kept in localStorage, in the header.)
+        device = await page.evaluate("localStorage.getItem('guidebot.visitor.device')")
         async with vf.fleet.http(PANEL_A) as panel_a:
             r = await panel_a.post(
-                "/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}
+                "/api/tasks",
+                json={"kind": "tour", "params": {"tour": "ground"}},
+                headers={"X-Guidebot-Device": device},
             )
             assert r.status_code == 201, r.text
             mine = r.json()["id"]
