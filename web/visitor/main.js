@@ -101,10 +101,12 @@ function told(status, before = undefined) {
 }
 
 /** A told wait (seconds) minus the time since it was told: what the server estimates now,
- * until it tells another (it does when its estimate drifts from this countdown). */
+ * until it tells another (it does when its estimate drifts from this countdown). Under a
+ * minute in steps of 10 s, so that a screen reader is not told a new number every second. */
 function countdown(seconds, at) {
   if (seconds === null || seconds === undefined) return null;
-  return Math.max(0, seconds - (performance.now() - at) / 1000);
+  const left = Math.max(0, seconds - (performance.now() - at) / 1000);
+  return left < 60 ? Math.ceil(left / 10) * 10 : left;
 }
 
 async function refreshRequests(ids) {
