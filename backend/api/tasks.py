@@ -111,7 +111,10 @@ class TaskStatus(BaseModel):
     duration_s: float | None
     """The task's own length from its first point."""
     progress: dict[str, Any] | None
-    """Tours on their robot: {index, total, poi, stage: arrived | explained}."""
+    """Tours on their robot: {index, total, poi, name, stage: arrived | explained}: the point
+    the robot reported, by id and by name in the task's language."""
+    cancelled_by: str = ""
+    """Cancelled tasks: "staff", "requester" or "" (the system; not kept across a restart)."""
 
 
 class TaskPage(BaseModel):

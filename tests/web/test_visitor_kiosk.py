@@ -395,8 +395,13 @@ async def test_a_tour_cancelled_by_staff_is_said_to_its_visitor(
                 f"/api/tasks/{walk.id}/cancel", json={"reason": "the museum closes early"}
             )
             assert r.status_code == 200, r.text
+            assert r.json()["cancelled_by"] == "staff"
         await expect(state).to_contain_text("Your tour was cancelled by staff")
         await web.axe_check(page)
+        # Read again over REST (a reconnect, e.g. a server restart) it still says so.
+        async with page.expect_response(f"**/api/tasks/{walk.id}"):
+            server.app.state.hub.clients["panel-kiosk"].request_close(1012, "test: restart")
+        await expect(state).to_contain_text("Your tour was cancelled by staff")
         # The visitor's own cancel is said as such (not "by staff").
         await page.get_by_role("button", name="Ask for another tour").click()
         await (
