@@ -219,16 +219,30 @@ class OnboardScreen(Service):
     def _on_show_point(self, message: Message) -> None:
         point = message.payload.get("point")
         point = point if isinstance(point, dict) else {}
+        poi = message.payload.get("poi")
+        # A single point (go_to_poi) comes without its texts: its name and pictures from the
+        # site, in the task's language; never its id.
+        site_texts = self._poi_texts(poi) if not point.get("name") else None
         self.explanation = {
-            "poi": message.payload.get("poi"),
-            "name": point.get("name") or message.payload.get("poi"),
+            "poi": poi,
+            "name": point.get("name") or (site_texts or {}).get("name") or poi,
             "text": message.payload.get("text", ""),
-            "media": [media_link(m) for m in point.get("media") or []],
+            "media": [
+                media_link(m) for m in point.get("media") or (site_texts or {}).get("media") or []
+            ],
             "index": point.get("index"),
             "total": point.get("total"),
             "lang": message.payload.get("lang"),
         }
         self._push("show_point", self.explanation)
+
+    def _poi_texts(self, poi: object) -> dict[str, Any] | None:
+        """A point's texts from the site in the running task's language (None: unknown)."""
+        site = self.site
+        found = site.poi(poi) if site is not None and isinstance(poi, str) else None
+        if site is None or found is None:
+            return None
+        return poi_texts(site, found, resolve_language(site, self.lang))
 
     def _on_speech(self, message: Message) -> None:
         started = message.type == "speech_started"

@@ -24,6 +24,7 @@ from backend.api.deps import (
     rate_limited,
 )
 from backend.api.models import RequestBody
+from backend.api.visitor import Me, MeRequesting
 from backend.auth import Principal, Role
 from backend.db.store import DbStore
 from backend.ratelimit import RateLimited
@@ -97,14 +98,18 @@ class TaskStatus(BaseModel):
     eta_s: float | None
     """Estimated wait before a robot starts on it (None: no robot can serve it now)."""
     service: str
-    """available | busy | unavailable | ended | withdrawn (docs/visitor.md, "The wait")."""
+    """available | busy | held_up | unavailable | ended | withdrawn (docs/visitor.md,
+    "The wait")."""
     arrival_s: float | None
     """Estimated seconds until the robot is at the first point."""
     remaining_s: float | None
     duration_s: float | None
     """The task's own length from its first point."""
     progress: dict[str, Any] | None
-    """Tours on their robot: {index, total, poi, stage: arrived | explained}."""
+    """Tours on their robot: {index, total, poi, name, stage: arrived | explained}: the point
+    the robot reported, by id and by name in the task's language."""
+    cancelled_by: str = ""
+    """Cancelled tasks: "staff", "requester" or "" (the system; not kept across a restart)."""
 
 
 class TaskPage(BaseModel):
@@ -117,8 +122,11 @@ def _status(manager: TaskManager, task: Task) -> TaskStatus:
     return TaskStatus.model_validate(manager.status(task))
 
 
-async def _find(manager: TaskManager, db: DbStore, who: Principal, task_id: str) -> Task:
-    """The live task, else the stored one; 404 also for a task this caller may not see."""
+async def _find(
+    manager: TaskManager, db: DbStore, who: Principal, task_id: str, me: str | None = None
+) -> Task:
+    """The live task, else the stored one; 404 also for a task this caller may not see
+    (``me``: the requester the caller acts as, a panel's device)."""
     try:
         task = manager.get(task_id)
     except TaskNotFound:
@@ -126,15 +134,16 @@ async def _find(manager: TaskManager, db: DbStore, who: Principal, task_id: str)
         if old is None:
             raise not_found(f"task {task_id!r}") from None
         task = old
-    if not _may_see(who, task):
+    if not _may_see(who, task, me):
         raise not_found(f"task {task_id!r}")
     return task
 
 
-def _may_see(who: Principal, task: Task) -> bool:
-    """Panels see what they requested; robots that and what they run; staff everything."""
+def _may_see(who: Principal, task: Task, me: str | None = None) -> bool:
+    """Panels (or their devices) see what they requested; robots that and what they run;
+    staff everything."""
     if who.role is Role.PANEL:
-        return task.requester == who.name
+        return task.requester == (me or who.name)
     if who.role is Role.ROBOT:
         return task.robot == who.name or task.requester == who.name
     return True
@@ -148,11 +157,16 @@ def _refuse_finished(task: Task) -> None:
 
 @router.post("", status_code=status.HTTP_201_CREATED)
 async def create_task(
-    request: Request, who: TaskRequester, manager: Tasks, body: Annotated[TaskCreate, Body()]
+    request: Request,
+    who: TaskRequester,
+    me: MeRequesting,
+    manager: Tasks,
+    body: Annotated[TaskCreate, Body()],
 ) -> TaskStatus:
-    """Request a task. Panels: tours and points of interest, priority up to 5. Robots: a
-    visitor at the robot's screen, so that robot takes it. Panels and robots are rate-limited
-    per requester (429)."""
+    """Request a task. Panels: tours and points of interest, priority up to 5 (with a device
+    id, the device is the requester). Robots: a visitor at the robot's screen, so that robot
+    takes it. Panels and robots are rate-limited per token (429): a panel's devices share
+    its limit."""
     refusal = task_request_refusal(
         who.role, who.name, kind=body.kind, priority=body.priority, robot=body.robot
     )
@@ -165,7 +179,7 @@ async def create_task(
         except RateLimited as exc:
             raise rate_limited(exc) from None
     task = manager.request(
-        body.kind, body.params, priority=body.priority, requester=who.name, robot=robot
+        body.kind, body.params, priority=body.priority, requester=me, robot=robot
     )
     if request.app.state.settings.broker_url:
         # Several processes: acknowledge only what a new leader would find (docs/scaling.md).
@@ -176,6 +190,7 @@ async def create_task(
 @router.get("")
 async def list_tasks(
     who: Requester,
+    me: Me,
     manager: Tasks,
     db: Store,
     state: TaskState | None = None,
@@ -188,7 +203,7 @@ async def list_tasks(
     change first; finished ones survive restarts. Panels and robots see only their own."""
     owner: tuple[str | None, str | None] | None = None
     if who.role is Role.PANEL:
-        owner = (who.name, None)
+        owner = (me, None)
     elif who.role is Role.ROBOT:
         owner = (who.name, who.name)
     queued: list[Task] = []
@@ -198,7 +213,7 @@ async def list_tasks(
             for t in manager.queue.ordered()
             if (robot is None or t.robot == robot)
             and (include_internal or not t.internal)
-            and _may_see(who, t)
+            and _may_see(who, t, me)
         ]
     page = queued[offset : offset + limit]
     rest_offset = max(0, offset - len(queued))
@@ -222,9 +237,11 @@ async def list_tasks(
 
 
 @router.get("/{task_id}")
-async def get_task(who: Requester, manager: Tasks, db: Store, task_id: TaskId) -> TaskStatus:
+async def get_task(
+    who: Requester, me: Me, manager: Tasks, db: Store, task_id: TaskId
+) -> TaskStatus:
     """A task's state, its robot, its queue position and estimated wait."""
-    return _status(manager, await _find(manager, db, who, task_id))
+    return _status(manager, await _find(manager, db, who, task_id, me))
 
 
 @router.get("/{task_id}/history")
@@ -238,17 +255,22 @@ async def task_history(
 @router.post("/{task_id}/cancel")
 async def cancel_task(
     who: Requester,
+    me: Me,
     manager: Tasks,
     db: Store,
     task_id: TaskId,
     body: Annotated[Cancel | None, Body()] = None,
 ) -> TaskStatus:
-    """Staff cancel any task; a panel or robot only what it requested."""
-    task = await _find(manager, db, who, task_id)
-    if who.role in (Role.PANEL, Role.ROBOT) and task.requester != who.name:
+    """Staff cancel any task; a panel (or a panel's device) or robot only what it requested.
+    The task_event says who: ``cancelled_by`` "staff" or "requester"."""
+    task = await _find(manager, db, who, task_id, me)
+    staff = who.role not in (Role.PANEL, Role.ROBOT)
+    if not staff and task.requester != me:
         raise forbid("you may cancel only the tasks you requested")
     _refuse_finished(task)
-    task = manager.cancel(task_id, reason=(body or Cancel()).reason, by=who.name)
+    reason = (body or Cancel()).reason
+    role = "staff" if staff else "requester"
+    task = manager.cancel(task_id, reason=reason, by=who.name, by_role=role)
     return _status(manager, task)
 
 

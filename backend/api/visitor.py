@@ -6,19 +6,65 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Path, Query, Request
+from fastapi import APIRouter, Depends, Header, Path, Query, Request
 from fastapi.responses import FileResponse
 
-from backend.api.deps import Anyone, Requester, Sites, Tasks, not_found
+from backend.api.deps import Anyone, Requester, Sites, TaskRequester, Tasks, not_found
+from backend.auth import Principal, Role
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_in
 from guidebot.site.schema import Site
 
-__all__ = ["media_url", "router"]
+__all__ = ["DEVICE_HEADER", "Me", "MeRequesting", "device_requester", "media_url", "router"]
 
 router = APIRouter(tags=["visitor"])
 
 Lang = Annotated[str | None, Query(max_length=16)]
+
+DEVICE_HEADER = "X-Guidebot-Device"
+"""A visitor device's own id under a shared panel token (docs/visitor.md, "Devices")."""
+REQUESTER_MAX = 64
+"""The requester column's width (backend/db/models.py)."""
+
+
+def device_requester(panel: str, device: str) -> str:
+    """The requester a panel's device acts as: ``panel/device``; a long panel name is cut
+    (the random device id keeps it unique)."""
+    return f"{panel[: REQUESTER_MAX - len(device) - 1]}/{device}"
+
+
+Device = Annotated[
+    str | None,
+    Header(
+        alias=DEVICE_HEADER,
+        min_length=16,
+        max_length=40,
+        pattern=r"^[A-Za-z0-9_-]+$",
+        description="A panel's device: the random id the page keeps in localStorage.",
+    ),
+]
+
+
+def _acting_as(who: Principal, device: str | None) -> str:
+    """Whom a call acts for: a panel with a device id is that device (it sees and cancels
+    only its own requests); any other caller is its token's name."""
+    if who.role is Role.PANEL and device is not None:
+        return device_requester(who.name, device)
+    return who.name
+
+
+async def _me(who: Requester, device: Device = None) -> str:
+    return _acting_as(who, device)
+
+
+async def _me_requesting(who: TaskRequester, device: Device = None) -> str:
+    return _acting_as(who, device)
+
+
+Me = Annotated[str, Depends(_me)]
+"""The requester a call acts as (``me: Me``): its token's name, or a panel's device."""
+MeRequesting = Annotated[str, Depends(_me_requesting)]
+"""The same for ``POST /api/tasks``, whose rule (``task_request``) lets modules in too."""
 
 
 def media_url(name: str) -> str | None:
@@ -79,12 +125,11 @@ async def visitor_menu(
 
 
 @router.get("/api/visitor/requests")
-async def my_requests(who: Requester, manager: Tasks) -> list[dict[str, Any]]:
-    """The caller's own tasks that are not finished (a panel never sees another's)."""
+async def my_requests(me: Me, manager: Tasks) -> list[dict[str, Any]]:
+    """The caller's own tasks that are not finished (a panel, or a panel's device, never
+    sees another's)."""
     mine = [
-        t
-        for t in manager.tasks.values()
-        if t.requester == who.name and not t.final and not t.internal
+        t for t in manager.tasks.values() if t.requester == me and not t.final and not t.internal
     ]
     return [manager.status(t) for t in sorted(mine, key=lambda t: t.seq)]
 

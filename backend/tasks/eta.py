@@ -55,7 +55,7 @@ CHECKPOINT_EVERY = 128
 MEMO_SIZE = 4096
 """Entries kept by each of the estimator's look-up memos before it starts afresh."""
 
-Service = Literal["available", "busy", "unavailable", "ended", "withdrawn"]
+Service = Literal["available", "busy", "held_up", "unavailable", "ended", "withdrawn"]
 
 
 def _remember(memo: dict[int, Any], key: int, value: Any) -> None:
@@ -153,6 +153,8 @@ class _Progress:
     index: int = 0
     total: int = 0
     poi: str | None = None
+    name: str | None = None
+    """The reported point's name in the task's language (from what its robot was given)."""
     stage: str = "assigned"
     learned: bool = False
 
@@ -181,6 +183,16 @@ class _Schedule:
     tasks: list[Task] = field(default_factory=list)
     checkpoints: list[list[tuple[float, int, str, str | None]]] = field(default_factory=list)
     """checkpoints[c]: the heap before ``tasks[c * CHECKPOINT_EVERY]`` was simulated."""
+
+
+def _point_name(task: Task, poi: str | None) -> str | None:
+    """The name of point ``poi`` as the task's robot was given it (in the task's language),
+    so a visitor is told the robot's real place even after the tour was edited."""
+    points = task.assigned_params.get("points") if task.assigned_params else None
+    for point in points if isinstance(points, list) else []:
+        if isinstance(point, dict) and point.get("poi") == poi and point.get("name"):
+            return str(point["name"])
+    return None
 
 
 class Fleet(Protocol):
@@ -257,6 +269,7 @@ class EtaEstimator:
         run.done = max(run.done, min(done, len(run.segments)))
         run.mark_at = now
         run.index, run.stage, run.poi = index, stage, poi
+        run.name = _point_name(task, poi)
         self._schedule = None
         return self.progress_view(task) or {}
 
@@ -278,10 +291,13 @@ class EtaEstimator:
     # --- what the visitor sees ----------------------------------------------------------------
     def service(self) -> Service:
         """available: a robot could start now; busy: all working robots are busy;
+        held_up: every working robot is held up (a jam: nobody can say when one is free);
         unavailable: no robot is in service (offline or in fault)."""
-        robots = self.tm.robots
-        if not any(r.online and not r.fault for r in robots.values()):
+        working = [r for r in self.tm.robots.values() if r.online and not r.fault]
+        if not working:
             return "unavailable"
+        if all(r.held_up for r in working):
+            return "held_up"
         if self.tm.has_free_robot():
             return "available"
         return "busy"
@@ -295,13 +311,16 @@ class EtaEstimator:
             if run is None:
                 return Estimate("available", 0.0, None, None, None)
             duration = self._real_after(run, 1)
+            robot = self.tm.robots.get(task.robot or "")
+            if robot is not None and robot.held_up:  # a jam: no promise of when
+                return Estimate("held_up", 0.0, None if run.done == 0 else 0.0, None, duration)
             remaining = self._remaining(run)
             first = self._remaining(run, upto=1) if run.done == 0 else 0.0
             return Estimate("available", 0.0, first, remaining, duration)
         duration = self._real(self.segments(task, None)[1:])
         service = self.service()
-        if service == "unavailable":
-            return Estimate("unavailable", None, None, None, duration)
+        if service in ("unavailable", "held_up"):
+            return Estimate(service, None, None, None, duration)
         sched = self._current()
         found = sched.waits.get(task.id)
         if found is None:
@@ -312,8 +331,9 @@ class EtaEstimator:
         """What a new request would be told now (the panel shows it before the visitor asks)."""
         probe = Task(id="~preview", kind=kind, params=params, priority=5, requester="", seq=0)
         duration = self._real(self.segments(probe, None)[1:])
-        if self.service() == "unavailable":
-            return Estimate("unavailable", None, None, None, duration)
+        service = self.service()
+        if service in ("unavailable", "held_up"):
+            return Estimate(service, None, None, None, duration)
         sched = self._current()
         heap = list(sched.heap)
         wait, arrival, _ = self._place(heap, probe)
@@ -323,16 +343,32 @@ class EtaEstimator:
         self, sched: _Schedule, wait: float, arrival: float, duration: float | None
     ) -> Estimate:
         if not math.isfinite(wait):
-            return Estimate("busy", None, None, None, duration)
+            jam = any(r.held_up for r in self._pool())
+            return Estimate("held_up" if jam else "busy", None, None, None, duration)
         age = self.tm.clock() - sched.built_at
         wait, arrival = max(0.0, wait - age), max(0.0, arrival - age)
         return Estimate("available" if wait <= 0 else "busy", wait, arrival, None, duration)
+
+    def next_free_s(self) -> float | None:
+        """Seconds until the first robot is free after the whole line (None: not known)."""
+        if self.service() in ("unavailable", "held_up"):
+            return None
+        sched = self._current()
+        if not sched.heap or not math.isfinite(sched.heap[0][0]):
+            return None
+        return round(max(0.0, sched.heap[0][0] - (self.tm.clock() - sched.built_at)), 1)
 
     def progress_view(self, task: Task) -> dict[str, Any] | None:
         run = self._running.get(task.id)
         if run is None or task.kind != "tour":
             return None
-        return {"index": run.index, "total": run.total, "poi": run.poi, "stage": run.stage}
+        return {
+            "index": run.index,
+            "total": run.total,
+            "poi": run.poi,
+            "name": run.name,
+            "stage": run.stage,
+        }
 
     # --- the model ------------------------------------------------------------------------------
     def segments(self, task: Task, start: str | None) -> list[Segment]:
@@ -515,6 +551,8 @@ class EtaEstimator:
 
     def _free(self, robot: RobotInfo) -> tuple[float, str | None]:
         """When (real seconds from now) and where ``robot`` is free for the next task."""
+        if robot.held_up:
+            return math.inf, robot.node  # a jam: nobody can say when
         current = self.tm.tasks.get(robot.current) if robot.current else None
         free_at, node = 0.0, robot.node
         if current is not None and not current.internal and not current.final:

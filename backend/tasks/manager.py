@@ -35,6 +35,7 @@ from backend.tasks.model import (
     TaskNotFound,
     TaskState,
 )
+from backend.tasks.news import QueueNews
 from backend.tasks.params import validate_params
 from backend.tasks.presence import Presence
 from backend.tasks.queue import TaskQueue
@@ -122,6 +123,8 @@ class TaskManager(Service):
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
         """Waits, arrivals and durations told to visitors (backend/tasks/eta.py)."""
+        self.news = QueueNews(self)
+        """Waits told again as they change without a task change (backend/tasks/news.py)."""
         self.courier = courier_for(endpoint)
         """task_assigned and task_cancel: sent again until the robot acknowledges them."""
         self.hub_requests = HubRequests(self)
@@ -247,12 +250,17 @@ class TaskManager(Service):
             raise TaskNotFound(f"no task {task_id!r}")
         return task
 
-    def cancel(self, task_id: str, *, reason: str = "cancelled", by: str = "") -> Task:
+    def cancel(
+        self, task_id: str, *, reason: str = "cancelled", by: str = "", by_role: str = ""
+    ) -> Task:
+        """``by_role`` ("staff" or "requester") goes out with the task_event: the visitor is
+        told who cancelled a request (docs/visitor.md)."""
         task = self.get(task_id)
         if task.final:
             raise TaskFinished(f"task {task_id} is already {task.state.value}")
         self._leave_robot(task, f"{reason} by {by}".strip())
         self.queue.remove(task.id)
+        task.cancelled_by = by_role
         task.move(TaskState.CANCELLED, reason=f"{reason} ({by})" if by else reason)
         self.changed(task, "cancelled")
         self.dispatch()
@@ -558,14 +566,21 @@ class TaskManager(Service):
             **self.estimator.estimate(task).as_dict(),
             progress=self.estimator.progress_view(task),
             reason=task.reason,
+            cancelled_by=task.cancelled_by,
         )
+
+    def publish_event(self, task: Task) -> None:
+        """The task's task_event on the hub, remembered as what its visitor was told."""
+        event = self.event(task)
+        self.endpoint.publish(event)
+        self.news.told(event)
 
     def changed(self, task: Task, event: str) -> None:
         """Every state change: an event on the hub and a row in the task's history."""
         self.estimator.changed(task, event)
         if self.store is not None:
             self.store.record(task, event)
-        self.endpoint.publish(self.event(task))
+        self.publish_event(task)
         if task.state in FINAL_STATES:
             self._avoid.pop(task.id, None)
             self.rather_not.pop(task.id, None)

@@ -88,6 +88,9 @@ class Task:
     net: str = ""
     assigned_params: dict[str, Any] = field(default_factory=dict)
     reason: str = ""
+    cancelled_by: str = ""
+    """Who cancelled it: "staff", "requester", or "" (not cancelled, or the system); the
+    visitor is told "cancelled by staff" (docs/visitor.md). Not kept across a restart."""
     created_at: float = field(default_factory=time.time)
     updated_at: float = field(default_factory=time.time)
     started_at: float | None = None
@@ -128,6 +131,7 @@ class Task:
             "internal": self.internal,
             "net": self.net,
             "reason": self.reason,
+            "cancelled_by": self.cancelled_by,
             "created_at": self.created_at,
             "updated_at": self.updated_at,
             "started_at": self.started_at,

@@ -18,6 +18,12 @@ __all__ = ["Presence"]
 
 log = logging.getLogger(__name__)
 
+BLOCKED = frozenset({"door_blocked"})
+"""Navigation states of a robot whose way is blocked (robot_state ``navigation``)."""
+WAITING = frozenset({"waiting_door", "waiting_area"})
+"""Navigation states that are normal for a while: held up once they last ``HELD_UP_AFTER_S``."""
+HELD_UP_AFTER_S = 20.0
+
 
 class Presence:
     """The Task Manager's handlers of robot_state and robot_disconnected."""
@@ -43,6 +49,7 @@ class Presence:
         if isinstance(p.get("node"), str) and p["node"] in tm.graph:
             moved = robot.node != p["node"]
             robot.node = p["node"]
+        self.held_up(robot, p.get("navigation"))
         # A robot that does not know its floor yet (no site on board) is on its node's floor.
         robot.floor = p.get("floor") or tm.graph.floor_of.get(robot.node or "") or robot.floor
         battery = p.get("battery")
@@ -72,8 +79,25 @@ class Presence:
         # robot_state comes at a steady rate from every robot: re-plan only on news.
         released = robot.current is None and before is not None
         news = came_back or was_fault != robot.fault or released or unrefused
+        if news:
+            tm.news.changed()
         if news or (robot.current is None and moved):
             tm.dispatch()
+
+    def held_up(self, robot: RobotInfo, navigation: object) -> None:
+        """A jam: its way blocked, or waiting for a door or an area too long. The waits told
+        to visitors stop promising what it would do (backend/tasks/eta.py)."""
+        now = self.tm.clock()
+        if navigation in WAITING:
+            if robot.waiting_since is None:
+                robot.waiting_since = now
+        else:
+            robot.waiting_since = None
+        waited = now - robot.waiting_since if robot.waiting_since is not None else 0.0
+        held_up = navigation in BLOCKED or waited >= HELD_UP_AFTER_S
+        if held_up != robot.held_up:
+            robot.held_up = held_up
+            self.tm.news.changed()
 
     def reconcile(self, robot: RobotInfo, reported: str | None) -> None:
         """Match what the robot says it runs with what we gave it."""
@@ -119,4 +143,5 @@ class Presence:
             robot.online = False
             robot.mode = "offline"
             robot.offline_since = self.tm.clock()
+            self.tm.news.changed()
             self.tm.dispatch()

@@ -103,4 +103,4 @@ class TaskReports:
         tm.estimator.progress(task, p.index, p.stage, p.poi)
         if tm.store is not None:
             tm.store.record(task, f"point {p.index}/{p.total} {p.stage}")
-        tm.endpoint.publish(tm.event(task))
+        tm.publish_event(task)

@@ -27,6 +27,11 @@ class RobotInfo:
     fault: bool = False
     out_of_service: bool = False
     """Taken out of service by staff: gets no tasks but the go_to/charge staff pin to it."""
+    held_up: bool = False
+    """Its way is blocked (a door that did not open) or it has waited long for a door or an
+    area (backend/tasks/presence.py): nobody can tell when it is free (docs/visitor.md)."""
+    waiting_since: float | None = None
+    """When its navigation started waiting for a door or an area (None: not waiting)."""
     refused: bool = False
     """It refused a task as busy with another: no new task until a robot_state shows it runs
     nothing or only what we gave it."""
@@ -44,5 +49,6 @@ class RobotInfo:
             "needs_charge": self.needs_charge,
             "fault": self.fault,
             "out_of_service": self.out_of_service,
+            "held_up": self.held_up,
             "last_seen": self.last_seen,
         }

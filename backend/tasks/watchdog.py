@@ -61,3 +61,4 @@ class Watchdog:
                 else:
                     tm.requeue(task, "the robot did not start it")
         tm.dispatch()
+        tm.news.check()

@@ -21,6 +21,7 @@ __all__ = [
     "TaskRequest",
     "TaskStarted",
     "TourProgress",
+    "VisitorService",
 ]
 
 Outcome = Literal["done", "failed", "cancelled", "refused"]
@@ -109,14 +110,29 @@ class TaskEvent(PayloadModel):
     eta_s: float | None = None
     """Estimated wait before a robot starts on it (None: no robot can serve it now)."""
     service: str | None = None
-    """available | busy | unavailable | ended | withdrawn (docs/visitor.md, "The wait")."""
+    """available | busy | held_up | unavailable | ended | withdrawn (docs/visitor.md,
+    "The wait")."""
     arrival_s: float | None = None
     """Estimated seconds until the robot is at the first point."""
     remaining_s: float | None = None
     duration_s: float | None = None
     progress: dict[str, Any] | None = None
-    """Tours: {index, total, poi, stage: arrived | explained}."""
+    """Tours: {index, total, poi, name, stage: arrived | explained}; ``poi`` and ``name``
+    are the point the robot reported (its real place), never an index into the tour."""
     reason: str = ""
+    cancelled_by: str = ""
+    """Cancelled tasks: "staff", "requester" or "" (the system)."""
+
+
+@register_payload("visitor_service")
+class VisitorService(PayloadModel):
+    """What a new visitor request would be told changed (the overall service, or the wait
+    for the next free robot): the visitor panels read their menu again (docs/visitor.md)."""
+
+    service: str
+    """available | busy | held_up | unavailable."""
+    eta_s: float | None = None
+    """Seconds until the first robot is free after the line (None: not known)."""
 
 
 @register_payload("tour_progress")

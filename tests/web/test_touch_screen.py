@@ -19,10 +19,10 @@ pytestmark = [pytest.mark.browser, pytest.mark.timeout(60)]
 SITE = Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml"
 
 
-def _screen() -> OnboardScreen:
+def _screen(bus: Bus | None = None) -> OnboardScreen:
     """Robot R1's touch screen on the demo site, its link up."""
     return OnboardScreen(
-        Bus().endpoint("screen"),
+        (bus or Bus()).endpoint("screen"),
         Clock(10.0),
         "R1",
         site=load_site_file(SITE),
@@ -77,6 +77,34 @@ async def test_the_touch_screen_says_when_its_agent_answers_with_an_error(open_p
             await page.unroute("**/api/screen*")
             await expect(banner).to_be_hidden(timeout=10_000)  # asked again, without a push
             await expect(page.locator("html")).to_have_attribute("lang", "es")
+        finally:
+            await open_page.close()
+            await server.stop()
+
+
+async def test_the_touch_screen_names_a_single_point_by_its_name_in_the_visitors_language(
+    open_page: Any,
+) -> None:
+    """A go_to_poi's show_point carries only the point's id and text: the screen names it
+    from the site in the task's language (with its picture), never by its id."""
+    bus = Bus()
+    onboard = _screen(bus)
+    task = bus.endpoint("task")
+    async with onboard:
+        server = ScreenServer(onboard, port=0)
+        await server.start()
+        try:
+            page = (await open_page(server.url, viewport=(1024, 600))).page
+            await expect(page.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
+            task.publish(
+                "task_assigned",
+                {"task_id": "t1", "net": "go_to_poi", "params": {"poi": "sword", "lang": "es"}},
+            )
+            task.publish("show_point", {"poi": "sword", "text": "Esta espada tiene tres mil años."})
+            now = page.get_by_role("region", name="Ahora")
+            name = "Espada de la Edad del Bronce"
+            await expect(now.get_by_role("heading", level=3)).to_have_text(name)
+            await expect(now.get_by_role("img", name=name)).to_be_visible()
         finally:
             await open_page.close()
             await server.stop()

@@ -178,10 +178,14 @@ async def test_a_visitor_cancels_and_a_second_panel_cannot_see_or_cancel_it(
         page = (await open_page(vf.panel_url(), viewport=PHONE)).page
         await expect(page.get_by_role("status").first).to_contain_text("No robot is in service")
         await expect(page.get_by_role("button", name="Take this tour").first).to_be_disabled()
-        # Staff bring a robot in later; the request waits for it meanwhile.
+        # Staff bring a robot in later; the request waits for it meanwhile. (Made over REST
+        # as this page's device: its device id, kept in localStorage, in the header.)
+        device = await page.evaluate("localStorage.getItem('guidebot.visitor.device')")
         async with vf.fleet.http(PANEL_A) as panel_a:
             r = await panel_a.post(
-                "/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}
+                "/api/tasks",
+                json={"kind": "tour", "params": {"tour": "ground"}},
+                headers={"X-Guidebot-Device": device},
             )
             assert r.status_code == 201, r.text
             mine = r.json()["id"]
@@ -235,3 +239,52 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
         events = [h["event"] for h in history]
         assert "point 1/5 explained" in events and "point 2/5 arrived" not in events
         await expect(screen.get_by_role("button", name="Ground floor tour")).to_be_visible()
+
+
+async def test_after_a_live_edit_reorders_the_tour_the_page_names_the_robots_real_stop(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The tour a robot runs keeps the stops it was given; the page names the point the robot
+    reported, not the stop at that index in the tour as edited since."""
+    async with visitor_fleet(time_scale=4.0) as vf:
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        await request_from(page, "Ground floor tour")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("Stop 1 of 5: Welcome hall", timeout=LONG)
+        async with vf.fleet.http() as staff:
+            tour = (await staff.get("/api/tours/ground")).json()
+            tour["points"] = list(reversed(tour["points"]))  # loom, sword, amphorae, ...
+            tour.pop("stops")
+            r = await staff.put("/api/tours/ground", json=tour)
+            assert r.status_code == 200, r.text
+        await page.reload()  # the menu now has the new order
+        await page.get_by_role("button", name="Your request: Ground floor tour").click()
+        await expect(state).to_contain_text("Stop 4 of 5: Bronze Age sword", timeout=LONG)
+        await expect(state).to_contain_text("Stop 5 of 5: Loom", timeout=LONG)
+        await web.axe_check(page)
+
+
+async def test_during_a_jam_the_panel_promises_no_wait(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The robot is stopped before a door that does not open: the start screen and a visitor
+    in line are told robots are held up, not "a robot can come in 3 min"; once the door is
+    repaired, waits come back."""
+    async with visitor_fleet() as vf:
+        vf.fleet.building.jam_door("door_gallery")
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        service = page.get_by_role("status").first
+        await expect(service).to_contain_text("A robot is free now")
+        async with vf.fleet.http() as staff:  # behind the gallery door
+            r = await staff.post(
+                "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "mosaics"}}
+            )
+            assert r.status_code == 201, r.text
+        await expect(service).to_contain_text("Robots are held up", timeout=LONG)
+        await request_from(page, "Highlights")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("You are number 1 in line")
+        await expect(state).to_contain_text("Robots are held up")
+        await web.axe_check(page)
+        vf.fleet.building.jam_door("door_gallery", False)
+        await expect(state).not_to_contain_text("Robots are held up", timeout=LONG)

@@ -10,6 +10,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
+import httpx
 import pytest
 import yaml
 from playwright.async_api import expect
@@ -198,3 +199,216 @@ async def test_a_language_tap_wins_over_a_slower_reload_started_before_it(
         await page.wait_for_timeout(500)  # the older reload's draw, if it were kept
         await expect(page.get_by_role("heading", name="Visitas")).to_be_visible(timeout=100)
         assert await page.evaluate("document.documentElement.lang") == "es"
+
+
+async def test_a_visitor_asks_for_one_exhibit_and_a_robot_takes_them_there(
+    tmp_path: Path, open_page: Any, web: SimpleNamespace
+) -> None:
+    settings = settings_for(tmp_path)
+    assert settings.site is not None
+    async with running_server(settings) as server, robot(server, settings.site, scale=8.0):
+        page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
+        await expect(page.get_by_role("status").first).to_contain_text("A robot is free")
+        coins = page.get_by_role("article", name="Coins")
+        await coins.get_by_role("button", name="Take me there").click()
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("R1 is going to Coins", timeout=LONG)
+        await web.axe_check(page)
+        await expect(state).to_contain_text("R1 has shown you Coins", timeout=LONG)
+        await expect(page.get_by_role("button", name="Ask for something else")).to_be_visible()
+        tasks = server.app.state.task_manager.tasks.values()
+        done = [t for t in tasks if t.kind == "go_to_poi"]
+        assert len(done) == 1 and done[0].params["poi"] == "coins"
+        assert done[0].state.value == "done" and done[0].robot == "R1"
+
+
+async def test_a_refused_token_is_said_on_the_page_without_an_error(
+    tmp_path: Path, open_page: Any, web: SimpleNamespace
+) -> None:
+    """A wrong or rotated panel token: the page says so instead of "Loading…" for ever."""
+    async with running_server(settings_for(tmp_path)) as server:
+        watch = await open_page(f"{server.url}/visitor/#token=an-old-panel-token", viewport=PHONE)
+        watch.expect_error(r"status of 401")
+        page = watch.page
+        await expect(page.get_by_role("alert")).to_contain_text(
+            "The access key of this panel was not accepted"
+        )
+        await expect(page.get_by_text("Loading…")).to_have_count(0)
+        await expect(page.locator("#app")).to_have_attribute("aria-busy", "false")
+        await web.axe_check(page)
+
+
+async def test_each_device_under_one_panel_token_sees_and_cancels_only_its_own(
+    tmp_path: Path, open_page: Any, web: SimpleNamespace
+) -> None:
+    """Phones sharing the QR code's token are told apart by the device id each keeps; the
+    panel's rate limit stays one for all of them."""
+    settings = settings_for(tmp_path)
+    assert settings.site is not None
+    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+        async with httpx.AsyncClient(
+            base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
+        ) as staff:  # the robot is busy: the visitors' requests wait in line
+            r = await staff.post(
+                "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "coins"}}
+            )
+            assert r.status_code == 201, r.text
+        url = f"{server.url}/visitor/#token={PANEL}"
+        first = (await open_page(url, viewport=PHONE)).page
+        second = (await open_page(url, viewport=PHONE)).page
+        await expect(first.get_by_role("status").first).to_contain_text("Every robot is busy")
+        await (
+            first.get_by_role("article", name="Corridor walk")
+            .get_by_role("button", name="Take this tour")
+            .click()
+        )
+        await expect(first.locator(".request-state")).to_contain_text("number 1 in line")
+        await second.reload()
+        await expect(second.get_by_role("heading", name="Tours")).to_be_visible()
+        await expect(second.get_by_role("button", name="Your request: ")).to_have_count(0)
+        await (
+            second.get_by_role("article", name="Vase")
+            .get_by_role("button", name="Take me there")
+            .click()
+        )
+        await expect(second.locator(".request-state")).to_contain_text("number 2 in line")
+        await second.get_by_role("button", name="Back to the start").click()
+        await expect(second.get_by_role("button", name="Your request: ")).to_have_text(
+            ["Your request: Vase"]
+        )
+        await first.reload()
+        await expect(first.get_by_role("button", name="Your request: ")).to_have_text(
+            ["Your request: Corridor walk"]
+        )
+        await web.axe_check(second)
+        # The server enforces it: the second device can neither read nor cancel the first's.
+        device = await second.evaluate("localStorage.getItem('guidebot.visitor.device')")
+        assert device != await first.evaluate("localStorage.getItem('guidebot.visitor.device')")
+        walk = next(t for t in server.app.state.task_manager.tasks.values() if t.kind == "tour")
+        assert walk.requester.startswith("panel-kiosk/")
+        headers = {"Authorization": f"Bearer {PANEL}", "X-Guidebot-Device": device}
+        async with httpx.AsyncClient(base_url=server.url, headers=headers) as phone:
+            assert (await phone.get(f"/api/tasks/{walk.id}")).status_code == 404
+            assert (await phone.post(f"/api/tasks/{walk.id}/cancel")).status_code == 404
+            mine = (await phone.get("/api/visitor/requests")).json()
+            assert [t["params"]["poi"] for t in mine] == ["vase"]
+            bad = await phone.get("/api/visitor/requests", headers={"X-Guidebot-Device": "x"})
+            assert bad.status_code == 422
+        assert walk.state.value == "queued"
+        # One rate limit for the panel, whatever device ids its callers send (a burst of 5:
+        # two requests made above, so a fresh id each time is refused by the sixth at most).
+        async with httpx.AsyncClient(base_url=server.url) as anyone:
+            codes = []
+            for n in range(6):
+                r = await anyone.post(
+                    "/api/tasks",
+                    json={"kind": "go_to_poi", "params": {"poi": "vase"}},
+                    headers={
+                        "Authorization": f"Bearer {PANEL}",
+                        "X-Guidebot-Device": f"fresh-device-{n:04d}-xyz",
+                    },
+                )
+                codes.append(r.status_code)
+            assert 429 in codes and codes.index(429) <= 4, codes
+
+
+async def test_a_kiosk_forgets_the_last_visitors_requests_when_it_goes_back_to_the_start(
+    tmp_path: Path, open_page: Any
+) -> None:
+    settings = settings_for(tmp_path)
+    assert settings.site is not None
+    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+        url = f"{server.url}/visitor/#token={PANEL}&kiosk=1&idle=3"
+        page = (await open_page(url, viewport=(1280, 800))).page
+        await (
+            page.get_by_role("article", name="Corridor walk")
+            .get_by_role("button", name="Take this tour")
+            .click()
+        )
+        await expect(page.locator(".request-state")).to_contain_text("R1", timeout=LONG)
+        await page.get_by_role("button", name="Back to the start").click()
+        await expect(page.get_by_role("button", name="Your request: ")).to_have_count(1)
+        # Nobody touches the kiosk: the next visitor does not see (nor cancel) that request.
+        await expect(page.get_by_role("button", name="Your request: ")).to_have_count(
+            0, timeout=10_000
+        )
+        walk = next(t for t in server.app.state.task_manager.tasks.values() if t.kind == "tour")
+        assert not walk.final  # it stays with the server
+
+
+async def test_a_visitor_in_line_sees_the_line_move(
+    tmp_path: Path, open_page: Any, web: SimpleNamespace
+) -> None:
+    """Place in line and wait follow the server while queued (no tap, no reload)."""
+    settings = settings_for(tmp_path)
+    assert settings.site is not None
+    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+        manager = server.app.state.task_manager
+        async with httpx.AsyncClient(
+            base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
+        ) as staff:
+            ids = []
+            for poi in ("coins", "vase"):
+                r = await staff.post(
+                    "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": poi}}
+                )
+                assert r.status_code == 201, r.text
+                ids.append(r.json()["id"])
+            page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
+            await (
+                page.get_by_role("article", name="Corridor walk")
+                .get_by_role("button", name="Take this tour")
+                .click()
+            )
+            state = page.locator(".request-state")
+            await expect(state).to_contain_text("You are number 2 in line")
+            walk = next(t for t in manager.tasks.values() if t.kind == "tour")
+            before = (await staff.get(f"/api/tasks/{walk.id}")).json()["eta_s"]
+            # The task ahead of it leaves the line: the visitor's page follows by itself.
+            r = await staff.post(f"/api/tasks/{ids[1]}/cancel", json={"reason": "not needed"})
+            assert r.status_code == 200, r.text
+            await expect(state).to_contain_text("You are number 1 in line")
+            now = (await staff.get(f"/api/tasks/{walk.id}")).json()
+            assert now["queue_position"] == 1 and now["eta_s"] < before
+            await web.axe_check(page)
+
+
+async def test_a_tour_cancelled_by_staff_is_said_to_its_visitor(
+    tmp_path: Path, open_page: Any, web: SimpleNamespace
+) -> None:
+    settings = settings_for(tmp_path)
+    assert settings.site is not None
+    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+        page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
+        await (
+            page.get_by_role("article", name="Corridor walk")
+            .get_by_role("button", name="Take this tour")
+            .click()
+        )
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("Robot R1 is coming for you", timeout=LONG)
+        walk = next(t for t in server.app.state.task_manager.tasks.values() if t.kind == "tour")
+        async with httpx.AsyncClient(
+            base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
+        ) as staff:
+            r = await staff.post(
+                f"/api/tasks/{walk.id}/cancel", json={"reason": "the museum closes early"}
+            )
+            assert r.status_code == 200, r.text
+            assert r.json()["cancelled_by"] == "staff"
+        await expect(state).to_contain_text("Your tour was cancelled by staff")
+        await web.axe_check(page)
+        # Read again over REST (a reconnect, e.g. a server restart) it still says so.
+        async with page.expect_response(f"**/api/tasks/{walk.id}"):
+            server.app.state.hub.clients["panel-kiosk"].request_close(1012, "test: restart")
+        await expect(state).to_contain_text("Your tour was cancelled by staff")
+        # The visitor's own cancel is said as such (not "by staff").
+        await page.get_by_role("button", name="Ask for another tour").click()
+        await (
+            page.get_by_role("article", name="Corridor walk")
+            .get_by_role("button", name="Take this tour")
+            .click()
+        )
+        await page.get_by_role("button", name="Cancel my request").click()
+        await page.get_by_role("button", name="Yes, cancel it").click()
+        await expect(state).to_have_text("Your request was cancelled.")

@@ -23,14 +23,19 @@ function describe(status, detail) {
 }
 
 export class Api extends EventTarget {
-  /** @param {() => string | null} getToken */
-  constructor(getToken) {
+  /**
+   * @param {() => string | null} getToken
+   * @param {() => Record<string, string>} [getHeaders] more headers for every call (the visitor
+   *   panel's device id)
+   */
+  constructor(getToken, getHeaders = () => ({})) {
     super();
     this.getToken = getToken;
+    this.getHeaders = getHeaders;
   }
 
   async request(method, path, body = undefined) {
-    const headers = { Accept: "application/json" };
+    const headers = { Accept: "application/json", ...this.getHeaders() };
     const token = this.getToken();
     if (token) headers.Authorization = `Bearer ${token}`;
     if (body !== undefined) headers["Content-Type"] = "application/json";

@@ -13,9 +13,32 @@ const token = fragmentToken();
 const kiosk = (options.get("kiosk") ?? query.get("kiosk")) === "1";
 const idleS = Number(options.get("idle") ?? query.get("idle") ?? 90);
 const STORE = "guidebot.visitor.requests";
+const DEVICE = "guidebot.visitor.device";
 const FINAL = new Set(["done", "failed", "cancelled"]);
+/** The kinds the panel asks for, by card (docs/visitor.md). */
+const KIND = { tour: "tour", poi: "go_to_poi" };
 
-const api = new Api(() => token);
+/** A random id, 22 URL-safe characters: this device's identity under the shared panel token. */
+function newDevice() {
+  const bytes = crypto.getRandomValues(new Uint8Array(16));
+  return btoa(String.fromCharCode(...bytes)).replace(/\+/g, "-").replace(/\//g, "_").replace(/=+$/, "");
+}
+
+/** This device's id (docs/visitor.md, "Devices"): a phone keeps it (localStorage), so it finds
+ * its requests again after a reload; a kiosk has a new one for each visitor (sessionStorage,
+ * replaced when the kiosk goes back to the start screen). */
+function deviceId(fresh = false) {
+  const store = kiosk ? sessionStorage : localStorage;
+  let id = fresh ? null : store.getItem(DEVICE);
+  if (!id) {
+    id = newDevice();
+    store.setItem(DEVICE, id);
+  }
+  return id;
+}
+let device = deviceId();
+
+const api = new Api(() => token, () => ({ "X-Guidebot-Device": device }));
 const app = document.getElementById("app");
 const banner = document.getElementById("connection");
 
@@ -23,6 +46,8 @@ const state = {
   texts: null,
   lang: options.get("lang") ?? null,
   menu: null,
+  /** when the menu (and its waits) was read: its waits count down from then */
+  menuAt: 0,
   error: "",
   /** "load" when `error` is reload()'s own (a later reload clears it), "action" when it answers
    * the visitor's tap (it stays until the next tap: a reconnect must not wipe it unread) */
@@ -57,6 +82,7 @@ async function loadMenu() {
   if (asked !== menuAsked) return;
   if (!state.lang) state.lang = lang;
   state.menu = menu;
+  state.menuAt = performance.now();
   state.texts = texts;
   document.documentElement.lang = menu.lang;
 }
@@ -66,10 +92,27 @@ function remember() {
   sessionStorage.setItem(STORE, JSON.stringify({ ids: live, labels: [...state.labels] }));
 }
 
+/** A task's status as told by the server now: its waits count down from `toldAt`. */
+function told(status, before = undefined) {
+  const merged = { ...before, ...status, toldAt: performance.now() };
+  // Who cancelled it is kept once known (a restarted server no longer knows it).
+  if (before?.cancelled_by && !status.cancelled_by) merged.cancelled_by = before.cancelled_by;
+  return merged;
+}
+
+/** A told wait (seconds) minus the time since it was told: what the server estimates now,
+ * until it tells another (it does when its estimate drifts from this countdown). Under a
+ * minute in steps of 10 s, so that a screen reader is not told a new number every second. */
+function countdown(seconds, at) {
+  if (seconds === null || seconds === undefined) return null;
+  const left = Math.max(0, seconds - (performance.now() - at) / 1000);
+  return left < 60 ? Math.ceil(left / 10) * 10 : left;
+}
+
 async function refreshRequests(ids) {
   for (const id of ids) {
     try {
-      state.requests.set(id, await api.get(`/api/tasks/${encodeURIComponent(id)}`));
+      state.requests.set(id, told(await api.get(`/api/tasks/${encodeURIComponent(id)}`), state.requests.get(id)));
     } catch (err) {
       if (err instanceof ApiError && err.status === 404) state.requests.delete(id);
       else throw err;
@@ -83,18 +126,34 @@ function labelOf(status) {
   return item?.name ?? p.tour ?? p.poi ?? status.id;
 }
 
+/** The name of a point in the page's language (its id when the site no longer has it). */
+function poiName(id) {
+  return state.menu?.pois.find((x) => x.id === id)?.name ?? id ?? "";
+}
+
+/** Where the robot really is on a tour: the point it reported (the server names it), never a
+ * stop counted in the tour as the site has it now (a live edit may have reordered it). */
+function placeOf(progress) {
+  return progress.name ?? poiName(progress.poi);
+}
+
 async function reload() {
   try {
     await loadMenu();
-    // This panel's live requests (after a reload or a server restart), then the ones we follow.
-    for (const status of await api.get("/api/visitor/requests")) state.requests.set(status.id, status);
+    // This device's live requests (after a reload or a server restart), then the ones we follow.
+    for (const status of await api.get("/api/visitor/requests")) state.requests.set(status.id, told(status, state.requests.get(status.id)));
     await refreshRequests([...state.requests.keys()]);
     for (const status of state.requests.values()) state.labels.set(status.id, labelOf(status));
     if (state.errorFrom !== "action") showError("", "");
   } catch (err) {
+    // Before any texts (a refused token at the first load): say it in the page's language.
+    if (!state.texts) state.texts = await loadTexts(state.lang ?? "en");
     showError(describe(err), "load");
+    draw();
+    return err;
   }
   draw();
+  return null;
 }
 
 function showError(text, from) {
@@ -138,8 +197,8 @@ async function request(kind, item) {
   const params = kind === "tour" ? { tour: item.id } : { poi: item.id };
   params.lang = state.menu.lang;
   try {
-    const status = await api.post("/api/tasks", { kind, params });
-    state.requests.set(status.id, status);
+    const status = await api.post("/api/tasks", { kind: KIND[kind], params });
+    state.requests.set(status.id, told(status));
     state.labels.set(status.id, item.name);
     state.current = status.id;
     state.view = "request";
@@ -157,7 +216,7 @@ async function request(kind, item) {
 async function cancel() {
   const id = state.current;
   try {
-    state.requests.set(id, await api.post(`/api/tasks/${encodeURIComponent(id)}/cancel`, { reason: "cancelled by the visitor" }));
+    state.requests.set(id, told(await api.post(`/api/tasks/${encodeURIComponent(id)}/cancel`, { reason: "cancelled by the visitor" }), state.requests.get(id)));
     showError("", "");
   } catch (err) {
     showError(describe(err), "action");
@@ -199,8 +258,10 @@ function picture(media, name) {
 function serviceLine(estimate) {
   if (!estimate) return "";
   if (estimate.service === "unavailable") return t("service_unavailable");
+  if (estimate.service === "held_up") return t("service_held_up");
   if (estimate.service === "busy") {
-    return estimate.eta_s === null ? t("service_busy_unknown") : t("service_busy", { t: state.texts.duration(estimate.eta_s) });
+    const wait = countdown(estimate.eta_s, state.menuAt);
+    return wait === null ? t("service_busy_unknown") : t("service_busy", { t: state.texts.duration(wait) });
   }
   return t("service_available");
 }
@@ -259,34 +320,41 @@ function startView() {
     </section>`;
 }
 
-function stopName(index) {
-  const r = state.requests.get(state.current);
-  const tour = state.menu.tours.find((x) => x.id === r?.params?.tour);
-  return tour?.stops[index - 1]?.name ?? r?.progress?.poi ?? "";
-}
-
 function statusLines(r) {
   const lines = [];
   const robot = r.robot ?? "";
   const progress = r.progress;
+  const point = r.kind === "go_to_poi";
+  const arrival = countdown(r.arrival_s, r.toldAt);
   if (r.state === "queued") {
     if (r.service === "unavailable") lines.push(t("state_unavailable"));
     else {
       if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
-      lines.push(r.eta_s === null ? t("service_busy_unknown") : t("state_wait", { t: state.texts.duration(r.eta_s) }));
+      const wait = countdown(r.eta_s, r.toldAt);
+      if (r.service === "held_up") lines.push(t("service_held_up"));
+      else lines.push(wait === null ? t("service_busy_unknown") : t("state_wait", { t: state.texts.duration(wait) }));
     }
   } else if (r.state === "assigned" || r.state === "running") {
-    if (!progress || progress.index === 0) {
+    if (point) {
+      const place = poiName(r.params?.poi);
+      if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
+      else if (arrival !== null && arrival > 0) lines.push(t("state_point_on_its_way", { robot, place, t: state.texts.duration(arrival) }));
+      else lines.push(t("state_point_going", { robot, place }));
+    } else if (!progress || progress.index === 0) {
       lines.push(t("state_assigned", { robot }));
-      if (r.arrival_s !== null && r.arrival_s !== undefined) lines.push(t("state_on_its_way", { robot, t: state.texts.duration(r.arrival_s) }));
+      if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
+      else if (arrival !== null) lines.push(t("state_on_its_way", { robot, t: state.texts.duration(arrival) }));
     } else {
-      if (progress.index === 1 && progress.stage === "arrived") lines.push(t("state_arrived", { robot, place: stopName(1) }));
+      const place = placeOf(progress);
+      if (progress.index === 1 && progress.stage === "arrived") lines.push(t("state_arrived", { robot, place }));
       const key = progress.stage === "explained" ? "state_explained" : "state_progress";
-      lines.push(t(key, { i: progress.index, n: progress.total, place: stopName(progress.index) }));
+      lines.push(t(key, { i: progress.index, n: progress.total, place }));
+      if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
     }
-  } else if (r.state === "done") lines.push(t("state_done"));
+  } else if (r.state === "done") lines.push(point ? t("state_point_done", { robot, place: poiName(r.params?.poi) }) : t("state_done"));
   else if (r.state === "failed") lines.push(t("state_failed", { reason: r.reason }));
   else if (r.service === "withdrawn") lines.push(t("state_withdrawn"));
+  else if (r.cancelled_by === "staff") lines.push(t(point ? "state_cancelled_staff_point" : "state_cancelled_staff_tour"));
   else lines.push(t("state_cancelled"));
   return lines;
 }
@@ -311,7 +379,7 @@ function requestView() {
         ? html`<button class="big danger" @click=${cancel}>${t("cancel_confirm")}</button>
                <button class="big secondary" @click=${() => { state.confirming = false; draw(); }}>${t("keep")}</button>`
         : html`<button class="big secondary" @click=${() => { state.confirming = true; draw(); }}>${t("cancel")}</button>`}
-      <button class="big" @click=${backToStart}>${final ? t("new_request") : t("back")}</button>
+      <button class="big" @click=${backToStart}>${final ? t(r.kind === "go_to_poi" ? "new_request_point" : "new_request") : t("back")}</button>
     </div>`;
 }
 
@@ -322,7 +390,9 @@ function draw() {
     app.textContent = ""; // the "Loading…" placeholder, before lit-html owns the container
     app.dataset.drawn = "1";
   }
-  if (!state.texts || !state.menu) {
+  if (!state.texts) return;
+  if (!state.menu) {
+    app.setAttribute("aria-busy", "false");
     render(html`${errorBox()}`, app);
     return;
   }
@@ -345,6 +415,12 @@ function kioskMode() {
       state.confirming = false;
       showError("", "");
       state.lang = state.menu?.default_language ?? state.lang;
+      // The next visitor is another device: the last one's requests are no longer listed here
+      // (and can no longer be cancelled from here); they stay with the server.
+      device = deviceId(true);
+      state.requests.clear();
+      state.labels.clear();
+      sessionStorage.removeItem(STORE);
       await reload();
     }, idleS * 1000);
   };
@@ -367,25 +443,39 @@ async function start() {
     draw();
     return;
   }
-  await reload();
-  if (!state.menu) return;
+  await live();
+}
+
+/** The first read, then live over the hub. Until the first read succeeds the page says why
+ * and tries again every 5 s; a refused token (401/403) is said once and stays. */
+async function live() {
+  const failed = await reload();
+  if (!state.menu) {
+    const status = failed instanceof ApiError ? failed.status : 0;
+    if (status !== 401 && status !== 403) setTimeout(live, 5000);
+    return;
+  }
   for (const lang of state.menu.languages) names.set(lang, (await loadTexts(lang)).name);
   draw();
   const hub = new HubClient({ token }).start();
-  hub.subscribe("task_event");
+  hub.subscribe("task_event", "visitor_service");
   hub.on("task_event", (message) => {
     const p = message.payload;
     refreshMenuSoon();
     const known = state.requests.get(p.task_id);
-    if (!known) return; // not ours (the server tells a panel's REST calls only its own)
-    state.requests.set(p.task_id, { ...known, ...p, id: p.task_id });
+    if (!known) return; // not ours (the server tells a device's REST calls only its own)
+    state.requests.set(p.task_id, told({ ...p, id: p.task_id }, known));
     if (FINAL.has(p.state)) remember();
     draw();
   });
+  // What a new request would be told changed (a robot free, a jam): read the menu again.
+  hub.on("visitor_service", () => refreshMenuSoon());
   hub.addEventListener("status", () => {
     banner.dataset.status = hub.status;
-    banner.textContent = hub.status === "open" ? "" : t("connection_lost");
+    banner.textContent = hub.status === "open" ? "" : t(hub.status === "refused" ? "error_token" : "connection_lost");
   });
+  // Told waits count down on the page between the server's news.
+  setInterval(draw, 1000);
   // After every (re)connect, e.g. a server restart, the true state comes from REST.
   hub.addEventListener("connect", () => reload());
 }
