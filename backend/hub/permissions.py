@@ -29,7 +29,6 @@ SERVER_ONLY = frozenset(
         "path",
         "area_granted",
         "area_yield",
-        "staff_alert",
         # site: a published version and how far it reached the robots
         "site_changed",
         "site_rollout",
@@ -40,10 +39,11 @@ SERVER_ONLY = frozenset(
         "command_failed",
         "building_input_changed",
         "building_module_health",
-        # staff console: lock views, its alert book, the event log as written
+        # staff console: lock views, the staff alerts, the event log as written
         "lock_changed",
         "alert_raised",
         "alert_acked",
+        "alert_resolved",
         "event_logged",
         # the hub's own answers
         "welcome",
