@@ -20,7 +20,8 @@ async def console(app: FastAPI) -> AsyncIterator[None]:
     closes then raise no alert."""
     store = app.state.store
     endpoint = app.state.hub.endpoint("console")
-    watcher = AlertWatcher(endpoint, app.state.alerts)
+    watching = app.state.hub.endpoint("alert_watcher")
+    watcher = AlertWatcher(watching, app.state.alerts)
     feed = ConsoleFeed(
         endpoint,
         app.state.traffic,
@@ -36,5 +37,6 @@ async def console(app: FastAPI) -> AsyncIterator[None]:
     finally:
         await feed.stop()
         await watcher.stop()
+        watching.close()
         store.listeners.remove(listener)
         endpoint.close()

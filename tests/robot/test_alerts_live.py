@@ -160,3 +160,30 @@ async def test_a_module_back_online_resolves_its_alert(tmp_path: Path, demo_site
         [up] = [a for a in await watch.alerts() if a["id"] == down["id"]]
         assert up["resolution"] == "Modbus module otb_first is online"
         assert not [a for a in await watch.alerts() if a["resolved_at"] is None]
+
+
+async def test_a_clean_shutdown_leaves_no_alert_for_the_next_start(
+    tmp_path: Path, demo_site: Site
+) -> None:
+    """The demo's Ctrl-C: the robot stops (it says so), the building simulator stops while the
+    server still polls it (true then: module_offline), the server stops. The next start shows
+    no open alert: no robot was lost, and what the last life saw is resolved."""
+    async with building_server(tmp_path, demo_site) as (server, sim):
+        watch = Watch(server)
+        poller = server.app.state.building.pollers["otb_first"]
+        await wait_until(lambda: poller.health.online, timeout=30)
+        async with robot(server.url, DEMO_SITE):
+            await watch.wait(lambda: watch.of("robot_state", robot="R1"))
+        await watch.wait(lambda: watch.of("robot_disconnected", robot="R1"))
+        await sim.stop()
+        await watch.wait(lambda: len(watch.of("alert_raised", kind="module_offline")) == 2)
+        settings = server.app.state.settings
+    assert not [m for m in watch.seen if m.payload.get("kind") == "robot_lost"]
+    async with running_server(settings.model_copy(update={"building_enabled": False})) as again:
+        watch = Watch(again)
+        assert await watch.alerts() and not [
+            a for a in await watch.alerts() if a["resolved_at"] is None
+        ]
+        assert {a["resolution"] for a in await watch.alerts()} == {
+            "server restarted: raised again if its cause is still there"
+        }
