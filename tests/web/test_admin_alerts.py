@@ -67,4 +67,4 @@ async def test_alerts_resolve_themselves_in_the_console_and_acknowledge_all(
                 await expect(bar).to_be_hidden()
                 await expect(r1).to_have_attribute("data-state", "resolved")
                 assert (await page.title()) == "GuideBot console"
-                await web.screenshot(page, "alerts")
+                await web.screenshot(page, "alerts-resolved")
