@@ -39,7 +39,7 @@ class Watch:
         server.app.state.hub.endpoint("test-watch").subscribe("*", self._record, tap=True)
 
     def _record(self, message: Message) -> None:
-        if message.type.startswith(("alert_", "robot_")):
+        if message.type.startswith(("alert_", "robot_", "building_module_health")):
             self.seen.append(message)
             self.changed.set()
 
@@ -146,7 +146,9 @@ async def building_server(
             yield server, sim
 
 
-async def test_a_module_back_online_resolves_its_alert(tmp_path: Path, demo_site: Site) -> None:
+async def test_an_acknowledged_module_alert_stays_so_and_resolves_when_it_is_back(
+    tmp_path: Path, demo_site: Site
+) -> None:
     async with building_server(tmp_path, demo_site) as (server, sim):
         watch = Watch(server)
         poller = server.app.state.building.pollers["otb_first"]
@@ -154,7 +156,20 @@ async def test_a_module_back_online_resolves_its_alert(tmp_path: Path, demo_site
         await sim.set_fault("otb_first", "offline")
         await watch.wait(lambda: watch.of("alert_raised", kind="module_offline"))
         [down] = [a for a in await watch.alerts() if a["kind"] == "module_offline"]
-        assert down["subject"] == "otb_first" and down["resolved_at"] is None
+        assert down["subject"] == "otb_first"
+        await watch.post(f"/api/alerts/{down['id']}/ack")
+        # Still offline, reported again (health every few seconds): it stays acknowledged.
+        reports = len(watch.of("building_module_health", module="otb_first", online=False))
+        await watch.wait(
+            lambda: len(watch.of("building_module_health", module="otb_first", online=False))
+            > reports
+        )
+        async with httpx.AsyncClient(base_url=server.url) as http:
+            headers = {"Authorization": f"Bearer {server.admin_token}"}
+            assert (await http.get("/api/alerts", headers=headers)).json() == []
+        [still] = [a for a in await watch.alerts() if a["id"] == down["id"]]
+        assert still["acked_by"] == "admin" and still["resolved_at"] is None
+        assert len(watch.of("alert_raised", kind="module_offline")) == 1
         await sim.set_fault("otb_first", "none")
         await watch.wait(lambda: watch.of("alert_resolved", id=down["id"]))
         [up] = [a for a in await watch.alerts() if a["id"] == down["id"]]
