@@ -161,8 +161,9 @@ async def test_an_acknowledged_module_alert_stays_so_and_resolves_when_it_is_bac
         # Still offline, reported again (health every few seconds): it stays acknowledged.
         reports = len(watch.of("building_module_health", module="otb_first", online=False))
         await watch.wait(
-            lambda: len(watch.of("building_module_health", module="otb_first", online=False))
-            > reports
+            lambda: (
+                len(watch.of("building_module_health", module="otb_first", online=False)) > reports
+            )
         )
         async with httpx.AsyncClient(base_url=server.url) as http:
             headers = {"Authorization": f"Bearer {server.admin_token}"}
