@@ -91,7 +91,7 @@ class AlertStore:
     # --- queries ------------------------------------------------------------------------
     def get(self, kind: str, subject: str) -> Alert | None:
         """The alert of this cause (active or resolved), if one is kept."""
-        return self._by_cause.get((kind, subject))
+        return self._by_cause.get((kind[:64], subject[:200]))
 
     def is_active(self, kind: str, subject: str) -> bool:
         alert = self.get(kind, subject)
@@ -119,6 +119,7 @@ class AlertStore:
         """Raise the alert of this cause, or count it again if it is active (its
         acknowledgement stays); a resolved one opens again."""
         now = time.time()
+        kind, subject, message = kind[:64], subject[:200], message[:500]  # the payload's bounds
         alert = self._by_cause.get((kind, subject))
         if alert is None:
             alert = Alert(uuid.uuid4().hex[:12], kind, subject, message, severity, now, now)
@@ -143,7 +144,7 @@ class AlertStore:
 
     def resolve(self, kind: str, subject: str, why: str) -> Alert | None:
         """The cause is gone: the alert closes by itself (nothing if none is active)."""
-        alert = self._by_cause.get((kind, subject))
+        alert = self._by_cause.get((kind[:64], subject[:200]))
         if alert is None or not alert.active:
             return None
         self._resolve(alert, why, "alerts")
@@ -211,7 +212,7 @@ class AlertStore:
 
     def _resolve(self, alert: Alert, why: str, source: str = "alerts") -> None:
         alert.resolved_at = alert.updated_at = time.time()
-        alert.resolution = why
+        alert.resolution = why[:500]
         log.info("alert resolved [%s %s] %s", alert.kind, alert.subject, why)
         self._changed("alert_resolved", source, alert)
 

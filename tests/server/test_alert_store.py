@@ -102,3 +102,12 @@ async def test_a_restart_resolves_the_alerts_the_last_server_life_left(db_url: s
         assert later.raise_("module_offline", "otb_first", "refused").open
     finally:
         await engine.dispose()
+
+
+async def test_a_long_report_is_cut_to_the_payloads_bounds_not_refused() -> None:
+    """A robot's fault detail can be long: the alert is still raised (and published)."""
+    alerts, seen = store_on(Bus())
+    alert = alerts.raise_("robot_fault", "R1/" + "x" * 300, "R1: motor_lost " + "y" * 2000)
+    assert len(alert.message) == 500 and len(alert.subject) == 200
+    assert seen[-1].payload["message"] == alert.message
+    assert alerts.resolve("robot_fault", "R1/" + "x" * 300, "back") is alert
