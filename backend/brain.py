@@ -14,7 +14,7 @@ from typing import Any
 
 from fastapi import FastAPI
 
-from backend.alerts import AlertBoard
+from backend.alerts import AlertStore
 from backend.api.component import (
     LOGGED_BROADCASTS,
     LOGGED_TYPES,
@@ -47,7 +47,7 @@ robot's task_ended (TaskManager.report_grace_s)."""
 
 class ServerBrain(Service):
     """Starts the brain's parts on ``app.state`` (store, sites, task_manager, traffic,
-    staff_alerts); ``stop`` gives them back in reverse order."""
+    alerts); ``stop`` gives them back in reverse order."""
 
     def __init__(self, app: FastAPI) -> None:
         super().__init__()
@@ -89,7 +89,10 @@ class ServerBrain(Service):
         def log_event(kind: str, data: dict[str, Any]) -> None:
             store.record_event(kind, "traffic_manager", data)
 
-        alerts = AlertBoard(hub.endpoint("alerts"), on_event=log_event)
+        alerts_endpoint = hub.endpoint("alerts")
+        self.on_cleanup(alerts_endpoint.close)
+        alerts = AlertStore(alerts_endpoint.publish, store.record_event)
+        await alerts.restore(store.events)
         traffic = TrafficManager(
             deciding_endpoint(app, "traffic_manager"),
             site,
@@ -149,7 +152,7 @@ class ServerBrain(Service):
         app.state.sites = sites
         app.state.task_manager = tasks
         app.state.traffic = traffic
-        app.state.staff_alerts = alerts
+        app.state.alerts = alerts
         self.spawn(
             watch_offline_locks(traffic, settings.lock_offline_grace_s),
             name="offline-lock-watcher",

@@ -7,7 +7,7 @@
 - Tasks: every task ever listed is remembered; one that disappears from the server, or that
   failed without a reason a person can read, is lost.
 - Locks: one held by an offline robot for longer than the grace period plus a margin must be
-  shown to staff (an active ``staff_alert`` naming its area).
+  shown to staff (an active ``lock_holder_offline`` alert naming its area, GET /api/alerts).
 - Logs: every ``Traceback`` (or unretrieved task exception) in any process's log.
 - Memory: each process's RSS, sampled.
 """
@@ -145,10 +145,16 @@ class Watch:
 
     async def poll_locks(self, http: httpx.AsyncClient) -> None:
         locks = await http.get(f"{self.url}/api/locks", headers=self._headers())
-        alerts = await http.get(f"{self.url}/api/alerts", headers=self._headers())
+        alerts = await http.get(
+            f"{self.url}/api/alerts", params={"include_acked": "true"}, headers=self._headers()
+        )
         locks.raise_for_status()
         alerts.raise_for_status()
-        shown = {a.get("area") for a in alerts.json() if a.get("active")}
+        shown = {
+            a["subject"]
+            for a in alerts.json()
+            if a["kind"] == "lock_holder_offline" and a["resolved_at"] is None
+        }
         now = time.monotonic()
         current = set()
         for lock in locks.json():

@@ -9,6 +9,7 @@ the net library, the main-task runner), interface (the link to the server, the t
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ from typing import Any, Literal
 from fastapi import FastAPI
 
 from guidebot.bus import Bus
+from guidebot.payloads.robot import RobotState
 from guidebot.service import Service
 from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
@@ -352,7 +354,17 @@ class RobotAgent(Service):
         )
         await self.enter(self.link)
         await self.hub.start()
-        self.on_cleanup(self.hub.close)
+        self.on_cleanup(self._leave)
+
+    async def _leave(self) -> None:
+        """A clean exit says so before the link closes: a last robot_state with mode
+        "offline" (the server then raises no "robot lost" alert, docs/protocol.md)."""
+        hub, state = self.hub, self.state
+        assert hub is not None and state is not None
+        if hub.connected.is_set():
+            with contextlib.suppress(Exception):  # the link may drop meanwhile: a lost robot
+                hub.publish(RobotState(**{**state.snapshot(), "mode": "offline"}))
+        await hub.close()
 
     def _use_site(self, view: OnboardSite) -> None:
         """A new live site (read in a thread): the fallback planner and the screen's menu

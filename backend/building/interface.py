@@ -45,7 +45,7 @@ from guidebot.payloads.building import (
     SetOutput,
 )
 from guidebot.service import Service, cancel_and_wait
-from guidebot.site.building import Door, IOPoint, IORef, PointKind
+from guidebot.site.building import Door, Elevator, ElevatorStop, IOPoint, IORef, PointKind
 from guidebot.site.building_config import BuildingConfig
 from guidebot.site.io_rules import Role, allowed
 
@@ -121,6 +121,8 @@ class BuildingInterface(Service):
         self._cabin: dict[tuple[str, str], bool] = {}
         self.elevators = ElevatorWatch(config)
         """Where each car is (``elevator_state``), for the console."""
+        self._moved: dict[str, float] = {}
+        """Elevator -> monotonic time its cabin last arrived at or left a stop (its progress)."""
         self._commands: set[asyncio.Task[None]] = set()
         self.events = 0
 
@@ -221,6 +223,7 @@ class BuildingInterface(Service):
         if stop is not None and self._cabin.get(key) != bool(value):
             self._cabin[key] = bool(value)
             elevator, floor = stop
+            self._moved[elevator] = time.monotonic()
             self.endpoint.publish(
                 ElevatorInPosition(elevator=elevator, floor=floor, door_open=bool(value)),
             )
@@ -288,11 +291,36 @@ class BuildingInterface(Service):
         try:
             await asyncio.wait_for(future, timeout_s)
         except TimeoutError:
-            health = self.pollers[ref.module].health
-            why = f"; module {ref.module} is {health.state.value}" if not health.online else ""
+            why = self._module_note(ref)
             raise CommandError(f"{what} not confirmed within {timeout_s:g} s{why}") from None
         finally:
             self._waiters[key].remove(entry)
+
+    def _module_note(self, ref: IORef) -> str:
+        health = self.pollers[ref.module].health
+        return f"; module {ref.module} is {health.state.value}" if not health.online else ""
+
+    async def _wait_cabin(self, elevator: Elevator, stop: ElevatorStop, what: str) -> None:
+        """Until the cabin is at ``stop`` with its door open. A busy cabin first ends its trip,
+        holds its door at other floors, then comes (a ride is longer than ``travel_time_s``):
+        the call fails only when the cabin shows no progress (it neither arrives at nor
+        leaves any stop) for ``travel_time_s`` plus the margin: a stuck cabin, an offline
+        module."""
+        window = elevator.travel_time_s + self.command_margin_s
+        since = time.monotonic()
+        while True:
+            left = since + window - time.monotonic()
+            try:
+                await self._wait_value(stop.in_position, 1, max(left, 0.0), what)
+                return
+            except CommandError:
+                moved = self._moved.get(elevator.id, 0.0)
+                if moved <= since:
+                    why = self._module_note(stop.in_position)
+                    raise CommandError(
+                        f"{what} not confirmed: the cabin showed no progress for {window:g} s{why}"
+                    ) from None
+                since = moved
 
     # -- commands ------------------------------------------------------------------------------
 
@@ -326,7 +354,7 @@ class BuildingInterface(Service):
 
     def _fail(self, request: Message, reason: str) -> None:
         log.info("%s from %s failed: %s", request.type, request.source, reason)
-        payload = CommandFailed(command=request.type, reason=reason)
+        payload = CommandFailed(command=request.type, reason=reason, target=_target(request))
         if request.source:
             self.endpoint.publish(payload, destination=request.source, correlation_id=request.id)
         else:
@@ -453,9 +481,7 @@ class BuildingInterface(Service):
             floors = ", ".join(s.floor for s in elevator.stops)
             raise CommandError(f"elevator {elevator.id} has no floor {call.floor!r} ({floors})")
         await self._write(stop.call, 1)
-        timeout = elevator.travel_time_s + self.command_margin_s
-        what = f"elevator {elevator.id} at floor {stop.floor}"
-        await self._wait_value(stop.in_position, 1, timeout, what)
+        await self._wait_cabin(elevator, stop, f"elevator {elevator.id} at floor {stop.floor}")
         payload = {"elevator": elevator.id, "floor": stop.floor, "door_open": True}
         self._reply(message, "elevator_in_position", payload)
         return payload
@@ -479,3 +505,14 @@ class BuildingInterface(Service):
             raise CommandError(f"register value {value} is outside 0..65535")
         await self._write(ref, value)
         return {"module": command.module, "point": command.point, "value": value}
+
+
+def _target(request: Message) -> str | None:
+    """What a command was for, as alerts name it: a door, an elevator, ``module/point``."""
+    p = request.payload
+    for key in ("door", "elevator"):
+        if isinstance(p.get(key), str):
+            return str(p[key])[:64]
+    if isinstance(p.get("module"), str) and isinstance(p.get("point"), str):
+        return f"{p['module']}/{p['point']}"[:129]
+    return None

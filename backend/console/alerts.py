@@ -1,116 +1,199 @@
-"""Alerts: things staff must see at once and acknowledge (robot lost, lock holder offline,
-door or elevator failure, Modbus module offline, CAN module lost, battery panic, task failed).
+"""What raises and resolves the staff alerts (backend.alerts): the server's messages, watched.
 
-An alert is open until a staff member acknowledges it; who and when is recorded. Alerts are
-kept as events of the event log (``alert_raised``, ``alert_acked``), so they survive a restart
-without a table of their own: ``restore`` replays them.
+Each cause is raised when it appears and resolved when a message says it is gone
+(docs/console.md, "Alerts"):
+
+- robot_lost: robot_disconnected, unless the robot said it is leaving (robot_state mode
+  "offline" first); resolved by robot_connected or a robot_state.
+- can_module_lost: robot_state.modules[name] "lost"; resolved when it no longer is.
+- battery_panic: battery_panic; resolved when robot_state.battery is above its level again.
+- robot_fault: robot_fault; resolved by a robot_state out of that fault (navigation, mode).
+- building_command_failed: command_failed; resolved by the device doing it (door_opened,
+  door_closed, elevator_in_position, building_input_changed of the output).
+- module_offline: building_module_health online false; resolved by online true.
+- lock_holder_offline: lock_changed holder_offline; resolved by any other lock state.
+- task_failed: task_event failed; an event: resolved when acknowledged.
+
+The Traffic Manager raises its own (area_conflict, lock_holder_offline after the grace,
+lock_released_offline) in the same store.
 """
 
 from __future__ import annotations
 
-import time
-import uuid
-from collections.abc import Awaitable, Callable
-from dataclasses import asdict, dataclass
-from typing import Any, Literal, Protocol
+from collections.abc import Callable
 
-from guidebot.payloads.console import ConsoleAlert
+from backend.alerts import AlertStore
+from guidebot.bus import Endpoint
+from guidebot.messages import Message
+from guidebot.service import Service
 
-__all__ = ["Alert", "AlertBook", "AlertNotFound"]
+__all__ = ["AlertWatcher"]
 
-Severity = Literal["warning", "error"]
-MAX_ALERTS = 2000
-"""Acknowledged alerts beyond this are forgotten (oldest first); open ones are kept."""
-
-
-class AlertNotFound(KeyError):
-    pass
+BATTERY_HYSTERESIS = 0.05
+"""A panic alert resolves once the battery is this much above the level it panicked at."""
+FAULT_NAVIGATION = {"door_blocked": "door_blocked", "bumper": "bumped"}
+"""robot_fault kinds that last while the robot's navigation state says so; any other kind
+lasts while its mode (or navigation) is "fault"."""
 
 
-@dataclass(slots=True)
-class Alert:
-    id: str
-    kind: str
-    subject: str
-    message: str
-    severity: Severity
-    raised_at: float
-    acked_by: str | None = None
-    acked_at: float | None = None
+class AlertWatcher(Service):
+    """Raises and resolves alerts from hub messages (tapped: commands' answers too)."""
 
-    @property
-    def open(self) -> bool:
-        return self.acked_at is None
+    def __init__(self, endpoint: Endpoint, alerts: AlertStore) -> None:
+        super().__init__()
+        self.endpoint = endpoint
+        self.alerts = alerts
+        self._leaving: set[str] = set()
+        """Robots that said they are leaving (robot_state mode offline): no robot_lost."""
+        self._panic: dict[str, float] = {}
 
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
+    async def on_start(self) -> None:
+        handlers: dict[str, Callable[[Message], None]] = {
+            "robot_state": self._on_robot_state,
+            "robot_connected": self._on_robot_connected,
+            "robot_disconnected": self._on_robot_disconnected,
+            "battery_panic": self._on_battery_panic,
+            "robot_fault": self._on_robot_fault,
+            "command_failed": self._on_command_failed,
+            "door_opened": self._on_door,
+            "door_closed": self._on_door,
+            "elevator_in_position": self._on_elevator,
+            "building_input_changed": self._on_input,
+            "building_module_health": self._on_module_health,
+            "task_event": self._on_task_event,
+            "lock_changed": self._on_lock_changed,
+        }
+        for pattern, handler in handlers.items():
+            self.subscribe(self.endpoint, pattern, handler, tap=True)
 
+    @staticmethod
+    def _robot(message: Message) -> str:
+        return str(message.payload.get("robot") or message.source)
 
-class EventSink(Protocol):
-    def record_event(self, kind: str, source: str, data: dict[str, Any]) -> None: ...
+    # --- robots -------------------------------------------------------------------------
+    def _on_robot_state(self, message: Message) -> None:
+        p = message.payload
+        robot = self._robot(message)
+        if p.get("mode") == "offline":
+            self._leaving.add(robot)  # its last word before a clean exit
+            return
+        self._leaving.discard(robot)
+        self.alerts.resolve("robot_lost", robot, f"robot {robot} is back online")
+        for name, state in (p.get("modules") or {}).items():
+            subject = f"{robot}/{name}"
+            if state == "lost":
+                if not self.alerts.is_active("can_module_lost", subject):
+                    self.alerts.raise_(
+                        "can_module_lost", subject, f"{robot}: CAN module {name} lost"
+                    )
+            else:
+                self.alerts.resolve("can_module_lost", subject, f"{robot}: CAN module {name} ok")
+        battery = p.get("battery")
+        panic = self._panic.get(robot)
+        if panic is not None and isinstance(battery, int | float):
+            if battery >= panic + BATTERY_HYSTERESIS:
+                del self._panic[robot]
+                self.alerts.resolve(
+                    "battery_panic", robot, f"{robot}: battery back at {battery:.0%}"
+                )
+        navigation, mode = p.get("navigation"), p.get("mode")
 
+        def over(subject: str) -> bool:
+            if not subject.startswith(f"{robot}/"):
+                return False
+            state = FAULT_NAVIGATION.get(subject[len(robot) + 1 :])
+            if state is not None:
+                return navigation != state
+            return mode != "fault" and navigation != "fault"
 
-class AlertBook:
-    """Open and recent alerts; ``publish`` puts each change on the hub."""
+        self.alerts.resolve_where("robot_fault", over, f"robot {robot} is no longer in fault")
 
-    def __init__(self, sink: EventSink, publish: Callable[[str, ConsoleAlert], object]) -> None:
-        self.sink = sink
-        self.publish = publish
-        self.alerts: dict[str, Alert] = {}
+    def _on_robot_connected(self, message: Message) -> None:
+        robot = self._robot(message)
+        self._leaving.discard(robot)
+        self.alerts.resolve("robot_lost", robot, f"robot {robot} is back online")
 
-    async def restore(
-        self, events: Callable[..., Awaitable[list[dict[str, Any]]]], page: int = 1000
-    ) -> None:
-        """Replay alert_raised/alert_acked from the event log (in id order)."""
-        after = 0
-        while True:
-            rows = await events(after_id=after, limit=page)
-            for row in rows:
-                data = row["data"]
-                if row["kind"] == "alert_raised":
-                    alert = Alert(**{k: data[k] for k in Alert.__dataclass_fields__ if k in data})
-                    self.alerts[alert.id] = alert
-                elif row["kind"] == "alert_acked" and data.get("id") in self.alerts:
-                    alert = self.alerts[data["id"]]
-                    alert.acked_by, alert.acked_at = data.get("acked_by"), data.get("acked_at")
-            if len(rows) < page:
-                break
-            after = rows[-1]["id"]
-        self._trim()
+    def _on_robot_disconnected(self, message: Message) -> None:
+        robot = self._robot(message)
+        if robot in self._leaving:
+            self._leaving.discard(robot)
+            return  # it said goodbye: a clean exit is not an alert
+        self.alerts.raise_("robot_lost", robot, f"robot {robot} lost its connection")
 
-    def open_alert(self, kind: str, subject: str) -> Alert | None:
-        return next(
-            (a for a in self.alerts.values() if a.open and a.kind == kind and a.subject == subject),
-            None,
+    def _on_battery_panic(self, message: Message) -> None:
+        robot = self._robot(message)
+        level = float(message.payload.get("level", 0.0))
+        self._panic[robot] = level
+        self.alerts.raise_("battery_panic", robot, f"{robot}: battery at {level:.0%}")
+
+    def _on_robot_fault(self, message: Message) -> None:
+        robot = self._robot(message)
+        kind = message.payload.get("kind", "fault")
+        detail = message.payload.get("detail", "")
+        self.alerts.raise_("robot_fault", f"{robot}/{kind}", f"{robot}: {kind} {detail}".strip())
+
+    # --- building -----------------------------------------------------------------------
+    def _on_command_failed(self, message: Message) -> None:
+        command = str(message.payload.get("command", "command"))
+        reason = str(message.payload.get("reason", ""))
+        target = message.payload.get("target") or reason[:40]
+        self.alerts.raise_(
+            "building_command_failed", f"{command}:{target}", f"{command} failed: {reason}"
         )
 
-    def raise_(self, kind: str, subject: str, message: str, severity: Severity = "error") -> Alert:
-        """Raise an alert, unless the same one (kind and subject) is still open."""
-        existing = self.open_alert(kind, subject)
-        if existing is not None:
-            return existing
-        alert = Alert(uuid.uuid4().hex[:12], kind, subject, message, severity, time.time())
-        self.alerts[alert.id] = alert
-        self.sink.record_event("alert_raised", "console", alert.as_dict())
-        self.publish("alert_raised", ConsoleAlert(**alert.as_dict()))
-        self._trim()
-        return alert
+    def _on_door(self, message: Message) -> None:
+        door = str(message.payload.get("door"))
+        if message.type == "door_opened":
+            self.alerts.resolve("building_command_failed", f"open_door:{door}", f"{door} open")
+        elif message.payload.get("sensed", True):
+            self.alerts.resolve("building_command_failed", f"close_door:{door}", f"{door} closed")
 
-    def acknowledge(self, alert_id: str, by: str) -> Alert:
-        alert = self.alerts.get(alert_id)
-        if alert is None:
-            raise AlertNotFound(alert_id)
-        if alert.open:
-            alert.acked_by, alert.acked_at = by, time.time()
-            self.sink.record_event("alert_acked", by, alert.as_dict())
-            self.publish("alert_acked", ConsoleAlert(**alert.as_dict()))
-        return alert
+    def _on_elevator(self, message: Message) -> None:
+        p = message.payload
+        if p.get("door_open"):
+            elevator = str(p.get("elevator"))
+            self.alerts.resolve(
+                "building_command_failed",
+                f"call_elevator:{elevator}",
+                f"elevator {elevator} arrived at floor {p.get('floor')}",
+            )
 
-    def listing(self, *, include_acked: bool = False) -> list[dict[str, Any]]:
-        alerts = sorted(self.alerts.values(), key=lambda a: -a.raised_at)
-        return [a.as_dict() for a in alerts if include_acked or a.open]
+    def _on_input(self, message: Message) -> None:
+        point = f"{message.payload.get('module')}/{message.payload.get('point')}"
+        self.alerts.resolve("building_command_failed", f"set_output:{point}", f"{point} written")
 
-    def _trim(self) -> None:
-        acked = sorted((a for a in self.alerts.values() if not a.open), key=lambda a: a.raised_at)
-        for alert in acked[: max(0, len(self.alerts) - MAX_ALERTS)]:
-            del self.alerts[alert.id]
+    def _on_module_health(self, message: Message) -> None:
+        module = str(message.payload.get("module"))
+        online = message.payload.get("online")
+        if online is False:
+            if not self.alerts.is_active("module_offline", module):
+                error = message.payload.get("last_error") or "no answer"
+                self.alerts.raise_("module_offline", module, f"Modbus module {module}: {error}")
+        elif online is True:
+            self.alerts.resolve("module_offline", module, f"Modbus module {module} is online")
+
+    # --- tasks and locks ----------------------------------------------------------------
+    def _on_task_event(self, message: Message) -> None:
+        if message.payload.get("state") == "failed":
+            task = str(message.payload.get("task_id"))
+            robot = message.payload.get("robot") or "no robot"
+            reason = message.payload.get("reason")
+            text = f"task {task} failed ({robot})" + (f": {reason}" if reason else "")
+            self.alerts.raise_("task_failed", task, text, "warning", lasting=False)
+
+    def _on_lock_changed(self, message: Message) -> None:
+        p = message.payload
+        area = str(p.get("area"))
+        if p.get("state") == "holder_offline":
+            if not self.alerts.is_active("lock_holder_offline", area):
+                self.alerts.raise_(
+                    "lock_holder_offline",
+                    area,
+                    f"area {area} is held by {p.get('holder')}, which is offline: "
+                    "release it by hand once the robot is out of the area",
+                )
+        else:
+            why = f"area {area} is {p.get('state')}" + (
+                f" ({p.get('holder')})" if p.get("holder") else ""
+            )
+            self.alerts.resolve("lock_holder_offline", area, why)

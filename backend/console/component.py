@@ -7,7 +7,7 @@ from collections.abc import AsyncIterator
 
 from fastapi import FastAPI
 
-from backend.console.alerts import AlertBook
+from backend.console.alerts import AlertWatcher
 from backend.console.feed import ConsoleFeed, relay_events
 from backend.console.robocan import RobocanBook
 
@@ -16,29 +16,32 @@ __all__ = ["console"]
 
 @contextlib.asynccontextmanager
 async def console(app: FastAPI) -> AsyncIterator[None]:
-    """Alerts restored from the event log, the feed started; ``app.state.console``."""
+    """The feed and the alert watcher (over the brain's ``app.state.alerts``) started;
+    ``app.state.console``. Stopped first when the server stops, so the links the server
+    closes then raise no alert."""
     store = app.state.store
     endpoint = app.state.hub.endpoint("console")
-    alerts = AlertBook(store, endpoint.publish)
-    await alerts.restore(store.events)
+    watching = app.state.hub.endpoint("alert_watcher")
+    watcher = AlertWatcher(watching, app.state.alerts)
     feed = ConsoleFeed(
         endpoint,
         app.state.traffic,
-        alerts,
         robots=lambda: {r.name for r in app.state.sites.site.robots},
     )
     listener = relay_events(endpoint)
     store.listeners.append(listener)
+    await watcher.start()
     await feed.start()
     robocan = RobocanBook(endpoint)
     await robocan.start()
     app.state.console = feed
-    app.state.alerts = alerts
     app.state.robocan = robocan
     try:
         yield
     finally:
         await robocan.stop()
         await feed.stop()
+        await watcher.stop()
+        watching.close()
         store.listeners.remove(listener)
         endpoint.close()

@@ -4,7 +4,6 @@
   robots only; staff need every change). Diffed after each message that may change a lock,
   at most once per event-loop turn.
 - ``event_logged``: every row written to the event log, as it is written.
-- alerts (backend.console.alerts) from robot, building, lock and task messages.
 - the running Petri nets of every robot and of the server's RGM, with their latest marking and
   last firings, from ``petri_net_event`` (``running_nets``).
 """
@@ -18,7 +17,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from backend.console.alerts import AlertBook
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
 from guidebot.payloads.console import EventLogged, LockChanged
@@ -79,30 +77,20 @@ class ConsoleFeed(Service):
         self,
         endpoint: Endpoint,
         locks: LockSource,
-        alerts: AlertBook,
         robots: Callable[[], set[str]],
     ) -> None:
         super().__init__()
         self.endpoint = endpoint
         self.locks = locks
-        self.alerts = alerts
         self.robots = robots
         self.lock_views: dict[str, dict[str, Any]] = {}
         self.nets: dict[tuple[str, str], RunningNet] = {}
         self._diff_scheduled = False
-        self._lost_modules: set[tuple[str, str]] = set()
 
     async def on_start(self) -> None:
         self.lock_views = {v.area: lock_dict(v) for v in self.locks.lock_views()}
         handlers: dict[str, Callable[[Message], None]] = {
-            "robot_state": self._on_robot_state,
             "robot_disconnected": self._on_robot_disconnected,
-            "battery_panic": self._on_battery_panic,
-            "robot_fault": self._on_robot_fault,
-            "command_failed": self._on_command_failed,
-            "building_module_health": self._on_module_health,
-            "task_event": self._on_task_event,
-            "staff_alert": self._on_staff_alert,
             "petri_net_event": self._on_net_event,
         }
         for pattern in {*LOCK_TRIGGERS, *handlers}:
@@ -138,82 +126,12 @@ class ConsoleFeed(Service):
                 continue
             self.lock_views[view.area] = now
             self.endpoint.publish(LockChanged(**now))
-            if now["state"] == "holder_offline" and (before or {}).get("state") != now["state"]:
-                self.alerts.raise_(
-                    "lock_holder_offline",
-                    now["area"],
-                    f"area {now['area']} is held by {now['holder']}, which is offline: "
-                    "release it by hand once the robot is out of the area",
-                )
 
-    # --- alerts -------------------------------------------------------------------------
-    def _robot(self, message: Message) -> str:
-        return str(message.payload.get("robot") or message.source)
-
-    def _on_robot_state(self, message: Message) -> None:
-        modules = message.payload.get("modules")
-        if not modules:
-            return
-        robot = self._robot(message)
-        for name, state in modules.items():
-            key = (robot, str(name))
-            if state == "lost" and key not in self._lost_modules:
-                self._lost_modules.add(key)
-                self.alerts.raise_(
-                    "can_module_lost", f"{robot}/{name}", f"{robot}: CAN module {name} lost"
-                )
-            elif state != "lost":
-                self._lost_modules.discard(key)
-
+    # --- robots -----------------------------------------------------------------------
     def _on_robot_disconnected(self, message: Message) -> None:
-        robot = self._robot(message)
-        self.alerts.raise_("robot_lost", robot, f"robot {robot} lost its connection")
+        robot = str(message.payload.get("robot") or message.source)
         for key in [k for k in self.nets if k[0] == robot]:
             del self.nets[key]
-
-    def _on_battery_panic(self, message: Message) -> None:
-        robot = self._robot(message)
-        level = float(message.payload.get("level", 0.0))
-        self.alerts.raise_("battery_panic", robot, f"{robot}: battery at {level:.0%}")
-
-    def _on_robot_fault(self, message: Message) -> None:
-        robot = self._robot(message)
-        kind = message.payload.get("kind", "fault")
-        detail = message.payload.get("detail", "")
-        self.alerts.raise_("robot_fault", f"{robot}/{kind}", f"{robot}: {kind} {detail}".strip())
-
-    def _on_command_failed(self, message: Message) -> None:
-        command = str(message.payload.get("command", "command"))
-        reason = str(message.payload.get("reason", ""))
-        self.alerts.raise_(
-            "building_command_failed", f"{command}:{reason[:40]}", f"{command} failed: {reason}"
-        )
-
-    def _on_module_health(self, message: Message) -> None:
-        module = str(message.payload.get("module"))
-        if message.payload.get("online") is False:
-            error = message.payload.get("last_error") or "no answer"
-            self.alerts.raise_("module_offline", module, f"Modbus module {module}: {error}")
-
-    def _on_task_event(self, message: Message) -> None:
-        if message.payload.get("state") == "failed":
-            task = str(message.payload.get("task_id"))
-            robot = message.payload.get("robot") or "no robot"
-            self.alerts.raise_("task_failed", task, f"task {task} failed ({robot})", "warning")
-
-    def _on_staff_alert(self, message: Message) -> None:
-        """The Traffic Manager's alerts (backend.alerts): each active one becomes a console
-        alert to acknowledge, keyed by area or robot so a condition the console also sees
-        (a lock holder offline) shows once."""
-        p = message.payload
-        if not p.get("active"):
-            return
-        subject = str(p.get("area") or p.get("robot") or p.get("alert_id"))
-        message_ = str(p.get("message"))
-        if p.get("severity") == "critical":
-            self.alerts.raise_(str(p.get("kind")), subject, message_, "error")
-        else:
-            self.alerts.raise_(str(p.get("kind")), subject, message_, "warning")
 
     # --- Petri nets -----------------------------------------------------------------------
     def _on_net_event(self, message: Message) -> None:

@@ -9,9 +9,9 @@ import httpx
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
 from pydantic import Field
 
+from backend.alerts import AlertNotFound, AlertStore
 from backend.api.deps import NetKiller, Staff, Tasks, app_service, error_response, not_found
 from backend.api.models import RequestBody
-from backend.console.alerts import AlertBook, AlertNotFound
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
 from petri_nets.layout import net_drawing
@@ -39,15 +39,15 @@ class Press(RequestBody):
     ms: float = Field(default=300.0, gt=0, le=10_000)
 
 
-def _alerts(request: Request) -> AlertBook:
-    return app_service(request, "alerts", AlertBook)
+def _alerts(request: Request) -> AlertStore:
+    return app_service(request, "alerts", AlertStore)
 
 
 def _feed(request: Request) -> ConsoleFeed:
     return app_service(request, "console", ConsoleFeed)
 
 
-Alerts = Annotated[AlertBook, Depends(_alerts)]
+Alerts = Annotated[AlertStore, Depends(_alerts)]
 Feed = Annotated[ConsoleFeed, Depends(_feed)]
 
 
@@ -55,13 +55,22 @@ Feed = Annotated[ConsoleFeed, Depends(_feed)]
 async def list_alerts(
     _: Staff, alerts: Alerts, include_acked: bool = False
 ) -> list[dict[str, Any]]:
-    """Open alerts, newest first (with ``include_acked``: the acknowledged ones too)."""
+    """Open alerts (active, not acknowledged), last seen first (with ``include_acked``: every
+    kept one, acknowledged and resolved ones too)."""
     return alerts.listing(include_acked=include_acked)
+
+
+@router.post("/alerts/ack-all")
+async def acknowledge_all_alerts(who: Staff, alerts: Alerts) -> dict[str, Any]:
+    """Acknowledge every open alert at once; returns those acknowledged now."""
+    done = alerts.acknowledge_all(who.name)
+    return {"acknowledged": len(done), "alerts": [a.as_dict() for a in done]}
 
 
 @router.post("/alerts/{alert_id}/ack")
 async def acknowledge_alert(who: Staff, alerts: Alerts, alert_id: Name) -> dict[str, Any]:
-    """Acknowledge an alert: who and when are recorded (idempotent)."""
+    """Acknowledge an alert: who and when are recorded (idempotent). It stays acknowledged
+    while its cause persists; an event alert (a failed task) is resolved by it."""
     try:
         return alerts.acknowledge(alert_id, who.name).as_dict()
     except AlertNotFound:

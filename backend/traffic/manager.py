@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from backend.alerts import AlertBoard
+from backend.alerts import AlertStore
 from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
@@ -42,12 +42,12 @@ class TrafficManager(Service):
         *,
         graph: SiteGraph | None = None,
         on_event: EventSink | None = None,
-        alerts: AlertBoard | None = None,
+        alerts: AlertStore | None = None,
     ) -> None:
         super().__init__()
         self.endpoint = endpoint
         self.on_event = on_event
-        self.alerts = alerts if alerts is not None else AlertBoard(endpoint, on_event)
+        self.alerts = alerts if alerts is not None else AlertStore(endpoint.publish)
         self._positions: dict[str, str] = {}
         self._paths: dict[str, PathResult] = {}
         self.site = site
@@ -156,7 +156,7 @@ class TrafficManager(Service):
         if holder is not None:
             self.courier.withdraw((holder, area))
         self._emit("area_force_released", {"area": area, "robot": holder, "by": by})
-        self.alerts.clear(f"lock:{area}", f"area {area} released by {by}")
+        self.alerts.resolve("lock_holder_offline", area, f"area {area} released by {by}")
         self._send_grants(grants)
         return holder
 
@@ -168,24 +168,20 @@ class TrafficManager(Service):
         for d in decided:
             if d.released:
                 self.alerts.raise_(
-                    f"lock:{d.area}",
                     "lock_released_offline",
+                    d.area,
                     f"area {d.area} released: {d.robot} went offline {d.offline_s:.0f} s ago "
                     "and was never seen inside it or at its edge",
-                    robot=d.robot,
-                    area=d.area,
-                    sticky=False,
+                    "warning",
+                    lasting=False,
                 )
                 self._emit("area_released", {"robot": d.robot, "area": d.area, "offline": True})
             else:
                 self.alerts.raise_(
-                    f"lock:{d.area}",
                     "lock_holder_offline",
+                    d.area,
                     f"area {d.area} stays locked: {d.robot} has been offline {d.offline_s:.0f} s "
                     "and may be inside; check the area, then release it by hand",
-                    severity="critical",
-                    robot=d.robot,
-                    area=d.area,
                 )
         self._send_grants(grants)
 
@@ -298,7 +294,9 @@ class TrafficManager(Service):
         online = mode != "offline"
         if online and not self.locks.is_online(robot):
             for area in self.locks.held_by(robot):
-                self.alerts.clear(f"lock:{area}", f"{robot} is back online; it holds {area}")
+                self.alerts.resolve(
+                    "lock_holder_offline", area, f"{robot} is back online; it holds {area}"
+                )
         self.locks.set_online(robot, online)
         known = isinstance(node, str) and node in self.graph
         here = self.graph.area_at.get(node) if isinstance(node, str) and known else None
@@ -358,20 +356,18 @@ class TrafficManager(Service):
 
     def _check_conflict(self, robot: str, here: str | None) -> None:
         """A robot reporting itself inside an area another robot holds: tell staff at once."""
-        alert_id = f"conflict:{robot}"
         holder = self.locks.holder(here) if here else None
         if here is not None and holder is not None and holder != robot:
-            if alert_id not in self.alerts.active:
+            if not self.alerts.is_active("area_conflict", robot):
                 self.alerts.raise_(
-                    alert_id,
                     "area_conflict",
+                    robot,
                     f"{robot} reports being in area {here}, which {holder} holds",
-                    severity="critical",
-                    robot=robot,
-                    area=here,
                 )
         else:
-            self.alerts.clear(alert_id, f"{robot} is no longer in an area another robot holds")
+            self.alerts.resolve(
+                "area_conflict", robot, f"{robot} is no longer in an area another robot holds"
+            )
 
     def _task_over(self, robot: str) -> None:
         """Task over: its locks go, except the area it is standing in (released on leaving)."""

@@ -110,6 +110,8 @@ class CommandFailed(PayloadModel):
 
     command: str
     reason: str
+    target: str | None = None
+    """What it was for: the door, the elevator, ``module/point`` (None: unknown, bad payload)."""
 
 
 @register_payload("building_input_changed")

@@ -1,5 +1,5 @@
-"""Payloads the staff console listens to: area locks, its own alerts and the event log as it is
-written (docs/messages.md, "Staff console")."""
+"""Payloads the staff console listens to: area locks and the event log as it is written
+(docs/messages.md, "Staff console"; alerts: guidebot/payloads/alerts.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any, Literal
 
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["ConsoleAlert", "EventLogged", "LockChanged"]
+__all__ = ["EventLogged", "LockChanged"]
 
 
 @register_payload("lock_changed")
@@ -20,21 +20,6 @@ class LockChanged(PayloadModel):
     since: float | None = None
     entered: bool = False
     waiting: list[str] = []
-
-
-@register_payload("alert_raised")
-@register_payload("alert_acked")
-class ConsoleAlert(PayloadModel):
-    """An alert of the console's alert book, when it is raised and when someone acknowledges it."""
-
-    id: str
-    kind: str
-    subject: str
-    message: str
-    severity: Literal["warning", "error"]
-    raised_at: float
-    acked_by: str | None = None
-    acked_at: float | None = None
 
 
 @register_payload("event_logged")

@@ -27,7 +27,7 @@ async def start_traffic(bus: Bus) -> tuple[TrafficManager, list[Message]]:
     traffic = TrafficManager(bus.endpoint("traffic_manager"), demo_site())
     await traffic.start()
     alerts: list[Message] = []
-    bus.endpoint("console").subscribe("staff_alert", alerts.append)
+    bus.endpoint("console").subscribe("alert_*", alerts.append)
     return traffic, alerts
 
 
@@ -50,9 +50,10 @@ async def test_lock_of_a_robot_that_went_offline_before_entering_is_released(
     await r2.wait_for("area_granted")
     assert traffic.locks.holder("corridor") == "R2"
     [alert] = alerts
-    assert alert.type == "staff_alert" and alert.payload["kind"] == "lock_released_offline"
-    assert alert.payload["robot"] == "R1" and alert.payload["area"] == "corridor"
+    assert alert.type == "alert_raised" and alert.payload["kind"] == "lock_released_offline"
+    assert alert.payload["subject"] == "corridor" and "R1 went offline" in alert.payload["message"]
     assert "never seen inside" in alert.payload["message"]
+    assert alert.payload["lasting"] is False  # a notice: acknowledging it resolves it
     assert any(
         r.levelno == logging.WARNING and "lock_released_offline" in r.getMessage()
         for r in caplog.records
@@ -91,12 +92,13 @@ async def test_offline_holder_that_may_be_inside_keeps_the_lock_and_staff_are_al
     assert view.state is LockState.HOLDER_OFFLINE and view.holder == "R1"
     assert not r2.of_type("area_granted")
     [alert] = alerts
-    assert alert.payload["kind"] == "lock_holder_offline" and alert.payload["active"] is True
-    assert alert.payload["severity"] == "critical" and alert.payload["alert_id"] == "lock:corridor"
-    assert list(traffic.alerts.active) == ["lock:corridor"]
-    r1.state("busy")  # back online: the alert is cleared under the same id
-    assert alerts[-1].payload["alert_id"] == "lock:corridor" and not alerts[-1].payload["active"]
-    assert not traffic.alerts.active
+    assert alert.type == "alert_raised" and alert.payload["kind"] == "lock_holder_offline"
+    assert alert.payload["severity"] == "error" and alert.payload["subject"] == "corridor"
+    assert [a.kind for a in traffic.alerts.active()] == ["lock_holder_offline"]
+    r1.state("busy")  # back online: the alert resolves itself, under the same id
+    assert alerts[-1].type == "alert_resolved" and alerts[-1].payload["id"] == alert.payload["id"]
+    assert "R1 is back online" in alerts[-1].payload["resolution"]
+    assert not traffic.alerts.active()
 
 
 async def test_robot_inside_an_area_another_holds_raises_a_conflict_alert() -> None:
@@ -108,10 +110,10 @@ async def test_robot_inside_an_area_another_holds_raises_a_conflict_alert() -> N
     r2.state("busy")
     r2.state("busy")
     [alert] = alerts
-    assert alert.payload["kind"] == "area_conflict" and alert.payload["robot"] == "R2"
+    assert alert.payload["kind"] == "area_conflict" and alert.payload["subject"] == "R2"
     r2.node = "gb1"
     r2.state("busy")
-    assert not alerts[-1].payload["active"] and not traffic.alerts.active
+    assert alerts[-1].type == "alert_resolved" and not traffic.alerts.active()
 
 
 def lost_robot_scene(bus: Bus, manager: TaskManager, clock: Clock) -> tuple[str, RobotStub]:

@@ -363,7 +363,7 @@ async def test_a_restarted_server_holds_the_last_lives_locks_until_their_robots_
     assert not r1.of_type("area_granted")
     traffic.check_offline_locks(grace_s=0.0)  # it may be inside: kept, staff alerted
     assert traffic.locks.holder("elevator") == "R2"
-    assert "lock:elevator" in traffic.alerts.active
+    assert traffic.alerts.is_active("lock_holder_offline", "elevator")
     r3 = RobotStub(bus, "R3", "corridor_w")
     r3.state("busy", areas=["corridor"])  # inside: still its own
     assert traffic.locks.holder("corridor") == "R3"

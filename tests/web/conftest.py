@@ -175,6 +175,8 @@ class WebFleet:
     async def kill(self, name: str) -> None:
         """The robot's process dies: its link drops without a goodbye."""
         agent = self.agents.pop(name)
+        if agent.hub is not None:  # no last word: a robot that leaves cleanly says so first
+            await agent.hub.close(flush=False)
         await agent.__aexit__(None, None, None)
 
 

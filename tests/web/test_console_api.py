@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 
 import httpx
@@ -29,7 +28,7 @@ async def test_console_endpoints_refuse_clearly(tmp_path: Path) -> None:
             assert (await http.post("/api/alerts/nope/ack", headers=desk)).status_code == 404
             alert = server.app.state.alerts.raise_("robot_lost", "R1", "robot R1 lost")
             again = server.app.state.alerts.raise_("robot_lost", "R1", "robot R1 lost")
-            assert again.id == alert.id  # not raised twice while open
+            assert again.id == alert.id and again.count == 2  # one alert per cause
             acked = (await http.post(f"/api/alerts/{alert.id}/ack", headers=desk)).json()
             assert acked["acked_by"] == "desk" and acked["acked_at"]
             later = (await http.post(f"/api/alerts/{alert.id}/ack", headers=admin)).json()
@@ -76,30 +75,21 @@ async def test_console_endpoints_refuse_clearly(tmp_path: Path) -> None:
             assert latest["events"][-1]["kind"] == "area_force_released"
 
 
-async def test_traffic_manager_alerts_reach_the_console_once(tmp_path: Path) -> None:
-    """A staff_alert of the Traffic Manager (e.g. an area conflict) becomes one console alert
-    to acknowledge, however often it is re-published while open."""
+async def test_traffic_manager_alerts_are_the_consoles_alerts(tmp_path: Path) -> None:
+    """One store: an alert of the Traffic Manager (an area conflict) is listed at once, once
+    per cause however often it is raised (counted)."""
     settings = Settings(
         db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=SITE, building_enabled=False
     )
     async with running_server(settings) as server:
         admin = {"Authorization": f"Bearer {server.admin_token}"}
-        board = server.app.state.staff_alerts
+        assert server.app.state.traffic.alerts is server.app.state.alerts
         for _ in range(2):
-            board.raise_(
-                "conflict:R2",
-                "area_conflict",
-                "R2 is in corridor held by R1",
-                severity="critical",
-                robot="R2",
-                area="corridor",
+            server.app.state.traffic.alerts.raise_(
+                "area_conflict", "R2", "R2 reports being in area corridor, which R1 holds"
             )
         async with httpx.AsyncClient(base_url=server.url) as http:
-            for _ in range(100):
-                listed = (await http.get("/api/alerts", headers=admin)).json()
-                if listed:
-                    break
-                await asyncio.sleep(0.02)
-        assert [(a["kind"], a["subject"], a["severity"]) for a in listed] == [
-            ("area_conflict", "corridor", "error")
+            listed = (await http.get("/api/alerts", headers=admin)).json()
+        assert [(a["kind"], a["subject"], a["severity"], a["count"]) for a in listed] == [
+            ("area_conflict", "R2", "error", 2)
         ]

@@ -4,6 +4,8 @@
 const MAX_EVENTS = 1000;
 const MAX_FINISHED_TASKS = 200;
 
+const isOpen = (alert) => !alert.acked_at && !alert.resolved_at;
+
 export class Store extends EventTarget {
   constructor(api, hub) {
     super();
@@ -79,11 +81,7 @@ export class Store extends EventTarget {
       this.emit("lock", m.payload);
     });
     on("task_event", (m) => this.#taskEvent(m.payload, m.timestamp));
-    on("alert_raised", (m) => {
-      this.alerts.set(m.payload.id, m.payload);
-      this.emit("alert", m.payload);
-    });
-    on("alert_acked", (m) => this.alerts.set(m.payload.id, m.payload));
+    for (const type of ["alert_raised", "alert_acked", "alert_resolved"]) on(type, (m) => this.#alert(m.payload));
     on("event_logged", (m) => {
       this.#addEvents([m.payload]);
       this.inFlight?.push(m.payload);
@@ -95,7 +93,7 @@ export class Store extends EventTarget {
     on("elevator_state", (m) => this.#lift(m.payload));
     this.hub.subscribe(
       "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault", "robocan_status",
-      "lock_changed", "task_event", "alert_raised", "alert_acked", "event_logged",
+      "lock_changed", "task_event", "alert_raised", "alert_acked", "alert_resolved", "event_logged",
       "building_input_changed", "building_module_health", "door_opened", "door_closed",
       "elevator_state",
     );
@@ -135,10 +133,7 @@ export class Store extends EventTarget {
       const known = this.tasks.get(task.id);
       if (!known || (known.updated_at ?? 0) <= task.updated_at) this.tasks.set(task.id, task);
     }
-    for (const alert of alerts) {
-      const known = this.alerts.get(alert.id);
-      if (!known || !known.acked_at) this.alerts.set(alert.id, alert);
-    }
+    for (const alert of alerts) this.#alert(alert, false);
     const last = events.events.length ? events.events[events.events.length - 1].at : 0;
     this.events = [];
     this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);
@@ -199,7 +194,17 @@ export class Store extends EventTarget {
     this.emit("door", id);
   }
 
+  /** An alert after a change (hub message or snapshot): the newer of two copies wins; a
+   * cause that newly needs attention emits "alert" (the sound). */
+  #alert(alert, live = true) {
+    const known = this.alerts.get(alert.id);
+    if (known && known.updated_at > alert.updated_at) return;
+    this.alerts.set(alert.id, alert);
+    if (live && isOpen(alert) && !(known && isOpen(known))) this.emit("alert", alert);
+  }
+
+  /** Alerts whose cause is there and that nobody acknowledged, last seen first. */
   openAlerts() {
-    return [...this.alerts.values()].filter((a) => !a.acked_at).sort((a, b) => b.raised_at - a.raised_at);
+    return [...this.alerts.values()].filter(isOpen).sort((a, b) => b.last_seen - a.last_seen);
   }
 }
