@@ -170,7 +170,7 @@ class TaskManager(Service):
                 self._idle.add(cfg.name)
             else:
                 info.config = cfg
-        on_site = {cfg.name for cfg in site.robots}  # a set: site.robot() is a scan per name
+        on_site = {cfg.name for cfg in site.robots}
         for name in [n for n in self.robots if n not in on_site]:
             info = self.robots[name]
             if info.current is not None:
