@@ -102,6 +102,10 @@ class Settings(BaseSettings):
     # robots and modules; None: off, 0: any free port (tests).
     hub_ws_port: int | None = Field(default=None, ge=0, le=65535)
     log_level: str = "info"
+    # Event log retention (docs/server.md "Persistence and restart"): rows older than this many
+    # days are deleted in the background every event_prune_every_s; 0 keeps them all.
+    event_retention_days: float = Field(default=30.0, ge=0)
+    event_prune_every_s: float = Field(default=3600.0, gt=0)
     # Worker processes for a large site's route tables and YAML import (0: threads only,
     # docs/server.md "Path search").
     site_workers: int = Field(default=2, ge=0, le=32)
