@@ -14,6 +14,8 @@ from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.db.models import EventRow
 from backend.db.store import PRUNE_CHUNK
 from backend.testing import running_server
+from guidebot.client import HubClient
+from guidebot.messages import Message
 
 from .conftest import OPERATOR_TOKEN, server_settings
 from .test_api import eventually, robot
@@ -124,3 +126,50 @@ async def test_retention_zero_keeps_every_event(tmp_path: Path) -> None:
     settings = server_settings(tmp_path).model_copy(update={"event_retention_days": 0.0})
     async with running_server(settings) as srv:
         assert srv.app.state.store.retention_s is None
+
+
+async def test_a_restored_task_its_robot_ended_unheard_is_not_given_out_again(
+    tmp_path: Path,
+) -> None:
+    """The server goes down with a task assigned; the robot runs and ends it meanwhile, and its
+    task_started and task_ended are lost (a long freeze overflows its link's queue). Back, it
+    names the task among the last it ended (robot_state ``ended``): the task ends there, and
+    is not requeued and run a second time by another robot."""
+    settings = server_settings(tmp_path)
+    staff = {"Authorization": f"Bearer {OPERATOR_TOKEN}"}
+    async with (
+        running_server(settings) as srv,
+        httpx.AsyncClient(base_url=srv.url, headers=staff) as http,
+    ):
+        async with robot(srv, "R1", "hall") as r1:
+            task = (
+                await http.post(
+                    "/api/tasks",
+                    json={"kind": "go_to_poi", "params": {"poi": "loom"}, "robot": "R1"},
+                )
+            ).json()
+            await r1.next_order("go_to_poi")
+            assert srv.app.state.task_manager.get(task["id"]).state == "assigned"
+    async with running_server(settings) as srv:
+        manager = srv.app.state.task_manager
+        assert manager.get(task["id"]).state == "assigned"  # restored, unconfirmed
+        async with (
+            robot(srv, "R2", "hall") as r2,
+            HubClient(srv.ws_url, "robot-R1-demo-token") as r1,
+        ):
+            orders: list[Message] = []
+            for client in (r1, r2.client):
+                client.subscribe("task_assigned", orders.append)
+            await r1.sync()
+            # Its first word after the reconnect, as a robot agent sends it (robot/state.py).
+            ended = [{"task_id": task["id"], "outcome": "done", "reason": ""}]
+            r1.publish(
+                "robot_state",
+                {"robot": "R1", "node": "ga2", "mode": "idle", "task_id": None, "ended": ended},
+            )
+            await r1.sync()
+            await r2.client.sync()
+            assert manager.get(task["id"]).state == "done"
+            assert task["id"] not in {m.payload["task_id"] for m in orders}
+            history = [h["event"] for h in await srv.app.state.store.history(task["id"])]
+            assert "requeued" not in history and history[-1] == "done"
