@@ -23,8 +23,9 @@ T = TypeVar("T")
 
 
 class ListIndex:
-    """Tables from key to position, one per list of one model. Equal to any other: pydantic
-    compares private attributes in ``==``, and a cache is not data."""
+    """Tables from key to position, one per list of one model. Equal to any other, and to
+    None (a model that has not looked anything up yet): pydantic compares private attributes
+    in ``==``, and a cache is not data."""
 
     __slots__ = ("builds", "owner", "tables")
 
@@ -35,7 +36,7 @@ class ListIndex:
         """How many tables were built (tests count them: a lookup must not scan)."""
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, ListIndex)
+        return other is None or isinstance(other, ListIndex)
 
     __hash__ = None  # type: ignore[assignment]
 
