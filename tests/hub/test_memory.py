@@ -58,6 +58,12 @@ def collections(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     return calls
 
 
+def one_leave_policy(clock: FakeClock, **overrides: float) -> GcFreezer:
+    """A freezer whose reclaim falls due at the first leave, timed by ``clock``."""
+    settings: dict[str, float] = {"min_interval_s": 0, **overrides}
+    return GcFreezer(delay=0, min_churn=1, churn_ratio=0.1, clock=clock, **settings)  # type: ignore[arg-type]
+
+
 async def frozen(freezer: GcFreezer, connected: int) -> None:
     freezer.attached(connected)
     await wait_until(lambda: freezer.freezes == 1)
@@ -101,15 +107,7 @@ async def test_the_timer_runs_the_reclaim_once_the_hub_is_quiet() -> None:
 
 async def test_a_reclaim_waits_for_clients_to_settle_but_not_for_ever() -> None:
     clock = FakeClock()
-    freezer = GcFreezer(
-        delay=0,
-        min_churn=1,
-        churn_ratio=0.1,
-        quiet_s=5.0,
-        max_wait_s=60.0,
-        min_interval_s=0,
-        clock=clock,
-    )
+    freezer = one_leave_policy(clock, quiet_s=5.0, max_wait_s=60.0)
     await frozen(freezer, 2)
     freezer.detached(1)
     for _ in range(11):  # a client comes or goes every 4 s: never quiet for 5 s
@@ -124,7 +122,7 @@ async def test_a_reclaim_waits_for_clients_to_settle_but_not_for_ever() -> None:
     freezer.stop()
 
 
-async def test_reclaims_are_spaced_by_their_own_cost(collections: list[int]) -> None:
+async def test_reclaims_are_spaced_by_their_own_cost(monkeypatch: pytest.MonkeyPatch) -> None:
     """A pass of D seconds is followed by none for D / max_duty seconds (nor min_interval_s):
     the reclaim holds the loop for at most max_duty of its time."""
     clock, watch = FakeClock(), FakeClock()
@@ -134,33 +132,22 @@ async def test_reclaims_are_spaced_by_their_own_cost(collections: list[int]) -> 
         watch.now += 2.0  # a 2 s pass, as with a large site on a busy VM
         return real_collect(generation)
 
-    freezer = GcFreezer(
-        delay=0,
-        min_churn=1,
-        churn_ratio=0.1,
-        quiet_s=0,
-        min_interval_s=300.0,
-        max_duty=0.001,
-        clock=clock,
-        stopwatch=watch,
-    )
+    freezer = one_leave_policy(clock, quiet_s=0, min_interval_s=300.0, max_duty=0.001)
+    freezer.stopwatch = watch
     await frozen(freezer, 3)
-    gc.collect = slow_collect  # type: ignore[assignment]
-    try:
-        freezer.detached(2)
-        freezer._reclaim()
-        assert freezer.reclaims == 1 and freezer.last_reclaim_s == 2.0
-        freezer.detached(1)
-        assert freezer.reclaim_due
-        clock.now += 1999.0
-        freezer._reclaim()
-        assert freezer.reclaims == 1  # 2 s / 0.1 % = 2000 s
-        clock.now += 1.0
-        freezer._reclaim()
-        assert freezer.reclaims == 2
-    finally:
-        gc.collect = real_collect
-        freezer.stop()
+    monkeypatch.setattr(gc, "collect", slow_collect)
+    freezer.detached(2)
+    freezer._reclaim()
+    assert freezer.reclaims == 1 and freezer.last_reclaim_s == 2.0
+    freezer.detached(1)
+    assert freezer.reclaim_due
+    clock.now += 1999.0
+    freezer._reclaim()
+    assert freezer.reclaims == 1  # 2 s / 0.1 % = 2000 s
+    clock.now += 1.0
+    freezer._reclaim()
+    assert freezer.reclaims == 2
+    freezer.stop()
 
 
 async def test_waits_while_site_work_has_the_collector_paused() -> None:
