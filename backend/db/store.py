@@ -9,7 +9,7 @@ by ``max_pending`` and the oldest unwritten ones are dropped (counted in ``dropp
 Retention: with ``retention_s`` the event log is pruned every ``prune_every_s`` in the
 background, in chunks of ``PRUNE_CHUNK`` rows (each its own short transaction), keeping what
 the next start replays (``lock_holders``: this life's ``server_started`` and the area rows
-after it).
+after it; the console's alerts: ``KEPT_KINDS``).
 """
 
 from __future__ import annotations
@@ -53,6 +53,9 @@ PRUNE_CHUNK = 5000
 
 LOCK_KINDS = ("area_granted", "area_released", "area_force_released")
 """What ``lock_holders`` replays after the last ``server_started``."""
+
+KEPT_KINDS = ("alert_raised", "alert_acked")
+"""Never pruned: the console replays every alert from the log at start (backend/console)."""
 
 TASK_FIELDS = (
     "kind",
@@ -221,7 +224,7 @@ class DbStore(Service):
 
     async def prune_events(self, older_than: float) -> int:
         """Delete event rows recorded before ``older_than`` (seconds since the epoch), a chunk
-        per transaction, except what the next start's lock replay reads; returns how many.
+        per transaction, except what the next start replays (locks, alerts); returns how many.
         A process that no longer leads deletes nothing."""
         total = 0
         while True:
@@ -240,7 +243,11 @@ class DbStore(Service):
                     (
                         await session.execute(
                             select(EventRow.id)
-                            .where(EventRow.at < older_than, not_(replayed))
+                            .where(
+                                EventRow.at < older_than,
+                                not_(replayed),
+                                EventRow.kind.not_in(KEPT_KINDS),
+                            )
                             .order_by(EventRow.id)
                             .limit(PRUNE_CHUNK)
                         )

@@ -88,6 +88,7 @@ async def test_retention_deletes_old_events_but_keeps_what_the_next_start_replay
             (old, "area_granted", {"robot": "R9", "area": "stairs"}),  # an earlier life's
             (old, "server_started", {}),  # this life began 40 days ago
             (old, "area_granted", corridor),  # still held: the next start needs it
+            (old, "alert_raised", {"id": "a1"}),  # the console replays alerts at start
             (old, "node_reached", {"robot": "R2"}),
             (now, "node_reached", {"robot": "R3"}),
         ],
@@ -101,6 +102,7 @@ async def test_retention_deletes_old_events_but_keeps_what_the_next_start_replay
         assert await event_kinds(store) == [
             ("server_started", {}),
             ("area_granted", corridor),
+            ("alert_raised", {"id": "a1"}),
             ("node_reached", {"robot": "R3"}),
         ]
         assert await store.lock_holders() == holders
