@@ -69,6 +69,8 @@ class ServerBrain(Service):
         store = DbStore(
             make_sessionmaker(engine),
             epoch=None if leadership is None else leadership.fencing_epoch,
+            retention_s=settings.event_retention_days * 86400 or None,
+            prune_every_s=settings.event_prune_every_s,
         )
         await self.enter(store)
         health.set("database", ComponentState.ok, engine.url.get_backend_name())
@@ -138,6 +140,7 @@ class ServerBrain(Service):
         held = await store.lock_holders()
         store.record_event("server_started", "server", {"site_version": version})
         restored = await store.load_open_tasks()
+        tasks.restore_service(await store.out_of_service())  # before restore() dispatches
         tasks.restore(restored)
         await self.enter(traffic)
         traffic.restore_locks(held)

@@ -109,6 +109,10 @@ class Settings(BaseSettings):
     log_level: str = "info"
     access_log: bool = True
     """uvicorn's line per HTTP request (``guidebot demo`` turns it off)."""
+    # Event log retention (docs/server.md "Persistence and restart"): rows older than this many
+    # days are deleted in the background every event_prune_every_s; 0 keeps them all.
+    event_retention_days: float = Field(default=30.0, ge=0)
+    event_prune_every_s: float = Field(default=3600.0, gt=0)
     # Worker processes for a large site's route tables and YAML import (0: threads only,
     # docs/server.md "Path search").
     site_workers: int = Field(default=2, ge=0, le=32)

@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
 BENCHMARKS: dict[str, str] = {
     "robot": "bench.robot:main",
     "hub": "bench.hub:hub",
+    "reclaim": "bench.hub_reclaim:main",
     "petri": "bench.petri:main",
     "robocan": "bench.robocan:main",
     "traffic": "bench.traffic:main",

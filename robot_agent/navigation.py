@@ -339,6 +339,7 @@ class Navigator(MotionControl):
         doors_ahead: dict[int, str] = {}  # step index -> door asked open for this pass
         called: Called = set()
         passage = self.passage
+        passage.new_path()
         try:
             i = 1
             while i < len(steps):

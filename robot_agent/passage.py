@@ -82,6 +82,8 @@ class Passage:
         self._door_failed: dict[str, str] = {}
         self._elevators: dict[str, str] = {}
         self._granted: set[str] = set()
+        self._gone: set[str] = set()
+        """Areas of this path the server says a publish removed: not asked for again."""
         self._link_down = False
         """The link is down: the server may release a granted area it never saw us enter
         (docs/server.md, offline grace), so no granted area is entered until it is back."""
@@ -126,7 +128,12 @@ class Passage:
     def _on_area_granted(self, message: Message) -> None:
         p = message.payload
         if p.get("robot") in (None, self.robot):
-            self._granted.add(str(p.get("area")))
+            area = str(p.get("area"))
+            if p.get("removed"):  # a publish took the area off the site: nothing to hold
+                log.info("%s: %s", self.robot, p.get("reason") or f"area {area} removed")
+                self._gone.add(area)
+            else:
+                self._granted.add(area)
             self._news.set()
 
     # -- the link ---------------------------------------------------------------------------------
@@ -175,8 +182,16 @@ class Passage:
 
     def must_ask(self, area: str) -> bool:
         """Entering ``area`` needs a grant we hold now, with the link up (docs/robot.md,
-        "Link down"); the area the robot already stands in needs nothing more."""
-        return area != self.inside and (area not in self.held_areas or self._link_down)
+        "Link down"); the area the robot already stands in, or one a publish removed from
+        the site (this path was planned before), needs nothing more."""
+        if area == self.inside or area in self._gone:
+            return False
+        return area not in self.held_areas or self._link_down
+
+    def new_path(self) -> None:
+        """A path starts: it was planned on the site as it is, so areas gone from an earlier
+        one are asked for again if it names them (a later publish may have brought them back)."""
+        self._gone.clear()
 
     async def acquire_area(self, area: str) -> None:
         """Hold ``area`` before entering it: granted ahead, or asked for and waited for."""
@@ -193,13 +208,17 @@ class Passage:
         self._waiting_area = area
         try:
             await self._wait_until(
-                lambda: area in self._granted and not self._link_down, f"area {area}"
+                lambda: (area in self._granted or area in self._gone) and not self._link_down,
+                f"area {area}",
             )
         finally:
             self._waiting_area = None
+        self.motion.state = NavState.MOVING
+        if area not in self._granted:
+            log.info("%s: area %s is gone from the site: going on without it", self.robot, area)
+            return
         log.info("%s: area %s granted", self.robot, area)
         self.held_areas.add(area)
-        self.motion.state = NavState.MOVING
 
     def release_left(self, here: PathStep, nxt: PathStep | None) -> None:
         """Areas neither of ``here`` nor of the next node are behind the robot: released."""

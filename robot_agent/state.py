@@ -12,7 +12,7 @@ from typing import Any
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.robot import RobotMode, RobotState
+from guidebot.payloads.robot import ENDED_REPORTED, RobotMode, RobotState
 from guidebot.service import Service
 from robot_agent.battery import BatteryMonitor
 from robot_agent.navigation import Navigator
@@ -98,8 +98,17 @@ class StateReporter(Service):
             "modules": dict(self.modules),
             "poi": self.poi[1] if self.poi and self.poi[0] == self.tasks.task_id else None,
             "areas": self.nav.areas_held(),
+            "ended": self.ended(),
             "seq": self.seq,
         }
+
+    def ended(self) -> list[dict[str, str]]:
+        """The last tasks that ended, newest first (robot_state ``ended``)."""
+        last = list(self.tasks.finished)[-ENDED_REPORTED:]
+        return [
+            {"task_id": t.task_id, "outcome": t.outcome or "failed", "reason": t.reason[:500]}
+            for t in reversed(last)
+        ]
 
     def publish_now(self) -> Message:
         return self.ep.publish(RobotState(**self.snapshot()))

@@ -1,4 +1,5 @@
-"""Database tables: the site document, tasks, their history and the event log."""
+"""Database tables: the site document, tasks, their history, the event log and which robots
+staff took out of service."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 __all__ = [
     "Base",
     "EventRow",
+    "RobotServiceRow",
     "SiteDraftRow",
     "SiteRow",
     "SiteVersionRow",
@@ -100,3 +102,13 @@ class EventRow(Base):
 
 
 Index("ix_events_kind", EventRow.kind)
+
+
+class RobotServiceRow(Base):
+    """A robot staff took out of service or put back (the latest word per robot)."""
+
+    __tablename__ = "robot_service"
+    robot: Mapped[str] = mapped_column(String(64), primary_key=True)
+    out_of_service: Mapped[bool] = mapped_column(Boolean)
+    by: Mapped[str] = mapped_column(String(64), default="")
+    at: Mapped[float] = mapped_column(Float)

@@ -1,10 +1,15 @@
-"""The server's persistence: a write-behind store for tasks, history and events, plus the
-site document.
+"""The server's persistence: a write-behind store for tasks, history, events and robots out of
+service, plus the site document.
 
 Bus handlers must not block, so ``record`` and ``record_event`` only queue; a background task
 writes batches in one transaction each. Overflow rule: task snapshots coalesce per task (the
 latest wins, so they are bounded by the number of tasks); history and event rows are bounded
 by ``max_pending`` and the oldest unwritten ones are dropped (counted in ``dropped``, logged).
+
+Retention: with ``retention_s`` the event log is pruned every ``prune_every_s`` in the
+background, in chunks of ``PRUNE_CHUNK`` rows (each its own short transaction), keeping what
+the next start replays (``lock_holders``: this life's ``server_started`` and the area rows
+after it; the console's alerts: ``KEPT_KINDS``).
 """
 
 from __future__ import annotations
@@ -17,12 +22,13 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from sqlalchemy import Insert, func, insert, or_, select, text, update
+from sqlalchemy import Insert, and_, delete, func, insert, not_, or_, select, text, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.exc import StatementError
 
 from backend.db.models import (
     EventRow,
+    RobotServiceRow,
     SiteDraftRow,
     SiteRow,
     SiteVersionRow,
@@ -41,6 +47,16 @@ log = logging.getLogger(__name__)
 
 UPSERT_CHUNK = 500
 """Rows per INSERT ... ON CONFLICT statement (SQLite allows 32766 bound parameters)."""
+
+PRUNE_CHUNK = 5000
+"""Event rows deleted per transaction: a SQLite writer holds the file only that long."""
+
+LOCK_KINDS = ("area_granted", "area_released", "area_force_released")
+"""What ``lock_holders`` replays after the last ``server_started``."""
+
+KEPT_KINDS = ("alert_raised", "alert_acked", "alert_resolved")
+"""Never pruned: the alert store replays every alert from the log at start (backend/alerts.py
+``LOGGED_KINDS``), to resolve what the last life left open and keep their history."""
 
 TASK_FIELDS = (
     "kind",
@@ -67,14 +83,23 @@ class DbStore(Service):
         *,
         max_pending: int = 100_000,
         epoch: Callable[[], int | None] | None = None,
+        retention_s: float | None = None,
+        prune_every_s: float = 3600.0,
     ) -> None:
         """``epoch``: with several server processes, the leader epoch this process won (None
         once it has lost it): each write checks it against the leader row in its transaction,
-        so a paused old leader's late writes are refused (docs/scaling.md, "Fencing")."""
+        so a paused old leader's late writes are refused (docs/scaling.md, "Fencing").
+        ``retention_s``: event rows older than this are deleted, every ``prune_every_s`` (the
+        first time that long after the start); None keeps them all."""
         super().__init__()
         self.sessionmaker = sessionmaker
         self.max_pending = max_pending
         self.epoch = epoch
+        self.retention_s = retention_s
+        self.prune_every_s = prune_every_s
+        self.pruned = 0
+        """Event rows deleted by retention since the start."""
+        self._service: dict[str, dict[str, Any]] = {}
         self.fenced = 0
         """Rows not written because this process no longer led when they were flushed."""
         self._tasks: dict[str, dict[str, Any]] = {}
@@ -110,6 +135,16 @@ class DbStore(Service):
             data["requester"] = task.requester
         self.record_event("task_" + event, "task_manager", data)
 
+    def record_service(self, robot: str, out_of_service: bool, by: str = "") -> None:
+        """Staff took ``robot`` out of service or put it back (the latest word per robot)."""
+        self._service[robot] = {
+            "robot": robot,
+            "out_of_service": out_of_service,
+            "by": by[:64],
+            "at": time.time(),
+        }
+        self._wake.set()
+
     def record_event(self, kind: str, source: str, data: dict[str, Any]) -> None:
         row = {"at": time.time(), "kind": kind[:64], "source": source, "data": data}
         self._append(self._events, row)
@@ -128,6 +163,18 @@ class DbStore(Service):
     async def on_start(self) -> None:
         self.on_cleanup(self.flush)  # after the writer has stopped: write what is pending
         self.spawn(self._run(), name="db-writer")
+        if self.retention_s is not None:
+            self.spawn(self._prune_periodically(self.retention_s), name="db-retention")
+
+    async def _prune_periodically(self, retention_s: float) -> None:
+        while True:
+            await asyncio.sleep(self.prune_every_s)
+            try:
+                await self.prune_events(time.time() - retention_s)
+            except Exception:
+                log.exception(
+                    "event log retention failed; trying again in %.0f s", self.prune_every_s
+                )
 
     async def _run(self) -> None:
         while True:
@@ -142,9 +189,10 @@ class DbStore(Service):
 
     async def flush(self) -> None:
         async with self._flush_lock:
-            if not (self._tasks or self._history or self._events):
+            if not (self._tasks or self._history or self._events or self._service):
                 return
             tasks, self._tasks = self._tasks, {}
+            service, self._service = self._service, {}
             history = list(self._history)
             events = list(self._events)
             try:
@@ -152,6 +200,8 @@ class DbStore(Service):
                     if self.epoch is not None and not await self._still_leading(session):
                         self._drop_fenced(tasks, history, events)
                         return
+                    if service:
+                        await session.execute(_upsert_service(session, list(service.values())))
                     if tasks:
                         rows = [{"id": task_id, **snap} for task_id, snap in tasks.items()]
                         for i in range(0, len(rows), UPSERT_CHUNK):
@@ -163,12 +213,55 @@ class DbStore(Service):
             except Exception:
                 for task_id, snap in tasks.items():
                     self._tasks.setdefault(task_id, snap)
+                for robot, row in service.items():
+                    self._service.setdefault(robot, row)
                 raise
             for _ in history:
                 self._history.popleft()
             for _ in events:
                 self._events.popleft()
-            self.written += len(tasks) + len(history) + len(events)
+            self.written += len(tasks) + len(history) + len(events) + len(service)
+
+    async def prune_events(self, older_than: float) -> int:
+        """Delete event rows recorded before ``older_than`` (seconds since the epoch), a chunk
+        per transaction, except what the next start replays (locks, alerts); returns how many.
+        A process that no longer leads deletes nothing."""
+        total = 0
+        while True:
+            async with self.sessionmaker() as session, session.begin():
+                if self.epoch is not None and not await self._still_leading(session):
+                    return total
+                life = (
+                    await session.execute(
+                        select(func.max(EventRow.id)).where(EventRow.kind == "server_started")
+                    )
+                ).scalar() or 0
+                replayed = and_(
+                    EventRow.id >= life, EventRow.kind.in_((*LOCK_KINDS, "server_started"))
+                )
+                ids = list(
+                    (
+                        await session.execute(
+                            select(EventRow.id)
+                            .where(
+                                EventRow.at < older_than,
+                                not_(replayed),
+                                EventRow.kind.not_in(KEPT_KINDS),
+                            )
+                            .order_by(EventRow.id)
+                            .limit(PRUNE_CHUNK)
+                        )
+                    ).scalars()
+                )
+                if ids:
+                    await session.execute(delete(EventRow).where(EventRow.id.in_(ids)))
+            total += len(ids)
+            self.pruned += len(ids)
+            if len(ids) < PRUNE_CHUNK:
+                if total:
+                    log.info("event log retention: %d rows deleted", total)
+                return total
+            await asyncio.sleep(0)  # let the writer and readers in between chunks
 
     async def _still_leading(self, session: Any) -> bool:
         """The leader row names our epoch; ``FOR SHARE`` holds a new leader's epoch bump until
@@ -320,6 +413,17 @@ class DbStore(Service):
                 del holders[area]
         return holders
 
+    async def out_of_service(self) -> dict[str, str]:
+        """Robots staff left out of service -> who took them out (for the next start)."""
+        await self.flush()
+        async with self.sessionmaker() as session:
+            rows = await session.execute(
+                select(RobotServiceRow.robot, RobotServiceRow.by).where(
+                    RobotServiceRow.out_of_service.is_(True)
+                )
+            )
+            return {robot: by for robot, by in rows}
+
     async def load_site(self) -> tuple[int, dict[str, Any]] | None:
         async with self.sessionmaker() as session:
             row = await session.get(SiteRow, 1)
@@ -427,6 +531,15 @@ def _upsert(session: Any, rows: list[dict[str, Any]]) -> Insert:
     statement = module.insert(TaskRow).values(rows)
     updated = {key: statement.excluded[key] for key in (*TASK_FIELDS, "state")}
     return statement.on_conflict_do_update(index_elements=[TaskRow.id], set_=updated)
+
+
+def _upsert_service(session: Any, rows: list[dict[str, Any]]) -> Insert:
+    """INSERT ... ON CONFLICT (robot) DO UPDATE for the robots' service rows."""
+    dialect = session.bind.dialect.name
+    module = postgresql if dialect == "postgresql" else sqlite
+    statement = module.insert(RobotServiceRow).values(rows)
+    updated = {key: statement.excluded[key] for key in ("out_of_service", "by", "at")}
+    return statement.on_conflict_do_update(index_elements=[RobotServiceRow.robot], set_=updated)
 
 
 def _task(row: TaskRow) -> Task:

@@ -9,15 +9,25 @@ connection, so scanning them again and again finds nothing.
 ``GcFreezer`` moves them to the collector's permanent generation (``gc.freeze()``) shortly after
 clients connect; full passes then only walk what is young, a few tens of milliseconds. Reference
 counting still frees frozen objects as usual. What freezing costs: reference cycles left behind by
-closed connections are not reclaimed while frozen. So once enough clients have gone (a quarter of
-those connected, at least ``min_churn``) everything is unfrozen and collected once, and when the
-hub stops it unfreezes everything (so tests that start many servers in one process keep nothing).
+closed connections (about 25 objects each, in asyncio's and uvicorn's transports) are not
+reclaimed while frozen. So once enough clients have gone (a quarter of those connected, at least
+``min_churn``) a reclaim is due: unfreeze, collect once, freeze again. When the hub stops it
+unfreezes everything (so tests that start many servers in one process keep nothing).
 
-Neither happens while the collector is off (``gc.isenabled()`` false): site work pauses it
-(backend/site/offloop.py) and freezes what it built when it ends, and an explicit collection
-meanwhile would walk every object that work has allocated so far, on the event loop (97 ms
-measured: 20 robots connecting just before a 10 000-node site was published). A freeze due then
-is tried again ``delay`` later; a reclaim waits for the next client to leave.
+The reclaim is one full pass over everything frozen, and CPython (3.11) cannot collect a part
+of the permanent generation: with a large site the pass takes 0.7-2 s on this VM. So what is
+bounded is when and how often it runs, never where clients are:
+- never inside a client's leave (that is a reconnect storm's hot path): it runs on its own
+  timer once no client has come or gone for ``quiet_s`` (at the latest ``max_wait_s`` after it
+  fell due, for a hub whose clients never settle);
+- at most once per ``min_interval_s``, and spaced by its own cost: after a pass of D seconds
+  the next waits at least D / ``max_duty`` (a 2 s pass: 2000 s with the default 0.1 %), so the
+  reclaim never holds the loop for more than ``max_duty`` of its time;
+- never while the collector is off (``gc.isenabled()`` false): site work pauses it
+  (backend/site/offloop.py) and freezes what it built when it ends, and an explicit collection
+  meanwhile would walk every object that work has allocated so far, on the event loop (97 ms
+  measured: 20 robots connecting just before a 10 000-node site was published). A freeze or a
+  reclaim due then is tried again ``delay`` later.
 """
 
 from __future__ import annotations
@@ -25,6 +35,8 @@ from __future__ import annotations
 import asyncio
 import gc
 import logging
+import time
+from collections.abc import Callable
 
 __all__ = ["GcFreezer"]
 
@@ -32,7 +44,8 @@ log = logging.getLogger(__name__)
 
 
 class GcFreezer:
-    """Freeze long-lived objects after clients connect; reclaim after clients leave."""
+    """Freeze long-lived objects after clients connect; reclaim, off the hot path, after
+    clients leave."""
 
     def __init__(
         self,
@@ -41,19 +54,42 @@ class GcFreezer:
         delay: float = 1.0,
         min_churn: int = 64,
         churn_ratio: float = 0.25,
+        quiet_s: float = 5.0,
+        max_wait_s: float = 60.0,
+        min_interval_s: float = 300.0,
+        max_duty: float = 0.001,
+        clock: Callable[[], float] = time.monotonic,
+        stopwatch: Callable[[], float] = time.perf_counter,
     ) -> None:
+        """``clock`` decides when a reclaim may run, ``stopwatch`` times it (tests pass their
+        own)."""
         self.enabled = enabled
         self.delay = delay
         self.min_churn = min_churn
         self.churn_ratio = churn_ratio
+        self.quiet_s = quiet_s
+        self.max_wait_s = max_wait_s
+        self.min_interval_s = min_interval_s
+        self.max_duty = max_duty
+        self.clock = clock
+        self.stopwatch = stopwatch
         self.freezes = 0
         self.reclaims = 0
+        self.last_reclaim_s = 0.0
+        """How long the last reclaim's collection held the loop."""
         self._timer: asyncio.TimerHandle | None = None
+        self._reclaim_timer: asyncio.TimerHandle | None = None
         self._gone = 0
         self._frozen = False
+        self._due_since: float | None = None
+        """When enough clients had left for a reclaim (None: none due)."""
+        self._last_change = 0.0
+        self._next_allowed = 0.0
+        """No reclaim before this (min_interval_s and max_duty after the last one)."""
 
     def attached(self, connected: int) -> None:
         """A client connected: freeze in ``delay`` seconds (one freeze per connection burst)."""
+        self._last_change = self.clock()
         if not self.enabled or self._timer is not None:
             return
         try:
@@ -63,19 +99,62 @@ class GcFreezer:
         self._timer = loop.call_later(self.delay, self._freeze)
 
     def detached(self, connected: int) -> None:
-        """A client left: after enough of them, unfreeze and collect once."""
-        if not self._frozen:
+        """A client left: after enough of them, a reclaim is due (run later, not here)."""
+        self._last_change = self.clock()
+        if not self._frozen or self._due_since is not None:
             return
         self._gone += 1
-        if gc.isenabled() and self._gone >= max(
-            self.min_churn, self.churn_ratio * (connected + self._gone)
-        ):
+        if self._gone >= max(self.min_churn, self.churn_ratio * (connected + self._gone)):
             self._gone = 0
-            self._frozen = False
-            self.reclaims += 1
-            gc.unfreeze()
-            collected = gc.collect()
-            log.info("hub: %d clients left: unfroze and collected %d objects", connected, collected)
+            self._due_since = self._last_change
+            self._schedule_reclaim(self.quiet_s)
+
+    @property
+    def reclaim_due(self) -> bool:
+        return self._due_since is not None
+
+    def _schedule_reclaim(self, after: float) -> None:
+        if self._reclaim_timer is not None:
+            self._reclaim_timer.cancel()
+            self._reclaim_timer = None
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return
+        self._reclaim_timer = loop.call_later(max(after, 0.0), self._reclaim)
+
+    def _reclaim(self) -> None:
+        """Run the due reclaim if the hub is quiet, the spacing allows and the collector is on;
+        else look again when it could."""
+        self._reclaim_timer = None
+        if self._due_since is None or not self._frozen:
+            self._due_since = None
+            return
+        now = self.clock()
+        wait = max(
+            self._next_allowed - now,
+            min(self._last_change + self.quiet_s, self._due_since + self.max_wait_s) - now,
+        )
+        if not gc.isenabled():  # paused by site work: see the module's docstring
+            wait = max(wait, self.delay)
+        if wait > 0:
+            self._schedule_reclaim(wait)
+            return
+        self._due_since = None
+        self.reclaims += 1
+        started = self.stopwatch()
+        gc.unfreeze()
+        collected = gc.collect()
+        gc.freeze()  # what survived is long-lived: later full passes stay short
+        self.last_reclaim_s = took = self.stopwatch() - started
+        self._next_allowed = self.clock() + max(self.min_interval_s, took / self.max_duty)
+        log.info(
+            "hub: reclaim after clients left: collected %d objects in %.0f ms; next not before"
+            " %.0f s",
+            collected,
+            took * 1000,
+            self._next_allowed - self.clock(),
+        )
 
     def _freeze(self) -> None:
         if not gc.isenabled():  # paused by site work: see the module's docstring
@@ -90,10 +169,13 @@ class GcFreezer:
         log.debug("hub: long-lived objects frozen (freeze %d)", self.freezes)
 
     def stop(self) -> None:
-        """The hub stops: cancel the pending freeze and give everything back to the collector."""
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
+        """The hub stops: cancel the pending freeze and reclaim and give everything back to
+        the collector."""
+        for timer in (self._timer, self._reclaim_timer):
+            if timer is not None:
+                timer.cancel()
+        self._timer = self._reclaim_timer = None
+        self._due_since = None
         if self._frozen:
             self._frozen = False
             gc.unfreeze()

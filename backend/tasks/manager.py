@@ -65,6 +65,8 @@ class TaskStore(Protocol):
 
     def record(self, task: Task, event: str) -> None: ...
 
+    def record_service(self, robot: str, out_of_service: bool, by: str = "") -> None: ...
+
 
 class TaskManager(Service):
     """One per server. ``graph`` is shared with the Traffic Manager (same site version)."""
@@ -173,7 +175,7 @@ class TaskManager(Service):
                 self._idle.add(cfg.name)
             else:
                 info.config = cfg
-        on_site = {cfg.name for cfg in site.robots}  # a set: site.robot() is a scan per name
+        on_site = {cfg.name for cfg in site.robots}
         for name in [n for n in self.robots if n not in on_site]:
             info = self.robots[name]
             if info.current is not None:
@@ -207,6 +209,14 @@ class TaskManager(Service):
         last = max((t.seq for t in tasks), default=0)
         self._seq = itertools.count(last + 1)
         self.dispatch()
+
+    def restore_service(self, out: dict[str, str]) -> None:
+        """After a restart: the robots staff had left out of service (robot -> by whom) are
+        out of service again; one no longer on the site is ignored."""
+        for name in out:
+            robot = self.robots.get(name)
+            if robot is not None:
+                robot.out_of_service = True
 
     # --- requests (API, buttons, robots) -------------------------------------------------
     def request(
@@ -311,6 +321,8 @@ class TaskManager(Service):
         if robot.out_of_service == out:
             return robot
         robot.out_of_service = out
+        if self.store is not None:
+            self.store.record_service(name, out, by)
         current = self.current_of(robot)
         if out and current is not None and not current.final:
             if current.internal:

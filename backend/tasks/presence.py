@@ -66,6 +66,7 @@ class Presence:
         before = robot.current
         was_fault = robot.fault
         robot.fault = robot.mode == "fault"
+        tm.reports.ended_in_state(robot, p.get("ended"))  # before a restored task is requeued
         self.reconcile(robot, reported)
         current = tm.current_of(robot)
         if returned and current is not None and current.state is TaskState.ASSIGNED:

@@ -6,6 +6,7 @@ from it gets that task cancelled on the robot again (docs/server.md, "Task Manag
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import TYPE_CHECKING
 
@@ -14,12 +15,15 @@ from pydantic import ValidationError
 from backend.tasks.model import Task, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
+from guidebot.payloads.robot import ENDED_REPORTED
 from guidebot.payloads.tasks import TourProgress
 
 if TYPE_CHECKING:
     from backend.tasks.manager import TaskManager
 
 __all__ = ["TaskReports"]
+
+log = logging.getLogger(__name__)
 
 _ENDED = {"done": TaskState.DONE, "failed": TaskState.FAILED}
 """A task_ended outcome -> the task's final state (anything else: cancelled)."""
@@ -60,8 +64,14 @@ class TaskReports:
         if msg.payload.get("outcome") == "refused":
             self._refused(robot, task, str(msg.payload.get("reason") or "busy"))
             return
-        state = _ENDED.get(msg.payload.get("outcome", "done"), TaskState.CANCELLED)
-        reason = str(msg.payload.get("reason") or "").strip()
+        self.end(robot, task, msg.payload.get("outcome", "done"), msg.payload.get("reason"))
+
+    def end(self, robot: RobotInfo, task: Task, outcome: object, reason: object) -> None:
+        """``robot`` ended ``task`` (not final, its own) with ``outcome``: from its task_ended,
+        or from the ``ended`` list of its robot_state when that task_ended was lost."""
+        tm = self.tm
+        state = _ENDED.get(str(outcome), TaskState.CANCELLED)
+        reason = str(reason or "").strip()
         if state is TaskState.FAILED and not reason:
             reason = f"{robot.name} reported the task failed without saying why"
         task.move(state, reason=reason)
@@ -79,6 +89,22 @@ class TaskReports:
             tm.estimator.ended(task, time.time() - task.started_at)
         tm.changed(task, state.value)
         tm.dispatch()
+
+    def ended_in_state(self, robot: RobotInfo, ended: object) -> None:
+        """The tasks a robot_state says ended: one still the robot's here ends as if its
+        task_ended had come (docs/server.md, "After a restart")."""
+        if not isinstance(ended, list):
+            return
+        tm = self.tm
+        for item in ended[:ENDED_REPORTED]:
+            if not isinstance(item, dict):
+                continue
+            task = tm.tasks.get(str(item.get("task_id")))
+            if task is None or task.final or task.robot != robot.name:
+                continue
+            log.info("%s: task %s ended by the robot's own state", robot.name, task.id)
+            tm.courier.withdraw(("task", task.id, robot.name))
+            self.end(robot, task, item.get("outcome"), item.get("reason"))
 
     def _refused(self, robot: RobotInfo, task: Task, reason: str) -> None:
         """Back to the queue, another robot preferred; this one waits for its next robot_state

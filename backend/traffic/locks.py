@@ -21,7 +21,16 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 
-__all__ = ["AreaLocks", "Grant", "LockError", "LockState", "LockView", "OfflineLock", "Yield"]
+__all__ = [
+    "AreaLocks",
+    "Cut",
+    "Grant",
+    "LockError",
+    "LockState",
+    "LockView",
+    "OfflineLock",
+    "Yield",
+]
 
 
 class LockError(ValueError):
@@ -59,6 +68,18 @@ class Yield:
     robot: str
     area: str
     cycle: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Cut:
+    """A waiting request that lost areas the site no longer has (``reshape``)."""
+
+    robot: str
+    areas: tuple[str, ...]
+    """The areas it waited for that are gone."""
+    request_id: str | None
+    still_waiting: bool
+    """Other areas of its chain remain, and it waits for them in its old place."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,6 +238,35 @@ class AreaLocks:
         if holder is not None:
             self._free(lock)
         return holder, self._grant_waiting()
+
+    def reshape(self, areas: list[str]) -> tuple[list[Cut], list[Grant]]:
+        """The site's areas changed (a publish): new areas start free; the locks of removed
+        ones go, with their holders' claims; every other lock keeps its holder, state and
+        waiters in their order. A wait loses the removed areas of its chain (returned, so the
+        robot is told at once rather than at its time-out) and ends when none is left.
+        Returns those cuts and the grants now possible."""
+        keep = dict.fromkeys(areas)
+        for area in keep:
+            self._locks.setdefault(area, _Lock(area))
+        for area in [a for a in self._locks if a not in keep]:
+            lock = self._locks.pop(area)
+            held = self._held.get(lock.holder or "", [])
+            if area in held:
+                held.remove(area)
+                if not held:
+                    self._held.pop(lock.holder or "", None)
+        cuts: list[Cut] = []
+        for robot, wait in list(self._waits.items()):
+            gone = tuple(a for a in wait.areas if a not in keep)
+            if not gone:
+                continue
+            left = tuple(a for a in wait.areas if a in keep)
+            if left:
+                wait.areas = left
+            else:
+                del self._waits[robot]
+            cuts.append(Cut(robot, gone, wait.request_id, still_waiting=bool(left)))
+        return cuts, self._grant_waiting()
 
     def set_online(self, robot: str, online: bool, now: float | None = None) -> None:
         """Offline holders keep their locks for now (they may be inside); the state shows it

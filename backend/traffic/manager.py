@@ -14,7 +14,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.alerts import AlertStore
-from backend.traffic.locks import AreaLocks, Grant, LockError, LockView, Yield
+from backend.traffic.locks import AreaLocks, Cut, Grant, LockError, LockView, Yield
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
@@ -54,6 +54,9 @@ class TrafficManager(Service):
         self.graph = graph or SiteGraph(site)
         self.locks = AreaLocks([a.id for a in site.areas])
         self._robots = {r.name for r in site.robots}
+        self._removed: dict[str, int] = {}
+        """Areas a publish removed -> the site version without them: a robot that asks for
+        one (its path was planned on the old site) is told so at once, not refused."""
         # After a restart: robots that may hold locks, whose word comes before any grant.
         self._awaiting: set[str] = set()
         self._deferred: list[Message] = []
@@ -130,18 +133,38 @@ class TrafficManager(Service):
             self._on_request_area(msg)
 
     def load_site(self, site: Site, graph: SiteGraph | None = None) -> None:
-        """New map, same locks: areas that still exist keep holder and queue."""
-        old = self.locks
+        """New map, same locks: areas that still exist keep holder, state and waiters; robots
+        waiting for an area the new site lacks are told at once (``area_granted`` with
+        ``removed``) and go on, or keep waiting for the rest of their chain."""
+        old_areas = set(self.locks.areas)
         self.site = site
         self.graph = graph or SiteGraph(site)
         self._robots = {r.name for r in site.robots}
         self._paths.clear()
         new_areas = [a.id for a in site.areas]
-        if set(new_areas) != set(old.areas):
-            self.locks = AreaLocks(new_areas)
-            for view in old.view():
-                if view.holder is not None and view.area in self.locks.areas:
-                    self.locks.request(view.holder, [view.area])
+        for area in new_areas:
+            self._removed.pop(area, None)
+        for area in old_areas - set(new_areas):
+            self._removed[area] = site.version
+        cuts, grants = self.locks.reshape(new_areas)
+        for cut in cuts:
+            self._tell_removed(cut)
+        self._send_grants(grants)
+
+    def _tell_removed(self, cut: Cut) -> None:
+        for area in cut.areas:
+            reason = f"area {area} is not on the site any more (version {self._removed[area]})"
+            log.info("traffic: %s no longer waits for %s: %s", cut.robot, area, reason)
+            self.courier.post(
+                make_message(
+                    AreaGranted(robot=cut.robot, area=area, removed=True, reason=reason),
+                    source=self.endpoint.name,
+                    destination=cut.robot,
+                    correlation_id=cut.request_id,
+                ),
+                key=(cut.robot, area),
+            )
+            self._emit("area_removed", {"robot": cut.robot, "area": area, "reason": reason})
 
     # --- queries used by the API ---------------------------------------------------------
     def path(self, start: str, goal: str) -> PathResult:
@@ -240,6 +263,9 @@ class TrafficManager(Service):
                 ", ".join(sorted(self._awaiting)),
             )
             self._deferred.append(msg)
+            return
+        if req.area in self._removed and req.area not in self.graph.area_nodes:
+            self._tell_removed(Cut(robot, (req.area,), msg.id, still_waiting=False))
             return
         chain = self._chain(robot, req.area)
         try:

@@ -8,14 +8,17 @@ registered here: the on-board bus does not require registration.
 from __future__ import annotations
 
 from enum import StrEnum
+from typing import Literal
 
 from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 
 __all__ = [
+    "ENDED_REPORTED",
     "BatteryAlarm",
     "CanModuleState",
+    "EndedTask",
     "NodeReached",
     "RobocanBus",
     "RobocanCounters",
@@ -26,6 +29,9 @@ __all__ = [
     "RobotState",
 ]
 
+ENDED_REPORTED = 3
+"""Ended tasks a robot_state carries (the newest first)."""
+
 
 class RobotMode(StrEnum):
     IDLE = "idle"
@@ -33,6 +39,14 @@ class RobotMode(StrEnum):
     CHARGING = "charging"
     FAULT = "fault"
     OFFLINE = "offline"
+
+
+class EndedTask(PayloadModel):
+    """A task the robot ended, as its task_ended said it."""
+
+    task_id: str = Field(min_length=1, max_length=64)
+    outcome: Literal["done", "failed", "cancelled"]
+    reason: str = Field(default="", max_length=500)
 
 
 @register_payload("robot_state")
@@ -58,6 +72,10 @@ class RobotState(PayloadModel):
     areas: list[str] = Field(default_factory=list, max_length=64)
     """Restricted areas the robot holds or was granted: after a server restart the Traffic
     Manager takes them from here (its lock table starts empty)."""
+    ended: list[EndedTask] = Field(default_factory=list, max_length=ENDED_REPORTED)
+    """The last tasks the robot ended, newest first: a server that restarted with one of them
+    still assigned ends it from here even if its task_ended never arrived (dropped from a
+    full queue during a long freeze), rather than giving it out again."""
     seq: int = 0
 
 

@@ -37,6 +37,10 @@ class RequestArea(PayloadModel):
 class AreaGranted(PayloadModel):
     robot: str
     area: str
+    removed: bool = False
+    """The area is no longer on the site (a publish removed it): nothing to hold, go on."""
+    reason: str = ""
+    """Why, for the robot's log (set with ``removed``)."""
 
 
 @register_payload("release_area")

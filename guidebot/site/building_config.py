@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import ConfigDict, Field, ValidationError
 
 from guidebot.site.building import (
     BuildingModule,
@@ -23,6 +23,7 @@ from guidebot.site.building import (
     IORef,
     PointKind,
 )
+from guidebot.site.index import Indexed
 from guidebot.site.io_rules import Role, kind_problem
 
 __all__ = [
@@ -39,7 +40,7 @@ class BuildingConfigError(ValueError):
     """A site whose building part cannot work; the message says where and why."""
 
 
-class BuildingConfig(BaseModel):
+class BuildingConfig(Indexed):
     """Every Modbus module of the venue and the devices bound to their points."""
 
     model_config = ConfigDict(extra="forbid")
@@ -50,10 +51,11 @@ class BuildingConfig(BaseModel):
     buttons: list[Button] = Field(default_factory=list)
 
     def module(self, module_id: str) -> BuildingModule:
-        for module in self.modules:
-            if module.id == module_id:
-                return module
-        raise KeyError(module_id)
+        """The module ``module_id`` (O(1): guidebot/site/index.py); KeyError when unknown."""
+        module = self._find("modules", self.modules, _module_id, module_id)
+        if module is None:
+            raise KeyError(module_id)
+        return module
 
     def resolve(self, ref: IORef) -> tuple[BuildingModule, IOPoint]:
         module = self.module(ref.module)
@@ -178,3 +180,7 @@ def load_building_file(path: str | Path) -> BuildingConfig:
     if not isinstance(data, Mapping):
         raise BuildingConfigError(f"site file {path} must hold a mapping at top level")
     return load_building(data)
+
+
+def _module_id(module: BuildingModule) -> str:
+    return module.id

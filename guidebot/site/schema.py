@@ -12,6 +12,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
 
 from guidebot.site.building import ID_PATTERN, BuildingModule, Button, Door, Elevator
+from guidebot.site.index import Indexed
 
 __all__ = [
     "ChargingStation",
@@ -150,8 +151,11 @@ class RobotConfig(StrictModel):
     params: dict[str, Any] = Field(default_factory=dict)
 
 
-class Site(StrictModel):
-    """The whole site document (what sites/*.yaml holds)."""
+class Site(StrictModel, Indexed):
+    """The whole site document (what sites/*.yaml holds).
+
+    ``poi``, ``tour``, ``robot`` and ``module`` look up by id in O(1) (guidebot/site/index.py).
+    """
 
     name: str = Field(min_length=1, max_length=200)
     version: StrictInt = Field(default=1, ge=1)
@@ -174,13 +178,21 @@ class Site(StrictModel):
     robots: list[RobotConfig] = Field(default_factory=list)
 
     def poi(self, poi_id: str) -> PointOfInterest | None:
-        return next((p for p in self.pois if p.id == poi_id), None)
+        return self._find("pois", self.pois, _id_of, poi_id)
 
     def tour(self, tour_id: str) -> Tour | None:
-        return next((t for t in self.tours if t.id == tour_id), None)
+        return self._find("tours", self.tours, _id_of, tour_id)
 
     def robot(self, name: str) -> RobotConfig | None:
-        return next((r for r in self.robots if r.name == name), None)
+        return self._find("robots", self.robots, _name_of, name)
 
     def module(self, module_id: str) -> BuildingModule | None:
-        return next((m for m in self.modules if m.id == module_id), None)
+        return self._find("modules", self.modules, _id_of, module_id)
+
+
+def _id_of(item: Any) -> str:
+    return str(item.id)
+
+
+def _name_of(item: RobotConfig) -> str:
+    return item.name

@@ -12,6 +12,7 @@ from backend.auth import Role
 from backend.hub import Hub
 from backend.hub.memory import GcFreezer
 from backend.site.offloop import gc_paused
+from guidebot.testing import wait_until
 
 
 @pytest.fixture(autouse=True)
@@ -33,36 +34,136 @@ async def test_freezes_once_after_a_burst_of_connections() -> None:
     assert gc.get_freeze_count() == 0
 
 
-async def test_churn_unfreezes_and_collects() -> None:
-    freezer = GcFreezer(delay=0, min_churn=3, churn_ratio=0.5)
-    freezer.attached(4)
-    await asyncio.sleep(0.01)
-    assert gc.get_freeze_count() > 0
+class FakeClock:
+    """Monotonic seconds the test moves by hand."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def collections(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The generations of every gc.collect() call (2: a full pass over everything unfrozen)."""
+    calls: list[int] = []
+    real = gc.collect
+
+    def recorded(generation: int = 2) -> int:
+        calls.append(generation)
+        return real(generation)
+
+    monkeypatch.setattr(gc, "collect", recorded)
+    return calls
+
+
+def one_leave_policy(clock: FakeClock, **overrides: float) -> GcFreezer:
+    """A freezer whose reclaim falls due at the first leave, timed by ``clock``."""
+    settings: dict[str, float] = {"min_interval_s": 0, **overrides}
+    return GcFreezer(delay=0, min_churn=1, churn_ratio=0.1, clock=clock, **settings)  # type: ignore[arg-type]
+
+
+async def frozen(freezer: GcFreezer, connected: int) -> None:
+    freezer.attached(connected)
+    await wait_until(lambda: freezer.freezes == 1)
+
+
+async def test_clients_leaving_never_collect_on_their_way_out(collections: list[int]) -> None:
+    """The reclaim (a full pass: 0.7-2 s with a large site) is due after a quarter of the
+    clients left, and runs later on its own timer, not inside a leave (a reconnect storm)."""
+    clock = FakeClock()
+    freezer = GcFreezer(
+        delay=0, min_churn=3, churn_ratio=0.5, quiet_s=5.0, min_interval_s=0, clock=clock
+    )
+    await frozen(freezer, 4)
+    collections.clear()
     freezer.detached(3)
     freezer.detached(2)
-    assert freezer.reclaims == 0  # 2 of 4 gone is under min_churn
+    assert not freezer.reclaim_due  # 2 of 4 gone is under min_churn
     freezer.detached(1)
-    assert freezer.reclaims == 1
+    assert freezer.reclaim_due and freezer.reclaims == 0
+    assert collections == []  # nothing collected while the clients left
+    freezer._reclaim()  # its timer, early: the hub has not been quiet for quiet_s
+    assert freezer.reclaims == 0 and collections == []
+    clock.now += 5.0
+    freezer._reclaim()
+    assert freezer.reclaims == 1 and collections == [2] and not freezer.reclaim_due
+    assert gc.get_freeze_count() > 0  # frozen again at once: later full passes stay short
+    freezer.detached(0)
+    assert not freezer.reclaim_due  # counting starts again
+    freezer.stop()
     assert gc.get_freeze_count() == 0
-    freezer.detached(0)  # not frozen any more: nothing to do
+
+
+async def test_the_timer_runs_the_reclaim_once_the_hub_is_quiet() -> None:
+    freezer = GcFreezer(delay=0, min_churn=1, churn_ratio=0.1, quiet_s=0.01, min_interval_s=0)
+    await frozen(freezer, 2)
+    freezer.detached(1)
+    assert freezer.reclaim_due
+    await wait_until(lambda: freezer.reclaims == 1)
+    freezer.stop()
+
+
+async def test_a_reclaim_waits_for_clients_to_settle_but_not_for_ever() -> None:
+    clock = FakeClock()
+    freezer = one_leave_policy(clock, quiet_s=5.0, max_wait_s=60.0)
+    await frozen(freezer, 2)
+    freezer.detached(1)
+    for _ in range(11):  # a client comes or goes every 4 s: never quiet for 5 s
+        clock.now += 4.0
+        freezer.attached(2)
+        freezer._reclaim()
+    assert freezer.reclaims == 0
+    clock.now += 16.0  # 60 s since it fell due
+    freezer.attached(2)
+    freezer._reclaim()
     assert freezer.reclaims == 1
+    freezer.stop()
+
+
+async def test_reclaims_are_spaced_by_their_own_cost(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pass of D seconds is followed by none for D / max_duty seconds (nor min_interval_s):
+    the reclaim holds the loop for at most max_duty of its time."""
+    clock, watch = FakeClock(), FakeClock()
+    real_collect = gc.collect
+
+    def slow_collect(generation: int = 2) -> int:
+        watch.now += 2.0  # a 2 s pass, as with a large site on a busy VM
+        return real_collect(generation)
+
+    freezer = one_leave_policy(clock, quiet_s=0, min_interval_s=300.0, max_duty=0.001)
+    freezer.stopwatch = watch
+    await frozen(freezer, 3)
+    monkeypatch.setattr(gc, "collect", slow_collect)
+    freezer.detached(2)
+    freezer._reclaim()
+    assert freezer.reclaims == 1 and freezer.last_reclaim_s == 2.0
+    freezer.detached(1)
+    assert freezer.reclaim_due
+    clock.now += 1999.0
+    freezer._reclaim()
+    assert freezer.reclaims == 1  # 2 s / 0.1 % = 2000 s
+    clock.now += 1.0
+    freezer._reclaim()
+    assert freezer.reclaims == 2
+    freezer.stop()
 
 
 async def test_waits_while_site_work_has_the_collector_paused() -> None:
     """A freeze or a reclaim due while the collector is paused would walk everything the site
     work allocated, on the loop: both wait until it is back on."""
-    freezer = GcFreezer(delay=0.01, min_churn=1, churn_ratio=0.5)
+    freezer = GcFreezer(delay=0.01, min_churn=1, churn_ratio=0.5, quiet_s=0, min_interval_s=0)
     with gc_paused():
         freezer.attached(2)
         await asyncio.sleep(0.05)
         assert freezer.freezes == 0
-    await asyncio.sleep(0.05)
-    assert freezer.freezes == 1
+    await wait_until(lambda: freezer.freezes == 1)
     with gc_paused():
         freezer.detached(1)
-        assert freezer.reclaims == 0
-    freezer.detached(0)
-    assert freezer.reclaims == 1
+        freezer._reclaim()
+        assert freezer.reclaims == 0 and freezer.reclaim_due
+    await wait_until(lambda: freezer.reclaims == 1)
     freezer.stop()
 
 

@@ -9,11 +9,13 @@ import pytest
 
 from guidebot.bus import Bus
 from guidebot.messages import Message
+from guidebot.payloads.robot import RobotState
 from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
 from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
 from robot_agent.speech import Speech, simulated_duration
+from robot_agent.state import StateReporter
 from robot_agent.tasks import IllegalTransition, MainTask, TaskPhase, TaskRunner
 
 
@@ -193,6 +195,33 @@ async def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers:
     assert ended["reason"] == "navigation to gb1 failed: base fault: module 0x02 lost"
     ended = run_and_fail("t2")  # nothing seen: still a sentence, and not the last task's
     assert ended["reason"] == "the go_to_poi task net failed (no step said why)"
+
+
+async def test_the_robot_state_names_the_last_tasks_that_ended(helpers: Any) -> None:
+    """robot_state ``ended``: the newest three, as their task_ended said, so a restarted server
+    that never heard a task_ended (lost in a long freeze) ends the task instead of giving it
+    out again (docs/server.md, "After a restart")."""
+    bus = Bus()
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
+    seen = helpers.Recorder(bus.endpoint("t"), "run_petri_net")
+    await runner.start()
+    tm, dispatch = bus.endpoint("tm"), bus.endpoint("dispatch")
+    for task_id, outcome in (("t1", "done"), ("t2", "failed"), ("t3", "killed"), ("t4", "done")):
+        tm.publish("task_assigned", {"task_id": task_id, "robot": "R1", "net": "go_to_poi"})
+        instance = seen.of("run_petri_net")[-1].payload["instance_id"]
+        dispatch.publish(
+            "petri_net_ended", {"net": "go_to_poi", "instance_id": instance, "outcome": outcome}
+        )
+    reporter = StateReporter(bus.endpoint("state"), "R1", None, None, runner)  # type: ignore[arg-type]
+    ended = reporter.ended()
+    assert [(e["task_id"], e["outcome"]) for e in ended] == [
+        ("t4", "done"),
+        ("t3", "cancelled"),
+        ("t2", "failed"),
+    ]
+    assert ended[2]["reason"] == "the go_to_poi task net failed (no step said why)"
+    state = RobotState(robot="R1", ended=ended)  # what the hub checks
+    assert [e.task_id for e in state.ended] == ["t4", "t3", "t2"]
 
 
 async def test_an_assignment_resent_for_a_task_that_ended_is_answered_not_run(

@@ -149,6 +149,29 @@ async def test_area_wait_and_yield_then_goal_reached(rig: Rig) -> None:
     assert not rig.seen.of("navigation_failed")
 
 
+async def test_a_robot_waiting_for_an_area_a_publish_removes_goes_on_at_once(rig: Rig) -> None:
+    """R2 holds the corridor and R1 waits at its edge; a new site without the corridor tells R1
+    at once (not at its navigation time-out), and R1 drives on without asking again."""
+    r2 = rig.bus.endpoint("R2")
+    r2.publish("request_area", {"robot": "R2", "area": "corridor"})
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: rig.seen.of("request_area")[1:])
+    assert rig.nav.state == "waiting_area"
+    site = rig.traffic.site
+    rig.traffic.load_site(
+        site.model_copy(update={"areas": [a for a in site.areas if a.id != "corridor"]})
+    )
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert not rig.seen.of("navigation_failed"), rig.seen.of("navigation_failed")[0].payload
+    assert rig.nav.node == "gb1"
+    [told] = [m for m in rig.seen.of("area_granted") if m.destination == "R1"]
+    assert told.payload["removed"] is True and told.payload["area"] == "corridor"
+    asked = [m for m in rig.seen.of("request_area") if m.payload["robot"] == "R1"]
+    assert len(asked) == 1  # not asked again at the corridor's second node
+    assert not [m for m in rig.seen.of("release_area") if m.payload["robot"] == "R1"]
+    assert rig.nav.areas_held() == []
+
+
 async def test_a_waiting_robot_says_what_it_waits_for_and_asks_again_after_a_reconnect(
     rig: Rig, caplog: pytest.LogCaptureFixture
 ) -> None:

@@ -142,7 +142,7 @@ async def test_waiting_robots_are_served_in_order(bus: Bus) -> None:
     assert not r3.of_type("area_granted")
     r2.endpoint.publish("release_area", {"robot": "R2", "area": "corridor"})
     grant = await r3.wait_for("area_granted")
-    assert grant.payload == {"robot": "R3", "area": "corridor"}
+    assert grant.payload == {"robot": "R3", "area": "corridor", "removed": False, "reason": ""}
 
 
 async def test_a_grant_answers_the_request_it_belongs_to(bus: Bus) -> None:
