@@ -12,6 +12,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from guidebot.site.building import ID_PATTERN, BuildingModule, Button, Door, Elevator
+from guidebot.site.emergency import Emergency
 
 __all__ = [
     "ChargingStation",
@@ -169,6 +170,8 @@ class Site(StrictModel):
     modules: list[BuildingModule] = Field(default_factory=list)
     buttons: list[Button] = Field(default_factory=list)
     robots: list[RobotConfig] = Field(default_factory=list)
+    emergency: Emergency | None = None
+    """Fire alarm inputs, safe spots, escape routes and their words (docs/emergency.md)."""
 
     def poi(self, poi_id: str) -> PointOfInterest | None:
         return next((p for p in self.pois if p.id == poi_id), None)
