@@ -40,6 +40,9 @@ SERVER_ONLY = frozenset(
         "command_failed",
         "building_input_changed",
         "building_module_health",
+        # the fire alarm (docs/emergency.md)
+        "emergency_changed",
+        "evacuate",
         # staff console: lock views, its alert book, the event log as written
         "lock_changed",
         "alert_raised",
@@ -75,6 +78,7 @@ _ROBOT = frozenset(
         "close_door",
         "call_elevator",
         "node_reached",  # what the fleet's safety invariants are checked on
+        "evacuation_state",  # its way to a safe spot during a fire alarm
         "say",  # what it says, for consoles; nothing on the server acts on it
         "ack",  # receipt of a must-arrive message (task_assigned, area_granted, ...)
         # answers to on-board requests a server module or tool may send it
