@@ -56,6 +56,7 @@ UP_TYPES: tuple[str, ...] = (
     "petri_net_ended",
     "site_loaded",
     "petri_net_event",
+    "evacuation_state",
 )
 """On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor)."""
 
@@ -76,6 +77,8 @@ DOWN_TYPES: tuple[str, ...] = (
     "site_changed",
     "error",
     "kill_petri_net",
+    "evacuate",
+    "emergency_changed",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
 

@@ -1,5 +1,6 @@
 """The EmergencyService as a server component (backend.app.COMPONENTS), after the brain and
-the BuildingInterface: it holds the Task Manager (``hold``) and the building (``gate``)."""
+the BuildingInterface: it holds the Task Manager (``hold``), the Traffic Manager (``gate``)
+and the building (the BuildingInterface asks ``app.state.emergency``)."""
 
 from __future__ import annotations
 
@@ -28,8 +29,10 @@ async def emergency(app: FastAPI) -> AsyncIterator[None]:
     async with service:
         app.state.emergency = service
         tasks.hold = service
+        app.state.traffic.gate = service.area_refusal
         try:
             yield
         finally:
+            app.state.traffic.gate = None
             tasks.hold = None
             app.state.emergency = None

@@ -31,6 +31,7 @@ from guidebot.payloads.emergency import EmergencyChanged, Evacuate, EvacuationSt
 from guidebot.service import Service
 from guidebot.site.emergency import Alarm, AlarmZone, Emergency, nearest_safe_spot, zone_nodes
 from guidebot.site.schema import Site
+from guidebot.site.steps import PathStep
 
 __all__ = ["EmergencyService"]
 
@@ -104,6 +105,7 @@ class EmergencyService(Service):
     async def on_start(self) -> None:
         self.subscribe(self.endpoint, "building_input_changed", self._on_input)
         self.subscribe(self.endpoint, "evacuation_state", self._on_evacuation_state)
+        self.subscribe(self.endpoint, "robot_state", self._on_robot_state)
         self.spawn(self._first_values(), name="emergency-first-values")
         if self.state is not EmergencyState.normal:
             self._publish()
@@ -170,6 +172,19 @@ class EmergencyService(Service):
             return False
         return robot.node is None or robot.node in self.held_nodes()
 
+    def area_refusal(self, robot: str, area: str) -> str | None:
+        """TrafficManager.gate: an area of the zone only for a robot whose way to its safe
+        spot crosses it (a robot in an escape route leaves it this way)."""
+        held = self.held_nodes()
+        if not held:
+            return None
+        nodes = next((set(a.nodes) for a in self.site.areas if a.id == area), set())
+        if not nodes & held:
+            return None
+        if nodes & set(self.evacuation.get(robot, {}).get("path", [])):
+            return None
+        return f"fire alarm: area {area} is closed to robots not on their way to a safe spot"
+
     def building_refusal(self, node: str) -> str | None:
         if node in self.held_nodes():
             return f"fire alarm: no door opened or elevator called in the alarm's zone ({node})"
@@ -233,16 +248,22 @@ class EmergencyService(Service):
         """Cut off the tasks of the robots the alarm holds and send each one to safety."""
         em = self._emergency()
         for robot in list(self.tasks.robots.values()):
-            if not self.holds(robot) or robot.name in self.evacuation:
+            if not robot.online or not self.holds(robot) or robot.name in self.evacuation:
                 continue
+            path = nearest_safe_spot(self.site, em, robot.node) if robot.node else None
+            order = Evacuate(
+                safe_spot=path[-1] if path else None,
+                path=path or [],
+                steps=self._steps(path or []),
+                words=self._words(),
+            )
+            self.endpoint.publish(order, destination=robot.name)
+            # The order first: the robot stops before its task's cancel reaches it.
             task = self.tasks.current_of(robot)
             if task is not None and not task.final:
                 if not task.internal:
                     self.cut_off.append(task.id)
                 self.tasks.requeue(task, CUT_OFF_REASON)
-            path = nearest_safe_spot(self.site, em, robot.node) if robot.node else None
-            order = Evacuate(safe_spot=path[-1] if path else None, path=path or [], words=em.words)
-            self.endpoint.publish(order, destination=robot.name)
             self.evacuation[robot.name] = {
                 "safe_spot": order.safe_spot,
                 "path": order.path,
@@ -256,6 +277,21 @@ class EmergencyService(Service):
                 "emergency",
                 {"robot": robot.name, "state": "ordered", "safe_spot": order.safe_spot},
             )
+
+    def _steps(self, path: list[str]) -> list[dict[str, Any]]:
+        nodes = {n.id: n for n in self.site.nodes}
+        area_of = {node: a.id for a in self.site.areas for node in a.nodes}
+        return [
+            PathStep(n.id, n.floor, n.x, n.y, area=area_of.get(n.id)).as_dict()
+            for n in (nodes[node] for node in path)
+        ]
+
+    def _words(self) -> dict[str, str]:
+        """The site's words, its default language first (a robot without a visitor's
+        language says the first)."""
+        words = self._emergency().words
+        default = self.site.default_language
+        return {**({default: words[default]} if default in words else {}), **words}
 
     def resume(self, *, by: str) -> dict[str, Any]:
         """Back to service (operator or admin); refused while an alarm input reads alarm."""
@@ -309,6 +345,14 @@ class EmergencyService(Service):
         self._move(EmergencyState.input_clear)
         self.store.record_event("emergency_input_clear", "emergency", {"zones": self._zone_dicts()})
         self._publish()
+
+    def _on_robot_state(self, msg: Message) -> None:
+        """A robot connecting, or driving into the zone, while the alarm lasts is held too."""
+        if self.state is EmergencyState.normal or msg.source in self.evacuation:
+            return
+        robot = self.tasks.robots.get(msg.source)
+        if robot is not None and robot.online and self.holds(robot):
+            self._hold_robots()
 
     def _on_evacuation_state(self, msg: Message) -> None:
         report = msg.payload_as(EvacuationState)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import Field
 
@@ -35,7 +35,11 @@ class Evacuate(PayloadModel):
     path: list[str] = Field(default_factory=list)
     """Nodes from where the server last saw the robot to the safe spot, no elevator, no escape
     route entered; empty: no way (the robot stops and reports ``stuck``)."""
+    steps: list[dict[str, Any]] = Field(default_factory=list)
+    """The path as ``path`` message steps (node, floor, x, y, area; never a door or an
+    elevator: the robot asks for neither on this way)."""
     words: dict[str, str] = Field(default_factory=dict)
+    """What to say, per language; the site's default language first."""
 
 
 @register_payload("evacuation_state")

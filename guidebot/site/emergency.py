@@ -219,7 +219,7 @@ def emergency_problems(site: Site, points: dict[tuple[str, str], str]) -> list[P
 
 def _floors_without_safety(site: Site, em: Emergency, escape: set[str]) -> list[Problem]:
     """A floor where robots live (start node, charging station, wait point) must reach a safe
-    spot from every node without an elevator."""
+    spot from every node an edge joins (a robot can be there) without an elevator."""
     floor_of = {n.id: n.floor for n in site.nodes}
     lived = {
         floor_of[node]
@@ -231,11 +231,14 @@ def _floors_without_safety(site: Site, em: Emergency, escape: set[str]) -> list[
         if node in floor_of
     }
     table = _to_safety(site, [s for s in em.safe_spots if s in floor_of], escape)
+    joined = {node for e in site.edges for node in (e.a, e.b)}  # a node no edge joins: no robot
     p: list[Problem] = []
     for i, floor in enumerate(site.floors):
         if floor.id not in lived:
             continue
-        cut = [n.id for n in site.nodes if n.floor == floor.id and n.id not in table]
+        cut = [
+            n.id for n in site.nodes if n.floor == floor.id and n.id not in table and n.id in joined
+        ]
         if cut:
             shown = ", ".join(cut[:5]) + (f" and {len(cut) - 5} more" if len(cut) > 5 else "")
             p.append(

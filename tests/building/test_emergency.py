@@ -88,6 +88,18 @@ async def test_alarm_input_holds_the_fleet_and_resume_takes_two_steps(tmp_path: 
         assert refused.status_code == 503
         assert refused.json()["reason"] == "emergency"
         assert refused.json()["detail"].startswith("Alarma de incendio")
+        # No area grant but on a robot's way to safety: R1's way avoids the corridor...
+        robot.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
+        refusal = await robot.wait_for("error")
+        assert "fire alarm: area corridor is closed" in refusal.payload["reason"]
+        # ... R2, connecting in the corridor during the alarm, is held and sent out of it,
+        # through the area it stands in.
+        other = RobotStub(hub, "R2", "corridor_e")
+        other.state()
+        out = await other.wait_for("evacuate")
+        assert out.payload["path"] == ["corridor_e", "gb1", "gb2", "ga2"]
+        other.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
+        await other.wait_for("area_granted")
         # No door opened for anyone in the zone.
         robot.endpoint.publish("open_door", {"door": "door_gallery"})
         failed = await robot.wait_for("command_failed")
