@@ -15,6 +15,7 @@ from backend.settings import Settings
 from backend.testing import RunningServer, running_server
 from building_sim.control import serve_control
 from building_sim.simulator import BuildingSimulator
+from guidebot.site.building import IORef
 from guidebot.site.building_config import load_building
 from guidebot.testing import Recorder, wait_until
 from tests.server.helpers import RobotStub
@@ -183,3 +184,23 @@ async def test_declare_by_rest_checks_the_zone_and_survives_a_restart(tmp_path: 
             resumed = await http.post("/api/emergency/resume")
             assert resumed.status_code == 200, resumed.text
             assert resumed.json()["state"] == "normal"
+
+
+async def test_an_alarm_input_already_raised_at_start_is_declared(tmp_path: Path) -> None:
+    """A module's first sample is no input change: the start reads the alarm inputs once."""
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        (tmp_path / "site.yaml").write_text(yaml.safe_dump(site), encoding="utf-8")
+        sim.write(IORef(module="otb_ground", point="fire_alarm"), 1)
+        settings = Settings(
+            db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=tmp_path / "site.yaml"
+        )
+        async with running_server(settings) as server, serving(server) as http:
+            recorder = Recorder(server.app.state.hub.endpoint("test"), "emergency_changed")
+            await wait_until(lambda: server.app.state.emergency.state == "alarm")
+            assert (await _state(http))["declared_by"] == "input:fire_main"
+            sim.write(IORef(module="otb_ground", point="fire_alarm"), 0)
+            await recorder.wait("emergency_changed", state="input_clear")
+            assert (await http.post("/api/emergency/resume")).status_code == 200
