@@ -101,6 +101,13 @@ async def test_alarm_input_holds_the_fleet_and_resume_takes_two_steps(tmp_path: 
         assert out.payload["path"] == ["corridor_e", "gb1", "gb2", "ga2"]
         other.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
         await other.wait_for("area_granted")
+        # The same refusal for a visitor at a robot's screen (task_request on the hub).
+        robot.endpoint.publish(
+            "task_request", {"kind": "tour", "params": {"tour": "ground", "lang": "es"}}
+        )
+        hub_refusal = await robot.wait_for("error", count=2)
+        assert hub_refusal.payload["code"] == "task_refused"
+        assert hub_refusal.payload["reason"].startswith("Alarma de incendio")
         # No door opened for anyone in the zone.
         robot.endpoint.publish("open_door", {"door": "door_gallery"})
         failed = await robot.wait_for("command_failed")
