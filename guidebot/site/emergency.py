@@ -141,11 +141,17 @@ def escape_nodes(site: Site, emergency: Emergency) -> set[str]:
     return {node for a in site.areas if a.id in routes for node in a.nodes}
 
 
+def closed_nodes(site: Site, emergency: Emergency) -> set[str]:
+    """What a way to safety never enters: escape routes, and automatic doors (fire doors
+    close in an alarm and the BuildingInterface opens none in its zone)."""
+    return escape_nodes(site, emergency) | {d.node for d in site.doors}
+
+
 def nearest_safe_spot(site: Site, emergency: Emergency, start: str) -> list[str] | None:
     """The path (start first, safe spot last) to the nearest safe spot without an elevator,
-    entering no escape route (leaving one the robot stands in by the shortest way); None when
-    there is no such way."""
-    table = _to_safety(site, emergency.safe_spots, escape_nodes(site, emergency))
+    entering no escape route and no door node (leaving one the robot stands on by the shortest
+    way); None when there is no such way."""
+    table = _to_safety(site, emergency.safe_spots, closed_nodes(site, emergency))
     if start not in table:
         return None
     path = [start]
@@ -205,6 +211,8 @@ def emergency_problems(site: Site, points: dict[tuple[str, str], str]) -> list[P
             p.append((loc, f"safe spot {spot!r} is not a node of the site"))
         elif spot in escape:
             p.append((loc, f"safe spot {spot!r} lies in an escape route"))
+        elif door := next((d.id for d in site.doors if d.node == spot), None):
+            p.append((loc, f"safe spot {spot!r} is the node of door {door}: robots would block it"))
     for lang in em.words:
         if lang != site.default_language and lang not in site.languages:
             p.append((("emergency", "words", lang), f"language {lang!r} is not offered"))
@@ -213,13 +221,14 @@ def emergency_problems(site: Site, points: dict[tuple[str, str], str]) -> list[P
             (("emergency", "words"), f"no words in the default language {site.default_language!r}")
         )
     if all(e.a in nodes and e.b in nodes for e in site.edges):  # else the graph is reported
-        p += _floors_without_safety(site, em, escape)
+        p += _floors_without_safety(site, em, closed_nodes(site, em))
     return p
 
 
-def _floors_without_safety(site: Site, em: Emergency, escape: set[str]) -> list[Problem]:
+def _floors_without_safety(site: Site, em: Emergency, closed: set[str]) -> list[Problem]:
     """A floor where robots live (start node, charging station, wait point) must reach a safe
-    spot from every node an edge joins (a robot can be there) without an elevator."""
+    spot from every node an edge joins (a robot can be there) without an elevator, a door or
+    an escape route."""
     floor_of = {n.id: n.floor for n in site.nodes}
     lived = {
         floor_of[node]
@@ -230,7 +239,7 @@ def _floors_without_safety(site: Site, em: Emergency, escape: set[str]) -> list[
         )
         if node in floor_of
     }
-    table = _to_safety(site, [s for s in em.safe_spots if s in floor_of], escape)
+    table = _to_safety(site, [s for s in em.safe_spots if s in floor_of], closed)
     joined = {node for e in site.edges for node in (e.a, e.b)}  # a node no edge joins: no robot
     p: list[Problem] = []
     for i, floor in enumerate(site.floors):
@@ -245,7 +254,7 @@ def _floors_without_safety(site: Site, em: Emergency, escape: set[str]) -> list[
                 (
                     ("floors", i),
                     f"floor {floor.id} has robots but no safe spot reachable without an"
-                    f" elevator from {shown}",
+                    f" elevator, a door or an escape route from {shown}",
                 )
             )
     return p

@@ -30,7 +30,7 @@ def test_demo_site_has_an_emergency_part() -> None:
     assert em.escape_routes == ["corridor"]
 
 
-def test_nearest_safe_spot_avoids_elevators_and_escape_routes() -> None:
+def test_nearest_safe_spot_avoids_elevators_doors_and_escape_routes() -> None:
     site = demo_site()
     assert site.emergency is not None
     # gb1 is east of the corridor (an escape route): out by the one-way back gallery
@@ -38,9 +38,11 @@ def test_nearest_safe_spot_avoids_elevators_and_escape_routes() -> None:
     # inside the corridor: leave it by the shortest way
     path = nearest_safe_spot(site, site.emergency, "corridor_w")
     assert path is not None and path[-1] == "ga2"
-    # the first floor's robots stay on the first floor
-    path = nearest_safe_spot(site, site.emergency, "gc1")
-    assert path is not None and path[-1] in {"gc3", "landing"}
+    # the first floor's robots stay on the first floor, and do not cross door_f1 (nearer)
+    assert nearest_safe_spot(site, site.emergency, "gc1") == ["gc1", "gc2", "gc3"]
+    # a robot standing in a door's way leaves it
+    path = nearest_safe_spot(site, site.emergency, "door_f1")
+    assert path is not None and path[-1] == "landing"
 
 
 def test_alarm_on_a_missing_module_is_refused_with_its_line() -> None:
@@ -67,9 +69,10 @@ def test_alarm_on_a_register_is_refused() -> None:
 def test_safe_spot_not_a_node_and_in_an_escape_route_are_refused() -> None:
     text = DEMO.read_text().replace(
         "safe_spots: [charge_b, ga2, landing, gc3]",
-        "safe_spots: [charge_b, ga2, landing, gc3, roof, corridor_e]",
+        "safe_spots: [charge_b, ga2, landing, gc3, roof, corridor_e, door_hall]",
     )
     issues = _refused(text)
+    assert "is the node of door door_gallery" in issues["emergency.safe_spots[6]"][0]
     assert "'roof' is not a node" in issues["emergency.safe_spots[4]"][0]
     assert "lies in an escape route" in issues["emergency.safe_spots[5]"][0]
     assert issues["emergency.safe_spots[4]"][1] is not None
