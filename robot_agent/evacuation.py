@@ -27,6 +27,9 @@ __all__ = ["CUT_OFF", "Evacuation"]
 log = logging.getLogger(__name__)
 
 CUT_OFF = "fire alarm"
+ATTEMPTS = 3
+RETRY_S = 5.0
+"""Robot seconds between two tries of a robot stuck on its way to safety."""
 
 
 class Evacuation(Service):
@@ -87,18 +90,28 @@ class Evacuation(Service):
         nav.start_evacuation(self._drive(steps))
 
     async def _drive(self, steps: list[PathStep]) -> None:
-        self._report("moving")
-        try:
-            await self.navigator.follow(steps)
-        except NavigationError as exc:
+        """Follow the way; stuck (reported with why), wait and try again from where it is."""
+        for attempt in range(1, ATTEMPTS + 1):
+            self._report("moving")
+            try:
+                await self.navigator.follow(self._from_here(steps))
+            except NavigationError as exc:
+                why = exc.reason
+            except YieldRequested as exc:
+                why = f"asked to yield area {exc.area}"
+            else:
+                self._report("safe")
+                return
             self.navigator.halt()
-            self._report("stuck", why=exc.reason)
-            return
-        except YieldRequested as exc:
-            self.navigator.halt()
-            self._report("stuck", why=f"asked to yield area {exc.area}")
-            return
-        self._report("safe")
+            self._report("stuck", why=f"{why} (attempt {attempt} of {ATTEMPTS})")
+            if attempt < ATTEMPTS:
+                await self.navigator.clock.sleep(RETRY_S)
+
+    def _from_here(self, steps: list[PathStep]) -> list[PathStep]:
+        """The rest of the way from the node the robot last reached on it."""
+        nodes = [s.node for s in steps]
+        here = self.navigator.node
+        return steps[nodes.index(here) :] if here in nodes else steps
 
     def _on_changed(self, message: Message) -> None:
         if message.payload.get("state") == "normal" and self.navigator.evacuating:

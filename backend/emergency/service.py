@@ -26,7 +26,8 @@ from backend.emergency.state import (
 )
 from backend.tasks.manager import TaskManager
 from backend.tasks.robots import RobotInfo
-from guidebot.messages import Message
+from guidebot.delivery import courier_for, listen
+from guidebot.messages import Message, make_message
 from guidebot.payloads.emergency import EmergencyChanged, Evacuate, EvacuationState
 from guidebot.service import Service
 from guidebot.site.emergency import Alarm, AlarmZone, Emergency, nearest_safe_spot, zone_nodes
@@ -84,6 +85,8 @@ class EmergencyService(Service):
         """Robot -> its evacuation: safe_spot, path, state (ordered, stopped, moving, safe,
         stuck), node, why, at."""
         self._held: tuple[int, frozenset[str]] = (0, frozenset())
+        self.courier = courier_for(endpoint)
+        """evacuate: sent again until the robot's link acknowledges it."""
 
     # -- life cycle ------------------------------------------------------------------------
 
@@ -106,6 +109,10 @@ class EmergencyService(Service):
         self.subscribe(self.endpoint, "building_input_changed", self._on_input)
         self.subscribe(self.endpoint, "evacuation_state", self._on_evacuation_state)
         self.subscribe(self.endpoint, "robot_state", self._on_robot_state)
+        self.subscribe(self.endpoint, "robot_disconnected", self._on_robot_gone)
+        for unsubscribe in listen(self.endpoint, self.courier):
+            self.on_cleanup(unsubscribe)
+        self.on_cleanup(self.courier.close)
         self.spawn(self._first_values(), name="emergency-first-values")
         if self.state is not EmergencyState.normal:
             self._publish()
@@ -257,7 +264,8 @@ class EmergencyService(Service):
                 steps=self._steps(path or []),
                 words=self._words(),
             )
-            self.endpoint.publish(order, destination=robot.name)
+            message = make_message(order, source=self.endpoint.name, destination=robot.name)
+            self.courier.post(message, key=("evacuate", robot.name))
             # The order first: the robot stops before its task's cancel reaches it.
             task = self.tasks.current_of(robot)
             if task is not None and not task.final:
@@ -353,6 +361,13 @@ class EmergencyService(Service):
         robot = self.tasks.robots.get(msg.source)
         if robot is not None and robot.online and self.holds(robot):
             self._hold_robots()
+
+    def _on_robot_gone(self, msg: Message) -> None:
+        """Gone before it acted on its order (the courier forgets it): ordered again when it
+        reports from the zone."""
+        robot = msg.payload.get("robot") or msg.payload.get("name")
+        if isinstance(robot, str) and self.evacuation.get(robot, {}).get("state") == "ordered":
+            del self.evacuation[robot]
 
     def _on_evacuation_state(self, msg: Message) -> None:
         report = msg.payload_as(EvacuationState)
