@@ -71,6 +71,7 @@ RULES: dict[str, frozenset[Role]] = {
             "release_area",
             "release_door",
             "node_reached",  # what the fleet's safety invariants are checked on
+            "evacuation_state",  # its way to a safe spot during a fire alarm
             "say",  # what it says, for consoles; nothing on the server acts on it
             "ack",  # receipt of a must-arrive message (task_assigned, area_granted, ...)
             # answers to on-board requests a server module or tool may send it

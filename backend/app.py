@@ -39,6 +39,8 @@ from backend.building.component import building_interface
 from backend.cluster import FollowerRest, cluster_report, clustered
 from backend.console import routes as console_routes
 from backend.console.component import console
+from backend.emergency import routes as emergency_routes
+from backend.emergency.component import emergency
 from backend.health import ComponentState, HealthBoard
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
@@ -63,6 +65,7 @@ COMPONENTS: list[Component] = [
     metrics,
     server_brain,
     building_interface,
+    emergency,
     rgm,
     site_editor,
     console,
@@ -74,6 +77,7 @@ ROUTERS: list[APIRouter] = [
     hub_routes.router,
     *api_routers,
     building_routes.router,
+    emergency_routes.router,
     console_routes.router,
     metrics_routes.router,
 ]

@@ -39,7 +39,7 @@ log = logging.getLogger(__name__)
 
 ACK = "ack"
 
-MUST_ARRIVE_DOWN = frozenset({"task_assigned", "task_cancel", "area_granted"})
+MUST_ARRIVE_DOWN = frozenset({"task_assigned", "task_cancel", "area_granted", "evacuate"})
 """Server -> robot: sent by a Courier, acknowledged by the robot's link."""
 
 MUST_ARRIVE_UP = frozenset(

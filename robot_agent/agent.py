@@ -23,6 +23,7 @@ from guidebot.payloads.robot import RobotState
 from guidebot.service import Service
 from robot_agent.battery import BatteryMonitor
 from robot_agent.clock import Clock
+from robot_agent.evacuation import Evacuation
 from robot_agent.gui import OnboardScreen, ScreenServer, VisitorAnswer
 from robot_agent.hardware import BareSimulation, Hardware, RoboCANHardware
 from robot_agent.head import HeadWatchdog
@@ -145,6 +146,7 @@ class RobotAgent(Service):
         self.head: HeadWatchdog | None = None
         self.battery: BatteryMonitor | None = None
         self.tasks: TaskRunner | None = None
+        self.evacuation: Evacuation | None = None
         self.state: StateReporter | None = None
         self.dispatch: Any = None
         self.hub: Any = None
@@ -228,6 +230,8 @@ class RobotAgent(Service):
             on_start=battery.undock,
         )
         await self.enter(self.tasks)
+        self.evacuation = Evacuation(bus.endpoint("evacuation"), name, navigator, self.tasks)
+        await self.enter(self.evacuation)
         self.state = StateReporter(
             bus.endpoint("state"),
             name,

@@ -61,6 +61,7 @@ UP_TYPES: tuple[str, ...] = (
     "site_loaded",
     "petri_net_event",
     "robocan_status",
+    "evacuation_state",
 )
 """On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor;
 robocan_status: its robot view's CAN modules and counters)."""
@@ -87,6 +88,8 @@ DOWN_TYPES: tuple[str, ...] = (
     "site_changed",
     "error",
     "kill_petri_net",
+    "evacuate",
+    "emergency_changed",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
 

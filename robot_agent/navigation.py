@@ -111,6 +111,9 @@ class Navigator(MotionControl):
         self._news = asyncio.Event()
         """Set when something a wait watches changes (building news, a fault, a yield)."""
         self._goal_task: asyncio.Task[None] | None = None
+        self.evacuating = False
+        """A fire alarm's evacuation drives the robot (robot_agent/evacuation.py): goals from
+        task nets are refused until it is over."""
         self.passage = Passage(
             self,
             check=self._check_fault,
@@ -202,7 +205,15 @@ class Navigator(MotionControl):
         # Visitors follow the robot: they stand behind it. Turn around in place.
         self._start_goal(self._face_people(message.id))
 
-    def _start_goal(self, coro: Any) -> None:
+    def start_evacuation(self, coro: Any) -> None:
+        """Run the evacuation's drive as the goal (robot_agent/evacuation.py)."""
+        self._start_goal(coro, evacuation=True)
+
+    def _start_goal(self, coro: Any, *, evacuation: bool = False) -> None:
+        if self.evacuating and not evacuation:
+            coro.close()
+            self.ep.publish(NavigationFailed(node=self.goal, reason="fire alarm: evacuating"))
+            return
         previous = self._goal_task
         if previous is not None and not previous.done():
             previous.cancel()

@@ -67,6 +67,9 @@ class MainTask:
     history: list[TaskPhase] = field(default_factory=list)
     run_request_id: str = ""
     """The id of the run_petri_net request, to tie RG's refusal (an ``error``) to this task."""
+    again: bool = False
+    """Cut off by the fire alarm: the server gives it again on resume, so it is run then, not
+    answered as already ended (docs/emergency.md)."""
 
     def move(self, to: TaskPhase) -> None:
         if to not in TRANSITIONS[self.phase]:
@@ -194,7 +197,20 @@ class TaskRunner(Service):
         task_id = message.payload.get("task_id")
         if task is None or task.task_id != task_id or task.phase is not TaskPhase.RUNNING:
             return
-        task.reason = str(message.payload.get("reason") or "cancelled")
+        self._cancel(task, str(message.payload.get("reason") or "cancelled"))
+
+    def abort(self, reason: str) -> MainTask | None:
+        """Kill the running main task's net now (the fire alarm, robot_agent/evacuation.py);
+        the server gives the task again later. Returns the task killed."""
+        task = self.current
+        if task is None or task.phase is not TaskPhase.RUNNING:
+            return None
+        task.again = True
+        self._cancel(task, reason)
+        return task
+
+    def _cancel(self, task: MainTask, reason: str) -> None:
+        task.reason = reason
         task.move(TaskPhase.CANCELLING)
         self.ep.publish(KillPetriNet(instance_id=task.instance_id))
         if self.on_cancel is not None:
@@ -248,7 +264,8 @@ class TaskRunner(Service):
         task.move(TaskPhase.ENDED)
         task.outcome = outcome
         self.current = None
-        self.finished.append(task)
+        if not task.again:
+            self.finished.append(task)
         log.info("%s: task %s %s %s", self.robot, task.task_id, outcome, task.reason)
         self._report_ended(task)
         self._start_waiting()

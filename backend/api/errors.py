@@ -18,7 +18,14 @@ from starlette.exceptions import HTTPException
 
 from backend.api.deps import role_check
 from backend.db.session import UnstorableJson
-from backend.tasks.model import IllegalTransition, QueueFull, TaskError, TaskFinished, TaskNotFound
+from backend.tasks.model import (
+    Held,
+    IllegalTransition,
+    QueueFull,
+    TaskError,
+    TaskFinished,
+    TaskNotFound,
+)
 
 __all__ = ["install_error_handlers", "task_error_status"]
 
@@ -29,7 +36,7 @@ def task_error_status(exc: TaskError) -> tuple[int, str]:
         return status.HTTP_404_NOT_FOUND, "task not found"
     if isinstance(exc, TaskFinished | IllegalTransition):
         return status.HTTP_409_CONFLICT, str(exc)
-    if isinstance(exc, QueueFull):
+    if isinstance(exc, QueueFull | Held):
         return status.HTTP_503_SERVICE_UNAVAILABLE, str(exc)
     return status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc)
 
@@ -37,7 +44,8 @@ def task_error_status(exc: TaskError) -> tuple[int, str]:
 async def _task_error(_: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, TaskError)
     code, detail = task_error_status(exc)
-    return JSONResponse({"detail": detail}, status_code=code)
+    reason = getattr(exc, "reason", None)  # Held: why the service holds (docs/emergency.md)
+    return JSONResponse({"detail": detail, **({"reason": reason} if reason else {})}, code)
 
 
 def _clean(errors: Any) -> list[dict[str, Any]]:

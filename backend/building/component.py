@@ -65,12 +65,19 @@ class _Runner:
             config.check_production()
         if not config.modules:
             return None
-        return BuildingInterface(
+        interface = BuildingInterface(
             self.endpoint,
             config,
             filter_ms=getattr(self.settings, "building_filter_ms", 200.0),
             floor_of_node=floors,
         )
+        interface.gate = self._gate
+        return interface
+
+    def _gate(self, node: str) -> str | None:
+        """The fire alarm's refusal for a device at ``node`` (backend.emergency), if any."""
+        emergency = getattr(self.app.state, "emergency", None)
+        return None if emergency is None else emergency.building_refusal(node)
 
     async def load(self, site: Any, *, startup: bool = False) -> None:
         """Start the interface for ``site``; in production a building that cannot run is an

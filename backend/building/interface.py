@@ -125,6 +125,9 @@ class BuildingInterface(Service):
         """Elevator -> monotonic time its cabin last arrived at or left a stop (its progress)."""
         self._commands: set[asyncio.Task[None]] = set()
         self.events = 0
+        self.gate: Callable[[str], str | None] | None = None
+        """Asked with a device's node before a door opens or a cabin is called: a reason to
+        refuse (the fire alarm holds that node, backend.emergency), or None."""
 
     # -- life cycle ----------------------------------------------------------------------------
 
@@ -376,10 +379,28 @@ class BuildingInterface(Service):
             raise CommandError(f"unknown door {door_id!r} (known: {known})")
         return door
 
+    def _check_gate(self, node: str) -> None:
+        if self.gate is not None and (reason := self.gate(node)) is not None:
+            raise CommandError(reason)
+
+    def drop_door_holders(self, nodes: set[str]) -> list[str]:
+        """Release every holder of the doors at ``nodes`` and close them (the fire alarm:
+        docs/emergency.md); the ids of the doors that were held."""
+        dropped = []
+        for keeper in self.doors.values():
+            if keeper.door.node in nodes and keeper.holders:
+                keeper.release_all()
+                dropped.append(keeper.door.id)
+                task = asyncio.get_running_loop().create_task(self._close(keeper, best_effort=True))
+                self._commands.add(task)
+                task.add_done_callback(self._commands.discard)
+        return dropped
+
     async def _open_door(self, message: Message) -> dict[str, Any]:
         """Hold the door open for the requester until it sends release_door."""
         open_door: OpenDoor = message.payload_as(OpenDoor)
         door = self._door(open_door.door)
+        self._check_gate(door.node)
         keeper = self.doors[door.id]
         holder = message.source or "anonymous"
         keeper.hold(holder, functools.partial(self._hold_expired, door.id, holder))
@@ -480,6 +501,8 @@ class BuildingInterface(Service):
         if stop is None:
             floors = ", ".join(s.floor for s in elevator.stops)
             raise CommandError(f"elevator {elevator.id} has no floor {call.floor!r} ({floors})")
+        for each in elevator.stops:  # a ride ends on another floor: every stop must be free
+            self._check_gate(each.node)
         await self._write(stop.call, 1)
         await self._wait_cabin(elevator, stop, f"elevator {elevator.id} at floor {stop.floor}")
         payload = {"elevator": elevator.id, "floor": stop.floor, "door_open": True}

@@ -27,6 +27,7 @@ from backend.tasks.choice import available, choose_robot, idle_errands
 from backend.tasks.eta import EtaEstimator
 from backend.tasks.model import (
     FINAL_STATES,
+    Held,
     InvalidTask,
     QueueFull,
     Task,
@@ -66,6 +67,13 @@ class TaskStore(Protocol):
     def record(self, task: Task, event: str) -> None: ...
 
     def record_service(self, robot: str, out_of_service: bool, by: str = "") -> None: ...
+
+
+class TaskHold(Protocol):
+    """What the fire alarm holds (backend.emergency.EmergencyService)."""
+
+    def refusal(self, lang: str | None) -> str | None: ...
+    def holds(self, robot: RobotInfo) -> bool: ...
 
 
 class TaskManager(Service):
@@ -134,6 +142,9 @@ class TaskManager(Service):
         self.presence = Presence(self)
         self.battery = BatteryAlarms(self)
         self.watchdog = Watchdog(self)
+        self.hold: TaskHold | None = None
+        """The fire alarm's hold (backend.emergency): no task for the robots it holds, no
+        new request while it lasts."""
         self.load_site(site, self.graph)
 
     # --- life cycle ----------------------------------------------------------------------
@@ -236,6 +247,9 @@ class TaskManager(Service):
             raise InvalidTask(f"language {params['lang']!r} not offered (offered: {offered})")
         if robot is not None and robot not in self.robots:
             raise InvalidTask(f"unknown robot {robot!r}")
+        if not internal and self.hold is not None:
+            if (why := self.hold.refusal(params.get("lang"))) is not None:
+                raise Held(why)
         if not internal and self.queue.full:
             raise QueueFull(f"the queue is full ({self.queue.maxsize} tasks waiting)")
         task = Task(
@@ -366,6 +380,8 @@ class TaskManager(Service):
             self._dispatching = False
 
     def _available(self, robot: RobotInfo) -> bool:
+        if self.hold is not None and self.hold.holds(robot):
+            return False
         return available(robot, self.current_of(robot))
 
     def has_free_robot(self) -> bool:
@@ -456,6 +472,8 @@ class TaskManager(Service):
         wait point (backend/tasks/choice.py, ``idle_errands``)."""
         robots = self.robots
         idle = [r for n in self._idle if (r := robots.get(n)) is not None and r.online]
+        if self.hold is not None:
+            idle = [r for r in idle if not self.hold.holds(r)]
         if not idle:
             return  # the usual case: nothing below needs the whole fleet (offline robots
             # have no errands: idle_errands skips them too)

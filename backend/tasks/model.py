@@ -10,6 +10,7 @@ from typing import Any
 __all__ = [
     "FINAL_STATES",
     "TRANSITIONS",
+    "Held",
     "IllegalTransition",
     "InvalidTask",
     "QueueFull",
@@ -24,7 +25,7 @@ __all__ = [
 class TaskError(ValueError):
     """A task operation refused. The API maps each subclass to one status (docs/server.md,
     "Status codes"): InvalidTask 422, TaskNotFound 404, TaskFinished and IllegalTransition
-    409, QueueFull 503."""
+    409, QueueFull and Held 503."""
 
 
 class InvalidTask(TaskError):
@@ -41,6 +42,13 @@ class TaskFinished(TaskError):
 
 class QueueFull(TaskError):
     """The queue is at its bound; nothing queued is dropped to make room (503)."""
+
+
+class Held(TaskError):
+    """No new task while the fire alarm holds the site (503, ``reason`` emergency; the text
+    in the requester's language: docs/emergency.md)."""
+
+    reason = "emergency"
 
 
 class IllegalTransition(TaskError):

@@ -65,6 +65,9 @@ class TrafficManager(Service):
         self._resync_timer: asyncio.TimerHandle | None = None
         self.courier = courier_for(endpoint)
         """area_granted: sent again until the robot acknowledges it."""
+        self.gate: Callable[[str, str], str | None] | None = None
+        """Asked with (robot, area) before a grant: a reason to refuse (the fire alarm holds
+        the area and it is not on the robot's way to safety, backend.emergency), or None."""
 
     # --- life cycle ----------------------------------------------------------------------
     async def on_start(self) -> None:
@@ -268,6 +271,10 @@ class TrafficManager(Service):
             self._tell_removed(Cut(robot, (req.area,), msg.id, still_waiting=False))
             return
         chain = self._chain(robot, req.area)
+        if self.gate is not None:
+            for area in chain:
+                if (why := self.gate(robot, area)) is not None:
+                    return self._refuse(msg, why)
         try:
             grants, yields = self.locks.request(robot, chain, msg.id)
         except LockError as exc:

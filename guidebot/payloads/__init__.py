@@ -7,6 +7,7 @@ from guidebot.payloads import (  # noqa: F401
     alerts,
     building,
     console,
+    emergency,
     hub,
     petri,
     robot,

@@ -34,6 +34,7 @@ class Role(StrEnum):
     button_input = "button input"
     button_led = "button led"
     output = "set_output target"
+    fire_alarm = "fire_alarm input"
 
 
 _BITS_IN = frozenset({PointKind.discrete_input, PointKind.coil})
@@ -47,6 +48,8 @@ ROLE_KINDS: dict[Role, frozenset[PointKind]] = {
     Role.door_is_open: _BITS_IN,
     Role.elevator_in_position: _BITS_IN,
     Role.button_input: _BITS_IN,
+    # A fire alarm relay's contact (docs/emergency.md), read like a button.
+    Role.fire_alarm: _BITS_IN,
     # The optional position registers ``<elevator>_floor`` / ``<elevator>_door``.
     Role.elevator_floor: frozenset({PointKind.input_register}),
     Role.elevator_door: frozenset({PointKind.input_register}),

@@ -12,6 +12,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
 
 from guidebot.site.building import ID_PATTERN, BuildingModule, Button, Door, Elevator
+from guidebot.site.emergency import Emergency
 from guidebot.site.index import Indexed
 
 __all__ = [
@@ -176,6 +177,8 @@ class Site(StrictModel, Indexed):
     modules: list[BuildingModule] = Field(default_factory=list)
     buttons: list[Button] = Field(default_factory=list)
     robots: list[RobotConfig] = Field(default_factory=list)
+    emergency: Emergency | None = None
+    """Fire alarm inputs, safe spots, escape routes and their words (docs/emergency.md)."""
 
     def poi(self, poi_id: str) -> PointOfInterest | None:
         return self._find("pois", self.pois, _id_of, poi_id)

@@ -14,6 +14,7 @@ from pydantic import ValidationError
 
 from guidebot.site.building import IORef, PointKind
 from guidebot.site.bulk import prevalidate
+from guidebot.site.emergency import emergency_problems
 from guidebot.site.io_rules import Role, kind_problem
 from guidebot.site.schema import Site
 from guidebot.task_kinds import KINDS, BadParams, UnknownTarget, check_params
@@ -318,4 +319,5 @@ def check_references(site: Site) -> list[Problem]:
         node_ref(("robots", i, "start_node"), r.start_node)
         if r.battery_panic > r.battery_low:
             p.append((("robots", i, "battery_panic"), "must not exceed battery_low"))
+    p += emergency_problems(site, {key: kind.value for key, kind in points.items()})
     return p

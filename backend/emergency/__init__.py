@@ -1,0 +1,1 @@
+"""The fire alarm on the server: state, holds, REST (docs/emergency.md)."""

@@ -1,0 +1,125 @@
+"""The robot's part of a fire alarm (docs/emergency.md): on ``evacuate``, stop, drop the task,
+say the site's words, let go of doors, drive to the safe spot; report each stage.
+
+Order matters: the first thing on the CAN bus after the order arrives is a zero-velocity
+command, before the task's net is killed or anything is said. The way comes from the server
+(``steps``: no elevator, no door asked for, no escape route entered); the areas on it are asked
+for as on any path, and the Traffic Manager grants them to a robot on its way to safety.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.emergency import EvacuationState, EvacuationStateName
+from guidebot.payloads.petri import Say
+from guidebot.service import Service
+from guidebot.site.steps import PathStep
+from robot_agent.motion import NavigationError
+from robot_agent.navigation import Navigator, YieldRequested
+from robot_agent.tasks import TaskRunner
+
+__all__ = ["CUT_OFF", "Evacuation"]
+
+log = logging.getLogger(__name__)
+
+CUT_OFF = "fire alarm"
+ATTEMPTS = 3
+RETRY_S = 5.0
+"""Robot seconds between two tries of a robot stuck on its way to safety."""
+
+
+class Evacuation(Service):
+    """Follows ``evacuate`` and ``emergency_changed`` on the on-board bus."""
+
+    def __init__(
+        self, endpoint: BusEndpoint, robot: str, navigator: Navigator, tasks: TaskRunner
+    ) -> None:
+        super().__init__()
+        self.ep = endpoint
+        self.robot = robot
+        self.navigator = navigator
+        self.tasks = tasks
+        self.state: EvacuationStateName | None = None
+        self.lang: str | None = None
+        """The language of the last visitor this robot served (its task's ``lang``)."""
+
+    async def on_start(self) -> None:
+        self.subscribe_all(
+            self.ep,
+            {
+                "evacuate": self._on_evacuate,
+                "emergency_changed": self._on_changed,
+                "task_assigned": self._on_assigned,
+            },
+        )
+
+    def _on_assigned(self, message: Message) -> None:
+        lang = (message.payload.get("params") or {}).get("lang")
+        if isinstance(lang, str):
+            self.lang = lang
+
+    def _on_evacuate(self, message: Message) -> None:
+        if message.destination not in (None, self.robot):
+            return
+        nav = self.navigator
+        nav.halt(force=True)  # first: the base stands still
+        nav.evacuating = True
+        self.tasks.abort(CUT_OFF)
+        nav.cancel_goal()  # abandons the goal and lets go of every door held
+        self._report("stopped")
+        payload: dict[str, Any] = message.payload
+        words: dict[str, str] = payload.get("words") or {}
+        if words:
+            lang = self.lang if self.lang in words else next(iter(words))
+            self.ep.publish(Say(text=words[lang], lang=lang))
+        try:
+            steps = [PathStep.from_dict(s) for s in payload.get("steps") or []]
+        except (KeyError, ValueError) as exc:
+            self._report("stuck", why=f"bad evacuation path: {exc}")
+            return
+        if len(steps) < 2:
+            if steps or payload.get("safe_spot") == nav.node:
+                self._report("safe")
+            else:
+                self._report("stuck", why="no way to a safe spot without an elevator")
+            return
+        nav.start_evacuation(self._drive(steps))
+
+    async def _drive(self, steps: list[PathStep]) -> None:
+        """Follow the way; stuck (reported with why), wait and try again from where it is."""
+        for attempt in range(1, ATTEMPTS + 1):
+            self._report("moving")
+            try:
+                await self.navigator.follow(self._from_here(steps))
+            except NavigationError as exc:
+                why = exc.reason
+            except YieldRequested as exc:
+                why = f"asked to yield area {exc.area}"
+            else:
+                self._report("safe")
+                return
+            self.navigator.halt()
+            self._report("stuck", why=f"{why} (attempt {attempt} of {ATTEMPTS})")
+            if attempt < ATTEMPTS:
+                await self.navigator.clock.sleep(RETRY_S)
+
+    def _from_here(self, steps: list[PathStep]) -> list[PathStep]:
+        """The rest of the way from the node the robot last reached on it."""
+        nodes = [s.node for s in steps]
+        here = self.navigator.node
+        return steps[nodes.index(here) :] if here in nodes else steps
+
+    def _on_changed(self, message: Message) -> None:
+        if message.payload.get("state") == "normal" and self.navigator.evacuating:
+            log.info("%s: the fire alarm is over: back in service", self.robot)
+            self.navigator.evacuating = False
+            self.state = None
+
+    def _report(self, state: EvacuationStateName, *, why: str = "") -> None:
+        self.state = state
+        log.warning("%s: evacuation %s at %s %s", self.robot, state, self.navigator.node, why)
+        self.ep.publish(EvacuationState(state=state, node=self.navigator.node, why=why))

@@ -1,0 +1,213 @@
+"""The fire alarm over real Modbus/TCP: the demo museum's alarm input raised at the building
+simulator's control port holds the real server (issue 35, docs/emergency.md)."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import yaml
+
+from backend.settings import Settings
+from backend.testing import RunningServer, running_server
+from building_sim.control import serve_control
+from building_sim.simulator import BuildingSimulator
+from guidebot.site.building import IORef
+from guidebot.site.building_config import load_building
+from guidebot.testing import Recorder, wait_until
+from tests.server.helpers import RobotStub
+
+from .test_server import DEMO_SITE, demo_building
+
+ALARM = "/points/otb_ground/fire_alarm"
+
+
+@contextlib.asynccontextmanager
+async def alarm_rig(
+    tmp_path: Path,
+) -> AsyncIterator[tuple[BuildingSimulator, RunningServer, httpx.AsyncClient, httpx.AsyncClient]]:
+    """The demo building and server, the simulator's control port, a staff REST client."""
+    async with demo_building(tmp_path) as (_site, sim, server):
+        async with serving(server) as http, serve_control(sim) as url:
+            async with httpx.AsyncClient(base_url=url) as control:
+                yield sim, server, control, http
+
+
+@contextlib.asynccontextmanager
+async def serving(server: RunningServer) -> AsyncIterator[httpx.AsyncClient]:
+    """Once every module has been polled: a staff REST client of the server."""
+    building = server.app.state.building
+    await wait_until(lambda: all(p.health.polls > 0 for p in building.pollers.values()))
+    headers = {"Authorization": f"Bearer {server.admin_token}"}
+    async with httpx.AsyncClient(base_url=server.url, headers=headers) as http:
+        yield http
+
+
+async def _state(http: httpx.AsyncClient) -> dict[str, Any]:
+    response = await http.get("/api/emergency")
+    assert response.status_code == 200, response.text
+    return response.json()
+
+
+async def test_alarm_input_holds_the_fleet_and_resume_takes_two_steps(tmp_path: Path) -> None:
+    async with alarm_rig(tmp_path) as (_sim, server, control, http):
+        hub = server.app.state.hub
+        recorder = Recorder(hub.endpoint("test"), "emergency_changed", "task_event")
+        robot = RobotStub(hub, "R1", "gb1")  # east of the corridor, an escape route
+        robot.state()
+        created = await http.post("/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}})
+        assert created.status_code == 201, created.text
+        task_id = created.json()["id"]
+        await robot.wait_for("task_assigned")
+        robot.start(task_id)
+        robot.state("busy")
+        await recorder.wait("task_event", task_id=task_id, state="running")
+
+        # The building's alarm relay closes: the input is read over Modbus/TCP.
+        assert (await control.post(ALARM, json={"value": 1})).status_code == 200
+        changed = await recorder.wait("emergency_changed", state="alarm")
+        assert changed.payload["declared_by"] == "input:fire_main"
+        assert changed.payload["words"]["es"].startswith("Alarma de incendio")
+        # The robot's tour is cut off (back in the queue, held) and it is sent to safety by
+        # the one-way back gallery, not through the corridor.
+        order = await robot.wait_for("evacuate")
+        assert order.payload["path"] == ["gb1", "gb2", "ga2"]
+        assert order.payload["safe_spot"] == "ga2"
+        await recorder.wait("task_event", task_id=task_id, state="queued")
+        state = await _state(http)
+        assert state["state"] == "alarm" and state["cut_off_tasks"] == [task_id]
+        assert state["alarms"] == [
+            {"id": "fire_main", "module": "otb_ground", "point": "fire_alarm", "reads_alarm": True}
+        ]
+        # New requests: 503 with the reason, in the visitor's language.
+        refused = await http.post(
+            "/api/tasks", json={"kind": "tour", "params": {"tour": "ground", "lang": "es"}}
+        )
+        assert refused.status_code == 503
+        assert refused.json()["reason"] == "emergency"
+        assert refused.json()["detail"].startswith("Alarma de incendio")
+        # No area grant but on a robot's way to safety: R1's way avoids the corridor...
+        robot.endpoint.publish("request_area", {"robot": "R1", "area": "corridor"})
+        refusal = await robot.wait_for("error")
+        assert "fire alarm: area corridor is closed" in refusal.payload["reason"]
+        # ... R2, connecting in the corridor during the alarm, is held and sent out of it,
+        # through the area it stands in.
+        other = RobotStub(hub, "R2", "corridor_e")
+        other.state()
+        out = await other.wait_for("evacuate")
+        assert out.payload["path"] == ["corridor_e", "gb1", "gb2", "ga2"]
+        other.endpoint.publish("request_area", {"robot": "R2", "area": "corridor"})
+        await other.wait_for("area_granted")
+        # The same refusal for a visitor at a robot's screen (task_request on the hub).
+        robot.endpoint.publish(
+            "task_request", {"kind": "tour", "params": {"tour": "ground", "lang": "es"}}
+        )
+        hub_refusal = await robot.wait_for("error", count=2)
+        assert hub_refusal.payload["code"] == "task_refused"
+        assert hub_refusal.payload["reason"].startswith("Alarma de incendio")
+        # No door opened for anyone in the zone.
+        robot.endpoint.publish("open_door", {"door": "door_gallery"})
+        failed = await robot.wait_for("command_failed")
+        assert "fire alarm" in failed.payload["reason"]
+        # The robot reports its way to safety; it is in the state and the event log.
+        robot.endpoint.publish("evacuation_state", {"state": "safe", "node": "ga2"})
+        await wait_until(lambda: server.app.state.emergency.evacuation["R1"]["state"] == "safe")
+
+        # Step one missing: the input still reads alarm. Refused, saying why.
+        early = await http.post("/api/emergency/resume")
+        assert early.status_code == 409
+        assert "fire_main (otb_ground/fire_alarm) still reads alarm" in early.json()["detail"]
+
+        # The building's alarm is reset: service waits for a person.
+        assert (await control.post(ALARM, json={"value": 0})).status_code == 200
+        await recorder.wait("emergency_changed", state="input_clear")
+        robot.node = "ga2"
+        robot.task_id = None
+        robot.state()
+        assert (await robot_held_still(server, "R1")) is True
+
+        resumed = await http.post("/api/emergency/resume")
+        assert resumed.status_code == 200, resumed.text
+        assert resumed.json()["resumed_tasks"] == [task_id]
+        await recorder.wait("emergency_changed", state="normal")
+        # The held queue runs: the cut-off tour goes to the robot again.
+        await robot.wait_for("task_assigned", count=2)
+        again = await http.post("/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}})
+        assert again.status_code == 201
+        events = (await http.get("/api/events", params={"limit": 500})).json()
+        kinds = {e["kind"] for e in (events["events"] if isinstance(events, dict) else events)}
+        assert {"emergency_declared", "robot_evacuation", "emergency_input_clear"} <= kinds
+        assert "emergency_resumed" in kinds
+
+
+async def robot_held_still(server: RunningServer, name: str) -> bool:
+    """The Task Manager gives the robot nothing while the alarm lasts."""
+    tasks = server.app.state.task_manager
+    robot = tasks.robots[name]
+    return tasks.hold is not None and tasks.hold.holds(robot) and robot.current is None
+
+
+async def test_declare_by_rest_checks_the_zone_and_survives_a_restart(tmp_path: Path) -> None:
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        (tmp_path / "site.yaml").write_text(yaml.safe_dump(site), encoding="utf-8")
+        settings = Settings(
+            db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=tmp_path / "site.yaml"
+        )
+        async with running_server(settings) as server, serving(server) as http:
+            bad = await http.post(
+                "/api/emergency/declare", json={"zone": {"floors": ["F9"]}, "reason": "drill"}
+            )
+            assert bad.status_code == 422
+            assert "unknown floor(s) F9 (the site's floors: F0, F1)" in bad.json()["detail"]
+            both = await http.post(
+                "/api/emergency/declare",
+                json={"zone": {"floors": ["F0"], "areas": ["corridor"]}, "reason": "x"},
+            )
+            assert both.status_code == 422
+            nothing = await http.post("/api/emergency/resume")
+            assert nothing.status_code == 409 and "normal" in nothing.json()["detail"]
+            declared = await http.post(
+                "/api/emergency/declare", json={"zone": {"floors": ["F1"]}, "reason": "smoke on F1"}
+            )
+            assert declared.status_code == 200, declared.text
+            assert declared.json()["declared_by"] == "admin"
+            # outside the zone a door still opens (the ground floor carries on)
+            emergency = server.app.state.emergency
+            assert emergency.building_refusal("door_hall") is None
+            assert "fire alarm" in (emergency.building_refusal("door_f1") or "")
+            panel = await http.get("/api/emergency", headers={"Authorization": ""})
+            assert panel.status_code == 401
+        # A restart during the alarm keeps it (replayed from the event log).
+        async with running_server(settings) as server, serving(server) as http:
+            state = await _state(http)
+            assert state["state"] == "alarm"
+            assert state["zones"] == [{"floors": ["F1"]}] and state["reason"] == "smoke on F1"
+            resumed = await http.post("/api/emergency/resume")
+            assert resumed.status_code == 200, resumed.text
+            assert resumed.json()["state"] == "normal"
+
+
+async def test_an_alarm_input_already_raised_at_start_is_declared(tmp_path: Path) -> None:
+    """A module's first sample is no input change: the start reads the alarm inputs once."""
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        (tmp_path / "site.yaml").write_text(yaml.safe_dump(site), encoding="utf-8")
+        sim.write(IORef(module="otb_ground", point="fire_alarm"), 1)
+        settings = Settings(
+            db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=tmp_path / "site.yaml"
+        )
+        async with running_server(settings) as server, serving(server) as http:
+            recorder = Recorder(server.app.state.hub.endpoint("test"), "emergency_changed")
+            await wait_until(lambda: server.app.state.emergency.state == "alarm")
+            assert (await _state(http))["declared_by"] == "input:fire_main"
+            sim.write(IORef(module="otb_ground", point="fire_alarm"), 0)
+            await recorder.wait("emergency_changed", state="input_clear")
+            assert (await http.post("/api/emergency/resume")).status_code == 200
