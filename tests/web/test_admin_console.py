@@ -88,7 +88,7 @@ async def test_tour_requested_from_the_console_runs_to_the_end(
             page.get_by_role("status").filter(has_text="Request tour: done")
         ).to_be_visible()
         running = page.get_by_role("table", name="Running tasks")
-        await expect(running).to_contain_text("tour short", timeout=20_000)
+        await expect(running).to_contain_text("Tour: Short tour", timeout=20_000)
         # On the map, the selected robot's planned path is drawn.
         await web.open_view(page, "Map")
         await page.get_by_role("button", name="robot R1").click()
@@ -125,9 +125,9 @@ async def test_tour_requested_from_the_console_runs_to_the_end(
         )
         await web.open_view(page, "Tasks")
         finished = page.get_by_role("table", name="Finished tasks")
-        await expect(finished.get_by_role("row").filter(has_text="tour short")).to_contain_text(
-            "done", timeout=60_000
-        )
+        await expect(
+            finished.get_by_role("row").filter(has_text="Tour: Short tour")
+        ).to_contain_text("done", timeout=60_000)
 
 
 async def test_robot_lost_mid_tour_shows_lost_and_its_lock_can_be_released(
@@ -194,7 +194,7 @@ async def test_building_view_shows_a_door_opening_and_presses_a_button(
         await page.get_by_role("button", name="Press button_entrance").click()
         await web.open_view(page, "Tasks")
         queue = page.get_by_role("table", name="Queued tasks")
-        await expect(queue).to_contain_text("tour ground", timeout=20_000)
+        await expect(queue).to_contain_text("Tour: Ground floor tour", timeout=20_000)
 
 
 async def test_alerts_survive_a_reload_and_a_server_restart(

@@ -228,6 +228,10 @@ async function start() {
     document.title = open.length ? `(${open.length}) GuideBot console` : "GuideBot console";
     render(alertBar(ui, open), $("alert-bar"));
     render(
+      store.error ? html`<p class="notice error" role="alert">The console could not refresh: ${store.error} It tries again when the server is back.</p>` : "",
+      $("page-error"),
+    );
+    render(
       VIEWS.map(
         ([id, label]) => html`<button type="button" class="secondary" aria-current=${ui.view === id ? "page" : "false"}
             @click=${() => ui.go(id)}>${label}${id === "alerts" && open.length ? html`<span class="count" aria-label=${`${open.length} open`}>${open.length}</span>` : ""}</button>`,

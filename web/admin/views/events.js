@@ -59,7 +59,10 @@ export function eventsView(ui) {
         ${["info", "warning", "error"].map((s) => html`<option value=${s} ?selected=${f.severity === s}>${s}</option>`)}</select></label>
       <button type="button" @click=${() => download(rows)}>Download JSON lines</button>
     </form>
-    <p class="muted">${rows.length} events (the newest 200 shown; the download has all ${rows.length}).</p>
+    <p class="muted" id="event-count">${rows.length} events loaded (the newest 200 shown; the download has all ${rows.length}).</p>
+    ${ui.store.olderEvents
+      ? html`<button type="button" class="secondary" @click=${() => ui.act("Load older events", () => ui.store.loadOlderEvents())}>Load older events</button>`
+      : html`<p class="muted">That is the whole event log.</p>`}
     <table aria-label="Events">
       <thead><tr><th scope="col">Time</th><th scope="col">Severity</th><th scope="col">Type</th><th scope="col">Source</th><th scope="col">Details</th></tr></thead>
       <tbody>${shown.map((r) => html`<tr><td>${clock(r.at)}</td><td>${severity(r)}</td><td>${r.kind}</td><td>${r.source}</td><td>${summary(r)}</td></tr>`)}</tbody>

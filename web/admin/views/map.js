@@ -1,6 +1,7 @@
 // The map view's toolbar (floor switch, legend) and details panel (what was clicked).
 import { html } from "lit-html";
 import { duration, percent } from "/lib/dom.js";
+import { floorName, placeName, taskLabel } from "/admin/names.js";
 
 export function toolbarView(ui) {
   const { store, map } = ui;
@@ -26,8 +27,8 @@ function robotDetails(ui, name) {
       <dt>Connection</dt><dd>${robot.online ? "online" : "offline"}</dd>
       <dt>Mode</dt><dd>${s.mode ?? robot.info?.mode ?? "—"}</dd>
       <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>
-      <dt>Where</dt><dd>${s.node ?? "—"} (${s.floor ?? "—"}) ${s.x !== undefined ? `x ${s.x.toFixed(1)} m, y ${s.y.toFixed(1)} m` : ""}</dd>
-      <dt>Task</dt><dd>${s.task_id ?? robot.info?.task_id ?? "none"}</dd>
+      <dt>Where</dt><dd>${s.node ? placeName(ui.store.site, s.node) : "—"} (${s.floor ? floorName(ui.store.site, s.floor) : "—"})</dd>
+      <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? robot.info?.task_id)}</dd>
       <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
     </dl>`;
 }
