@@ -5,6 +5,7 @@ import { connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
 import { FloorMap } from "/lib/map.js";
 import { Api, ApiError } from "/lib/rest.js";
+import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
 import { buildingView } from "/admin/views/building.js";
@@ -172,6 +173,7 @@ async function start() {
 
   const map = new FloorMap($("map"), (url) => api.get(url));
   ui.map = map;
+  map.describeRobot = (s) => robotDoing(store, s);
   ui.monitor = new Monitor(ui);
   let pathKey = "";
   store.addEventListener("robot_state", (e) => {

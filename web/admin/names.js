@@ -28,7 +28,7 @@ export function elevatorName(site, id) {
 }
 
 /** A node as a person would name the place: "Welcome hall", "charging station station_a",
- * "elevator lift (Ground floor)", "door door_gallery", "near Roman mosaics (First floor)". */
+ * "elevator lift", "door door_gallery", "near Roman mosaics" (the floor is said beside it). */
 export function placeName(site, nodeId) {
   if (!nodeId) return "—";
   const node = byId(site.nodes, nodeId);
@@ -37,7 +37,7 @@ export function placeName(site, nodeId) {
   const station = (site.charging_stations ?? []).find((s) => s.node === nodeId);
   if (station) return `charging station ${station.id}`;
   const lift = (site.elevators ?? []).find((e) => e.stops.some((s) => s.node === nodeId));
-  if (lift) return `${elevatorName(site, lift.id)} (${floorName(site, node?.floor)})`;
+  if (lift) return elevatorName(site, lift.id);
   const door = (site.doors ?? []).find((d) => d.node === nodeId);
   if (door) return doorName(site, door.id);
   if (!node) return nodeId;
@@ -52,8 +52,7 @@ export function placeName(site, nodeId) {
       bestD = d;
     }
   }
-  const floor = floorName(site, node.floor);
-  return best ? `near ${best.name || best.id} (${floor})` : `${nodeId} (${floor})`;
+  return best ? `near ${best.name || best.id}` : `${nodeId} (${floorName(site, node.floor)})`;
 }
 
 /** What a task does, in the site's words: "Tour: Highlights", "Go to: Roman mosaics". */
@@ -71,4 +70,42 @@ export function taskLabel(store, id) {
   if (!id) return "none";
   const task = store.tasks.get(id);
   return task ? taskName(store.site, task) : "an automatic task";
+}
+
+const WAITS = { waiting_door: "door", door_blocked: "door", waiting_area: "area", waiting_elevator: "elevator" };
+
+function neighbours(site, nodeId) {
+  const out = new Set([nodeId]);
+  for (const e of site.edges ?? []) {
+    if (e.a === nodeId) out.add(e.b);
+    if (e.b === nodeId) out.add(e.a);
+  }
+  return out;
+}
+
+/** What a robot stands and waits for, from robot_state.navigation, the lock views and the
+ * site around its node ("waiting for door door_gallery to open", "blocked: door door_gallery
+ * did not open", "waiting for area corridor (held by R2)"); null when it does not wait. */
+export function waitingFor(store, s) {
+  const what = WAITS[s?.navigation];
+  if (!what) return null;
+  const site = store.site;
+  if (what === "area") {
+    const lock = [...store.locks.values()].find((l) => (l.waiting ?? []).includes(s.robot));
+    if (!lock) return "waiting for a restricted area";
+    return `waiting for area ${lock.area}${lock.holder ? ` (held by ${lock.holder})` : ""}`;
+  }
+  const near = neighbours(site, s.node);
+  if (what === "door") {
+    const door = (site.doors ?? []).find((d) => near.has(d.node));
+    const name = door ? doorName(site, door.id) : "a door";
+    return s.navigation === "door_blocked" ? `blocked: ${name} did not open` : `waiting for ${name} to open`;
+  }
+  const lift = (site.elevators ?? []).find((e) => e.stops.some((st) => near.has(st.node)));
+  return `waiting for ${lift ? elevatorName(site, lift.id) : "the elevator"}`;
+}
+
+/** A robot's mode as the console says it: the wait when it waits, else its mode. */
+export function robotDoing(store, s) {
+  return waitingFor(store, s) ?? s?.mode ?? "—";
 }

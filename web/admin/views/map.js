@@ -1,7 +1,7 @@
 // The map view's toolbar (floor switch, legend) and details panel (what was clicked).
 import { html } from "lit-html";
 import { duration, percent } from "/lib/dom.js";
-import { floorName, placeName, taskLabel } from "/admin/names.js";
+import { floorName, placeName, taskLabel, waitingFor } from "/admin/names.js";
 
 export function toolbarView(ui) {
   const { store, map } = ui;
@@ -15,6 +15,9 @@ export function toolbarView(ui) {
       <span><span class="badge warn">20–50 %</span></span>
       <span><span class="badge bad">&lt; 20 %</span></span>
     </span>
+    <span class="legend" aria-label="Ring colours">
+      <span>blue ring: busy</span> <span>orange dotted: waiting (door, area, elevator)</span> <span>red: fault or door blocked</span>
+    </span>
     <span class="muted">${[...store.robots.values()].filter((r) => r.online).length} robots online</span>`;
 }
 
@@ -26,6 +29,7 @@ function robotDetails(ui, name) {
     <dl>
       <dt>Connection</dt><dd>${robot.online ? "online" : "offline"}</dd>
       <dt>Mode</dt><dd>${s.mode ?? robot.info?.mode ?? "—"}</dd>
+      ${waitingFor(ui.store, s) ? html`<dt>Waiting</dt><dd class="state-waiting">${waitingFor(ui.store, s)}</dd>` : ""}
       <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>
       <dt>Where</dt><dd>${s.node ? placeName(ui.store.site, s.node) : "—"} (${s.floor ? floorName(ui.store.site, s.floor) : "—"})</dd>
       <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? robot.info?.task_id)}</dd>
