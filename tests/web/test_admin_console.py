@@ -22,6 +22,7 @@ VIEWS = [
     ("Map", "map"),
     ("Robots", "robots"),
     ("Tasks", "tasks"),
+    ("Fleet", "fleet"),
     ("Locks", "locks"),
     ("Building", "building"),
     ("RoboGraph monitor", "monitor"),

@@ -10,6 +10,7 @@ import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
 import { buildingView } from "/admin/views/building.js";
 import { eventsView } from "/admin/views/events.js";
+import { fleetView } from "/admin/views/fleet.js";
 import { locksView } from "/admin/views/locks.js";
 import { detailsView, toolbarView } from "/admin/views/map.js";
 import { Monitor, monitorView } from "/admin/views/monitor.js";
@@ -21,6 +22,7 @@ const VIEWS = [
   ["map", "Map"],
   ["robots", "Robots"],
   ["tasks", "Tasks"],
+  ["fleet", "Fleet"],
   ["locks", "Locks"],
   ["building", "Building"],
   ["monitor", "RoboGraph monitor"],
@@ -30,6 +32,7 @@ const VIEWS = [
 const RENDER = {
   robots: robotsView,
   tasks: tasksView,
+  fleet: fleetView,
   locks: locksView,
   building: buildingView,
   monitor: monitorView,

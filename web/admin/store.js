@@ -21,6 +21,7 @@ export class Store extends EventTarget {
     this.doors = new Map(); // door id -> open (bool)
     this.lifts = new Map(); // elevator id -> {floor, door_open}
     this.simulator = false;
+    this.fleet = null; // GET /api/fleet: {paused, by, since, reason}
     this.frame = 0;
     this.error = null; // the last background failure (shown on the page until the next success)
     this.olderEvents = true; // the event log has rows older than this.events[0]
@@ -101,6 +102,9 @@ export class Store extends EventTarget {
     on("event_logged", (m) => {
       this.#addEvents([m.payload]);
       if (this.reloading) this.inFlight.push(m.payload);
+      const row = m.payload;
+      if (row.kind === "fleet_paused") this.fleet = { paused: true, by: row.data.by, since: row.at, reason: row.data.reason ?? "" };
+      if (row.kind === "fleet_resumed") this.fleet = { paused: false, by: null, since: null, reason: "" };
     });
     on("building_input_changed", (m) => this.#point(m.payload.module, m.payload.point, m.payload.value));
     on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
@@ -148,14 +152,16 @@ export class Store extends EventTarget {
 
   async #reloadOnce() {
     this.inFlight = []; // events logged while the snapshot is fetched
-    const [robots, locks, tasks, alerts, events, building] = await Promise.all([
+    const [robots, locks, tasks, alerts, events, building, fleet] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
       this.api.get(TASK_LISTING),
       this.api.get("/api/alerts?include_acked=true"),
       this.api.get(`/api/events?latest=true&limit=${EVENT_PAGE}`),
       this.api.get("/api/building"),
+      this.api.get("/api/fleet"),
     ]);
+    this.fleet = fleet;
     for (const info of robots) {
       const robot = this.robot(info.name);
       robot.info = info;

@@ -3,7 +3,10 @@ import { html } from "lit-html";
 import { clock } from "/lib/dom.js";
 
 const ERRORS = new Set(["robot_fault", "battery_panic", "task_failed", "robot_disconnected", "area_force_released", "alert_raised"]);
-const WARNINGS = new Set(["battery_low", "area_yield", "deadlock_resolved", "task_cancelled", "alert_acked"]);
+const WARNINGS = new Set([
+  "battery_low", "area_yield", "deadlock_resolved", "task_cancelled", "alert_acked",
+  "fleet_paused", "fleet_sent_home", "door_opened_by_hand", "elevator_called_by_hand",
+]);
 
 export function severity(row) {
   if (ERRORS.has(row.kind)) return "error";
