@@ -151,3 +151,28 @@ async def test_cancelling_a_task_asks_first_and_tells_the_requester(
             status = (await http.get(f"/api/tasks/{task}")).json()
             assert status["state"] == "cancelled"
             assert status["reason"].startswith("cancelled by staff")
+
+
+async def test_cancelling_a_running_tour_from_the_robots_view_asks_and_gives_the_reason(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=1, time_scale=4) as fleet:
+        async with fleet.http() as http:
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await expect(page.get_by_role("button", name="robot R1")).to_be_visible(timeout=20_000)
+            [task] = await request_tours(http, ["ground"])
+            await web.open_view(page, "Robots")
+            card = page.get_by_role("region", name="R1")
+            await expect(card).to_contain_text("Tour: Ground floor tour", timeout=20_000)
+            await card.get_by_role("button", name="Cancel R1's task").click()
+            dialog = page.get_by_role("dialog", name="Cancel Tour: Ground floor tour?")
+            await expect(dialog).to_contain_text("the visitor is told")
+            await dialog.get_by_role("button", name="Cancel Tour: Ground floor tour").click()
+            await expect(
+                page.get_by_role("status").filter(has_text="Cancel Tour: Ground floor tour: done")
+            ).to_be_visible()
+            status = (await http.get(f"/api/tasks/{task}")).json()
+            assert status["state"] == "cancelled"
+            assert status["reason"] == "cancelled by staff (desk)"
