@@ -104,6 +104,21 @@ async def test_event_log_has_the_history_and_concurrent_reloads_agree(
             now = (await http.get("/api/events", params={"latest": "true", "limit": 1000})).json()
             await expect(count).to_contain_text(f"{len(now['events'])} events")
             await expect(page.get_by_text("That is the whole event log.")).to_be_visible()
+            # Ids are named: the task's tour.
+            await expect(page.get_by_role("table", name="Events")).to_contain_text(
+                "task=Tour: First floor tour ("
+            )
+            # Paged back from the REST log, a page at a time (3 rows here, 1000 in use).
+            await page.evaluate(
+                "() => { guidebotConsole.store.eventPage = 3;"
+                " return guidebotConsole.store.reload(); }"
+            )
+            await expect(count).to_contain_text("3 events loaded")
+            await page.get_by_role("button", name="Load older events").click()
+            await expect(count).to_contain_text("6 events loaded")
+            shown = await page.evaluate("guidebotConsole.store.events.map(e => e.id)")
+            latest = await http.get("/api/events", params={"latest": "true", "limit": 6})
+            assert shown == [e["id"] for e in latest.json()["events"]]
             # A refresh that fails says so on the page.
             watch.expect_error(r"status of 500")
             await page.route("**/api/locks", lambda route: route.fulfill(status=500, body="{}"))

@@ -25,6 +25,7 @@ export class Store extends EventTarget {
     this.frame = 0;
     this.error = null; // the last background failure (shown on the page until the next success)
     this.olderEvents = true; // the event log has rows older than this.events[0]
+    this.eventPage = EVENT_PAGE; // rows per page of the event log (a test may make it small)
     this.reloading = null; // the reload in flight (a second caller joins it, then runs again)
     this.reloadAgain = false;
     this.inFlight = []; // event_logged rows that arrived while a reload was in flight
@@ -157,7 +158,7 @@ export class Store extends EventTarget {
       this.api.get("/api/locks"),
       this.api.get(TASK_LISTING),
       this.api.get("/api/alerts?include_acked=true"),
-      this.api.get(`/api/events?latest=true&limit=${EVENT_PAGE}`),
+      this.api.get(`/api/events?latest=true&limit=${this.eventPage}`),
       this.api.get("/api/building"),
       this.api.get("/api/fleet"),
     ]);
@@ -178,7 +179,7 @@ export class Store extends EventTarget {
     }
     const last = events.events.length ? events.events[events.events.length - 1].at : 0;
     this.events = [];
-    this.olderEvents = events.events.length === EVENT_PAGE;
+    this.olderEvents = events.events.length === this.eventPage;
     this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);
     this.inFlight = [];
     this.building.enabled = building.enabled;
@@ -191,8 +192,8 @@ export class Store extends EventTarget {
   async loadOlderEvents() {
     const first = this.events.find((row) => row.id !== undefined)?.id;
     if (first === undefined) return;
-    const page = await this.api.get(`/api/events?latest=true&before_id=${first}&limit=${EVENT_PAGE}`);
-    this.olderEvents = page.events.length === EVENT_PAGE;
+    const page = await this.api.get(`/api/events?latest=true&before_id=${first}&limit=${this.eventPage}`);
+    this.olderEvents = page.events.length === this.eventPage;
     this.events.unshift(...page.events);
     this.changed();
   }

@@ -1,6 +1,7 @@
 // Event log: live, filtered by robot, type and severity, downloadable as JSON lines.
 import { html } from "lit-html";
 import { clock } from "/lib/dom.js";
+import { placeName, poiName, taskName, tourName } from "/admin/names.js";
 
 const ERRORS = new Set(["robot_fault", "battery_panic", "task_failed", "robot_disconnected", "area_force_released", "alert_raised"]);
 const WARNINGS = new Set([
@@ -37,10 +38,22 @@ function download(rows) {
   setTimeout(() => URL.revokeObjectURL(url), 1000);
 }
 
-function summary(row) {
+/** The row's data, ids named as the site names them (task, node, point, tour). */
+function summary(ui, row) {
   const d = row.data ?? {};
+  const site = ui.store.site;
+  const named = {
+    task_id: (v) => {
+      const task = ui.store.tasks.get(v);
+      return ["task", task ? `${taskName(site, task)} (${v})` : v];
+    },
+    node: (v) => ["at", placeName(site, v)],
+    poi: (v) => ["point", poiName(site, v)],
+    tour: (v) => ["tour", tourName(site, v)],
+  };
   return Object.entries(d)
     .filter(([, v]) => v !== null && typeof v !== "object")
+    .map(([k, v]) => (named[k] ? named[k](v) : [k, v]))
     .map(([k, v]) => `${k}=${v}`)
     .join(" ");
 }
@@ -68,6 +81,6 @@ export function eventsView(ui) {
       : html`<p class="muted">That is the whole event log.</p>`}
     <table aria-label="Events">
       <thead><tr><th scope="col">Time</th><th scope="col">Severity</th><th scope="col">Type</th><th scope="col">Source</th><th scope="col">Details</th></tr></thead>
-      <tbody>${shown.map((r) => html`<tr><td>${clock(r.at)}</td><td>${severity(r)}</td><td>${r.kind}</td><td>${r.source}</td><td>${summary(r)}</td></tr>`)}</tbody>
+      <tbody>${shown.map((r) => html`<tr><td>${clock(r.at)}</td><td>${severity(r)}</td><td>${r.kind}</td><td>${r.source}</td><td>${summary(ui, r)}</td></tr>`)}</tbody>
     </table>`;
 }
