@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import Sites, Staff, Store, Tasks, not_found
 from backend.console.routes import Feed
+from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError
 from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
 
@@ -34,10 +35,13 @@ class Call(BaseModel):
     floor: str = Field(min_length=1, max_length=64)
 
 
-def _fleet_view(request: Request) -> dict[str, Any]:
-    state: dict[str, Any] = getattr(request.app.state, "fleet_pause", None) or {}
+def _fleet_view(request: Request, manager: TaskManager) -> dict[str, Any]:
+    """The Task Manager says whether it is paused; who paused it, when and why is kept here."""
+    state: dict[str, Any] = (
+        (getattr(request.app.state, "fleet_pause", None) or {}) if manager.paused else {}
+    )
     return {
-        "paused": bool(state),
+        "paused": bool(manager.paused),
         "by": state.get("by"),
         "since": state.get("since"),
         "reason": state.get("reason", ""),
@@ -45,9 +49,9 @@ def _fleet_view(request: Request) -> dict[str, Any]:
 
 
 @router.get("/fleet")
-async def fleet_state(request: Request, _: Staff) -> dict[str, Any]:
+async def fleet_state(request: Request, _: Staff, manager: Tasks) -> dict[str, Any]:
     """Whether the fleet is paused, since when, by whom and why."""
-    return _fleet_view(request)
+    return _fleet_view(request, manager)
 
 
 @router.post("/fleet/pause")
@@ -65,7 +69,7 @@ async def pause_fleet(
         manager.set_paused(True)
         request.app.state.fleet_pause = {"by": who.name, "since": time.time(), "reason": reason}
         db.record_event("fleet_paused", "console", {"by": who.name, "reason": reason})
-    return _fleet_view(request)
+    return _fleet_view(request, manager)
 
 
 @router.post("/fleet/resume")
@@ -75,7 +79,7 @@ async def resume_fleet(request: Request, who: Staff, manager: Tasks, db: Store) 
         request.app.state.fleet_pause = None
         db.record_event("fleet_resumed", "console", {"by": who.name})
         manager.set_paused(False)
-    return _fleet_view(request)
+    return _fleet_view(request, manager)
 
 
 @router.post("/fleet/home")
