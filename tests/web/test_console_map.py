@@ -48,6 +48,9 @@ async def test_robots_on_one_node_are_each_visible_and_clickable(
         ).to_be_visible()
         # Places are named as the site names them.
         await expect(page.locator("#details")).to_contain_text("charging station station_a")
+        await page.locator("#map path.map-poi").first.click()  # welcome, the site's first
+        await expect(page.locator("#details h3")).to_have_text("Welcome hall")
+        await expect(page.locator("#details")).to_contain_text("At Welcome hall (node hall)")
         await web.axe_check(page)
 
 

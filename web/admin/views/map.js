@@ -42,11 +42,12 @@ function plainDetails(ui, kind, id) {
   const lists = { node: site.nodes, poi: site.pois, door: site.doors, elevator: site.elevators, button: site.buttons, area: site.areas };
   const item = (lists[kind] ?? []).find((x) => x.id === id);
   const lock = kind === "area" ? ui.store.locks.get(id) : null;
-  return html`<h3>${kind} ${id}</h3>
-    ${item?.name ? html`<p>${item.name}</p>` : ""}
+  const title = kind === "node" ? placeName(site, id) : item?.name || `${kind} ${id}`;
+  return html`<h3>${title}</h3>
+    ${item?.name || kind === "node" ? html`<p class="muted">${kind} ${id}</p>` : ""}
     ${item?.text ? html`<p class="muted">${item.text}</p>` : ""}
-    ${item?.node ? html`<p>At node ${item.node}</p>` : ""}
-    ${kind === "node" ? html`<p>Floor ${item.floor}, x ${item.x} m, y ${item.y} m${item.passing_place ? ", passing place" : ""}</p>` : ""}
+    ${item?.node ? html`<p>At ${placeName(site, item.node)} (node ${item.node})</p>` : ""}
+    ${kind === "node" ? html`<p>${floorName(site, item.floor)}, x ${item.x} m, y ${item.y} m${item.passing_place ? ", passing place" : ""}</p>` : ""}
     ${kind === "door" ? html`<p>State: ${ui.store.doors.has(id) ? (ui.store.doors.get(id) ? "open" : "closed") : "unknown"}</p>` : ""}
     ${kind === "elevator" ? html`<p>Car: ${ui.store.lifts.has(id) ? `at ${ui.store.lifts.get(id).floor}${ui.store.lifts.get(id).door_open ? ", door open" : ""}` : "unknown"}</p>` : ""}
     ${kind === "button" && item?.task ? html`<p>Requests: ${item.task.kind} ${Object.values(item.task.params ?? {}).join(" ")}</p>` : ""}
