@@ -104,3 +104,6 @@ async def test_doors_and_elevators_by_hand_and_every_floor_at_once(
             wrong = await http.post("/api/building/elevators/lift/call", json={"floor": "F7"})
             assert wrong.status_code == 422, wrong.text
             assert "stops at F0, F1" in wrong.json()["detail"]
+        async with fleet.http("robot-R1-demo-token") as robot:  # staff only
+            for path in ("/api/fleet/pause", "/api/fleet/home", "/api/building/doors/x/open"):
+                assert (await robot.post(path)).status_code == 403, path
