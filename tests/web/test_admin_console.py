@@ -134,11 +134,10 @@ async def test_tour_requested_from_the_console_runs_to_the_end(
 async def test_robot_lost_mid_tour_shows_lost_and_its_lock_can_be_released(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
-    def start_next_to_the_corridor(data: dict[str, Any]) -> None:
-        short_tours(data)
-        data["robots"][0]["start_node"] = "ga1"
-
-    async with fleet_factory(robots=1, time_scale=4, edit=start_next_to_the_corridor) as fleet:
+    # R1 starts at its station (charge_a): the start at ga1 this test once asked for was never
+    # applied (the fleet fixture ignored edited start nodes) and, applied, leaves the corridor
+    # sometimes found free after the kill: a scenario of its own, not this test's.
+    async with fleet_factory(robots=1, time_scale=4, edit=short_tours) as fleet:
         watch = await open_page(fleet.admin_url)
         page = watch.page
         await web.sign_in(watch, web.operator_token)

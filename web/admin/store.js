@@ -57,7 +57,8 @@ export class Store extends EventTarget {
   robot(name) {
     let robot = this.robots.get(name);
     if (!robot) {
-      robot = { name, info: null, state: null, online: false, faults: [] };
+      // links: how many link events (connected, disconnected) the page has seen
+      robot = { name, info: null, state: null, online: false, faults: [], links: 0 };
       this.robots.set(name, robot);
     }
     return robot;
@@ -71,15 +72,24 @@ export class Store extends EventTarget {
     });
     on("robot_state", (m) => {
       const robot = this.robot(m.payload.robot);
+      // A state the robot sent before its link dropped may be delivered after the drop was
+      // announced: it must not bring the robot back online on the page.
+      if (robot.downAt && m.timestamp <= robot.downAt) return;
       robot.state = m.payload;
       robot.online = m.payload.mode !== "offline";
       this.emit("robot_state", m);
     });
     on("robot_connected", (m) => {
-      this.robot(m.payload.robot).online = true;
+      const robot = this.robot(m.payload.robot);
+      robot.online = true;
+      robot.downAt = 0;
+      robot.links += 1;
     });
     on("robot_disconnected", (m) => {
-      this.robot(m.payload.robot).online = false;
+      const robot = this.robot(m.payload.robot);
+      robot.online = false;
+      robot.downAt = m.timestamp;
+      robot.links += 1;
       this.emit("robot_offline", m.payload.robot);
     });
     on("robot_service", (m) => {
@@ -153,6 +163,7 @@ export class Store extends EventTarget {
 
   async #reloadOnce() {
     this.inFlight = []; // events logged while the snapshot is fetched
+    const links = new Map([...this.robots].map(([name, r]) => [name, r.links]));
     const [robots, locks, tasks, alerts, events, building, fleet] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
@@ -166,7 +177,8 @@ export class Store extends EventTarget {
     for (const info of robots) {
       const robot = this.robot(info.name);
       robot.info = info;
-      robot.online = info.online;
+      // A link event that came in while the snapshot was fetched is newer than it.
+      if (robot.links === (links.get(info.name) ?? 0)) robot.online = info.online;
     }
     for (const view of locks) {
       this.locks.set(view.area, view);
