@@ -4,6 +4,7 @@ and reports its failures, irreversible actions ask first."""
 
 from __future__ import annotations
 
+import asyncio
 from types import SimpleNamespace
 from typing import Any
 
@@ -191,3 +192,32 @@ async def test_cancelling_a_running_tour_from_the_robots_view_asks_and_gives_the
             status = (await http.get(f"/api/tasks/{task}")).json()
             assert status["state"] == "cancelled"
             assert status["reason"] == "cancelled by staff (desk)"
+
+
+async def test_a_snapshot_taken_before_a_robot_was_lost_does_not_bring_it_back(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=1) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, web.operator_token)
+        await expect(page.get_by_role("button", name="robot R1")).to_be_visible(timeout=20_000)
+        fetched, release = asyncio.Event(), asyncio.Event()
+
+        async def late_answer(route: Any) -> None:
+            response = await route.fetch()  # R1 online, as the server says now
+            fetched.set()
+            await release.wait()
+            await route.fulfill(response=response)
+
+        await page.route("**/api/robots", late_answer)
+        reload = asyncio.ensure_future(page.evaluate("guidebotConsole.store.reload()"))
+        await fetched.wait()
+        await fleet.kill("R1")
+        await web.open_view(page, "Robots")
+        heading = page.get_by_role("heading", name="R1")
+        await expect(heading).to_contain_text("lost", timeout=20_000)
+        release.set()
+        await reload
+        await expect(heading).to_contain_text("lost")
+        assert await page.evaluate("guidebotConsole.store.robots.get('R1').online") is False
