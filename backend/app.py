@@ -37,6 +37,7 @@ from backend.brain import server_brain
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
 from backend.cluster import FollowerRest, cluster_report, clustered
+from backend.console import fleet as console_fleet
 from backend.console import routes as console_routes
 from backend.console.component import console
 from backend.emergency import routes as emergency_routes
@@ -79,6 +80,7 @@ ROUTERS: list[APIRouter] = [
     building_routes.router,
     emergency_routes.router,
     console_routes.router,
+    console_fleet.router,
     metrics_routes.router,
 ]
 

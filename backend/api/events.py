@@ -18,11 +18,16 @@ async def list_events(
     _: Staff,
     db: Store,
     after_id: Annotated[int, Query(ge=0, le=2**62)] = 0,
+    before_id: Annotated[int | None, Query(ge=1, le=2**62)] = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     kind: Annotated[str | None, Query(max_length=64)] = None,
     latest: bool = False,
 ) -> dict[str, Any]:
     """Events with id greater than ``after_id``; pass ``next_after_id`` to get the next page.
-    ``latest=true``: the last ``limit`` events instead of the first (still in id order)."""
-    events = await db.events(after_id=after_id, limit=limit, kind=kind, latest=latest)
+    ``latest=true``: the last ``limit`` events instead of the first (still in id order);
+    ``before_id``: only events older than that id (the console pages back with
+    ``latest=true&before_id=<its oldest id>``)."""
+    events = await db.events(
+        after_id=after_id, before_id=before_id, limit=limit, kind=kind, latest=latest
+    )
     return {"events": events, "next_after_id": events[-1]["id"] if events else after_id}

@@ -365,11 +365,20 @@ class DbStore(Service):
             ]
 
     async def events(
-        self, *, after_id: int = 0, limit: int = 100, kind: str | None = None, latest: bool = False
+        self,
+        *,
+        after_id: int = 0,
+        before_id: int | None = None,
+        limit: int = 100,
+        kind: str | None = None,
+        latest: bool = False,
     ) -> list[dict[str, Any]]:
-        """Events after ``after_id`` in id order; ``latest``: the last ``limit`` of them."""
+        """Events after ``after_id`` (and before ``before_id``) in id order; ``latest``: the
+        last ``limit`` of them."""
         await self.flush()
         query = select(EventRow).where(EventRow.id > after_id)
+        if before_id is not None:
+            query = query.where(EventRow.id < before_id)
         if kind:
             query = query.where(EventRow.kind == kind)
         order = EventRow.id.desc() if latest else EventRow.id

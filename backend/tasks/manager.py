@@ -123,6 +123,8 @@ class TaskManager(Service):
         self.rather_not: dict[str, set[str]] = {}
         """Task -> robots it was taken from (lost, battery panic): used only if no other is free."""
         self._dispatching = False
+        self.paused = False
+        """Staff paused the fleet (set_paused): nothing is dispatched until they resume."""
         self._dispatch_again = False
         self._idle: set[str] = set()
         """Robots free for a main task as far as tasks go: nothing, or an internal task."""
@@ -363,8 +365,17 @@ class TaskManager(Service):
         }
 
     # --- assignment ----------------------------------------------------------------------
+    def set_paused(self, paused: bool) -> None:
+        """Staff pause the fleet: no queued task is given to a robot and no idle robot is sent
+        anywhere until they resume; running tasks go on (docs/console.md, "Fleet")."""
+        self.paused = paused
+        if not paused:
+            self.dispatch()
+
     def dispatch(self) -> None:
         """Give queued tasks to available robots, best first; then send idle robots home."""
+        if self.paused:
+            return
         if self._dispatching:
             self._dispatch_again = True
             return

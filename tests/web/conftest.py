@@ -217,6 +217,7 @@ async def web_fleet(
             module["port"] = building.ports[module["id"]]
         if edit is not None:
             edit(data)
+        start_nodes = {r["name"]: r.get("start_node") for r in data["robots"]}
         plans = tmp_path / "demo_museum"
         plans.mkdir(exist_ok=True)
         for svg in (DEMO_SITE.parent / "demo_museum").glob("*.svg"):
@@ -241,7 +242,7 @@ async def web_fleet(
                             token=robot.token,
                             can=None,
                             time_scale=time_scale,
-                            start_node=robot.start_node,
+                            start_node=start_nodes.get(robot.name, robot.start_node),
                             speech_engine=None,
                             state_period_s=0.2,
                             site=site_file,

@@ -22,6 +22,7 @@ VIEWS = [
     ("Map", "map"),
     ("Robots", "robots"),
     ("Tasks", "tasks"),
+    ("Fleet", "fleet"),
     ("Locks", "locks"),
     ("Building", "building"),
     ("RoboGraph monitor", "monitor"),
@@ -88,7 +89,7 @@ async def test_tour_requested_from_the_console_runs_to_the_end(
             page.get_by_role("status").filter(has_text="Request tour: done")
         ).to_be_visible()
         running = page.get_by_role("table", name="Running tasks")
-        await expect(running).to_contain_text("tour short", timeout=20_000)
+        await expect(running).to_contain_text("Tour: Short tour", timeout=20_000)
         # On the map, the selected robot's planned path is drawn.
         await web.open_view(page, "Map")
         await page.get_by_role("button", name="robot R1").click()
@@ -125,19 +126,18 @@ async def test_tour_requested_from_the_console_runs_to_the_end(
         )
         await web.open_view(page, "Tasks")
         finished = page.get_by_role("table", name="Finished tasks")
-        await expect(finished.get_by_role("row").filter(has_text="tour short")).to_contain_text(
-            "done", timeout=60_000
-        )
+        await expect(
+            finished.get_by_role("row").filter(has_text="Tour: Short tour")
+        ).to_contain_text("done", timeout=60_000)
 
 
 async def test_robot_lost_mid_tour_shows_lost_and_its_lock_can_be_released(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
-    def start_next_to_the_corridor(data: dict[str, Any]) -> None:
-        short_tours(data)
-        data["robots"][0]["start_node"] = "ga1"
-
-    async with fleet_factory(robots=1, time_scale=4, edit=start_next_to_the_corridor) as fleet:
+    # R1 starts at its station (charge_a): the start at ga1 this test once asked for was never
+    # applied (the fleet fixture ignored edited start nodes) and, applied, leaves the corridor
+    # sometimes found free after the kill: a scenario of its own, not this test's.
+    async with fleet_factory(robots=1, time_scale=4, edit=short_tours) as fleet:
         watch = await open_page(fleet.admin_url)
         page = watch.page
         await web.sign_in(watch, web.operator_token)
@@ -194,7 +194,7 @@ async def test_building_view_shows_a_door_opening_and_presses_a_button(
         await page.get_by_role("button", name="Press button_entrance").click()
         await web.open_view(page, "Tasks")
         queue = page.get_by_role("table", name="Queued tasks")
-        await expect(queue).to_contain_text("tour ground", timeout=20_000)
+        await expect(queue).to_contain_text("Tour: Ground floor tour", timeout=20_000)
 
 
 async def test_alerts_survive_a_reload_and_a_restart_resolves_the_stale_ones(

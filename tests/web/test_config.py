@@ -115,6 +115,15 @@ async def test_roll_back_restores_the_previous_tour_order(
             )
             await web.screenshot(page, "config-history")
             await page.get_by_role("button", name="Roll back to version 1").click()
+            confirm = page.get_by_role("dialog", name="Roll back to version 1?")
+            await expect(confirm).to_be_visible()  # one click never rolls back
+            await web.axe_check(page)
+            await confirm.get_by_role("button", name="Keep the live version").click()
+            await expect(confirm).to_have_count(0)
+            versions = (await http.get("/api/site/versions")).json()
+            assert [v["version"] for v in versions] == [2, 1]
+            await page.get_by_role("button", name="Roll back to version 1").click()
+            await confirm.get_by_role("button", name="Roll back to version 1").click()
             await expect(page.get_by_role("status").filter(has_text="Rolled back")).to_be_visible()
             tours = (await http.get("/api/site")).json()["site"]["tours"]
             assert tours[0]["points"] == ["welcome", "mosaics", "amphorae", "sword", "loom"]

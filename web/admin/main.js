@@ -5,10 +5,12 @@ import { connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
 import { FloorMap } from "/lib/map.js";
 import { Api, ApiError } from "/lib/rest.js";
+import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
 import { buildingView } from "/admin/views/building.js";
 import { eventsView } from "/admin/views/events.js";
+import { fleetView } from "/admin/views/fleet.js";
 import { locksView } from "/admin/views/locks.js";
 import { detailsView, toolbarView } from "/admin/views/map.js";
 import { Monitor, monitorView } from "/admin/views/monitor.js";
@@ -20,6 +22,7 @@ const VIEWS = [
   ["map", "Map"],
   ["robots", "Robots"],
   ["tasks", "Tasks"],
+  ["fleet", "Fleet"],
   ["locks", "Locks"],
   ["building", "Building"],
   ["monitor", "RoboGraph monitor"],
@@ -29,6 +32,7 @@ const VIEWS = [
 const RENDER = {
   robots: robotsView,
   tasks: tasksView,
+  fleet: fleetView,
   locks: locksView,
   building: buildingView,
   monitor: monitorView,
@@ -172,6 +176,7 @@ async function start() {
 
   const map = new FloorMap($("map"), (url) => api.get(url));
   ui.map = map;
+  map.describeRobot = (s) => robotDoing(store, s);
   ui.monitor = new Monitor(ui);
   let pathKey = "";
   store.addEventListener("robot_state", (e) => {
@@ -227,6 +232,10 @@ async function start() {
     const open = store.openAlerts();
     document.title = open.length ? `(${open.length}) GuideBot console` : "GuideBot console";
     render(alertBar(ui, open), $("alert-bar"));
+    render(
+      store.error ? html`<p class="notice error" role="alert">The console could not refresh: ${store.error} It tries again when the server is back.</p>` : "",
+      $("page-error"),
+    );
     render(
       VIEWS.map(
         ([id, label]) => html`<button type="button" class="secondary" aria-current=${ui.view === id ? "page" : "false"}

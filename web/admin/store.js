@@ -1,8 +1,10 @@
 // The console's live state: a REST snapshot at start (and after every reconnect), then hub
 // messages. Views read it; "change" events (at most one per animation frame) re-render them.
 
-const MAX_EVENTS = 1000;
-const MAX_FINISHED_TASKS = 200;
+const MAX_EVENTS = 20000;
+const EVENT_PAGE = 1000;
+const TASK_LISTING = "/api/tasks?limit=300";
+const TASK_REFRESH_MS = 5000;
 
 const isOpen = (alert) => !alert.acked_at && !alert.resolved_at;
 
@@ -16,12 +18,29 @@ export class Store extends EventTarget {
     this.locks = new Map(); // area -> lock view
     this.tasks = new Map(); // id -> task status (GET /api/tasks)
     this.alerts = new Map(); // id -> alert
-    this.events = []; // newest last, at most MAX_EVENTS
+    this.events = []; // newest last, at most MAX_EVENTS (REST rows have an id, live ones not yet)
     this.building = { enabled: false, modules: new Map(), points: new Map() };
     this.doors = new Map(); // door id -> open (bool)
     this.lifts = new Map(); // elevator id -> elevator_state {floor, door_open, state, calls}
     this.simulator = false;
+    this.fleet = null; // GET /api/fleet: {paused, by, since, reason}
     this.frame = 0;
+    this.error = null; // the last background failure (shown on the page until the next success)
+    this.olderEvents = true; // the event log has rows older than this.events[0]
+    this.eventPage = EVENT_PAGE; // rows per page of the event log (a test may make it small)
+    this.reloading = null; // the reload in flight (a second caller joins it, then runs again)
+    this.reloadAgain = false;
+    this.inFlight = []; // event_logged rows that arrived while a reload was in flight
+    this.tasksTimer = 0;
+    this.taskFetch = null;
+    this.taskFetchAgain = false;
+  }
+
+  /** A background refresh failed: the page shows why (never swallowed). */
+  fail(err) {
+    this.error = err instanceof Error ? err.message : String(err);
+    console.warn("console refresh failed:", err);
+    this.changed();
   }
 
   changed() {
@@ -40,7 +59,8 @@ export class Store extends EventTarget {
   robot(name) {
     let robot = this.robots.get(name);
     if (!robot) {
-      robot = { name, info: null, state: null, online: false, faults: [], robocan: null };
+      // links: how many link events (connected, disconnected) the page has seen
+      robot = { name, info: null, state: null, online: false, faults: [], robocan: null, links: 0 };
       this.robots.set(name, robot);
     }
     return robot;
@@ -54,15 +74,24 @@ export class Store extends EventTarget {
     });
     on("robot_state", (m) => {
       const robot = this.robot(m.payload.robot);
+      // A state the robot sent before its link dropped may be delivered after the drop was
+      // announced: it must not bring the robot back online on the page.
+      if (robot.downAt && m.timestamp <= robot.downAt) return;
       robot.state = m.payload;
       robot.online = m.payload.mode !== "offline";
       this.emit("robot_state", m);
     });
     on("robot_connected", (m) => {
-      this.robot(m.payload.robot).online = true;
+      const robot = this.robot(m.payload.robot);
+      robot.online = true;
+      robot.downAt = 0;
+      robot.links += 1;
     });
     on("robot_disconnected", (m) => {
-      this.robot(m.payload.robot).online = false;
+      const robot = this.robot(m.payload.robot);
+      robot.online = false;
+      robot.downAt = m.timestamp;
+      robot.links += 1;
       this.emit("robot_offline", m.payload.robot);
     });
     on("robot_service", (m) => {
@@ -80,11 +109,14 @@ export class Store extends EventTarget {
       this.locks.set(m.payload.area, m.payload);
       this.emit("lock", m.payload);
     });
-    on("task_event", (m) => this.#taskEvent(m.payload, m.timestamp));
+    on("task_event", () => this.refreshTasks());
     for (const type of ["alert_raised", "alert_acked", "alert_resolved"]) on(type, (m) => this.#alert(m.payload));
     on("event_logged", (m) => {
       this.#addEvents([m.payload]);
-      this.inFlight?.push(m.payload);
+      if (this.reloading) this.inFlight.push(m.payload);
+      const row = m.payload;
+      if (row.kind === "fleet_paused") this.fleet = { paused: true, by: row.data.by, since: row.at, reason: row.data.reason ?? "" };
+      if (row.kind === "fleet_resumed") this.fleet = { paused: false, by: null, since: null, reason: "" };
     });
     on("building_input_changed", (m) => this.#point(m.payload.module, m.payload.point, m.payload.value));
     on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
@@ -97,7 +129,7 @@ export class Store extends EventTarget {
       "building_input_changed", "building_module_health", "door_opened", "door_closed",
       "elevator_state",
     );
-    this.hub.addEventListener("connect", () => this.reload().catch(() => {}));
+    this.hub.addEventListener("connect", () => this.reload().catch((err) => this.fail(err)));
     const [site, simulator] = await Promise.all([
       this.api.get("/api/site/map"),
       this.api.get("/api/building/simulator"),
@@ -106,38 +138,58 @@ export class Store extends EventTarget {
     this.simulator = simulator.configured;
   }
 
-  /** The REST snapshot: what happened while the page was not connected. */
-  async reload() {
+  /** The REST snapshot: what happened while the page was not connected. Calls made while
+   * one is in flight share it, and one more runs after it (it may have missed their cause). */
+  reload() {
+    if (this.reloading) {
+      this.reloadAgain = true;
+      return this.reloading;
+    }
+    this.reloading = (async () => {
+      try {
+        do {
+          this.reloadAgain = false;
+          await this.#reloadOnce();
+        } while (this.reloadAgain);
+        this.error = null;
+      } finally {
+        this.reloading = null;
+      }
+    })();
+    return this.reloading;
+  }
+
+  async #reloadOnce() {
     this.inFlight = []; // events logged while the snapshot is fetched
-    const [robots, locks, tasks, alerts, events, building] = await Promise.all([
+    const links = new Map([...this.robots].map(([name, r]) => [name, r.links]));
+    const [robots, locks, tasks, alerts, events, building, fleet] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
-      this.api.get("/api/tasks?limit=300"),
+      this.api.get(TASK_LISTING),
       this.api.get("/api/alerts?include_acked=true"),
-      this.api.get(`/api/events?latest=true&limit=${MAX_EVENTS}`),
+      this.api.get(`/api/events?latest=true&limit=${this.eventPage}`),
       this.api.get("/api/building"),
+      this.api.get("/api/fleet"),
     ]);
+    this.fleet = fleet;
     for (const info of robots) {
       const robot = this.robot(info.name);
       robot.info = info;
-      robot.online = info.online;
+      // A link event that came in while the snapshot was fetched is newer than it.
+      if (robot.links === (links.get(info.name) ?? 0)) robot.online = info.online;
       if (info.robocan && !(robot.robocan?.at > info.robocan.at)) robot.robocan = info.robocan;
     }
     for (const view of locks) {
       this.locks.set(view.area, view);
       this.emit("lock", view);
     }
-    // Merge, never replace: hub messages that arrived while these requests were in flight
-    // are newer than the snapshot.
-    for (const task of tasks.tasks) {
-      const known = this.tasks.get(task.id);
-      if (!known || (known.updated_at ?? 0) <= task.updated_at) this.tasks.set(task.id, task);
-    }
+    this.#setTasks(tasks.tasks);
     for (const alert of alerts) this.#alert(alert, false);
     const last = events.events.length ? events.events[events.events.length - 1].at : 0;
     this.events = [];
+    this.olderEvents = events.events.length === this.eventPage;
     this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);
-    this.inFlight = null;
+    this.inFlight = [];
     this.building.enabled = building.enabled;
     for (const m of building.modules) this.building.modules.set(m.module, m);
     for (const p of building.points) this.#point(p.module, p.point, p.value);
@@ -145,9 +197,57 @@ export class Store extends EventTarget {
     this.changed();
   }
 
+  /** One more page of the event log, older than the oldest row shown. */
+  async loadOlderEvents() {
+    const first = this.events.find((row) => row.id !== undefined)?.id;
+    if (first === undefined) return;
+    const page = await this.api.get(`/api/events?latest=true&before_id=${first}&limit=${this.eventPage}`);
+    this.olderEvents = page.events.length === this.eventPage;
+    this.events.unshift(...page.events);
+    this.changed();
+  }
+
+  /** The tasks as GET /api/tasks lists them. A task_event says how one task changed, not
+   * how the others moved in the queue nor its new priority: the listing is fetched again
+   * (one request at a time; one more after it when events came in meanwhile), and every
+   * few seconds while tasks wait (their ETAs move without events). */
+  refreshTasks() {
+    if (this.taskFetch) {
+      this.taskFetchAgain = true;
+      return this.taskFetch;
+    }
+    this.taskFetch = (async () => {
+      try {
+        do {
+          this.taskFetchAgain = false;
+          this.#setTasks((await this.api.get(TASK_LISTING)).tasks);
+        } while (this.taskFetchAgain);
+        this.error = null;
+      } catch (err) {
+        this.fail(err);
+      } finally {
+        this.taskFetch = null;
+      }
+    })();
+    return this.taskFetch;
+  }
+
+  #setTasks(tasks) {
+    this.tasks = new Map(tasks.map((t) => [t.id, t]));
+    clearTimeout(this.tasksTimer);
+    if (tasks.some((t) => t.state === "queued")) {
+      this.tasksTimer = setTimeout(() => this.refreshTasks(), TASK_REFRESH_MS);
+    }
+    this.emit("tasks");
+    this.changed();
+  }
+
   #addEvents(rows) {
     this.events.push(...rows);
-    if (this.events.length > MAX_EVENTS) this.events.splice(0, this.events.length - MAX_EVENTS);
+    if (this.events.length > MAX_EVENTS) {
+      this.events.splice(0, this.events.length - MAX_EVENTS);
+      this.olderEvents = true;
+    }
     for (const row of rows) {
       if (row.kind === "robot_fault" && row.data?.robot) {
         const robot = this.robot(row.data.robot);
@@ -156,25 +256,6 @@ export class Store extends EventTarget {
         }
       }
     }
-  }
-
-  async #taskEvent(p, timestamp) {
-    const task = this.tasks.get(p.task_id);
-    if (task) {
-      Object.assign(task, { state: p.state, robot: p.robot, queue_position: p.queue_position, eta_s: p.eta_s, updated_at: timestamp });
-    } else {
-      try {
-        this.tasks.set(p.task_id, await this.api.get(`/api/tasks/${encodeURIComponent(p.task_id)}`));
-      } catch {
-        return;
-      }
-    }
-    const finished = [...this.tasks.values()].filter((t) => ["done", "failed", "cancelled"].includes(t.state));
-    if (finished.length > MAX_FINISHED_TASKS) {
-      finished.sort((a, b) => a.updated_at - b.updated_at);
-      for (const t of finished.slice(0, finished.length - MAX_FINISHED_TASKS)) this.tasks.delete(t.id);
-    }
-    this.changed();
   }
 
   #point(module, point, value) {

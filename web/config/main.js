@@ -1,6 +1,7 @@
 // The site editor (/config, admin): edit the draft on the plan, publish it live, history.
 import { html, nothing, render } from "lit-html";
 import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
+import { confirmAction } from "/lib/confirm.js";
 import { clock, connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
 import { Api, ApiError } from "/lib/rest.js";
@@ -187,6 +188,13 @@ async function start(me) {
   }
 
   async function rollback(version) {
+    const ok = await confirmAction({
+      title: `Roll back to version ${version}?`,
+      text: `Version ${version} goes live again (as a new version) on the server and every robot at once; the changes made since are no longer live (they stay in the history).`,
+      confirm: `Roll back to version ${version}`,
+      keep: "Keep the live version",
+    });
+    if (!ok) return;
     try {
       const reply = await api.post("/api/site/rollback", { version });
       await model.load();

@@ -5,6 +5,10 @@
 import * as L from "leaflet";
 
 const AREA_MARGIN_M = 1.2;
+const SPREAD_PX = 22; // robots standing together are drawn this far from their common place
+const TOGETHER_M = 0.6; // closer than this, two robots would hide each other
+/** Navigator states in which a robot stands and waits for something (robot_state.navigation). */
+export const WAITING = new Set(["waiting_area", "waiting_door", "waiting_elevator", "door_blocked"]);
 const STATE_COLOURS = { free: "#1b7a3a", held: "#b35900", holder_offline: "#b00020", yielding: "#6a3d9a" };
 
 export function batteryClass(level) {
@@ -51,6 +55,9 @@ export class FloorMap extends EventTarget {
     this.latencies = new Float64Array(8192); // ms from robot_state timestamp to drawn
     this.latencyCount = 0;
     this.nodes = new Map();
+    /** Optional: (robot_state payload) -> text saying what the robot does or waits for. */
+    this.describeRobot = null;
+    this.map.on("zoomend", () => this.#spread());
   }
 
   /** Draw a site (the document of GET /api/site/map) and show its first floor. */
@@ -77,6 +84,7 @@ export class FloorMap extends EventTarget {
     const changed = this.floor !== floorId;
     this.floor = floorId;
     for (const [name, robot] of this.robots) this.#placeRobot(name, robot);
+    this.#spread();
     if (changed) {
       this.#fit();
       this.dispatchEvent(new CustomEvent("floor", { detail: floorId }));
@@ -178,7 +186,7 @@ export class FloorMap extends EventTarget {
       const n = at(poi.node);
       if (!n) continue;
       const mark = L.circleMarker([n.y + 0.6, n.x + 0.6], { radius: 6, className: "map-poi" });
-      mark.bindTooltip(poi.name || poi.id, { direction: "right" });
+      mark.bindTooltip(poi.name || poi.id, { direction: "right", permanent: true, className: "map-label" });
       mark.on("click", () => this.#select("poi", poi.id));
       mark.addTo(this.floorLayers.get(n.floor));
     }
@@ -289,6 +297,7 @@ export class FloorMap extends EventTarget {
       this.latencyCount += 1;
     }
     this.pending.clear();
+    this.#spread();
     if (this.pathNodes?.length) this.#drawPath();
   }
 
@@ -315,13 +324,15 @@ export class FloorMap extends EventTarget {
     if (!s) return;
     const element = robot.marker.getElement();
     if (!element) return;
-    const cls = `robot-body mode-${s.mode} ${batteryClass(s.battery)}${robot.selected ? " selected" : ""}`;
+    const waiting = WAITING.has(s.navigation) ? ` waiting nav-${s.navigation}` : "";
+    const cls = `robot-body mode-${s.mode}${waiting} ${batteryClass(s.battery)}${robot.selected ? " selected" : ""}`;
     if (cls !== robot.cls) {
       robot.parts.body.className = cls;
       robot.cls = cls;
     }
     robot.parts.arrow.style.transform = `rotate(${(-s.theta * 180) / Math.PI}deg)`;
-    element.title = `${s.robot}: ${s.mode}, battery ${Math.round(s.battery * 100)} %`;
+    const doing = this.describeRobot?.(s) ?? s.mode;
+    element.title = `${s.robot}: ${doing}, battery ${Math.round(s.battery * 100)} %`;
   }
 
   /** Where to draw a robot: its pose, or its node's place while it has no floor yet (a robot
@@ -337,8 +348,9 @@ export class FloorMap extends EventTarget {
     if (!s) return;
     const pose = this.pose(s);
     const visible = pose.floor === this.floor && s.mode !== "offline";
+    robot.at = visible ? [pose.y, pose.x] : null;
     if (visible) {
-      robot.marker.setLatLng([pose.y, pose.x]);
+      robot.marker.setLatLng(robot.at);
       if (!robot.shown) {
         robot.marker.addTo(this.robotLayer);
         robot.shown = true;
@@ -350,12 +362,43 @@ export class FloorMap extends EventTarget {
     }
   }
 
+  /** Robots standing at one place are drawn around it (in name order), each visible and
+   * clickable; a robot alone is drawn where it is. */
+  #spread() {
+    const groups = new Map();
+    for (const [name, robot] of this.robots) {
+      if (!robot.shown || !robot.at) continue;
+      const key = `${Math.round(robot.at[1] / TOGETHER_M)},${Math.round(robot.at[0] / TOGETHER_M)}`;
+      if (!groups.has(key)) groups.set(key, []);
+      groups.get(key).push([name, robot]);
+    }
+    const metres = SPREAD_PX / 2 ** this.map.getZoom();
+    for (const group of groups.values()) {
+      if (group.length === 1) {
+        const robot = group[0][1];
+        if (robot.spread) {
+          robot.spread = false;
+          robot.marker.setLatLng(robot.at);
+        }
+        continue;
+      }
+      group.sort((a, b) => a[0].localeCompare(b[0]));
+      const [y, x] = group[0][1].at;
+      group.forEach(([, robot], i) => {
+        const angle = (2 * Math.PI * i) / group.length + Math.PI / 2;
+        robot.spread = true;
+        robot.marker.setLatLng([y + metres * Math.sin(angle), x + metres * Math.cos(angle)]);
+      });
+    }
+  }
+
   /** Show a robot as offline (removed from the map until it reports again). */
   robotOffline(name) {
     const robot = this.robots.get(name);
     if (robot?.state) {
       robot.state = { ...robot.state, mode: "offline" };
       this.#placeRobot(name, robot);
+      this.#spread();
     }
   }
 

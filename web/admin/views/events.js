@@ -1,9 +1,13 @@
 // Event log: live, filtered by robot, type and severity, downloadable as JSON lines.
 import { html } from "lit-html";
 import { clock } from "/lib/dom.js";
+import { placeName, poiName, taskName, tourName } from "/admin/names.js";
 
 const ERRORS = new Set(["robot_fault", "battery_panic", "task_failed", "robot_disconnected", "area_force_released", "alert_raised"]);
-const WARNINGS = new Set(["battery_low", "area_yield", "deadlock_resolved", "task_cancelled", "alert_acked"]);
+const WARNINGS = new Set([
+  "battery_low", "area_yield", "deadlock_resolved", "task_cancelled", "alert_acked",
+  "fleet_paused", "fleet_sent_home", "door_opened_by_hand", "elevator_called_by_hand",
+]);
 
 export function severity(row) {
   if (ERRORS.has(row.kind)) return "error";
@@ -34,10 +38,22 @@ function download(rows) {
   setTimeout(() => URL.revokeObjectURL(url), 1000);
 }
 
-function summary(row) {
+/** The row's data, ids named as the site names them (task, node, point, tour). */
+function summary(ui, row) {
   const d = row.data ?? {};
+  const site = ui.store.site;
+  const named = {
+    task_id: (v) => {
+      const task = ui.store.tasks.get(v);
+      return ["task", task ? `${taskName(site, task)} (${v})` : v];
+    },
+    node: (v) => ["at", placeName(site, v)],
+    poi: (v) => ["point", poiName(site, v)],
+    tour: (v) => ["tour", tourName(site, v)],
+  };
   return Object.entries(d)
     .filter(([, v]) => v !== null && typeof v !== "object")
+    .map(([k, v]) => (named[k] ? named[k](v) : [k, v]))
     .map(([k, v]) => `${k}=${v}`)
     .join(" ");
 }
@@ -59,9 +75,12 @@ export function eventsView(ui) {
         ${["info", "warning", "error"].map((s) => html`<option value=${s} ?selected=${f.severity === s}>${s}</option>`)}</select></label>
       <button type="button" @click=${() => download(rows)}>Download JSON lines</button>
     </form>
-    <p class="muted">${rows.length} events (the newest 200 shown; the download has all ${rows.length}).</p>
+    <p class="muted" id="event-count">${rows.length} events loaded (the newest 200 shown; the download has all ${rows.length}).</p>
+    ${ui.store.olderEvents
+      ? html`<button type="button" class="secondary" @click=${() => ui.act("Load older events", () => ui.store.loadOlderEvents())}>Load older events</button>`
+      : html`<p class="muted">That is the whole event log.</p>`}
     <table aria-label="Events">
       <thead><tr><th scope="col">Time</th><th scope="col">Severity</th><th scope="col">Type</th><th scope="col">Source</th><th scope="col">Details</th></tr></thead>
-      <tbody>${shown.map((r) => html`<tr><td>${clock(r.at)}</td><td>${severity(r)}</td><td>${r.kind}</td><td>${r.source}</td><td>${summary(r)}</td></tr>`)}</tbody>
+      <tbody>${shown.map((r) => html`<tr><td>${clock(r.at)}</td><td>${severity(r)}</td><td>${r.kind}</td><td>${r.source}</td><td>${summary(ui, r)}</td></tr>`)}</tbody>
     </table>`;
 }

@@ -2,6 +2,7 @@
 import { html } from "lit-html";
 import { carText } from "/admin/views/building.js";
 import { duration, percent } from "/lib/dom.js";
+import { floorName, placeName, taskLabel, waitingFor } from "/admin/names.js";
 
 export function toolbarView(ui) {
   const { store, map } = ui;
@@ -15,6 +16,9 @@ export function toolbarView(ui) {
       <span><span class="badge warn">20–50 %</span></span>
       <span><span class="badge bad">&lt; 20 %</span></span>
     </span>
+    <span class="legend" aria-label="Ring colours">
+      <span>blue ring: busy</span> <span>orange dotted: waiting (door, area, elevator)</span> <span>red: fault or door blocked</span>
+    </span>
     <span class="muted">${[...store.robots.values()].filter((r) => r.online).length} robots online</span>`;
 }
 
@@ -26,9 +30,10 @@ function robotDetails(ui, name) {
     <dl>
       <dt>Connection</dt><dd>${robot.online ? "online" : "offline"}</dd>
       <dt>Mode</dt><dd>${s.mode ?? robot.info?.mode ?? "—"}</dd>
+      ${waitingFor(ui.store, s) ? html`<dt>Waiting</dt><dd class="state-waiting">${waitingFor(ui.store, s)}</dd>` : ""}
       <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>
-      <dt>Where</dt><dd>${s.node ?? "—"} (${s.floor ?? "—"}) ${s.x !== undefined ? `x ${s.x.toFixed(1)} m, y ${s.y.toFixed(1)} m` : ""}</dd>
-      <dt>Task</dt><dd>${s.task_id ?? robot.info?.task_id ?? "none"}</dd>
+      <dt>Where</dt><dd>${s.node ? placeName(ui.store.site, s.node) : "—"} (${s.floor ? floorName(ui.store.site, s.floor) : "—"})</dd>
+      <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? robot.info?.task_id)}</dd>
       <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
     </dl>`;
 }
@@ -38,11 +43,12 @@ function plainDetails(ui, kind, id) {
   const lists = { node: site.nodes, poi: site.pois, door: site.doors, elevator: site.elevators, button: site.buttons, area: site.areas };
   const item = (lists[kind] ?? []).find((x) => x.id === id);
   const lock = kind === "area" ? ui.store.locks.get(id) : null;
-  return html`<h3>${kind} ${id}</h3>
-    ${item?.name ? html`<p>${item.name}</p>` : ""}
+  const title = kind === "node" ? placeName(site, id) : item?.name || `${kind} ${id}`;
+  return html`<h3>${title}</h3>
+    ${item?.name || kind === "node" ? html`<p class="muted">${kind} ${id}</p>` : ""}
     ${item?.text ? html`<p class="muted">${item.text}</p>` : ""}
-    ${item?.node ? html`<p>At node ${item.node}</p>` : ""}
-    ${kind === "node" ? html`<p>Floor ${item.floor}, x ${item.x} m, y ${item.y} m${item.passing_place ? ", passing place" : ""}</p>` : ""}
+    ${item?.node ? html`<p>At ${placeName(site, item.node)} (node ${item.node})</p>` : ""}
+    ${kind === "node" ? html`<p>${floorName(site, item.floor)}, x ${item.x} m, y ${item.y} m${item.passing_place ? ", passing place" : ""}</p>` : ""}
     ${kind === "door" ? html`<p>State: ${ui.store.doors.has(id) ? (ui.store.doors.get(id) ? "open" : "closed") : "unknown"}</p>` : ""}
     ${kind === "elevator" ? html`<p>Car: ${carText(ui.store.lifts.get(id))}</p>` : ""}
     ${kind === "button" && item?.task ? html`<p>Requests: ${item.task.kind} ${Object.values(item.task.params ?? {}).join(" ")}</p>` : ""}

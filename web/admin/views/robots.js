@@ -2,6 +2,8 @@
 // actions: charge, send to a node, out of service and back, cancel the task.
 import { html } from "lit-html";
 import { clock, percent } from "/lib/dom.js";
+import { floorName, placeName, poiName, taskLabel, waitingFor } from "/admin/names.js";
+import { cancelTask } from "/admin/views/tasks.js";
 
 export function tourStep(ui, robot) {
   const s = robot.state;
@@ -9,7 +11,8 @@ export function tourStep(ui, robot) {
   if (!task || task.kind !== "tour" || !s.poi) return "";
   const tour = ui.store.site.tours.find((t) => t.id === task.params.tour);
   const at = tour ? tour.points.indexOf(s.poi) + 1 : 0;
-  return tour ? `${s.poi} (${at}/${tour.points.length})` : s.poi;
+  const name = poiName(ui.store.site, s.poi);
+  return tour ? `${name} (${at}/${tour.points.length})` : name;
 }
 
 function actions(ui, robot) {
@@ -22,14 +25,14 @@ function actions(ui, robot) {
     <button type="button" @click=${() => send("charge", {})}>Send ${name} to charge</button>
     <label for=${nodeSelect} class="sr-only">Node for ${name}</label>
     <select id=${nodeSelect}>
-      ${ui.store.site.nodes.map((n) => html`<option value=${n.id}>${n.id}</option>`)}
+      ${ui.store.site.nodes.map((n) => html`<option value=${n.id}>${placeName(ui.store.site, n.id)} · ${n.id}</option>`)}
     </select>
     <button type="button" @click=${() => send("go_to", { node: document.getElementById(nodeSelect).value })}>Send ${name} to node</button>
     <button type="button" class=${out ? "" : "secondary"}
       @click=${() => ui.act(out ? `Put ${name} back in service` : `Take ${name} out of service`, () => ui.api.post(`/api/robots/${encodeURIComponent(name)}/service`, { out_of_service: !out }))}>
       ${out ? `Put ${name} back in service` : `Take ${name} out of service`}</button>
     ${taskId
-      ? html`<button type="button" class="danger" @click=${() => ui.act(`Cancel task of ${name}`, () => ui.api.post(`/api/tasks/${encodeURIComponent(taskId)}/cancel`, { reason: "cancelled from the console" }))}>Cancel ${name}'s task</button>`
+      ? html`<button type="button" class="danger" @click=${() => cancelTask(ui, ui.store.tasks.get(taskId) ?? { id: taskId, kind: "task", state: "running", robot: name })}>Cancel ${name}'s task</button>`
       : ""}
   </div>`;
 }
@@ -80,10 +83,10 @@ export function robotsView(ui) {
           <span class=${`badge ${link[0]}`}>${link[1]}</span>
           ${info.out_of_service ? html`<span class="badge warn">out of service</span>` : ""}</h3>
         <dl class="facts">
-          <dt>Mode</dt><dd>${s.mode ?? info.mode ?? "—"}</dd>
+          <dt>Mode</dt><dd>${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
-          <dt>Pose</dt><dd>${node ?? "—"}, floor ${floor ?? "—"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
-          <dt>Task</dt><dd>${s.task_id ?? info.task_id ?? "none"}${tourStep(ui, robot) ? `, at ${tourStep(ui, robot)}` : ""}</dd>
+          <dt>Pose</dt><dd>${node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
+          <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? info.task_id)}${tourStep(ui, robot) ? `, at ${tourStep(ui, robot)}` : ""}</dd>
           <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
           <dt>RoboCAN modules</dt><dd>${modules.length ? modules.map(([m, st]) => html`<span class=${`badge ${st === "ok" ? "ok" : "bad"}`}>${m}: ${st}</span> `) : "none reported"}</dd>
           <dt>Last errors</dt><dd>${robot.faults.length ? robot.faults.map((f) => html`<div>${clock(f.at)} ${f.kind} ${f.detail ?? ""}</div>`) : "none"}</dd>

@@ -1,14 +1,33 @@
 // Tasks: create, the queue (position, ETA), running tasks (progress), recent history; cancel,
 // re-prioritise, reassign; a task's event history.
 import { html } from "lit-html";
+import { repeat } from "lit-html/directives/repeat.js";
+import { confirmAction } from "/lib/confirm.js";
 import { clock, duration } from "/lib/dom.js";
+import { placeName, poiName, taskName } from "/admin/names.js";
 
 const FINAL = new Set(["done", "failed", "cancelled"]);
 const KINDS = [["tour", "Tour"], ["go_to_poi", "Point of interest"], ["go_to", "Go to node"], ["charge", "Charge"]];
 
-function describe(task) {
-  const p = task.params ?? {};
-  return [task.kind, p.tour ?? p.poi ?? p.node ?? p.station ?? ""].join(" ").trim();
+/** Told to the visitor whose tour staff cancel (their panel shows the task's reason). */
+export const STAFF_CANCEL_REASON = "cancelled by staff";
+
+const describe = (ui, task) => taskName(ui.store.site, task);
+
+/** Cancel after an accessible confirmation (tasks and robots views). */
+export async function cancelTask(ui, task) {
+  const label = describe(ui, task);
+  const running = task.state !== "queued";
+  const ok = await confirmAction({
+    title: `Cancel ${label}?`,
+    text: running
+      ? `${task.robot ?? "Its robot"} stops and the visitor is told the tour was cancelled by staff. This cannot be undone.`
+      : "It leaves the queue and its requester is told it was cancelled by staff. This cannot be undone.",
+    confirm: `Cancel ${label}`,
+    keep: "Keep the task",
+  });
+  if (!ok) return;
+  await ui.act(`Cancel ${label}`, () => ui.api.post(`/api/tasks/${encodeURIComponent(task.id)}/cancel`, { reason: STAFF_CANCEL_REASON }));
 }
 
 async function create(ui, event) {
@@ -26,7 +45,7 @@ function targets(ui, kind) {
   const site = ui.store.site;
   if (kind === "tour") return site.tours.map((t) => [t.id, t.name || t.id]);
   if (kind === "go_to_poi") return site.pois.map((p) => [p.id, p.name || p.id]);
-  if (kind === "go_to") return site.nodes.map((n) => [n.id, n.id]);
+  if (kind === "go_to") return site.nodes.map((n) => [n.id, `${placeName(site, n.id)} · ${n.id}`]);
   return [];
 }
 
@@ -48,11 +67,11 @@ function createForm(ui) {
 
 function taskActions(ui, task) {
   const id = encodeURIComponent(task.id);
-  const label = describe(task);
+  const label = describe(ui, task);
   const reassignId = `reassign-${task.id}`;
   const priorityId = `priority-${task.id}`;
   return html`<div class="actions">
-    <button type="button" class="danger" @click=${() => ui.act(`Cancel ${label}`, () => ui.api.post(`/api/tasks/${id}/cancel`, { reason: "cancelled from the console" }))}>Cancel <span class="sr-only">${label}</span></button>
+    <button type="button" class="danger" @click=${() => cancelTask(ui, task)}>Cancel <span class="sr-only">${label}</span></button>
     <label for=${priorityId} class="sr-only">Priority of ${label}</label>
     <input id=${priorityId} type="number" min="0" max="100" size="3" .value=${String(task.priority)}>
     <button type="button" class="secondary" @click=${() => ui.act(`Priority of ${label}`, () => ui.api.post(`/api/tasks/${id}/priority`, { priority: Number(document.getElementById(priorityId).value) }))}>Set priority</button>
@@ -65,7 +84,7 @@ function taskActions(ui, task) {
 }
 
 async function showHistory(ui, task) {
-  await ui.act(`History of ${describe(task)}`, async () => {
+  await ui.act(`History of ${describe(ui, task)}`, async () => {
     ui.history = { task, rows: await ui.api.get(`/api/tasks/${encodeURIComponent(task.id)}/history`) };
   });
 }
@@ -75,9 +94,9 @@ function progress(ui, task) {
   const s = robot?.state;
   if (task.kind === "tour" && s?.poi) {
     const tour = ui.store.site.tours.find((t) => t.id === task.params.tour);
-    if (tour) return `${tour.points.indexOf(s.poi) + 1} of ${tour.points.length} (${s.poi})`;
+    if (tour) return `${tour.points.indexOf(s.poi) + 1} of ${tour.points.length} (${poiName(ui.store.site, s.poi)})`;
   }
-  return s?.node ? `at ${s.node}` : "—";
+  return s?.node ? `at ${placeName(ui.store.site, s.node)}` : "—";
 }
 
 export function tasksView(ui) {
@@ -90,21 +109,21 @@ export function tasksView(ui) {
     <h3>Queue</h3>
     <table aria-label="Queued tasks">
       <thead><tr><th scope="col">#</th><th scope="col">Task</th><th scope="col">Priority</th><th scope="col">Robot</th><th scope="col">ETA</th><th scope="col">Requested by</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
-      <tbody>${queued.map((t) => html`<tr><td>${t.queue_position ?? "—"}</td><td>${describe(t)}</td><td>${t.priority}</td><td>${t.pinned_robot ?? "any"}</td><td>${duration(t.eta_s)}</td><td>${t.requester}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
+      <tbody>${repeat(queued, (t) => t.id, (t) => html`<tr data-task=${t.id}><td>${t.queue_position ?? "—"}</td><td>${describe(ui, t)}</td><td>${t.priority}</td><td>${t.pinned_robot ?? "any"}</td><td>${duration(t.eta_s)}</td><td>${t.requester}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
     </table>
     ${queued.length ? "" : html`<p class="muted">The queue is empty.</p>`}
     <h3>Running</h3>
     <table aria-label="Running tasks">
       <thead><tr><th scope="col">Task</th><th scope="col">Robot</th><th scope="col">State</th><th scope="col">Progress</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
-      <tbody>${running.map((t) => html`<tr><td>${describe(t)}${t.internal ? html` <span class="muted">(automatic)</span>` : ""}</td><td>${t.robot ?? "—"}</td><td>${t.state}</td><td>${progress(ui, t)}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
+      <tbody>${repeat(running, (t) => t.id, (t) => html`<tr data-task=${t.id}><td>${describe(ui, t)}${t.internal ? html` <span class="muted">(automatic)</span>` : ""}</td><td>${t.robot ?? "—"}</td><td>${t.state}</td><td>${progress(ui, t)}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
     </table>
     <h3>History</h3>
     <table aria-label="Finished tasks">
       <thead><tr><th scope="col">Task</th><th scope="col">Robot</th><th scope="col">Outcome</th><th scope="col">Ended</th><th scope="col">Reason</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
-      <tbody>${history.map((t) => html`<tr><td>${describe(t)}</td><td>${t.robot ?? "—"}</td><td class=${`state-${t.state}`}>${t.state}</td><td>${clock(t.ended_at ?? t.updated_at)}</td><td>${t.reason ?? ""}</td><td><button type="button" class="secondary" @click=${() => showHistory(ui, t)}>History <span class="sr-only">of ${describe(t)}</span></button></td></tr>`)}</tbody>
+      <tbody>${repeat(history, (t) => t.id, (t) => html`<tr data-task=${t.id}><td>${describe(ui, t)}</td><td>${t.robot ?? "—"}</td><td class=${`state-${t.state}`}>${t.state}</td><td>${clock(t.ended_at ?? t.updated_at)}</td><td>${t.reason ?? ""}</td><td><button type="button" class="secondary" @click=${() => showHistory(ui, t)}>History <span class="sr-only">of ${describe(ui, t)}</span></button></td></tr>`)}</tbody>
     </table>
     ${ui.history
-      ? html`<section aria-labelledby="history-title"><h3 id="history-title">History of ${describe(ui.history.task)} (${ui.history.task.id})</h3>
+      ? html`<section aria-labelledby="history-title"><h3 id="history-title">History of ${describe(ui, ui.history.task)} <span class="muted">(task ${ui.history.task.id})</span></h3>
           <ol>${ui.history.rows.map((r) => html`<li>${clock(r.at)} ${r.event}: ${r.state}${r.robot ? ` (${r.robot})` : ""}${r.reason ? ` — ${r.reason}` : ""}</li>`)}</ol></section>`
       : ""}`;
 }

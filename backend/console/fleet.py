@@ -1,0 +1,174 @@
+"""REST routes of the console's fleet controls for a busy day: pause the whole fleet and
+resume, send every robot home, open a door or call an elevator by hand. Each is logged in the
+event log with who did it (docs/console.md, "Fleet")."""
+
+from __future__ import annotations
+
+import time
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, HTTPException, Path, Request, status
+from pydantic import BaseModel, ConfigDict, Field
+
+from backend.api.deps import Sites, Staff, Store, Tasks, not_found
+from backend.console.routes import Feed
+from backend.tasks.manager import TaskManager
+from backend.tasks.model import TaskError
+from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api", tags=["console"])
+
+Name = Annotated[str, Path(max_length=64)]
+HOME_PRIORITY = 10
+"""As "Send to charge" in the Robots view."""
+
+
+class Pause(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    reason: str = Field(default="", max_length=200)
+
+
+class Call(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    floor: str = Field(min_length=1, max_length=64)
+
+
+def _fleet_view(request: Request, manager: TaskManager) -> dict[str, Any]:
+    """The Task Manager says whether it is paused; who paused it, when and why is kept here."""
+    state: dict[str, Any] = (
+        (getattr(request.app.state, "fleet_pause", None) or {}) if manager.paused else {}
+    )
+    return {
+        "paused": bool(manager.paused),
+        "by": state.get("by"),
+        "since": state.get("since"),
+        "reason": state.get("reason", ""),
+    }
+
+
+@router.get("/fleet")
+async def fleet_state(request: Request, _: Staff, manager: Tasks) -> dict[str, Any]:
+    """Whether the fleet is paused, since when, by whom and why."""
+    return _fleet_view(request, manager)
+
+
+@router.post("/fleet/pause")
+async def pause_fleet(
+    request: Request,
+    who: Staff,
+    manager: Tasks,
+    db: Store,
+    body: Annotated[Pause | None, Body()] = None,
+) -> dict[str, Any]:
+    """No robot is given a task (queued tasks wait, idle robots stay where they are) until
+    staff resume; running tasks go on. Not kept across a server restart."""
+    reason = (body or Pause()).reason
+    if not manager.paused:
+        manager.set_paused(True)
+        request.app.state.fleet_pause = {"by": who.name, "since": time.time(), "reason": reason}
+        db.record_event("fleet_paused", "console", {"by": who.name, "reason": reason})
+    return _fleet_view(request, manager)
+
+
+@router.post("/fleet/resume")
+async def resume_fleet(request: Request, who: Staff, manager: Tasks, db: Store) -> dict[str, Any]:
+    """Dispatch again: queued tasks go to free robots at once."""
+    if manager.paused:
+        request.app.state.fleet_pause = None
+        db.record_event("fleet_resumed", "console", {"by": who.name})
+        manager.set_paused(False)
+    return _fleet_view(request, manager)
+
+
+@router.post("/fleet/home")
+async def send_fleet_home(who: Staff, manager: Tasks, db: Store) -> dict[str, Any]:
+    """Every online robot in service gets a charge task pinned to it (a free charging
+    station; priority 10): one without a task goes at once, one on a tour after it."""
+    sent: list[dict[str, str]] = []
+    skipped: list[dict[str, str]] = []
+    for name, robot in sorted(manager.robots.items()):
+        if not robot.online:
+            skipped.append({"robot": name, "why": "offline"})
+        elif robot.out_of_service:
+            skipped.append({"robot": name, "why": "out of service"})
+        else:
+            try:
+                task = manager.request(
+                    "charge", {}, priority=HOME_PRIORITY, requester=who.name, robot=name
+                )
+            except TaskError as exc:
+                skipped.append({"robot": name, "why": str(exc)})
+                continue
+            sent.append({"robot": name, "task_id": task.id})
+    db.record_event(
+        "fleet_sent_home", "console", {"by": who.name, "robots": [s["robot"] for s in sent]}
+    )
+    return {"sent": sent, "skipped": skipped}
+
+
+def _building(request: Request) -> Any:
+    building = getattr(request.app.state, "building", None)
+    if building is None:
+        raise HTTPException(status.HTTP_409_CONFLICT, "the building interface is off")
+    return building
+
+
+@router.post("/building/doors/{door}/open", status_code=status.HTTP_202_ACCEPTED)
+async def open_door(
+    request: Request, who: Staff, service: Sites, feed: Feed, db: Store, door: Name
+) -> dict[str, Any]:
+    """Open a door by hand: the building holds it open for the console until "close" or
+    the door's longest hold (``max_hold_s``). Its state shows in door_opened/door_closed; a
+    door that does not open raises the building_command_failed alert."""
+    if not any(d.id == door for d in service.site.doors):
+        raise not_found(f"door {door!r}")
+    _building(request)
+    feed.endpoint.publish(OpenDoor(door=door))
+    db.record_event("door_opened_by_hand", "console", {"door": door, "by": who.name})
+    return {"door": door, "by": who.name}
+
+
+@router.post("/building/doors/{door}/close", status_code=status.HTTP_202_ACCEPTED)
+async def close_door(
+    request: Request, who: Staff, service: Sites, feed: Feed, db: Store, door: Name
+) -> dict[str, Any]:
+    """Let go of a door opened by hand (it closes unless a robot holds it too)."""
+    if not any(d.id == door for d in service.site.doors):
+        raise not_found(f"door {door!r}")
+    _building(request)
+    feed.endpoint.publish(ReleaseDoor(door=door))
+    db.record_event("door_released_by_hand", "console", {"door": door, "by": who.name})
+    return {"door": door, "by": who.name}
+
+
+@router.post("/building/elevators/{elevator}/call", status_code=status.HTTP_202_ACCEPTED)
+async def call_elevator(
+    request: Request,
+    who: Staff,
+    service: Sites,
+    feed: Feed,
+    db: Store,
+    elevator: Name,
+    body: Annotated[Call, Body()],
+) -> dict[str, Any]:
+    """Call an elevator's car to a floor by hand; elevator_in_position says when it is there."""
+    lift = next((e for e in service.site.elevators if e.id == elevator), None)
+    if lift is None:
+        raise not_found(f"elevator {elevator!r}")
+    floors = [s.floor for s in lift.stops]
+    if body.floor not in floors:
+        raise HTTPException(
+            status.HTTP_422_UNPROCESSABLE_CONTENT,
+            f"elevator {elevator} has no stop on floor {body.floor!r} (it stops at "
+            f"{', '.join(floors)})",
+        )
+    _building(request)
+    feed.endpoint.publish(CallElevator(elevator=elevator, floor=body.floor))
+    db.record_event(
+        "elevator_called_by_hand",
+        "console",
+        {"elevator": elevator, "floor": body.floor, "by": who.name},
+    )
+    return {"elevator": elevator, "floor": body.floor, "by": who.name}

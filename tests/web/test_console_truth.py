@@ -1,0 +1,223 @@
+"""The staff console says what the server says (issue 33, "The staff console"): the tasks view
+equals GET /api/tasks after live updates, the event log holds the history from before sign-in
+and reports its failures, irreversible actions ask first."""
+
+from __future__ import annotations
+
+import asyncio
+from types import SimpleNamespace
+from typing import Any
+
+import httpx
+import pytest
+from playwright.async_api import expect
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
+
+QUEUE_ROWS = """() => [...document.querySelectorAll('table[aria-label="Queued tasks"] tbody tr')]
+    .map(tr => [tr.dataset.task, tr.cells[0].textContent.trim(), tr.cells[2].textContent.trim(),
+                tr.cells[3].textContent.trim(), tr.querySelector('input[type=number]').value])"""
+
+
+async def api_queue(http: httpx.AsyncClient) -> list[list[str]]:
+    """The queue as GET /api/tasks lists it, in the shape QUEUE_ROWS reads the page."""
+    tasks = (await http.get("/api/tasks", params={"limit": 300})).json()["tasks"]
+    return [
+        [
+            t["id"],
+            str(t["queue_position"]),
+            str(t["priority"]),
+            t["pinned_robot"] or "any",
+            str(t["priority"]),
+        ]
+        for t in tasks
+        if t["state"] == "queued"
+    ]
+
+
+async def wait_queue_equals(page: Any, expected: list[list[str]]) -> None:
+    await page.wait_for_function(
+        f"expected => JSON.stringify(({QUEUE_ROWS})()) === JSON.stringify(expected)",
+        arg=expected,
+        timeout=20_000,
+    )
+
+
+async def request_tours(http: httpx.AsyncClient, tours: list[str]) -> list[str]:
+    ids = []
+    for tour in tours:
+        reply = await http.post("/api/tasks", json={"kind": "tour", "params": {"tour": tour}})
+        assert reply.status_code == 201, reply.text
+        ids.append(reply.json()["id"])
+    return ids
+
+
+async def test_set_priority_moves_the_task_and_every_position_as_the_server_does(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        async with fleet.http() as http:
+            ids = await request_tours(http, ["ground", "upstairs", "highlights"])
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await web.open_view(page, "Tasks")
+            await wait_queue_equals(page, await api_queue(http))
+            last = page.locator(f'tr[data-task="{ids[2]}"]')
+            await last.get_by_role("spinbutton").fill("90")
+            await last.get_by_role("button", name="Set priority").click()
+            await expect(
+                page.get_by_role("status").filter(has_text="Priority of Tour: ")
+            ).to_contain_text("done")
+            expected = await api_queue(http)
+            assert [row[0] for row in expected] == [ids[2], ids[0], ids[1]]
+            assert expected[0][2] == "90"
+            await wait_queue_equals(page, expected)
+            # The names of the site, not its ids.
+            await expect(last).to_contain_text("Tour: ")
+            await web.axe_check(page)
+
+
+async def test_event_log_has_the_history_and_concurrent_reloads_agree(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        async with fleet.http() as http:
+            await request_tours(http, ["ground", "upstairs"])
+            before = await http.get("/api/events", params={"latest": "true", "limit": 1000})
+            logged = len(before.json()["events"])
+            assert logged >= 3
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await web.open_view(page, "Event log")
+            count = page.locator("#event-count")
+            await page.wait_for_function(
+                f"guidebotConsole.store.events.length >= {logged}", timeout=20_000
+            )
+            now = (await http.get("/api/events", params={"latest": "true", "limit": 1000})).json()
+            await expect(count).to_contain_text(f"{len(now['events'])} events")
+            # Two reloads at once (the hub's reconnect and the start, say) both complete.
+            await page.evaluate(
+                "() => { const s = guidebotConsole.store;"
+                " return Promise.all([s.reload(), s.reload()]); }"
+            )
+            now = (await http.get("/api/events", params={"latest": "true", "limit": 1000})).json()
+            await expect(count).to_contain_text(f"{len(now['events'])} events")
+            await expect(page.get_by_text("That is the whole event log.")).to_be_visible()
+            # Ids are named: the task's tour.
+            await expect(page.get_by_role("table", name="Events")).to_contain_text(
+                "task=Tour: First floor tour ("
+            )
+            # Paged back from the REST log, a page at a time (3 rows here, 1000 in use).
+            await page.evaluate(
+                "() => { guidebotConsole.store.eventPage = 3;"
+                " return guidebotConsole.store.reload(); }"
+            )
+            await expect(count).to_contain_text("3 events loaded")
+            await page.get_by_role("button", name="Load older events").click()
+            await expect(count).to_contain_text("6 events loaded")
+            shown = await page.evaluate("guidebotConsole.store.events.map(e => e.id)")
+            latest = await http.get("/api/events", params={"latest": "true", "limit": 6})
+            assert shown == [e["id"] for e in latest.json()["events"]]
+            # A refresh that fails says so on the page.
+            watch.expect_error(r"status of 500")
+            await page.route("**/api/locks", lambda route: route.fulfill(status=500, body="{}"))
+            await page.evaluate("guidebotConsole.hub.dispatchEvent(new Event('connect'))")
+            await expect(page.locator("#page-error")).to_contain_text("could not refresh")
+            await page.unroute("**/api/locks")
+            await page.evaluate("guidebotConsole.hub.dispatchEvent(new Event('connect'))")
+            await expect(page.locator("#page-error")).to_have_text("")
+            # The REST log pages back from the oldest row shown.
+            ids = [e["id"] for e in before.json()["events"]]
+            older = await http.get(
+                "/api/events", params={"latest": "true", "before_id": ids[-1], "limit": 2}
+            )
+            assert [e["id"] for e in older.json()["events"]] == ids[-3:-1]
+
+
+async def test_cancelling_a_task_asks_first_and_tells_the_requester(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        async with fleet.http() as http:
+            [task] = await request_tours(http, ["ground"])
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await web.open_view(page, "Tasks")
+            row = page.locator(f'tr[data-task="{task}"]')
+            await row.get_by_role("button", name="Cancel").click()
+            dialog = page.get_by_role("dialog", name="Cancel Tour: Ground floor tour?")
+            await expect(dialog).to_be_visible()
+            await expect(dialog.get_by_role("button", name="Keep the task")).to_be_focused()
+            await web.axe_check(page)
+            await web.screenshot(page, "console-confirm-cancel")
+            await dialog.get_by_role("button", name="Keep the task").click()
+            await expect(dialog).to_have_count(0)
+            assert (await http.get(f"/api/tasks/{task}")).json()["state"] == "queued"
+            await page.keyboard.press("Escape")  # nothing open: nothing happens
+            await row.get_by_role("button", name="Cancel").click()
+            await dialog.get_by_role("button", name="Cancel Tour: Ground floor tour").click()
+            await expect(dialog).to_have_count(0)
+            finished = page.get_by_role("table", name="Finished tasks")
+            await expect(finished.locator(f'tr[data-task="{task}"]')).to_contain_text(
+                "cancelled by staff"
+            )
+            status = (await http.get(f"/api/tasks/{task}")).json()
+            assert status["state"] == "cancelled"
+            assert status["reason"].startswith("cancelled by staff")
+
+
+async def test_cancelling_a_running_tour_from_the_robots_view_asks_and_gives_the_reason(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=1, time_scale=4) as fleet:
+        async with fleet.http() as http:
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await expect(page.get_by_role("button", name="robot R1")).to_be_visible(timeout=20_000)
+            [task] = await request_tours(http, ["ground"])
+            await web.open_view(page, "Robots")
+            card = page.get_by_role("region", name="R1")
+            await expect(card).to_contain_text("Tour: Ground floor tour", timeout=20_000)
+            await card.get_by_role("button", name="Cancel R1's task").click()
+            dialog = page.get_by_role("dialog", name="Cancel Tour: Ground floor tour?")
+            await expect(dialog).to_contain_text("the visitor is told")
+            await dialog.get_by_role("button", name="Cancel Tour: Ground floor tour").click()
+            await expect(
+                page.get_by_role("status").filter(has_text="Cancel Tour: Ground floor tour: done")
+            ).to_be_visible()
+            status = (await http.get(f"/api/tasks/{task}")).json()
+            assert status["state"] == "cancelled"
+            assert status["reason"] == "cancelled by staff (desk)"
+
+
+async def test_a_snapshot_taken_before_a_robot_was_lost_does_not_bring_it_back(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=1) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, web.operator_token)
+        await expect(page.get_by_role("button", name="robot R1")).to_be_visible(timeout=20_000)
+        fetched, release = asyncio.Event(), asyncio.Event()
+
+        async def late_answer(route: Any) -> None:
+            response = await route.fetch()  # R1 online, as the server says now
+            fetched.set()
+            await release.wait()
+            await route.fulfill(response=response)
+
+        await page.route("**/api/robots", late_answer)
+        reload = asyncio.ensure_future(page.evaluate("guidebotConsole.store.reload()"))
+        await fetched.wait()
+        await fleet.kill("R1")
+        await web.open_view(page, "Robots")
+        heading = page.get_by_role("heading", name="R1")
+        await expect(heading).to_contain_text("lost", timeout=20_000)
+        release.set()
+        await reload
+        await expect(heading).to_contain_text("lost")
+        assert await page.evaluate("guidebotConsole.store.robots.get('R1').online") is False

@@ -1,0 +1,111 @@
+// The site's names for what the server calls by id: tours, points, stations, doors, elevators
+// and the places robots stand at (a node is named by the point, station, door or elevator
+// there, else by the nearest point of interest on its floor).
+
+const byId = (list, id) => (list ?? []).find((x) => x.id === id);
+
+export function floorName(site, floor) {
+  const f = byId(site.floors, floor);
+  return f?.name || floor || "";
+}
+
+export function tourName(site, id) {
+  return byId(site.tours, id)?.name || id;
+}
+
+export function poiName(site, id) {
+  return byId(site.pois, id)?.name || id;
+}
+
+export function doorName(site, id) {
+  const door = byId(site.doors, id);
+  return door?.name || `door ${id}`;
+}
+
+export function elevatorName(site, id) {
+  const lift = byId(site.elevators, id);
+  return lift?.name || `elevator ${id}`;
+}
+
+/** A node as a person would name the place: "Welcome hall", "charging station station_a",
+ * "elevator lift", "door door_gallery", "near Roman mosaics" (the floor is said beside it). */
+export function placeName(site, nodeId) {
+  if (!nodeId) return "—";
+  const node = byId(site.nodes, nodeId);
+  const poi = (site.pois ?? []).find((p) => p.node === nodeId);
+  if (poi) return poi.name || poi.id;
+  const station = (site.charging_stations ?? []).find((s) => s.node === nodeId);
+  if (station) return `charging station ${station.id}`;
+  const lift = (site.elevators ?? []).find((e) => e.stops.some((s) => s.node === nodeId));
+  if (lift) return elevatorName(site, lift.id);
+  const door = (site.doors ?? []).find((d) => d.node === nodeId);
+  if (door) return doorName(site, door.id);
+  if (!node) return nodeId;
+  let best = null;
+  let bestD = Infinity;
+  for (const p of site.pois ?? []) {
+    const at = byId(site.nodes, p.node);
+    if (!at || at.floor !== node.floor) continue;
+    const d = Math.hypot(at.x - node.x, at.y - node.y);
+    if (d < bestD) {
+      best = p;
+      bestD = d;
+    }
+  }
+  return best ? `near ${best.name || best.id}` : `${nodeId} (${floorName(site, node.floor)})`;
+}
+
+/** What a task does, in the site's words: "Tour: Highlights", "Go to: Roman mosaics". */
+export function taskName(site, task) {
+  const p = task.params ?? {};
+  if (task.kind === "tour") return `Tour: ${tourName(site, p.tour)}`;
+  if (task.kind === "go_to_poi") return `Go to: ${poiName(site, p.poi)}`;
+  if (task.kind === "go_to") return `Go to: ${placeName(site, p.node)}`;
+  if (task.kind === "charge") return p.station ? `Charge at ${placeName(site, byId(site.charging_stations, p.station)?.node)}` : "Charge";
+  return [task.kind, ...Object.values(p)].join(" ");
+}
+
+/** The task a robot runs, by name ("an automatic task" for one the console does not list). */
+export function taskLabel(store, id) {
+  if (!id) return "none";
+  const task = store.tasks.get(id);
+  return task ? taskName(store.site, task) : "an automatic task";
+}
+
+const WAITS = { waiting_door: "door", door_blocked: "door", waiting_area: "area", waiting_elevator: "elevator" };
+
+function neighbours(site, nodeId) {
+  const out = new Set([nodeId]);
+  for (const e of site.edges ?? []) {
+    if (e.a === nodeId) out.add(e.b);
+    if (e.b === nodeId) out.add(e.a);
+  }
+  return out;
+}
+
+/** What a robot stands and waits for, from robot_state.navigation, the lock views and the
+ * site around its node ("waiting for door door_gallery to open", "blocked: door door_gallery
+ * did not open", "waiting for area corridor (held by R2)"); null when it does not wait. */
+export function waitingFor(store, s) {
+  const what = WAITS[s?.navigation];
+  if (!what) return null;
+  const site = store.site;
+  if (what === "area") {
+    const lock = [...store.locks.values()].find((l) => (l.waiting ?? []).includes(s.robot));
+    if (!lock) return "waiting for a restricted area";
+    return `waiting for area ${lock.area}${lock.holder ? ` (held by ${lock.holder})` : ""}`;
+  }
+  const near = neighbours(site, s.node);
+  if (what === "door") {
+    const door = (site.doors ?? []).find((d) => near.has(d.node));
+    const name = door ? doorName(site, door.id) : "a door";
+    return s.navigation === "door_blocked" ? `blocked: ${name} did not open` : `waiting for ${name} to open`;
+  }
+  const lift = (site.elevators ?? []).find((e) => e.stops.some((st) => near.has(st.node)));
+  return `waiting for ${lift ? elevatorName(site, lift.id) : "the elevator"}`;
+}
+
+/** A robot's mode as the console says it: the wait when it waits, else its mode. */
+export function robotDoing(store, s) {
+  return waitingFor(store, s) ?? s?.mode ?? "—";
+}
