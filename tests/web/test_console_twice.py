@@ -48,9 +48,9 @@ async def test_two_consoles_and_the_site_editor_stay_live_together(
             await web.open_view(page, "Tasks")
         for page in consoles:
             finished = page.get_by_role("table", name="Finished tasks")
-            await expect(finished.get_by_role("row").filter(has_text="tour short")).to_contain_text(
-                "done", timeout=150_000
-            )
+            await expect(
+                finished.get_by_role("row").filter(has_text="Tour: Short tour")
+            ).to_contain_text("done", timeout=150_000)
         # All three pages are still signed in and live: none was replaced by another.
         for page in pages:
             await expect(page.locator("#connection")).to_have_attribute("data-status", "open")
