@@ -58,6 +58,9 @@ class RobotState(PayloadModel):
     areas: list[str] = Field(default_factory=list, max_length=64)
     """Restricted areas the robot holds or was granted: after a server restart the Traffic
     Manager takes them from here (its lock table starts empty)."""
+    boot_id: str | None = Field(default=None, max_length=64)
+    """A random id drawn once per agent process: a new one for a known robot tells the server
+    the old process is gone (its holds are stale: docs/server.md, "Lock policy")."""
     seq: int = 0
 
 
