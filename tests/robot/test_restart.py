@@ -178,3 +178,53 @@ async def test_robot_restarted_inside_the_corridor_keeps_it_and_does_not_wait_on
             await assert_safe(f)
         finally:
             await new.stop()
+
+
+async def test_restarted_robot_lets_go_of_the_door_its_old_process_held(
+    tmp_path: Path, helpers: SimpleNamespace
+) -> None:
+    """R1 is killed just after D0 opened for it, before driving through; its new process,
+    back in the hall, does not stand in the doorway: the door closes at once rather than
+    standing open until the hold's time-out (max_hold_s, 120 s)."""
+    async with fleet(tmp_path, ["R1", "R2"], external=frozenset({"R1"})) as f:
+        cutter = helpers.LinkCutter(f.server.port)
+        await cutter.start()
+        old = f.new_agent("R1", url=f"http://127.0.0.1:{cutter.port}", start_node="hall")
+        await old.start()
+        hub = f.server.app.state.hub
+        await f.wait_for(lambda: "R1" in hub.clients and f.states.get("R1", {}).get("boot_id"))
+        task = await post_go(f, "R1", "west")
+
+        def opened_for_r1() -> bool:
+            return any(
+                m.type == "door_opened" and m.destination == "R1" and m.payload["door"] == "D0"
+                for m in f.seen
+            )
+
+        await f.wait_for(opened_for_r1)
+        await cutter.cut()
+        await f.wait_for(lambda: not old.hub.connected.is_set())
+        await old.stop()
+        await cutter.stop()
+        await f.wait_for(lambda: f.of("robot_disconnected", robot="R1"))
+        keeper = f.server.app.state.building.doors["D0"]
+        assert "R1" in keeper.holders  # the dead process's hold
+        async with httpx.AsyncClient(base_url=f.server.url) as http:
+            r = await http.post(
+                f"/api/tasks/{task}/cancel",
+                headers={"Authorization": f"Bearer {f.server.admin_token}"},
+            )
+        assert r.status_code < 300, r.text  # so that the new process does not pass D0 again
+        mark = len(f.seen)
+        new = await restart_r1(f, at="hall")
+        try:
+            await f.wait_for(
+                lambda: any(
+                    m.type == "door_closed" and m.destination is None and m.payload["door"] == "D0"
+                    for m in f.seen[mark:]
+                ),
+                timeout=15,
+            )
+            assert "R1" not in keeper.holders
+        finally:
+            await new.stop()
