@@ -7,6 +7,7 @@ hub) and on demand (``publish_now``) after a reconnect so the server resynchroni
 from __future__ import annotations
 
 import asyncio
+import secrets
 from collections.abc import Callable
 from typing import Any
 
@@ -45,6 +46,9 @@ class StateReporter(Service):
         self.poi: tuple[str | None, str] | None = None
         """(task id, point) of the last show_point: the tour's current step."""
         self.seq = 0
+        self.boot_id = secrets.token_hex(8)
+        """Drawn once per agent process (robot_state ``boot_id``): the server tells a restart
+        from a reconnect by it and drops the old process's holds."""
 
     async def on_start(self) -> None:
         self.subscribe(self.ep, "module_status", self._on_module_status)
@@ -99,6 +103,7 @@ class StateReporter(Service):
             "poi": self.poi[1] if self.poi and self.poi[0] == self.tasks.task_id else None,
             "areas": self.nav.areas_held(),
             "ended": self.ended(),
+            "boot_id": self.boot_id,
             "seq": self.seq,
         }
 

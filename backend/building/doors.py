@@ -13,7 +13,8 @@ Safety rules (docs/building.md, "Doors"):
   would announce the door open a moment before the interface closes it: the soak saw a robot
   drive on such an announcement);
 - robots hold a door from ``open_door`` until ``release_door``; the coil is cleared when the
-  last holder lets go, or when a holder has held it ``max_hold_s`` (a lost robot).
+  last holder lets go, when a holder has held it ``max_hold_s`` (a lost robot), or when a
+  holder's agent restarted and it does not stand on the door's node (BuildingInterface).
 """
 
 from __future__ import annotations

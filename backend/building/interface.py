@@ -31,6 +31,7 @@ from backend.building.elevators import ElevatorWatch
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
 from backend.health import ComponentState
+from backend.traffic.restarts import BootIds
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.building import (
@@ -120,6 +121,8 @@ class BuildingInterface(Service):
         }
         self._cabin: dict[tuple[str, str], bool] = {}
         self.elevators = ElevatorWatch(config)
+        self.boots = BootIds()
+        """Each robot's agent process: a new one lets go of the doors the old one held."""
         """Where each car is (``elevator_state``), for the console."""
         self._moved: dict[str, float] = {}
         """Elevator -> monotonic time its cabin last arrived at or left a stop (its progress)."""
@@ -149,6 +152,7 @@ class BuildingInterface(Service):
             self.subscribe(
                 self.endpoint, type_name, functools.partial(self._spawn, handler=handler)
             )
+        self.subscribe(self.endpoint, "robot_state", self._on_robot_state)
 
     async def _cancel_commands(self) -> None:
         for task in list(self._commands):
@@ -441,6 +445,29 @@ class BuildingInterface(Service):
             holder,
             keeper.door.max_hold_s,
         )
+        self._let_go(keeper, holder)
+
+    def _on_robot_state(self, message: Message) -> None:
+        """A robot whose agent restarted (a new ``boot_id``, backend/traffic/restarts.py): the
+        doors its old process held open are let go at once, but the one it stands in."""
+        robot, node = message.payload.get("robot"), message.payload.get("node")
+        if robot != message.source or not isinstance(robot, str) or not isinstance(node, str):
+            return
+        if self.boots.restarted(robot, message.payload.get("boot_id")) is None:
+            return
+        for keeper in self.doors.values():
+            if robot in keeper.holders and keeper.door.node != node:
+                log.warning(
+                    "door %s: %s's agent restarted (the process that held it is gone) and "
+                    "reports %s: hold dropped",
+                    keeper.door.id,
+                    robot,
+                    node,
+                )
+                self._let_go(keeper, robot)
+
+    def _let_go(self, keeper: DoorKeeper, holder: str) -> None:
+        """Drop ``holder``'s hold; the door closes when nobody else holds it."""
         if keeper.release(holder):
             task = asyncio.get_running_loop().create_task(self._close(keeper, best_effort=True))
             self._commands.add(task)

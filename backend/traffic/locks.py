@@ -368,14 +368,21 @@ class AreaLocks:
         """Grant waiting requests in arrival order; an earlier waiter's areas are claimed, so a
         later one cannot overtake it on those areas (no starvation)."""
         grants: list[Grant] = []
-        claimed: set[str] = set()
+        claimed: dict[str, list[_Wait]] = {}
         for wait in sorted(self._waits.values(), key=lambda w: w.seq):
+            # An area the robot holds is never waited for, and a claim does not hold back the
+            # robot its claimant waits on: either would make it wait on itself (issue 36).
             free = all(
-                (self._locks[a].holder in (None, wait.robot)) and a not in claimed
+                self._locks[a].holder == wait.robot
+                or (
+                    self._locks[a].holder is None
+                    and all(self._waits_on(w, wait.robot) for w in claimed.get(a, ()))
+                )
                 for a in wait.areas
             )
             if not free:
-                claimed.update(wait.areas)
+                for a in wait.areas:
+                    claimed.setdefault(a, []).append(wait)
                 continue
             del self._waits[wait.robot]
             now = time.time()
@@ -391,6 +398,10 @@ class AreaLocks:
                         lock.offline_since = time.monotonic()
                 grants.append(Grant(wait.robot, a, wait.request_id))
         return grants
+
+    def _waits_on(self, wait: _Wait, robot: str) -> bool:
+        """``wait`` needs an area ``robot`` holds."""
+        return any(self._locks[a].holder == robot for a in wait.areas)
 
     def _resolve_cycle(self, start: str) -> list[Yield]:
         """Walk the wait-for graph from ``start``; on a cycle, the newest waiter yields."""

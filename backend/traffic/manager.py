@@ -15,6 +15,7 @@ from pydantic import ValidationError
 
 from backend.alerts import AlertStore
 from backend.traffic.locks import AreaLocks, Cut, Grant, LockError, LockView, Yield
+from backend.traffic.restarts import BootIds, release_former_holds
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
@@ -57,6 +58,8 @@ class TrafficManager(Service):
         self._removed: dict[str, int] = {}
         """Areas a publish removed -> the site version without them: a robot that asks for
         one (its path was planned on the old site) is told so at once, not refused."""
+        self.boots = BootIds()
+        """Each robot's agent process (robot_state ``boot_id``): a new one drops old holds."""
         # After a restart: robots that may hold locks, whose word comes before any grant.
         self._awaiting: set[str] = set()
         self._deferred: list[Message] = []
@@ -323,6 +326,9 @@ class TrafficManager(Service):
         node = msg.payload.get("node")
         if not isinstance(robot, str) or self._robot_of(msg, robot) is None:
             return
+        known = isinstance(node, str) and node in self.graph
+        if known and (previous := self.boots.restarted(robot, msg.payload.get("boot_id"))):
+            self._restarted(robot, str(node), previous)
         mode = msg.payload.get("mode")
         online = mode != "offline"
         if online and not self.locks.is_online(robot):
@@ -331,7 +337,6 @@ class TrafficManager(Service):
                     "lock_holder_offline", area, f"{robot} is back online; it holds {area}"
                 )
         self.locks.set_online(robot, online)
-        known = isinstance(node, str) and node in self.graph
         here = self.graph.area_at.get(node) if isinstance(node, str) and known else None
         self._adopt(robot, here, msg.payload.get("areas"))
         if robot in self._awaiting:
@@ -369,6 +374,31 @@ class TrafficManager(Service):
             self.locks.set_online(robot, False)
 
     # --- helpers -------------------------------------------------------------------------
+    def _restarted(self, robot: str, node: str, previous: str) -> None:
+        """A new agent process under a known name (the old one is gone): its holds and queue
+        place go at once, but for the area the robot reports being inside (restarts.py)."""
+        done = release_former_holds(self.locks, robot, self.graph.area_at.get(node))
+        self._declared.discard(robot)  # its first word is a declaration, as after our restart
+        why = f"{robot}'s agent restarted (the process that held it is gone) and reports {node}"
+        for area in done.released + done.kept:
+            self.courier.withdraw((robot, area))
+        for area in done.released:
+            self.alerts.resolve("lock_holder_offline", area, f"area {area} released: {why}")
+            reason = f"{why}, outside {area}"
+            self._emit("area_released", {"robot": robot, "area": area, "reason": reason})
+        log.warning("traffic: %s; released %s", why, ", ".join(done.released) or "nothing")
+        self._emit(
+            "robot_restarted",
+            {
+                "robot": robot,
+                "node": node,
+                "released": done.released,
+                "kept": done.kept,
+                "previous_boot_id": previous,
+            },
+        )
+        self._send_grants(done.grants)
+
     def _adopt(self, robot: str, here: str | None, reported: object) -> None:
         """The locks a robot says it holds (robot_state ``areas``) and the area it stands in
         are its own: after a server restart this lock table starts empty, and without this a

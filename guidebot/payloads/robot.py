@@ -76,6 +76,9 @@ class RobotState(PayloadModel):
     """The last tasks the robot ended, newest first: a server that restarted with one of them
     still assigned ends it from here even if its task_ended never arrived (dropped from a
     full queue during a long freeze), rather than giving it out again."""
+    boot_id: str | None = Field(default=None, max_length=64)
+    """A random id drawn once per agent process: a new one for a known robot tells the server
+    the old process is gone (its holds are stale: docs/server.md, "Lock policy")."""
     seq: int = 0
 
 

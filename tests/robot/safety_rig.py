@@ -150,6 +150,19 @@ class Fleet:
     states: dict[str, dict[str, Any]] = field(default_factory=dict)
     """The last robot_state of each robot."""
     changed: asyncio.Event = field(default_factory=asyncio.Event)
+    robots: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """The site's robots (name -> its site entry)."""
+    site_file: Path | None = None
+
+    def new_agent(
+        self, name: str, *, url: str | None = None, start_node: str | None = None
+    ) -> RobotAgent:
+        """A robot agent as the rig starts them (not started): ``url`` another way to the
+        server (a LinkCutter), ``start_node`` where it stands (default: the site's)."""
+        spec = self.robots[name]
+        return rig_agent(
+            url or self.server.url, spec, self.site_file, start_node or spec["start_node"]
+        )
 
     def of(self, type_: str, **fields: Any) -> list[Message]:
         return [
@@ -179,6 +192,26 @@ class Fleet:
         assert ended["outcome"] == "done", f"{robot} to {node}: {ended}"
 
 
+def rig_agent(
+    url: str, robot: dict[str, Any], site_file: Path | None, start_node: str
+) -> RobotAgent:
+    """One robot of the rig: bare simulated base, real WebSocket link to ``url``."""
+    return RobotAgent(
+        AgentConfig(
+            name=robot["name"],
+            server=url,
+            token=robot["token"],
+            can=None,
+            time_scale=ROBOT_SCALE,
+            start_node=start_node,
+            speech_engine=None,
+            state_period_s=0.2,
+            site=site_file,
+            idle_net=None,
+        )
+    )
+
+
 @contextlib.asynccontextmanager
 async def fleet(
     tmp_path: Path,
@@ -186,7 +219,11 @@ async def fleet(
     *,
     start: dict[str, str] | None = None,
     site: dict[str, Any] | None = None,
+    external: frozenset[str] = frozenset(),
+    **settings: Any,
 ) -> AsyncIterator[Fleet]:
+    """``external``: robots of the site the test starts itself (``Fleet.new_agent``);
+    ``settings``: server settings beyond the database and the site."""
     data = site if site is not None else safety_site()
     for robot in data["robots"]:
         if start and robot["name"] in start:
@@ -199,10 +236,13 @@ async def fleet(
         site_file = tmp_path / "site.yaml"
         site_file.write_text(yaml.safe_dump(data))
         checker = InvariantChecker.from_site(validate_site(data))
-        settings = Settings(db_url=f"sqlite+aiosqlite:///{tmp_path}/guidebot.db", site=site_file)
-        async with running_server(settings) as server, contextlib.AsyncExitStack() as stack:
+        config = Settings(
+            db_url=f"sqlite+aiosqlite:///{tmp_path}/guidebot.db", site=site_file, **settings
+        )
+        async with running_server(config) as server, contextlib.AsyncExitStack() as stack:
             seen: list[Message] = []
-            f = Fleet(server, building, {}, checker, seen)
+            f = Fleet(server, building, {}, checker, seen, site_file=site_file)
+            f.robots = {r["name"]: r for r in data["robots"]}
 
             def record(message: Message) -> None:
                 if message.type == "robot_state":
@@ -223,20 +263,9 @@ async def fleet(
             server.app.state.hub.endpoint("test-monitor").subscribe("*", record, tap=True)
             await f.wait_for(lambda: server.app.state.building is not None, timeout=10)
             for r in data["robots"]:
-                agent = RobotAgent(
-                    AgentConfig(
-                        name=r["name"],
-                        server=server.url,
-                        token=r["token"],
-                        can=None,
-                        time_scale=ROBOT_SCALE,
-                        start_node=r["start_node"],
-                        speech_engine=None,
-                        state_period_s=0.2,
-                        site=site_file,
-                        idle_net=None,
-                    )
-                )
+                if r["name"] in external:
+                    continue
+                agent = rig_agent(server.url, r, site_file, r["start_node"])
                 await stack.enter_async_context(agent)
                 f.agents[r["name"]] = agent
             hub = server.app.state.hub

@@ -8,6 +8,7 @@ import pytest
 from pydantic import ValidationError
 
 from backend.traffic import LockState, TrafficManager
+from backend.traffic.locks import AreaLocks, Grant
 from guidebot.bus import Bus
 from guidebot.payloads.traffic import Path
 from guidebot.site import Site, validate_site
@@ -372,3 +373,21 @@ async def test_a_restarted_server_holds_the_last_lives_locks_until_their_robots_
     await r1.wait_for("area_granted")
     assert traffic.locks.holder("elevator") == "R1"
     await traffic.stop()
+
+
+def test_a_robot_never_waits_on_itself_behind_an_earlier_waiters_claim() -> None:
+    """Issue 36: R1 stands in corridor a (kept after its task, or by its restarted agent); R2,
+    earlier, waits for a and the b after it. Without the two exceptions to the claim rule R1
+    would wait behind R2, which waits for R1: a deadlock the wait-for graph does not show."""
+    locks = AreaLocks(["a", "b"])
+    assert locks.request("R1", ["a"])[0] == [Grant("R1", "a", None)]
+    assert locks.request("R2", ["a", "b"], "r2") == ([], [])
+    # Asking again for the area it holds: granted at once.
+    assert locks.request("R1", ["a"], "again")[0] == [Grant("R1", "a", "again")]
+    # Asking for b, to get out: R2's claim on b does not hold back the robot R2 waits on.
+    assert locks.request("R1", ["b"], "out")[0] == [Grant("R1", "b", "out")]
+    assert locks.release_all("R1") == [Grant("R2", "a", "r2"), Grant("R2", "b", "r2")]
+    # Others are served in request order, as before.
+    assert locks.request("R3", ["a"], "r3") == ([], [])
+    assert locks.request("R4", ["a", "b"]) == ([], [])
+    assert locks.release("R2", "a") == [Grant("R3", "a", "r3")]
