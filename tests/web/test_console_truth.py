@@ -5,6 +5,7 @@ and reports its failures, irreversible actions ask first."""
 from __future__ import annotations
 
 import asyncio
+import re
 from types import SimpleNamespace
 from typing import Any
 
@@ -221,3 +222,21 @@ async def test_a_snapshot_taken_before_a_robot_was_lost_does_not_bring_it_back(
         await reload
         await expect(heading).to_contain_text("lost")
         assert await page.evaluate("guidebotConsole.store.robots.get('R1').online") is False
+
+
+async def test_event_log_names_places_and_shows_times_as_times(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """A node_reached row: the node by the site's name, the robot's time stamp as a time, not
+    as a second ``at=`` of Unix seconds."""
+    async with fleet_factory(robots=1) as fleet:
+        async with fleet.http() as http:
+            await request_tours(http, ["ground"])
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, fleet.server.admin_token)
+        await web.open_view(page, "Event log")
+        reached = page.get_by_role("row").filter(has_text="node_reached").first
+        await expect(reached).to_contain_text("reported=", timeout=30_000)
+        text = await reached.inner_text()
+        assert not re.search(r"=\d{9,}\.\d", text), text

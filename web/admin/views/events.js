@@ -50,6 +50,8 @@ function summary(ui, row) {
     node: (v) => ["at", placeName(site, v)],
     poi: (v) => ["point", poiName(site, v)],
     tour: (v) => ["tour", tourName(site, v)],
+    // A time the sender stamped (node_reached: the robot's clock), not a place.
+    at: (v) => (typeof v === "number" ? ["reported", new Date(v * 1000).toLocaleTimeString()] : ["at", v]),
   };
   return Object.entries(d)
     .filter(([, v]) => v !== null && typeof v !== "object")
