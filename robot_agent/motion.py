@@ -26,6 +26,13 @@ PROCESS_STALL_S = 0.5
 (a starved process, a paused VM): that time does not count against the goal's budget, which is
 robot time and runs ``time_scale`` times faster than the wall clock in simulation."""
 
+ODOMETRY_TIMEOUT_S = 2.0
+"""Wall seconds without odometry after which the base is given up ("no odometry from the
+base"): seconds this process ran, a stall of its own not counted (``_next_odometry``)."""
+
+ODOMETRY_SLICE_S = 0.25
+"""The odometry watchdog counts silence in slices this long (``ODOMETRY_TIMEOUT_S``)."""
+
 
 class NavigationError(Exception):
     """A goal could not be reached; ``reason`` is sent in navigation_failed (the payload
@@ -170,12 +177,22 @@ class MotionControl(Service):
         self._send_velocity(0.0, 0.0, force=True)
 
     async def _next_odometry(self) -> None:
+        """Wait for the base's next report; NavigationError after ``ODOMETRY_TIMEOUT_S`` of
+        silence, counted in slices of ``ODOMETRY_SLICE_S``: a slice the process itself stood
+        still through counts as one slice, so the base gets a turn to report after a stall
+        (its report, due meanwhile, used to come after the watchdog's expiry)."""
         self._odom_event.clear()
-        try:
-            async with asyncio.timeout(2.0):  # not wait_for: see _wait_until
-                await self._odom_event.wait()
-        except TimeoutError:
-            raise NavigationError("no odometry from the base") from None
+        silent = 0.0
+        while True:
+            began = time.monotonic()
+            try:
+                async with asyncio.timeout(ODOMETRY_SLICE_S):  # not wait_for: see _wait_until
+                    await self._odom_event.wait()
+                return
+            except TimeoutError:
+                silent += min(time.monotonic() - began, ODOMETRY_SLICE_S)
+            if silent >= ODOMETRY_TIMEOUT_S:
+                raise NavigationError("no odometry from the base") from None
 
     def halt(self, *, force: bool = True) -> None:
         """Command the base to stand still. ``force``: even when the last command was the same
