@@ -21,10 +21,14 @@ from robot_agent.clock import Clock
 
 __all__ = ["MotionControl", "NavState", "NavigationError", "wrap_angle"]
 
-PROCESS_STALL_S = 0.5
+PROCESS_STALL_S = 0.1
 """Wall seconds between two turns of the drive loop beyond which the agent itself stood still
 (a starved process, a paused VM): that time does not count against the goal's budget, which is
-robot time and runs ``time_scale`` times faster than the wall clock in simulation."""
+robot time and runs ``time_scale`` times faster than the wall clock in simulation. The same as
+the simulated bases' longest step (``MAX_STEP_S``, robot_agent/sim_base.py and
+robocan/sim/motor.py): they do not move through the rest of a longer gap, so it must not count
+either (at 0.5 s a loaded machine's 0.3 s turns spent the budget three times faster than the
+simulated robot drove: "stuck")."""
 
 ODOMETRY_TIMEOUT_S = 2.0
 """Wall seconds without odometry after which the base is given up ("no odometry from the

@@ -342,6 +342,36 @@ async def test_a_stall_of_the_agents_own_process_does_not_make_the_robot_stuck()
         await base.stop()
 
 
+async def test_a_slow_process_does_not_make_the_robot_stuck() -> None:
+    """Every turn of the loop 0.3 s late (a loaded machine, each gap shorter than a stall of
+    old, 0.5 s): the simulated base moves 0.1 s of each gap, so the goal's budget must count
+    no more of it."""
+    bus = Bus()
+    clock = Clock(time_scale=50.0)
+    base = SimulatedBase(bus.endpoint("R1.base"), clock)
+    nav = Navigator(bus.endpoint("R1"), clock, "R1", start_node="charge_a")
+
+    async def slow_process() -> None:
+        while True:
+            time.sleep(0.3)  # noqa: ASYNC251 -- the point: the process gets little CPU
+            await asyncio.sleep(0)
+
+    await nav.start()
+    await base.start()
+    try:
+        await nav.turn_to(0.0)
+        x, y = nav.x + 10.0, nav.y
+        slow = asyncio.create_task(slow_process())
+        try:
+            assert await asyncio.wait_for(nav.drive_to(x, y), 60.0) is True
+        finally:
+            slow.cancel()
+        assert math.hypot(nav.x - x, nav.y - y) < 0.3
+    finally:
+        await nav.stop()
+        await base.stop()
+
+
 async def test_a_silent_base_ends_the_goal_with_no_odometry() -> None:
     """The watchdog still fires when the base says nothing (and this process is not stalled)."""
     bus = Bus()
