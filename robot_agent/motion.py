@@ -30,6 +30,12 @@ robocan/sim/motor.py): they do not move through the rest of a longer gap, so it 
 either (at 0.5 s a loaded machine's 0.3 s turns spent the budget three times faster than the
 simulated robot drove: "stuck")."""
 
+ODOM_PERIOD_MAX_S = 0.5
+"""The longest gap between two odometry reports taken for the base's period (the loop's
+gains follow it); a longer one is a stall of this process. Not ``PROCESS_STALL_S``: a base
+reporting every 0.1 s (the simulated RoboCAN encoder) would then be taken for a faster one,
+its gains doubled, and the robot would circle its goal 0.2 m away ("stuck")."""
+
 ODOMETRY_TIMEOUT_S = 2.0
 """Wall seconds without odometry after which the base is given up ("no odometry from the
 base"): seconds this process ran, a stall of its own not counted (``_next_odometry``)."""
@@ -102,7 +108,7 @@ class MotionControl(Service):
         p = message.payload
         ox, oy, oth = float(p.get("x", 0.0)), float(p.get("y", 0.0)), float(p.get("theta", 0.0))
         now = time.monotonic()
-        if self._odom_last and now - self._odom_last < PROCESS_STALL_S:
+        if self._odom_last and now - self._odom_last < ODOM_PERIOD_MAX_S:
             # The base's period, for the loop's gains; a stall of this process is not one.
             self._odom_dt = 0.8 * self._odom_dt + 0.2 * (now - self._odom_last)
         self._odom_last = now
