@@ -27,8 +27,10 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy guidebot backend robot_agent building_sim petri_nets bench
 
+# The suite waits far more than it computes (servers, browsers, robots at work): four pytest-xdist
+# workers share 2 CPUs. `--dist loadgroup` keeps the docker tests in one worker (tests/conftest.py).
 test: $(STAMP) system-deps lint typecheck
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 4 --dist loadgroup
 
 # docs/screenshots/*.png from the browser tests' scenarios (needs /usr/bin/chromium).
 screenshots: $(STAMP) system-deps

@@ -21,10 +21,27 @@ from robot_agent.clock import Clock
 
 __all__ = ["MotionControl", "NavState", "NavigationError", "wrap_angle"]
 
-PROCESS_STALL_S = 0.5
+PROCESS_STALL_S = 0.1
 """Wall seconds between two turns of the drive loop beyond which the agent itself stood still
 (a starved process, a paused VM): that time does not count against the goal's budget, which is
-robot time and runs ``time_scale`` times faster than the wall clock in simulation."""
+robot time and runs ``time_scale`` times faster than the wall clock in simulation. The same as
+the simulated bases' longest step (``MAX_STEP_S``, robot_agent/sim_base.py and
+robocan/sim/motor.py): they do not move through the rest of a longer gap, so it must not count
+either (at 0.5 s a loaded machine's 0.3 s turns spent the budget three times faster than the
+simulated robot drove: "stuck")."""
+
+ODOM_PERIOD_MAX_S = 0.5
+"""The longest gap between two odometry reports taken for the base's period (the loop's
+gains follow it); a longer one is a stall of this process. Not ``PROCESS_STALL_S``: a base
+reporting every 0.1 s (the simulated RoboCAN encoder) would then be taken for a faster one,
+its gains doubled, and the robot would circle its goal 0.2 m away ("stuck")."""
+
+ODOMETRY_TIMEOUT_S = 2.0
+"""Wall seconds without odometry after which the base is given up ("no odometry from the
+base"): seconds this process ran, a stall of its own not counted (``_next_odometry``)."""
+
+ODOMETRY_SLICE_S = 0.25
+"""The odometry watchdog counts silence in slices this long (``ODOMETRY_TIMEOUT_S``)."""
 
 
 class NavigationError(Exception):
@@ -91,7 +108,7 @@ class MotionControl(Service):
         p = message.payload
         ox, oy, oth = float(p.get("x", 0.0)), float(p.get("y", 0.0)), float(p.get("theta", 0.0))
         now = time.monotonic()
-        if self._odom_last and now - self._odom_last < PROCESS_STALL_S:
+        if self._odom_last and now - self._odom_last < ODOM_PERIOD_MAX_S:
             # The base's period, for the loop's gains; a stall of this process is not one.
             self._odom_dt = 0.8 * self._odom_dt + 0.2 * (now - self._odom_last)
         self._odom_last = now
@@ -170,12 +187,22 @@ class MotionControl(Service):
         self._send_velocity(0.0, 0.0, force=True)
 
     async def _next_odometry(self) -> None:
+        """Wait for the base's next report; NavigationError after ``ODOMETRY_TIMEOUT_S`` of
+        silence, counted in slices of ``ODOMETRY_SLICE_S``: a slice the process itself stood
+        still through counts as one slice, so the base gets a turn to report after a stall
+        (its report, due meanwhile, used to come after the watchdog's expiry)."""
         self._odom_event.clear()
-        try:
-            async with asyncio.timeout(2.0):  # not wait_for: see _wait_until
-                await self._odom_event.wait()
-        except TimeoutError:
-            raise NavigationError("no odometry from the base") from None
+        silent = 0.0
+        while True:
+            began = time.monotonic()
+            try:
+                async with asyncio.timeout(ODOMETRY_SLICE_S):  # not wait_for: see _wait_until
+                    await self._odom_event.wait()
+                return
+            except TimeoutError:
+                silent += min(time.monotonic() - began, ODOMETRY_SLICE_S)
+            if silent >= ODOMETRY_TIMEOUT_S:
+                raise NavigationError("no odometry from the base") from None
 
     def halt(self, *, force: bool = True) -> None:
         """Command the base to stand still. ``force``: even when the last command was the same

@@ -95,7 +95,10 @@ def private_engine() -> Iterator[dict[str, str]]:
         stderr=subprocess.STDOUT,
         start_new_session=True,
     )
-    env = {**os.environ, "DOCKER_HOST": f"unix://{sock}"}
+    # Its own CLI configuration too (the Compose plugin is copied there): ~/.docker is the
+    # machine's, and a Compose CLI still running from it cannot be overwritten ("Text file
+    # busy").
+    env = {**os.environ, "DOCKER_HOST": f"unix://{sock}", "DOCKER_CONFIG": str(home / "config")}
     try:
         deadline = time.monotonic() + 60
         while subprocess.run(["docker", "info"], env=env, capture_output=True).returncode:
@@ -103,7 +106,7 @@ def private_engine() -> Iterator[dict[str, str]]:
                 tail = (home / "dockerd.log").read_text(errors="replace")[-800:]
                 raise EngineUnavailable(f"dockerd did not come up:\n{tail}")
             time.sleep(0.5)
-        plugins = Path.home() / ".docker" / "cli-plugins"
+        plugins = home / "config" / "cli-plugins"
         plugins.mkdir(parents=True, exist_ok=True)
         compose = compose_binary()
         assert compose is not None

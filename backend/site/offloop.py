@@ -102,7 +102,8 @@ async def in_processes(fn: Callable[[A], T], args: Sequence[A], workers: int) ->
     module with ``if __name__ == "__main__":``. Starting them and handing them ``args`` is
     done in a thread too (a few milliseconds of forking and pickling). A worker that dies
     raises ``BrokenProcessPool``; one that cannot start, ``OSError``. They run at a lower
-    priority than the server (``WORKER_NICE``)."""
+    priority than the server (``WORKER_NICE``). The call returns once they have exited: no
+    process or thread of the pool outlives it."""
     pool = ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
@@ -116,5 +117,7 @@ async def in_processes(fn: Callable[[A], T], args: Sequence[A], workers: int) ->
         futures = await asyncio.to_thread(submit)
         return list(await asyncio.gather(*(asyncio.wrap_future(f) for f in futures)))
     finally:
-        # Not waited for: the workers' own exit (0.4-0.5 s) is the executor's thread's business.
-        pool.shutdown(wait=False, cancel_futures=True)
+        # Waited for (in a thread): left to the executor's own thread, the workers' exit went on
+        # after the call returned (0.4-0.5 s on an idle machine, 4-10 s on a loaded one, the
+        # workers being niced), so a caller could not tell when its processes were gone.
+        await asyncio.to_thread(pool.shutdown, wait=True, cancel_futures=True)

@@ -5,8 +5,6 @@ of it."""
 from __future__ import annotations
 
 import asyncio
-import statistics
-import time
 from typing import Any
 
 import orjson
@@ -128,28 +126,28 @@ async def flooding(ws: ClientConnection, frame: str, times: int) -> None:
 async def test_one_client_flooding_garbage_does_not_stall_the_others(
     server: RunningServer, connect: ClientFactory
 ) -> None:
+    """The flood is read in turn with everything else, one frame at a time: the others' round
+    trips are answered between its frames. Counted on the hub (in this process), not timed:
+    had the hub handled the flood in one go (it held the loop for about a second), no round
+    trip could begin and end while the flood was half refused."""
+    hub = server.app.state.hub
     gui = await connect("gui")
-    quiet = []
-    for _ in range(10):
-        t0 = time.perf_counter()
-        await gui.sync()
-        quiet.append(time.perf_counter() - t0)
+    await gui.sync()
     async for ws in authenticated(server, "R1"):
+        before = hub.refused
         flood = orjson.dumps([{"type": "teleport", "id": str(i)} for i in range(200)]).decode()
         sender = asyncio.create_task(flooding(ws, flood, 100))  # 20 000 refused messages
         reader = asyncio.create_task(collect(ws))
-        during = []
-        while not sender.done():
-            t0 = time.perf_counter()
+        between = 0  # gui round trips begun and answered while the flood was being refused
+        while (begun := hub.refused - before) < 20_000:
             await asyncio.wait_for(gui.sync(), WAIT)
-            during.append(time.perf_counter() - t0)
+            if 0 < begun and hub.refused - before < 20_000:
+                between += 1
         await sender
         await ws.send(orjson.dumps({"type": "ping", "id": "alive"}).decode())
         errors = await reader
         assert len(errors) == 20_000 and {m["payload"]["code"] for m in errors} == {"unknown_type"}
-    # The flood is read in turn with everything else, one frame at a time: the others' round
-    # trips stay short (handled in one go, the flood held the loop for about a second).
-    assert during and statistics.median(during) < max(0.5, 20 * statistics.median(quiet))
+    assert between >= 3
 
 
 async def test_a_client_that_never_reads_is_dropped_after_the_send_timeout(

@@ -94,6 +94,25 @@ def test_a_velocity_command_starts_the_physics_and_stopping_ends_it() -> None:
     assert motor.distance == distance
 
 
+def test_a_stall_of_the_process_does_not_trip_the_motors_command_timeout() -> None:
+    """The process stands still 1.5 s (the 1 s time-out's worth and more): the agent's next
+    command is late because of it, not lost, so the wheels go on; real silence still stops
+    them. On the real clock, as the simulator runs."""
+    motor = MotorController("virtual:x", 0x02)
+    start = time.monotonic()
+    powered(motor, start)
+    motor.modes[1] = 1
+    motor.tick(start)
+    command(motor, p.set_velocity(1, 0.5))
+    now = start + 1.5
+    motor.tick(now)
+    assert motor.target == 0.5
+    while motor.target and now < start + 5.0:
+        now += TICK_S
+        motor.tick(now)
+    assert motor.target == 0.0 and 2.35 <= now - start <= 2.5  # 1 s of it counted
+
+
 def test_modules_of_one_robot_share_their_wake_ups() -> None:
     """Watchdogs and data frames fall on their period's grid: one wake-up serves them all."""
     modules: list[SimModule] = [

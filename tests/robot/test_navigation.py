@@ -13,8 +13,10 @@ import pytest
 
 from backend.traffic.manager import TrafficManager
 from guidebot.bus import Bus
+from guidebot.messages import Message
 from guidebot.site.schema import Site
 from robot_agent.clock import Clock
+from robot_agent.motion import NavigationError
 from robot_agent.navigation import Navigator
 from robot_agent.sim_base import SimulatedBase
 
@@ -334,22 +336,72 @@ async def test_an_on_board_plan_that_fails_asks_the_traffic_manager_for_the_reas
 
 async def test_a_stall_of_the_agents_own_process_does_not_make_the_robot_stuck() -> None:
     """At time scale 50 a 10 m drive's budget (77 robot seconds) is 1.5 s of wall time: an
-    event loop blocked for 2.5 s (a starved process) used to end the goal as "stuck"."""
+    event loop blocked for 2.5 s (a starved process) used to end the goal as "stuck"; and, the
+    stall beginning while the drive waited for odometry, as "no odometry from the base" (the
+    base's next report came after the 2 s watchdog had fired). The stall begins there on
+    purpose: the loop turn after a velocity command."""
     bus = Bus()
     clock = Clock(time_scale=50.0)
     base = SimulatedBase(bus.endpoint("R1.base"), clock)
     nav = Navigator(bus.endpoint("R1"), clock, "R1", start_node="charge_a")
+    loop = asyncio.get_running_loop()
+    stalls: list[asyncio.Handle] = []
+
+    def stall_once(message: Message) -> None:
+        if message.payload["v"] > 0 and not stalls:
+            stalls.append(loop.call_soon(time.sleep, 2.5))  # the whole process stands still
+
     await nav.start()
     await base.start()
     try:
         await nav.turn_to(0.0)
         x, y = nav.x + 10.0, nav.y
-        driving = asyncio.create_task(nav.drive_to(x, y))
-        await asyncio.sleep(0.05)
-        assert not driving.done()
-        time.sleep(2.5)  # noqa: ASYNC251 -- the point: the whole process stands still
-        assert await asyncio.wait_for(driving, 10.0) is True
+        bus.endpoint("watch").subscribe("set_velocity", stall_once, tap=True)
+        assert await asyncio.wait_for(nav.drive_to(x, y), 10.0) is True
+        assert stalls
         assert math.hypot(nav.x - x, nav.y - y) < 0.3
     finally:
         await nav.stop()
         await base.stop()
+
+
+async def test_a_slow_process_does_not_make_the_robot_stuck() -> None:
+    """Every turn of the loop 0.3 s late (a loaded machine, each gap shorter than a stall of
+    old, 0.5 s): the simulated base moves 0.1 s of each gap, so the goal's budget must count
+    no more of it."""
+    bus = Bus()
+    clock = Clock(time_scale=50.0)
+    base = SimulatedBase(bus.endpoint("R1.base"), clock)
+    nav = Navigator(bus.endpoint("R1"), clock, "R1", start_node="charge_a")
+
+    async def slow_process() -> None:
+        while True:
+            time.sleep(0.3)  # noqa: ASYNC251 -- the point: the process gets little CPU
+            await asyncio.sleep(0)
+
+    await nav.start()
+    await base.start()
+    try:
+        await nav.turn_to(0.0)
+        x, y = nav.x + 10.0, nav.y
+        slow = asyncio.create_task(slow_process())
+        try:
+            assert await asyncio.wait_for(nav.drive_to(x, y), 60.0) is True
+        finally:
+            slow.cancel()
+        assert math.hypot(nav.x - x, nav.y - y) < 0.3
+    finally:
+        await nav.stop()
+        await base.stop()
+
+
+async def test_a_silent_base_ends_the_goal_with_no_odometry() -> None:
+    """The watchdog still fires when the base says nothing (and this process is not stalled)."""
+    bus = Bus()
+    nav = Navigator(bus.endpoint("R1"), Clock(time_scale=50.0), "R1", start_node="charge_a")
+    await nav.start()
+    try:
+        with pytest.raises(NavigationError, match="no odometry from the base"):
+            await asyncio.wait_for(nav.turn_to(0.0), 10.0)
+    finally:
+        await nav.stop()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import os
 import random
+import threading
 
 import pytest
 
@@ -14,7 +15,7 @@ from backend.site.offloop import WORKER_NICE, in_processes
 from guidebot.route_tables import compute_tables, split
 from guidebot.site.graph import SiteGraph
 from guidebot.site.synthetic import synthetic_site
-from tests.server.workers import killing_new_workers
+from tests.server.workers import killing_new_workers, spawned_workers
 
 
 def same_answers(ours: SiteGraph, reference: SiteGraph, pairs: int = 200) -> None:
@@ -61,3 +62,13 @@ def test_a_killed_worker_falls_back_to_the_thread_and_the_graph_is_whole(
     built = asyncio.run(killing_new_workers(build_site_graph(site, 2, min_nodes=0)))
     assert "worker process failed" in caplog.text
     same_answers(built, SiteGraph(site), pairs=60)
+
+
+def test_worker_processes_and_their_pools_thread_are_gone_when_the_call_returns() -> None:
+    """in_processes waits for its pool to shut down: a worker still exiting (seconds on a loaded
+    machine, being niced) kept the pool's thread alive after the call, past the suite's
+    thread-leak check (tests/conftest.py)."""
+    before = set(threading.enumerate())
+    assert asyncio.run(in_processes(abs, [-1, -2], 2)) == [1, 2]
+    assert spawned_workers() == set()
+    assert [t.name for t in threading.enumerate() if t not in before and t.is_alive()] == []

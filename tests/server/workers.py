@@ -30,8 +30,7 @@ def spawned_workers() -> set[int]:
 
 async def killing_new_workers(job: Awaitable[T]) -> T:
     """Run ``job``, SIGKILL the worker processes it starts as soon as they appear, and return
-    what it returns. Workers of earlier pools (their shutdown is not waited for, so they may
-    still be exiting) are left alone."""
+    what it returns. Processes that were already running are left alone."""
     earlier = spawned_workers()
     task = asyncio.ensure_future(job)
     for _ in range(1000):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from typing import Any
 
 from robot_agent.robocan import protocol as p
@@ -38,7 +37,11 @@ class MotorController(SimModule):
         self.target = 0.0
         self.velocity = 0.0
         self.distance = 0.0
-        self.last_command = 0.0
+        # Wall seconds the wheels' model has run since the last velocity command: the safety
+        # time-out's clock. Like the wheels, it leaves out the part of a step over MAX_STEP_S
+        # (a stall of the process, which delays the agent's commands too): on the wall clock,
+        # a loaded machine's late commands stopped the robot again and again ("stuck").
+        self.since_command = 0.0
         self.next_publish = 0.0
         self.bumpers = 0
         self.commands = 0
@@ -53,7 +56,7 @@ class MotorController(SimModule):
             self.commands += 1
             if self.enabled and self.modes.get(1) == 1:
                 self.target = velocity
-                self.last_command = time.monotonic()
+                self.since_command = 0.0
         return None  # velocity commands are not acknowledged: the next one follows soon
 
     def on_stop(self) -> None:
@@ -64,8 +67,9 @@ class MotorController(SimModule):
         # A stall of the simulator's process freezes the wheels: no blind run at the last
         # command (robot_agent/motion.py does not count such a stall against a goal either).
         dt_sim = min(dt_sim, MAX_STEP_S * self.time_scale)
+        self.since_command += dt_sim / self.time_scale
         timeout = self.param(1, p.Param.COMMAND_TIMEOUT_MS) / 1000
-        timed_out = now - self.last_command > timeout and "no_command_timeout" not in self.flaws
+        timed_out = self.since_command > timeout and "no_command_timeout" not in self.flaws
         if self.target and timed_out:
             self.target = 0.0  # the agent's own safety time-out
         accel = self.param(1, p.Param.MAX_ACCEL) / 1000
