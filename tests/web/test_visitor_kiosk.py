@@ -64,6 +64,16 @@ def settings_for(tmp_path: Path) -> Settings:
 
 
 @contextlib.asynccontextmanager
+async def pages_closed_first(open_page: Any) -> AsyncIterator[None]:
+    """Close the test's pages before its server stops: a page left open would log its hub
+    reconnecting to a server that is gone (ERR_CONNECTION_REFUSED), as fleet_factory avoids."""
+    try:
+        yield
+    finally:
+        await open_page.close()
+
+
+@contextlib.asynccontextmanager
 async def robot(server: RunningServer, site_file: Path, scale: float) -> AsyncIterator[RobotAgent]:
     agent = light_robot(
         server.url,
@@ -115,7 +125,7 @@ async def test_the_panel_survives_a_server_restart_and_shows_the_true_state(
 async def test_kiosk_mode_goes_back_to_the_start_and_keeps_the_visitor_in(
     tmp_path: Path, open_page: Any, web: SimpleNamespace
 ) -> None:
-    async with running_server(settings_for(tmp_path)) as server:
+    async with running_server(settings_for(tmp_path)) as server, pages_closed_first(open_page):
         url = f"{server.url}/visitor/#token={PANEL}&kiosk=1&idle=4"
         page = (await open_page(url, viewport=(1280, 800))).page
         await page.get_by_role("button", name="Español").click()
@@ -138,7 +148,11 @@ async def test_a_refused_request_says_why_on_the_page(
 ) -> None:
     settings = settings_for(tmp_path)
     assert settings.site is not None
-    async with running_server(settings) as server, robot(server, settings.site, scale=8.0):
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=8.0),
+        pages_closed_first(open_page),
+    ):
         watch = await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)
         page = watch.page
         watch.expect_error(r"status of 429")
@@ -178,7 +192,7 @@ async def test_a_language_tap_wins_over_a_slower_reload_started_before_it(
 ) -> None:
     """A hub reconnect reloads the page's data in the language of that moment; a visitor who taps
     another language meanwhile must not be sent back when that older answer arrives last."""
-    async with running_server(settings_for(tmp_path)) as server:
+    async with running_server(settings_for(tmp_path)) as server, pages_closed_first(open_page):
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await expect(page.get_by_role("heading", name="Tours")).to_be_visible()
         # The page draws before its hub link is up.
@@ -206,7 +220,11 @@ async def test_a_visitor_asks_for_one_exhibit_and_a_robot_takes_them_there(
 ) -> None:
     settings = settings_for(tmp_path)
     assert settings.site is not None
-    async with running_server(settings) as server, robot(server, settings.site, scale=8.0):
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=8.0),
+        pages_closed_first(open_page),
+    ):
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await expect(page.get_by_role("status").first).to_contain_text("A robot is free")
         coins = page.get_by_role("article", name="Coins")
@@ -226,7 +244,7 @@ async def test_a_refused_token_is_said_on_the_page_without_an_error(
     tmp_path: Path, open_page: Any, web: SimpleNamespace
 ) -> None:
     """A wrong or rotated panel token: the page says so instead of "Loading…" for ever."""
-    async with running_server(settings_for(tmp_path)) as server:
+    async with running_server(settings_for(tmp_path)) as server, pages_closed_first(open_page):
         watch = await open_page(f"{server.url}/visitor/#token=an-old-panel-token", viewport=PHONE)
         watch.expect_error(r"status of 401")
         page = watch.page
@@ -245,7 +263,11 @@ async def test_each_device_under_one_panel_token_sees_and_cancels_only_its_own(
     panel's rate limit stays one for all of them."""
     settings = settings_for(tmp_path)
     assert settings.site is not None
-    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=0.5),
+        pages_closed_first(open_page),
+    ):
         async with httpx.AsyncClient(
             base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
         ) as staff:  # the robot is busy: the visitors' requests wait in line
@@ -317,7 +339,11 @@ async def test_a_kiosk_forgets_the_last_visitors_requests_when_it_goes_back_to_t
 ) -> None:
     settings = settings_for(tmp_path)
     assert settings.site is not None
-    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=0.5),
+        pages_closed_first(open_page),
+    ):
         url = f"{server.url}/visitor/#token={PANEL}&kiosk=1&idle=3"
         page = (await open_page(url, viewport=(1280, 800))).page
         await (
@@ -342,7 +368,11 @@ async def test_a_visitor_in_line_sees_the_line_move(
     """Place in line and wait follow the server while queued (no tap, no reload)."""
     settings = settings_for(tmp_path)
     assert settings.site is not None
-    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=0.5),
+        pages_closed_first(open_page),
+    ):
         manager = server.app.state.task_manager
         async with httpx.AsyncClient(
             base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
@@ -378,7 +408,11 @@ async def test_a_tour_cancelled_by_staff_is_said_to_its_visitor(
 ) -> None:
     settings = settings_for(tmp_path)
     assert settings.site is not None
-    async with running_server(settings) as server, robot(server, settings.site, scale=0.5):
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=0.5),
+        pages_closed_first(open_page),
+    ):
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await (
             page.get_by_role("article", name="Corridor walk")
