@@ -28,9 +28,12 @@ typecheck: $(STAMP)
 	$(BIN)/mypy guidebot backend robot_agent building_sim petri_nets bench
 
 # The suite waits far more than it computes (servers, browsers, robots at work): four pytest-xdist
-# workers share 2 CPUs. `--dist loadgroup` keeps the docker tests in one worker (tests/conftest.py).
+# workers share 2 CPUs. `--dist loadgroup` keeps the docker tests in one worker; the tests
+# marked `alone` (robots on simulated CAN hardware, the demo) run after, by themselves
+# (tests/conftest.py).
 test: $(STAMP) system-deps lint typecheck
-	$(BIN)/python -m pytest -n 4 --dist loadgroup
+	$(BIN)/python -m pytest -n 4 --dist loadgroup -m "not alone"
+	$(BIN)/python -m pytest -m alone
 
 # docs/screenshots/*.png from the browser tests' scenarios (needs /usr/bin/chromium).
 screenshots: $(STAMP) system-deps

@@ -11,6 +11,23 @@ import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
 
+ALONE = frozenset(
+    {
+        "test_e2e.py",
+        "test_doors.py",
+        "test_invariants.py",
+        "test_restart.py",
+        "test_evacuation.py",
+        "test_demo.py",
+    }
+)
+"""Test files marked ``alone``: the Makefile runs them after the rest, with nothing beside
+them. Robots on simulated RoboCAN hardware hold the watchdog's 350 ms and their goals' time
+budgets only with a CPU to run on: beside four busy workers a robot was now and then taken for
+'stuck'. The demo's test starts it on free ports it picked, which a neighbour's connection
+could take before the demo bound them."""
+
+
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Under pytest-xdist (`--dist loadgroup`, the Makefile), run the docker tests in one
@@ -18,6 +35,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     site's fixed Modbus ports (the compose file's building simulator). They come first: the
     longest stretch of the suite (images built, fleets started), it then runs beside the rest
     instead of after it."""
+    for item in items:
+        if item.path.name in ALONE:
+            item.add_marker(pytest.mark.alone)
     docker = [item for item in items if item.get_closest_marker("docker") is not None]
     for item in docker:
         item.add_marker(pytest.mark.xdist_group("docker"))
