@@ -10,7 +10,6 @@ from collections.abc import Iterator
 import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
-
 ALONE = frozenset(
     {
         "test_e2e.py",
