@@ -30,8 +30,8 @@ could take before the demo bound them."""
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Under pytest-xdist (`--dist loadgroup`, the Makefile), run the docker tests in one
-    worker: they share the session's private engine (`engine` below), its image cache and the
-    site's fixed Modbus ports (the compose file's building simulator). They come first: the
+    worker: they share the session's private engine (`engine` below) and its image cache.
+    They come first: the
     longest stretch of the suite (images built, fleets started), it then runs beside the rest
     instead of after it."""
     for item in items:
