@@ -75,6 +75,7 @@ export function robotsView(ui) {
       const info = robot.info ?? {};
       const modules = Object.entries(s.modules ?? {});
       const seen = robot.online || robot.state || robot.info?.last_seen;
+      // A lost robot's last robot_state still says what it was doing: the server says offline.
       const link = robot.online ? ["ok", "online"] : seen ? ["bad", "lost"] : ["warn", "never connected"];
       const node = s.node ?? info.node;
       const floor = s.floor ?? info.floor ?? ui.store.site.nodes.find((n) => n.id === node)?.floor;
@@ -83,7 +84,7 @@ export function robotsView(ui) {
           <span class=${`badge ${link[0]}`}>${link[1]}</span>
           ${info.out_of_service ? html`<span class="badge warn">out of service</span>` : ""}</h3>
         <dl class="facts">
-          <dt>Mode</dt><dd>${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}</dd>
+          <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : "offline"}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
           <dt>Pose</dt><dd>${node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
           <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? info.task_id)}${tourStep(ui, robot) ? `, at ${tourStep(ui, robot)}` : ""}</dd>
