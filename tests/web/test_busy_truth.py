@@ -45,7 +45,7 @@ VISITOR_VIEW = r"""() => {
     for (const p of patterns) { const m = line.match(p); if (m) place = m[1]; }
   }
   const state = [...box.classList].find((c) => c !== "request-state") ?? "";
-  return {state: state === "assigned" ? "running" : state,
+  return {state,
           robot: document.querySelector(".robot-name")?.textContent.trim() ?? "",
           number, place};
 }"""
@@ -109,11 +109,6 @@ def visitor_expected(task: dict[str, Any], names: dict[str, str]) -> dict[str, A
     elif state == "done" and point:
         place = names[task["params"]["poi"]]
     robot = f"Robot {task['robot']}" if task.get("robot") else ""
-    # Not yet compared: assigned vs running. A task_event that reaches the page while its
-    # POST /api/tasks is in flight is dropped (the page does not know the task yet), so a
-    # point visit assigned at once stays "assigned" on the page until it ends (the text
-    # shown is the same for both): left to a fix of the visitor page.
-    state = "running" if state == "assigned" else state
     return {"state": state, "robot": robot, "number": number, "place": place}
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import re
 from collections.abc import AsyncIterator
 from pathlib import Path
 from types import SimpleNamespace
@@ -238,6 +239,46 @@ async def test_a_visitor_asks_for_one_exhibit_and_a_robot_takes_them_there(
         done = [t for t in tasks if t.kind == "go_to_poi"]
         assert len(done) == 1 and done[0].params["poi"] == "coins"
         assert done[0].state.value == "done" and done[0].robot == "R1"
+
+
+async def test_news_of_a_request_that_comes_before_its_answer_is_not_lost(
+    tmp_path: Path, open_page: Any
+) -> None:
+    """A point visit a free robot starts at once: the hub may tell the page the task runs
+    before the page has the answer to its own request. The page shows it running, not
+    "assigned" until it ends (found by tests/web/test_busy_truth.py)."""
+    settings = settings_for(tmp_path)
+    assert settings.site is not None
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=0.5),
+        pages_closed_first(open_page),
+    ):
+        page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
+        frames: list[str] = []
+        told = asyncio.Event()
+
+        def on_socket(socket: Any) -> None:
+            def on_frame(payload: str | bytes) -> None:
+                text = payload if isinstance(payload, str) else payload.decode()
+                frames.append(text)
+                if '"running"' in text and "task_event" in text:
+                    told.set()
+
+            socket.on("framereceived", on_frame)
+
+        page.on("websocket", on_socket)
+        await expect(page.get_by_role("status").first).to_contain_text("A robot is free")
+
+        async def answer_after_the_news(route: Any) -> None:
+            response = await route.fetch()
+            await asyncio.wait_for(told.wait(), LONG / 1000)
+            await route.fulfill(response=response)
+
+        await page.route("**/api/tasks", answer_after_the_news)
+        coins = page.get_by_role("article", name="Coins")
+        await coins.get_by_role("button", name="Take me there").click()
+        await expect(page.locator(".request-state")).to_have_class(re.compile(r"\brunning\b"))
 
 
 async def test_a_refused_token_is_said_on_the_page_without_an_error(

@@ -15,6 +15,12 @@ const idleS = Number(options.get("idle") ?? query.get("idle") ?? 90);
 const STORE = "guidebot.visitor.requests";
 const DEVICE = "guidebot.visitor.device";
 const FINAL = new Set(["done", "failed", "cancelled"]);
+/** How far along a state is: a task goes forward (a robot lost puts it back in line, rarely). */
+const RANK = { queued: 0, assigned: 1, running: 2, done: 3, failed: 3, cancelled: 3 };
+/** task_event of tasks this page has not been told of yet: its own request's answer may come
+ * after the hub's first news of it (a point visit assigned and started at once). Bounded. */
+const early = new Map();
+const EARLY_MAX = 64;
 /** The kinds the panel asks for, by card (docs/visitor.md). */
 const KIND = { tour: "tour", poi: "go_to_poi" };
 
@@ -199,6 +205,12 @@ async function request(kind, item) {
   try {
     const status = await api.post("/api/tasks", { kind: KIND[kind], params });
     state.requests.set(status.id, told(status));
+    // News of it that came before this answer is newer when the task is further along.
+    const first = early.get(status.id);
+    early.delete(status.id);
+    if (first && (RANK[first.state] ?? 0) > (RANK[status.state] ?? 0)) {
+      state.requests.set(status.id, told({ ...first, id: status.id }, state.requests.get(status.id)));
+    }
     state.labels.set(status.id, item.name);
     state.current = status.id;
     state.view = "request";
@@ -463,7 +475,13 @@ async function live() {
     const p = message.payload;
     refreshMenuSoon();
     const known = state.requests.get(p.task_id);
-    if (!known) return; // not ours (the server tells a device's REST calls only its own)
+    if (!known) {
+      // Not ours (the server tells a device's REST calls only its own), or ours before our
+      // request's answer: kept a while for request() to look at.
+      early.set(p.task_id, p);
+      if (early.size > EARLY_MAX) early.delete(early.keys().next().value);
+      return;
+    }
     state.requests.set(p.task_id, told({ ...p, id: p.task_id }, known));
     if (FINAL.has(p.state)) remember();
     draw();
