@@ -13,6 +13,7 @@ import pytest
 from building_sim.control import serve_control
 from guidebot.messages import Message
 from guidebot.site.schema import Site
+from guidebot.testing import wait_until
 from robot_agent.robocan import protocol as p
 
 from .test_e2e import fleet_up
@@ -61,10 +62,20 @@ async def test_alarm_stops_the_robot_sends_it_to_safety_and_resume_runs_its_tour
             last_command = next(m for m in reversed(since[:kill]) if m.type == "set_velocity")
             assert last_command.payload == {"v": 0.0, "w": 0.0}
             assert types.index("say") > kill
+
             # ... which reaches the wheels on the CAN bus as zero-velocity frames.
-            stops = [f for f in fleet.can_tap.velocity_frames() if f.timestamp >= raised]
-            stops = [f for f in stops if _speed(f) == 0]
-            assert stops, "no zero-velocity frame on the CAN bus after the alarm"
+            # (The tap reads the bus in its own turn: the frame may come a moment after.)
+            def stops_seen() -> list[can.Message]:
+                frames = [f for f in fleet.can_tap.velocity_frames() if f.timestamp >= raised]
+                return [f for f in frames if _speed(f) == 0]
+
+            try:
+                await wait_until(lambda: bool(stops_seen()), timeout=30)
+            except TimeoutError:
+                raise AssertionError(
+                    "no zero-velocity frame on the CAN bus after the alarm"
+                ) from None
+            stops = stops_seen()
             print(f"alarm_to_stop_ms={(stops[0].timestamp - raised) * 1000:.0f}")
             # It says the words in its visitor's language, and drives to its safe spot.
             said = [m.payload for m in fleet.onboard_of("say")]
