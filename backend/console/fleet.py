@@ -11,7 +11,10 @@ from fastapi import APIRouter, Body, HTTPException, Path, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.api.deps import Sites, Staff, Store, Tasks, not_found
+from backend.console.feed import ConsoleFeed
 from backend.console.routes import Feed
+from backend.db.store import DbStore
+from backend.site.service import SiteService
 from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError
 from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
@@ -122,12 +125,7 @@ async def open_door(
     """Open a door by hand: the building holds it open for the console until "close" or
     the door's longest hold (``max_hold_s``). Its state shows in door_opened/door_closed; a
     door that does not open raises the building_command_failed alert."""
-    if not any(d.id == door for d in service.site.doors):
-        raise not_found(f"door {door!r}")
-    _building(request)
-    feed.endpoint.publish(OpenDoor(door=door))
-    db.record_event("door_opened_by_hand", "console", {"door": door, "by": who.name})
-    return {"door": door, "by": who.name}
+    return _door_by_hand(request, service, feed, db, OpenDoor(door=door), by=who.name)
 
 
 @router.post("/building/doors/{door}/close", status_code=status.HTTP_202_ACCEPTED)
@@ -135,12 +133,26 @@ async def close_door(
     request: Request, who: Staff, service: Sites, feed: Feed, db: Store, door: Name
 ) -> dict[str, Any]:
     """Let go of a door opened by hand (it closes unless a robot holds it too)."""
-    if not any(d.id == door for d in service.site.doors):
-        raise not_found(f"door {door!r}")
+    return _door_by_hand(request, service, feed, db, ReleaseDoor(door=door), by=who.name)
+
+
+def _door_by_hand(
+    request: Request,
+    service: SiteService,
+    feed: ConsoleFeed,
+    db: DbStore,
+    command: OpenDoor | ReleaseDoor,
+    *,
+    by: str,
+) -> dict[str, Any]:
+    """Ask the building for ``command`` on a door of the site, logged with who asked."""
+    if not any(d.id == command.door for d in service.site.doors):
+        raise not_found(f"door {command.door!r}")
     _building(request)
-    feed.endpoint.publish(ReleaseDoor(door=door))
-    db.record_event("door_released_by_hand", "console", {"door": door, "by": who.name})
-    return {"door": door, "by": who.name}
+    feed.endpoint.publish(command)
+    kind = "door_opened_by_hand" if isinstance(command, OpenDoor) else "door_released_by_hand"
+    db.record_event(kind, "console", {"door": command.door, "by": by})
+    return {"door": command.door, "by": by}
 
 
 @router.post("/building/elevators/{elevator}/call", status_code=status.HTTP_202_ACCEPTED)
