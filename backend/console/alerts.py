@@ -13,6 +13,10 @@ Each cause is raised when it appears and resolved when a message says it is gone
 - module_offline: building_module_health online false; resolved by online true.
 - lock_holder_offline: lock_changed holder_offline; resolved by any other lock state.
 - task_failed: task_event failed; an event: resolved when acknowledged.
+- fire_alarm: emergency_changed alarm (the zones, who declared it); resolved by the state
+  normal (service resumed). Seen on start too (an alarm kept across a restart).
+- evacuation_stuck: evacuation_state stuck (where and why); resolved when the robot moves
+  again, is safe, or the alarm is over.
 
 The Traffic Manager raises its own (area_conflict, lock_holder_offline after the grace,
 lock_released_offline) in the same store.
@@ -21,6 +25,7 @@ lock_released_offline) in the same store.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from backend.alerts import AlertStore
 from guidebot.bus import Endpoint
@@ -62,6 +67,8 @@ class AlertWatcher(Service):
             "building_module_health": self._on_module_health,
             "task_event": self._on_task_event,
             "lock_changed": self._on_lock_changed,
+            "emergency_changed": self._on_emergency,
+            "evacuation_state": self._on_evacuation,
         }
         for pattern, handler in handlers.items():
             self.subscribe(self.endpoint, pattern, handler, tap=True)
@@ -197,3 +204,50 @@ class AlertWatcher(Service):
                 f" ({p.get('holder')})" if p.get("holder") else ""
             )
             self.alerts.resolve("lock_holder_offline", area, why)
+
+    # --- the fire alarm (docs/emergency.md) ----------------------------------------------
+    def emergency_now(self, state: dict[str, Any]) -> None:
+        """The emergency state when the watcher starts (an alarm kept across a restart is
+        published before the watcher listens)."""
+        self._emergency(state)
+
+    def _on_emergency(self, message: Message) -> None:
+        self._emergency(message.payload)
+
+    def _emergency(self, p: dict[str, Any]) -> None:
+        state = p.get("state")
+        if state == "normal":
+            self.alerts.resolve("fire_alarm", "site", "service resumed after the fire alarm")
+            self.alerts.resolve_where("evacuation_stuck", lambda _: True, "the fire alarm is over")
+            return
+        if state != "alarm":
+            return  # input_clear: the alarm still holds until a person resumes service
+        zones = "; ".join(_zone_text(z) for z in p.get("zones") or [{}])
+        by = str(p.get("declared_by") or "unknown")
+        who = f"alarm input {by[6:]}" if by.startswith("input:") else by
+        text = f"Fire alarm: {zones} (declared by {who}): robots go to their safe spots"
+        alert = self.alerts.get("fire_alarm", "site")
+        if alert is None or not alert.active or alert.message != text:
+            self.alerts.raise_("fire_alarm", "site", text)
+
+    def _on_evacuation(self, message: Message) -> None:
+        robot = message.source
+        p = message.payload
+        if p.get("state") == "stuck":
+            where = p.get("node") or "an unknown place"
+            why = p.get("why") or "no reason given"
+            self.alerts.raise_(
+                "evacuation_stuck",
+                robot,
+                f"{robot} is stuck on its way to safety at {where}: {why}",
+            )
+        else:
+            self.alerts.resolve("evacuation_stuck", robot, f"{robot}: evacuation {p.get('state')}")
+
+
+def _zone_text(zone: dict[str, Any]) -> str:
+    if zone.get("floors"):
+        return "floor " + ", ".join(zone["floors"])
+    if zone.get("areas"):
+        return "area " + ", ".join(zone["areas"])
+    return "the whole site"

@@ -31,6 +31,9 @@ async def console(app: FastAPI) -> AsyncIterator[None]:
     listener = relay_events(endpoint)
     store.listeners.append(listener)
     await watcher.start()
+    emergency = getattr(app.state, "emergency", None)
+    if emergency is not None:  # an alarm kept across a restart was published before this
+        watcher.emergency_now(emergency.snapshot())
     await feed.start()
     robocan = RobocanBook(endpoint)
     await robocan.start()

@@ -1,8 +1,9 @@
 """REST routes of the staff console: alerts, robots in or out of service, Petri nets (library,
-running instances, kill) and the building simulator's inputs."""
+running instances, kill) and the building simulator's inputs (buttons, fire alarm inputs)."""
 
 from __future__ import annotations
 
+import logging
 from typing import Annotated, Any
 
 import httpx
@@ -10,7 +11,15 @@ from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Reques
 from pydantic import Field
 
 from backend.alerts import AlertNotFound, AlertStore
-from backend.api.deps import NetKiller, Staff, Tasks, app_service, error_response, not_found
+from backend.api.deps import (
+    NetKiller,
+    Sites,
+    Staff,
+    Tasks,
+    app_service,
+    error_response,
+    not_found,
+)
 from backend.api.models import RequestBody
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
@@ -18,6 +27,8 @@ from petri_nets.layout import net_drawing
 from petri_nets.library import UnknownNet
 
 __all__ = ["router"]
+
+log = logging.getLogger(__name__)
 
 router = APIRouter(prefix="/api", tags=["console"])
 
@@ -37,6 +48,12 @@ class Kill(RequestBody):
 class Press(RequestBody):
     button: str = Field(min_length=1, max_length=64)
     ms: float = Field(default=300.0, gt=0, le=10_000)
+
+
+class SimulatedAlarm(RequestBody):
+    alarm: str = Field(min_length=1, max_length=64)
+    """An alarm of the site's ``emergency.alarms`` (its input is what the simulator sets)."""
+    raised: bool
 
 
 def _alerts(request: Request) -> AlertStore:
@@ -177,18 +194,59 @@ async def press_simulated(
     request: Request, _: Staff, body: Annotated[Press, Body()]
 ) -> dict[str, Any]:
     """Press a building button on the building simulator (a demo or test installation)."""
+    await _simulator_post(
+        request, f"/buttons/{body.button}/press", {"ms": body.ms}, f"button {body.button!r}"
+    )
+    return {"button": body.button, "ms": body.ms}
+
+
+@router.post(
+    "/building/simulator/alarm",
+    responses={502: error_response("the building simulator did not answer, or failed")},
+)
+async def simulated_alarm(
+    request: Request, who: Staff, sites: Sites, body: Annotated[SimulatedAlarm, Body()]
+) -> dict[str, Any]:
+    """Raise or clear a fire alarm input on the building simulator (a demo or test
+    installation): the input reads the alarm's ``active_when`` value, or the other one. The
+    server hears it as it hears a real relay (docs/emergency.md)."""
+    emergency = sites.site.emergency
+    alarms = {a.id: a for a in (emergency.alarms if emergency else [])}
+    alarm = alarms.get(body.alarm)
+    if alarm is None:
+        raise not_found(
+            f"alarm {body.alarm!r} (the site's alarms: {', '.join(sorted(alarms)) or 'none'})"
+        )
+    value = alarm.active_when if body.raised else 1 - alarm.active_when
+    where = f"{alarm.input.module}/{alarm.input.point}"
+    await _simulator_post(request, f"/points/{where}", {"value": value}, f"point {where}")
+    log.warning(
+        "%s %s the simulated alarm input %s",
+        who.name,
+        "raised" if body.raised else "cleared",
+        where,
+    )
+    return {
+        "alarm": alarm.id,
+        "raised": body.raised,
+        "module": alarm.input.module,
+        "point": alarm.input.point,
+        "value": value,
+    }
+
+
+async def _simulator_post(request: Request, path: str, body: dict[str, Any], what: str) -> None:
+    """POST to the building simulator's control API; 409 without one, 404 for ``what`` it
+    does not know, 502 when it fails."""
     url = request.app.state.settings.building_sim_url
     if not url:
         raise HTTPException(status.HTTP_409_CONFLICT, "no building simulator is configured")
     try:
         async with httpx.AsyncClient(timeout=5.0) as http:
-            reply = await http.post(
-                f"{url.rstrip('/')}/buttons/{body.button}/press", json={"ms": body.ms}
-            )
+            reply = await http.post(f"{url.rstrip('/')}{path}", json=body)
     except httpx.HTTPError as exc:
         raise HTTPException(status.HTTP_502_BAD_GATEWAY, f"building simulator: {exc}") from None
     if reply.status_code == 404:
-        raise not_found(f"button {body.button!r}")
+        raise not_found(what)
     if reply.status_code >= 400:
         raise HTTPException(status.HTTP_502_BAD_GATEWAY, f"building simulator: {reply.text}")
-    return {"button": body.button, "ms": body.ms}

@@ -105,3 +105,34 @@ async def test_lock_and_task_alerts(rig: tuple[Bus, AlertStore]) -> None:
     assert failed is not None and failed.severity == "warning" and not failed.lasting
     alerts.acknowledge(failed.id, "desk")
     assert not active(alerts)
+
+
+async def test_the_fire_alarm_and_a_stuck_evacuation_are_alerts_until_resumed(
+    rig: tuple[Bus, AlertStore],
+) -> None:
+    bus, alerts = rig
+    emergency, r1 = bus.endpoint("emergency"), bus.endpoint("R1")
+    alarm = {"state": "alarm", "zones": [{}], "declared_by": "input:fire_main", "since": 1.0}
+    emergency.publish("emergency_changed", alarm)
+    (alert,) = alerts.active()
+    assert (alert.kind, alert.subject) == ("fire_alarm", "site")
+    assert alert.message.startswith(
+        "Fire alarm: the whole site (declared by alarm input fire_main)"
+    )
+    emergency.publish("emergency_changed", alarm)  # said again (a client connects): no count
+    assert alerts.get("fire_alarm", "site").count == 1  # type: ignore[union-attr]
+    emergency.publish("emergency_changed", {**alarm, "zones": [{}, {"floors": ["F1"]}]})
+    assert "the whole site; floor F1" in alert.message and alert.count == 2
+    r1.publish("evacuation_state", {"state": "stuck", "node": "gc2", "why": "bumper"})
+    assert active(alerts) == {("fire_alarm", "site"), ("evacuation_stuck", "R1")}
+    assert alerts.get("evacuation_stuck", "R1").message == (  # type: ignore[union-attr]
+        "R1 is stuck on its way to safety at gc2: bumper"
+    )
+    r1.publish("evacuation_state", {"state": "moving", "node": "gc2"})
+    assert active(alerts) == {("fire_alarm", "site")}
+    r1.publish("evacuation_state", {"state": "stuck", "node": "gc2", "why": "bumper"})
+    emergency.publish("emergency_changed", {**alarm, "state": "input_clear"})
+    assert active(alerts) == {("fire_alarm", "site"), ("evacuation_stuck", "R1")}
+    emergency.publish("emergency_changed", {"state": "normal"})
+    assert not active(alerts)
+    assert alert.resolution == "service resumed after the fire alarm"

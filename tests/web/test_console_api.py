@@ -62,6 +62,19 @@ async def test_console_endpoints_refuse_clearly(tmp_path: Path) -> None:
                 "/api/building/simulator/press", json={"button": "button_entrance"}, headers=desk
             )
             assert press.status_code == 409 and "no building simulator" in press.json()["detail"]
+            alarm = await http.post(
+                "/api/building/simulator/alarm",
+                json={"alarm": "fire_main", "raised": True},
+                headers=desk,
+            )
+            assert alarm.status_code == 409 and "no building simulator" in alarm.json()["detail"]
+            unknown = await http.post(
+                "/api/building/simulator/alarm",
+                json={"alarm": "smoke", "raised": True},
+                headers=desk,
+            )
+            assert unknown.status_code == 404
+            assert "the site's alarms: fire_main" in unknown.json()["detail"]
 
             free = await http.post("/api/locks/corridor/release", headers=desk)
             assert free.status_code == 403  # operators: only a lock whose holder is offline

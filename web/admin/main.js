@@ -9,6 +9,7 @@ import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
 import { buildingView } from "/admin/views/building.js";
+import { declareButton, emergencyBanner } from "/admin/views/emergency.js";
 import { eventsView } from "/admin/views/events.js";
 import { fleetView } from "/admin/views/fleet.js";
 import { locksView } from "/admin/views/locks.js";
@@ -49,6 +50,8 @@ function showSignIn(message = "") {
   $("map-view").hidden = true;
   $("view").hidden = true;
   render("", $("alert-bar"));
+  render("", $("declare"));
+  $("emergency-banner").hidden = true;
   const section = $("signin");
   section.hidden = false;
   const submit = async (event) => {
@@ -232,6 +235,11 @@ async function start() {
     const open = store.openAlerts();
     document.title = open.length ? `(${open.length}) GuideBot console` : "GuideBot console";
     render(alertBar(ui, open), $("alert-bar"));
+    const alarm = ui.store.emergency && ui.store.emergency.state !== "normal";
+    if (!alarm) ui.resumeRefusal = null;
+    $("emergency-banner").hidden = !alarm;
+    render(emergencyBanner(ui), $("emergency-banner"));
+    render(declareButton(ui), $("declare"));
     render(
       store.error ? html`<p class="notice error" role="alert">The console could not refresh: ${store.error} It tries again when the server is back.</p>` : "",
       $("page-error"),

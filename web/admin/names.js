@@ -105,7 +105,33 @@ export function waitingFor(store, s) {
   return `waiting for ${lift ? elevatorName(site, lift.id) : "the elevator"}`;
 }
 
-/** A robot's mode as the console says it: the wait when it waits, else its mode. */
+/** A robot's evacuation while a fire alarm holds it, as staff read it ("evacuation: moving to
+ * its safe spot Charging station B", "evacuation: stuck near Roman mosaics: the way is
+ * blocked"); null when no alarm holds it (docs/emergency.md, docs/console.md). */
+export function evacuationText(store, name) {
+  const e = store.evacuation?.(name);
+  if (!e) return null;
+  const site = store.site;
+  const spot = e.safe_spot ? placeName(site, e.safe_spot) : null;
+  const at = e.node ? placeName(site, e.node) : "an unknown place";
+  switch (e.state) {
+    case "ordered":
+      return spot ? `evacuation: ordered to its safe spot ${spot}` : `evacuation: no safe spot${e.why ? ` (${e.why})` : ""}`;
+    case "stopped":
+      return `evacuation: stopped at ${at}`;
+    case "moving":
+      return spot ? `evacuation: moving to its safe spot ${spot}` : "evacuation: moving to its safe spot";
+    case "safe":
+      return `evacuation: safe at ${at}`;
+    case "stuck":
+      return `evacuation: stuck at ${at}${e.why ? `: ${e.why}` : ""}`;
+    default:
+      return `evacuation: ${e.state}`;
+  }
+}
+
+/** A robot's mode as the console says it: its evacuation during an alarm, the wait when it
+ * waits, else its mode. */
 export function robotDoing(store, s) {
-  return waitingFor(store, s) ?? s?.mode ?? "—";
+  return evacuationText(store, s?.robot) ?? waitingFor(store, s) ?? s?.mode ?? "—";
 }

@@ -24,6 +24,7 @@ export class Store extends EventTarget {
     this.lifts = new Map(); // elevator id -> elevator_state {floor, door_open, state, calls}
     this.simulator = false;
     this.fleet = null; // GET /api/fleet: {paused, by, since, reason}
+    this.emergency = null; // GET /api/emergency, kept live (docs/emergency.md)
     this.frame = 0;
     this.error = null; // the last background failure (shown on the page until the next success)
     this.olderEvents = true; // the event log has rows older than this.events[0]
@@ -34,6 +35,8 @@ export class Store extends EventTarget {
     this.tasksTimer = 0;
     this.taskFetch = null;
     this.taskFetchAgain = false;
+    this.emergencyFetch = null;
+    this.emergencyFetchAgain = false;
   }
 
   /** A background refresh failed: the page shows why (never swallowed). */
@@ -118,16 +121,33 @@ export class Store extends EventTarget {
       if (row.kind === "fleet_paused") this.fleet = { paused: true, by: row.data.by, since: row.at, reason: row.data.reason ?? "" };
       if (row.kind === "fleet_resumed") this.fleet = { paused: false, by: null, since: null, reason: "" };
     });
-    on("building_input_changed", (m) => this.#point(m.payload.module, m.payload.point, m.payload.value));
+    on("building_input_changed", (m) => {
+      const { module, point, value } = m.payload;
+      this.#point(module, point, value);
+      // An alarm input moved: what it reads decides whether "Resume service" can work.
+      if ((this.emergency?.alarms ?? []).some((a) => a.module === module && a.point === point)) this.refreshEmergency();
+    });
     on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
     on("door_opened", (m) => this.#door(m.payload.door, true));
     on("door_closed", (m) => this.#door(m.payload.door, false));
     on("elevator_state", (m) => this.#lift(m.payload));
+    // The fire alarm: the state changes (banner), and each robot's evacuation as it reports it.
+    on("emergency_changed", (m) => {
+      this.emergency = { ...(this.emergency ?? {}), ...m.payload };
+      this.refreshEmergency();
+    });
+    on("evacuation_state", (m) => {
+      if (!this.emergency) return;
+      const robots = { ...(this.emergency.robots ?? {}) };
+      robots[m.source] = { ...(robots[m.source] ?? {}), ...m.payload, at: m.timestamp };
+      this.emergency = { ...this.emergency, robots };
+      this.emit("evacuation", m.source);
+    });
     this.hub.subscribe(
       "robot_state", "robot_connected", "robot_disconnected", "robot_service", "robot_fault", "robocan_status",
       "lock_changed", "task_event", "alert_raised", "alert_acked", "alert_resolved", "event_logged",
       "building_input_changed", "building_module_health", "door_opened", "door_closed",
-      "elevator_state",
+      "elevator_state", "emergency_changed", "evacuation_state",
     );
     this.hub.addEventListener("connect", () => this.reload().catch((err) => this.fail(err)));
     const [site, simulator] = await Promise.all([
@@ -162,7 +182,7 @@ export class Store extends EventTarget {
   async #reloadOnce() {
     this.inFlight = []; // events logged while the snapshot is fetched
     const links = new Map([...this.robots].map(([name, r]) => [name, r.links]));
-    const [robots, locks, tasks, alerts, events, building, fleet] = await Promise.all([
+    const [robots, locks, tasks, alerts, events, building, fleet, emergency] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
       this.api.get(TASK_LISTING),
@@ -170,8 +190,10 @@ export class Store extends EventTarget {
       this.api.get(`/api/events?latest=true&limit=${this.eventPage}`),
       this.api.get("/api/building"),
       this.api.get("/api/fleet"),
+      this.api.get("/api/emergency"),
     ]);
     this.fleet = fleet;
+    this.emergency = emergency;
     for (const info of robots) {
       const robot = this.robot(info.name);
       robot.info = info;
@@ -195,6 +217,37 @@ export class Store extends EventTarget {
     for (const p of building.points) this.#point(p.module, p.point, p.value);
     for (const car of building.elevators ?? []) this.#lift(car);
     this.changed();
+  }
+
+  /** The emergency state again (after emergency_changed: the robots held, the inputs' values,
+   * the cut-off tasks come with the snapshot only). One request at a time, one more after. */
+  refreshEmergency() {
+    if (this.emergencyFetch) {
+      this.emergencyFetchAgain = true;
+      return this.emergencyFetch;
+    }
+    this.emergencyFetch = (async () => {
+      try {
+        do {
+          this.emergencyFetchAgain = false;
+          this.emergency = await this.api.get("/api/emergency");
+          for (const name of Object.keys(this.emergency.robots ?? {})) this.emit("evacuation", name);
+          this.changed();
+        } while (this.emergencyFetchAgain);
+      } catch (err) {
+        this.fail(err);
+      } finally {
+        this.emergencyFetch = null;
+      }
+    })();
+    return this.emergencyFetch;
+  }
+
+  /** A robot's evacuation while an alarm holds (null otherwise). */
+  evacuation(name) {
+    const e = this.emergency;
+    if (!e || e.state === "normal") return null;
+    return e.robots?.[name] ?? null;
   }
 
   /** One more page of the event log, older than the oldest row shown. */

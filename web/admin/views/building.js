@@ -1,7 +1,8 @@
 // Building: every Modbus module with health and live inputs/outputs; doors and elevators (where
 // each car is, from the server's elevator_state); the building simulator's buttons when one is
-// configured.
+// configured; the fire alarm's section (views/emergency.js).
 import { html } from "lit-html";
+import { emergencySection } from "/admin/views/emergency.js";
 
 const BITS = new Set(["discrete_input", "coil"]);
 
@@ -36,6 +37,7 @@ export function buildingView(ui) {
   const press = (button) => ui.act(`Press ${button}`, () => ui.api.post("/api/building/simulator/press", { button, ms: 800 }));
   return html`<h2>Building</h2>
     ${ui.store.building.enabled ? "" : html`<p class="notice error">The building interface is not running (no modules, or disabled).</p>`}
+    ${emergencySection(ui)}
     <h3>Doors</h3>
     <table aria-label="Doors">
       <thead><tr><th scope="col">Door</th><th scope="col">Node</th><th scope="col">State</th></tr></thead>

@@ -78,7 +78,9 @@ function buildingControls(ui) {
   </section>`;
 }
 
-function robotColour(s) {
+function robotColour(ui, s) {
+  const evacuation = ui.store.evacuation(s.robot);
+  if (evacuation) return evacuation.state === "safe" ? "#1b7a3a" : evacuation.state === "stuck" ? "#b00020" : "#b35900";
   if (s.mode === "fault" || s.navigation === "door_blocked") return "#b00020";
   if (WAITING.has(s.navigation)) return "#b35900";
   if (s.mode === "busy") return "#0b57d0";
@@ -108,7 +110,7 @@ function floorPlan(ui, floor) {
     const x = p.x + k * 1.4;
     const label = `${r.name}: ${robotDoing(ui.store, r.state)}, at ${placeName(site, r.state.node)}`;
     return svg`<g class="overview-robot" data-robot=${r.name} role="img" aria-label=${label}><title>${label}</title>
-      <circle cx=${x} cy=${Y(p.y)} r="0.8" fill=${robotColour(r.state)} stroke="#1a1a1a" stroke-width="0.15"></circle>
+      <circle cx=${x} cy=${Y(p.y)} r="0.8" fill=${robotColour(ui, r.state)} stroke="#1a1a1a" stroke-width="0.15"></circle>
       <text x=${x} y=${Y(p.y) - 1.1} text-anchor="middle" font-size="1.1" font-weight="700">${r.name}</text></g>`;
   });
   return html`<figure class="overview-floor" data-floor=${floor.id}>

@@ -2,7 +2,7 @@
 import { html } from "lit-html";
 import { carText } from "/admin/views/building.js";
 import { duration, percent } from "/lib/dom.js";
-import { floorName, placeName, taskLabel, waitingFor } from "/admin/names.js";
+import { evacuationText, floorName, placeName, taskLabel, waitingFor } from "/admin/names.js";
 
 export function toolbarView(ui) {
   const { store, map } = ui;
@@ -29,6 +29,7 @@ function robotDetails(ui, name) {
   return html`<h3>Robot ${name}</h3>
     <dl>
       <dt>Connection</dt><dd>${robot.online ? "online" : "offline"}</dd>
+      ${evacuationText(ui.store, name) ? html`<dt>Evacuation</dt><dd class="state-evacuation">${evacuationText(ui.store, name).replace("evacuation: ", "")}</dd>` : ""}
       <dt>Mode</dt><dd>${s.mode ?? robot.info?.mode ?? "—"}</dd>
       ${waitingFor(ui.store, s) ? html`<dt>Waiting</dt><dd class="state-waiting">${waitingFor(ui.store, s)}</dd>` : ""}
       <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>

@@ -2,7 +2,7 @@
 // actions: charge, send to a node, out of service and back, cancel the task.
 import { html } from "lit-html";
 import { clock, percent } from "/lib/dom.js";
-import { floorName, placeName, poiName, taskLabel, waitingFor } from "/admin/names.js";
+import { evacuationText, floorName, placeName, poiName, taskLabel, waitingFor } from "/admin/names.js";
 import { cancelTask } from "/admin/views/tasks.js";
 
 export function tourStep(ui, robot) {
@@ -84,6 +84,7 @@ export function robotsView(ui) {
           <span class=${`badge ${link[0]}`}>${link[1]}</span>
           ${info.out_of_service ? html`<span class="badge warn">out of service</span>` : ""}</h3>
         <dl class="facts">
+          ${evacuationText(ui.store, robot.name) ? html`<dt>Evacuation</dt><dd class="state-evacuation" data-evacuation=${robot.name}>${evacuationText(ui.store, robot.name).replace("evacuation: ", "")}</dd>` : ""}
           <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : "offline"}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
           <dt>Pose</dt><dd>${node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
