@@ -1,6 +1,8 @@
 """The on-board touch screen: tours and points of interest to request, the current explanation
 with its picture, the "continue the tour?" question with its time-out, and the robot's state
-(charging, going to the next point, link to the server lost).
+(charging, going to the next point, link to the server lost); during a fire alarm, the
+evacuation screen with the site's words in the screen's language, and requests refused with
+them (docs/emergency.md).
 
 A small FastAPI app served by uvicorn in the agent's own event loop at ``--gui-port``:
 ``GET /`` the page, ``GET /api/screen?lang=`` what the screen shows (JSON, texts in that
@@ -25,7 +27,7 @@ from typing import Any, Literal
 
 import uvicorn
 from fastapi import FastAPI, HTTPException, Query, WebSocket, WebSocketDisconnect
-from fastapi.responses import FileResponse, HTMLResponse, Response
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
@@ -40,7 +42,7 @@ from guidebot.site.schema import Site
 from guidebot.task_kinds import KINDS, VISITOR_KINDS
 from robot_agent.clock import Clock
 
-__all__ = ["OnboardScreen", "ScreenServer", "VisitorAnswer"]
+__all__ = ["AlarmHolds", "OnboardScreen", "ScreenServer", "VisitorAnswer"]
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +65,13 @@ VisitorAnswer = Literal["yes", "no"]
 
 class LinkDown(RuntimeError):
     """A request while the link to the server is down and requests are refused."""
+
+
+class AlarmHolds(RuntimeError):
+    """A request while a fire alarm holds the service: the site's words say why (REST 503,
+    reason ``emergency``, as the server answers it)."""
+
+    reason = "emergency"
 
 
 class TourRequest(BaseModel):
@@ -119,6 +128,9 @@ class OnboardScreen(Service):
         self.question: dict[str, Any] | None = None
         self.answers: list[str] = []
         self._question_timer: asyncio.TimerHandle | None = None
+        self.alarm: dict[str, Any] | None = None
+        """While a fire alarm holds the service: {words: {lang: text}, evacuation: this
+        robot's own state (stopped, moving, safe, stuck) or None}; None otherwise."""
 
     async def on_start(self) -> None:
         self.subscribe_all(
@@ -134,6 +146,9 @@ class OnboardScreen(Service):
                 "goal_reached": self._on_going,
                 "navigation_failed": self._on_going,
                 "robot_state": self._on_robot_state,
+                "emergency_changed": self._on_emergency,
+                "evacuate": self._on_evacuate,
+                "evacuation_state": self._on_evacuation_state,
             },
         )
 
@@ -164,7 +179,18 @@ class OnboardScreen(Service):
                 "up": None if self.link_up is None else self.link_up(),
                 "offline_requests": self.offline_requests,
             },
+            "alarm": None
+            if self.alarm is None
+            else {"words": self.alarm_words(chosen), "evacuation": self.alarm["evacuation"]},
         }
+
+    def alarm_words(self, lang: str | None) -> str:
+        """The site's alarm words in ``lang``, else in the first language given (the server
+        puts the site's default first); empty when none came."""
+        words: dict[str, str] = (self.alarm or {}).get("words") or {}
+        if lang in words:
+            return words[lang]
+        return next(iter(words.values()), "")
 
     def _tours(self, lang: str) -> list[dict[str, Any]]:
         site = self.site
@@ -208,6 +234,32 @@ class OnboardScreen(Service):
         self.lang = lang if isinstance(lang, str) else None
         self.task = {"id": message.payload.get("task_id"), "tour": params.get("tour")}
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
+
+    # -- the fire alarm ---------------------------------------------------------------------
+
+    def _on_emergency(self, message: Message) -> None:
+        """The server's state: an alarm anywhere holds new requests (docs/emergency.md)."""
+        if message.payload.get("state") == "normal":
+            self.alarm = None
+        else:
+            words = message.payload.get("words") or {}
+            evacuation = (self.alarm or {}).get("evacuation")
+            self.alarm = {"words": dict(words), "evacuation": evacuation}
+        self._push("emergency", {"alarm": self.alarm})
+
+    def _on_evacuate(self, message: Message) -> None:
+        """This robot's order to leave (it may come without emergency_changed: a robot that
+        connected during the alarm)."""
+        if message.destination not in (None, self.robot):
+            return
+        words = message.payload.get("words") or (self.alarm or {}).get("words") or {}
+        self.alarm = {"words": dict(words), "evacuation": (self.alarm or {}).get("evacuation")}
+        self._push("emergency", {"alarm": self.alarm})
+
+    def _on_evacuation_state(self, message: Message) -> None:
+        if self.alarm is not None:
+            self.alarm["evacuation"] = message.payload.get("state")
+            self._push("emergency", {"alarm": self.alarm})
 
     def _on_robot_state(self, message: Message) -> None:
         self._push("state", {})  # battery, mode and the link change without other events
@@ -310,6 +362,10 @@ class OnboardScreen(Service):
     def request(self, req: TourRequest) -> Message:
         """A visitor asks for a tour or a point: a task_request for the Task Manager.
         Raises LinkDown when the server cannot be reached and requests are refused."""
+        if self.alarm is not None:
+            raise AlarmHolds(
+                self.alarm_words(req.lang) or "fire alarm: no request until it is over"
+            )
         if self.link_up is not None and not self.link_up() and self.offline_requests == "refuse":
             raise LinkDown("no connection to the server: requests are refused until it is back")
         if req.kind == "tour":
@@ -372,10 +428,12 @@ def create_screen_app(
     async def get_screen(lang: str | None = Query(default=None, max_length=16)) -> dict[str, Any]:
         return screen.screen(lang)
 
-    @app.post("/api/request", status_code=202)
-    async def post_request(req: TourRequest) -> dict[str, Any]:
+    @app.post("/api/request", status_code=202, response_model=None)
+    async def post_request(req: TourRequest) -> dict[str, Any] | JSONResponse:
         try:
             message = screen.request(req)
+        except AlarmHolds as exc:
+            return JSONResponse({"detail": str(exc), "reason": AlarmHolds.reason}, status_code=503)
         except LinkDown as exc:
             raise HTTPException(status_code=503, detail=str(exc)) from None
         except ValueError as exc:

@@ -1,6 +1,7 @@
 // The robot's touch screen: the visitor panel's look and language files (/lib, /lang, /visitor
 // served by the robot itself), tours and points to request, the current explanation with its
-// picture, "continue the tour?" with a visible countdown, and the robot's state.
+// picture, "continue the tour?" with a visible countdown, and the robot's state. During a fire
+// alarm: the evacuation screen, the site's words in the screen's language (docs/emergency.md).
 import { html, render } from "/vendor/lit-html/lit-html.js";
 import { loadTexts } from "/lib/i18n.js";
 
@@ -86,6 +87,7 @@ async function ask(kind, item) {
   const r = await post("/api/request", body);
   if (r.ok) state.message = r.data.queued_offline ? t("request_queued_offline") : t("requested");
   else if (r.status === 0) state.message = t("error_network");
+  else if (r.data.reason === "emergency") state.message = r.data.detail; // the site's words
   else state.message = r.status === 503 ? t("link_down_refuse") : t("error_server", { detail: r.data.detail ?? r.status });
   draw();
 }
@@ -140,6 +142,26 @@ function nowView(s) {
   </div>`;
 }
 
+/** While a fire alarm lasts: the site's words, what the robot does, no request. */
+function alarmView(s) {
+  const evacuation = s.alarm.evacuation;
+  return html`<section class="evacuation" aria-labelledby="evacuation-title">
+    <header class="visitor-top">
+      <h1 id="evacuation-title">${t("evacuation_title")}</h1>
+      ${languages(s)}
+    </header>
+    <p class="evacuation-words" role="alert">${s.alarm.words || t("evacuation_default")}</p>
+    ${evacuation ? html`<p class="touch-state" role="status">${t(`evacuation_robot_${evacuation}`)}</p>` : ""}
+    <p>${t("evacuation_no_requests")}</p>
+  </section>`;
+}
+
+function languages(s) {
+  return s.languages.length > 1 ? html`<div class="languages" role="group" aria-label=${t("choose_language")}>
+    ${s.languages.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === s.lang)}
+      @click=${() => { state.chosen = lang; refresh(); }}>${names.get(lang) ?? lang}</button>`)}</div>` : "";
+}
+
 function draw() {
   const s = state.screen;
   if (!s || !state.texts) return;
@@ -148,12 +170,15 @@ function draw() {
     app.textContent = ""; // the "Loading…" placeholder, before lit-html owns the container
     app.dataset.drawn = "1";
   }
+  document.body.classList.toggle("alarm", Boolean(s.alarm));
+  if (s.alarm) {
+    render(alarmView(s), app);
+    return;
+  }
   const refused = s.link?.up === false && s.link?.offline_requests === "refuse";
   render(html`<header class="visitor-top">
       <h1>${t("touch_title", { robot: s.robot })}</h1>
-      ${s.languages.length > 1 ? html`<div class="languages" role="group" aria-label=${t("choose_language")}>
-        ${s.languages.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === s.lang)}
-          @click=${() => { state.chosen = lang; refresh(); }}>${names.get(lang) ?? lang}</button>`)}</div>` : ""}
+      ${languages(s)}
     </header>
     ${stateView(s)}
     ${questionView(s.question)}

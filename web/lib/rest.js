@@ -2,10 +2,13 @@
 // for the person in front of the page (401: the token; 403: the role; 422: what is wrong).
 
 export class ApiError extends Error {
-  constructor(status, message, detail = null) {
+  /** `reason`: the answer's machine-readable why, when it has one ("emergency": a fire alarm
+   * holds the service, docs/emergency.md). */
+  constructor(status, message, detail = null, reason = null) {
     super(message);
     this.status = status;
     this.detail = detail;
+    this.reason = reason;
   }
 }
 
@@ -51,12 +54,15 @@ export class Api extends EventTarget {
     }
     if (!response.ok) {
       let detail = null;
+      let reason = null;
       try {
-        detail = (await response.json()).detail;
+        const body = await response.json();
+        detail = body.detail;
+        reason = typeof body.reason === "string" ? body.reason : null;
       } catch {
         detail = null;
       }
-      const error = new ApiError(response.status, describe(response.status, detail), detail);
+      const error = new ApiError(response.status, describe(response.status, detail), detail, reason);
       if (response.status === 401 || response.status === 403) {
         this.dispatchEvent(new CustomEvent("denied", { detail: error }));
       }

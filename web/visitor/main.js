@@ -1,6 +1,7 @@
 // The visitor panel (/visitor/): a kiosk at the entrance or a visitor's phone. Tours and points
 // in the visitor's language, a request, then live over the hub: which robot, place in line and
-// wait, on its way, arrived, progress, ended; cancel. docs/visitor.md describes it.
+// wait, on its way, arrived, progress, ended; cancel. During a fire alarm, the evacuation screen;
+// after it, the offer to go on with a request the alarm cut off. docs/visitor.md describes it.
 import { html, render } from "lit-html";
 import { fragmentToken } from "/lib/auth.js";
 import { HubClient } from "/lib/hub.js";
@@ -23,6 +24,8 @@ const early = new Map();
 const EARLY_MAX = 64;
 /** The kinds the panel asks for, by card (docs/visitor.md). */
 const KIND = { tour: "tour", poi: "go_to_poi" };
+/** The reason the server gives a task it cut off for a fire alarm (docs/emergency.md). */
+const CUT_OFF = "fire alarm";
 
 /** A random id, 22 URL-safe characters: this device's identity under the shared panel token. */
 function newDevice() {
@@ -66,6 +69,10 @@ const state = {
   confirming: false,
   busy: false,
   brokenPictures: new Set(),
+  /** the server's emergency state (GET /api/emergency, then emergency_changed) */
+  emergency: null,
+  /** this device's requests a fire alarm cut off, not yet answered after it (the offer) */
+  cutOff: new Set(),
 };
 
 const t = (key, vars) => state.texts.t(key, vars);
@@ -95,7 +102,30 @@ async function loadMenu() {
 
 function remember() {
   const live = [...state.requests.values()].filter((r) => !FINAL.has(r.state)).map((r) => r.id);
-  sessionStorage.setItem(STORE, JSON.stringify({ ids: live, labels: [...state.labels] }));
+  for (const id of state.cutOff) if (!live.includes(id)) state.cutOff.delete(id);
+  sessionStorage.setItem(STORE, JSON.stringify({ ids: live, labels: [...state.labels], cutOff: [...state.cutOff] }));
+}
+
+/** An alarm holds the service (the evacuation screen shows). */
+const alarm = () => Boolean(state.emergency && state.emergency.state !== "normal");
+
+/** The server's emergency state; the requests it cut off are this device's to offer again. */
+async function loadEmergency() {
+  const emergency = await api.get("/api/emergency");
+  state.emergency = emergency;
+  markCutOff(emergency.cut_off_tasks ?? []);
+}
+
+function markCutOff(ids) {
+  let more = false;
+  for (const id of ids) {
+    const r = state.requests.get(id);
+    if (r && !FINAL.has(r.state) && !state.cutOff.has(id)) {
+      state.cutOff.add(id);
+      more = true;
+    }
+  }
+  if (more) remember();
 }
 
 /** A task's status as told by the server now: its waits count down from `toldAt`. */
@@ -150,6 +180,7 @@ async function reload() {
     for (const status of await api.get("/api/visitor/requests")) state.requests.set(status.id, told(status, state.requests.get(status.id)));
     await refreshRequests([...state.requests.keys()]);
     for (const status of state.requests.values()) state.labels.set(status.id, labelOf(status));
+    await loadEmergency();
     if (state.errorFrom !== "action") showError("", "");
   } catch (err) {
     // Before any texts (a refused token at the first load): say it in the page's language.
@@ -217,7 +248,11 @@ async function request(kind, item) {
     state.confirming = false;
     remember();
   } catch (err) {
-    showError(describe(err), "action");
+    if (err instanceof ApiError && err.reason === "emergency") {
+      // Refused for a fire alarm: the server's words (in this language), the evacuation screen.
+      showError(typeof err.detail === "string" ? err.detail : t("evacuation_no_requests"), "action");
+      await loadEmergency().catch(() => {});
+    } else showError(describe(err), "action");
   } finally {
     state.busy = false;
   }
@@ -225,8 +260,7 @@ async function request(kind, item) {
   focusHeading();
 }
 
-async function cancel() {
-  const id = state.current;
+async function cancel(id = state.current) {
   try {
     state.requests.set(id, told(await api.post(`/api/tasks/${encodeURIComponent(id)}/cancel`, { reason: "cancelled by the visitor" }), state.requests.get(id)));
     showError("", "");
@@ -234,8 +268,20 @@ async function cancel() {
     showError(describe(err), "action");
   }
   state.confirming = false;
+  state.cutOff.delete(id);
   remember();
   draw();
+}
+
+/** The answer to the offer after an alarm: go on (the request keeps its place) or drop it. */
+async function answerOffer(id, goOn) {
+  if (!goOn) return cancel(id);
+  state.cutOff.delete(id);
+  state.current = id;
+  state.view = "request";
+  remember();
+  draw();
+  focusHeading();
 }
 
 async function chooseLanguage(lang) {
@@ -395,6 +441,54 @@ function requestView() {
     </div>`;
 }
 
+/** The site's words for the alarm in the page's language (its default language's otherwise). */
+function alarmWords() {
+  const words = state.emergency?.words ?? {};
+  return words[state.menu.lang] ?? words[state.menu.default_language] ?? t("evacuation_default");
+}
+
+/** While an alarm lasts: the site's words, no request possible, a cut-off request's fate. */
+function evacuationView() {
+  const cut = [...state.cutOff].map((id) => state.requests.get(id)).filter((r) => r && !FINAL.has(r.state));
+  return html`<section class="evacuation" aria-labelledby="evacuation-title">
+      <header class="visitor-top">
+        <h1 id="evacuation-title" tabindex="-1">${t("evacuation_title")}</h1>
+        ${languagePicker()}
+      </header>
+      <p class="evacuation-words" role="alert">${alarmWords()}</p>
+      <p>${t("evacuation_no_requests")}</p>
+      ${cut.map((r) => html`<p class="notice">${t("evacuation_cut_off", { name: state.labels.get(r.id) ?? labelOf(r) })}</p>`)}
+      ${state.error && state.error !== alarmWords() ? errorBox() : ""}
+    </section>`;
+}
+
+/** After the alarm: a request it cut off is offered again, in its place in line. */
+function offerView(r) {
+  const name = state.labels.get(r.id) ?? labelOf(r);
+  return html`<header class="visitor-top">
+      <h1 tabindex="-1">${t("offer_title")}</h1>
+      ${languagePicker()}
+    </header>
+    ${errorBox()}
+    <div class="request-state" role="status">
+      <p>${t("offer_text", { name })}</p>
+      ${statusLines(r).map((line) => html`<p>${line}</p>`)}
+    </div>
+    <div class="actions">
+      <button class="big" @click=${() => answerOffer(r.id, true)}>${t("offer_keep")}</button>
+      <button class="big secondary" @click=${() => answerOffer(r.id, false)}>${t("offer_drop")}</button>
+    </div>`;
+}
+
+function offered() {
+  if (alarm()) return null;
+  for (const id of state.cutOff) {
+    const r = state.requests.get(id);
+    if (r && !FINAL.has(r.state)) return r;
+  }
+  return null;
+}
+
 const names = new Map();
 
 function draw() {
@@ -409,7 +503,11 @@ function draw() {
     return;
   }
   app.setAttribute("aria-busy", "false");
-  render(state.view === "request" ? requestView() : startView(), app);
+  const offer = offered();
+  document.body.classList.toggle("alarm", alarm());
+  if (alarm()) render(evacuationView(), app);
+  else if (offer) render(offerView(offer), app);
+  else render(state.view === "request" ? requestView() : startView(), app);
 }
 
 // --- kiosk --------------------------------------------------------------------------------------
@@ -432,6 +530,7 @@ function kioskMode() {
       device = deviceId(true);
       state.requests.clear();
       state.labels.clear();
+      state.cutOff.clear();
       sessionStorage.removeItem(STORE);
       await reload();
     }, idleS * 1000);
@@ -448,6 +547,7 @@ async function start() {
   if (kiosk) kioskMode();
   const saved = JSON.parse(sessionStorage.getItem(STORE) ?? "{}");
   for (const [id, label] of saved.labels ?? []) state.labels.set(id, label);
+  for (const id of saved.cutOff ?? []) state.cutOff.add(id);
   for (const id of saved.ids ?? []) state.requests.set(id, { id, state: "queued", params: {} });
   if (!token) {
     state.texts = await loadTexts(state.lang ?? "en");
@@ -470,7 +570,7 @@ async function live() {
   for (const lang of state.menu.languages) names.set(lang, (await loadTexts(lang)).name);
   draw();
   const hub = new HubClient({ token }).start();
-  hub.subscribe("task_event", "visitor_service");
+  hub.subscribe("task_event", "visitor_service", "emergency_changed");
   hub.on("task_event", (message) => {
     const p = message.payload;
     refreshMenuSoon();
@@ -483,8 +583,23 @@ async function live() {
       return;
     }
     state.requests.set(p.task_id, told({ ...p, id: p.task_id }, known));
+    if (p.state === "queued" && p.reason === CUT_OFF) markCutOff([p.task_id]);
     if (FINAL.has(p.state)) remember();
     draw();
+  });
+  // A fire alarm starts or ends: the evacuation screen, then the offer (docs/emergency.md).
+  hub.on("emergency_changed", async (message) => {
+    const was = alarm();
+    state.emergency = { ...(state.emergency ?? {}), ...message.payload };
+    try {
+      await loadEmergency();
+    } catch {
+      /* the reconnect's reload reads it again */
+    }
+    if (was && !alarm() && state.errorFrom === "action") showError("", "");
+    refreshMenuSoon();
+    draw();
+    if (was !== alarm()) focusHeading();
   });
   // What a new request would be told changed (a robot free, a jam): read the menu again.
   hub.on("visitor_service", () => refreshMenuSoon());
