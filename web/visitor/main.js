@@ -434,7 +434,7 @@ function requestView() {
       <progress max=${progress.total} value=${progress.index}>${progress.index} / ${progress.total}</progress></label>` : ""}
     <div class="actions">
       ${final ? "" : state.confirming
-        ? html`<button class="big danger" @click=${cancel}>${t("cancel_confirm")}</button>
+        ? html`<button class="big danger" @click=${() => cancel()}>${t("cancel_confirm")}</button>
                <button class="big secondary" @click=${() => { state.confirming = false; draw(); }}>${t("keep")}</button>`
         : html`<button class="big secondary" @click=${() => { state.confirming = true; draw(); }}>${t("cancel")}</button>`}
       <button class="big" @click=${backToStart}>${final ? t(r.kind === "go_to_poi" ? "new_request_point" : "new_request") : t("back")}</button>

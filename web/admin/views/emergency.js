@@ -83,7 +83,7 @@ export function emergencyBanner(ui) {
       ? html`<p>${inputs.map((a) => html`<span class="badge bad">${a.id} (${a.module}/${a.point}) ${a.reads_alarm === null ? "cannot be read" : "reads alarm"}</span> `)}</p>`
       : "";
   return html`<h2 id="emergency-title">Fire alarm: ${zones}</h2>
-    <p>Since ${clock(e.since)}, declared by ${whoText(e.declared_by)}${e.reason ? ` (${e.reason})` : ""}. No new task starts; queued tasks wait.</p>
+    <p>Since ${clock(e.since)}, declared by ${whoText(e.declared_by)}${e.reason && !e.declared_by?.startsWith("input:") ? ` (${e.reason})` : ""}. No new task starts; queued tasks wait.</p>
     ${state}
     ${robotsLine(ui, e)}
     <div class="actions">
@@ -105,8 +105,8 @@ function simulatorAlarms(ui) {
         const value = ui.store.building.points.get(`${a.input.module}/${a.input.point}`);
         const reads = value === undefined ? "not read yet" : Number(value) === a.active_when ? "alarm" : "normal";
         return html`<tr><td>${a.id}</td><td>${a.input.module}/${a.input.point}</td><td data-alarm-input=${a.id}>${reads}</td>
-          <td class="actions"><button type="button" class="danger" @click=${() => set(a, true)}>Raise alarm ${a.id}</button>
-            <button type="button" class="secondary" @click=${() => set(a, false)}>Clear alarm ${a.id}</button></td></tr>`;
+          <td><div class="actions"><button type="button" class="danger" @click=${() => set(a, true)}>Raise alarm ${a.id}</button>
+            <button type="button" class="secondary" @click=${() => set(a, false)}>Clear alarm ${a.id}</button></div></td></tr>`;
       })}</tbody>
     </table>`;
 }
