@@ -188,6 +188,12 @@ async def test_declare_by_rest_checks_the_zone_and_survives_a_restart(tmp_path: 
             state = await _state(http)
             assert state["state"] == "alarm"
             assert state["zones"] == [{"floors": ["F1"]}] and state["reason"] == "smoke on F1"
+            # ... and its staff alert, open again (the console's watcher starts after the
+            # emergency service has published it).
+            alerts = (await http.get("/api/alerts")).json()
+            assert [a["message"] for a in alerts if a["kind"] == "fire_alarm"] == [
+                "Fire alarm: floor F1 (declared by admin): robots go to their safe spots"
+            ]
             resumed = await http.post("/api/emergency/resume")
             assert resumed.status_code == 200, resumed.text
             assert resumed.json()["state"] == "normal"
