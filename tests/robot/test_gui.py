@@ -111,3 +111,26 @@ async def test_a_refused_assignment_leaves_the_running_tour_on_the_screen(screen
     assert screen.screen.screen()["task"]["id"] == "t1"
     robot.publish("task_ended", {"task_id": "t1", "robot": "R1"})
     assert screen.screen.screen()["task"] is None
+
+
+async def test_a_fire_alarm_holds_the_screen_in_the_requests_language(screen: Screen) -> None:
+    """emergency_changed (then the robot's own evacuation_state) makes the evacuation screen;
+    a request meanwhile is refused with the site's words in its language, like the server's
+    503 (docs/visitor.md, "The robot's touch screen")."""
+    server = screen.bus.endpoint("server")
+    words = {"en": "Fire alarm. Leave the building.", "es": "Alarma de incendio. Salga."}
+    server.publish("emergency_changed", {"state": "alarm", "zones": [{}], "words": words})
+    screen.bus.endpoint("evacuation").publish("evacuation_state", {"state": "moving"})
+    async with httpx.AsyncClient(base_url=screen.server.url) as http:
+        shown = (await http.get("/api/screen?lang=es")).json()["alarm"]
+        assert shown == {"words": "Alarma de incendio. Salga.", "evacuation": "moving"}
+        refused = await http.post(
+            "/api/request", json={"kind": "tour", "tour": "ground", "lang": "es"}
+        )
+        assert refused.status_code == 503
+        assert refused.json() == {"detail": "Alarma de incendio. Salga.", "reason": "emergency"}
+        assert not screen.seen.of("task_request")
+        server.publish("emergency_changed", {"state": "normal"})
+        assert (await http.get("/api/screen")).json()["alarm"] is None
+        accepted = await http.post("/api/request", json={"kind": "tour", "tour": "ground"})
+        assert accepted.status_code == 202
