@@ -217,3 +217,28 @@ async def until_state(states: list[str], changed: asyncio.Event, wanted: str) ->
     while wanted not in states:
         changed.clear()
         await changed.wait()
+
+
+async def test_a_kiosk_visitor_declines_the_cut_off_tour_after_the_alarm(
+    alarm_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with alarm_fleet() as af:
+        page = (await open_page(f"{af.panel_url}&kiosk=1", viewport=(1280, 900))).page
+        card = page.get_by_role("article", name="Highlights")
+        await card.get_by_role("button", name="Take this tour").click()
+        await expect(page.get_by_text("Robot R1", exact=True)).to_be_visible(timeout=LONG)
+        (task_id,) = list(af.fleet.server.app.state.task_manager.tasks)
+        async with af.fleet.http() as staff:
+            r = await staff.post("/api/emergency/declare", json={"reason": "drill"})
+            assert r.status_code == 200, r.text
+            await expect(page.get_by_role("heading", name="Fire alarm")).to_be_visible()
+            await expect(page.get_by_text("Your request “Highlights” stopped")).to_be_visible()
+            await web.axe_check(page)
+            # Declared by a person, no input reads alarm: resumed in one step.
+            assert (await staff.post("/api/emergency/resume")).status_code == 200
+        await expect(page.get_by_role("heading", name="Your tour can go on")).to_be_visible()
+        await page.get_by_role("button", name="No, thank you").click()
+        await expect(page.get_by_role("heading", name="Your tour can go on")).to_have_count(0)
+        await expect(page.locator(".request-state")).to_have_text("Your request was cancelled.")
+        task = af.fleet.server.app.state.task_manager.tasks[task_id]
+        assert (task.state.value, task.cancelled_by) == ("cancelled", "requester")
