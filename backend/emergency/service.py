@@ -85,6 +85,9 @@ class EmergencyService(Service):
         """Robot -> its evacuation: safe_spot, path, state (ordered, stopped, moving, safe,
         stuck), node, why, at."""
         self._held: tuple[int, frozenset[str]] = (0, frozenset())
+        self._told: dict[str, object] = {}
+        """Robot -> the boot id of its agent process that was told of this alarm: a robot
+        that connects, or whose agent restarts, during the alarm hears of it at once."""
         self.courier = courier_for(endpoint)
         """evacuate: sent again until the robot's link acknowledges it."""
 
@@ -327,7 +330,7 @@ class EmergencyService(Service):
         )
         log.warning("service resumed by %s after the fire alarm", by)
         self.zones, self.since, self.declared_by, self.reason = [], None, "", ""
-        self.cut_off, self.evacuation = [], {}
+        self.cut_off, self.evacuation, self._told = [], {}, {}
         self._publish()
         self.tasks.dispatch()  # the held queue runs, cut-off tasks first in their places
         return {**self.snapshot(), "resumed_tasks": cut_off}
@@ -356,11 +359,30 @@ class EmergencyService(Service):
 
     def _on_robot_state(self, msg: Message) -> None:
         """A robot connecting, or driving into the zone, while the alarm lasts is held too."""
-        if self.state is EmergencyState.normal or msg.source in self.evacuation:
+        if self.state is EmergencyState.normal:
+            return
+        self._tell_new_process(msg.source, msg.payload.get("boot_id"))
+        if msg.source in self.evacuation:
             return
         robot = self.tasks.robots.get(msg.source)
         if robot is not None and robot.online and self.holds(robot):
             self._hold_robots()
+
+    def _tell_new_process(self, robot: str, boot_id: object) -> None:
+        """The alarm's state, sent to an agent process that has not heard it (the broadcast
+        went out before it connected: its screen would offer tours the server refuses). A
+        restarted agent also forgot its evacuation order: it is ordered again from where it
+        stands."""
+        if robot in self._told and self._told[robot] == boot_id:
+            return
+        restarted = robot in self._told
+        self._told[robot] = boot_id
+        self.endpoint.send(
+            make_message(self._changed(), source=self.endpoint.name, destination=robot)
+        )
+        if restarted and robot in self.evacuation:
+            log.warning("%s restarted during the fire alarm: ordered to safety again", robot)
+            del self.evacuation[robot]
 
     def _on_robot_gone(self, msg: Message) -> None:
         """Gone before it acted on its order (the courier forgets it): ordered again when it
@@ -382,17 +404,18 @@ class EmergencyService(Service):
     def _zone_dicts(self) -> list[dict[str, list[str]]]:
         return [z.model_dump(exclude_defaults=True) for z in self.zones]
 
-    def _publish(self) -> None:
-        self.endpoint.publish(
-            EmergencyChanged(
-                state=self.state.value,
-                zones=self._zone_dicts(),
-                since=self.since,
-                declared_by=self.declared_by,
-                reason=self.reason,
-                words=self._emergency().words,
-            )
+    def _changed(self) -> EmergencyChanged:
+        return EmergencyChanged(
+            state=self.state.value,
+            zones=self._zone_dicts(),
+            since=self.since,
+            declared_by=self.declared_by,
+            reason=self.reason,
+            words=self._emergency().words,
         )
+
+    def _publish(self) -> None:
+        self.endpoint.publish(self._changed())
 
     def snapshot(self) -> dict[str, Any]:
         """What ``GET /api/emergency`` answers."""

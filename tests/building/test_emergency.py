@@ -217,3 +217,42 @@ async def test_an_alarm_input_already_raised_at_start_is_declared(tmp_path: Path
             sim.write(IORef(module="otb_ground", point="fire_alarm"), 0)
             await recorder.wait("emergency_changed", state="input_clear")
             assert (await http.post("/api/emergency/resume")).status_code == 200
+
+
+async def test_a_robot_connecting_or_restarting_during_the_alarm_hears_of_it(
+    tmp_path: Path,
+) -> None:
+    """The broadcast went out before these processes were there: each is told on its first
+    state, and a restarted agent (new boot id) is ordered to safety again."""
+    async with alarm_rig(tmp_path) as (_sim, server, _control, http):
+        hub = server.app.state.hub
+        declared = await http.post(
+            "/api/emergency/declare", json={"zone": {"floors": ["F1"]}, "reason": "smoke on F1"}
+        )
+        assert declared.status_code == 200, declared.text
+        # Outside the zone: no order, but the screen must know new requests are refused.
+        below = RobotStub(hub, "R1", "hall")
+        below.state(boot_id="r1-first")
+        told = await below.wait_for("emergency_changed")
+        assert told.payload["state"] == "alarm" and told.payload["zones"] == [{"floors": ["F1"]}]
+        assert below.of_type("evacuate") == []
+        # Inside the zone: told and ordered; safe at its spot.
+        above = RobotStub(hub, "R2", "gc1")
+        above.state(boot_id="r2-first")
+        await above.wait_for("emergency_changed")
+        first = await above.wait_for("evacuate")
+        above.endpoint.publish(
+            "evacuation_state", {"state": "safe", "node": first.payload["safe_spot"]}
+        )
+        emergency = server.app.state.emergency
+        await wait_until(lambda: emergency.evacuation["R2"]["state"] == "safe")
+        # The same process reporting again is not told twice.
+        above.state(boot_id="r2-first")
+        below.state(boot_id="r1-first")
+        # Its agent restarts (same name, new process): it forgot its order and the alarm.
+        above.node = first.payload["safe_spot"]
+        above.state(boot_id="r2-second")
+        again = await above.wait_for("evacuate", count=2)
+        assert again.payload["safe_spot"] == first.payload["safe_spot"]
+        await above.wait_for("emergency_changed", count=2)
+        assert len(below.of_type("emergency_changed")) == 1
