@@ -98,7 +98,7 @@ async function answer(value) {
 
 function picture(media, name) {
   const first = (media ?? []).find((m) => m.url && !state.broken.has(m.url));
-  if (!first) return html`<div class="picture placeholder" role="img" aria-label=${t("picture_missing")}><span aria-hidden="true">🖼</span></div>`;
+  if (!first) return html`<div class="picture placeholder" role="img" aria-label=${t("picture_missing")}><svg aria-hidden="true" viewBox="0 0 24 24" width="56" height="56" fill="none" stroke="currentColor" stroke-width="1.5" stroke-linejoin="round"><rect x="3" y="4" width="18" height="16" rx="2"/><circle cx="9" cy="10" r="2"/><path d="M3 18l5-5 4 4 3-3 6 6"/></svg></div>`;
   return html`<img class="picture" src=${first.url} alt=${name} @error=${() => { state.broken.add(first.url); draw(); }}>`;
 }
 
