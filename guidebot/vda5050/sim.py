@@ -6,8 +6,8 @@ every event (an order taken or refused, a node reached, an action's state, a pau
 the instant actions cancelOrder, startPause, stopPause, startCharging, stopCharging and
 stateRequest, and says ONLINE on ``connection`` with CONNECTIONBROKEN as its last will.
 A node action ``speak`` (text, lang) or ``wait`` (seconds) blocks for its time at that node.
-Faults for tests: ``reject_orders`` (the next orders are refused with that reason) and
-``raise_error`` (an error in the state).
+Faults for tests: ``reject_orders`` (the next orders are refused with that reason),
+``deaf`` (orders dropped unanswered) and ``raise_error`` (an error in the state).
 """
 
 from __future__ import annotations
@@ -98,6 +98,10 @@ class SimVehicle(Service):
         self.actions: dict[str, _Action] = {}
         self.errors: list[dict[str, Any]] = []
         self.reject_orders: str | None = None
+        self.deaf = False
+        """Orders are dropped unanswered (kept in ``orders_ignored``): a vehicle that never
+        acknowledges them."""
+        self.orders_ignored: list[dict[str, Any]] = []
         self.orders_received: list[dict[str, Any]] = []
         self.instant_received: list[dict[str, Any]] = []
         self._headers: dict[str, int] = {}
@@ -146,6 +150,9 @@ class SimVehicle(Service):
             check(name, message, self.vehicle.version)
         except (ValueError, SchemaViolation) as exc:
             self._error("validationError", "WARNING", str(exc)[:500], [])
+            return
+        if name == "order" and self.deaf:
+            self.orders_ignored.append(message)
             return
         if name == "order":
             self.orders_received.append(message)

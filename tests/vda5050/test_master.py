@@ -4,17 +4,20 @@ simulated vehicle refuses what its schema refuses, with an error in its state)."
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 
+import aiomqtt
 import pytest
 
 from backend.tasks.model import FINAL_STATES
+from guidebot.payloads.traffic import ReleaseArea, RequestArea
 from guidebot.testing import wait_on, wait_until
 from guidebot.vda5050.schemas import problems
 
 from .broker import Mosquitto, mosquitto
-from .fleet import Fleet, fleet, vehicle
+from .fleet import V1, Fleet, fleet, vehicle
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -73,3 +76,175 @@ async def test_go_to_drives_the_vehicle_through_the_corridor_lock(
         assert traffic.locks.holder("corridor") is None
         state = f.of("robot_state")[-1].payload
         assert state["robot"] == "V1" and state["node"] == "e" and state["mode"] == "idle"
+
+
+async def test_the_base_ends_before_an_area_held_by_another_robot(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        other = f.server.app.state.hub.endpoint("R1")
+        other.publish(RequestArea(robot="R1", area="corridor"))
+        traffic = f.server.app.state.traffic
+        await wait_until(lambda: traffic.locks.holder("corridor") == "R1")
+        task = await f.task("go_to", {"node": "e"})
+        states = f.of("robot_state")
+        await wait_on(
+            f.changed,
+            lambda: (
+                any(
+                    m.payload["robot"] == "V1" and m.payload["navigation"] == "waiting_area"
+                    for m in states
+                )
+                and sim.last_node == "b"
+                and not sim.driving
+            ),
+            20,
+        )
+        assert [released(o) for o in sim.orders_received] == [["a", "b"]]
+        other.publish(ReleaseArea(robot="R1", area="corridor"))
+        result = await until_done(f, task)
+        assert result["state"] == "done", result
+        assert sim.last_node == "e"
+        assert released(sim.orders_received[-1]) == ["b", "c", "d", "e"]
+        other.close()
+
+
+async def test_a_refused_order_fails_the_task_with_the_vehicles_reason(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        sim.reject_orders = "map ground is not loaded"
+        task = await f.task("go_to", {"node": "b"})
+        result = await until_done(f, task)
+        assert result["state"] == "failed", result
+        assert "map ground is not loaded" in result["reason"], result
+        assert sim.last_node == "a"
+        faults = [m.payload for m in f.of("robot_fault") if m.payload["robot"] == "V1"]
+        assert faults and faults[0]["kind"] == "vda5050_orderError"
+
+
+async def test_an_order_never_acknowledged_is_sent_three_times_then_given_up(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        sim.deaf = True
+        task = await f.task("go_to", {"node": "b"})
+        result = await until_done(f, task, timeout=30)
+        assert result["state"] == "failed", result
+        assert "never acknowledged" in result["reason"], result
+        assert len(sim.orders_ignored) == 3
+        assert {o["orderId"] for o in sim.orders_ignored} == {sim.orders_ignored[0]["orderId"]}
+
+
+async def test_cancel_from_the_console_reaches_the_vehicle(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        sim.speed = 0.05  # slow: still on its way when the cancel comes
+        task = await f.task("go_to", {"node": "b"})
+        await wait_until(lambda: sim.driving, 10)
+        answer = await f.http.post(f"/api/tasks/{task}/cancel", json={"reason": "test"})
+        assert answer.status_code == 200, answer.text
+        result = await until_done(f, task)
+        assert result["state"] == "cancelled", result
+        await wait_until(lambda: bool(sim.instant_received), 10)
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert "cancelOrder" in kinds
+        all_valid(sim.instant_received, "instantActions")
+        await wait_until(lambda: not sim.driving and not sim.order.nodes, 10)
+
+
+async def test_a_tour_stops_with_a_speak_action_at_each_point(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        task = await f.task("tour", {"tour": "line"})
+        result = await until_done(f, task, timeout=60)
+        assert result["state"] == "done", result
+        progress = [
+            (m.payload["index"], m.payload["stage"])
+            for m in f.of("tour_progress")
+            if m.payload["task_id"] == task
+        ]
+        assert progress == [(1, "arrived"), (1, "explained"), (2, "arrived"), (2, "explained")]
+        # a horizon node comes again in each update, with its actions (same ids)
+        speak = list(
+            {
+                a["actionId"]: a
+                for o in sim.orders_received
+                for n in o["nodes"]
+                for a in n["actions"]
+                if a["actionType"] == "speak"
+            }.values()
+        )
+        texts = [{p["key"]: p["value"] for p in a["actionParameters"]}["text"] for a in speak]
+        assert texts == ["Here is the bee.", "The end of the line."]
+        assert all(sim.actions[a["actionId"]].status == "FINISHED" for a in speak)
+        all_valid(sim.orders_received, "order")
+
+
+async def test_a_bad_message_is_logged_counted_and_alerted_and_nothing_is_lost(
+    tmp_path: Path, broker: Mosquitto, caplog: pytest.LogCaptureFixture
+) -> None:
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        async with aiomqtt.Client("127.0.0.1", broker.port) as client:
+            await client.publish(V1.topic("state"), b"{not json", qos=1)
+            bad = sim.state() | {"batteryState": {"batteryCharge": "full"}}
+            await client.publish(V1.topic("state"), json.dumps(bad), qos=1)
+        await wait_until(lambda: f.master.refused == 2, 10)
+        alerts = f.server.app.state.alerts
+        alert = alerts.get("vda5050_message", "V1")
+        assert alert is not None and alert.count == 2
+        assert "batteryState/batteryCharge" in alert.message
+        assert "V1: message on uagv/v2/Acme/sn-0001/state ignored" in caplog.text
+        # the vehicle goes on: a task after it is done
+        task = await f.task("go_to", {"node": "b"})
+        result = await until_done(f, task)
+        assert result["state"] == "done", result
+        assert f.robot("V1").online
+
+
+async def test_the_broker_down_at_start_and_coming_back(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with mosquitto(started=False) as broker:
+        async with fleet(tmp_path, broker.url) as f:
+            alerts = f.server.app.state.alerts
+            await wait_until(lambda: alerts.is_active("vda5050_broker", broker.url), 10)
+            assert f"cannot reach the MQTT broker {broker.url}" in caplog.text
+            broker.start()
+            async with vehicle(broker.url) as sim:
+                await wait_until(lambda: f.robot("V1").online, 30)
+                assert not alerts.is_active("vda5050_broker", broker.url)
+                # the broker goes and comes back: the master reconnects by itself
+                broker.stop()
+                await wait_until(lambda: alerts.is_active("vda5050_broker", broker.url), 10)
+                broker.start()
+                await wait_until(lambda: f.master.session.connections == 2, 30)
+                task = await f.task("go_to", {"node": "b"})
+                result = await until_done(f, task, timeout=40)
+                assert result["state"] == "done", result
+                assert sim.last_node == "b"
+
+
+async def test_a_broken_connection_is_a_robot_disconnected(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        async with aiomqtt.Client("127.0.0.1", broker.port) as client:
+            # what the broker publishes for the vehicle's last will
+            will = {**V1.header(7), "connectionState": "CONNECTIONBROKEN"}
+            await client.publish(V1.topic("connection"), json.dumps(will), qos=1)
+        await wait_on(
+            f.changed,
+            lambda: any(m.payload["robot"] == "V1" for m in f.of("robot_disconnected")),
+            10,
+        )
+        assert sim.session.connected.is_set()
