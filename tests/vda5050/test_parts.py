@@ -49,7 +49,7 @@ def test_instant_actions_follow_the_schema() -> None:
 
 
 def test_the_schema_names_what_is_wrong() -> None:
-    with pytest.raises(SchemaViolation, match="order refused by the VDA 5050 schema: .*orderId"):
+    with pytest.raises(SchemaViolation, match=r"order refused by the VDA 5050 schema: .*orderId"):
         check("order", {**V.header(0), "nodes": [], "edges": [], "orderUpdateId": 0})
     assert problems("connection", {**V.header(0), "connectionState": "SLEEPY"})
 
