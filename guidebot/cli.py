@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "site": "backend.site.cli:site",
     "robocan": "robot_agent.robocan.cli:robocan",
     "building-sim": "building_sim.cli:building_sim",
+    "vda5050-sim": "guidebot.vda5050.cli:vda5050_sim",
 }
 
 BENCHMARKS: dict[str, str] = {

@@ -85,6 +85,9 @@ class MasterControl(Service):
         return send
 
     def _on_connect(self) -> None:
+        if self.session.connections > 1:  # back after a loss: what did the vehicles do?
+            for robot in self.robots.values():
+                self.spawn(robot.instant("stateRequest"), f"stateRequest {robot.name}")
         if self.resolve is not None:
             self.resolve("vda5050_broker", str(self.broker), "connected")
 
