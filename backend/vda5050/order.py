@@ -12,7 +12,7 @@ from typing import Any
 
 from guidebot.vda5050.topics import Vehicle
 
-__all__ = ["build_order", "instant_actions", "node_seq", "step_of_seq"]
+__all__ = ["build_order", "init_position", "instant_actions", "node_seq", "step_of_seq"]
 
 
 def node_seq(index: int) -> int:
@@ -82,13 +82,31 @@ def build_order(
 
 
 def instant_actions(
-    vehicle: Vehicle, header_id: int, actions: Sequence[tuple[str, str]]
+    vehicle: Vehicle,
+    header_id: int,
+    actions: Sequence[tuple[str, str]],
+    parameters: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """``instantActions`` of (actionId, actionType) pairs, each HARD blocking."""
+    """``instantActions`` of (actionId, actionType) pairs, each HARD blocking, each with
+    ``parameters`` (key -> value) when given."""
+    params = [{"key": k, "value": v} for k, v in (parameters or {}).items()]
     return {
         **vehicle.header(header_id),
         "actions": [
             {"actionId": action_id, "actionType": kind, "blockingType": "HARD"}
+            | ({"actionParameters": params} if params else {})
             for action_id, kind in actions
         ],
+    }
+
+
+def init_position(step: Mapping[str, Any], map_id: str) -> dict[str, Any]:
+    """The parameters of ``initPosition`` that put the vehicle on ``step``'s node (after an
+    elevator ride: the exit cabin node, on the target floor's map)."""
+    return {
+        "x": float(step["x"]),
+        "y": float(step["y"]),
+        "theta": 0.0,
+        "mapId": map_id,
+        "lastNodeId": str(step["node"]),
     }

@@ -11,12 +11,13 @@ import logging
 import math
 from collections import deque
 from collections.abc import Awaitable, Callable, Mapping
+from datetime import datetime
 from typing import Any
 
-from backend.vda5050.order import build_order, instant_actions, step_of_seq
+from backend.vda5050.order import build_order, init_position, instant_actions, step_of_seq
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
-from guidebot.payloads.building import OpenDoor, ReleaseDoor
+from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
 from guidebot.payloads.robot import (
     ENDED_REPORTED,
     EndedTask,
@@ -42,6 +43,10 @@ ACK_TIMEOUT_S = 3.0
 ORDER_TRIES = 3
 """Sends of one order before the task fails: never resent forever."""
 DONE_ACTIONS = frozenset({"FINISHED", "FAILED"})
+RECALL_S = 2.0
+"""While a vehicle waits for a cabin, drives into it or out of it, its call is repeated this
+often (wall seconds), as a person keeps the button pressed: the building's door hold does not
+run out under it."""
 
 
 class DriveFailed(Exception):
@@ -91,6 +96,10 @@ class VdaRobot:
         self.doors: set[str] = set()
         """Doors asked for (open_door sent) and not released."""
         self.open_doors: set[str] = set()
+        self.cabins: dict[str, tuple[str, bool]] = {}
+        """Elevator -> (floor, door open), from the building's elevator_in_position."""
+        self.recall_s = RECALL_S
+        self._called: dict[tuple[str, str], float] = {}
         self.waiting: str | None = None
         self.changed = asyncio.Event()
         self.ended: deque[EndedTask] = deque(maxlen=ENDED_REPORTED)
@@ -104,6 +113,7 @@ class VdaRobot:
             endpoint.subscribe("area_granted", self._on_area_granted),
             endpoint.subscribe("door_opened", self._on_door),
             endpoint.subscribe("door_closed", self._on_door),
+            endpoint.subscribe("elevator_in_position", self._on_cabin),
         ]
 
     async def close(self) -> None:
@@ -119,13 +129,16 @@ class VdaRobot:
         self._headers[topic] = self._headers.get(topic, -1) + 1
         return self._headers[topic]
 
-    async def instant(self, *kinds: str) -> dict[str, Any]:
+    async def instant(
+        self, *kinds: str, parameters: Mapping[str, Any] | None = None
+    ) -> dict[str, Any]:
         """Send one ``instantActions`` with these action types; returns it."""
         n = self._header_id("instantActions")
         message = instant_actions(
             self.vehicle,
             n,
             [(f"{self.name}-{kind}-{n}", kind) for kind in kinds],
+            parameters,
         )
         await self.send("instantActions", message)
         return message
@@ -156,7 +169,8 @@ class VdaRobot:
         if last in self.nodes and last != self.node:
             self.node = last
             self.floor = self.nodes[last].floor
-            self.ep.publish(NodeReached(robot=self.name, node=last, floor=self.floor))
+            at = datetime.fromisoformat(message["timestamp"]).timestamp()
+            self.ep.publish(NodeReached(robot=self.name, node=last, floor=self.floor, at=at))
         self._report_errors(message["errors"])
         self._publish_state()
         self.changed.set()
@@ -321,9 +335,10 @@ class VdaRobot:
         *,
         on_arrival: Callable[[], None] | None = None,
     ) -> None:
-        """Bring the vehicle to ``goal`` with one order, its base released as far as the areas
-        granted and the doors open allow, extended by an update at each grant or opening; the
-        ``actions`` run at the goal. Raises DriveFailed with the reason."""
+        """Bring the vehicle to ``goal``: one order per floor of the path (a leg), its base
+        released as far as the areas granted, the doors open and the cabin at the landing
+        allow, extended by an update at each grant, opening or arrival; between two legs an
+        elevator ride. The ``actions`` run at the goal. Raises DriveFailed with the reason."""
         try:
             reply = await self.ep.request(
                 GetPath(robot=self.name, from_node=self.node, to_node=goal), timeout=5.0
@@ -333,22 +348,65 @@ class VdaRobot:
         steps: list[dict[str, Any]] = reply.payload.get("steps") or []
         if reply.type != "path" or not steps:
             raise DriveFailed(f"no path to {goal}: {reply.payload.get('error', 'none')}")
-        if any(s.get("elevator") for s in steps[1:]):
-            raise DriveFailed(
-                f"the way to {goal} takes an elevator: not yet supported for VDA 5050 robots"
+        last = len(steps) - 1
+        rides = [
+            i
+            for i in range(last)
+            if steps[i].get("elevator")
+            and steps[i + 1].get("elevator") == steps[i]["elevator"]
+            and steps[i + 1]["floor"] != steps[i]["floor"]
+        ]
+        starts = [0, *(r + 1 for r in rides)]
+        ends = [*rides, last]
+        for n, (first, end) in enumerate(zip(starts, ends, strict=True)):
+            if n:
+                await self._ride(steps[first - 1], steps[first])
+            final = end == last
+            await self._leg(
+                task_id,
+                steps[: end + 1],
+                first,
+                actions if final else None,
+                on_arrival if final else None,
             )
+
+    async def _ride(self, cabin: Mapping[str, Any], exit_: Mapping[str, Any]) -> None:
+        """The vehicle stands in the cabin: call it to the exit's floor, and once it is there
+        with its door open tell the vehicle where it is now (``initPosition`` on that floor's
+        map): the next leg is a new order there."""
+        elevator, floor = str(cabin["elevator"]), str(exit_["floor"])
+        self.waiting = "riding"
+        while self.cabins.get(elevator) != (floor, True):
+            self._call(elevator, floor)
+            self.changed.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.changed.wait(), 0.5)
+        self.node, self.floor = str(exit_["node"]), floor
+        self.ep.publish(NodeReached(robot=self.name, node=self.node, floor=floor))
+        map_id = self.map_ids.get(floor, floor)
+        await self.instant("initPosition", parameters=init_position(exit_, map_id))
+
+    async def _leg(
+        self,
+        task_id: str,
+        steps: list[dict[str, Any]],
+        first: int,
+        actions: list[dict[str, Any]] | None,
+        on_arrival: Callable[[], None] | None,
+    ) -> None:
+        """One order: the vehicle from ``steps[first]`` to the last of ``steps``."""
         self._orders += 1
         order_id = self.order_id = f"{task_id}-{self._orders}"
         last = len(steps) - 1
         action_ids = {a["actionId"] for a in actions or []}
-        update, base_end, sent_at, tries = -1, -1, 0.0, 0
+        update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
         order: dict[str, Any] = {}
         arrived = False
         loop = asyncio.get_running_loop()
         while True:
             state = self.state or {}
             ours = state.get("orderId") == order_id
-            progress = step_of_seq(state["lastNodeSequenceId"]) if ours else 0
+            progress = step_of_seq(state["lastNodeSequenceId"]) if ours else first
             self._release_behind(steps, progress)
             released_to = self._releasable(steps, progress)
             if released_to > base_end:
@@ -359,7 +417,7 @@ class VdaRobot:
                     order_id,
                     update,
                     steps,
-                    start=max(base_end, 0),
+                    start=max(base_end, first),
                     released_to=released_to,
                     map_ids=self.map_ids,
                     actions={last: actions or []} if base_end < last else None,
@@ -378,6 +436,9 @@ class VdaRobot:
             refusal = self._refusal(order_id)
             if refusal is not None:
                 raise DriveFailed(f"{self.name} refused the order: {refusal}")
+            cabin = steps[progress].get("elevator")
+            if cabin and progress < last:  # getting out: keep the cabin's door open
+                self._call(cabin, str(steps[progress]["floor"]))
             if acked and progress == last:
                 if not arrived and on_arrival is not None:
                     on_arrival()
@@ -421,6 +482,13 @@ class VdaRobot:
                 if door not in self.open_doors:
                     self.waiting = "waiting_door"
                     return i - 1
+            elevator = steps[i].get("elevator")
+            if elevator and steps[i - 1].get("elevator") != elevator:  # into the cabin
+                floor = str(steps[i]["floor"])
+                self._call(elevator, floor)
+                if self.cabins.get(elevator) != (floor, True):
+                    self.waiting = "waiting_elevator"
+                    return i - 1
         return len(steps) - 1
 
     def _release_behind(self, steps: list[dict[str, Any]], progress: int) -> None:
@@ -462,6 +530,18 @@ class VdaRobot:
         if area in self.requested:
             self.granted.add(area)
         self.changed.set()
+
+    def _on_cabin(self, msg: Message) -> None:
+        p = msg.payload
+        self.cabins[str(p.get("elevator"))] = (str(p.get("floor")), bool(p.get("door_open")))
+        self.changed.set()
+
+    def _call(self, elevator: str, floor: str) -> None:
+        """Call the cabin to ``floor``, again only after ``recall_s``."""
+        now = asyncio.get_running_loop().time()
+        if now - self._called.get((elevator, floor), -math.inf) >= self.recall_s:
+            self._called[(elevator, floor)] = now
+            self.ep.publish(CallElevator(elevator=elevator, floor=floor))
 
     def _on_door(self, msg: Message) -> None:
         door = str(msg.payload.get("door"))

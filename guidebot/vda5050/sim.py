@@ -3,8 +3,9 @@
 It drives the released base of its order from node to node in straight lines at its speed
 (times ``time_scale``), reports ``state`` every ``state_period_s`` (wall time) and at once on
 every event (an order taken or refused, a node reached, an action's state, a pause), honours
-the instant actions cancelOrder, startPause, stopPause, startCharging, stopCharging and
-stateRequest, and says ONLINE on ``connection`` with CONNECTIONBROKEN as its last will.
+the instant actions cancelOrder, startPause, stopPause, startCharging, stopCharging,
+initPosition (after an elevator ride) and stateRequest, and says ONLINE on ``connection``
+with CONNECTIONBROKEN as its last will.
 A node action ``speak`` (text, lang) or ``wait`` (seconds) blocks for its time at that node.
 Faults for tests: ``reject_orders`` (the next orders are refused with that reason),
 ``deaf`` (orders dropped unanswered) and ``raise_error`` (an error in the state).
@@ -253,6 +254,14 @@ class SimVehicle(Service):
             self.charging = True
         elif kind == "stopCharging":
             self.charging = False
+        elif kind == "initPosition":  # after an elevator ride: on another map
+            params = {p["key"]: p["value"] for p in action.get("actionParameters", [])}
+            self.x, self.y = float(params["x"]), float(params["y"])
+            self.theta = float(params.get("theta", 0.0))
+            self.map_id, self.last_node = str(params["mapId"]), str(params["lastNodeId"])
+            self.last_seq = 0
+            self.order.nodes.clear()
+            self.order.edges.clear()
         elif kind == "stateRequest":
             pass  # the state goes out at once (_event)
         else:
