@@ -14,12 +14,19 @@ from collections.abc import Awaitable, Callable, Mapping
 from datetime import datetime
 from typing import Any
 
-from backend.vda5050.order import build_order, init_position, instant_actions, step_of_seq
+from backend.vda5050.order import (
+    build_order,
+    init_position,
+    instant_actions,
+    node_seq,
+    step_of_seq,
+)
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
 from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
 from guidebot.payloads.robot import (
     ENDED_REPORTED,
+    BatteryAlarm,
     EndedTask,
     NodeReached,
     RobotFault,
@@ -43,6 +50,7 @@ ACK_TIMEOUT_S = 3.0
 ORDER_TRIES = 3
 """Sends of one order before the task fails: never resent forever."""
 DONE_ACTIONS = frozenset({"FINISHED", "FAILED"})
+BATTERY_REARM = 0.05
 RECALL_S = 2.0
 """While a vehicle waits for a cabin, drives into it or out of it, its call is repeated this
 often (wall seconds), as a person keeps the button pressed: the building's door hold does not
@@ -96,9 +104,15 @@ class VdaRobot:
         self.doors: set[str] = set()
         """Doors asked for (open_door sent) and not released."""
         self.open_doors: set[str] = set()
+        self.route: dict[int, str] = {}
+        """The current order's nodes ahead by sequence id (``_reached``)."""
+        self.route_seq = 0
         self.cabins: dict[str, tuple[str, bool]] = {}
         """Elevator -> (floor, door open), from the building's elevator_in_position."""
         self.recall_s = RECALL_S
+        self.battery_low, self.battery_panic = config.battery_low, config.battery_panic
+        self._alarm: str | None = None
+        """The battery alarm sent and not yet re-armed (``battery_low`` or ``battery_panic``)."""
         self._called: dict[tuple[str, str], float] = {}
         self.waiting: str | None = None
         self.changed = asyncio.Event()
@@ -165,15 +179,46 @@ class VdaRobot:
         position = message.get("agvPosition")
         if position is not None:
             self.floor = self.floor_of_map.get(position["mapId"], self.floor)
-        last = message["lastNodeId"]
-        if last in self.nodes and last != self.node:
-            self.node = last
-            self.floor = self.nodes[last].floor
-            at = datetime.fromisoformat(message["timestamp"]).timestamp()
-            self.ep.publish(NodeReached(robot=self.name, node=last, floor=self.floor, at=at))
+        at = datetime.fromisoformat(message["timestamp"]).timestamp()
+        for node in self._reached(message):
+            if node == self.node:
+                continue
+            self._left(self.node, node)
+            self.node = node
+            self.floor = self.nodes[node].floor
+            self.ep.publish(NodeReached(robot=self.name, node=node, floor=self.floor, at=at))
         self._report_errors(message["errors"])
+        self._battery(float(message["batteryState"]["batteryCharge"]) / 100)
         self._publish_state()
         self.changed.set()
+
+    def _reached(self, message: dict[str, Any]) -> list[str]:
+        """The nodes reached since the last state, in order: a state is a sample, and a
+        vehicle may pass several nodes of its order between two (every one is reported, for
+        the area locks and the fleet's invariants)."""
+        if message.get("orderId") == self.order_id and self.route:
+            seq = int(message["lastNodeSequenceId"])
+            passed = [n for s, n in sorted(self.route.items()) if self.route_seq < s <= seq]
+            if passed:
+                self.route_seq = seq
+                return passed
+        last = str(message["lastNodeId"])
+        return [last] if last in self.nodes else []
+
+    def _battery(self, level: float) -> None:
+        """``battery_low`` / ``battery_panic`` once per crossing of the robot's thresholds, as
+        the robot agent sends them (re-armed 0.05 above ``battery_low``)."""
+        if level >= self.battery_low + BATTERY_REARM:
+            self._alarm = None
+        if level <= self.battery_panic and self._alarm != "battery_panic":
+            self._alarm = "battery_panic"
+        elif level <= self.battery_low and self._alarm is None:
+            self._alarm = "battery_low"
+        else:
+            return
+        log.warning("%s: %s at %.2f", self.name, self._alarm.replace("_", " "), level)
+        alarm = BatteryAlarm(robot=self.name, level=round(max(0.0, min(1.0, level)), 3))
+        self.ep.publish(self._alarm, alarm)
 
     def _report_errors(self, errors: list[dict[str, Any]]) -> None:
         now = {(e["errorType"], e.get("errorDescription", "")) for e in errors}
@@ -282,6 +327,7 @@ class VdaRobot:
         finally:
             self._release_all()
             self.order_id = None
+            self.route = {}
             self.waiting = None
         self.task_id = None
         self.runner = None
@@ -398,6 +444,8 @@ class VdaRobot:
         self._orders += 1
         order_id = self.order_id = f"{task_id}-{self._orders}"
         last = len(steps) - 1
+        self.route = {node_seq(i): str(steps[i]["node"]) for i in range(first + 1, len(steps))}
+        self.route_seq = node_seq(first)
         action_ids = {a["actionId"] for a in actions or []}
         update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
         order: dict[str, Any] = {}
@@ -502,6 +550,14 @@ class VdaRobot:
         for door in sorted(self.doors & passed_doors):
             self.doors.discard(door)
             self.ep.publish(ReleaseDoor(door=door))
+
+    def _left(self, before: str | None, now: str) -> None:
+        """The areas the vehicle has just left are released before its ``node_reached``, as
+        a robot does (the Traffic Manager may give them on at once)."""
+        for area in sorted(self.granted):
+            nodes = self.area_nodes.get(area, frozenset())
+            if before in nodes and now not in nodes:
+                self._release_area(area)
 
     def _release_area(self, area: str) -> None:
         self.granted.discard(area)

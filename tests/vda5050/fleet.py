@@ -26,8 +26,10 @@ V1 = Vehicle(manufacturer="Acme", serial_number="sn-0001")
 TIME_SCALE = 10.0
 
 
-def site_dict() -> dict[str, Any]:
-    return {
+def site_dict(**more: Any) -> dict[str, Any]:
+    """The line; ``more``: other site sections (no charging station or wait point by default:
+    an idle robot stays where its task left it)."""
+    return more | {
         "name": "VDA 5050 test line",
         "floors": [{"id": "F0", "name": "Ground", "level": 0}],
         "nodes": [
@@ -105,9 +107,9 @@ def vehicle(broker_url: str, **options: Any) -> SimVehicle:
 
 
 @contextlib.asynccontextmanager
-async def fleet(tmp_path: Path, broker_url: str) -> AsyncIterator[Fleet]:
+async def fleet(tmp_path: Path, broker_url: str, **more: Any) -> AsyncIterator[Fleet]:
     site = tmp_path / "site.yaml"
-    site.write_text(yaml.safe_dump(site_dict(), sort_keys=False), encoding="utf-8")
+    site.write_text(yaml.safe_dump(site_dict(**more), sort_keys=False), encoding="utf-8")
     settings = Settings(
         db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db",
         site=site,

@@ -248,3 +248,25 @@ async def test_a_broken_connection_is_a_robot_disconnected(
             10,
         )
         assert sim.session.connected.is_set()
+
+
+async def test_a_low_battery_sends_the_vehicle_to_charge(tmp_path: Path, broker: Mosquitto) -> None:
+    dock = [{"id": "dock", "node": "a"}]
+    async with fleet(tmp_path, broker.url, charging_stations=dock) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        sim.x = 4.0  # at b: the dock is at a
+        sim.last_node = "b"
+        await wait_until(lambda: f.robot("V1").node == "b", 10)
+        sim.battery = 0.25  # below the robot's battery_low (0.3)
+        await wait_on(
+            f.changed, lambda: any(m.payload["robot"] == "V1" for m in f.of("battery_low")), 10
+        )
+        await wait_until(lambda: sim.charging, 30)
+        assert sim.last_node == "a"
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert "startCharging" in kinds
+        await wait_on(
+            f.changed,
+            lambda: f.of("robot_state")[-1].payload["mode"] == "charging",
+            10,
+        )

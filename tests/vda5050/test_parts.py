@@ -3,11 +3,17 @@ vendored schemas."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from backend.vda5050.order import build_order, instant_actions
+from backend.vda5050.vehicle import VdaRobot
+from guidebot.bus import Bus
+from guidebot.messages import Message
 from guidebot.site.validate import SiteInvalid, validate_site
 from guidebot.vda5050.schemas import SCHEMA_DIR, SchemaViolation, check, problems
+from guidebot.vda5050.sim import SimVehicle
 from guidebot.vda5050.topics import Vehicle, parse_broker
 
 from .fleet import site_dict
@@ -90,3 +96,41 @@ def test_topic_names() -> None:
     assert (
         Vehicle("Acme", "sn-1", "fleet", "3.0.0").topic("zoneSet") == "fleet/v3/Acme/sn-1/zoneSet"
     )
+
+
+async def test_nodes_passed_between_two_states_are_each_reached_in_order() -> None:
+    """A state is a sample: a vehicle that passed c and d between two reports still reaches
+    them on the hub, and the corridor is released before the node after it."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+    sent: list[tuple[str, dict[str, Any]]] = []
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        sent.append((topic, message))
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.order_id = "o1"
+    robot.route = {2: "b", 4: "c", 6: "d", 8: "e"}
+    robot.granted = {"corridor"}
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    state = sim.state() | {"orderId": "o1", "lastNodeId": "b", "lastNodeSequenceId": 2}
+    robot.on_state(state)
+    robot.on_state(state | {"lastNodeId": "e", "lastNodeSequenceId": 8})
+    events = [
+        (m.type, m.payload.get("node") or m.payload.get("area"))
+        for m in seen
+        if m.type in ("node_reached", "release_area")
+    ]
+    assert events == [
+        ("node_reached", "b"),
+        ("node_reached", "c"),
+        ("node_reached", "d"),
+        ("release_area", "corridor"),
+        ("node_reached", "e"),
+    ]
+    assert [m.payload["robot"] for m in seen if m.type == "robot_connected"] == ["V1"]
+    await robot.close()
