@@ -121,6 +121,8 @@ class MasterControl(Service):
             robot.on_state(message)
         elif kind == "connection":
             robot.on_connection(message)
+        else:
+            robot.on_factsheet(message)
 
     def _refuse(self, robot: VdaRobot, topic: str, exc: Exception) -> None:
         self.refused += 1

@@ -10,7 +10,7 @@ import contextlib
 import logging
 import math
 from collections import deque
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Coroutine, Mapping
 from datetime import datetime
 from typing import Any
 
@@ -36,6 +36,7 @@ from guidebot.payloads.robot import (
 from guidebot.payloads.tasks import RobotLink, TaskEnded, TaskStarted, TourProgress
 from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
 from guidebot.site.schema import RobotConfig, Site
+from guidebot.vda5050.sim import speak_seconds
 from guidebot.vda5050.topics import Vehicle
 
 __all__ = ["DriveFailed", "VdaRobot", "vehicle_of"]
@@ -110,6 +111,11 @@ class VdaRobot:
         self.cabins: dict[str, tuple[str, bool]] = {}
         """Elevator -> (floor, door open), from the building's elevator_in_position."""
         self.recall_s = RECALL_S
+        self.factsheet: dict[str, Any] | None = None
+        self.speaks = True
+        """Tour stops are ``speak`` actions (until a factsheet says the vehicle has none:
+        then a ``wait`` as long as the text takes to say)."""
+        self._tasks: set[asyncio.Task[Any]] = set()
         self.battery_low, self.battery_panic = config.battery_low, config.battery_panic
         self._alarm: str | None = None
         """The battery alarm sent and not yet re-armed (``battery_low`` or ``battery_panic``)."""
@@ -133,6 +139,8 @@ class VdaRobot:
     async def close(self) -> None:
         for unsubscribe in self._unsubscribe:
             unsubscribe()
+        for task in list(self._tasks):
+            task.cancel()
         if self.runner is not None:
             self.runner.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -164,13 +172,32 @@ class VdaRobot:
         self.online = state == "ONLINE"
         if self.online and not was:
             self.announce.publish("robot_connected", RobotLink(robot=self.name))
-            asyncio.get_running_loop().create_task(self.instant("stateRequest"))
+            self._spawn(self.instant("stateRequest", "factsheetRequest"))
         elif not self.online and was:
             log.warning("%s: the vehicle's connection is %s", self.name, state)
             if state == "OFFLINE":  # a clean goodbye
                 self._publish_state()
             self.announce.publish("robot_disconnected", RobotLink(robot=self.name))
         self.changed.set()
+
+    def _spawn(self, coro: Coroutine[Any, Any, Any]) -> None:
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def on_factsheet(self, message: dict[str, Any]) -> None:
+        """What the vehicle can do: whether a tour stop is a ``speak`` or a timed ``wait``."""
+        self.factsheet = message
+        actions = message["protocolFeatures"]["agvActions"]
+        self.speaks = any(
+            a["actionType"] == "speak" and "NODE" in a["actionScopes"] for a in actions
+        )
+        log.info(
+            "%s: factsheet of %s: tour stops by %s",
+            self.name,
+            message["typeSpecification"]["seriesName"],
+            "speech (speak)" if self.speaks else "a timed wait (no speak action)",
+        )
 
     def on_state(self, message: dict[str, Any]) -> None:
         if not self.online:
@@ -338,14 +365,21 @@ class VdaRobot:
     async def _visit(self, task_id: str, point: Mapping[str, Any], lang: str) -> None:
         """One tour stop: drive there, explain it with a ``speak`` node action."""
         index, total = int(point["index"]), int(point["total"])
-        action = {
-            "actionId": f"{task_id}-speak-{index}",
-            "actionType": "speak",
-            "blockingType": "HARD",
-            "actionParameters": [
-                {"key": "text", "value": str(point.get("text") or point.get("name") or "")},
+        text = str(point.get("text") or point.get("name") or "")
+        if self.speaks:
+            parameters: list[dict[str, Any]] = [
+                {"key": "text", "value": text},
                 {"key": "lang", "value": str(point.get("lang") or lang)},
-            ],
+            ]
+            kind = "speak"
+        else:
+            parameters = [{"key": "seconds", "value": speak_seconds(text)}]
+            kind = "wait"
+        action = {
+            "actionId": f"{task_id}-{kind}-{index}",
+            "actionType": kind,
+            "blockingType": "HARD",
+            "actionParameters": parameters,
         }
 
         def arrived() -> None:

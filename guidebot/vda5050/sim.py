@@ -99,6 +99,8 @@ class SimVehicle(Service):
         self.actions: dict[str, _Action] = {}
         self.errors: list[dict[str, Any]] = []
         self.reject_orders: str | None = None
+        self.speaks = True
+        """Whether ``speak`` is among the actions its factsheet offers."""
         self.deaf = False
         """Orders are dropped unanswered (kept in ``orders_ignored``): a vehicle that never
         acknowledges them."""
@@ -264,6 +266,8 @@ class SimVehicle(Service):
             self.order.edges.clear()
         elif kind == "stateRequest":
             pass  # the state goes out at once (_event)
+        elif kind == "factsheetRequest":
+            self.spawn(self._publish_factsheet(), "vda5050-sim factsheet")
         else:
             done.status = "FAILED"
             done.result = f"unsupported instant action {kind}"
@@ -374,6 +378,67 @@ class SimVehicle(Service):
             "errors": list(self.errors),
             "safetyState": {"eStop": "NONE", "fieldViolation": False},
         }
+
+    def factsheet(self) -> dict[str, Any]:
+        """What the vehicle is and can do; ``speaks`` False leaves ``speak`` out of its
+        actions (a vehicle without speech)."""
+
+        def action(kind: str, scopes: list[str], params: dict[str, str]) -> dict[str, Any]:
+            return {
+                "actionType": kind,
+                "actionScopes": scopes,
+                "actionParameters": [
+                    {"key": k, "valueDataType": t, "isOptional": False} for k, t in params.items()
+                ],
+            }
+
+        actions = [
+            action(kind, ["INSTANT"], {})
+            for kind in (
+                "cancelOrder",
+                "startPause",
+                "stopPause",
+                "startCharging",
+                "stopCharging",
+                "stateRequest",
+                "factsheetRequest",
+            )
+        ]
+        actions.append(action("initPosition", ["INSTANT"], {"x": "FLOAT", "y": "FLOAT"}))
+        actions.append(action("wait", ["NODE"], {"seconds": "FLOAT"}))
+        if self.speaks:
+            actions.append(action("speak", ["NODE"], {"text": "STRING", "lang": "STRING"}))
+        return {
+            **self._header("factsheet"),
+            "typeSpecification": {
+                "seriesName": "GuideBot simulated vehicle",
+                "agvKinematic": "DIFF",
+                "agvClass": "CARRIER",
+                "maxLoadMass": 0,
+                "localizationTypes": ["NATURAL"],
+                "navigationTypes": ["AUTONOMOUS"],
+            },
+            "physicalParameters": {
+                "speedMin": 0.0,
+                "speedMax": self.speed,
+                "accelerationMax": 1.0,
+                "decelerationMax": 1.0,
+                "heightMax": 1.5,
+                "width": 0.6,
+                "length": 0.8,
+            },
+            "protocolLimits": {
+                "maxStringLens": {},
+                "maxArrayLens": {},
+                "timing": {"minOrderInterval": 0.1, "minStateInterval": self.state_period_s},
+            },
+            "protocolFeatures": {"optionalParameters": [], "agvActions": actions},
+            "agvGeometry": {},
+            "loadSpecification": {},
+        }
+
+    async def _publish_factsheet(self) -> None:
+        await self.session.publish(self.vehicle.topic("factsheet"), self.factsheet())
 
     async def publish_state(self) -> None:
         await self.session.publish(self.vehicle.topic("state"), self.state())

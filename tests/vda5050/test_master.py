@@ -11,10 +11,12 @@ from pathlib import Path
 import aiomqtt
 import pytest
 
-from backend.tasks.model import FINAL_STATES
+from backend.tasks.model import FINAL_STATES, TaskState
 from guidebot.payloads.traffic import ReleaseArea, RequestArea
+from guidebot.processes import spawn_guidebot
 from guidebot.testing import wait_on, wait_until
 from guidebot.vda5050.schemas import problems
+from guidebot.vda5050.sim import speak_seconds
 
 from .broker import Mosquitto, mosquitto
 from .fleet import V1, Fleet, fleet, vehicle
@@ -158,11 +160,19 @@ async def test_cancel_from_the_console_reaches_the_vehicle(
         await wait_until(lambda: not sim.driving and not sim.order.nodes, 10)
 
 
-async def test_a_tour_stops_with_a_speak_action_at_each_point(
-    tmp_path: Path, broker: Mosquitto
+@pytest.mark.parametrize("speaks", [True, False], ids=["speech", "no-speech"])
+async def test_a_tour_stops_with_an_action_the_factsheet_offers(
+    tmp_path: Path, broker: Mosquitto, speaks: bool
 ) -> None:
+    """Each stop is a speak action with the point's text, or, for a vehicle whose factsheet
+    offers no speak, a timed wait."""
     async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        sim.speaks = speaks
         await wait_until(lambda: f.robot("V1").online, 15)
+        robot = next(iter(f.master.robots.values()))
+        await wait_until(lambda: robot.factsheet is not None, 10)
+        assert problems("factsheet", robot.factsheet) == []
+        assert robot.speaks is speaks
         task = await f.task("tour", {"tour": "line"})
         result = await until_done(f, task, timeout=60)
         assert result["state"] == "done", result
@@ -173,18 +183,25 @@ async def test_a_tour_stops_with_a_speak_action_at_each_point(
         ]
         assert progress == [(1, "arrived"), (1, "explained"), (2, "arrived"), (2, "explained")]
         # a horizon node comes again in each update, with its actions (same ids)
-        speak = list(
+        stops = list(
             {
                 a["actionId"]: a
                 for o in sim.orders_received
                 for n in o["nodes"]
                 for a in n["actions"]
-                if a["actionType"] == "speak"
             }.values()
         )
-        texts = [{p["key"]: p["value"] for p in a["actionParameters"]}["text"] for a in speak]
-        assert texts == ["Here is the bee.", "The end of the line."]
-        assert all(sim.actions[a["actionId"]].status == "FINISHED" for a in speak)
+        params = [{p["key"]: p["value"] for p in a["actionParameters"]} for a in stops]
+        if speaks:
+            assert [a["actionType"] for a in stops] == ["speak", "speak"]
+            assert [p["text"] for p in params] == ["Here is the bee.", "The end of the line."]
+        else:
+            assert [a["actionType"] for a in stops] == ["wait", "wait"]
+            assert [p["seconds"] for p in params] == [
+                speak_seconds("Here is the bee."),
+                speak_seconds("The end of the line."),
+            ]
+        assert all(sim.actions[a["actionId"]].status == "FINISHED" for a in stops)
         all_valid(sim.orders_received, "order")
 
 
@@ -270,3 +287,40 @@ async def test_a_low_battery_sends_the_vehicle_to_charge(tmp_path: Path, broker:
             lambda: f.of("robot_state")[-1].payload["mode"] == "charging",
             10,
         )
+
+
+async def test_a_vehicle_process_killed_mid_order_loses_its_task_after_the_grace_period(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """A real `guidebot vda5050-sim` process, killed (SIGKILL) on its way: the broker sends its
+    last will (CONNECTIONBROKEN), the robot is disconnected, and after the grace period its
+    task goes back to the queue."""
+    async with fleet(tmp_path, broker.url) as f:
+        tm = f.server.app.state.task_manager
+        tm.lost_grace_s = 1.0
+        args = ["vda5050-sim", "--broker", broker.url, "--manufacturer", V1.manufacturer]
+        args += ["--serial-number", V1.serial_number, "--map-id", "ground", "--node", "a"]
+        args += ["--speed", "0.1", "--state-period", "0.2"]
+        process = spawn_guidebot(args)
+        try:
+            await wait_until(lambda: f.robot("V1").online, 30)
+            task = await f.task("go_to", {"node": "e"})
+            await wait_on(
+                f.changed,
+                lambda: any(
+                    m.payload["robot"] == "V1" and m.payload["navigation"] == "moving"
+                    for m in f.of("robot_state")
+                ),
+                20,
+            )
+        finally:
+            process.kill()
+            process.wait(10)
+        await wait_on(
+            f.changed,
+            lambda: any(m.payload["robot"] == "V1" for m in f.of("robot_disconnected")),
+            20,
+        )
+        await wait_until(lambda: tm.tasks[task].state == TaskState.QUEUED, 20)
+        history = (await f.http.get(f"/api/tasks/{task}/history")).json()
+        assert "robot lost" in str(history), history
