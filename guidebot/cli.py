@@ -37,6 +37,7 @@ BENCHMARKS: dict[str, str] = {
     "reaction": "bench.reaction:main",
     "soak": "bench.soak:main",
     "failover": "bench.failover:main",
+    "vda5050": "bench.vda5050:main",
 }
 
 

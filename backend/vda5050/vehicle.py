@@ -457,8 +457,8 @@ class VdaRobot:
         elevator, floor = str(cabin["elevator"]), str(exit_["floor"])
         self.waiting = "riding"
         while self.cabins.get(elevator) != (floor, True):
-            self._call(elevator, floor)
             self.changed.clear()
+            self._call(elevator, floor)
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.changed.wait(), 0.5)
         self.node, self.floor = str(exit_["node"]), floor
@@ -486,6 +486,7 @@ class VdaRobot:
         arrived = False
         loop = asyncio.get_running_loop()
         while True:
+            self.changed.clear()  # news during this turn (its awaits too) ends the wait below
             state = self.state or {}
             ours = state.get("orderId") == order_id
             progress = step_of_seq(state["lastNodeSequenceId"]) if ours else first
@@ -532,7 +533,6 @@ class VdaRobot:
                 }
                 if not state.get("driving") and action_ids <= done:
                     return
-            self.changed.clear()
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.changed.wait(), 0.5)
 
