@@ -116,6 +116,8 @@ class VdaRobot:
         """Tour stops are ``speak`` actions (until a factsheet says the vehicle has none:
         then a ``wait`` as long as the text takes to say)."""
         self._tasks: set[asyncio.Task[Any]] = set()
+        self.closing = False
+        """The server stops: a running task is left as it is (not reported ended)."""
         self.battery_low, self.battery_panic = config.battery_low, config.battery_panic
         self._alarm: str | None = None
         """The battery alarm sent and not yet re-armed (``battery_low`` or ``battery_panic``)."""
@@ -137,6 +139,7 @@ class VdaRobot:
         ]
 
     async def close(self) -> None:
+        self.closing = True
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         for task in list(self._tasks):
@@ -334,6 +337,7 @@ class VdaRobot:
     async def _run(self, task_id: str, net: str, params: dict[str, Any]) -> None:
         outcome, reason = "done", ""
         try:
+            await self._take_over()
             if (self.state or {}).get("batteryState", {}).get("charging"):
                 await self.instant("stopCharging")
             points = params.get("points")
@@ -348,11 +352,14 @@ class VdaRobot:
             outcome, reason = "failed", str(exc)
             log.warning("%s: task %s failed: %s", self.name, task_id, reason)
         except asyncio.CancelledError:
+            if self.closing:  # the server stops: the task and its locks stay, as for a robot
+                raise
             outcome, reason = "cancelled", "cancelled"
             if self.order_id is not None:
                 await self.instant("cancelOrder")
         finally:
-            self._release_all()
+            if not self.closing:
+                self._release_all()
             self.order_id = None
             self.route = {}
             self.waiting = None
@@ -361,6 +368,28 @@ class VdaRobot:
         self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self.ep.publish(TaskEnded(task_id=task_id, robot=self.name, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self._publish_state()
+
+    async def _take_over(self) -> None:
+        """A vehicle still on an order this master did not give (before a restart of the
+        server, or from another master) is stopped with ``cancelOrder`` first: it would refuse
+        a new order while that one runs."""
+        state = self.state or {}
+        if not state.get("nodeStates") or state.get("orderId") == self.order_id:
+            return
+        log.warning(
+            "%s: the vehicle still runs order %s: cancelled before the task",
+            self.name,
+            state["orderId"],
+        )
+        await self.instant("cancelOrder")
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + ACK_TIMEOUT_S * ORDER_TRIES
+        while (self.state or {}).get("nodeStates") or (self.state or {}).get("driving"):
+            if loop.time() > deadline:
+                raise DriveFailed(f"{self.name} did not cancel its order {state['orderId']}")
+            self.changed.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.changed.wait(), 0.5)
 
     async def _visit(self, task_id: str, point: Mapping[str, Any], lang: str) -> None:
         """One tour stop: drive there, explain it with a ``speak`` node action."""

@@ -12,6 +12,7 @@ import aiomqtt
 import pytest
 
 from backend.tasks.model import FINAL_STATES, TaskState
+from backend.vda5050.order import build_order
 from guidebot.payloads.traffic import ReleaseArea, RequestArea
 from guidebot.processes import spawn_guidebot
 from guidebot.testing import wait_on, wait_until
@@ -19,7 +20,7 @@ from guidebot.vda5050.schemas import problems
 from guidebot.vda5050.sim import speak_seconds
 
 from .broker import Mosquitto, mosquitto
-from .fleet import V1, Fleet, fleet, vehicle
+from .fleet import LINE, V1, Fleet, fleet, vehicle
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -324,3 +325,28 @@ async def test_a_vehicle_process_killed_mid_order_loses_its_task_after_the_grace
         await wait_until(lambda: tm.tasks[task].state == TaskState.QUEUED, 20)
         history = (await f.http.get(f"/api/tasks/{task}/history")).json()
         assert "robot lost" in str(history), history
+
+
+async def test_a_vehicle_on_an_order_of_another_master_is_cancelled_first(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """As after a restart of the server: the vehicle still drives an order this master did
+    not give; a new task stops it with cancelOrder, then sends its own order."""
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        sim.speed = 0.02  # crawls: still on the old order when the task comes
+        steps = [{"node": n, "floor": "F0", "x": 4.0 * i, "y": 0.0} for i, n in enumerate(LINE[:3])]
+        old = build_order(
+            V1, 0, "old-order", 0, steps, start=0, released_to=2, map_ids={"F0": "ground"}
+        )
+        async with aiomqtt.Client("127.0.0.1", broker.port) as client:
+            await client.publish(V1.topic("order"), json.dumps(old), qos=1)
+        robot = next(iter(f.master.robots.values()))
+        await wait_until(lambda: (robot.state or {}).get("orderId") == "old-order", 10)
+        sim.speed = 1.0
+        task = await f.task("go_to", {"node": "a"})
+        result = await until_done(f, task)
+        assert result["state"] == "done", result
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert "cancelOrder" in kinds
+        assert sim.order.order_id.startswith(task) and sim.last_node == "a"

@@ -3,6 +3,7 @@ vendored schemas."""
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 import pytest
@@ -134,3 +135,32 @@ async def test_nodes_passed_between_two_states_are_each_reached_in_order() -> No
     ]
     assert [m.payload["robot"] for m in seen if m.type == "robot_connected"] == ["V1"]
     await robot.close()
+
+
+async def test_a_server_that_stops_leaves_the_task_to_the_next_one() -> None:
+    """Stopping the master (the server stops) is no cancel: no task_ended, no lock released,
+    no cancelOrder; the next server life finds the task as it was (as for a robot)."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+    sent: list[str] = []
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        sent.append(topic)
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.granted = {"corridor"}
+    manager = bus.endpoint("task_manager")
+    manager.publish(
+        "task_assigned",
+        {"task_id": "T1", "robot": "V1", "net": "navigate_to_point", "params": {"node": "e"}},
+        destination="V1",
+    )
+    assert [m.type for m in seen if m.type == "task_started"] == ["task_started"]
+    await asyncio.sleep(0)  # the task asks for its path (nobody answers here)
+    await robot.close()
+    assert not [m for m in seen if m.type in ("task_ended", "release_area", "release_door")]
+    assert "instantActions" not in sent
