@@ -16,7 +16,9 @@ $(STAMP): pyproject.toml
 system-deps:
 	@bash scripts/system-deps.sh
 
+# The demo's VDA 5050 vehicle needs a broker: Debian's mosquitto, installed when missing.
 demo: $(STAMP)
+	@bash scripts/system-deps.sh mosquitto
 	$(BIN)/guidebot demo
 
 lint: $(STAMP)

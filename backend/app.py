@@ -53,6 +53,7 @@ from backend.ratelimit import RateLimiter
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
+from backend.vda5050.component import vda5050
 from backend.webpages import WebFiles, page
 
 __all__ = ["COMPONENTS", "ROUTERS", "create_app", "uvicorn_config"]
@@ -70,6 +71,7 @@ COMPONENTS: list[Component] = [
     rgm,
     site_editor,
     console,
+    vda5050,
 ]
 
 # REST/WebSocket routers of the server modules. One line each.

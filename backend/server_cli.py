@@ -60,6 +60,22 @@ def refuse_broken_site(path: Path) -> None:
     help="Also serve the hub on this port without ASGI, for robots and modules "
     "(GUIDEBOT_HUB_WS_PORT; docs/protocol.md).",
 )
+@click.option(
+    "--mqtt",
+    "mqtt_url",
+    default=None,
+    help="mqtt://[user:password@]host:1883 (mqtts:// for TLS): the broker of the site's VDA 5050 "
+    "robots (GUIDEBOT_MQTT_URL; docs/vda5050.md).",
+)
+@click.option(
+    "--mqtt-user", "mqtt_username", default=None, help="MQTT user (GUIDEBOT_MQTT_USERNAME)."
+)
+@click.option(
+    "--mqtt-cafile",
+    default=None,
+    help="CA certificates of an mqtts:// broker (GUIDEBOT_MQTT_CAFILE; password: "
+    "GUIDEBOT_MQTT_PASSWORD).",
+)
 @click.option("--log-level", default=None, help="uvicorn log level (default info).")
 @click.option(
     "--access-log/--no-access-log",
@@ -74,6 +90,9 @@ def server(
     site_dir: Path | None,
     broker_url: str | None,
     hub_ws_port: int | None,
+    mqtt_url: str | None,
+    mqtt_username: str | None,
+    mqtt_cafile: str | None,
     log_level: str | None,
     access_log: bool | None,
 ) -> None:
@@ -93,6 +112,9 @@ def server(
             "site_dir": site_dir,
             "broker_url": broker_url,
             "hub_ws_port": hub_ws_port,
+            "mqtt_url": mqtt_url,
+            "mqtt_username": mqtt_username,
+            "mqtt_cafile": mqtt_cafile,
             "log_level": log_level,
             "access_log": access_log,
         }.items()

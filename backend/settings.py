@@ -149,6 +149,12 @@ class Settings(BaseSettings):
             return self.site.resolve().parent
         return Path(DEFAULT_SITE_DIR).resolve()
 
+    # VDA 5050 vehicles (docs/vda5050.md): their MQTT broker; TLS with mqtts://.
+    mqtt_url: str | None = Field(default=None, pattern=r"^mqtts?://")
+    mqtt_username: str | None = None
+    mqtt_password: str | None = None
+    mqtt_cafile: str | None = None
+    """The CA certificates that sign an mqtts:// broker's (default: the system's)."""
     # Staff console: the building simulator's control API (demo/tests), for "press a button".
     building_sim_url: str | None = None
 

@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "site": "backend.site.cli:site",
     "robocan": "robot_agent.robocan.cli:robocan",
     "building-sim": "building_sim.cli:building_sim",
+    "vda5050-sim": "guidebot.vda5050.cli:vda5050_sim",
 }
 
 BENCHMARKS: dict[str, str] = {
@@ -36,6 +37,7 @@ BENCHMARKS: dict[str, str] = {
     "reaction": "bench.reaction:main",
     "soak": "bench.soak:main",
     "failover": "bench.failover:main",
+    "vda5050": "bench.vda5050:main",
 }
 
 

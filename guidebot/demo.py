@@ -277,6 +277,7 @@ def url_block(
     seed: int,
     hub_url: str,
     operator: str = "",
+    vda: str = "",
 ) -> str:
     """Every page's URL and token, in one short block."""
     lines = [
@@ -294,6 +295,7 @@ def url_block(
         f"  API docs       {url}/docs   metrics {url}/metrics (admin token)",
         f"  hub            {hub_url}   the robots' link (pages: /ws on {url})",
         f"  building sim   {control}/state",
+        *([f"  VDA 5050       {vda}"] if vda else []),
     ]
     if scenario == "busy":
         lines.append(
@@ -311,7 +313,14 @@ def url_block(
 
 
 @click.command()
-@click.option("--robots", type=click.IntRange(0, 50), default=3, show_default=True)
+@click.option("--robots", type=click.IntRange(0, 50), default=2, show_default=True)
+@click.option(
+    "--vda-robots",
+    type=click.IntRange(0, 10),
+    default=1,
+    show_default=True,
+    help="Simulated VDA 5050 vehicles (V1, ...) on a private Mosquitto (docs/vda5050.md).",
+)
 @click.option("--time-scale", type=click.FloatRange(min=0.01), default=1.0, show_default=True)
 @click.option(
     "--site",
@@ -382,6 +391,7 @@ def url_block(
 )
 def demo(
     robots: int,
+    vda_robots: int,
     time_scale: float,
     site: Path,
     port: int,
@@ -397,6 +407,7 @@ def demo(
     visitors: bool,
 ) -> None:
     """Run the building simulator, the server and N simulated robots until Ctrl-C."""
+    from guidebot.demo_vda import add_vda_robots, mosquitto_binary, start_broker
     from guidebot.demo_visitors import Visitors
     from guidebot.site.yamlio import load_site_file
 
@@ -448,9 +459,19 @@ def demo(
         control = str(ready["control"])
         ports = {str(k): int(v) for k, v in dict(ready["modules"]).items()}
         served = site_with_ports(site, ports, folder)
+        mosquitto = mosquitto_binary() if vda_robots else None
+        if vda_robots and mosquitto is None:
+            click.echo("demo: mosquitto is not installed: no VDA 5050 robot", err=True)
+        vda: list[str] = []
+        if mosquitto is not None:
+            broker, mqtt_url = start_broker(mosquitto, folder)
+            fleet.children.append(Child("mosquitto", [], broker, time.monotonic()))
+            taken = {r.start_node or "" for r in known[:robots]}
+            vda = add_vda_robots(served, vda_robots, taken)
         fleet.env = _server_env(panel_token, operator_token, control)
         # The robots connect to the hub's own listener (any free port; /api/health names it).
         server_args = ["--port", str(port), "--hub-ws-port", "0", "--site", str(served)]
+        server_args += ["--mqtt", mqtt_url] if vda else []
         fleet.spawn("server", "server", *server_args, "--db", db, "--no-access-log")
         fleet.env = None
         hub_url = f"ws://127.0.0.1:{_wait_healthy(url, fleet)['hub_ws_port']}/ws"
@@ -468,11 +489,25 @@ def demo(
             robot_children.add(robot.name)
             fleet.spawn(robot.name, *args)
             screens.append((robot.name, robot.token, f"http://127.0.0.1:{gui_port + index}"))
+        for name in vda:
+            args = ["vda5050-sim", "--broker", mqtt_url, "--site", str(served), "--robot", name]
+            robot_children.add(name)
+            fleet.spawn(name, *args, "--time-scale", scale)
         late = _wait_robots_online(url, admin, sorted(robot_children), fleet)
         if late:
             click.echo(f"demo: not online yet: {', '.join(late)}", err=True)
+        vda_line = f"{', '.join(vda)} (simulated vehicles) on {mqtt_url}" if vda else ""
         block = url_block(
-            url, admin, panel_token, screens, control, scenario, seed, hub_url, operator_token
+            url,
+            admin,
+            panel_token,
+            screens,
+            control,
+            scenario,
+            seed,
+            hub_url,
+            operator_token,
+            vda_line,
         )
         click.echo(block)
         keys = Keys(sys.stdin)

@@ -6,8 +6,11 @@
 # docker.io, debootstrap: tests/test_compose_engine.py runs docker-compose.yml on a private engine.
 # redis-server: the broker between server processes; tests run a private one (tests/scale).
 # nginx-light: tests/scale/test_proxy.py runs deploy/cluster/nginx.conf in front of two servers.
+# mosquitto: the MQTT broker of VDA 5050 vehicles; tests run a private one (tests/vda5050).
+# With arguments, only those packages (make demo: mosquitto).
 set -euo pipefail
-wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light prometheus)
+wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light prometheus mosquitto)
+[ $# -gt 0 ] && wanted=("$@")
 missing=()
 for pkg in "${wanted[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -7,7 +7,7 @@ A site is a plain pydantic document. ``Site.model_validate`` checks shapes; cros
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
 
@@ -31,6 +31,9 @@ __all__ = [
 ]
 
 Id = str
+
+MQTT_NAME = r"^[A-Za-z0-9_.-]+$"
+"""A name that goes into an MQTT topic level (no ``/``, ``+`` or ``#``)."""
 
 
 class StrictModel(BaseModel):
@@ -150,6 +153,19 @@ class RobotConfig(StrictModel):
     battery_low: StrictFloat = Field(default=0.3, ge=0, le=1)
     battery_panic: StrictFloat = Field(default=0.1, ge=0, le=1)
     params: dict[str, Any] = Field(default_factory=dict)
+    interface: Literal["guidebot", "vda5050"] = "guidebot"
+    """How the robot joins the fleet: GuideBot's own agent over the hub, or a vehicle of
+    another maker speaking VDA 5050 over MQTT (docs/vda5050.md)."""
+    manufacturer: str | None = Field(default=None, min_length=1, max_length=64, pattern=MQTT_NAME)
+    """VDA 5050: the vehicle's manufacturer, as in its topics."""
+    serial_number: str | None = Field(default=None, min_length=1, max_length=64, pattern=MQTT_NAME)
+    """VDA 5050: the vehicle's serial number, as in its topics."""
+    mqtt_interface: str = Field(default="uagv", min_length=1, max_length=64, pattern=MQTT_NAME)
+    """VDA 5050: the first level of its topics (the spec's ``interfaceName``)."""
+    vda_version: Literal["2.1.0", "3.0.0"] = "2.1.0"
+    """VDA 5050: the version the vehicle speaks (its topics carry the major, ``v2``)."""
+    map_ids: dict[Id, str] = Field(default_factory=dict)
+    """VDA 5050: floor id -> the vehicle's ``mapId`` there (default: the floor id)."""
 
 
 class Site(StrictModel, Indexed):

@@ -319,5 +319,15 @@ def check_references(site: Site) -> list[Problem]:
         node_ref(("robots", i, "start_node"), r.start_node)
         if r.battery_panic > r.battery_low:
             p.append((("robots", i, "battery_panic"), "must not exceed battery_low"))
+        if r.interface == "vda5050":
+            for field, value in (
+                ("manufacturer", r.manufacturer),
+                ("serial_number", r.serial_number),
+            ):
+                if value is None:
+                    p.append((("robots", i, field), "a VDA 5050 robot needs it (its MQTT topics)"))
+        for floor in r.map_ids:
+            if floor not in floors:
+                p.append((("robots", i, "map_ids", floor), f"unknown floor {floor!r}"))
     p += emergency_problems(site, {key: kind.value for key, kind in points.items()})
     return p

@@ -1,0 +1,134 @@
+"""The master control: one MQTT session for every VDA 5050 robot of the site, each message
+checked against the official schema of its topic before it reaches its robot (backend/vda5050/
+vehicle.py); what the schema refuses is logged, counted and raised as an alert, never handled."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from backend.vda5050.vehicle import Send, VdaRobot, vehicle_of
+from guidebot.bus import BusEndpoint
+from guidebot.service import Service
+from guidebot.site.schema import Site
+from guidebot.vda5050.mqtt import MqttSession
+from guidebot.vda5050.schemas import SchemaViolation, check
+from guidebot.vda5050.topics import BrokerAddress
+
+__all__ = ["MasterControl"]
+
+log = logging.getLogger(__name__)
+
+INCOMING = frozenset({"state", "connection", "factsheet"})
+
+Alert = Callable[[str, str, str, bool], None]
+"""raise (kind, subject, message, lasting) an alert for staff."""
+Resolve = Callable[[str, str, str], None]
+
+
+class MasterControl(Service):
+    """The VDA 5050 robots of ``site`` on ``broker``; ``endpoint(name)`` gives hub endpoints."""
+
+    def __init__(
+        self,
+        site: Site,
+        broker: BrokerAddress,
+        endpoint: Callable[[str], BusEndpoint],
+        *,
+        cafile: str | None = None,
+        alert: Alert | None = None,
+        resolve: Resolve | None = None,
+    ) -> None:
+        super().__init__()
+        self.site = site
+        self.broker = broker
+        self.endpoint = endpoint
+        self.alert = alert
+        self.resolve = resolve
+        self.robots: dict[tuple[str, str, str], VdaRobot] = {}
+        self.refused = 0
+        """Messages from vehicles that were not JSON or that their schema refused."""
+        self.received = 0
+        configs = [r for r in site.robots if r.interface == "vda5050"]
+        subscriptions = [vehicle_of(r).topic(kind) for r in configs for kind in sorted(INCOMING)]
+        self._configs = configs
+        self.session = MqttSession(
+            broker,
+            client_id="guidebot-master",
+            subscriptions=subscriptions,
+            on_message=self._on_message,
+            on_connect=self._on_connect,
+            on_error=self._on_error,
+            cafile=cafile,
+        )
+
+    async def on_start(self) -> None:
+        announce = self.endpoint("vda5050")
+        self.on_cleanup(announce.close)  # type: ignore[attr-defined]
+        for config in self._configs:
+            vehicle = vehicle_of(config)
+            ep = self.endpoint(config.name)
+            robot = VdaRobot(config, self.site, ep, announce, self._sender(vehicle.topic))
+            self.robots[(vehicle.interface, vehicle.manufacturer, vehicle.serial_number)] = robot
+            self.on_cleanup(ep.close)  # type: ignore[attr-defined]
+            self.on_cleanup(robot.close)
+        await self.enter(self.session)
+        log.info("VDA 5050: %d robot(s) on MQTT broker %s", len(self.robots), self.broker)
+
+    def _sender(self, topic: Callable[[str], str]) -> Send:
+        async def send(name: str, message: dict[str, Any]) -> bool:
+            check(name, message)  # ours: a refusal here is a bug of the master
+            return await self.session.publish(topic(name), message)
+
+        return send
+
+    def _on_connect(self) -> None:
+        if self.session.connections > 1:  # back after a loss: what did the vehicles do?
+            for robot in self.robots.values():
+                self.spawn(robot.instant("stateRequest"), f"stateRequest {robot.name}")
+        if self.resolve is not None:
+            self.resolve("vda5050_broker", str(self.broker), "connected")
+
+    def _on_error(self, reason: str) -> None:
+        log.error("VDA 5050: cannot reach the MQTT broker %s: %s", self.broker, reason)
+        if self.alert is not None:
+            self.alert(
+                "vda5050_broker",
+                str(self.broker),
+                f"cannot reach the MQTT broker {self.broker}: {reason}; VDA 5050 robots are "
+                "out of reach until it is back",
+                True,
+            )
+
+    def _on_message(self, topic: str, payload: bytes) -> None:
+        self.received += 1
+        parts = topic.split("/")
+        if len(parts) != 5 or parts[4] not in INCOMING:
+            return
+        robot = self.robots.get((parts[0], parts[2], parts[3]))
+        if robot is None:
+            return
+        kind = parts[4]
+        try:
+            message = json.loads(payload)
+            check(kind, message)
+        except (ValueError, SchemaViolation) as exc:
+            self._refuse(robot, topic, exc)
+            return
+        if kind == "state":
+            robot.on_state(message)
+        elif kind == "connection":
+            robot.on_connection(message)
+        else:
+            robot.on_factsheet(message)
+
+    def _refuse(self, robot: VdaRobot, topic: str, exc: Exception) -> None:
+        self.refused += 1
+        why = str(exc) if isinstance(exc, SchemaViolation) else f"not JSON: {exc}"
+        log.warning("VDA 5050: %s: message on %s ignored: %s", robot.name, topic, why)
+        if self.alert is not None:
+            self.alert(
+                "vda5050_message", robot.name, f"{robot.name} sent a bad message: {why}", False
+            )

@@ -1,0 +1,671 @@
+"""One VDA 5050 vehicle in the fleet: a hub endpoint named after the robot that does, for the
+Task and Traffic Managers, what GuideBot's robot agent does (task reports, paths, areas, doors,
+``robot_state``), and turns it into ``order`` and ``instantActions`` for the vehicle
+(docs/vda5050.md)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+from collections import deque
+from collections.abc import Awaitable, Callable, Coroutine, Mapping
+from datetime import datetime
+from typing import Any
+
+from backend.vda5050.order import (
+    build_order,
+    init_position,
+    instant_actions,
+    node_seq,
+    step_of_seq,
+)
+from guidebot.bus import BusEndpoint, RequestTimeout
+from guidebot.messages import Message
+from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
+from guidebot.payloads.robot import (
+    ENDED_REPORTED,
+    BatteryAlarm,
+    EndedTask,
+    NodeReached,
+    RobotFault,
+    RobotMode,
+    RobotState,
+)
+from guidebot.payloads.tasks import RobotLink, TaskEnded, TaskStarted, TourProgress
+from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
+from guidebot.site.schema import RobotConfig, Site
+from guidebot.vda5050.sim import speak_seconds
+from guidebot.vda5050.topics import Vehicle
+
+__all__ = ["DriveFailed", "VdaRobot", "vehicle_of"]
+
+log = logging.getLogger(__name__)
+
+Send = Callable[[str, dict[str, Any]], Awaitable[bool]]
+"""Publish a message on one of the vehicle's topics (``order``, ``instantActions``)."""
+
+ACK_TIMEOUT_S = 3.0
+"""An order the vehicle's state does not name this long after it was sent is sent again."""
+ORDER_TRIES = 3
+"""Sends of one order before the task fails: never resent forever."""
+DONE_ACTIONS = frozenset({"FINISHED", "FAILED"})
+BATTERY_REARM = 0.05
+RECALL_S = 2.0
+"""While a vehicle waits for a cabin, drives into it or out of it, its call is repeated this
+often (wall seconds), as a person keeps the button pressed: the building's door hold does not
+run out under it."""
+
+
+class DriveFailed(Exception):
+    """A goal the vehicle cannot reach, with the reason the task fails with."""
+
+
+def vehicle_of(config: RobotConfig) -> Vehicle:
+    """The vehicle's names on the broker, from its site entry."""
+    assert config.manufacturer is not None and config.serial_number is not None
+    return Vehicle(
+        manufacturer=config.manufacturer,
+        serial_number=config.serial_number,
+        interface=config.mqtt_interface,
+        version=config.vda_version,
+    )
+
+
+class VdaRobot:
+    """The robot ``config.name`` on the hub (``endpoint``), the vehicle behind ``send``."""
+
+    def __init__(
+        self,
+        config: RobotConfig,
+        site: Site,
+        endpoint: BusEndpoint,
+        announce: BusEndpoint,
+        send: Send,
+    ) -> None:
+        self.name = config.name
+        self.vehicle = vehicle_of(config)
+        self.map_ids: Mapping[str, str] = config.map_ids
+        self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
+        self.nodes = {n.id: n for n in site.nodes}
+        self.area_nodes = {a.id: frozenset(a.nodes) for a in site.areas}
+        self.ep = endpoint
+        self.announce = announce
+        self.send = send
+        self.node: str | None = config.start_node
+        self.floor: str | None = self.nodes[self.node].floor if self.node in self.nodes else None
+        self.state: dict[str, Any] | None = None
+        self.online = False
+        self.task_id: str | None = None
+        self.runner: asyncio.Task[None] | None = None
+        self.order_id: str | None = None
+        self.granted: set[str] = set()
+        self.requested: set[str] = set()
+        self.doors: set[str] = set()
+        """Doors asked for (open_door sent) and not released."""
+        self.open_doors: set[str] = set()
+        self.route: dict[int, str] = {}
+        """The current order's nodes ahead by sequence id (``_reached``)."""
+        self.route_seq = 0
+        self.cabins: dict[str, tuple[str, bool]] = {}
+        """Elevator -> (floor, door open), from the building's elevator_in_position."""
+        self.recall_s = RECALL_S
+        self.factsheet: dict[str, Any] | None = None
+        self.speaks = True
+        """Tour stops are ``speak`` actions (until a factsheet says the vehicle has none:
+        then a ``wait`` as long as the text takes to say)."""
+        self._tasks: set[asyncio.Task[Any]] = set()
+        self.closing = False
+        """The server stops: a running task is left as it is (not reported ended)."""
+        self.battery_low, self.battery_panic = config.battery_low, config.battery_panic
+        self._alarm: str | None = None
+        """The battery alarm sent and not yet re-armed (``battery_low`` or ``battery_panic``)."""
+        self._called: dict[tuple[str, str], float] = {}
+        self.waiting: str | None = None
+        self.changed = asyncio.Event()
+        self.ended: deque[EndedTask] = deque(maxlen=ENDED_REPORTED)
+        self.faults: set[tuple[str, str]] = set()
+        self.seq = 0
+        self._headers: dict[str, int] = {}
+        self._orders = 0
+        self._unsubscribe = [
+            endpoint.subscribe("task_assigned", self._on_task_assigned),
+            endpoint.subscribe("task_cancel", self._on_task_cancel),
+            endpoint.subscribe("area_granted", self._on_area_granted),
+            endpoint.subscribe("door_opened", self._on_door),
+            endpoint.subscribe("door_closed", self._on_door),
+            endpoint.subscribe("elevator_in_position", self._on_cabin),
+        ]
+
+    async def close(self) -> None:
+        self.closing = True
+        for unsubscribe in self._unsubscribe:
+            unsubscribe()
+        for task in list(self._tasks):
+            task.cancel()
+        if self.runner is not None:
+            self.runner.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self.runner
+
+    # -- to the vehicle --------------------------------------------------------------------
+    def _header_id(self, topic: str) -> int:
+        self._headers[topic] = self._headers.get(topic, -1) + 1
+        return self._headers[topic]
+
+    async def instant(
+        self, *kinds: str, parameters: Mapping[str, Any] | None = None
+    ) -> dict[str, Any]:
+        """Send one ``instantActions`` with these action types; returns it."""
+        n = self._header_id("instantActions")
+        message = instant_actions(
+            self.vehicle,
+            n,
+            [(f"{self.name}-{kind}-{n}", kind) for kind in kinds],
+            parameters,
+        )
+        await self.send("instantActions", message)
+        return message
+
+    # -- from the vehicle ------------------------------------------------------------------
+    def on_connection(self, message: dict[str, Any]) -> None:
+        state = message["connectionState"]
+        was = self.online
+        self.online = state == "ONLINE"
+        if self.online and not was:
+            self.announce.publish("robot_connected", RobotLink(robot=self.name))
+            self._spawn(self.instant("stateRequest", "factsheetRequest"))
+        elif not self.online and was:
+            log.warning("%s: the vehicle's connection is %s", self.name, state)
+            if state == "OFFLINE":  # a clean goodbye
+                self._publish_state()
+            self.announce.publish("robot_disconnected", RobotLink(robot=self.name))
+        self.changed.set()
+
+    def _spawn(self, coro: Coroutine[Any, Any, Any]) -> None:
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def on_factsheet(self, message: dict[str, Any]) -> None:
+        """What the vehicle can do: whether a tour stop is a ``speak`` or a timed ``wait``."""
+        self.factsheet = message
+        actions = message["protocolFeatures"]["agvActions"]
+        self.speaks = any(
+            a["actionType"] == "speak" and "NODE" in a["actionScopes"] for a in actions
+        )
+        log.info(
+            "%s: factsheet of %s: tour stops by %s",
+            self.name,
+            message["typeSpecification"]["seriesName"],
+            "speech (speak)" if self.speaks else "a timed wait (no speak action)",
+        )
+
+    def on_state(self, message: dict[str, Any]) -> None:
+        if not self.online:
+            self.on_connection({"connectionState": "ONLINE"})
+        self.state = message
+        position = message.get("agvPosition")
+        if position is not None:
+            self.floor = self.floor_of_map.get(position["mapId"], self.floor)
+        at = datetime.fromisoformat(message["timestamp"]).timestamp()
+        for node in self._reached(message):
+            if node == self.node:
+                continue
+            self._left(self.node, node)
+            self.node = node
+            self.floor = self.nodes[node].floor
+            self.ep.publish(NodeReached(robot=self.name, node=node, floor=self.floor, at=at))
+        self._report_errors(message["errors"])
+        self._battery(float(message["batteryState"]["batteryCharge"]) / 100)
+        self._publish_state()
+        self.changed.set()
+
+    def _reached(self, message: dict[str, Any]) -> list[str]:
+        """The nodes reached since the last state, in order: a state is a sample, and a
+        vehicle may pass several nodes of its order between two (every one is reported, for
+        the area locks and the fleet's invariants)."""
+        if message.get("orderId") == self.order_id and self.route:
+            seq = int(message["lastNodeSequenceId"])
+            passed = [n for s, n in sorted(self.route.items()) if self.route_seq < s <= seq]
+            if passed:
+                self.route_seq = seq
+                return passed
+        last = str(message["lastNodeId"])
+        return [last] if last in self.nodes else []
+
+    def _battery(self, level: float) -> None:
+        """``battery_low`` / ``battery_panic`` once per crossing of the robot's thresholds, as
+        the robot agent sends them (re-armed 0.05 above ``battery_low``)."""
+        if level >= self.battery_low + BATTERY_REARM:
+            self._alarm = None
+        if level <= self.battery_panic and self._alarm != "battery_panic":
+            self._alarm = "battery_panic"
+        elif level <= self.battery_low and self._alarm is None:
+            self._alarm = "battery_low"
+        else:
+            return
+        log.warning("%s: %s at %.2f", self.name, self._alarm.replace("_", " "), level)
+        alarm = BatteryAlarm(robot=self.name, level=round(max(0.0, min(1.0, level)), 3))
+        self.ep.publish(self._alarm, alarm)
+
+    def _report_errors(self, errors: list[dict[str, Any]]) -> None:
+        now = {(e["errorType"], e.get("errorDescription", "")) for e in errors}
+        for error in errors:
+            key = (error["errorType"], error.get("errorDescription", ""))
+            if key in self.faults or error["errorLevel"] not in ("WARNING", "FATAL"):
+                continue
+            detail = f"{error['errorLevel']} {error['errorType']}: {key[1]}".strip(": ")
+            self.ep.publish(
+                RobotFault(
+                    robot=self.name, kind=f"vda5050_{error['errorType']}"[:64], detail=detail
+                )
+            )
+        self.faults = now
+
+    def _mode(self) -> RobotMode:
+        state = self.state or {}
+        if not self.online:
+            return RobotMode.OFFLINE
+        if any(e["errorLevel"] == "FATAL" for e in state.get("errors", [])):
+            return RobotMode.FAULT
+        if self.task_id is not None:
+            return RobotMode.BUSY
+        if state.get("batteryState", {}).get("charging"):
+            return RobotMode.CHARGING
+        return RobotMode.IDLE
+
+    def _publish_state(self) -> None:
+        state = self.state or {}
+        position = state.get("agvPosition") or {}
+        node = self.nodes.get(self.node or "")
+        battery = state.get("batteryState", {}).get("batteryCharge", 100.0)
+        velocity = state.get("velocity") or {}
+        self.seq += 1
+        driving = bool(state.get("driving"))
+        self.ep.publish(
+            RobotState(
+                robot=self.name,
+                x=float(position.get("x", node.x if node else 0.0)),
+                y=float(position.get("y", node.y if node else 0.0)),
+                theta=float(position.get("theta", 0.0)),
+                node=self.node,
+                floor=self.floor,
+                battery=min(1.0, max(0.0, float(battery) / 100)),
+                mode=self._mode(),
+                navigation="moving" if driving else (self.waiting or "idle"),
+                task_id=self.task_id,
+                speed=math.hypot(velocity.get("vx", 0.0), velocity.get("vy", 0.0)),
+                areas=sorted(self.granted)[:64],
+                ended=list(self.ended),
+                seq=self.seq,
+            )
+        )
+
+    # -- tasks -----------------------------------------------------------------------------
+    def _on_task_assigned(self, msg: Message) -> None:
+        p = msg.payload
+        if p.get("robot") != self.name:
+            return
+        task_id = str(p["task_id"])
+        if task_id == self.task_id:
+            return  # the same task again
+        if self.task_id is not None:
+            self.ep.publish(
+                TaskEnded(
+                    task_id=task_id,
+                    robot=self.name,
+                    outcome="refused",
+                    reason=f"robot busy with task {self.task_id}",
+                )
+            )
+            return
+        self.task_id = task_id
+        self.ep.publish(TaskStarted(task_id=task_id, robot=self.name))
+        self.runner = asyncio.get_running_loop().create_task(
+            self._run(task_id, str(p.get("net", "")), dict(p.get("params") or {})),
+            name=f"vda5050 {self.name} {task_id}",
+        )
+
+    def _on_task_cancel(self, msg: Message) -> None:
+        task_id = msg.payload.get("task_id")
+        if task_id != self.task_id or self.runner is None:
+            return
+        self.runner.cancel()
+
+    async def _run(self, task_id: str, net: str, params: dict[str, Any]) -> None:
+        outcome, reason = "done", ""
+        try:
+            await self._take_over()
+            if (self.state or {}).get("batteryState", {}).get("charging"):
+                await self.instant("stopCharging")
+            points = params.get("points")
+            if isinstance(points, list):
+                for point in points:
+                    await self._visit(task_id, point, str(params.get("lang") or ""))
+            else:
+                await self.drive(task_id, str(params["node"]))
+                if net == "battery_charge":
+                    await self.instant("startCharging")
+        except DriveFailed as exc:
+            outcome, reason = "failed", str(exc)
+            log.warning("%s: task %s failed: %s", self.name, task_id, reason)
+        except asyncio.CancelledError:
+            if self.closing:  # the server stops: the task and its locks stay, as for a robot
+                raise
+            outcome, reason = "cancelled", "cancelled"
+            if self.order_id is not None:
+                await self.instant("cancelOrder")
+        finally:
+            if not self.closing:
+                self._release_all()
+            self.order_id = None
+            self.route = {}
+            self.waiting = None
+        self.task_id = None
+        self.runner = None
+        self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
+        self.ep.publish(TaskEnded(task_id=task_id, robot=self.name, outcome=outcome, reason=reason))  # type: ignore[arg-type]
+        self._publish_state()
+
+    async def _take_over(self) -> None:
+        """A vehicle still on an order this master did not give (before a restart of the
+        server, or from another master) is stopped with ``cancelOrder`` first: it would refuse
+        a new order while that one runs."""
+        state = self.state or {}
+        if not state.get("nodeStates") or state.get("orderId") == self.order_id:
+            return
+        log.warning(
+            "%s: the vehicle still runs order %s: cancelled before the task",
+            self.name,
+            state["orderId"],
+        )
+        await self.instant("cancelOrder")
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + ACK_TIMEOUT_S * ORDER_TRIES
+        while (self.state or {}).get("nodeStates") or (self.state or {}).get("driving"):
+            if loop.time() > deadline:
+                raise DriveFailed(f"{self.name} did not cancel its order {state['orderId']}")
+            self.changed.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.changed.wait(), 0.5)
+
+    async def _visit(self, task_id: str, point: Mapping[str, Any], lang: str) -> None:
+        """One tour stop: drive there, explain it with a ``speak`` node action."""
+        index, total = int(point["index"]), int(point["total"])
+        text = str(point.get("text") or point.get("name") or "")
+        if self.speaks:
+            parameters: list[dict[str, Any]] = [
+                {"key": "text", "value": text},
+                {"key": "lang", "value": str(point.get("lang") or lang)},
+            ]
+            kind = "speak"
+        else:
+            parameters = [{"key": "seconds", "value": speak_seconds(text)}]
+            kind = "wait"
+        action = {
+            "actionId": f"{task_id}-{kind}-{index}",
+            "actionType": kind,
+            "blockingType": "HARD",
+            "actionParameters": parameters,
+        }
+
+        def arrived() -> None:
+            self.ep.publish(
+                TourProgress(
+                    task_id=task_id,
+                    robot=self.name,
+                    index=index,
+                    total=total,
+                    poi=point.get("poi"),
+                    stage="arrived",
+                )
+            )
+
+        await self.drive(task_id, str(point["node"]), [action], on_arrival=arrived)
+        self.ep.publish(
+            TourProgress(
+                task_id=task_id,
+                robot=self.name,
+                index=index,
+                total=total,
+                poi=point.get("poi"),
+                stage="explained",
+            )
+        )
+
+    # -- driving ---------------------------------------------------------------------------
+    async def drive(
+        self,
+        task_id: str,
+        goal: str,
+        actions: list[dict[str, Any]] | None = None,
+        *,
+        on_arrival: Callable[[], None] | None = None,
+    ) -> None:
+        """Bring the vehicle to ``goal``: one order per floor of the path (a leg), its base
+        released as far as the areas granted, the doors open and the cabin at the landing
+        allow, extended by an update at each grant, opening or arrival; between two legs an
+        elevator ride. The ``actions`` run at the goal. Raises DriveFailed with the reason."""
+        try:
+            reply = await self.ep.request(
+                GetPath(robot=self.name, from_node=self.node, to_node=goal), timeout=5.0
+            )
+        except RequestTimeout:
+            raise DriveFailed(f"no path to {goal}: the Traffic Manager did not answer") from None
+        steps: list[dict[str, Any]] = reply.payload.get("steps") or []
+        if reply.type != "path" or not steps:
+            raise DriveFailed(f"no path to {goal}: {reply.payload.get('error', 'none')}")
+        last = len(steps) - 1
+        rides = [
+            i
+            for i in range(last)
+            if steps[i].get("elevator")
+            and steps[i + 1].get("elevator") == steps[i]["elevator"]
+            and steps[i + 1]["floor"] != steps[i]["floor"]
+        ]
+        starts = [0, *(r + 1 for r in rides)]
+        ends = [*rides, last]
+        for n, (first, end) in enumerate(zip(starts, ends, strict=True)):
+            if n:
+                await self._ride(steps[first - 1], steps[first])
+            final = end == last
+            await self._leg(
+                task_id,
+                steps[: end + 1],
+                first,
+                actions if final else None,
+                on_arrival if final else None,
+            )
+
+    async def _ride(self, cabin: Mapping[str, Any], exit_: Mapping[str, Any]) -> None:
+        """The vehicle stands in the cabin: call it to the exit's floor, and once it is there
+        with its door open tell the vehicle where it is now (``initPosition`` on that floor's
+        map): the next leg is a new order there."""
+        elevator, floor = str(cabin["elevator"]), str(exit_["floor"])
+        self.waiting = "riding"
+        while self.cabins.get(elevator) != (floor, True):
+            self.changed.clear()
+            self._call(elevator, floor)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.changed.wait(), 0.5)
+        self.node, self.floor = str(exit_["node"]), floor
+        self.ep.publish(NodeReached(robot=self.name, node=self.node, floor=floor))
+        map_id = self.map_ids.get(floor, floor)
+        await self.instant("initPosition", parameters=init_position(exit_, map_id))
+
+    async def _leg(
+        self,
+        task_id: str,
+        steps: list[dict[str, Any]],
+        first: int,
+        actions: list[dict[str, Any]] | None,
+        on_arrival: Callable[[], None] | None,
+    ) -> None:
+        """One order: the vehicle from ``steps[first]`` to the last of ``steps``."""
+        self._orders += 1
+        order_id = self.order_id = f"{task_id}-{self._orders}"
+        last = len(steps) - 1
+        self.route = {node_seq(i): str(steps[i]["node"]) for i in range(first + 1, len(steps))}
+        self.route_seq = node_seq(first)
+        action_ids = {a["actionId"] for a in actions or []}
+        update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
+        order: dict[str, Any] = {}
+        arrived = False
+        loop = asyncio.get_running_loop()
+        while True:
+            self.changed.clear()  # news during this turn (its awaits too) ends the wait below
+            state = self.state or {}
+            ours = state.get("orderId") == order_id
+            progress = step_of_seq(state["lastNodeSequenceId"]) if ours else first
+            self._release_behind(steps, progress)
+            released_to = self._releasable(steps, progress)
+            if released_to > base_end:
+                update += 1
+                order = build_order(
+                    self.vehicle,
+                    self._header_id("order"),
+                    order_id,
+                    update,
+                    steps,
+                    start=max(base_end, first),
+                    released_to=released_to,
+                    map_ids=self.map_ids,
+                    actions={last: actions or []} if base_end < last else None,
+                )
+                base_end, tries = released_to, 0
+            acked = ours and state.get("orderUpdateId", -1) >= update
+            if not acked and (tries == 0 or loop.time() - sent_at > ACK_TIMEOUT_S):
+                if tries >= ORDER_TRIES:
+                    raise DriveFailed(
+                        f"{self.name} never acknowledged order {order_id} "
+                        f"(update {update}, sent {tries} times)"
+                    )
+                tries += 1
+                sent_at = loop.time()
+                await self.send("order", order)
+            refusal = self._refusal(order_id)
+            if refusal is not None:
+                raise DriveFailed(f"{self.name} refused the order: {refusal}")
+            cabin = steps[progress].get("elevator")
+            if cabin and progress < last:  # getting out: keep the cabin's door open
+                self._call(cabin, str(steps[progress]["floor"]))
+            if acked and progress == last:
+                if not arrived and on_arrival is not None:
+                    on_arrival()
+                arrived = True
+                done = {
+                    a["actionId"]
+                    for a in state.get("actionStates", [])
+                    if a["actionStatus"] in DONE_ACTIONS
+                }
+                if not state.get("driving") and action_ids <= done:
+                    return
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.changed.wait(), 0.5)
+
+    def _refusal(self, order_id: str) -> str | None:
+        """The vehicle's error that names this order, if any (its description)."""
+        for error in (self.state or {}).get("errors", []):
+            for ref in error.get("errorReferences") or []:
+                if ref.get("referenceKey") == "orderId" and ref.get("referenceValue") == order_id:
+                    return str(error.get("errorDescription") or error["errorType"])
+        return None
+
+    def _releasable(self, steps: list[dict[str, Any]], progress: int) -> int:
+        """The last step the vehicle may be released to: before the next area not granted or
+        the next door not open (asking for them on the way)."""
+        self.waiting = None
+        for i in range(progress + 1, len(steps)):
+            area = steps[i].get("area")
+            if area and area != steps[i - 1].get("area") and area not in self.granted:
+                if area not in self.requested:
+                    self.requested.add(area)
+                    self.ep.publish(RequestArea(robot=self.name, area=area))
+                self.waiting = "waiting_area"
+                return i - 1
+            door = steps[i].get("door")
+            if door and (door not in self.doors or door not in self.open_doors):
+                if door not in self.doors:
+                    self.doors.add(door)
+                    self.ep.publish(OpenDoor(door=door))
+                if door not in self.open_doors:
+                    self.waiting = "waiting_door"
+                    return i - 1
+            elevator = steps[i].get("elevator")
+            if elevator and steps[i - 1].get("elevator") != elevator:  # into the cabin
+                floor = str(steps[i]["floor"])
+                self._call(elevator, floor)
+                if self.cabins.get(elevator) != (floor, True):
+                    self.waiting = "waiting_elevator"
+                    return i - 1
+        return len(steps) - 1
+
+    def _release_behind(self, steps: list[dict[str, Any]], progress: int) -> None:
+        """Give back the areas left and the doors passed."""
+        here = steps[progress].get("area")
+        passed_areas = {s.get("area") for s in steps[: progress + 1]}
+        for area in sorted(self.granted):
+            if area != here and area in passed_areas:
+                self._release_area(area)
+        passed_doors = {s.get("door") for s in steps[:progress]}
+        for door in sorted(self.doors & passed_doors):
+            self.doors.discard(door)
+            self.ep.publish(ReleaseDoor(door=door))
+
+    def _left(self, before: str | None, now: str) -> None:
+        """The areas the vehicle has just left are released before its ``node_reached``, as
+        a robot does (the Traffic Manager may give them on at once)."""
+        for area in sorted(self.granted):
+            nodes = self.area_nodes.get(area, frozenset())
+            if before in nodes and now not in nodes:
+                self._release_area(area)
+
+    def _release_area(self, area: str) -> None:
+        self.granted.discard(area)
+        self.requested.discard(area)
+        self.ep.publish(ReleaseArea(robot=self.name, area=area))
+
+    def _release_all(self) -> None:
+        """At a task's end: every door, every area but the one the vehicle stands in."""
+        for door in sorted(self.doors):
+            self.ep.publish(ReleaseDoor(door=door))
+        self.doors.clear()
+        for area in sorted(self.granted | self.requested):
+            if not self._stands_in(area, self.node):
+                self._release_area(area)
+
+    def _stands_in(self, area: str, node: str | None) -> bool:
+        return node is not None and node in self.area_nodes.get(area, ())
+
+    def _on_area_granted(self, msg: Message) -> None:
+        p = msg.payload
+        if p.get("robot") != self.name:
+            return
+        area = str(p.get("area"))
+        if p.get("removed"):
+            log.info("%s: area %s removed: %s", self.name, area, p.get("reason"))
+        if area in self.requested:
+            self.granted.add(area)
+        self.changed.set()
+
+    def _on_cabin(self, msg: Message) -> None:
+        p = msg.payload
+        self.cabins[str(p.get("elevator"))] = (str(p.get("floor")), bool(p.get("door_open")))
+        self.changed.set()
+
+    def _call(self, elevator: str, floor: str) -> None:
+        """Call the cabin to ``floor``, again only after ``recall_s``."""
+        now = asyncio.get_running_loop().time()
+        if now - self._called.get((elevator, floor), -math.inf) >= self.recall_s:
+            self._called[(elevator, floor)] = now
+            self.ep.publish(CallElevator(elevator=elevator, floor=floor))
+
+    def _on_door(self, msg: Message) -> None:
+        door = str(msg.payload.get("door"))
+        if msg.type == "door_opened":
+            self.open_doors.add(door)
+        else:
+            self.open_doors.discard(door)
+        self.changed.set()

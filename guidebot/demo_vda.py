@@ -1,0 +1,77 @@
+"""The VDA 5050 part of ``guidebot demo``: a private Mosquitto and simulated VDA 5050 vehicles,
+added to the demo's copy of the site as robots V1, V2, ... (docs/vda5050.md)."""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+__all__ = ["add_vda_robots", "mosquitto_binary", "start_broker"]
+
+START_NODES = ("entrance", "ga2", "gb2", "gc3", "hall")
+"""Where the demo's vehicles start, the first ones no started GuideBot robot stands on."""
+
+
+def mosquitto_binary() -> str | None:
+    return shutil.which("mosquitto") or shutil.which("mosquitto", path="/usr/sbin:/sbin")
+
+
+def start_broker(binary: str, folder: Path) -> tuple[subprocess.Popen[bytes], str]:
+    """Mosquitto on a free port of 127.0.0.1, its configuration in ``folder``; waits until it
+    listens. Returns the process and its mqtt:// address."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = int(s.getsockname()[1])
+    config = folder / "mosquitto.conf"
+    config.write_text(
+        f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nlog_dest none\n",
+        encoding="utf-8",
+    )
+    process = subprocess.Popen(
+        [binary, "-c", str(config)],
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            raise RuntimeError(f"mosquitto exited with {process.returncode}")
+        try:
+            socket.create_connection(("127.0.0.1", port), 1).close()
+        except OSError:
+            time.sleep(0.05)
+            continue
+        return process, f"mqtt://127.0.0.1:{port}"
+    process.kill()
+    raise RuntimeError(f"mosquitto did not listen on port {port} within 20 s")
+
+
+def add_vda_robots(served: Path, count: int, taken: set[str]) -> list[str]:
+    """Add ``count`` VDA 5050 robots to the site file ``served`` (in place), each on a start
+    node not in ``taken``; returns their names."""
+    data: dict[str, Any] = yaml.safe_load(served.read_text(encoding="utf-8"))
+    nodes = {n["id"] for n in data["nodes"]}
+    free = [n for n in START_NODES if n in nodes and n not in taken] or [data["nodes"][0]["id"]]
+    names = []
+    for i in range(1, count + 1):
+        name = f"V{i}"
+        data["robots"].append(
+            {
+                "name": name,
+                "token": f"robot-{name}-demo-token",
+                "start_node": free[(i - 1) % len(free)],
+                "interface": "vda5050",
+                "manufacturer": "GuideBotSim",
+                "serial_number": f"{name}-0001",
+            }
+        )
+        names.append(name)
+    served.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    return names

@@ -1,0 +1,454 @@
+"""``guidebot vda5050-sim``: a simulated VDA 5050 2.1.0 vehicle for tests and the demo.
+
+It drives the released base of its order from node to node in straight lines at its speed
+(times ``time_scale``), reports ``state`` every ``state_period_s`` (wall time) and at once on
+every event (an order taken or refused, a node reached, an action's state, a pause), honours
+the instant actions cancelOrder, startPause, stopPause, startCharging, stopCharging,
+initPosition (after an elevator ride) and stateRequest, and says ONLINE on ``connection``
+with CONNECTIONBROKEN as its last will.
+A node action ``speak`` (text, lang) or ``wait`` (seconds) blocks for its time at that node.
+Faults for tests: ``reject_orders`` (the next orders are refused with that reason),
+``deaf`` (orders dropped unanswered) and ``raise_error`` (an error in the state).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from guidebot.service import Service
+from guidebot.vda5050.mqtt import LastWill, MqttSession
+from guidebot.vda5050.schemas import SchemaViolation, check
+from guidebot.vda5050.topics import BrokerAddress, Vehicle
+
+__all__ = ["SimVehicle", "speak_seconds"]
+
+log = logging.getLogger(__name__)
+
+TICK_S = 0.05
+"""Wall seconds between two steps of the simulated motion."""
+
+
+def speak_seconds(text: str) -> float:
+    """How long saying ``text`` takes, in vehicle time (about 15 characters a second)."""
+    return max(1.0, len(text) / 15)
+
+
+@dataclass
+class _Action:
+    action: dict[str, Any]
+    status: str = "WAITING"
+    left_s: float = 0.0
+    result: str | None = None
+
+    def state(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "actionId": self.action["actionId"],
+            "actionType": self.action["actionType"],
+            "actionStatus": self.status,
+        }
+        if self.result is not None:
+            out["resultDescription"] = self.result
+        return out
+
+
+@dataclass
+class _Order:
+    order_id: str = ""
+    update_id: int = 0
+    nodes: list[dict[str, Any]] = field(default_factory=list)
+    """Nodes not yet reached (the first is the next goal), released and horizon."""
+    edges: list[dict[str, Any]] = field(default_factory=list)
+
+
+class SimVehicle(Service):
+    """One simulated vehicle on ``broker``; ``x``, ``y``, ``map_id`` and ``node`` its start."""
+
+    def __init__(
+        self,
+        broker: BrokerAddress,
+        vehicle: Vehicle,
+        *,
+        x: float = 0.0,
+        y: float = 0.0,
+        map_id: str = "map",
+        node: str = "",
+        speed: float = 1.0,
+        time_scale: float = 1.0,
+        state_period_s: float = 1.0,
+        battery: float = 1.0,
+    ) -> None:
+        super().__init__()
+        self.vehicle = vehicle
+        self.x, self.y, self.theta = x, y, 0.0
+        self.map_id = map_id
+        self.last_node = node
+        self.last_seq = 0
+        self.speed = speed
+        self.time_scale = time_scale
+        self.state_period_s = state_period_s
+        self.battery = battery
+        self.charging = False
+        self.paused = False
+        self.driving = False
+        self.order = _Order()
+        self.actions: dict[str, _Action] = {}
+        self.errors: list[dict[str, Any]] = []
+        self.reject_orders: str | None = None
+        self.speaks = True
+        """Whether ``speak`` is among the actions its factsheet offers."""
+        self.deaf = False
+        """Orders are dropped unanswered (kept in ``orders_ignored``): a vehicle that never
+        acknowledges them."""
+        self.orders_ignored: list[dict[str, Any]] = []
+        self.orders_received: list[dict[str, Any]] = []
+        self.instant_received: list[dict[str, Any]] = []
+        self._headers: dict[str, int] = {}
+        self._wake = asyncio.Event()
+        self.session = MqttSession(
+            broker,
+            client_id=f"sim-{vehicle.manufacturer}-{vehicle.serial_number}",
+            subscriptions=[vehicle.topic("order"), vehicle.topic("instantActions")],
+            on_message=self._on_message,
+            on_connect=self._on_connect,
+            will=LastWill(vehicle.topic("connection"), self._connection("CONNECTIONBROKEN")),
+        )
+
+    # -- life cycle ------------------------------------------------------------------------
+    async def on_start(self) -> None:
+        await self.enter(self.session)
+        self.spawn(self._drive(), "vda5050-sim drive")
+        self.spawn(self._report(), "vda5050-sim report")
+
+    async def on_stop(self) -> None:
+        if self.session.connected.is_set():
+            await self.session.publish(
+                self.vehicle.topic("connection"), self._connection("OFFLINE"), retain=True
+            )
+
+    def _header(self, topic: str) -> dict[str, Any]:
+        self._headers[topic] = self._headers.get(topic, -1) + 1
+        return self.vehicle.header(self._headers[topic])
+
+    def _connection(self, state: str) -> dict[str, Any]:
+        return {**self.vehicle.header(0), "connectionState": state}
+
+    def _on_connect(self) -> None:
+        self.spawn(self._hello(), "vda5050-sim hello")
+
+    async def _hello(self) -> None:
+        message = {**self._header("connection"), "connectionState": "ONLINE"}
+        await self.session.publish(self.vehicle.topic("connection"), message, retain=True)
+        await self.publish_state()
+
+    # -- incoming --------------------------------------------------------------------------
+    def _on_message(self, topic: str, payload: bytes) -> None:
+        name = topic.rsplit("/", 1)[-1]
+        try:
+            message = json.loads(payload)
+            check(name, message, self.vehicle.version)
+        except (ValueError, SchemaViolation) as exc:
+            self._error("validationError", "WARNING", str(exc)[:500], [])
+            return
+        if name == "order" and self.deaf:
+            self.orders_ignored.append(message)
+            return
+        if name == "order":
+            self.orders_received.append(message)
+            self._take_order(message)
+        else:
+            self.instant_received.append(message)
+            for action in message["actions"]:
+                self._instant(action)
+        self._event()
+
+    def _error(
+        self, kind: str, level: str, text: str, refs: list[tuple[str, str]]
+    ) -> dict[str, Any]:
+        error = {
+            "errorType": kind,
+            "errorLevel": level,
+            "errorDescription": text,
+            "errorReferences": [{"referenceKey": k, "referenceValue": v} for k, v in refs],
+        }
+        self.errors.append(error)
+        self._event()
+        return error
+
+    def raise_error(self, kind: str, level: str = "WARNING", text: str = "") -> None:
+        """An error in the state until ``clear_errors``."""
+        self._error(kind, level, text or kind, [])
+
+    def clear_errors(self) -> None:
+        self.errors.clear()
+        self._event()
+
+    def _take_order(self, order: dict[str, Any]) -> None:
+        refs = [("orderId", order["orderId"]), ("orderUpdateId", str(order["orderUpdateId"]))]
+        if self.reject_orders is not None:
+            self._error("orderError", "WARNING", self.reject_orders, refs)
+            return
+        same = order["orderId"] == self.order.order_id
+        if same and order["orderUpdateId"] <= self.order.update_id:
+            if order["orderUpdateId"] < self.order.update_id:
+                self._error("orderUpdateError", "WARNING", "an older update of the order", refs)
+            return  # the same update again: already taken
+        first = order["nodes"][0]
+        if same:
+            base = [n for n in self.order.nodes if n["released"]]
+            stitch = (base[-1]["nodeId"], base[-1]["sequenceId"]) if base else None
+            stitch = stitch or (self.last_node, self.last_seq)
+            if (first["nodeId"], first["sequenceId"]) != stitch:
+                self._error(
+                    "orderUpdateError",
+                    "WARNING",
+                    f"the update starts at {first['nodeId']}, not at the base's end {stitch[0]}",
+                    refs,
+                )
+                return
+            self.order.nodes = [*base, *order["nodes"][1:]]
+            self.order.edges = [e for e in self.order.edges if e["released"]] + [
+                e for e in order["edges"] if e["sequenceId"] > stitch[1]
+            ]
+            self.order.update_id = order["orderUpdateId"]
+        else:
+            busy = any(n["released"] for n in self.order.nodes)
+            if busy or first["nodeId"] != self.last_node:
+                why = "still driving an order" if busy else f"not at {first['nodeId']}"
+                self._error("orderError", "WARNING", f"order refused: {why}", refs)
+                return
+            self.last_seq = first["sequenceId"]
+            self.order = _Order(order["orderId"], order["orderUpdateId"], order["nodes"][1:], [])
+            self.order.edges = list(order["edges"])
+            for action in first["actions"]:
+                self._start_action(action)
+        for node in order["nodes"]:
+            for action in node["actions"]:
+                self.actions.setdefault(action["actionId"], _Action(action))
+        self.errors = [e for e in self.errors if e["errorType"] != "orderError"]
+
+    def _instant(self, action: dict[str, Any]) -> None:
+        kind = action["actionType"]
+        done = _Action(action, status="FINISHED")
+        self.actions[action["actionId"]] = done
+        if kind == "cancelOrder":
+            if not self.order.order_id:
+                done.status = "FAILED"
+                done.result = "no order to cancel"
+                self._error("noOrderToCancel", "WARNING", "no order to cancel", [])
+                return
+            for a in self.actions.values():
+                if a.status in ("WAITING", "RUNNING", "INITIALIZING"):
+                    a.status = "FAILED"
+                    a.result = "order cancelled"
+            done.status = "FINISHED"
+            self.order.nodes.clear()
+            self.order.edges.clear()
+        elif kind == "startPause":
+            self.paused = True
+        elif kind == "stopPause":
+            self.paused = False
+        elif kind == "startCharging":
+            self.charging = True
+        elif kind == "stopCharging":
+            self.charging = False
+        elif kind == "initPosition":  # after an elevator ride: on another map
+            params = {p["key"]: p["value"] for p in action.get("actionParameters", [])}
+            self.x, self.y = float(params["x"]), float(params["y"])
+            self.theta = float(params.get("theta", 0.0))
+            self.map_id, self.last_node = str(params["mapId"]), str(params["lastNodeId"])
+            self.last_seq = 0
+            self.order.nodes.clear()
+            self.order.edges.clear()
+        elif kind == "stateRequest":
+            pass  # the state goes out at once (_event)
+        elif kind == "factsheetRequest":
+            self.spawn(self._publish_factsheet(), "vda5050-sim factsheet")
+        else:
+            done.status = "FAILED"
+            done.result = f"unsupported instant action {kind}"
+
+    def _start_action(self, action: dict[str, Any]) -> None:
+        entry = self.actions.setdefault(action["actionId"], _Action(action))
+        params = {p["key"]: p["value"] for p in action.get("actionParameters", [])}
+        if action["actionType"] == "speak":
+            entry.left_s = speak_seconds(str(params.get("text", "")))
+        elif action["actionType"] == "wait":
+            entry.left_s = float(params.get("seconds", 1.0))
+        else:
+            entry.status = "FAILED"
+            entry.result = f"unsupported action {action['actionType']}"
+            return
+        entry.status = "RUNNING"
+
+    # -- motion ----------------------------------------------------------------------------
+    def _event(self) -> None:
+        self._wake.set()
+
+    async def _drive(self) -> None:
+        loop = asyncio.get_running_loop()
+        last = loop.time()
+        while True:
+            await asyncio.sleep(TICK_S)
+            now = loop.time()
+            dt = (now - last) * self.time_scale
+            last = now
+            self._step(min(dt, 0.1 * self.time_scale))
+
+    def _step(self, dt: float) -> None:
+        running = [a for a in self.actions.values() if a.status == "RUNNING"]
+        if self.charging:
+            self.battery = min(1.0, self.battery + dt / 600)
+        if running:
+            if not self.paused:
+                for a in running:
+                    a.left_s -= dt
+                    if a.left_s <= 0:
+                        a.status = "FINISHED"
+                        self._event()
+            was, self.driving = self.driving, False
+            if was:
+                self._event()
+            return
+        goal = self.order.nodes[0] if self.order.nodes else None
+        if goal is None or not goal["released"] or self.paused or self.charging:
+            if self.driving:
+                self.driving = False
+                self._event()
+            return
+        if not self.driving:
+            self.driving = True
+            self._event()
+        pos = goal["nodePosition"]
+        dx, dy = pos["x"] - self.x, pos["y"] - self.y
+        dist = math.hypot(dx, dy)
+        step = self.speed * dt
+        self.battery = max(0.0, self.battery - dt / 7200)
+        if dist > 1e-9:
+            self.theta = math.atan2(dy, dx)
+        if step < dist:
+            self.x += dx / dist * step
+            self.y += dy / dist * step
+            return
+        self.x, self.y, self.map_id = pos["x"], pos["y"], pos["mapId"]
+        self.last_node, self.last_seq = goal["nodeId"], goal["sequenceId"]
+        self.order.nodes.pop(0)
+        self.order.edges = [e for e in self.order.edges if e["sequenceId"] > self.last_seq]
+        for action in goal["actions"]:
+            self._start_action(action)
+        self._event()
+
+    # -- state -----------------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """The ``state`` message now."""
+        return {
+            **self._header("state"),
+            "orderId": self.order.order_id,
+            "orderUpdateId": self.order.update_id,
+            "lastNodeId": self.last_node,
+            "lastNodeSequenceId": self.last_seq,
+            "nodeStates": [
+                {"nodeId": n["nodeId"], "sequenceId": n["sequenceId"], "released": n["released"]}
+                for n in self.order.nodes
+            ],
+            "edgeStates": [
+                {"edgeId": e["edgeId"], "sequenceId": e["sequenceId"], "released": e["released"]}
+                for e in self.order.edges
+            ],
+            "agvPosition": {
+                "x": self.x,
+                "y": self.y,
+                "theta": self.theta,
+                "mapId": self.map_id,
+                "positionInitialized": True,
+            },
+            "velocity": {"vx": self.speed if self.driving else 0.0, "vy": 0.0, "omega": 0.0},
+            "driving": self.driving,
+            "paused": self.paused,
+            "actionStates": [a.state() for a in self.actions.values()],
+            "batteryState": {
+                "batteryCharge": round(self.battery * 100, 2),
+                "charging": self.charging,
+            },
+            "operatingMode": "AUTOMATIC",
+            "errors": list(self.errors),
+            "safetyState": {"eStop": "NONE", "fieldViolation": False},
+        }
+
+    def factsheet(self) -> dict[str, Any]:
+        """What the vehicle is and can do; ``speaks`` False leaves ``speak`` out of its
+        actions (a vehicle without speech)."""
+
+        def action(kind: str, scopes: list[str], params: dict[str, str]) -> dict[str, Any]:
+            return {
+                "actionType": kind,
+                "actionScopes": scopes,
+                "actionParameters": [
+                    {"key": k, "valueDataType": t, "isOptional": False} for k, t in params.items()
+                ],
+            }
+
+        actions = [
+            action(kind, ["INSTANT"], {})
+            for kind in (
+                "cancelOrder",
+                "startPause",
+                "stopPause",
+                "startCharging",
+                "stopCharging",
+                "stateRequest",
+                "factsheetRequest",
+            )
+        ]
+        actions.append(action("initPosition", ["INSTANT"], {"x": "FLOAT", "y": "FLOAT"}))
+        actions.append(action("wait", ["NODE"], {"seconds": "FLOAT"}))
+        if self.speaks:
+            actions.append(action("speak", ["NODE"], {"text": "STRING", "lang": "STRING"}))
+        return {
+            **self._header("factsheet"),
+            "typeSpecification": {
+                "seriesName": "GuideBot simulated vehicle",
+                "agvKinematic": "DIFF",
+                "agvClass": "CARRIER",
+                "maxLoadMass": 0,
+                "localizationTypes": ["NATURAL"],
+                "navigationTypes": ["AUTONOMOUS"],
+            },
+            "physicalParameters": {
+                "speedMin": 0.0,
+                "speedMax": self.speed,
+                "accelerationMax": 1.0,
+                "decelerationMax": 1.0,
+                "heightMax": 1.5,
+                "width": 0.6,
+                "length": 0.8,
+            },
+            "protocolLimits": {
+                "maxStringLens": {},
+                "maxArrayLens": {},
+                "timing": {"minOrderInterval": 0.1, "minStateInterval": self.state_period_s},
+            },
+            "protocolFeatures": {"optionalParameters": [], "agvActions": actions},
+            "agvGeometry": {},
+            "loadSpecification": {},
+        }
+
+    async def _publish_factsheet(self) -> None:
+        await self.session.publish(self.vehicle.topic("factsheet"), self.factsheet())
+
+    async def publish_state(self) -> None:
+        await self.session.publish(self.vehicle.topic("state"), self.state())
+
+    async def _report(self) -> None:
+        while True:
+            try:
+                await asyncio.wait_for(self._wake.wait(), self.state_period_s)
+            except TimeoutError:
+                pass
+            self._wake.clear()
+            if self.session.connected.is_set():
+                await self.publish_state()

@@ -1,0 +1,166 @@
+"""The pure parts: orders from paths, the broker's address, the site's VDA 5050 fields, the
+vendored schemas."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import pytest
+
+from backend.vda5050.order import build_order, instant_actions
+from backend.vda5050.vehicle import VdaRobot
+from guidebot.bus import Bus
+from guidebot.messages import Message
+from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.vda5050.schemas import SCHEMA_DIR, SchemaViolation, check, problems
+from guidebot.vda5050.sim import SimVehicle
+from guidebot.vda5050.topics import Vehicle, parse_broker
+
+from .fleet import site_dict
+
+STEPS = [
+    {"node": "a", "floor": "F0", "x": 0, "y": 0, "area": None, "door": None},
+    {"node": "b", "floor": "F0", "x": 4, "y": 0, "area": None, "door": None},
+    {"node": "c", "floor": "F0", "x": 8, "y": 0, "area": "corridor", "door": None},
+]
+V = Vehicle("Acme", "sn-1")
+
+
+def test_an_order_releases_its_base_and_keeps_the_rest_as_horizon() -> None:
+    order = build_order(V, 0, "o1", 0, STEPS, start=0, released_to=1, map_ids={"F0": "ground"})
+    check("order", order)
+    assert [(n["nodeId"], n["sequenceId"], n["released"]) for n in order["nodes"]] == [
+        ("a", 0, True),
+        ("b", 2, True),
+        ("c", 4, False),
+    ]
+    assert [(e["edgeId"], e["sequenceId"], e["released"]) for e in order["edges"]] == [
+        ("a->b", 1, True),
+        ("b->c", 3, False),
+    ]
+    assert order["nodes"][2]["nodePosition"] == {"x": 8.0, "y": 0.0, "mapId": "ground"}
+
+
+def test_an_update_starts_at_the_last_node_of_the_base() -> None:
+    update = build_order(V, 1, "o1", 1, STEPS, start=1, released_to=2, map_ids={})
+    check("order", update)
+    assert [(n["nodeId"], n["sequenceId"]) for n in update["nodes"]] == [("b", 2), ("c", 4)]
+    assert update["nodes"][0]["nodePosition"]["mapId"] == "F0"  # default: the floor id
+    with pytest.raises(ValueError, match="bad order window"):
+        build_order(V, 1, "o1", 1, STEPS, start=2, released_to=1, map_ids={})
+
+
+def test_instant_actions_follow_the_schema() -> None:
+    check("instantActions", instant_actions(V, 3, [("x1", "cancelOrder")]))
+
+
+def test_the_schema_names_what_is_wrong() -> None:
+    with pytest.raises(SchemaViolation, match=r"order refused by the VDA 5050 schema: .*orderId"):
+        check("order", {**V.header(0), "nodes": [], "edges": [], "orderUpdateId": 0})
+    assert problems("connection", {**V.header(0), "connectionState": "SLEEPY"})
+
+
+def test_the_vendored_schemas_keep_their_licence() -> None:
+    assert "Verband der Automobilindustrie" in (SCHEMA_DIR / "LICENSE.txt").read_text("utf-8")
+    for version in ("2.1.0", "3.0.0"):
+        assert (SCHEMA_DIR / version / "state.schema").is_file()
+    assert (SCHEMA_DIR / "3.0.0" / "zoneSet.schema").is_file()
+
+
+def test_broker_addresses() -> None:
+    plain = parse_broker("mqtt://broker.example:1884")
+    assert (plain.host, plain.port, plain.tls) == ("broker.example", 1884, False)
+    tls = parse_broker("mqtts://fleet:s%40cret@broker.example")
+    assert (tls.port, tls.tls, tls.username, tls.password) == (8883, True, "fleet", "s@cret")
+    assert str(tls) == "mqtts://broker.example:8883"  # never the password
+    assert parse_broker("mqtt://host").port == 1883
+    for bad in ("http://host", "mqtt://", "mqtt://host:port"):
+        with pytest.raises(ValueError, match="broker address"):
+            parse_broker(bad)
+
+
+def test_a_vda5050_robot_needs_its_names_and_known_floors() -> None:
+    site = site_dict()
+    robot = site["robots"][1]
+    del robot["serial_number"]
+    robot["map_ids"] = {"F9": "nowhere"}
+    with pytest.raises(SiteInvalid) as caught:
+        validate_site(site)
+    text = str(caught.value)
+    assert "serial_number" in text and "a VDA 5050 robot needs it" in text
+    assert "unknown floor 'F9'" in text
+
+
+def test_topic_names() -> None:
+    assert V.topic("state") == "uagv/v2/Acme/sn-1/state"
+    assert (
+        Vehicle("Acme", "sn-1", "fleet", "3.0.0").topic("zoneSet") == "fleet/v3/Acme/sn-1/zoneSet"
+    )
+
+
+async def test_nodes_passed_between_two_states_are_each_reached_in_order() -> None:
+    """A state is a sample: a vehicle that passed c and d between two reports still reaches
+    them on the hub, and the corridor is released before the node after it."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+    sent: list[tuple[str, dict[str, Any]]] = []
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        sent.append((topic, message))
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.order_id = "o1"
+    robot.route = {2: "b", 4: "c", 6: "d", 8: "e"}
+    robot.granted = {"corridor"}
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    state = sim.state() | {"orderId": "o1", "lastNodeId": "b", "lastNodeSequenceId": 2}
+    robot.on_state(state)
+    robot.on_state(state | {"lastNodeId": "e", "lastNodeSequenceId": 8})
+    events = [
+        (m.type, m.payload.get("node") or m.payload.get("area"))
+        for m in seen
+        if m.type in ("node_reached", "release_area")
+    ]
+    assert events == [
+        ("node_reached", "b"),
+        ("node_reached", "c"),
+        ("node_reached", "d"),
+        ("release_area", "corridor"),
+        ("node_reached", "e"),
+    ]
+    assert [m.payload["robot"] for m in seen if m.type == "robot_connected"] == ["V1"]
+    await robot.close()
+
+
+async def test_a_server_that_stops_leaves_the_task_to_the_next_one() -> None:
+    """Stopping the master (the server stops) is no cancel: no task_ended, no lock released,
+    no cancelOrder; the next server life finds the task as it was (as for a robot)."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+    sent: list[str] = []
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        sent.append(topic)
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.granted = {"corridor"}
+    manager = bus.endpoint("task_manager")
+    manager.publish(
+        "task_assigned",
+        {"task_id": "T1", "robot": "V1", "net": "navigate_to_point", "params": {"node": "e"}},
+        destination="V1",
+    )
+    assert [m.type for m in seen if m.type == "task_started"] == ["task_started"]
+    await asyncio.sleep(0)  # the task asks for its path (nobody answers here)
+    await robot.close()
+    assert not [m for m in seen if m.type in ("task_ended", "release_area", "release_door")]
+    assert "instantActions" not in sent
