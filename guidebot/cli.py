@@ -36,6 +36,7 @@ BENCHMARKS: dict[str, str] = {
     "reaction": "bench.reaction:main",
     "soak": "bench.soak:main",
     "failover": "bench.failover:main",
+    "reports": "bench.reports:main",
 }
 
 

@@ -27,8 +27,6 @@ log = logging.getLogger(__name__)
 
 CHUNK = 20_000
 """Events folded per transaction."""
-UPSERT_CHUNK = 2_000
-"""Rollup rows per INSERT ... ON CONFLICT (5 parameters each, SQLite allows 32 766)."""
 
 Tally = dict[tuple[str, int, str], list[float]]
 
@@ -126,14 +124,14 @@ async def _add(session: Any, tally: Tally) -> None:
         {"metric": m, "hour": h, "key": k, "n": int(cell[0]), "total": float(cell[1])}
         for (m, h, k), cell in tally.items()
     ]
-    for i in range(0, len(rows), UPSERT_CHUNK):
-        await session.execute(_upsert_adding(session, rows[i : i + UPSERT_CHUNK]))
+    if rows:  # one statement compiled once, executed for every row (executemany)
+        await session.execute(_upsert_adding(session), rows)
 
 
-def _upsert_adding(session: Any, rows: list[dict[str, Any]]) -> Insert:
+def _upsert_adding(session: Any) -> Insert:
     """INSERT ... ON CONFLICT DO UPDATE n = n + new n, total = total + new total."""
     module = postgresql if session.bind.dialect.name == "postgresql" else sqlite
-    statement = module.insert(ReportRollupRow).values(rows)
+    statement = module.insert(ReportRollupRow)
     table = ReportRollupRow.__table__.c
     return statement.on_conflict_do_update(
         index_elements=[table.metric, table.hour, table.key],
