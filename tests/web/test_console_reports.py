@@ -1,0 +1,87 @@
+"""The console's Reports view (docs/reports.md): a day's figures from a real run, charts drawn,
+a figure downloaded as CSV, a bad range refused with the server's reason, the printed summary
+on one page, and axe-core clean."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+from playwright.async_api import expect
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(150)]
+
+
+async def test_reports_view_charts_csv_errors_and_print(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=1) as fleet:
+        async with fleet.http() as http:
+            reply = await http.post(
+                "/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}
+            )
+            task = reply.json()
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, web.operator_token)
+        await web.open_view(page, "Reports")
+        headline = page.get_by_role("definition").first  # "Tours requested"
+        await expect(page.locator(".report-headline")).to_contain_text("Tours requested")
+        await expect(headline).to_have_text("1", timeout=20_000)
+        assert task["id"]
+        # Both charts are drawn by the vendored uPlot.
+        await expect(page.locator("#chart-tours canvas")).to_have_count(1)
+        await expect(page.locator("#chart-waits canvas")).to_have_count(1)
+        await expect(page.get_by_role("table", name="Robots' time and distance")).to_contain_text(
+            "R1"
+        )
+        await web.axe_check(page)
+
+        # A figure as CSV, with the operator's token (not a link anyone could open).
+        async with page.expect_download() as info:
+            await page.get_by_role("button", name="CSV: tasks per hour").click()
+        download = await info.value
+        assert download.suggested_filename.startswith("guidebot-tasks-")
+        saved = await download.path()
+        text = await asyncio.to_thread(Path(saved).read_text, encoding="utf-8")
+        lines = text.splitlines()
+        assert lines[0] == "start,requested,done,failed,cancelled" and len(lines) == 25
+        assert sum(int(line.split(",")[1]) for line in lines[1:]) == 1
+
+        # A week, day by day: seven rows in the tasks CSV, and the chart redrawn.
+        await page.get_by_label("Period", exact=True).select_option("week")
+        await page.get_by_role("button", name="Show report").click()
+        await expect(page.locator(".report-period")).to_contain_text("(")
+        await expect(page.locator("#chart-tours canvas")).to_have_count(1)
+
+        # A custom range that ends before it starts: the server's reason on the page.
+        watch.expect_error(r"status of 422|HTTP 422 .*/api/reports\?")
+        await page.get_by_label("Period", exact=True).select_option("range")
+        await page.get_by_label("From").fill("2026-07-14T12:00")
+        await page.get_by_label("Until").fill("2026-07-14T10:00")
+        await page.get_by_role("button", name="Show report").click()
+        await expect(
+            page.get_by_role("alert").filter(has_text="ends before it starts")
+        ).to_be_visible()
+
+        # The daily summary, printed: the console's chrome and the form are left out.
+        await page.get_by_label("Period", exact=True).select_option("day")
+        await page.get_by_role("button", name="Show report").click()
+        await expect(page.locator("#chart-tours canvas")).to_have_count(1)
+        await web.screenshot(page, "console-reports")
+        await page.emulate_media(media="print")
+        await expect(page.locator("#tabs")).to_be_hidden()
+        await expect(page.get_by_role("form", name="Report period")).to_be_hidden()
+        await expect(page.locator(".report-headline")).to_be_visible()
+        pdf = await page.pdf(format="A4", print_background=True)
+        assert _pages(pdf) == 1, "the daily summary prints on one page"
+
+
+def _pages(pdf: bytes) -> int:
+    """The page count of a PDF Chromium wrote (its page tree's /Count)."""
+    counts = [int(n) for n in re.findall(rb"/Count (\d+)", pdf)]
+    return max(counts) if counts else 0

@@ -1,0 +1,269 @@
+// Reports: how the robots served visitors over a day, a week or any range (docs/reports.md).
+// Figures from GET /api/reports, charts drawn with the vendored uPlot, every table as CSV, and a
+// one-page daily summary for the printer (web/admin/reports.css, @media print).
+import { html } from "lit-html";
+import uPlot from "uplot";
+
+const STATES = [
+  ["touring", "Touring", "#0b57d0"],
+  ["errand", "Errands", "#6b3fa0"],
+  ["charging", "Charging", "#1b7a3a"],
+  ["idle", "Idle", "#9aa0a6"],
+  ["faulted", "Faulted", "#b00020"],
+  ["offline", "Offline", "#e2e4e8"],
+];
+const TASK_SERIES = [
+  ["requested", "Requested", "#0b57d0"],
+  ["done", "Done", "#1b7a3a"],
+  ["failed", "Failed", "#b00020"],
+  ["cancelled", "Cancelled", "#8a4b00"],
+];
+const INCIDENT_NAMES = {
+  faults: "Robot faults",
+  door_blocks: "Doors that did not open",
+  elevator_wait: "Elevator waits",
+  lock_wait: "Waits for a restricted area",
+  alarms: "Alerts and alarms",
+};
+const ZONE = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC";
+
+const isoDay = (date) => {
+  const local = new Date(date.getTime() - date.getTimezoneOffset() * 60000);
+  return local.toISOString().slice(0, 10);
+};
+const monday = (date) => {
+  const d = new Date(date);
+  d.setDate(d.getDate() - ((d.getDay() + 6) % 7));
+  return d;
+};
+
+function state(ui) {
+  if (!ui.reports) {
+    const today = isoDay(new Date());
+    ui.reports = { mode: "day", day: today, week: isoDay(monday(new Date())), start: `${today}T08:00`, end: `${today}T20:00`, data: null, error: null, loading: false };
+  }
+  return ui.reports;
+}
+
+/** The query of the chosen period (the browser's time zone is the venue's). */
+function query(r) {
+  const q = new URLSearchParams({ tz: ZONE });
+  if (r.mode === "day") q.set("day", r.day);
+  else if (r.mode === "week") q.set("week", r.week);
+  else {
+    q.set("start", r.start);
+    q.set("end", r.end);
+  }
+  return q.toString();
+}
+
+async function load(ui) {
+  const r = state(ui);
+  r.loading = true;
+  r.error = null;
+  ui.draw();
+  try {
+    r.data = await ui.api.get(`/api/reports?${query(r)}`);
+  } catch (err) {
+    r.data = null;
+    r.error = err.message;
+  }
+  r.loading = false;
+  ui.draw();
+}
+
+async function downloadCsv(ui, figure) {
+  const r = state(ui);
+  await ui.act(`Download ${figure} as CSV`, async () => {
+    const blob = await ui.api.get(`/api/reports/${figure}?${query(r)}&format=csv`);
+    const url = URL.createObjectURL(blob);
+    const link = document.createElement("a");
+    link.href = url;
+    link.download = `guidebot-${figure}-${r.data?.period?.start?.slice(0, 10) ?? "report"}.csv`;
+    document.body.append(link);
+    link.click();
+    link.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 1000);
+  });
+}
+
+const seconds = (s) => {
+  if (s === null || s === undefined) return "–";
+  if (s < 90) return `${Math.round(s)} s`;
+  if (s < 5400) return `${Math.round(s / 60)} min`;
+  return `${(s / 3600).toFixed(1)} h`;
+};
+const share = (x) => (x === null || x === undefined ? "–" : `${Math.round(x * 100)} %`);
+const hours = (s) => (s / 3600).toFixed(1);
+
+function csvButton(ui, figure, label) {
+  return html`<button type="button" class="secondary no-print" @click=${() => downloadCsv(ui, figure)}>CSV: ${label}</button>`;
+}
+
+function form(ui, r) {
+  const set = (key) => (e) => { r[key] = e.target.value; ui.draw(); };
+  return html`<form class="inline no-print" aria-label="Report period" @submit=${(e) => { e.preventDefault(); load(ui); }}>
+      <span class="field"><label for="report-mode">Period</label> <select id="report-mode" name="mode" @change=${set("mode")}>
+        <option value="day" ?selected=${r.mode === "day"}>A day</option>
+        <option value="week" ?selected=${r.mode === "week"}>A week</option>
+        <option value="range" ?selected=${r.mode === "range"}>A custom range</option></select></span>
+      ${r.mode === "day" ? html`<label>Day <input type="date" name="day" .value=${r.day} @change=${set("day")} required></label>` : ""}
+      ${r.mode === "week" ? html`<label>Week from <input type="date" name="week" .value=${r.week} @change=${set("week")} required></label>` : ""}
+      ${r.mode === "range"
+        ? html`<label>From <input type="datetime-local" name="start" .value=${r.start} @change=${set("start")} required></label>
+            <label>Until <input type="datetime-local" name="end" .value=${r.end} @change=${set("end")} required></label>`
+        : ""}
+      <button type="submit">Show report</button>
+      <button type="button" class="secondary" ?disabled=${!r.data} @click=${() => window.print()}>Print summary</button>
+    </form>`;
+}
+
+function headline(data) {
+  const tours = data.tasks.by_kind.find((k) => k.kind === "tour") ?? { requested: 0, done: 0, failed: 0, cancelled: 0 };
+  const w = data.waits;
+  const facts = [
+    ["Tours requested", tours.requested],
+    ["Tours done", tours.done],
+    ["Tours failed", tours.failed],
+    ["Tours cancelled", tours.cancelled],
+    ["Wait p50 / p95", `${seconds(w.wait_s.p50)} / ${seconds(w.wait_s.p95)}`],
+    ["Tour length p50", seconds(w.tour_length_s.p50)],
+    ["Stopped following", `${share(data.following.share)} of ${data.following.tours}`],
+  ];
+  return html`<dl class="report-headline" aria-label="Headline figures">
+    ${facts.map(([label, value]) => html`<div><dt>${label}</dt><dd>${value}</dd></div>`)}</dl>`;
+}
+
+function legend(series) {
+  return html`<ul class="chart-legend">${series.map(([, label, colour]) => html`<li><span class="swatch" style=${`background:${colour}`}></span>${label}</li>`)}</ul>`;
+}
+
+function robotsTable(ui, data) {
+  const rows = data.robots.rows;
+  return html`<section class="report-part">
+    <h3>Robots</h3>${csvButton(ui, "robots", "robots")}
+    ${legend(STATES)}
+    <table aria-label="Robots' time and distance">
+      <thead><tr><th scope="col">Robot</th>${STATES.map(([, label]) => html`<th scope="col">${label} (h)</th>`)}<th scope="col">Distance (km)</th><th scope="col">Share of time</th></tr></thead>
+      <tbody>${rows.map((row) => {
+        const total = STATES.reduce((sum, [key]) => sum + row[`${key}_s`], 0) || 1;
+        return html`<tr><th scope="row">${row.robot}</th>${STATES.map(([key]) => html`<td>${hours(row[`${key}_s`])}</td>`)}
+          <td>${(row.distance_m / 1000).toFixed(2)}</td>
+          <td><div class="time-bar" role="img" aria-label=${STATES.map(([key, label]) => `${label} ${Math.round((100 * row[`${key}_s`]) / total)} %`).join(", ")}>
+            ${STATES.map(([key, , colour]) => html`<span style=${`width:${(100 * row[`${key}_s`]) / total}%;background:${colour}`}></span>`)}</div></td></tr>`;
+      })}</tbody>
+    </table>
+    ${rows.length ? "" : html`<p class="muted">No robot in this period.</p>`}</section>`;
+}
+
+function table(label, head, rows, empty) {
+  return html`<table aria-label=${label}>
+      <thead><tr>${head.map((h) => html`<th scope="col">${h}</th>`)}</tr></thead>
+      <tbody>${rows.map((cells) => html`<tr>${cells.map((c) => html`<td>${c}</td>`)}</tr>`)}</tbody>
+    </table>${rows.length ? "" : html`<p class="muted">${empty}</p>`}`;
+}
+
+function parts(ui, data) {
+  const by = (kind) => data.following.rows.filter((row) => row.by === kind);
+  const following = (kind, title) => table(
+    `Stopped following per ${title}`,
+    [title, "Tours", "Stopped", "Share"],
+    by(kind).map((row) => [row.name, row.tours, row.stopped, share(row.share)]),
+    "No tour ended in this period.",
+  );
+  return html`
+    <section class="report-part">
+      <h3>Failed tasks by reason</h3>${csvButton(ui, "tasks", "tasks per hour")}
+      ${table("Failed tasks by reason", ["Reason", "Tasks"], data.tasks.failed_by_reason.map((r) => [r.reason, r.count]), "No task failed.")}
+    </section>
+    <section class="report-part">
+      <h3>Visitors who stopped following</h3>${csvButton(ui, "following", "stopped following")}
+      <div class="report-columns">${following("tour", "Tour")}${following("lang", "Language")}${following("stop", "Stop")}</div>
+    </section>
+    <section class="report-part">
+      <h3>Stops most listened to</h3>${csvButton(ui, "stops", "stops")}
+      ${table("Stops most listened to", ["Stop", "Explanations heard"], data.stops.rows.slice(0, 10).map((r) => [poiLabel(ui, r.stop), r.listened]), "No stop explained.")}
+    </section>
+    ${robotsTable(ui, data)}
+    <section class="report-part">
+      <h3>Incidents</h3>${csvButton(ui, "incidents", "incidents")}
+      ${table("Incidents", ["What", "Where / who", "Count", "Mean wait"], data.incidents.rows.map((r) => [INCIDENT_NAMES[r.type] ?? r.type, r.name, r.count, r.wait_mean_s === null ? "–" : seconds(r.wait_mean_s)]), "No incident.")}
+    </section>`;
+}
+
+function poiLabel(ui, id) {
+  const poi = ui.store.site?.pois?.find((p) => p.id === id);
+  return poi?.name ? `${poi.name} (${id})` : id;
+}
+
+/** Draw (or redraw) the charts once their containers are on the page. */
+function drawCharts(ui) {
+  const data = state(ui).data;
+  if (!data) return;
+  const key = JSON.stringify(data.period);
+  const tours = document.getElementById("chart-tours");
+  const waits = document.getElementById("chart-waits");
+  if (!tours || !waits || tours.dataset.key === key) return;
+  // Bin labels are the venue's (this browser's) local time: "2026-07-14 10:00" or a day.
+  const binStarts = (rows) => rows.map((row) => Date.parse(row.start.length === 10 ? `${row.start}T00:00` : row.start.replace(" ", "T")) / 1000);
+  const width = Math.max(320, Math.min(tours.parentElement.clientWidth - 16, 900));
+  const common = { width, height: 220, legend: { show: false }, cursor: { drag: { x: false, y: false } } };
+  for (const el of [tours, waits]) {
+    el.dataset.key = key;
+    el.replaceChildren();
+  }
+  const rows = data.tasks.rows;
+  new uPlot(
+    {
+      ...common,
+      axes: [{}, { label: "tours" }],
+      series: [{}, ...TASK_SERIES.map(([k, label, colour], i) => ({
+        label, stroke: colour, width: 2, fill: i === 0 ? `${colour}33` : undefined,
+        paths: i === 0 ? uPlot.paths.bars({ size: [0.8] }) : undefined,
+      }))],
+    },
+    [binStarts(rows), ...TASK_SERIES.map(([k]) => rows.map((row) => row[k]))],
+    tours,
+  );
+  const w = data.waits.rows;
+  new uPlot(
+    {
+      ...common,
+      axes: [{}, { label: "minutes" }],
+      series: [{}, { label: "Mean wait", stroke: "#0b57d0", width: 2, spanGaps: false, points: { show: true } }],
+    },
+    [binStarts(w), w.map((row) => (row.wait_mean_s === null ? null : row.wait_mean_s / 60))],
+    waits,
+  );
+}
+
+export function reportsView(ui) {
+  const r = state(ui);
+  const data = r.data;
+  if (!data && !r.loading && !r.error) queueMicrotask(() => load(ui));
+  if (data) requestAnimationFrame(() => drawCharts(ui));
+  const p = data?.period;
+  const perBin = p?.bin === "day" ? "day by day" : "hour by hour";
+  return html`<div class="reports">
+    <h2>Reports</h2>
+    ${form(ui, r)}
+    ${r.loading ? html`<p class="muted" role="status">Loading the report…</p>` : ""}
+    ${r.error ? html`<p class="notice error" role="alert">${r.error}</p>` : ""}
+    ${data
+      ? html`<p class="report-period">${ui.store.site?.name ?? "GuideBot"}: ${p.start.slice(0, 16).replace("T", " ")} to ${p.end.slice(0, 16).replace("T", " ")} (${p.tz})</p>
+        ${headline(data)}
+        <div class="report-charts">
+          <figure class="report-chart">
+            <figcaption>Tours ${perBin}</figcaption>${legend(TASK_SERIES)}
+            <div id="chart-tours" role="img" aria-label=${`Tours ${perBin}: requested, done, failed and cancelled (the table in the CSV)`}></div>
+          </figure>
+          <figure class="report-chart">
+            <figcaption>Mean wait for a robot, ${perBin} (minutes)</figcaption>
+            <div id="chart-waits" role="img" aria-label=${`Mean visitor wait ${perBin}`}></div>
+            ${csvButton(ui, "waits", "waits")}
+          </figure>
+        </div>
+        ${parts(ui, data)}`
+      : ""}
+  </div>`;
+}
