@@ -5,13 +5,19 @@ on one page, and axe-core clean."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import datetime as dt
+import random
 import re
+import sqlite3
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
 from playwright.async_api import expect
+
+from bench.reports import venue_events
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(150)]
 
@@ -72,7 +78,6 @@ async def test_reports_view_charts_csv_errors_and_print(
         await page.get_by_label("Period", exact=True).select_option("day")
         await page.get_by_role("button", name="Show report").click()
         await expect(page.locator("#chart-tours canvas")).to_have_count(1)
-        await web.screenshot(page, "console-reports")
         await page.emulate_media(media="print")
         await expect(page.locator("#tabs")).to_be_hidden()
         await expect(page.get_by_role("form", name="Report period")).to_be_hidden()
@@ -85,3 +90,44 @@ def _pages(pdf: bytes) -> int:
     """The page count of a PDF Chromium wrote (its page tree's /Count)."""
     counts = [int(n) for n in re.findall(rb"/Count (\d+)", pdf)]
     return max(counts) if counts else 0
+
+
+async def test_a_busy_days_summary_prints_on_one_page(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path
+) -> None:
+    """Yesterday as the reports bench writes a busy venue's day (eight robots, some 300 tours),
+    in the server's own database: every part of the view filled, still one printed page."""
+    async with fleet_factory(robots=1) as fleet:
+        yesterday = dt.datetime.now(dt.UTC).date() - dt.timedelta(days=1)
+        rows = venue_events(yesterday, 8, random.Random(7))
+        await asyncio.to_thread(_insert, tmp_path / "guidebot.db", rows)
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, web.operator_token)
+        await web.open_view(page, "Reports")
+        await page.get_by_label("Day").fill(yesterday.isoformat())
+        await page.get_by_role("button", name="Show report").click()
+        await expect(page.locator(".report-period")).to_contain_text(
+            f"{yesterday.isoformat()} 00:00"
+        )
+        tours = sum(1 for row in rows if row[1] == "task_created" and b'"tour"' in row[3])
+        headline = page.locator(".report-headline div").first
+        await expect(headline).to_contain_text(str(tours))
+        robots = page.get_by_role("table", name="Robots' time and distance")
+        await expect(robots.locator("tbody tr")).to_have_count(8)
+        stops = page.get_by_role("table", name="Stops most listened to")
+        await expect(stops.locator("tbody tr")).to_have_count(10)
+        await expect(page.locator("#chart-tours canvas")).to_have_count(1)
+        await web.axe_check(page)
+        await web.screenshot(page, "console-reports")
+        await page.emulate_media(media="print")
+        pdf = await page.pdf(format="A4", print_background=True)
+        assert _pages(pdf) == 1, "the daily summary prints on one page"
+
+
+def _insert(path: Path, rows: list[tuple[float, str, str, bytes]]) -> None:
+    with contextlib.closing(sqlite3.connect(path)) as connection, connection:
+        connection.executemany(
+            "INSERT INTO events (at, kind, source, data) VALUES (?, ?, ?, ?)",
+            [(at, kind, source, data.decode()) for at, kind, source, data in rows],
+        )

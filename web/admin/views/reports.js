@@ -140,7 +140,7 @@ function legend(series) {
 
 function robotsTable(ui, data) {
   const rows = data.robots.rows;
-  return html`<section class="report-part">
+  return html`<section class="report-part wide whole">
     <h3>Robots</h3>${csvButton(ui, "robots", "robots")}
     ${legend(STATES)}
     <table aria-label="Robots' time and distance">
@@ -164,7 +164,7 @@ function table(label, head, rows, empty) {
 }
 
 function parts(ui, data) {
-  const by = (kind) => data.following.rows.filter((row) => row.by === kind);
+  const by = (kind) => data.following.rows.filter((row) => row.by === kind).sort((a, b) => b.stopped - a.stopped);
   const following = (kind, title) => table(
     `Stopped following per ${title}`,
     [title, "Tours", "Stopped", "Share"],
@@ -176,7 +176,7 @@ function parts(ui, data) {
       <h3>Failed tasks by reason</h3>${csvButton(ui, "tasks", "tasks per hour")}
       ${table("Failed tasks by reason", ["Reason", "Tasks"], data.tasks.failed_by_reason.map((r) => [r.reason, r.count]), "No task failed.")}
     </section>
-    <section class="report-part">
+    <section class="report-part wide">
       <h3>Visitors who stopped following</h3>${csvButton(ui, "following", "stopped following")}
       <div class="report-columns">${following("tour", "Tour")}${following("lang", "Language")}${following("stop", "Stop")}</div>
     </section>
