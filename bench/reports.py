@@ -261,7 +261,7 @@ def _wal(path: Path) -> float:
 
 @click.command()
 @click.option("--events", default=5_000_000, show_default=True, help="Events in the log (about).")
-@click.option("--robots", default=8, show_default=True, help="Robots giving tours every day.")
+@click.option("--robots", default=12, show_default=True, help="Robots giving tours every day.")
 @click.option("--seed", default=1, show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="Only the JSON line on stdout.")
 def main(events: int, robots: int, seed: int, as_json: bool) -> None:

@@ -12,6 +12,7 @@ __all__ = [
     "Base",
     "EventRow",
     "ReportCursorRow",
+    "ReportDayRow",
     "ReportRollupRow",
     "RobotServiceRow",
     "SiteDraftRow",
@@ -115,6 +116,18 @@ class ReportRollupRow(Base):
     metric: Mapped[str] = mapped_column(String(32), primary_key=True)
     hour: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
     """Unix seconds of the hour's start (UTC-aligned)."""
+    key: Mapped[str] = mapped_column(String(160), primary_key=True)
+    n: Mapped[int] = mapped_column(Integer, default=0)
+    total: Mapped[float] = mapped_column(Float, default=0.0)
+
+
+class ReportDayRow(Base):
+    """The same figures summed per UTC day: a year's report reads 365 rows per key, not 8760."""
+
+    __tablename__ = "report_days"
+    metric: Mapped[str] = mapped_column(String(32), primary_key=True)
+    day: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
+    """Unix seconds of the UTC day's start."""
     key: Mapped[str] = mapped_column(String(160), primary_key=True)
     n: Mapped[int] = mapped_column(Integer, default=0)
     total: Mapped[float] = mapped_column(Float, default=0.0)

@@ -9,7 +9,7 @@ from typing import Any
 
 from sqlalchemy import func, select
 
-from backend.db.models import ReportRollupRow
+from backend.db.models import ReportDayRow, ReportRollupRow
 from backend.reports.fold import ROBOT_STATES
 from backend.reports.period import Period
 from backend.reports.rollup import Rollups, Tally
@@ -19,6 +19,7 @@ __all__ = ["FIGURES", "Reports", "percentile"]
 TASK_STATES = ("requested", "done", "failed", "cancelled")
 INCIDENTS = ("faults", "door_blocks", "elevator_wait", "lock_wait", "alarms")
 HEAT = {"node_visits": "node", "door_opened": "door", "area_granted": "area"}
+DAY = 86400
 
 
 def percentile(histogram: dict[str, int], share: float) -> float | None:
@@ -52,17 +53,38 @@ class Reports:
         await self.rollups.catch_up()
 
     async def _sums(self, period: Period, metrics: tuple[str, ...]) -> dict[str, dict[str, list]]:
-        """metric -> key -> [n, total] over the period."""
-        t = ReportRollupRow
-        query = (
-            select(t.metric, t.key, func.sum(t.n), func.sum(t.total))
-            .where(t.metric.in_(metrics), t.hour >= period.start, t.hour < period.end)
-            .group_by(t.metric, t.key)
+        """metric -> key -> [n, total] over the period: its whole UTC days from the daily
+        rollups, the hours before the first and after the last from the hourly ones."""
+        first_day = -(-int(period.start) // DAY) * DAY
+        last_day = int(period.end) // DAY * DAY
+        h, d = ReportRollupRow, ReportDayRow
+        if last_day > first_day:
+            edges = [(period.start, first_day), (last_day, period.end)]
+        else:
+            edges = [(period.start, period.end)]
+        queries = (
+            [
+                select(d.metric, d.key, func.sum(d.n), func.sum(d.total))
+                .where(d.metric.in_(metrics), d.day >= first_day, d.day < last_day)
+                .group_by(d.metric, d.key)
+            ]
+            if last_day > first_day
+            else []
         )
+        queries += [
+            select(h.metric, h.key, func.sum(h.n), func.sum(h.total))
+            .where(h.metric.in_(metrics), h.hour >= start, h.hour < end)
+            .group_by(h.metric, h.key)
+            for start, end in edges
+            if end > start
+        ]
         out: dict[str, dict[str, list]] = {m: {} for m in metrics}
         async with self.rollups.sessionmaker() as session:
-            for metric, key, n, total in await session.execute(query):
-                out[metric][key] = [int(n or 0), float(total or 0.0)]
+            for query in queries:
+                for metric, key, n, total in await session.execute(query):
+                    cell = out[metric].setdefault(key, [0, 0.0])
+                    cell[0] += int(n or 0)
+                    cell[1] += float(total or 0.0)
         if "robot_time" in metrics:
             for (metric, hour, key), cell in (await self._tail(period)).items():
                 if metric == "robot_time" and period.start <= hour < period.end:
@@ -79,14 +101,16 @@ class Reports:
     async def _series(
         self, period: Period, metrics: tuple[str, ...], key: str | None = None
     ) -> dict[float, dict[str, list]]:
-        """bin start -> metric -> [n, total], the bins in the venue's time."""
-        t = ReportRollupRow
-        query = select(t.metric, t.hour, func.sum(t.n), func.sum(t.total)).where(
-            t.metric.in_(metrics), t.hour >= period.start, t.hour < period.end
+        """bin start -> metric -> [n, total], the bins in the venue's time (days on UTC: from
+        the daily rollups; otherwise from the hours)."""
+        t: Any = ReportDayRow if period.utc_days() else ReportRollupRow
+        when = t.day if t is ReportDayRow else t.hour
+        query = select(t.metric, when, func.sum(t.n), func.sum(t.total)).where(
+            t.metric.in_(metrics), when >= period.start, when < period.end
         )
         if key is not None:
             query = query.where(t.key == key)
-        query = query.group_by(t.metric, t.hour)
+        query = query.group_by(t.metric, when)
         bins: dict[float, dict[str, list]] = {
             b: {m: [0, 0.0] for m in metrics} for b in period.bins()
         }

@@ -39,6 +39,18 @@ class Period:
         local = dt.datetime.fromtimestamp(hour, self.tz)
         return local.replace(hour=0, minute=0, second=0).timestamp()
 
+    def utc_days(self) -> bool:
+        """Day by day on whole UTC days (the daily rollups hold the bins as they are)."""
+        return (
+            self.bin_s == 86400
+            and self.start % 86400 == 0
+            and self.end % 86400 == 0
+            and all(
+                dt.datetime.fromtimestamp(at, self.tz).utcoffset() == dt.timedelta(0)
+                for at in range(int(self.start), int(self.end) + 1, 86400)
+            )
+        )
+
     def bins(self) -> list[float]:
         """Every bin's start, in order (empty bins too)."""
         starts: list[float] = []

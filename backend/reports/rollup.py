@@ -17,7 +17,7 @@ from typing import Any
 from sqlalchemy import Insert, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 
-from backend.db.models import EventRow, ReportCursorRow, ReportRollupRow
+from backend.db.models import EventRow, ReportCursorRow, ReportDayRow, ReportRollupRow
 from backend.reports.fold import Fold, Positions
 from guidebot.site.schema import Site
 
@@ -25,6 +25,7 @@ __all__ = ["CHUNK", "Rollups", "Tally", "node_positions"]
 
 log = logging.getLogger(__name__)
 
+DAY = 86400
 CHUNK = 20_000
 """Events folded per transaction."""
 
@@ -120,21 +121,31 @@ class Rollups:
 
 
 async def _add(session: Any, tally: Tally) -> None:
-    rows = [
-        {"metric": m, "hour": h, "key": k, "n": int(cell[0]), "total": float(cell[1])}
-        for (m, h, k), cell in tally.items()
-    ]
-    if rows:  # one statement compiled once, executed for every row (executemany)
-        await session.execute(_upsert_adding(session), rows)
+    """Add the chunk's hours to ``report_rollups`` and their sums per UTC day to
+    ``report_days``; each one statement compiled once, executed for every row."""
+    days: Tally = {}
+    hours = []
+    for (metric, hour, key), (n, total) in tally.items():
+        hours.append({"metric": metric, "hour": hour, "key": key, "n": int(n), "total": total})
+        cell = days.setdefault((metric, hour // DAY * DAY, key), [0, 0.0])
+        cell[0] += n
+        cell[1] += total
+    if hours:
+        await session.execute(_upsert_adding(session, ReportRollupRow, "hour"), hours)
+        rows = [
+            {"metric": m, "day": d, "key": k, "n": int(c[0]), "total": float(c[1])}
+            for (m, d, k), c in days.items()
+        ]
+        await session.execute(_upsert_adding(session, ReportDayRow, "day"), rows)
 
 
-def _upsert_adding(session: Any) -> Insert:
+def _upsert_adding(session: Any, model: Any, when: str) -> Insert:
     """INSERT ... ON CONFLICT DO UPDATE n = n + new n, total = total + new total."""
     module = postgresql if session.bind.dialect.name == "postgresql" else sqlite
-    statement = module.insert(ReportRollupRow)
-    table = ReportRollupRow.__table__.c
+    statement = module.insert(model)
+    table = model.__table__.c
     return statement.on_conflict_do_update(
-        index_elements=[table.metric, table.hour, table.key],
+        index_elements=[table.metric, table[when], table.key],
         set_={
             "n": table.n + statement.excluded.n,
             "total": table.total + statement.excluded.total,

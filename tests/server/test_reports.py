@@ -146,7 +146,14 @@ async def test_a_mornings_figures_from_the_event_log(
     store: DbStore, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     write_morning(VenueDay(store, monkeypatch))
-    await check_morning(Reports(Rollups(store.sessionmaker, POSITIONS), store.flush))
+    reports = Reports(Rollups(store.sessionmaker, POSITIONS), store.flush)
+    await check_morning(reports)
+    # Whole UTC days come from the daily rollups, the hours around them from the hourly ones.
+    day = (await reports.following(parse_period(day="2026-07-14")))["rows"]
+    across = parse_period(start="2026-07-13T12:00", end="2026-07-15T06:00")
+    assert (await reports.following(across))["rows"] == day
+    ten = parse_period(start="2026-07-14T10:00", end="2026-07-14T11:00")
+    assert [k["requested"] for k in (await reports.tasks(ten))["by_kind"]] == [2]
 
 
 async def check_morning(reports: Reports) -> None:
@@ -292,3 +299,11 @@ async def test_retention_keeps_what_the_rollups_have_not_folded(
     assert pruned == 10 - 1  # the folded ones, but this life's server_started
     assert len(await store.events(limit=1000)) == total - pruned
     await check_morning(Reports(rollups))
+
+
+def test_day_bins_read_the_daily_rollups_only_on_utc_days() -> None:
+    assert parse_period(week="2026-07-13").utc_days()
+    assert not parse_period(week="2026-07-13", tz="Europe/Madrid").utc_days()
+    assert not parse_period(day="2026-07-14").utc_days()  # hour by hour
+    winter_to_summer = parse_period(start="2026-01-01", end="2026-07-01", tz="Europe/London")
+    assert not winter_to_summer.utc_days()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import datetime as dt
+import json
 import random
 import re
 import sqlite3
@@ -93,13 +94,19 @@ def _pages(pdf: bytes) -> int:
 
 
 async def test_a_busy_days_summary_prints_on_one_page(
-    fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path, demo_site: Any
 ) -> None:
     """Yesterday as the reports bench writes a busy venue's day (eight robots, some 300 tours),
-    in the server's own database: every part of the view filled, still one printed page."""
+    in the server's own database: every part of the view filled, the busiest nodes of the demo
+    museum on its floor plan, still one printed page."""
     async with fleet_factory(robots=1) as fleet:
         yesterday = dt.datetime.now(dt.UTC).date() - dt.timedelta(days=1)
         rows = venue_events(yesterday, 8, random.Random(7))
+        noon = dt.datetime(yesterday.year, yesterday.month, yesterday.day, 12, tzinfo=dt.UTC)
+        busy = [node.id for node in demo_site.nodes[:3]]  # reached 3, 2 and 1 times
+        for times, node in zip((3, 2, 1), busy, strict=True):
+            data = json.dumps({"robot": "R1", "node": node}).encode()
+            rows += [(noon.timestamp() + i, "node_reached", "R1", data) for i in range(times)]
         await asyncio.to_thread(_insert, tmp_path / "guidebot.db", rows)
         watch = await open_page(fleet.admin_url)
         page = watch.page
@@ -118,8 +125,18 @@ async def test_a_busy_days_summary_prints_on_one_page(
         stops = page.get_by_role("table", name="Stops most listened to")
         await expect(stops.locator("tbody tr")).to_have_count(10)
         await expect(page.locator("#chart-tours canvas")).to_have_count(1)
+        top = page.get_by_role("list", name="Busiest places")
+        await expect(top).to_contain_text("area corridor: ")  # an area the museum has
+        await expect(top).to_contain_text(": 3")  # its busiest node
+        busiest = page.locator(f'.heat-node[data-node="{busy[0]}"]')
+        quiet = page.locator(f'.heat-node[data-node="{busy[2]}"]')
+        assert float(await busiest.get_attribute("r") or 0) > float(
+            await quiet.get_attribute("r") or 0
+        )
         await web.axe_check(page)
         await web.screenshot(page, "console-reports")
+        await page.get_by_role("heading", name="Busiest places").scroll_into_view_if_needed()
+        await web.screenshot(page, "console-reports-heat")
         await page.emulate_media(media="print")
         pdf = await page.pdf(format="A4", print_background=True)
         assert _pages(pdf) == 1, "the daily summary prints on one page"

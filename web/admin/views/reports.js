@@ -1,8 +1,9 @@
 // Reports: how the robots served visitors over a day, a week or any range (docs/reports.md).
 // Figures from GET /api/reports, charts drawn with the vendored uPlot, every table as CSV, and a
 // one-page daily summary for the printer (web/admin/reports.css, @media print).
-import { html } from "lit-html";
+import { html, svg } from "lit-html";
 import uPlot from "uplot";
+import { doorName, floorName, placeName } from "/admin/names.js";
 
 const STATES = [
   ["touring", "Touring", "#0b57d0"],
@@ -57,17 +58,24 @@ function query(r) {
   return q.toString();
 }
 
+/** Fetch the chosen period's report; only the last one asked for is shown (an earlier answer
+ * arriving later must not replace it). */
 async function load(ui) {
   const r = state(ui);
+  const asked = (r.asked = (r.asked ?? 0) + 1);
   r.loading = true;
   r.error = null;
   ui.draw();
+  let data = null;
+  let error = null;
   try {
-    r.data = await ui.api.get(`/api/reports?${query(r)}`);
+    data = await ui.api.get(`/api/reports?${query(r)}`);
   } catch (err) {
-    r.data = null;
-    r.error = err.message;
+    error = err.message;
   }
+  if (asked !== r.asked) return;
+  r.data = data;
+  r.error = error;
   r.loading = false;
   ui.draw();
 }
@@ -191,6 +199,71 @@ function parts(ui, data) {
     </section>`;
 }
 
+const HEAT_PAD_M = 2;
+const HEAT_PX_PER_M = 12;
+
+/** White-yellow (quiet) to dark red (busiest): ``share`` of the busiest count, 0..1. */
+function heatColour(share) {
+  const hue = 50 - 50 * share;
+  const light = 88 - 53 * share;
+  return `hsl(${hue} 100% ${light}%)`;
+}
+
+/** One floor of the site with each node, door and restricted area coloured by how busy it was
+ * (robots reaching a node, a door's openings, an area's grants). */
+function heatFloor(ui, floor, counts, most) {
+  const site = ui.store.site;
+  const nodes = site.nodes.filter((n) => n.floor === floor.id);
+  if (!nodes.length) return "";
+  const byId = new Map(nodes.map((n) => [n.id, n]));
+  const xs = nodes.map((n) => n.x);
+  const ys = nodes.map((n) => n.y);
+  const minX = Math.min(...xs) - HEAT_PAD_M;
+  const maxX = Math.max(...xs) + HEAT_PAD_M;
+  const minY = Math.min(...ys) - HEAT_PAD_M;
+  const maxY = Math.max(...ys) + HEAT_PAD_M;
+  const Y = (y) => maxY + minY - y; // north up
+  const share = (kind, id) => (most[kind] ? (counts[kind].get(id) ?? 0) / most[kind] : 0);
+  const areas = (site.areas ?? []).flatMap((a) => a.nodes.filter((n) => byId.has(n)).map((n) => [a, byId.get(n)]));
+  const busiest = nodes.map((n) => [n, counts.node.get(n.id) ?? 0]).filter(([, c]) => c).sort((a, b) => b[1] - a[1]).slice(0, 3);
+  const label = `Floor ${floor.name || floor.id}: ${busiest.length ? `busiest ${busiest.map(([n, c]) => `${placeName(site, n.id)} (${c})`).join(", ")}` : "no robot reached a node here"}`;
+  return html`<figure class="heat-floor" data-floor=${floor.id}>
+    <figcaption>${floorName(site, floor.id)}</figcaption>
+    <svg viewBox=${`${minX} ${minY} ${maxX - minX} ${maxY - minY}`} style=${`width: ${Math.round((maxX - minX) * HEAT_PX_PER_M)}px`} role="img" aria-label=${label}>
+      ${areas.map(([a, n]) => svg`<circle cx=${n.x} cy=${Y(n.y)} r="1.6" fill=${heatColour(share("area", a.id))} opacity="0.6"><title>Area ${a.id}: ${counts.area.get(a.id) ?? 0} grants</title></circle>`)}
+      ${site.edges.filter((e) => byId.has(e.a) && byId.has(e.b)).map((e) => svg`<line x1=${byId.get(e.a).x} y1=${Y(byId.get(e.a).y)} x2=${byId.get(e.b).x} y2=${Y(byId.get(e.b).y)} stroke="#9aa0a6" stroke-width="0.2"></line>`)}
+      ${nodes.map((n) => svg`<circle class="heat-node" data-node=${n.id} cx=${n.x} cy=${Y(n.y)} r=${0.35 + 0.65 * share("node", n.id)} fill=${heatColour(share("node", n.id))} stroke="#5f6368" stroke-width="0.08"><title>${placeName(site, n.id)}: reached ${counts.node.get(n.id) ?? 0} times</title></circle>`)}
+      ${(site.doors ?? []).filter((d) => byId.has(d.node)).map((d) => {
+        const n = byId.get(d.node);
+        return svg`<rect x=${n.x - 0.6} y=${Y(n.y) - 0.6} width="1.2" height="1.2" fill=${heatColour(share("door", d.id))} stroke="#1a1a1a" stroke-width="0.12"><title>${doorName(site, d.id)}: opened ${counts.door.get(d.id) ?? 0} times</title></rect>`;
+      })}
+    </svg></figure>`;
+}
+
+function heatMap(ui, data) {
+  const site = ui.store.site;
+  if (!site) return "";
+  // Only what the current site has (a node since removed has no place on the plan).
+  const known = {
+    node: new Set(site.nodes.map((n) => n.id)),
+    door: new Set((site.doors ?? []).map((d) => d.id)),
+    area: new Set((site.areas ?? []).map((a) => a.id)),
+  };
+  const rows = data.heat.rows.filter((row) => known[row.kind]?.has(row.name));
+  const counts = { node: new Map(), door: new Map(), area: new Map() };
+  for (const row of rows) counts[row.kind].set(row.name, row.count);
+  const most = Object.fromEntries(Object.entries(counts).map(([k, m]) => [k, Math.max(0, ...m.values())]));
+  const top = rows.slice().sort((a, b) => b.count - a.count).slice(0, 5);
+  const name = (row) => (row.kind === "node" ? placeName(site, row.name) : row.kind === "door" ? doorName(site, row.name) : `area ${row.name}`);
+  return html`<section class="report-part wide no-print" aria-labelledby="heat-title">
+    <h3 id="heat-title">Busiest places</h3>${csvButton(ui, "heat", "busiest places")}
+    <p class="muted">Nodes by robots reaching them (bigger and redder: busier), doors (squares) by openings, restricted areas (halos) by grants.
+      <span class="heat-scale" aria-hidden="true"><span style=${`background:${heatColour(0)}`}></span><span style=${`background:${heatColour(0.5)}`}></span><span style=${`background:${heatColour(1)}`}></span></span></p>
+    <ol class="heat-top" aria-label="Busiest places">${top.map((row) => html`<li>${name(row)}: ${row.count}</li>`)}</ol>
+    <div class="heat-floors">${site.floors.map((f) => heatFloor(ui, f, counts, most))}</div>
+  </section>`;
+}
+
 function poiLabel(ui, id) {
   const poi = ui.store.site?.pois?.find((p) => p.id === id);
   return poi?.name ? `${poi.name} (${id})` : id;
@@ -263,7 +336,8 @@ export function reportsView(ui) {
             ${csvButton(ui, "waits", "waits")}
           </figure>
         </div>
-        ${parts(ui, data)}`
+        ${parts(ui, data)}
+        ${heatMap(ui, data)}`
       : ""}
   </div>`;
 }

@@ -1,5 +1,5 @@
-"""Hourly rollups of the event log that the reports read, and how far they have read it
-(docs/reports.md).
+"""Hourly and daily rollups of the event log that the reports read, and how far they have read
+it (docs/reports.md).
 
 Revision ID: 0005
 Revises: 0004
@@ -25,6 +25,14 @@ def upgrade() -> None:
         sa.Column("total", sa.Float, nullable=False),
     )
     op.create_table(
+        "report_days",
+        sa.Column("metric", sa.String(32), primary_key=True),
+        sa.Column("day", sa.Integer, primary_key=True, autoincrement=False),
+        sa.Column("key", sa.String(160), primary_key=True),
+        sa.Column("n", sa.Integer, nullable=False),
+        sa.Column("total", sa.Float, nullable=False),
+    )
+    op.create_table(
         "report_cursor",
         sa.Column("id", sa.Integer, primary_key=True),
         sa.Column("last_event_id", sa.Integer, nullable=False),
@@ -35,4 +43,5 @@ def upgrade() -> None:
 
 def downgrade() -> None:
     op.drop_table("report_cursor")
+    op.drop_table("report_days")
     op.drop_table("report_rollups")
