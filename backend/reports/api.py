@@ -13,6 +13,7 @@ from backend.api.deps import app_service
 from backend.auth import Principal
 from backend.reports.figures import FIGURES, Reports
 from backend.reports.period import BadPeriod, Period, parse_period
+from backend.reports.replay import replay
 
 __all__ = ["router"]
 
@@ -49,6 +50,18 @@ async def summary(_: Reader, service: Service, asked: Asked) -> dict[str, Any]:
     """Every figure of the period in one answer (the console's view and daily summary)."""
     figures = {name: await method(service, asked) for name, method in FIGURES.items()}
     return {"period": asked.as_dict(), **figures}
+
+
+@router.get("/replay")
+async def replay_period(_: Reader, service: Service, asked: Asked) -> dict[str, Any]:
+    """What robots, doors, locks and elevators did in the period (at most 24 hours), and where
+    they were when it started: the console plays it back."""
+    if service.flush is not None:
+        await service.flush()
+    try:
+        return await replay(service.rollups.sessionmaker, asked)
+    except BadPeriod as exc:
+        raise HTTPException(422, str(exc)) from None
 
 
 @router.get("/{figure}", response_model=None)

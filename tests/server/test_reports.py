@@ -4,6 +4,7 @@ databases (docs/reports.md)."""
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 from collections.abc import AsyncIterator
 from types import SimpleNamespace
@@ -17,6 +18,7 @@ from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.reports.figures import Reports, percentile
 from backend.reports.fold import bucket
 from backend.reports.period import BadPeriod, parse_period
+from backend.reports.replay import replay
 from backend.reports.rollup import Rollups
 from backend.tasks.model import Task, TaskState
 
@@ -307,3 +309,23 @@ def test_day_bins_read_the_daily_rollups_only_on_utc_days() -> None:
     assert not parse_period(day="2026-07-14").utc_days()  # hour by hour
     winter_to_summer = parse_period(start="2026-01-01", end="2026-07-01", tz="Europe/London")
     assert not winter_to_summer.utc_days()
+
+
+async def test_a_replay_has_the_periods_events_and_the_state_it_starts_from(
+    store: DbStore, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    write_morning(VenueDay(store, monkeypatch))
+    await store.flush()
+    half = parse_period(start="2026-07-14T10:30", end="2026-07-14T11:00")
+    # Periods are whole hours; the player asks for any, this one from 10:30.
+    played = await replay(store.sessionmaker, dataclasses.replace(half, start=at(10, 30)))
+    # At 10:30 R1 stood at p2 (reached 10:08) and held the corridor (granted 10:06:30).
+    assert played["start"]["robots"] == {"R1": "p2"}
+    assert played["start"]["locks"] == {"corridor": "R1"}
+    assert [(e["at"], e["kind"]) for e in played["events"]] == [
+        (at(10, 30, 20), "task_started"),
+        (at(10, 51), "elevator_in_position"),
+    ]
+    assert played["truncated"] is False
+    with pytest.raises(BadPeriod, match="at most 24 hours"):
+        await replay(store.sessionmaker, parse_period(week="2026-07-13"))

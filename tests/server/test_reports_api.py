@@ -53,6 +53,12 @@ async def test_a_tour_run_on_the_server_is_in_the_days_report(
     [r1_row] = [r for r in report["robots"]["rows"] if r["robot"] == "R1"]
     assert r1_row["touring_s"] >= 0 and r1_row["offline_s"] >= 0
 
+    # The same hours to play back: the tour's start among them.
+    played = (await staff.get("/api/reports/replay", params=around)).json()
+    assert any(
+        e["kind"] == "task_started" and e["data"]["task_id"] == task["id"] for e in played["events"]
+    )
+
     # One figure as CSV: a row per hour, with a header.
     exported = await staff.get("/api/reports/tasks", params={**around, "format": "csv"})
     assert exported.status_code == 200
@@ -80,6 +86,8 @@ async def test_bad_periods_are_422_with_the_reason_and_only_staff_read(http: Htt
     assert (
         await staff.get("/api/reports/weather", params={"day": "2026-07-14"})
     ).status_code == 422
+    long = await staff.get("/api/reports/replay", params={"week": "2026-07-13"})
+    assert long.status_code == 422 and "at most 24 hours" in long.json()["detail"]
     csv_only = {"day": "2026-07-14", "format": "pdf"}
     assert (await staff.get("/api/reports/tasks", params=csv_only)).status_code == 422
     assert (await panel.get("/api/reports", params={"day": "2026-07-14"})).status_code == 403

@@ -5,6 +5,7 @@ on one page, and axe-core clean."""
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import datetime as dt
 import json
@@ -97,16 +98,17 @@ async def test_a_busy_days_summary_prints_on_one_page(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path, demo_site: Any
 ) -> None:
     """Yesterday as the reports bench writes a busy venue's day (eight robots, some 300 tours),
-    in the server's own database: every part of the view filled, the busiest nodes of the demo
-    museum on its floor plan, still one printed page."""
+    in the server's own database, and ten robots walking the demo museum's ground floor: every
+    part of the view filled, the busiest nodes on the floor plan, still one printed page; then
+    the day played back and scrubbed end to end."""
     async with fleet_factory(robots=1) as fleet:
         yesterday = dt.datetime.now(dt.UTC).date() - dt.timedelta(days=1)
         rows = venue_events(yesterday, 8, random.Random(7))
         noon = dt.datetime(yesterday.year, yesterday.month, yesterday.day, 12, tzinfo=dt.UTC)
-        busy = [node.id for node in demo_site.nodes[:3]]  # reached 3, 2 and 1 times
-        for times, node in zip((3, 2, 1), busy, strict=True):
-            data = json.dumps({"robot": "R1", "node": node}).encode()
-            rows += [(noon.timestamp() + i, "node_reached", "R1", data) for i in range(times)]
+        walks = _walkers(demo_site, noon - dt.timedelta(hours=3), robots=10, hours=10)
+        visits = collections.Counter(json.loads(row[3])["node"] for row in walks)
+        [(busiest, _)], quietest = visits.most_common(1), min(visits, key=visits.__getitem__)
+        rows += walks
         await asyncio.to_thread(_insert, tmp_path / "guidebot.db", rows)
         watch = await open_page(fleet.admin_url)
         page = watch.page
@@ -121,18 +123,16 @@ async def test_a_busy_days_summary_prints_on_one_page(
         headline = page.locator(".report-headline div").first
         await expect(headline).to_contain_text(str(tours))
         robots = page.get_by_role("table", name="Robots' time and distance")
-        await expect(robots.locator("tbody tr")).to_have_count(8)
+        await expect(robots.locator("tbody tr")).to_have_count(18)  # the walkers: distance only
         stops = page.get_by_role("table", name="Stops most listened to")
         await expect(stops.locator("tbody tr")).to_have_count(10)
         await expect(page.locator("#chart-tours canvas")).to_have_count(1)
-        top = page.get_by_role("list", name="Busiest places")
-        await expect(top).to_contain_text("area corridor: ")  # an area the museum has
-        await expect(top).to_contain_text(": 3")  # its busiest node
-        busiest = page.locator(f'.heat-node[data-node="{busy[0]}"]')
-        quiet = page.locator(f'.heat-node[data-node="{busy[2]}"]')
-        assert float(await busiest.get_attribute("r") or 0) > float(
-            await quiet.get_attribute("r") or 0
-        )
+        top = page.get_by_role("list", name="Busiest places").get_by_role("listitem")
+        await expect(top.first).to_contain_text(f": {visits[busiest]}")
+        most = page.locator(f'.heat-node[data-node="{busiest}"]')
+        least = page.locator(f'.heat-node[data-node="{quietest}"]')
+        assert await most.get_attribute("r") == "1"  # the biggest
+        assert float(await least.get_attribute("r") or 1) < 1
         await web.axe_check(page)
         await web.screenshot(page, "console-reports")
         await page.get_by_role("heading", name="Busiest places").scroll_into_view_if_needed()
@@ -140,6 +140,59 @@ async def test_a_busy_days_summary_prints_on_one_page(
         await page.emulate_media(media="print")
         pdf = await page.pdf(format="A4", print_background=True)
         assert _pages(pdf) == 1, "the daily summary prints on one page"
+        await page.emulate_media(media="screen")
+
+        # The day played back: at noon the walkers are on the ground floor.
+        await page.get_by_role("button", name="Replay this period").click()
+        slider = page.get_by_label("Time", exact=True)
+        await slider.fill(str(int(noon.timestamp()) + 1))
+        robot = page.locator('#replay-stage [data-floor="F0"] .replay-robot[data-robot="W0"]')
+        await expect(robot).to_have_count(1)
+        await page.get_by_role("button", name="Play").click()
+        await expect(page.get_by_role("button", name="Pause")).to_be_visible()
+        await page.get_by_role("button", name="Pause").click()
+        await web.axe_check(page)
+        # Scrubbed end to end in 180 painted frames, ten robots walking all day: the frames a
+        # second the page kept (reported; the display gives at most 60).
+        frames = await page.evaluate(
+            """() => new Promise((done) => {
+                const p = window.guidebotConsole.player;
+                let i = 0;
+                let t0 = null;
+                const step = (now) => {
+                    t0 ??= now;
+                    p.show(p.start + ((p.end - p.start) * i) / 180);
+                    i += 1;
+                    if (i <= 180) requestAnimationFrame(step);
+                    else done(180 / ((now - t0) / 1000));
+                };
+                requestAnimationFrame(step);
+            })"""
+        )
+        walkers = page.locator("#replay-stage .replay-robot")
+        await expect(walkers).to_have_count(10)  # at 24:00 the ten walkers stand where they ended
+        print(f"replay: a busy day scrubbed end to end at {frames:.0f} frames a second")
+
+
+def _walkers(
+    site: Any, start: dt.datetime, *, robots: int, hours: int
+) -> list[tuple[float, str, str, bytes]]:
+    """``robots`` robots walking the ground floor's corridors all day, a node every 20 s."""
+    ground = {n.id for n in site.nodes if n.floor == site.floors[0].id}
+    near: dict[str, list[str]] = {}
+    for edge in site.edges:
+        if edge.a in ground and edge.b in ground:
+            near.setdefault(edge.a, []).append(edge.b)
+            near.setdefault(edge.b, []).append(edge.a)
+    rng = random.Random(3)
+    rows = []
+    for k in range(robots):
+        name, node = f"W{k}", rng.choice(sorted(near))
+        for step in range(hours * 180):
+            node = rng.choice(near[node])
+            data = json.dumps({"robot": name, "node": node}).encode()
+            rows.append((start.timestamp() + 20 * step + k, "node_reached", name, data))
+    return rows
 
 
 def _insert(path: Path, rows: list[tuple[float, str, str, bytes]]) -> None:

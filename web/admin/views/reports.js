@@ -1,7 +1,7 @@
 // Reports: how the robots served visitors over a day, a week or any range (docs/reports.md).
 // Figures from GET /api/reports, charts drawn with the vendored uPlot, every table as CSV, and a
 // one-page daily summary for the printer (web/admin/reports.css, @media print).
-import { html, svg } from "lit-html";
+import { html, render, svg } from "lit-html";
 import uPlot from "uplot";
 import { doorName, floorName, placeName } from "/admin/names.js";
 
@@ -264,6 +264,188 @@ function heatMap(ui, data) {
   </section>`;
 }
 
+// --- Replay: the period played back on the floor plans, from GET /api/reports/replay -----------
+
+const SPEEDS = [1, 10, 100];
+const SMOOTH_S = 120; // between two nodes reached less than this apart, a robot is drawn moving
+
+/** Plays a replay: the state at any time ``t`` from the start state and the events up to t. */
+class Player {
+  constructor(ui, replay) {
+    this.ui = ui;
+    this.replay = replay;
+    this.start = Date.parse(replay.period.start) / 1000;
+    this.end = Date.parse(replay.period.end) / 1000;
+    this.t = this.start;
+    this.speed = 10;
+    this.playing = false;
+    this.frames = 0;
+    this.paths = new Map(); // robot -> [[at, node], ...] for smooth moves
+    for (const [robot, node] of Object.entries(replay.start.robots)) this.paths.set(robot, [[this.start, node]]);
+    for (const e of replay.events) {
+      if (e.kind !== "node_reached" || !e.data.robot) continue;
+      if (!this.paths.has(e.data.robot)) this.paths.set(e.data.robot, []);
+      this.paths.get(e.data.robot).push([e.at, e.data.node]);
+    }
+    this.seek(this.start);
+  }
+
+  /** The doors, locks, elevators, links and tasks at ``t``: the events since the last ``t``
+   * applied (forward), or all of them again from the start state (backward). */
+  seek(t) {
+    t = Math.max(this.start, Math.min(this.end, t));
+    if (!this.state || t < this.t) {
+      const s = this.replay.start;
+      this.state = { doors: new Map(Object.entries(s.doors)), locks: new Map(Object.entries(s.locks)), lifts: new Map(Object.entries(s.elevators)), busy: new Set(), gone: new Set(), alerts: 0 };
+      this.next = 0;
+    }
+    this.t = t;
+    const events = this.replay.events;
+    const state = this.state;
+    while (this.next < events.length && events[this.next].at <= t) {
+      const e = events[this.next];
+      this.next += 1;
+      const d = e.data;
+      if (e.kind === "door_opened" || e.kind === "door_closed") state.doors.set(d.door, e.kind === "door_opened");
+      else if (e.kind === "area_granted") state.locks.set(d.area, d.robot);
+      else if (e.kind === "area_released" || e.kind === "area_force_released") { if (state.locks.get(d.area) === d.robot) state.locks.delete(d.area); }
+      else if (e.kind === "elevator_in_position") state.lifts.set(d.elevator, d.floor);
+      else if (e.kind === "task_started" && d.robot) state.busy.add(d.robot);
+      else if (e.kind.startsWith("task_") && d.robot) state.busy.delete(d.robot);
+      else if (e.kind === "robot_disconnected") state.gone.add(d.robot);
+      else if (e.kind === "robot_connected") state.gone.delete(d.robot);
+      else if (e.kind === "alert_raised") state.alerts += 1;
+      else if (e.kind === "alert_resolved") state.alerts = Math.max(0, state.alerts - 1);
+    }
+  }
+
+  /** Where ``robot`` is drawn at t: on its last node, or between it and the next one. */
+  where(robot, nodes) {
+    const path = this.paths.get(robot) ?? [];
+    let lo = -1;
+    for (let i = 0; i < path.length && path[i][0] <= this.t; i += 1) lo = i;
+    if (lo < 0) return null;
+    const here = nodes.get(path[lo][1]);
+    const next = path[lo + 1] ? nodes.get(path[lo + 1][1]) : null;
+    if (!here) return null;
+    if (!next || next.floor !== here.floor || path[lo + 1][0] - path[lo][0] > SMOOTH_S) return { ...here };
+    const f = (this.t - path[lo][0]) / (path[lo + 1][0] - path[lo][0]);
+    return { floor: here.floor, x: here.x + (next.x - here.x) * f, y: here.y + (next.y - here.y) * f };
+  }
+
+  /** Show the floors at ``t`` (the slider and the browser test's scrub). */
+  show(t) {
+    this.seek(t);
+    drawReplay(this.ui);
+  }
+
+  play() {
+    if (this.playing) return;
+    this.playing = true;
+    let last = performance.now();
+    const step = (now) => {
+      const stage = document.getElementById("replay-stage");
+      if (!this.playing || !stage) return (this.playing = false);
+      this.seek(this.t + ((now - last) / 1000) * this.speed);
+      last = now;
+      this.frames += 1;
+      if (this.t >= this.end) this.playing = false;
+      drawReplay(this.ui);
+      if (this.playing) requestAnimationFrame(step);
+    };
+    requestAnimationFrame(step);
+  }
+}
+
+function replayFloor(ui, player, floor, nodes) {
+  const site = ui.store.site;
+  const mine = site.nodes.filter((n) => n.floor === floor.id);
+  if (!mine.length) return "";
+  const byId = new Map(mine.map((n) => [n.id, n]));
+  const minX = Math.min(...mine.map((n) => n.x)) - HEAT_PAD_M;
+  const maxX = Math.max(...mine.map((n) => n.x)) + HEAT_PAD_M;
+  const minY = Math.min(...mine.map((n) => n.y)) - HEAT_PAD_M;
+  const maxY = Math.max(...mine.map((n) => n.y)) + HEAT_PAD_M;
+  const Y = (y) => maxY + minY - y;
+  const s = player.state;
+  const robots = [...player.paths.keys()].filter((r) => !s.gone.has(r)).map((r) => [r, player.where(r, nodes)]).filter(([, p]) => p && p.floor === floor.id);
+  const held = (site.areas ?? []).filter((a) => s.locks.has(a.id)).flatMap((a) => a.nodes.filter((n) => byId.has(n)).map((n) => [a, byId.get(n)]));
+  return html`<figure class="heat-floor replay-floor" data-floor=${floor.id}>
+    <figcaption>${floorName(site, floor.id)}</figcaption>
+    <svg viewBox=${`${minX} ${minY} ${maxX - minX} ${maxY - minY}`} style=${`width: ${Math.round((maxX - minX) * HEAT_PX_PER_M)}px`} role="img" aria-label=${`Floor ${floor.name || floor.id} at the replay's time: ${robots.map(([r]) => r).join(", ") || "no robot"}`}>
+      ${held.map(([a, n]) => svg`<circle cx=${n.x} cy=${Y(n.y)} r="1.6" fill="#f9ab00" opacity="0.45"><title>Area ${a.id} held by ${s.locks.get(a.id)}</title></circle>`)}
+      ${site.edges.filter((e) => byId.has(e.a) && byId.has(e.b)).map((e) => svg`<line x1=${byId.get(e.a).x} y1=${Y(byId.get(e.a).y)} x2=${byId.get(e.b).x} y2=${Y(byId.get(e.b).y)} stroke="#9aa0a6" stroke-width="0.2"></line>`)}
+      ${(site.doors ?? []).filter((d) => byId.has(d.node)).map((d) => {
+        const n = byId.get(d.node);
+        const open = s.doors.get(d.id);
+        return svg`<rect x=${n.x - 0.6} y=${Y(n.y) - 0.6} width="1.2" height="1.2" fill=${open ? "#a8dab5" : "#f4b6bf"} stroke=${open ? "#1b7a3a" : "#b00020"} stroke-width="0.15"><title>${doorName(site, d.id)}: ${open ? "open" : "closed"}</title></rect>`;
+      })}
+      ${(site.elevators ?? []).flatMap((e) => e.stops.filter((st) => byId.has(st.node) && s.lifts.get(e.id) === st.floor).map((st) => {
+        const n = byId.get(st.node);
+        return svg`<rect x=${n.x - 0.9} y=${Y(n.y) - 0.9} width="1.8" height="1.8" fill="#8ab4f8" stroke="#444" stroke-width="0.15"><title>${e.id}: the car is here</title></rect>`;
+      }))}
+      ${robots.map(([r, p]) => svg`<g class="replay-robot" data-robot=${r}><circle cx=${p.x} cy=${Y(p.y)} r="0.8" fill=${s.busy.has(r) ? "#0b57d0" : "#1b7a3a"} stroke="#1a1a1a" stroke-width="0.15"></circle>
+        <text x=${p.x} y=${Y(p.y) - 1.1} text-anchor="middle" font-size="1.1" font-weight="700">${r}</text></g>`)}
+    </svg></figure>`;
+}
+
+function drawReplay(ui) {
+  const stage = document.getElementById("replay-stage");
+  const player = state(ui).player;
+  if (!stage || !player) return;
+  const site = ui.store.site;
+  const nodes = new Map(site.nodes.map((n) => [n.id, n]));
+  const at = new Date(player.t * 1000);
+  const toggle = () => {
+    if (player.playing) player.playing = false;
+    else {
+      if (player.t >= player.end) player.seek(player.start);
+      player.play();
+    }
+    drawReplay(ui);
+  };
+  render(
+    html`<div class="replay-controls">
+        <button type="button" @click=${toggle}>${player.playing ? "Pause" : "Play"}</button>
+        <label>Speed <select @change=${(e) => { player.speed = Number(e.target.value); }}>
+          ${SPEEDS.map((v) => html`<option value=${v} ?selected=${player.speed === v}>${v}×</option>`)}</select></label>
+        <label class="replay-time">Time <input type="range" min=${player.start} max=${player.end} step="1" .value=${String(Math.round(player.t))}
+          @input=${(e) => player.show(Number(e.target.value))}></label>
+        <output id="replay-clock">${at.toLocaleString()}</output>
+        ${player.replay.truncated ? html`<span class="muted">(the first 200 000 events only)</span>` : ""}
+      </div>
+      <div class="heat-floors">${site.floors.map((f) => replayFloor(ui, player, f, nodes))}</div>`,
+    stage,
+  );
+}
+
+async function loadReplay(ui) {
+  const r = state(ui);
+  await ui.act("Load the replay", async () => {
+    const replay = await ui.api.get(`/api/reports/replay?${query(r)}`);
+    r.player = new Player(ui, replay);
+    ui.player = r.player; // for the browser test
+  });
+  requestAnimationFrame(() => drawReplay(ui));
+}
+
+function replayPart(ui, r) {
+  const p = r.data.period;
+  const long = Date.parse(p.end) - Date.parse(p.start) > 24 * 3600 * 1000;
+  if (r.player && JSON.stringify(r.player.replay.period) !== JSON.stringify(p)) {
+    r.player.playing = false;
+    r.player = null;
+  }
+  if (r.player) requestAnimationFrame(() => drawReplay(ui));
+  return html`<section class="report-part wide no-print" aria-labelledby="replay-title">
+    <h3 id="replay-title">Replay</h3>
+    ${long
+      ? html`<p class="muted">A replay covers at most 24 hours: choose a day or a shorter range.</p>`
+      : r.player ? "" : html`<button type="button" class="secondary" @click=${() => loadReplay(ui)}>Replay this period</button>`}
+    <div id="replay-stage"></div>
+  </section>`;
+}
+
 function poiLabel(ui, id) {
   const poi = ui.store.site?.pois?.find((p) => p.id === id);
   return poi?.name ? `${poi.name} (${id})` : id;
@@ -337,7 +519,8 @@ export function reportsView(ui) {
           </figure>
         </div>
         ${parts(ui, data)}
-        ${heatMap(ui, data)}`
+        ${heatMap(ui, data)}
+        ${replayPart(ui, r)}`
       : ""}
   </div>`;
 }
