@@ -3,6 +3,7 @@ figure), plus the robots' time since their last event (``Rollups.tail``)."""
 
 from __future__ import annotations
 
+import bisect
 import time
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -111,15 +112,14 @@ class Reports:
         if key is not None:
             query = query.where(t.key == key)
         query = query.group_by(t.metric, when)
-        bins: dict[float, dict[str, list]] = {
-            b: {m: [0, 0.0] for m in metrics} for b in period.bins()
-        }
+        starts = period.bins()
+        bins: dict[float, dict[str, list]] = {b: {m: [0, 0.0] for m in metrics} for b in starts}
         async with self.rollups.sessionmaker() as session:
             for metric, hour, n, total in await session.execute(query):
-                cell = bins.setdefault(period.bin_of(hour), {m: [0, 0.0] for m in metrics})[metric]
+                cell = bins[starts[bisect.bisect_right(starts, hour) - 1]][metric]
                 cell[0] += int(n or 0)
                 cell[1] += float(total or 0.0)
-        return dict(sorted(bins.items()))
+        return bins
 
     # --- figures ---------------------------------------------------------------------------
     async def tasks(self, period: Period) -> dict[str, Any]:

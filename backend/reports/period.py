@@ -52,15 +52,18 @@ class Period:
         )
 
     def bins(self) -> list[float]:
-        """Every bin's start, in order (empty bins too)."""
-        starts: list[float] = []
-        at = self.start
-        while at < self.end:
-            start = self.bin_of(int(at))
-            if not starts or starts[-1] != start:
-                starts.append(start)
-            at += 3600
-        return starts
+        """Every bin's start, in order (empty bins too): each hour, or each local midnight
+        (one date after the other: a day of 23 or 25 hours stays one bin)."""
+        if self.bin_s == 3600:
+            return [float(at) for at in range(int(self.start), int(self.end), 3600)]
+        day = dt.datetime.fromtimestamp(self.start, self.tz).date()
+        starts = [self.bin_of(int(self.start))]
+        while True:
+            day += dt.timedelta(days=1)
+            at = dt.datetime(day.year, day.month, day.day, tzinfo=self.tz).timestamp()
+            if at >= self.end:
+                return starts
+            starts.append(at)
 
     def as_dict(self) -> dict[str, object]:
         return {

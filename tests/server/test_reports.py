@@ -329,3 +329,12 @@ async def test_a_replay_has_the_periods_events_and_the_state_it_starts_from(
     assert played["truncated"] is False
     with pytest.raises(BadPeriod, match="at most 24 hours"):
         await replay(store.sessionmaker, parse_period(week="2026-07-13"))
+
+
+def test_bins_are_the_venues_hours_or_days_across_a_clock_change() -> None:
+    spring = parse_period(start="2026-03-28", end="2026-04-01", tz="Europe/Madrid")
+    labels = [spring.label(b) for b in spring.bins()]
+    assert labels == ["2026-03-28", "2026-03-29", "2026-03-30", "2026-03-31"]
+    assert spring.bins()[2] - spring.bins()[1] == 23 * 3600  # the clocks went forward
+    day = parse_period(day="2026-03-29", tz="Europe/Madrid")
+    assert len(day.bins()) == 23 and day.label(day.bins()[3]) == "2026-03-29 04:00"
