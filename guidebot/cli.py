@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "site": "backend.site.cli:site",
     "robocan": "robot_agent.robocan.cli:robocan",
     "building-sim": "building_sim.cli:building_sim",
+    "replay": "backend.reports.cli:replay_command",
 }
 
 BENCHMARKS: dict[str, str] = {

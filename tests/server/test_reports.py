@@ -7,14 +7,17 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 from collections.abc import AsyncIterator
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
+from click.testing import CliRunner
 
 import backend.db.store as store_module
 import backend.tasks.model as model_module
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.reports.cli import replay_command
 from backend.reports.figures import Reports, percentile
 from backend.reports.fold import bucket
 from backend.reports.period import BadPeriod, parse_period
@@ -338,3 +341,11 @@ def test_bins_are_the_venues_hours_or_days_across_a_clock_change() -> None:
     assert spring.bins()[2] - spring.bins()[1] == 23 * 3600  # the clocks went forward
     day = parse_period(day="2026-03-29", tz="Europe/Madrid")
     assert len(day.bins()) == 23 and day.label(day.bins()[3]) == "2026-03-29 04:00"
+
+
+def test_guidebot_replay_refuses_more_than_a_day(tmp_path: Path) -> None:
+    args = ["--from", f"sqlite+aiosqlite:///{tmp_path}/x.db", "--start", "2026-07-13"]
+    args += ["--end", "2026-07-15", "--out", str(tmp_path / "r.json")]
+    result = CliRunner().invoke(replay_command, args)
+    assert result.exit_code == 2 and "at most 24 hours" in result.output
+    assert not (tmp_path / "r.json").exists()

@@ -17,8 +17,10 @@ from types import SimpleNamespace
 from typing import Any
 
 import pytest
+from click.testing import CliRunner
 from playwright.async_api import expect
 
+from backend.reports.cli import replay_command
 from bench.reports import venue_events
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(150)]
@@ -148,9 +150,9 @@ async def test_a_busy_days_summary_prints_on_one_page(
         await slider.fill(str(int(noon.timestamp()) + 1))
         robot = page.locator('#replay-stage [data-floor="F0"] .replay-robot[data-robot="W0"]')
         await expect(robot).to_have_count(1)
-        await page.get_by_role("button", name="Play").click()
-        await expect(page.get_by_role("button", name="Pause")).to_be_visible()
-        await page.get_by_role("button", name="Pause").click()
+        await page.get_by_role("button", name="Play", exact=True).click()
+        await expect(page.get_by_role("button", name="Pause", exact=True)).to_be_visible()
+        await page.get_by_role("button", name="Pause", exact=True).click()
         await web.axe_check(page)
         # Scrubbed end to end in 180 painted frames, ten robots walking all day: the frames a
         # second the page kept (reported; the display gives at most 60).
@@ -172,6 +174,18 @@ async def test_a_busy_days_summary_prints_on_one_page(
         walkers = page.locator("#replay-stage .replay-robot")
         await expect(walkers).to_have_count(10)  # at 24:00 the ten walkers stand where they ended
         print(f"replay: a busy day scrubbed end to end at {frames:.0f} frames a second")
+
+        # Noon to one written by `guidebot replay` and opened from the file: the walkers where
+        # they stood at noon.
+        saved = tmp_path / "noon.json"
+        start, end = noon.isoformat(), (noon + dt.timedelta(hours=1)).isoformat()
+        db_url = f"sqlite+aiosqlite:///{tmp_path}/guidebot.db"
+        args = ["--from", db_url, "--start", start, "--end", end, "--out", str(saved)]
+        result = await asyncio.to_thread(CliRunner().invoke, replay_command, args)
+        assert result.exit_code == 0, result.output
+        await page.get_by_label("Open a replay file").set_input_files(str(saved))
+        await expect(page.get_by_text("Playing noon.json")).to_be_visible()
+        await expect(walkers).to_have_count(10)
 
 
 def _walkers(

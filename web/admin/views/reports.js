@@ -429,10 +429,33 @@ async function loadReplay(ui) {
   requestAnimationFrame(() => drawReplay(ui));
 }
 
+/** A file written by ``guidebot replay --out FILE`` (sent by a venue to its integrator). */
+async function openReplayFile(ui, input) {
+  const r = state(ui);
+  const [file] = input.files;
+  if (!file) return;
+  await ui.act(`Open ${file.name}`, async () => {
+    let replay;
+    try {
+      replay = JSON.parse(await file.text());
+    } catch {
+      throw new Error("this file is not JSON");
+    }
+    if (replay?.guidebot_replay !== 1 || !replay.period || !Array.isArray(replay.events) || !replay.start) {
+      throw new Error("this is not a replay file written by guidebot replay");
+    }
+    if (r.player) r.player.playing = false;
+    r.player = new Player(ui, replay);
+    r.player.file = file.name;
+    ui.player = r.player;
+  });
+  requestAnimationFrame(() => drawReplay(ui));
+}
+
 function replayPart(ui, r) {
   const p = r.data.period;
   const long = Date.parse(p.end) - Date.parse(p.start) > 24 * 3600 * 1000;
-  if (r.player && JSON.stringify(r.player.replay.period) !== JSON.stringify(p)) {
+  if (r.player && !r.player.file && JSON.stringify(r.player.replay.period) !== JSON.stringify(p)) {
     r.player.playing = false;
     r.player = null;
   }
@@ -442,6 +465,8 @@ function replayPart(ui, r) {
     ${long
       ? html`<p class="muted">A replay covers at most 24 hours: choose a day or a shorter range.</p>`
       : r.player ? "" : html`<button type="button" class="secondary" @click=${() => loadReplay(ui)}>Replay this period</button>`}
+    <label>Open a replay file <input type="file" accept=".json,application/json" @change=${(e) => openReplayFile(ui, e.target)}></label>
+    ${r.player?.file ? html`<p class="muted">Playing ${r.player.file}: ${r.player.replay.period.start.slice(0, 16).replace("T", " ")} to ${r.player.replay.period.end.slice(0, 16).replace("T", " ")}.</p>` : ""}
     <div id="replay-stage"></div>
   </section>`;
 }
