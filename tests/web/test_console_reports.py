@@ -78,6 +78,16 @@ async def test_reports_view_charts_csv_errors_and_print(
             page.get_by_role("alert").filter(has_text="ends before it starts")
         ).to_be_visible()
 
+        # A file that is not a replay is refused, saying so.
+        await page.get_by_label("Period", exact=True).select_option("day")
+        await page.get_by_role("button", name="Show report").click()
+        await page.get_by_label("Open a replay file").set_input_files(
+            files=[{"name": "notes.json", "mimeType": "application/json", "buffer": b'{"a": 1}'}]
+        )
+        await expect(
+            page.get_by_role("alert").filter(has_text="not a replay file written by guidebot")
+        ).to_be_visible()
+
         # The daily summary, printed: the console's chrome and the form are left out.
         await page.get_by_label("Period", exact=True).select_option("day")
         await page.get_by_role("button", name="Show report").click()
