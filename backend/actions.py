@@ -41,6 +41,7 @@ RULES: dict[str, frozenset[Role]] = {
     "see_robot": _ROBOT_OR_OPERATOR,  # one robot's view (a robot: itself only)
     "plan_path": _ROBOT_OR_OPERATOR,
     "read_metrics": _OPERATOR,  # GET /metrics (or the metrics token)
+    "read_reports": _OPERATOR,  # GET /api/reports (docs/reports.md)
     "read": _READERS,  # tours, points of interest, the visitor menu, the map, /api/me
     # Actions that arrive over REST and the hub alike
     "task_request": _REQUESTERS | {Role.MODULE},  # POST /api/tasks
@@ -91,7 +92,16 @@ RULES: dict[str, frozenset[Role]] = {
 server-only (admin and module tokens: ``SERVER_ROLES``)."""
 
 REST_ONLY = frozenset(
-    {"administer", "operate", "follow_tasks", "see_robot", "plan_path", "read_metrics", "read"}
+    {
+        "administer",
+        "operate",
+        "follow_tasks",
+        "see_robot",
+        "plan_path",
+        "read_metrics",
+        "read_reports",
+        "read",
+    }
 )
 """The actions that are not hub message types."""
 

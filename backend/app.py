@@ -50,6 +50,7 @@ from backend.hub.listener import hub_listener
 from backend.metrics import routes as metrics_routes
 from backend.metrics.component import metrics
 from backend.ratelimit import RateLimiter
+from backend.reports import api as reports_routes
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
@@ -84,6 +85,7 @@ ROUTERS: list[APIRouter] = [
     console_routes.router,
     console_fleet.router,
     metrics_routes.router,
+    reports_routes.router,
 ]
 
 

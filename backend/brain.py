@@ -28,6 +28,8 @@ from backend.api.component import (
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
+from backend.reports.figures import Reports
+from backend.reports.rollup import Rollups, node_positions
 from backend.site.graph_build import build_site_graph
 from backend.site.offloop import release
 from backend.site.service import SiteService
@@ -84,6 +86,7 @@ class ServerBrain(Service):
                 "development)"
             )
         sites = SiteService(site, version, store)
+        rollups = Rollups(store.sessionmaker, node_positions(site))
         # Seconds on a large site: built off the event loop (threads, worker processes).
         workers = settings.site_workers
         graph = await build_site_graph(site, workers)
@@ -121,6 +124,7 @@ class ServerBrain(Service):
             tasks.load_site(new, new_graph)
             buttons.load_site(new)
             _sync_robot_tokens(app.state.tokens, new, known_tokens)
+            rollups.positions = node_positions(new)
             await release(retired)
 
         sites.on_change(on_site)
@@ -156,6 +160,8 @@ class ServerBrain(Service):
         app.state.task_manager = tasks
         app.state.traffic = traffic
         app.state.alerts = alerts
+        app.state.reports = Reports(rollups, store.flush)
+        self.spawn(rollups.run_periodically(settings.report_rollup_every_s), name="report-rollups")
         self.spawn(
             watch_offline_locks(traffic, settings.lock_offline_grace_s),
             name="offline-lock-watcher",

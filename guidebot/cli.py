@@ -21,6 +21,7 @@ COMMANDS: dict[str, str] = {
     "robocan": "robot_agent.robocan.cli:robocan",
     "building-sim": "building_sim.cli:building_sim",
     "vda5050-sim": "guidebot.vda5050.cli:vda5050_sim",
+    "replay": "backend.reports.cli:replay_command",
 }
 
 BENCHMARKS: dict[str, str] = {
@@ -38,6 +39,7 @@ BENCHMARKS: dict[str, str] = {
     "soak": "bench.soak:main",
     "failover": "bench.failover:main",
     "vda5050": "bench.vda5050:main",
+    "reports": "bench.reports:main",
 }
 
 

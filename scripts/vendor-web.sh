@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 npm ci --no-audit --no-fund --ignore-scripts
 out=web/vendor
 rm -rf "$out"
-mkdir -p "$out/leaflet" "$out/lit-html/directives" "$out/axe-core" "$out/swagger-ui"
+mkdir -p "$out/leaflet" "$out/lit-html/directives" "$out/axe-core" "$out/swagger-ui" "$out/uplot"
 
 # Leaflet: the ES module build, its stylesheet and marker images.
 cp node_modules/leaflet/dist/leaflet-src.esm.js node_modules/leaflet/dist/leaflet.css \
@@ -28,6 +28,10 @@ cp node_modules/swagger-ui-dist/swagger-ui-bundle.js \
   node_modules/swagger-ui-dist/swagger-ui-bundle.js.LICENSE.txt \
   node_modules/swagger-ui-dist/swagger-ui.css node_modules/swagger-ui-dist/favicon-32x32.png \
   node_modules/swagger-ui-dist/LICENSE node_modules/swagger-ui-dist/NOTICE "$out/swagger-ui/"
+
+# uPlot: the staff console's report charts (web/admin/views/reports.js), its ES module build.
+cp node_modules/uplot/dist/uPlot.esm.js node_modules/uplot/dist/uPlot.min.css \
+  node_modules/uplot/LICENSE "$out/uplot/"
 
 # Source maps are not vendored: drop the comments that point at them.
 find "$out" -name '*.js' -exec sed -i '/^\/\/# sourceMappingURL=/d' {} +

@@ -38,6 +38,7 @@ LOGGED_TYPES = (
     "area_yield",
     "robot_connected",
     "robot_disconnected",
+    "call_elevator",  # the reports' elevator waits: a call until its elevator_in_position
 )
 """Hub messages copied into the event log (task changes and lock changes are logged directly)."""
 LOGGED_BROADCASTS = ("door_opened", "door_closed", "elevator_in_position", "node_reached")

@@ -11,6 +11,9 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 __all__ = [
     "Base",
     "EventRow",
+    "ReportCursorRow",
+    "ReportDayRow",
+    "ReportRollupRow",
     "RobotServiceRow",
     "SiteDraftRow",
     "SiteRow",
@@ -102,6 +105,43 @@ class EventRow(Base):
 
 
 Index("ix_events_kind", EventRow.kind)
+
+
+class ReportRollupRow(Base):
+    """One figure of one hour, folded from the event log (backend/reports/): ``n`` events or
+    facts and their ``total`` (seconds, metres). The reports read these, not the raw events,
+    so a year's figure sums a few hundred thousand small rows (docs/reports.md)."""
+
+    __tablename__ = "report_rollups"
+    metric: Mapped[str] = mapped_column(String(32), primary_key=True)
+    hour: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
+    """Unix seconds of the hour's start (UTC-aligned)."""
+    key: Mapped[str] = mapped_column(String(160), primary_key=True)
+    n: Mapped[int] = mapped_column(Integer, default=0)
+    total: Mapped[float] = mapped_column(Float, default=0.0)
+
+
+class ReportDayRow(Base):
+    """The same figures summed per UTC day: a year's report reads 365 rows per key, not 8760."""
+
+    __tablename__ = "report_days"
+    metric: Mapped[str] = mapped_column(String(32), primary_key=True)
+    day: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
+    """Unix seconds of the UTC day's start."""
+    key: Mapped[str] = mapped_column(String(160), primary_key=True)
+    n: Mapped[int] = mapped_column(Integer, default=0)
+    total: Mapped[float] = mapped_column(Float, default=0.0)
+
+
+class ReportCursorRow(Base):
+    """How far the rollups have read the event log (one row, id 1): the last event folded and
+    the fold's open state (robots' activities, tours under way, lock requests not granted)."""
+
+    __tablename__ = "report_cursor"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    last_event_id: Mapped[int] = mapped_column(Integer)
+    state: Mapped[dict[str, Any]] = mapped_column(JSON)
+    updated_at: Mapped[float] = mapped_column(Float)
 
 
 class RobotServiceRow(Base):

@@ -9,7 +9,8 @@ by ``max_pending`` and the oldest unwritten ones are dropped (counted in ``dropp
 Retention: with ``retention_s`` the event log is pruned every ``prune_every_s`` in the
 background, in chunks of ``PRUNE_CHUNK`` rows (each its own short transaction), keeping what
 the next start replays (``lock_holders``: this life's ``server_started`` and the area rows
-after it; the console's alerts: ``KEPT_KINDS``).
+after it; the console's alerts: ``KEPT_KINDS``) and what the reports' rollups have not folded
+yet (after ``report_cursor``).
 """
 
 from __future__ import annotations
@@ -22,12 +23,25 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from sqlalchemy import Insert, and_, delete, func, insert, not_, or_, select, text, update
+from sqlalchemy import (
+    Insert,
+    and_,
+    delete,
+    false,
+    func,
+    insert,
+    not_,
+    or_,
+    select,
+    text,
+    update,
+)
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.exc import StatementError
 
 from backend.db.models import (
     EventRow,
+    ReportCursorRow,
     RobotServiceRow,
     SiteDraftRow,
     SiteRow,
@@ -113,8 +127,10 @@ class DbStore(Service):
         """Called with every event row as it is recorded (the console's live event log)."""
 
     # --- write-behind --------------------------------------------------------------------
-    def record(self, task: Task, event: str) -> None:
-        """A task changed: its snapshot and one history row."""
+    def record(self, task: Task, event: str, detail: dict[str, Any] | None = None) -> None:
+        """A task changed: its snapshot and one history row. The event row also carries what
+        the reports fold (backend/reports/): the kind, tour, point and language of a new task,
+        why one ended, and ``detail`` (a tour's progress: index, total, poi, stage)."""
         snapshot = {f: getattr(task, f) for f in TASK_FIELDS}
         snapshot["params"] = dict(task.params)
         snapshot["state"] = task.state.value
@@ -133,6 +149,14 @@ class DbStore(Service):
         data: dict[str, Any] = {"task_id": task.id, "state": task.state.value, "robot": task.robot}
         if event == "created":  # who asked: a person's token name, a panel, a robot, a button
             data["requester"] = task.requester
+            data["kind"] = task.kind
+            for key in ("tour", "poi", "lang"):
+                if isinstance(value := task.params.get(key), str):
+                    data[key] = value
+        if task.reason and task.state in FINAL_STATES:
+            data["reason"] = task.reason[:200]
+        if detail:
+            data.update(detail)
         self.record_event("task_" + event, "task_manager", data)
 
     def record_service(self, robot: str, out_of_service: bool, by: str = "") -> None:
@@ -239,6 +263,10 @@ class DbStore(Service):
                 replayed = and_(
                     EventRow.id >= life, EventRow.kind.in_((*LOCK_KINDS, "server_started"))
                 )
+                folded = await session.scalar(
+                    select(ReportCursorRow.last_event_id).where(ReportCursorRow.id == 1)
+                )
+                unfolded = EventRow.id > folded if folded is not None else false()
                 ids = list(
                     (
                         await session.execute(
@@ -246,6 +274,7 @@ class DbStore(Service):
                             .where(
                                 EventRow.at < older_than,
                                 not_(replayed),
+                                not_(unfolded),  # the reports' rollups have not read it yet
                                 EventRow.kind.not_in(KEPT_KINDS),
                             )
                             .order_by(EventRow.id)

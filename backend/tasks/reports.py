@@ -128,5 +128,6 @@ class TaskReports:
             return
         tm.estimator.progress(task, p.index, p.stage, p.poi)
         if tm.store is not None:
-            tm.store.record(task, f"point {p.index}/{p.total} {p.stage}")
+            detail = {"index": p.index, "total": p.total, "poi": p.poi, "stage": p.stage}
+            tm.store.record(task, f"point {p.index}/{p.total} {p.stage}", detail)
         tm.publish_event(task)

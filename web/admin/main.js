@@ -15,6 +15,7 @@ import { fleetView } from "/admin/views/fleet.js";
 import { locksView } from "/admin/views/locks.js";
 import { detailsView, toolbarView } from "/admin/views/map.js";
 import { Monitor, monitorView } from "/admin/views/monitor.js";
+import { reportsView } from "/admin/views/reports.js";
 import { robotsView } from "/admin/views/robots.js";
 import { tasksView } from "/admin/views/tasks.js";
 
@@ -29,6 +30,7 @@ const VIEWS = [
   ["monitor", "RoboGraph monitor"],
   ["alerts", "Alerts"],
   ["events", "Event log"],
+  ["reports", "Reports"],
 ];
 const RENDER = {
   robots: robotsView,
@@ -39,6 +41,7 @@ const RENDER = {
   monitor: monitorView,
   alerts: alertsView,
   events: eventsView,
+  reports: reportsView,
 };
 const $ = (id) => document.getElementById(id);
 
