@@ -10,8 +10,9 @@ from __future__ import annotations
 import time
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, Field, model_validator
 
+from backend.api.models import RequestBody
 from guidebot.site.schema import Site
 
 __all__ = ["Closure", "ClosureError", "ClosureKind", "ClosureRequest", "closed_nodes"]
@@ -23,10 +24,9 @@ class ClosureError(ValueError):
     """A closure the site cannot have (an unknown area, door, elevator or node)."""
 
 
-class ClosureRequest(BaseModel):
+class ClosureRequest(RequestBody):
     """What staff ask for (REST body): which element, why, and when (none: from now on)."""
 
-    model_config = ConfigDict(extra="forbid")
     kind: ClosureKind
     target: str = Field(default="", max_length=64)
     """The area, door or elevator id (kind ``nodes``: empty)."""

@@ -23,13 +23,19 @@ class RouteClosed(NoPath):
     def __init__(self, goal: str, closures: list[Closure]) -> None:
         self.goal = goal
         self.closures = closures
-        why = "; ".join(f"{c.what()} closed: {c.reason}" for c in closures)
-        super().__init__(f"{goal} cut off: {why}")
+        super().__init__(f"{goal} cut off: {self.reason}")
 
     @property
     def reason(self) -> str:
-        """The closures' own reasons, for the visitor ("gallery g2 closed: cleaning")."""
-        return "; ".join(f"{c.what()} closed: {c.reason}" for c in self.closures)
+        """Why, for the visitor, one part per closure joined by "; ": "<gallery|door|elevator|
+        nodes> <id> closed: <staff's words>" or, for trouble, "<door|elevator> <id> out of
+        order" (docs/protocol.md, "Skipped stops": pages put it in the visitor's language)."""
+        return "; ".join(
+            f"{c.what()} out of order"
+            if c.source == "trouble"
+            else f"{c.what()} closed: {c.reason}"
+            for c in self.closures
+        )
 
 
 def path_avoiding(
