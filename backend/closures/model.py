@@ -10,9 +10,8 @@ from __future__ import annotations
 import time
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from backend.api.models import RequestBody
 from guidebot.site.schema import Site
 
 __all__ = ["Closure", "ClosureError", "ClosureKind", "ClosureRequest", "closed_nodes"]
@@ -24,8 +23,12 @@ class ClosureError(ValueError):
     """A closure the site cannot have (an unknown area, door, elevator or node)."""
 
 
-class ClosureRequest(RequestBody):
-    """What staff ask for (REST body): which element, why, and when (none: from now on)."""
+class ClosureRequest(BaseModel):
+    """What staff ask for (REST body): which element, why, and when (none: from now on).
+    Strict as every REST body (backend.api.models.RequestBody, not imported: the Traffic
+    Manager imports this module and backend.api imports the Traffic Manager)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     kind: ClosureKind
     target: str = Field(default="", max_length=64)

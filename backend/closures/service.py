@@ -103,11 +103,20 @@ class ClosureService(Service):
         return self._closed
 
     def view(self) -> dict[str, Any]:
+        return {"closures": self._views(), "closed_nodes": sorted(self.closed)}
+
+    def _views(self) -> list[dict[str, Any]]:
+        """Each closure as shown, with the nodes it closes now (``closed_nodes``)."""
         now = self.clock()
-        return {
-            "closures": [c.view(now) for c in sorted(self.closures.values(), key=_order)],
-            "closed_nodes": sorted(self.closed),
-        }
+        by: dict[str, list[str]] = {}
+        for node, closure in self._closed.items():
+            by.setdefault(closure.id, []).append(node)
+        views = []
+        for closure in sorted(self.closures.values(), key=_order):
+            view = closure.view(now)
+            view["closed_nodes"] = sorted(by.get(closure.id, []))
+            views.append(view)
+        return views
 
     # -- staff ----------------------------------------------------------------------------------
 
@@ -213,11 +222,7 @@ class ClosureService(Service):
         self._closed = closed_nodes(site, sorted(self.closures.values(), key=_order), self.clock())
 
     def _news(self) -> ClosuresChanged:
-        now = self.clock()
-        return ClosuresChanged(
-            nodes=sorted(self._closed),
-            closures=[c.view(now) for c in sorted(self.closures.values(), key=_order)],
-        )
+        return ClosuresChanged(nodes=sorted(self._closed), closures=self._views())
 
     def _log(self, kind: str, closure: Closure, by: str, why: str = "") -> None:
         if self.events is None:
