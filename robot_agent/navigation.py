@@ -124,6 +124,8 @@ class Navigator(MotionControl):
         self.yields = 0
         self._yield: YieldRequested | None = None
         self._replan: ReplanRequested | None = None
+        self._backing_off: str | None = None
+        """The area being yielded while the robot drives to its passing place."""
         self.closed: frozenset[str] = frozenset()
         """Nodes closed now (closures_changed): never driven onto; plans come from the server
         while any is closed (the on-board map does not know them)."""
@@ -275,6 +277,8 @@ class Navigator(MotionControl):
         p = message.payload
         if p.get("robot") not in (None, self.robot) or self._goal_task is None:
             return
+        if p.get("area") == self._backing_off:
+            return  # asked again (the server repeats a yield not acted on): already on it
         self._yield = YieldRequested(str(p.get("area")), str(p.get("go_to_node") or ""))
         self._news.set()
         self._odom_event.set()
@@ -299,8 +303,12 @@ class Navigator(MotionControl):
         self._replan = None
         try:
             yields = replans = 0
+            backing: YieldRequested | None = None
             while True:
                 try:
+                    if backing is not None:  # a yield or a closure may come while backing off
+                        await self._back_off(backing)
+                        backing = None
                     await self.go_to(node)
                     break
                 except YieldRequested as request:
@@ -309,7 +317,7 @@ class Navigator(MotionControl):
                         raise NavigationError(
                             f"asked to yield too often on the way to {node}"
                         ) from None
-                    await self._back_off(request)
+                    backing = request
                 except ReplanRequested as closed:
                     replans += 1
                     self._replan = None
@@ -341,8 +349,12 @@ class Navigator(MotionControl):
         self._yield = None
         self._send_velocity(0.0, 0.0, force=True)
         log.info("%s: yielding area %s, backing off to %s", self.robot, request.area, request.node)
-        if request.node and request.node != self.node:
-            await self.go_to(request.node)
+        self._backing_off = request.area
+        try:
+            if request.node and request.node != self.node:
+                await self.go_to(request.node)
+        finally:
+            self._backing_off = None
         self.passage.give_up(request.area)
 
     async def _face_people(self, request_id: str) -> None:

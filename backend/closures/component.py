@@ -1,5 +1,6 @@
 """The ClosureService as a server component (backend.app.COMPONENTS), after the brain: the
-Traffic Manager asks it what is closed (``closures``)."""
+Traffic Manager asks it what is closed (``closures``), and the ETA estimator leaves a queued
+tour's closed stops out (``closed``)."""
 
 from __future__ import annotations
 
@@ -26,11 +27,14 @@ async def closures(app: FastAPI) -> AsyncIterator[None]:
     )
     await service.restore()
     traffic = app.state.traffic
+    estimator = app.state.task_manager.estimator
     async with service:
         app.state.closures = service
         traffic.closures = lambda: service.closed
+        estimator.closed = lambda: service.closed
         try:
             yield
         finally:
+            estimator.closed = None
             traffic.closures = None
             app.state.closures = None

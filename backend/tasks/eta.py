@@ -238,6 +238,9 @@ class EtaEstimator:
         the same whichever robot starts them."""
         self._mean_speed: tuple[int, float] | None = None
         """(number of robots, their mean speed): for tasks not yet on a robot."""
+        self.closed: Callable[[], Mapping[str, object]] | None = None
+        """The nodes closed now (backend/closures): a queued tour's stops there are left out
+        of its estimates (it will skip them); set by the closures component."""
 
     # --- hooks from the Task Manager -----------------------------------------------------------
     def changed(self, task: Task, event: str) -> None:
@@ -427,7 +430,15 @@ class EtaEstimator:
         return out
 
     def _points(self, task: Task) -> list[tuple[str, str | None]]:
-        """(node, spoken text or None) of each place the task visits."""
+        """(node, spoken text or None) of each place the task visits (a queued task: not
+        those closed now, which its tour will skip)."""
+        places = self._all_points(task)
+        closed = self.closed() if self.closed is not None else None
+        if closed and task.state is TaskState.QUEUED:
+            return [place for place in places if place[0] not in closed]
+        return places
+
+    def _all_points(self, task: Task) -> list[tuple[str, str | None]]:
         sent = task.assigned_params.get("points") if task.assigned_params else None
         if isinstance(sent, list) and sent:
             known = self._sent.get(id(sent))

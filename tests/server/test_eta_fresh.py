@@ -125,3 +125,17 @@ async def test_a_skipped_stop_leaves_its_leg_and_talk_out_and_is_told_with_its_r
             "reason": "gallery hall closed: a reception",
         }
     ]
+
+
+async def test_a_queued_tour_is_told_its_length_without_the_stops_closed_now(
+    manager: TaskManager,
+) -> None:
+    """Building modes: a closed gallery's stops will be skipped, so a tour asked for now is
+    told a shorter length; once reopened, the whole tour again."""
+    whole = manager.estimator.preview("tour", {"tour": "ground"}).duration_s
+    assert whole is not None
+    manager.estimator.closed = lambda: {"gb1": "closed", "gb2": "closed"}
+    shorter = manager.estimator.preview("tour", {"tour": "ground"}).duration_s
+    assert shorter is not None and shorter < whole
+    manager.estimator.closed = lambda: {}
+    assert manager.estimator.preview("tour", {"tour": "ground"}).duration_s == whole
