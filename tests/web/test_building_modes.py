@@ -44,7 +44,7 @@ async def test_a_closed_gallery_is_skipped_by_a_tour_and_the_visitor_is_told(
         console = await open_page(fleet.admin_url)
         page = console.page
         await web.sign_in(console, web.operator_token)
-        await web.open_view(page, "Building modes")
+        await web.open_view(page, "Modes")
         await expect(page.get_by_role("cell", name="Nothing is closed.")).to_be_visible()
         # The Bronze Age gallery (gb1, gb2) is closed for cleaning.
         await page.locator('select[name="kind"]').select_option("nodes")

@@ -26,7 +26,7 @@ const VIEWS = [
   ["fleet", "Fleet"],
   ["locks", "Locks"],
   ["building", "Building"],
-  ["modes", "Building modes"],
+  ["modes", "Modes"],
   ["monitor", "RoboGraph monitor"],
   ["alerts", "Alerts"],
   ["events", "Event log"],
