@@ -146,7 +146,7 @@ async def test_get_path_goes_around_a_closure_and_says_why_when_it_cannot() -> N
         await traffic.stop()
 
 
-async def test_trouble_closes_a_door_until_it_is_seen_working() -> None:
+async def test_trouble_closes_a_door_or_a_lift_until_it_is_seen_working() -> None:
     bus = Bus()
     site = demo_site()
     service = ClosureService(bus.endpoint("closures"), lambda: site, None, None)
@@ -166,6 +166,27 @@ async def test_trouble_closes_a_door_until_it_is_seen_working() -> None:
         assert door.node in service.closed
         building.publish("door_opened", {"door": door.id})
         assert door.node not in service.closed
+        # A lift that does not come: its stops are closed until the cabin is seen working.
+        lift = site.elevators[0]
+        building.publish(
+            "command_failed",
+            {
+                "command": "call_elevator",
+                "reason": "call not confirmed: the cabin showed no progress for 14 s",
+                "target": lift.id,
+            },
+            destination="R2",
+        )
+        assert {s.node for s in lift.stops} <= set(service.closed)
+        assert service.view()["closures"][0]["what"] == f"elevator {lift.id}"
+        building.publish(
+            "elevator_in_position", {"elevator": lift.id, "floor": "F1", "door_open": False}
+        )
+        assert lift.stops[0].node in service.closed  # a closed door is no sign of life
+        building.publish(
+            "elevator_in_position", {"elevator": lift.id, "floor": "F1", "door_open": True}
+        )
+        assert not service.closed
     finally:
         await service.stop()
 
