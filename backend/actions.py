@@ -37,6 +37,7 @@ RULES: dict[str, frozenset[Role]] = {
     # REST-only actions (their routes: docs/server.md, "REST API and roles")
     "administer": frozenset(),  # the site, its drafts, versions, uploads
     "operate": _OPERATOR,  # the staff console: robots, locks, events, alerts, nets, building
+    "building_modes": _OPERATOR,  # close a gallery, nodes, a door or a lift (backend/closures)
     "follow_tasks": _REQUESTERS,  # tasks one may see and cancel (own only for panels, robots)
     "see_robot": _ROBOT_OR_OPERATOR,  # one robot's view (a robot: itself only)
     "plan_path": _ROBOT_OR_OPERATOR,
@@ -95,6 +96,7 @@ REST_ONLY = frozenset(
     {
         "administer",
         "operate",
+        "building_modes",
         "follow_tasks",
         "see_robot",
         "plan_path",

@@ -36,6 +36,8 @@ from backend.auth import Authenticator, Role, TokenStore
 from backend.brain import server_brain
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
+from backend.closures import routes as closures_routes
+from backend.closures.component import closures
 from backend.cluster import FollowerRest, cluster_report, clustered
 from backend.console import fleet as console_fleet
 from backend.console import routes as console_routes
@@ -69,6 +71,7 @@ COMPONENTS: list[Component] = [
     server_brain,
     building_interface,
     emergency,
+    closures,
     rgm,
     site_editor,
     console,
@@ -82,6 +85,7 @@ ROUTERS: list[APIRouter] = [
     *api_routers,
     building_routes.router,
     emergency_routes.router,
+    closures_routes.router,
     console_routes.router,
     console_fleet.router,
     metrics_routes.router,

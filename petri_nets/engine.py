@@ -479,7 +479,10 @@ def _field(payload: dict[str, Any], path: str) -> Any:
 
 
 def _same(actual: Any, expected: Any) -> bool:
-    """Equality that forgives a number written as text in the net (``value="2"``)."""
+    """Equality that forgives a number or a boolean written as text in the net (``value="2"``,
+    ``value="true"``)."""
+    if isinstance(actual, bool) and isinstance(expected, str):
+        return expected == ("true" if actual else "false")
     return actual == expected or (
         actual is not None
         and not isinstance(actual, str)

@@ -303,7 +303,9 @@ def give_tour() -> NetDoc:
     b = NetBuilder(
         "give_tour",
         "Visit each point of the tour (navigate, show, explain); before each next "
-        "point ask to continue; end on no, on time-out, or when navigation fails (Figure 11).",
+        "point ask to continue; end on no, on time-out, or when navigation fails (Figure 11). "
+        "A point only closed elements lead to (building modes, a jammed door, a stuck lift) "
+        "is skipped: point_skipped says which and why, and the tour goes on.",
         params={
             "question": "Shall we continue the tour?",
             "answer_timeout_s": 20.0,
@@ -313,7 +315,12 @@ def give_tour() -> NetDoc:
         required=("tour", "points"),
     )
     b.place("first_point", initial=1, action=next_item("points", "point"))
-    b.place("navigate_to_point", action=run("navigate_to_point", {"node": "${point.node}"}))
+    b.place("navigate_to_point", action=publish("navigate_to", {"node": "${point.node}"}))
+    b.place(
+        "point_skipped",
+        action=publish("point_skipped", {"point": "${point}", "reason": "${skip_reason}"}),
+    )
+    b.place("after_skip", action=next_item("points", "point"))
     b.place(
         "show_point",
         action=publish(
@@ -344,11 +351,26 @@ def give_tour() -> NetDoc:
     b.transition("has_first", ["first_point"], ["navigate_to_point"], guard("point", "set"))
     b.transition("empty_tour", ["first_point"], ["tour_done"], guard("point", "unset"))
     b.transition(
-        "arrived", ["navigate_to_point"], ["show_point"], net_ended("navigate_to_point", "done")
+        "arrived",
+        ["navigate_to_point"],
+        ["show_point"],
+        message("goal_reached", node="${point.node}"),
     )
     b.transition(
-        "not_arrived", ["navigate_to_point"], ["navigation_failed"], net_ended("navigate_to_point")
+        "point_closed",
+        ["navigate_to_point"],
+        ["point_skipped"],
+        message("navigation_failed", {"skip_reason": "reason"}, node="${point.node}", closed=True),
     )
+    b.transition(
+        "not_arrived",
+        ["navigate_to_point"],
+        ["navigation_failed"],
+        message("navigation_failed", node="${point.node}"),
+    )
+    b.transition("skipped", ["point_skipped"], ["after_skip"])
+    b.transition("skip_to_next", ["after_skip"], ["navigate_to_point"], guard("point", "set"))
+    b.transition("skipped_last", ["after_skip"], ["tour_done"], guard("point", "unset"))
     b.transition("shown", ["show_point"], ["explain_point"])
     b.transition("explained", ["explain_point"], ["point_explained"], net_ended("explain_point"))
     b.transition("reported", ["point_explained"], ["next_point"])

@@ -124,6 +124,8 @@ class OnboardScreen(Service):
         self.task: dict[str, Any] | None = None
         self.going = False
         self.explanation: dict[str, Any] | None = None
+        self.skipped: list[dict[str, Any]] = []
+        """Stops the running tour skipped (closed off): index, name, poi, reason."""
         self.speaking: str | None = None
         self.question: dict[str, Any] | None = None
         self.answers: list[str] = []
@@ -137,6 +139,7 @@ class OnboardScreen(Service):
             self.ep,
             {
                 "show_point": self._on_show_point,
+                "point_skipped": self._on_point_skipped,
                 "ask_continue": self._on_ask,
                 "speech_started": self._on_speech,
                 "speech_ended": self._on_speech,
@@ -172,6 +175,7 @@ class OnboardScreen(Service):
             "task": self.task,
             "going": self.going,
             "explanation": self.explanation,
+            "skipped": self.skipped,
             "speaking": self.speaking,
             "question": self.question,
             "state": self.state(),
@@ -233,6 +237,7 @@ class OnboardScreen(Service):
         lang = params.get("lang")
         self.lang = lang if isinstance(lang, str) else None
         self.task = {"id": message.payload.get("task_id"), "tour": params.get("tour")}
+        self.skipped = []
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
 
     # -- the fire alarm ---------------------------------------------------------------------
@@ -288,6 +293,18 @@ class OnboardScreen(Service):
         }
         self._push("show_point", self.explanation)
 
+    def _on_point_skipped(self, message: Message) -> None:
+        point = message.payload.get("point")
+        point = point if isinstance(point, dict) else {}
+        skip = {
+            "index": point.get("index"),
+            "poi": point.get("poi"),
+            "name": point.get("name") or point.get("poi"),
+            "reason": message.payload.get("reason", ""),
+        }
+        self.skipped.append(skip)
+        self._push("point_skipped", skip)
+
     def _poi_texts(self, poi: object) -> dict[str, Any] | None:
         """A point's texts from the site in the running task's language (None: unknown)."""
         site = self.site
@@ -305,6 +322,7 @@ class OnboardScreen(Service):
         if message.payload.get("outcome") == "refused":
             return  # a task it did not take: the running tour stays on the screen
         self.explanation = None
+        self.skipped = []
         self.task = None
         self.lang = None
         self.going = False

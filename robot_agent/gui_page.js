@@ -4,6 +4,7 @@
 // alarm: the evacuation screen, the site's words in the screen's language (docs/emergency.md).
 import { html, render } from "/vendor/lit-html/lit-html.js";
 import { loadTexts } from "/lib/i18n.js";
+import { skippedLines } from "/lib/skipped.js";
 
 const app = document.getElementById("app");
 const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now() };
@@ -130,16 +131,22 @@ function stateView(s) {
     </p>`;
 }
 
+function skippedView(s) {
+  if (!s.skipped?.length) return "";
+  return html`<section class="skipped" aria-labelledby="skipped-title"><h3 id="skipped-title">${t("skipped_title")}</h3>
+    <ul>${skippedLines(t, s.skipped, (k) => k.name ?? k.poi).map((line) => html`<li>${line}</li>`)}</ul></section>`;
+}
+
 function nowView(s) {
   const e = s.explanation;
-  if (!e) return html`<p>${t("touch_idle")}</p>`;
+  if (!e) return html`<p>${t("touch_idle")}</p>${skippedView(s)}`;
   return html`<div class="touch-now">
     ${picture(e.media, e.name)}
     <div>
       ${e.index ? html`<p class="muted">${t("state_progress", { i: e.index, n: e.total, place: e.name })}</p>` : html`<h3>${e.name}</h3>`}
       <p class="explanation" aria-live="polite">${e.text}</p>
     </div>
-  </div>`;
+  </div>${skippedView(s)}`;
 }
 
 /** While a fire alarm lasts: the site's words, what the robot does, no request. */

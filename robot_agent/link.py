@@ -90,6 +90,7 @@ DOWN_TYPES: tuple[str, ...] = (
     "kill_petri_net",
     "evacuate",
     "emergency_changed",
+    "closures_changed",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
 

@@ -7,6 +7,9 @@ One goal at a time (a new navigate_to pre-empts the old one). For each path the 
   door and the elevator cabin on the way, and stops before a node that is not passable;
 - backs off to a passing place when the Traffic Manager asks it to yield an area, then tries
   the goal again;
+- plans again when ``closures_changed`` closes a node of its path ahead (building modes, a
+  jammed door, a stuck lift), and plans with the server only while any node is closed; a goal
+  only closed nodes lead to fails with ``navigation_failed`` ``closed`` (a tour skips it);
 - reports every node it reaches (node_reached: what the fleet's invariants are checked on);
 - stops on bumper_hit, reports it as robot_fault, and goes on after ``bumper_pause_s``;
 - stops for good on base_fault (a critical module lost) and fails the goal.
@@ -52,6 +55,22 @@ class YieldRequested(Exception):
         super().__init__(f"yield {area}, back off to {node}")
         self.area = area
         self.node = node
+
+
+class ReplanRequested(Exception):
+    """A node of the path ahead was closed (closures_changed): plan the goal again."""
+
+    def __init__(self, nodes: list[str]) -> None:
+        super().__init__(f"closed ahead: {', '.join(nodes)}")
+        self.nodes = nodes
+
+
+class RouteClosed(NavigationError):
+    """The server says only closed elements lead to the goal; ``reason`` says which and why."""
+
+
+MAX_REPLANS = 8
+"""Plans again for closures on the way to one goal (a closure that comes and goes)."""
 
 
 class Navigator(MotionControl):
@@ -104,6 +123,15 @@ class Navigator(MotionControl):
         self.bumps = 0
         self.yields = 0
         self._yield: YieldRequested | None = None
+        self._replan: ReplanRequested | None = None
+        self._backing_off: str | None = None
+        """The area being yielded while the robot drives to its passing place."""
+        self.closed: frozenset[str] = frozenset()
+        """Nodes closed now (closures_changed): never driven onto; plans come from the server
+        while any is closed (the on-board map does not know them)."""
+        self._ahead: list[str] = []
+        """The nodes of the path being followed not reached yet."""
+        self.replans = 0
         if (start := (position_of or {}).get(start_node or "")) is not None:
             # Odometry starts at (0, 0): anchor it at the start node until the first path.
             self._tx, self._ty = start
@@ -148,6 +176,7 @@ class Navigator(MotionControl):
                 "module_status": self._on_module_status,
                 **self.passage.handlers(),
                 "area_yield": self._on_area_yield,
+                "closures_changed": self._on_closures,
             },
         )
 
@@ -168,6 +197,7 @@ class Navigator(MotionControl):
         if self.state is not NavState.FAULT:
             self.state = NavState.IDLE
         self.goal = None
+        self._replan = None
 
     async def cancel(self) -> None:
         """cancel_goal, then wait until the goal's coroutine has unwound."""
@@ -247,28 +277,63 @@ class Navigator(MotionControl):
         p = message.payload
         if p.get("robot") not in (None, self.robot) or self._goal_task is None:
             return
+        if p.get("area") == self._backing_off:
+            return  # asked again (the server repeats a yield not acted on): already on it
         self._yield = YieldRequested(str(p.get("area")), str(p.get("go_to_node") or ""))
         self._news.set()
         self._odom_event.set()
+
+    def _on_closures(self, message: Message) -> None:
+        nodes = message.payload.get("nodes")
+        if not isinstance(nodes, list):
+            return
+        self.closed = frozenset(n for n in nodes if isinstance(n, str))
+        cut = [n for n in self._ahead if n in self.closed]
+        if cut and self._goal_task is not None and not self.evacuating:
+            log.info("%s: closed ahead (%s): planning again", self.robot, ", ".join(cut))
+            self._replan = ReplanRequested(cut)
+            self._news.set()
+            self._odom_event.set()
 
     # -- goals --------------------------------------------------------------------------------
 
     async def _goal(self, node: str, request_id: str, *, reply: GoalReached | Docked) -> None:
         """Drive to ``node`` and answer ``reply`` (or navigation_failed)."""
         self.goal = node
+        self._replan = None
         try:
-            for _attempt in range(4):
+            yields = replans = 0
+            backing: YieldRequested | None = None
+            while True:
                 try:
+                    if backing is not None:  # a yield or a closure may come while backing off
+                        await self._back_off(backing)
+                        backing = None
                     await self.go_to(node)
                     break
                 except YieldRequested as request:
-                    await self._back_off(request)
-            else:
-                raise NavigationError(f"asked to yield too often on the way to {node}")
+                    yields += 1
+                    if yields > 3:
+                        raise NavigationError(
+                            f"asked to yield too often on the way to {node}"
+                        ) from None
+                    backing = request
+                except ReplanRequested as closed:
+                    replans += 1
+                    self._replan = None
+                    self.replans += 1
+                    self._send_velocity(0.0, 0.0, force=True)
+                    if replans > MAX_REPLANS:
+                        raise NavigationError(
+                            f"planned again too often on the way to {node} ({closed})"
+                        ) from None
         except NavigationError as failure:
             self._send_velocity(0.0, 0.0, force=True)
             self.ep.publish(
-                NavigationFailed(node=node, reason=failure.reason), correlation_id=request_id
+                NavigationFailed(
+                    node=node, reason=failure.reason, closed=isinstance(failure, RouteClosed)
+                ),
+                correlation_id=request_id,
             )
             return
         finally:
@@ -284,8 +349,12 @@ class Navigator(MotionControl):
         self._yield = None
         self._send_velocity(0.0, 0.0, force=True)
         log.info("%s: yielding area %s, backing off to %s", self.robot, request.area, request.node)
-        if request.node and request.node != self.node:
-            await self.go_to(request.node)
+        self._backing_off = request.area
+        try:
+            if request.node and request.node != self.node:
+                await self.go_to(request.node)
+        finally:
+            self._backing_off = None
         self.passage.give_up(request.area)
 
     async def _face_people(self, request_id: str) -> None:
@@ -304,7 +373,12 @@ class Navigator(MotionControl):
         await self.follow([PathStep.from_dict(s) for s in path.get("steps", [])])
 
     async def _get_path(self, node: str) -> dict[str, Any]:
-        if self.plan_on_board and self.planner is not None and self.node is not None:
+        if (
+            self.plan_on_board
+            and not self.closed
+            and self.planner is not None
+            and self.node is not None
+        ):
             try:
                 path = self.planner(self.node, node)
             except Exception:  # the server answers why (unknown node, no path)
@@ -326,6 +400,8 @@ class Navigator(MotionControl):
             except RequestTimeout:
                 log.warning("%s: no path to %s yet (attempt %d)", self.robot, node, attempt + 1)
                 continue
+            if reply.type == "path" and reply.payload.get("closed"):
+                raise RouteClosed(str(reply.payload.get("reason") or f"{node} is closed"))
             if reply.type != "path" or not reply.payload.get("steps"):
                 reason = reply.payload.get("error") or reply.payload.get("reason") or reply.payload
                 raise NavigationError(f"no path to {node}: {reason}")
@@ -354,6 +430,7 @@ class Navigator(MotionControl):
         try:
             i = 1
             while i < len(steps):
+                self._ahead = [s.node for s in steps[i:]]
                 self._check_fault()
                 step = steps[i]
                 passage.ask_ahead(steps, i, doors_ahead, called)
@@ -381,6 +458,7 @@ class Navigator(MotionControl):
                 passage.release_passed(i, doors_ahead)
                 i += 1
         finally:
+            self._ahead = []
             passage.release_doors()
             passage.release_not_entered()
         self._send_velocity(0.0, 0.0, force=True)
@@ -438,3 +516,5 @@ class Navigator(MotionControl):
         super()._check_fault()
         if self._yield is not None:
             raise self._yield
+        if self._replan is not None:
+            raise self._replan

@@ -117,6 +117,7 @@ class TaskRunner(Service):
                 "petri_net_event": self._on_net_event,
                 "show_point": self._on_point,
                 "point_explained": self._on_point,
+                "point_skipped": self._on_point,
                 "navigation_failed": self._on_problem,
                 "robot_fault": self._on_problem,
                 "error": self._on_refused,
@@ -281,16 +282,19 @@ class TaskRunner(Service):
         )
 
     def _on_point(self, message: Message) -> None:
-        """give_tour reached or explained a point: tour_progress for the Task Manager."""
+        """give_tour reached, explained or skipped a point: tour_progress for the Task Manager."""
         point = message.payload.get("point")
         if self.current is None or not isinstance(point, dict):
             return
         index, total = point.get("index"), point.get("total")
         if not isinstance(index, int) or not isinstance(total, int):
             return  # points without their place in the tour (not from the Task Manager)
-        stage: Literal["arrived", "explained"] = (
-            "arrived" if message.type == "show_point" else "explained"
-        )
+        stages: dict[str, Literal["arrived", "explained", "skipped"]] = {
+            "show_point": "arrived",
+            "point_explained": "explained",
+            "point_skipped": "skipped",
+        }
+        reason = message.payload.get("reason")
         try:
             progress = TourProgress(
                 task_id=self.current.task_id,
@@ -298,7 +302,8 @@ class TaskRunner(Service):
                 index=index,
                 total=total,
                 poi=point.get("poi"),
-                stage=stage,
+                stage=stages[message.type],
+                reason=str(reason)[:500] if isinstance(reason, str) else "",
             )
         except ValidationError as exc:  # the Task Manager would refuse it
             log.warning("%s: tour point not reported: %s", self.robot, exc)

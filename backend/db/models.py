@@ -1,5 +1,5 @@
-"""Database tables: the site document, tasks, their history, the event log and which robots
-staff took out of service."""
+"""Database tables: the site document, tasks, their history, the event log, which robots
+staff took out of service and what staff closed (building modes)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 __all__ = [
     "Base",
+    "ClosureRow",
     "EventRow",
     "ReportCursorRow",
     "ReportDayRow",
@@ -152,3 +153,14 @@ class RobotServiceRow(Base):
     out_of_service: Mapped[bool] = mapped_column(Boolean)
     by: Mapped[str] = mapped_column(String(64), default="")
     at: Mapped[float] = mapped_column(Float)
+
+
+class ClosureRow(Base):
+    """A building mode staff set: an area, nodes, a door or an elevator closed to robots, now
+    or between two times (backend/closures). Deleted when staff reopen it."""
+
+    __tablename__ = "closures"
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    """The closure as shown (backend.closures.model.Closure)."""
+    end: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -157,6 +157,8 @@ class _Progress:
     """The reported point's name in the task's language (from what its robot was given)."""
     stage: str = "assigned"
     learned: bool = False
+    skipped: list[dict[str, Any]] = field(default_factory=list)
+    """Points the tour skipped (closed off): index, poi, name, reason (what the visitor sees)."""
 
     def __post_init__(self) -> None:
         move = talk = 0.0
@@ -236,6 +238,9 @@ class EtaEstimator:
         the same whichever robot starts them."""
         self._mean_speed: tuple[int, float] | None = None
         """(number of robots, their mean speed): for tasks not yet on a robot."""
+        self.closed: Callable[[], Mapping[str, object]] | None = None
+        """The nodes closed now (backend/closures): a queued tour's stops there are left out
+        of its estimates (it will skip them); set by the closures component."""
 
     # --- hooks from the Task Manager -----------------------------------------------------------
     def changed(self, task: Task, event: str) -> None:
@@ -254,13 +259,23 @@ class EtaEstimator:
             return
         self._schedule = None
 
-    def progress(self, task: Task, index: int, stage: str, poi: str | None) -> dict[str, Any]:
-        """A robot reached (``arrived``) or explained (``explained``) point ``index`` of its
-        task: learn the real time of the segment just ended and refine what is left."""
+    def progress(
+        self, task: Task, index: int, stage: str, poi: str | None, reason: str = ""
+    ) -> dict[str, Any]:
+        """A robot reached (``arrived``), explained (``explained``) or skipped (``skipped``:
+        closed off) point ``index`` of its task: learn the real time of the segment just ended
+        and refine what is left (a skipped point's leg and talk are left out, not learned)."""
         run = self._running.get(task.id)
         if run is None:
             run = self._running[task.id] = self._track(task, None)
         now = self.tm.clock()
+        if stage == "skipped":
+            name = _point_name(task, poi)
+            run.skipped.append({"index": index, "poi": poi, "name": name, "reason": reason})
+            run.done = max(run.done, min(2 * index, len(run.segments)))
+            run.mark_at = now
+            self._schedule = None
+            return self.progress_view(task) or {}
         done = 2 * index - 1 if stage == "arrived" else 2 * index
         if done == run.done + 1 and done <= len(run.segments):
             seg = run.segments[done - 1]
@@ -368,6 +383,7 @@ class EtaEstimator:
             "poi": run.poi,
             "name": run.name,
             "stage": run.stage,
+            "skipped": list(run.skipped),
         }
 
     # --- the model ------------------------------------------------------------------------------
@@ -414,7 +430,15 @@ class EtaEstimator:
         return out
 
     def _points(self, task: Task) -> list[tuple[str, str | None]]:
-        """(node, spoken text or None) of each place the task visits."""
+        """(node, spoken text or None) of each place the task visits (a queued task: not
+        those closed now, which its tour will skip)."""
+        places = self._all_points(task)
+        closed = self.closed() if self.closed is not None else None
+        if closed and task.state is TaskState.QUEUED:
+            return [place for place in places if place[0] not in closed]
+        return places
+
+    def _all_points(self, task: Task) -> list[tuple[str, str | None]]:
         sent = task.assigned_params.get("points") if task.assigned_params else None
         if isinstance(sent, list) and sent:
             known = self._sent.get(id(sent))

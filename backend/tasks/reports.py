@@ -116,7 +116,8 @@ class TaskReports:
         tm.dispatch()
 
     def on_tour_progress(self, msg: Message) -> None:
-        """A point reached or explained: into the task's history, refined estimate to all."""
+        """A point reached, explained or skipped: into the task's history, refined estimate to
+        all (a skipped point's reason goes to the visitor in the task's progress)."""
         tm = self.tm
         robot = tm.robot_of(msg)
         task = tm.tasks.get(str(msg.payload.get("task_id")))
@@ -126,7 +127,7 @@ class TaskReports:
             p = msg.payload_as(TourProgress)
         except ValidationError:
             return
-        tm.estimator.progress(task, p.index, p.stage, p.poi)
+        tm.estimator.progress(task, p.index, p.stage, p.poi, p.reason)
         if tm.store is not None:
             detail = {"index": p.index, "total": p.total, "poi": p.poi, "stage": p.stage}
             tm.store.record(task, f"point {p.index}/{p.total} {p.stage}", detail)

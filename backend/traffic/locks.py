@@ -68,6 +68,8 @@ class Yield:
     robot: str
     area: str
     cycle: tuple[str, ...]
+    wanted: tuple[str, ...] = ()
+    """The areas the yielding robot waited for (its wait is dropped while it backs off)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -405,35 +407,88 @@ class AreaLocks:
 
     def _resolve_cycle(self, start: str) -> list[Yield]:
         """Walk the wait-for graph from ``start``; on a cycle, the newest waiter yields."""
-        graph = self.wait_for_graph()
-        path: list[str] = []
-        on_path: set[str] = set()
-
-        def dfs(robot: str) -> list[str] | None:
-            path.append(robot)
-            on_path.add(robot)
-            for nxt in graph.get(robot, ()):
-                if nxt in on_path:
-                    return path[path.index(nxt) :]
-                if nxt in graph:
-                    found = dfs(nxt)
-                    if found:
-                        return found
-            on_path.discard(path.pop())
-            return None
-
-        cycle = dfs(start)
+        cycle = _find_cycle(start, self.wait_for_graph())
         if not cycle:
             return []
         victim = max(cycle, key=lambda r: self._waits[r].seq)
-        needed = {a for r in cycle if r != victim for a in self._waits[r].areas}
+        self.deadlocks_resolved += 1
+        return self.ask_to_yield(victim, cycle)
+
+    def cycles(self) -> list[list[str]]:
+        """Every cycle of the wait-for graph (each once, from its first robot in name order);
+        each robot waits for the next, the last for the first."""
+        graph = self.wait_for_graph()
+        found: dict[frozenset[str], list[str]] = {}
+        for start in sorted(graph):
+            cycle = _find_cycle(start, graph)
+            if cycle:
+                found.setdefault(frozenset(cycle), cycle)
+        return list(found.values())
+
+    def newest_waiter(self, robots: list[str]) -> str:
+        return max(robots, key=lambda r: self._waits[r].seq if r in self._waits else -1)
+
+    def ask_to_yield(
+        self,
+        victim: str,
+        cycle: list[str],
+        *,
+        again: bool = False,
+        areas: tuple[str, ...] | None = None,
+    ) -> list[Yield]:
+        """``victim`` backs off: the areas it holds that the rest of ``cycle`` waits for (or
+        ``areas``) move to YIELDING (``again``: those already yielding are asked again, the
+        word may have been lost), and its own wait is dropped (it asks again once it has
+        backed off)."""
+        needed = (
+            set(areas)
+            if areas is not None
+            else {
+                a for r in cycle if r != victim and r in self._waits for a in self._waits[r].areas
+            }
+        )
+        wanted = self._waits[victim].areas if victim in self._waits else ()
         yields: list[Yield] = []
         for a in sorted(needed):
             lock = self._locks[a]
-            if lock.holder == victim and lock.state is not LockState.YIELDING:
+            if lock.holder != victim:
+                continue
+            if lock.state is not LockState.YIELDING:
                 lock.move(LockState.YIELDING)
-                yields.append(Yield(victim, a, tuple(cycle)))
-        # The victim stops waiting: it must back off first, then ask again.
+            elif not again:
+                continue
+            yields.append(Yield(victim, a, tuple(cycle), tuple(wanted)))
         self._waits.pop(victim, None)
-        self.deadlocks_resolved += 1
         return yields
+
+    def yielding(self) -> list[tuple[str, str]]:
+        """(robot, area) of every lock whose holder was asked to back off and still holds it."""
+        return [
+            (lock.holder, lock.area)
+            for lock in self._locks.values()
+            if lock.state is LockState.YIELDING and lock.holder is not None
+        ]
+
+    def waiters_on(self, area: str) -> list[str]:
+        return [w.robot for w in self._waits.values() if area in w.areas]
+
+
+def _find_cycle(start: str, graph: dict[str, set[str]]) -> list[str] | None:
+    """A cycle reached from ``start`` in the wait-for graph (depth first), or None."""
+    path: list[str] = []
+    on_path: set[str] = set()
+
+    def dfs(robot: str) -> list[str] | None:
+        path.append(robot)
+        on_path.add(robot)
+        for nxt in sorted(graph.get(robot, ())):
+            if nxt in on_path:
+                return path[path.index(nxt) :]
+            if nxt in graph:
+                found = dfs(nxt)
+                if found:
+                    return found
+        on_path.discard(path.pop())
+        return None
+
+    return dfs(start)

@@ -9,11 +9,14 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from pydantic import ValidationError
 
 from backend.alerts import AlertStore
+from backend.closures.model import Closure
+from backend.closures.routing import RouteClosed, path_avoiding
 from backend.traffic.locks import AreaLocks, Cut, Grant, LockError, LockView, Yield
 from backend.traffic.restarts import BootIds, release_former_holds
 from guidebot.bus import BusEndpoint
@@ -31,6 +34,24 @@ log = logging.getLogger(__name__)
 
 FINAL_TASK_STATES = frozenset({"done", "failed", "cancelled"})
 EventSink = Callable[[str, dict[str, Any]], None]
+
+CYCLE_BREAK_S = 20.0
+"""A robot asked to back off (a cycle of waits) that still holds the area after this long is
+asked again; after twice this long another robot of the cycle backs off instead. A cycle
+never lasts 60 s (issue 36): the first word at once, the second at 20 s, another robot at 40 s."""
+CYCLE_CHECK_S = 1.0
+"""How often the lock table is looked at for cycles and yields not acted on."""
+
+
+@dataclass(slots=True)
+class _YieldWatch:
+    """A yield asked of a robot, until it lets the area go."""
+
+    since: float
+    cycle: tuple[str, ...]
+    wanted: tuple[str, ...]
+    asked_again: bool = False
+    escalated: bool = False
 
 
 class TrafficManager(Service):
@@ -71,6 +92,11 @@ class TrafficManager(Service):
         self.gate: Callable[[str, str], str | None] | None = None
         """Asked with (robot, area) before a grant: a reason to refuse (the fire alarm holds
         the area and it is not on the robot's way to safety, backend.emergency), or None."""
+        self.closures: Callable[[], Mapping[str, Closure]] | None = None
+        """The nodes closed now (building modes and trouble, backend.closures): paths avoid
+        them, and a goal only they lead to is refused with their reasons."""
+        self.cycle_break_s = CYCLE_BREAK_S
+        self._yields: dict[tuple[str, str], _YieldWatch] = {}
 
     # --- life cycle ----------------------------------------------------------------------
     async def on_start(self) -> None:
@@ -88,6 +114,15 @@ class TrafficManager(Service):
         )
         for unsubscribe in listen(self.endpoint, self.courier):
             self.on_cleanup(unsubscribe)
+        self.spawn(self._watch_cycles(), name="traffic-wait-cycles")
+
+    async def _watch_cycles(self) -> None:
+        while True:
+            await asyncio.sleep(min(CYCLE_CHECK_S, self.cycle_break_s / 4))
+            try:
+                self.check_wait_cycles()
+            except Exception:
+                log.exception("traffic: the wait-cycle check failed")
 
     async def on_stop(self) -> None:
         self.courier.close()
@@ -174,7 +209,9 @@ class TrafficManager(Service):
 
     # --- queries used by the API ---------------------------------------------------------
     def path(self, start: str, goal: str) -> PathResult:
-        return self.graph.shortest_path(start, goal)
+        """The shortest open path (RouteClosed when closures cut the goal off)."""
+        closed = self.closures() if self.closures is not None else {}
+        return path_avoiding(self.graph, start, goal, closed)
 
     def lock_views(self) -> list[LockView]:
         return self.locks.view()
@@ -214,6 +251,64 @@ class TrafficManager(Service):
                 )
         self._send_grants(grants)
 
+    def check_wait_cycles(self, now: float | None = None) -> None:
+        """Run-time guard (issue 36: no robot waits 60 s in a cycle the server does not break).
+        A cycle in the wait-for graph that the request-time rule did not see (formed by a
+        resync, a restored lock, a publish) is broken at once; a robot asked to back off that
+        still holds the area after ``cycle_break_s`` is asked again, and after twice that
+        another robot of the cycle backs off instead (the first may be stuck, or deaf)."""
+        now = time.monotonic() if now is None else now
+        for cycle in self.locks.cycles():
+            victim = self.locks.newest_waiter(cycle)
+            self.locks.deadlocks_resolved += 1
+            yields = self.locks.ask_to_yield(victim, cycle)
+            self._cycle_alert(cycle, f"{victim} backs off")
+            self._send_yields(yields, now)
+        held = set(self.locks.yielding())
+        for key in [k for k in self._yields if k not in held]:
+            del self._yields[key]
+        for (robot, area), watch in list(self._yields.items()):
+            age = now - watch.since
+            if age >= 2 * self.cycle_break_s and not watch.escalated:
+                watch.escalated = True
+                self._escalate(robot, area, watch, now)
+            elif age >= self.cycle_break_s and not watch.asked_again:
+                watch.asked_again = True
+                yields = self.locks.ask_to_yield(
+                    robot, list(watch.cycle), again=True, areas=(area,)
+                )
+                self._cycle_alert(
+                    list(watch.cycle), f"{robot} asked again to back off from {area} ({age:.0f} s)"
+                )
+                self._send_yields(yields, now)
+
+    def _escalate(self, robot: str, area: str, watch: _YieldWatch, now: float) -> None:
+        """``robot`` did not back off from ``area``: the holders of what it waited for back off
+        instead, and it waits for those areas again in its old place."""
+        others = {
+            h: tuple(a for a in watch.wanted if self.locks.holder(a) == h)
+            for a in watch.wanted
+            if (h := self.locks.holder(a)) is not None and h != robot
+        }
+        yields: list[Yield] = []
+        for other, areas in sorted(others.items()):
+            yields += self.locks.ask_to_yield(other, list(watch.cycle), areas=areas)
+        if not yields:
+            return
+        grants, more = self.locks.request(robot, watch.wanted)
+        names = ", ".join(sorted(others))
+        self._cycle_alert(
+            list(watch.cycle), f"{robot} did not back off from {area}: {names} back(s) off instead"
+        )
+        self._send_yields(yields + more, now)
+        self._send_grants(grants)
+
+    def _cycle_alert(self, cycle: list[str], what: str) -> None:
+        text = f"cycle of waits {' -> '.join([*cycle, cycle[0]])}: {what}"
+        log.warning("traffic: %s", text)
+        self.alerts.raise_("wait_cycle", "+".join(sorted(cycle)), text, "warning", lasting=False)
+        self._emit("wait_cycle_broken", {"cycle": list(cycle), "what": what})
+
     def _may_be_inside(self, robot: str, area: str) -> bool:
         """Last seen inside the area, or at its edge (a node one step from it): a robot
         granted the area there may have driven in after its link dropped. Robots never enter
@@ -237,7 +332,11 @@ class TrafficManager(Service):
         try:
             if start is None:
                 raise UnknownNode("the robot's position is unknown: give from_node")
-            result = self.graph.shortest_path(start, req.to_node)
+            result = self.path(start, req.to_node)
+        except RouteClosed as exc:
+            log.info("traffic: no open path for %s to %s: %s", robot, req.to_node, exc.reason)
+            self._reply(msg, "path", {"error": str(exc), "closed": True, "reason": exc.reason})
+            return
         except (UnknownNode, NoPath) as exc:
             self._reply(msg, "path", {"error": str(exc).strip("'\"")})
             return
@@ -284,7 +383,7 @@ class TrafficManager(Service):
             return self._refuse(msg, str(exc))
         self._emit("area_requested", {"robot": robot, "area": req.area, "chain": list(chain)})
         self._send_grants(grants)
-        self._send_yields(yields)
+        self._send_yields(yields, time.monotonic())
         self._log_wait(robot)
 
     def _log_wait(self, robot: str) -> None:
@@ -478,8 +577,11 @@ class TrafficManager(Service):
             self.courier.post(granted, key=(g.robot, g.area))
             self._emit("area_granted", {"robot": g.robot, "area": g.area})
 
-    def _send_yields(self, yields: list[Yield]) -> None:
+    def _send_yields(self, yields: list[Yield], now: float) -> None:
         for y in yields:
+            watch = self._yields.get((y.robot, y.area))
+            if watch is None:
+                self._yields[(y.robot, y.area)] = _YieldWatch(now, y.cycle, y.wanted)
             near = [self._positions[y.robot]] if y.robot in self._positions else []
             go_to = self.graph.passing_place_for(y.area, near) or ""
             self.endpoint.publish(

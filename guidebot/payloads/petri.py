@@ -120,6 +120,9 @@ class NavigationFailed(PayloadModel):
     node: str | None
     """The goal's node; None when navigate_to or dock named none the robot could use."""
     reason: str = ""
+    closed: bool = False
+    """Only closed elements lead there (building modes or trouble, the server's ``path``
+    answer): a tour skips the stop and says ``reason`` to its visitor."""
 
 
 @register_payload("ask_continue")
@@ -138,6 +141,15 @@ class ShowPoint(PayloadModel):
     poi: str
     text: str = ""
     media: str | None = None
+
+
+@register_payload("point_skipped")
+class PointSkipped(PayloadModel):
+    """give_tour skipped a point only closed elements lead to (the robot's TaskRunner tells
+    the Task Manager: tour_progress stage ``skipped``)."""
+
+    point: dict[str, Any]
+    reason: str = ""
 
 
 @register_payload("dock")

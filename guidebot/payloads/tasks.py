@@ -137,15 +137,18 @@ class VisitorService(PayloadModel):
 
 @register_payload("tour_progress")
 class TourProgress(PayloadModel):
-    """A robot reached (arrived) or finished explaining (explained) point ``index`` (1-based)
-    of its tour; the Task Manager records it and tells the panels."""
+    """A robot reached (arrived), finished explaining (explained) or skipped (skipped: closed
+    off, ``reason`` says why) point ``index`` (1-based) of its tour; the Task Manager records
+    it and tells the panels."""
 
     task_id: str = Field(max_length=64)
     robot: str = Field(max_length=64)
     index: int = Field(ge=1, le=10_000)
     total: int = Field(ge=1, le=10_000)
     poi: str | None = Field(default=None, max_length=64)
-    stage: Literal["arrived", "explained"]
+    stage: Literal["arrived", "explained", "skipped"]
+    reason: str = Field(default="", max_length=500)
+    """Stage ``skipped``: why (only closed elements lead there: "gallery g2 closed: ...")."""
 
 
 @register_payload("robot_connected")

@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 from guidebot.site.steps import PathStep
 
-__all__ = ["AreaGranted", "AreaYield", "GetPath", "Path", "PathStep", "ReleaseArea", "RequestArea"]
+__all__ = [
+    "AreaGranted",
+    "AreaYield",
+    "ClosuresChanged",
+    "GetPath",
+    "Path",
+    "PathStep",
+    "ReleaseArea",
+    "RequestArea",
+]
 
 
 @register_payload("get_path")
@@ -25,6 +36,10 @@ class Path(PayloadModel):
     steps: list[PathStep] = Field(default_factory=list)
     error: str | None = None
     """Set (and nodes empty) when there is no path or a node is unknown."""
+    closed: bool = False
+    """With ``error``: only closed elements lead there (building modes or trouble)."""
+    reason: str | None = None
+    """With ``closed``: the closures' reasons ("gallery g2 closed: cleaning"), for the visitor."""
 
 
 @register_payload("request_area")
@@ -56,3 +71,13 @@ class AreaYield(PayloadModel):
     robot: str
     area: str
     go_to_node: str
+
+
+@register_payload("closures_changed")
+class ClosuresChanged(PayloadModel):
+    """Building modes and trouble (backend/closures): the nodes closed to robots now. A robot
+    whose path ahead crosses one plans again; while any is closed it plans with the server."""
+
+    nodes: list[str] = Field(default_factory=list)
+    closures: list[dict[str, Any]] = Field(default_factory=list)
+    """Each closure as ``GET /api/closures`` shows it (consoles draw them on the map)."""

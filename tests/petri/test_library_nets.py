@@ -86,7 +86,7 @@ def test_explain_point_kills_head_talk_when_speech_ends(rig: Rig) -> None:
     assert rig.dispatch.running() == []
 
 
-def tour_rig(answer: str | None, navigation: str = "goal_reached") -> Rig:
+def tour_rig(answer: str | None, navigation: str = "goal_reached", *, closed: bool = False) -> Rig:
     replies = copy.deepcopy(DEFAULT_REPLIES)
     replies["ask_continue"] = (
         []
@@ -94,9 +94,9 @@ def tour_rig(answer: str | None, navigation: str = "goal_reached") -> Rig:
         else [{"type": "continue_answer", "payload": {"answer": answer}, "delay": 1.0}]
     )
     if navigation != "goal_reached":
-        replies["navigate_to"] = [
-            {"type": "navigation_failed", "payload": {"node": "${node}", "reason": "blocked"}}
-        ]
+        reason = "gallery g closed: cleaning" if closed else "blocked"
+        failed = {"node": "${node}", "reason": reason, "closed": closed}
+        replies["navigate_to"] = [{"type": "navigation_failed", "payload": failed}]
     return make_rig(replies=replies)
 
 
@@ -190,3 +190,21 @@ def test_describe_gives_a_gui_everything_to_draw_a_net() -> None:
     answers = {t["id"]: t for t in described["transitions"]}
     assert answers["answer_no"]["detail"] == "continue_answer answer=no"
     assert len(described["arcs"]) == len(net.doc.arcs)
+
+
+def test_give_tour_skips_a_point_only_closed_elements_lead_to_and_goes_on() -> None:
+    """Building modes and trouble (issue 36): navigation says the point is closed off; the tour
+    says point_skipped with the reason, asks nothing, and goes on to the next point."""
+    rig = tour_rig("yes", navigation="navigation_failed", closed=True)
+    iid = rig.dispatch.start("give_tour", {"tour": "t1", "points": TOUR_POINTS})
+    rig.run()
+    assert rig.ended(iid) == "done"
+    assert [p["node"] for p in rig.published("navigate_to")] == ["n1", "n2", "n3"]
+    skipped = rig.published("point_skipped")
+    assert [(s["point"]["node"], s["reason"]) for s in skipped] == [
+        ("n1", "gallery g closed: cleaning"),
+        ("n2", "gallery g closed: cleaning"),
+        ("n3", "gallery g closed: cleaning"),
+    ]
+    assert rig.published("show_point") == [] and rig.published("ask_continue") == []
+    assert rig.fired(iid)[-1] == "skipped_last"

@@ -268,9 +268,13 @@ async def test_tour_points_become_tour_progress_and_points_out_of_range_do_not(
     tour.publish("show_point", {"poi": "p1", "point": {"poi": "p1", "index": 1, "total": 2}})
     tour.publish("point_explained", {"point": {"poi": "p1", "index": 1, "total": 2}})
     tour.publish("show_point", {"poi": "p0", "point": {"poi": "p0", "index": 0, "total": 2}})
+    why = "gallery g2 closed: cleaning"
+    tour.publish("point_skipped", {"point": {"poi": "p2", "index": 2, "total": 2}, "reason": why})
+    base = {"task_id": "t1", "robot": "R1", "total": 2}
     assert [m.payload for m in seen.of("tour_progress")] == [
-        {"task_id": "t1", "robot": "R1", "index": 1, "total": 2, "poi": "p1", "stage": stage}
-        for stage in ("arrived", "explained")
+        {**base, "index": 1, "poi": "p1", "stage": "arrived", "reason": ""},
+        {**base, "index": 1, "poi": "p1", "stage": "explained", "reason": ""},
+        {**base, "index": 2, "poi": "p2", "stage": "skipped", "reason": why},
     ]
     await runner.stop()
 

@@ -130,7 +130,11 @@ async def test_navigate_to_without_a_node_fails_at_once(rig: Rig) -> None:
     request = rig.bus.endpoint("net").publish("navigate_to", {})
     [failed] = rig.seen.of("navigation_failed")
     assert failed.correlation_id == request.id
-    assert failed.payload == {"node": None, "reason": "navigate_to needs a node id"}
+    assert failed.payload == {
+        "node": None,
+        "reason": "navigate_to needs a node id",
+        "closed": False,
+    }
 
 
 async def test_area_wait_and_yield_then_goal_reached(rig: Rig) -> None:

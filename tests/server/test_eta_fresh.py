@@ -86,3 +86,56 @@ async def test_a_queued_wait_follows_the_queue_at_once(bus: Bus, manager: TaskMa
     manager.cancel(before.id)
     # No longer behind the cancelled tour: it waits for the running one only.
     assert manager.eta_s(behind) == wait_before
+
+
+async def test_a_skipped_stop_leaves_its_leg_and_talk_out_and_is_told_with_its_reason(
+    bus: Bus, manager: TaskManager, clock: Clock, events: list[Message]
+) -> None:
+    """Issue 36: a stop only closed elements lead to is skipped; what is left no longer counts
+    it (and nothing is learned from it), and the task's progress names it with why."""
+    robot = RobotStub(bus, "R1", "charge_a")
+    robot.state()
+    task = manager.request("tour", {"tour": "ground"})
+    robot.start(task.id)
+    segments = [(s.kind, s.nominal_s) for s in manager.estimator.segments(task, "charge_a")]
+    move, talk = manager.estimator.move.value, manager.estimator.talk.value
+    clock.now += 1.0
+    robot.endpoint.publish(
+        "tour_progress",
+        {
+            "task_id": task.id,
+            "robot": "R1",
+            "index": 1,
+            "total": 5,
+            "poi": "welcome",
+            "stage": "skipped",
+            "reason": "gallery hall closed: a reception",
+        },
+    )
+    assert (manager.estimator.move.value, manager.estimator.talk.value) == (move, talk)
+    skipped = last_event(events, task.id)
+    assert skipped["remaining_s"] == round(real_s(manager, segments[2:]), 1)
+    progress = skipped["progress"]
+    assert isinstance(progress, dict)
+    assert progress["skipped"] == [
+        {
+            "index": 1,
+            "poi": "welcome",
+            "name": "Welcome hall",
+            "reason": "gallery hall closed: a reception",
+        }
+    ]
+
+
+async def test_a_queued_tour_is_told_its_length_without_the_stops_closed_now(
+    manager: TaskManager,
+) -> None:
+    """Building modes: a closed gallery's stops will be skipped, so a tour asked for now is
+    told a shorter length; once reopened, the whole tour again."""
+    whole = manager.estimator.preview("tour", {"tour": "ground"}).duration_s
+    assert whole is not None
+    manager.estimator.closed = lambda: {"gb1": "closed", "gb2": "closed"}
+    shorter = manager.estimator.preview("tour", {"tour": "ground"}).duration_s
+    assert shorter is not None and shorter < whole
+    manager.estimator.closed = lambda: {}
+    assert manager.estimator.preview("tour", {"tour": "ground"}).duration_s == whole

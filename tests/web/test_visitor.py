@@ -20,6 +20,7 @@ from playwright.async_api import expect
 
 from guidebot.messages import Message
 from guidebot.site.schema import Site
+from guidebot.testing import wait_until
 from robot_agent.agent import RobotAgent
 from robot_agent.testing import light_robot
 
@@ -264,12 +265,13 @@ async def test_after_a_live_edit_reorders_the_tour_the_page_names_the_robots_rea
         await web.axe_check(page)
 
 
-async def test_during_a_jam_the_panel_promises_no_wait(
+async def test_during_a_jam_a_tour_skips_the_stops_behind_the_door_and_says_why(
     visitor_fleet: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
-    """The robot is stopped before a door that does not open: the start screen and a visitor
-    in line are told robots are held up, not "a robot can come in 3 min"; once the door is
-    repaired, waits come back."""
+    """Issue 36, "Routing around trouble": a door that does not open is closed as trouble
+    (robots used to stand before it, "held up", for minutes). With no other way to the
+    galleries behind it, a visit there fails at once saying why, a tour skips those stops, tells
+    its visitor which and why, and goes on to the stop it can reach (upstairs, by the lift)."""
     async with visitor_fleet() as vf:
         vf.fleet.building.jam_door("door_gallery")
         page = (await open_page(vf.panel_url(), viewport=PHONE)).page
@@ -280,11 +282,17 @@ async def test_during_a_jam_the_panel_promises_no_wait(
                 "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "mosaics"}}
             )
             assert r.status_code == 201, r.text
-        await expect(service).to_contain_text("Robots are held up", timeout=LONG)
+            visit = r.json()["id"]
+        await wait_until(lambda: vf.task(visit).state == "failed", timeout=LONG / 1000)
+        assert "door door_gallery out of order" in vf.task(visit).reason
         await request_from(page, "Highlights")
+        skipped = page.locator(".skipped")
+        await expect(skipped).to_contain_text(
+            "Stop 1, Roman mosaics: door door_gallery is jammed", timeout=LONG
+        )
+        await expect(skipped).to_contain_text(
+            "Stop 2, Bronze Age sword: door door_gallery is jammed"
+        )
         state = page.locator(".request-state")
-        await expect(state).to_contain_text("You are number 1 in line")
-        await expect(state).to_contain_text("Robots are held up")
+        await expect(state).to_contain_text("The tour has ended", timeout=LONG)
         await web.axe_check(page)
-        vf.fleet.building.jam_door("door_gallery", False)
-        await expect(state).not_to_contain_text("Robots are held up", timeout=LONG)

@@ -14,6 +14,7 @@ import { eventsView } from "/admin/views/events.js";
 import { fleetView } from "/admin/views/fleet.js";
 import { locksView } from "/admin/views/locks.js";
 import { detailsView, toolbarView } from "/admin/views/map.js";
+import { Modes, modesView } from "/admin/views/modes.js";
 import { Monitor, monitorView } from "/admin/views/monitor.js";
 import { reportsView } from "/admin/views/reports.js";
 import { robotsView } from "/admin/views/robots.js";
@@ -27,6 +28,7 @@ const VIEWS = [
   ["fleet", "Fleet"],
   ["locks", "Locks"],
   ["building", "Building"],
+  ["modes", "Modes"],
   ["monitor", "RoboGraph monitor"],
   ["alerts", "Alerts"],
   ["events", "Event log"],
@@ -38,6 +40,7 @@ const RENDER = {
   fleet: fleetView,
   locks: locksView,
   building: buildingView,
+  modes: modesView,
   monitor: monitorView,
   alerts: alertsView,
   events: eventsView,
@@ -184,6 +187,7 @@ async function start() {
   ui.map = map;
   map.describeRobot = (s) => robotDoing(store, s);
   ui.monitor = new Monitor(ui);
+  ui.modes = new Modes(ui);
   let pathKey = "";
   store.addEventListener("robot_state", (e) => {
     map.updateRobot(e.detail);
@@ -272,6 +276,7 @@ async function start() {
     ui.go(ui.view);
     await map.setSite(store.site);
     await store.reload();
+    await ui.modes.start();
   } catch (err) {
     render(html`<p class="notice error" role="alert">${err.message}</p>`, $("details"));
     return;

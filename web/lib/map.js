@@ -73,6 +73,7 @@ export class FloorMap extends EventTarget {
     await Promise.all(site.floors.map((f) => this.#drawPlan(f)));
     this.#drawGraph(site);
     this.#drawFixtures(site);
+    this.#drawClosed();
     this.showFloor(this.floor && this.floorLayers.has(this.floor) ? this.floor : site.floors[0].id);
   }
 
@@ -261,6 +262,28 @@ export class FloorMap extends EventTarget {
       mark.options.className = cls;
       mark.getElement?.()?.setAttribute("class", `${cls} leaflet-interactive`);
       mark.setTooltipContent(`elevator ${liftId}: ${here ? `here${doorOpen ? ", door open" : ""}` : `at ${floorId}`}`);
+    }
+  }
+
+  /** Closed nodes (building modes and trouble, GET /api/closures): node id -> why, each
+   * drawn as a red ring on its floor (the console's Building modes view keeps it current). */
+  setClosed(closed) {
+    this.closed = closed;
+    this.#drawClosed();
+  }
+
+  #drawClosed() {
+    for (const mark of this.closedMarks ?? []) mark.remove();
+    this.closedMarks = [];
+    if (!this.nodes) return;
+    for (const [id, why] of this.closed ?? []) {
+      const n = this.nodes.get(id);
+      const layer = n && this.floorLayers.get(n.floor);
+      if (!layer) continue;
+      const mark = L.circleMarker([n.y, n.x], { radius: 11, className: "map-closed" });
+      mark.bindTooltip(`${id} closed: ${why}`, { direction: "top" });
+      mark.addTo(layer);
+      this.closedMarks.push(mark);
     }
   }
 

@@ -7,6 +7,7 @@ import { fragmentToken } from "/lib/auth.js";
 import { HubClient } from "/lib/hub.js";
 import { loadTexts, preferredLanguage } from "/lib/i18n.js";
 import { Api, ApiError } from "/lib/rest.js";
+import { skippedLines } from "/lib/skipped.js";
 
 const options = new URLSearchParams(location.hash.slice(1));
 const query = new URLSearchParams(location.search);
@@ -133,6 +134,8 @@ function told(status, before = undefined) {
   const merged = { ...before, ...status, toldAt: performance.now() };
   // Who cancelled it is kept once known (a restarted server no longer knows it).
   if (before?.cancelled_by && !status.cancelled_by) merged.cancelled_by = before.cancelled_by;
+  // Skipped stops stay shown after the tour ends (its last news has no progress any more).
+  if (status.progress?.skipped?.length) merged.skipped = status.progress.skipped;
   return merged;
 }
 
@@ -430,6 +433,8 @@ function requestView() {
     <div class=${`request-state ${r.state}`} role="status" aria-live="polite" aria-atomic="true">
       ${statusLines(r).map((line) => html`<p>${line}</p>`)}
     </div>
+    ${r.skipped?.length ? html`<section class="skipped" aria-labelledby="skipped-title"><h3 id="skipped-title">${t("skipped_title")}</h3>
+      <ul>${skippedLines(t, r.skipped, placeOf).map((line) => html`<li>${line}</li>`)}</ul></section>` : ""}
     ${progress && progress.total ? html`<label class="progress">${t("progress_label")}
       <progress max=${progress.total} value=${progress.index}>${progress.index} / ${progress.total}</progress></label>` : ""}
     <div class="actions">

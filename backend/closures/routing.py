@@ -1,0 +1,85 @@
+"""Paths that avoid closed nodes (building modes and trouble, backend/closures).
+
+The site graph's own search (guidebot/site/graph.py) knows nothing of closures: its answer is
+taken when it crosses no closed node, else a Dijkstra over the graph without the closed nodes
+finds the way around. A goal that is itself closed, or that only closed nodes lead to, raises
+``RouteClosed`` naming the closures that cut it off (what the visitor is told)."""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Mapping
+
+from backend.closures.model import Closure
+from guidebot.site.graph import NoPath, PathResult, SiteGraph
+
+__all__ = ["RouteClosed", "path_avoiding"]
+
+
+class RouteClosed(NoPath):
+    """No way to the goal but through closed elements."""
+
+    def __init__(self, goal: str, closures: list[Closure]) -> None:
+        self.goal = goal
+        self.closures = closures
+        super().__init__(f"{goal} cut off: {self.reason}")
+
+    @property
+    def reason(self) -> str:
+        """Why, for the visitor, one part per closure joined by "; ": "<gallery|door|elevator|
+        nodes> <id> closed: <staff's words>" or, for trouble, "<door|elevator> <id> out of
+        order" (docs/protocol.md, "Skipped stops": pages put it in the visitor's language)."""
+        return "; ".join(
+            f"{c.what()} out of order"
+            if c.source == "trouble"
+            else f"{c.what()} closed: {c.reason}"
+            for c in self.closures
+        )
+
+
+def path_avoiding(
+    graph: SiteGraph, start: str, goal: str, closed: Mapping[str, Closure]
+) -> PathResult:
+    """The shortest path from ``start`` to ``goal`` over open nodes (``start`` may be closed: a
+    robot inside a closed gallery gets out). Raises UnknownNode, NoPath, or RouteClosed."""
+    plain = graph.shortest_path(start, goal)  # UnknownNode / NoPath as without closures
+    if not closed:
+        return plain
+    if goal in closed and goal != start:
+        raise RouteClosed(goal, [closed[goal]])
+    if not any(n in closed for n in plain.nodes[1:]):
+        return plain
+    found = _dijkstra(graph, start, goal, closed)
+    if found is None:
+        cut = list({id(c): c for n in plain.nodes[1:] if (c := closed.get(n))}.values())
+        raise RouteClosed(goal, cut)
+    nodes, length = found
+    return PathResult(nodes, length, [graph.step(n) for n in nodes])
+
+
+def _dijkstra(
+    graph: SiteGraph, start: str, goal: str, closed: Mapping[str, Closure]
+) -> tuple[list[str], float] | None:
+    dist: dict[str, float] = {start: 0.0}
+    prev: dict[str, str] = {}
+    heap = [(0.0, start)]
+    while heap:
+        d, node = heapq.heappop(heap)
+        if node == goal:
+            path = [goal]
+            while path[-1] != start:
+                path.append(prev[path[-1]])
+            path.reverse()
+            return path, d
+        if d > dist.get(node, math.inf):
+            continue
+        for nxt, cost in graph.adj.get(node, ()):
+            if nxt in closed:
+                continue
+            nd = d + cost
+            if nd < dist.get(nxt, math.inf):
+                dist[nxt] = nd
+                prev[nxt] = node
+                heapq.heappush(heap, (nd, nxt))
+    return None
