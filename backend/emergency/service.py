@@ -376,7 +376,13 @@ class EmergencyService(Service):
         self.store.record_event(
             "robot_evacuation",
             msg.source,
-            {"robot": msg.source, "state": report.state, "node": report.node, "why": report.why},
+            {
+                "robot": msg.source,
+                "state": report.state,
+                "node": report.node,
+                "why": report.why,
+                **({"stopped_at": report.stopped_at} if report.stopped_at is not None else {}),
+            },
         )
 
     def _zone_dicts(self) -> list[dict[str, list[str]]]:
