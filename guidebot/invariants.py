@@ -39,10 +39,12 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
-__all__ = ["InvariantChecker", "Violation"]
+__all__ = ["ALARM_RULES", "InvariantChecker", "Violation"]
 
 T = TypeVar("T")
 
+ALARM_RULES = ("escape_route", "elevator_ride", "alarm_door")
+"""The fire alarm's invariants (rule 4)."""
 BY_HAND_S = 30.0
 """A door opening within this many seconds of a person's order (console) is that person's."""
 

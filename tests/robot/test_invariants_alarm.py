@@ -3,7 +3,7 @@ broken once is found, and the same moves outside the alarm, or legal under it, a
 
 from __future__ import annotations
 
-from guidebot.invariants import InvariantChecker
+from guidebot.invariants import ALARM_RULES, InvariantChecker
 from guidebot.site.schema import Site
 
 
@@ -22,9 +22,6 @@ def _checker() -> InvariantChecker:
 
 def _reach(c: InvariantChecker, robot: str, node: str, at: float) -> None:
     c.feed("node_reached", {"robot": robot, "node": node, "at": at}, at)
-
-
-ALARM_RULES = ("escape_route", "elevator_ride", "alarm_door")
 
 
 def _kinds(c: InvariantChecker) -> list[tuple[str, str]]:
