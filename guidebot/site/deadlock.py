@@ -92,11 +92,14 @@ class _Model:
     rest_locks: set[str]
     succ: dict[str, set[str]]
     """place -> the places a robot can drive into from it (one step)."""
+    _runs: dict[str, list[tuple[tuple[str, ...], str | None]]] = field(default_factory=dict)
 
     def runs(self, start: str) -> list[tuple[tuple[str, ...], str | None]]:
         """Every run of back-to-back locks from ``start``: (locks, where it ends: a free part
-        it comes out into, or None: it stops in the last lock)."""
-        out: list[tuple[tuple[str, ...], str | None]] = []
+        it comes out into, or None: it stops in the last lock). Computed once per lock."""
+        if start in self._runs:
+            return self._runs[start]
+        out: list[tuple[tuple[str, ...], str | None]] = self._runs.setdefault(start, [])
 
         def walk(path: tuple[str, ...]) -> None:
             here = path[-1]
