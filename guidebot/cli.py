@@ -34,6 +34,7 @@ BENCHMARKS: dict[str, str] = {
     "reconfigure": "bench.reconfigure:main",
     "console": "bench.console:main",
     "reaction": "bench.reaction:main",
+    "emergency": "bench.emergency:main",
     "soak": "bench.soak:main",
     "failover": "bench.failover:main",
 }
