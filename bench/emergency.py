@@ -160,6 +160,8 @@ class Run:
     resume_s: float | None = None
     stuck: int = 0
     missing_stop: int = 0
+    declared_s: float | None = None
+    """The server declared the alarm (its event's time): poll, filter and the server's part."""
 
 
 @dataclass
@@ -299,6 +301,8 @@ class Bench:
         safe: dict[str, float] = {}
         for e in events:
             data = e.get("data") or {}
+            if e["kind"] == "emergency_declared" and run.declared_s is None:
+                run.declared_s = float(e["at"]) - raised
             if e["kind"] != "robot_evacuation":
                 continue
             robot = str(data.get("robot"))
@@ -414,6 +418,20 @@ def summarise(
         "violations_by_rule": by_rule,
         "robot_stop_ms": stats([s for r in runs for s in r.stop_s], 1000.0, 1),
         "safe_s": stats([r.safe_s for r in runs if r.safe_s is not None]),
+        "steps_ms": {
+            "input_to_declared": stats(
+                [r.declared_s for r in runs if r.declared_s is not None], 1000.0, 1
+            ),
+            "declared_to_last_stop": stats(
+                [
+                    max(r.stop_s) - r.declared_s
+                    for r in runs
+                    if r.stop_s and r.declared_s is not None
+                ],
+                1000.0,
+                1,
+            ),
+        },
         "runs_not_all_safe": sum(1 for r in runs if r.stuck),
         "stops_not_seen": sum(r.missing_stop for r in runs),
         "checked": {k: v for k, v in checker.counts.items() if k != "events"},
