@@ -43,6 +43,7 @@ import yaml
 
 from bench.reaction import _robots, _wait_fleet
 from bench.robot import _server_process
+from bench.soak import _until_signal
 from bench.soak_site import soak_site
 from guidebot.benchutil import percentiles, print_result
 from guidebot.invariants import InvariantChecker
@@ -470,7 +471,9 @@ def main(
 ) -> None:
     """Fire alarm input -> every robot stopped, clear of the escape routes, safe; resume."""
     logging.basicConfig(level=logging.WARNING)  # one line a run, on stderr
-    results, checker = asyncio.run(_experiment(site_kind, robots, runs, nodes, time_scale, seed))
+    results, checker = asyncio.run(
+        _until_signal(_experiment(site_kind, robots, runs, nodes, time_scale, seed))
+    )
     result = summarise(results, checker, site_kind, robots, nodes)
     if not as_json:
         for v in checker.violations:

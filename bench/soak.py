@@ -21,9 +21,10 @@ import shutil
 import signal
 import tempfile
 import time
+from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import click
 import httpx
@@ -38,6 +39,7 @@ from guidebot.invariants import ALARM_RULES, InvariantChecker
 
 __all__ = ["SoakOptions", "main", "run_soak"]
 
+T = TypeVar("T")
 ADMIN = "dev-admin-token"
 LOCK_GRACE_S = 30.0
 RESUME_WAIT_S = 180.0
@@ -432,7 +434,7 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
     }
 
 
-async def _until_signal(run: Any) -> dict[str, Any]:
+async def _until_signal(run: Awaitable[T]) -> T:
     """SIGTERM or SIGINT cancel the run, whose clean-up stops every child (each runs in a
     session of its own, so nothing else would)."""
     task = asyncio.ensure_future(run)

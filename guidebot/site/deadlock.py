@@ -266,8 +266,8 @@ def lock_loc(site: Site, lock: str) -> tuple[str | int, ...]:
     """Where a lock of a cycle is in the site document (``("areas", 2)``), for file:line."""
     kind, _, name = lock.partition(" ")
     section = "areas" if kind == "area" else "elevators"
-    items = site.areas if kind == "area" else site.elevators
-    return next(((section, i) for i, item in enumerate(items) if item.id == name), (section,))
+    ids = [a.id for a in site.areas] if kind == "area" else [e.id for e in site.elevators]
+    return (section, ids.index(name)) if name in ids else (section,)
 
 
 def find_deadlock(
