@@ -112,7 +112,9 @@ def bench_site(robots: int, period_ms: int, modbus_port: int) -> dict[str, Any]:
 
 
 @contextlib.asynccontextmanager
-async def _robots(url: str, site: Path, count: int) -> AsyncIterator[list[Any]]:
+async def _robots(
+    url: str, site: Path, count: int, time_scale: float = 1.0
+) -> AsyncIterator[list[Any]]:
     """``count`` robot processes with simulated RoboCAN, each printing its ready line."""
     children = []
     try:
@@ -120,6 +122,8 @@ async def _robots(url: str, site: Path, count: int) -> AsyncIterator[list[Any]]:
             args = guidebot_command("robot", "--name", f"R{i}")
             args += ["--server", url, "--token", f"robot-R{i}-bench-token", "--simulate"]
             args += ["--site", str(site), "--log-level", "warning"]
+            if time_scale != 1.0:
+                args += ["--time-scale", f"{time_scale:g}"]
             children.append(
                 await asyncio.create_subprocess_exec(
                     *args, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL

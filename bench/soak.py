@@ -21,9 +21,10 @@ import shutil
 import signal
 import tempfile
 import time
+from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import click
 import httpx
@@ -34,12 +35,15 @@ from bench.soak_fleet import Child, LinkRelay, free_port, healthy, wait_for
 from bench.soak_site import PANELS, robot_token, soak_site, with_ports
 from bench.soak_watch import Watch, unhandled_errors
 from guidebot.benchutil import print_result
-from guidebot.invariants import InvariantChecker
+from guidebot.invariants import ALARM_RULES, InvariantChecker
 
 __all__ = ["SoakOptions", "main", "run_soak"]
 
+T = TypeVar("T")
 ADMIN = "dev-admin-token"
 LOCK_GRACE_S = 30.0
+RESUME_WAIT_S = 180.0
+"""Wall seconds the soak tries to resume service after a fire alarm is cleared."""
 
 
 @dataclass
@@ -51,6 +55,8 @@ class SoakOptions:
     time_scale: float = 10.0
     db: str | None = None
     fault_every_s: float = 8.0
+    fire_alarm: bool = False
+    """Deal the ``fire_alarm`` fault too (bench/soak_faults.py)."""
     request_every_s: float = 2.0
     drain_s: float = 180.0
     workdir: Path | None = None
@@ -257,6 +263,8 @@ class Soak:
             self.server_up = True
             return True
         async with httpx.AsyncClient(timeout=10.0) as http:
+            if kind == "fire_alarm":
+                return await self._fire_alarm(http, target, undo=undo)
             if kind == "modbus_offline":
                 body = {"kind": "none" if undo else "offline"}
                 r = await http.post(f"{self.control}/modules/{target}/fault", json=body)
@@ -277,6 +285,34 @@ class Soak:
             else:
                 raise ValueError(f"unknown fault kind {kind!r}")
         r.raise_for_status()
+        return True
+
+    async def _fire_alarm(self, http: httpx.AsyncClient, alarm_id: str, *, undo: bool) -> bool:
+        """The alarm input to its alarm value; undone: back to normal, then service resumed as
+        a person would, tried again while the server refuses (input not read yet, server or
+        module down under another fault)."""
+        alarm = next(a for a in self.site["emergency"]["alarms"] if a["id"] == alarm_id)
+        ref, active = alarm["input"], int(alarm.get("active_when", 1))
+        r = await http.post(
+            f"{self.control}/points/{ref['module']}/{ref['point']}",
+            json={"value": 1 - active if undo else active},
+        )
+        r.raise_for_status()
+        if not undo:
+            return True
+        deadline = time.monotonic() + RESUME_WAIT_S
+        why = ""
+        while time.monotonic() < deadline:
+            with contextlib.suppress(httpx.HTTPError):
+                r = await http.post(f"{self.url}/api/emergency/resume", headers=_auth(ADMIN))
+                if r.status_code == 200:
+                    return True
+                why = r.text[:200]
+                if r.status_code == 409 and "cannot become normal" in why:
+                    return True  # already normal (resumed before a server restart, say)
+            await asyncio.sleep(0.5)
+        assert self.watch is not None
+        self.watch.notes.append(f"fire alarm {alarm_id}: service not resumed: {why}")
         return True
 
     # --- the referee -----------------------------------------------------------------------
@@ -336,10 +372,15 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
                 [m["id"] for m in soak.site["modules"]],
                 [e["id"] for e in soak.site["elevators"]],
                 [d["id"] for d in soak.site["doors"]],
+                alarms=[a["id"] for a in (soak.site.get("emergency") or {}).get("alarms", [])],
+                kinds=(*KINDS, "fire_alarm") if opts.fire_alarm else KINDS,
+                time_scale=opts.time_scale,
             )
             if opts.faults
             else []
         )
+        if opts.fire_alarm:
+            soak.injected["fire_alarm"] = 0
         _log(f"{len(plan)} faults planned from seed {opts.seed}; logs in {work}")
         stop = asyncio.Event()
         soak.t0 = time.monotonic()
@@ -365,7 +406,7 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
     errors = unhandled_errors([c.log for c in soak.children()])
     counts = watch.task_counts()
     counts["tasks_lost"] += len(stuck)
-    by_kind = {"area": 0, "door": 0, "cabin": 0}
+    by_kind = dict.fromkeys(("area", "door", "cabin", *ALARM_RULES), 0)
     for violation in watch.checker.violations:
         by_kind[violation.invariant] += 1
     for line in (
@@ -386,13 +427,14 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         "area_violations": by_kind["area"] + len(watch.lock_violations),
         "door_violations": by_kind["door"],
         "elevator_violations": by_kind["cabin"],
+        "alarm_violations": sum(by_kind[rule] for rule in ALARM_RULES),
         "faults_injected": soak.injected,
         "unhandled_errors": len(errors),
         "max_rss_mb": watch.rss_mb,
     }
 
 
-async def _until_signal(run: Any) -> dict[str, Any]:
+async def _until_signal(run: Awaitable[T]) -> T:
     """SIGTERM or SIGINT cancel the run, whose clean-up stops every child (each runs in a
     session of its own, so nothing else would)."""
     task = asyncio.ensure_future(run)
@@ -420,6 +462,13 @@ async def _until_signal(run: Any) -> dict[str, Any]:
     help="Mean wall seconds between two faults.",
 )
 @click.option(
+    "--fire-alarm/--no-fire-alarm",
+    default=False,
+    show_default=True,
+    help="Deal the fire_alarm fault too: the site's alarm input raised for 20-60 site seconds, "
+    "then cleared and service resumed.",
+)
+@click.option(
     "--drain",
     type=click.FloatRange(min=10.0),
     default=180.0,
@@ -441,6 +490,7 @@ def main(
     time_scale: float,
     db: str | None,
     fault_every: float,
+    fire_alarm: bool,
     drain: float,
     workdir: Path | None,
     as_json: bool,
@@ -454,6 +504,7 @@ def main(
         time_scale=time_scale,
         db=db,
         fault_every_s=fault_every,
+        fire_alarm=fire_alarm,
         drain_s=drain,
         workdir=workdir,
     )

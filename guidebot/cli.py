@@ -36,6 +36,7 @@ BENCHMARKS: dict[str, str] = {
     "reconfigure": "bench.reconfigure:main",
     "console": "bench.console:main",
     "reaction": "bench.reaction:main",
+    "emergency": "bench.emergency:main",
     "soak": "bench.soak:main",
     "failover": "bench.failover:main",
     "vda5050": "bench.vda5050:main",

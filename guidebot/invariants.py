@@ -4,11 +4,19 @@
    ``door_closed`` with ``sensed`` false, is unknown: not checked until it is sensed again).
 2. No robot enters a cabin node unless the cabin is at that floor with its door open.
 3. No two robots in one restricted area (by position, and by grants).
+4. While a fire alarm holds a zone (docs/emergency.md): no robot enters an escape route of the
+   zone (a robot already in one may leave it), no elevator ride starts with a robot in the cabin
+   when any stop of the elevator is in the zone, no door of the zone is opened but by a person
+   (``door_opened_by_hand``). The alarm reaches a robot ``reach_s`` after it is declared (the
+   chain input -> server -> robot takes that long; the bench's goal is 500 ms p99): the rules
+   hold from then on, so a move or a door opening ordered just before the alarm is not counted.
 
 Fed with the building's broadcasts (door_opened / door_closed, elevator_in_position with
 door_open), the robots' node_reached and the Traffic Manager's area_granted / area_released
-(or the robots' release_area). Used by the integration tests and ``guidebot bench soak``;
-it depends on nothing but the standard library, so any process can run it.
+(or the robots' release_area), and the alarm's ``emergency_declared`` / ``emergency_resumed``
+(event log) or ``emergency_changed`` (hub). Used by the integration tests, ``guidebot bench
+soak`` and ``guidebot bench emergency``; it depends on nothing but the standard library, so
+any process can run it.
 
 Time, not arrival, decides. A robot whose link is down keeps its ``node_reached`` reports and
 sends them when the link is back, seconds later: the soak saw a robot "enter a closed cabin"
@@ -31,15 +39,21 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
-__all__ = ["InvariantChecker", "Violation"]
+__all__ = ["ALARM_RULES", "InvariantChecker", "Violation"]
 
 T = TypeVar("T")
+
+ALARM_RULES = ("escape_route", "elevator_ride", "alarm_door")
+"""The fire alarm's invariants (rule 4)."""
+BY_HAND_S = 30.0
+"""A door opening within this many seconds of a person's order (console) is that person's."""
 
 
 @dataclass(frozen=True)
 class Violation:
     invariant: str
-    """"door", "cabin" or "area"."""
+    """"door", "cabin", "area", or an alarm rule: "escape_route", "elevator_ride",
+    "alarm_door"."""
     robot: str
     detail: str
     at: float | None = None
@@ -79,6 +93,11 @@ class TimeLine(Generic[T]):
         hi = bisect.bisect_left(self.times, before)
         return list(zip(self.times[lo:hi], self.values[lo:hi], strict=True))
 
+    def since(self, when: float) -> float | None:
+        """When the value ``when`` sees was set (None: the initial value)."""
+        i = bisect.bisect_right(self.times, when)
+        return self.times[i - 1] if i else None
+
     def next_change(self, after: float) -> float:
         i = bisect.bisect_right(self.times, after)
         return self.times[i] if i < len(self.times) else float("inf")
@@ -94,9 +113,23 @@ class InvariantChecker:
     """node -> (elevator, floor) of a cabin stop"""
     area_at: Mapping[str, str]
     """node -> restricted area"""
+    escape_at: Mapping[str, str] = field(default_factory=dict)
+    """node -> escape route (a restricted area robots leave and avoid in an alarm)"""
+    floor_of: Mapping[str, str] = field(default_factory=dict)
+    """node -> floor (to know which nodes a floor's alarm holds)"""
+    reach_s: float = 1.0
+    """Seconds from an alarm's declaration to the moment its rules hold (see above)."""
     violations: list[Violation] = field(default_factory=list)
     counts: dict[str, int] = field(
-        default_factory=lambda: {"door": 0, "cabin": 0, "area": 0, "events": 0}
+        default_factory=lambda: {
+            "door": 0,
+            "cabin": 0,
+            "area": 0,
+            "escape_route": 0,
+            "elevator_ride": 0,
+            "alarm_door": 0,
+            "events": 0,
+        }
     )
     """How many times each invariant was checked (a run that checked nothing proves nothing)."""
     doors: dict[str, TimeLine[bool | None]] = field(default_factory=dict)
@@ -107,16 +140,24 @@ class InvariantChecker:
     """robot -> node (None: unknown)"""
     holders: dict[str, str] = field(default_factory=dict)
     """area -> robot granted it"""
+    alarm: TimeLine[tuple[Mapping[str, Any], ...]] = field(default_factory=lambda: TimeLine(()))
+    """The zones a fire alarm holds ({} the whole site, {floors} or {areas}); () none."""
+    by_hand: dict[str, float] = field(default_factory=dict)
+    """door -> the last time a person asked for it to open (console)."""
     _now: float = 0.0
     """The latest event time seen; events fed without a time come just after it."""
 
     @classmethod
     def from_site(cls, site: Any) -> InvariantChecker:
         """From a site document (guidebot.site.schema.Site or anything shaped like it)."""
+        emergency = getattr(site, "emergency", None)
+        routes = set(emergency.escape_routes) if emergency is not None else set()
         return cls(
             door_at={d.node: d.id for d in site.doors},
             cabin_at={s.node: (e.id, s.floor) for e in site.elevators for s in e.stops},
             area_at={n: a.id for a in site.areas for n in a.nodes},
+            escape_at={n: a.id for a in site.areas if a.id in routes for n in a.nodes},
+            floor_of={n.id: n.floor for n in site.nodes},
         )
 
     @property
@@ -169,6 +210,7 @@ class InvariantChecker:
 
     def _on_door_opened(self, p: Mapping[str, Any], at: float) -> None:
         self._line(self.doors, str(p.get("door")), False).set(at, True)
+        self._alarm_door(str(p.get("door")), at)
 
     def _on_door_closed(self, p: Mapping[str, Any], at: float) -> None:
         known = p.get("sensed", True) is not False
@@ -187,7 +229,10 @@ class InvariantChecker:
         reached = p.get("at")
         if isinstance(reached, int | float) and reached <= at:
             at = float(reached)  # the robot's time: it may report late, never early
-        self._line(self.positions, robot, None).set(at, node)
+        line = self._line(self.positions, robot, None)
+        before, before_at = line.at(at), line.since(at)
+        line.set(at, node)
+        self._check_alarm_move(robot, node, before, before_at, at)
         door = self.door_at.get(node)
         if door is not None:
             self.counts["door"] += 1
@@ -248,3 +293,79 @@ class InvariantChecker:
 
     _on_area_released = _on_release_area
     _on_area_force_released = _on_release_area
+
+    # -- the fire alarm's rules ------------------------------------------------------------
+
+    def _zone_holds(self, zone: Mapping[str, Any], node: str) -> bool:
+        floors, areas = zone.get("floors") or [], zone.get("areas") or []
+        if floors:
+            return self.floor_of.get(node) in floors
+        if areas:
+            return self.area_at.get(node) in areas
+        return True
+
+    def held(self, node: str, at: float) -> bool:
+        """An alarm holds ``node`` at ``at`` and has held it for ``reach_s`` already."""
+        return all(
+            any(self._zone_holds(z, node) for z in self.alarm.at(t))
+            for t in (at, at - self.reach_s)
+        )
+
+    def _check_alarm_move(
+        self, robot: str, node: str, before: str | None, before_at: float | None, at: float
+    ) -> None:
+        route = self.escape_at.get(node)
+        if route is not None and before is not None and self.escape_at.get(before) != route:
+            self.counts["escape_route"] += 1
+            if self.held(node, at):
+                self._fail("escape_route", robot, f"entered escape route {route} at {node}", at)
+        cabin, came_from = self.cabin_at.get(node), self.cabin_at.get(before or "")
+        if cabin is None or came_from is None or before_at is None:
+            return
+        (elevator, floor), (was_elevator, was_floor) = cabin, came_from
+        if elevator != was_elevator or floor == was_floor:
+            return
+        self.counts["elevator_ride"] += 1
+        # The ride started when the cabin, with the robot in it, left the robot's floor.
+        cabin_line = self._line(self.cabins, elevator, None)
+        start = next(
+            (t for t, where in cabin_line.changes(before_at, at) if where != was_floor), at
+        )
+        stops = [n for n, (e, _) in self.cabin_at.items() if e == elevator]
+        if any(self.held(stop, start) for stop in stops):
+            self._fail(
+                "elevator_ride",
+                robot,
+                f"rode {elevator} from {was_floor} to {floor} during the fire alarm",
+                start,
+            )
+
+    def _alarm_door(self, door: str, at: float) -> None:
+        node = next((n for n, d in self.door_at.items() if d == door), None)
+        if node is None:
+            return
+        self.counts["alarm_door"] += 1
+        if not self.held(node, at):
+            return
+        asked = self.by_hand.get(door)
+        if asked is not None and asked <= at <= asked + BY_HAND_S:
+            return  # a person opened it (the console), not the fleet for a robot
+        self._fail("alarm_door", "-", f"door {door} opened during the fire alarm", at)
+
+    def _on_door_opened_by_hand(self, p: Mapping[str, Any], at: float) -> None:
+        self.by_hand[str(p.get("door"))] = at
+
+    def _on_emergency_declared(self, p: Mapping[str, Any], at: float) -> None:
+        zones = p.get("zones")
+        self.alarm.set(at, tuple(zones) if isinstance(zones, list) and zones else ({},))
+
+    def _on_emergency_resumed(self, p: Mapping[str, Any], at: float) -> None:
+        self.alarm.set(at, ())
+
+    def _on_emergency_changed(self, p: Mapping[str, Any], at: float) -> None:
+        """The hub's broadcast: ``state`` normal, alarm or input_clear (still held)."""
+        if p.get("state") == "normal":
+            if self.alarm.at(at):
+                self.alarm.set(at, ())
+        else:
+            self._on_emergency_declared(p, at)

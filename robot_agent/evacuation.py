@@ -10,9 +10,10 @@ for as on any path, and the Traffic Manager grants them to a robot on its way to
 from __future__ import annotations
 
 import logging
+import time
 from typing import Any
 
-from guidebot.bus import BusEndpoint
+from guidebot.bus import Endpoint
 from guidebot.messages import Message
 from guidebot.payloads.emergency import EvacuationState, EvacuationStateName
 from guidebot.payloads.petri import Say
@@ -36,7 +37,7 @@ class Evacuation(Service):
     """Follows ``evacuate`` and ``emergency_changed`` on the on-board bus."""
 
     def __init__(
-        self, endpoint: BusEndpoint, robot: str, navigator: Navigator, tasks: TaskRunner
+        self, endpoint: Endpoint, robot: str, navigator: Navigator, tasks: TaskRunner
     ) -> None:
         super().__init__()
         self.ep = endpoint
@@ -66,11 +67,22 @@ class Evacuation(Service):
         if message.destination not in (None, self.robot):
             return
         nav = self.navigator
-        nav.halt(force=True)  # first: the base stands still
+        stopped: list[float] = []
+
+        def on_velocity(command: Message) -> None:
+            if not (command.payload.get("v") or command.payload.get("w")) and not stopped:
+                stopped.append(time.time())
+
+        # A tap subscribed after the base entity's handler: it runs once the frame is sent.
+        unsubscribe = self.ep.subscribe("set_velocity", on_velocity, tap=True)
+        try:
+            nav.halt(force=True)  # first: the base stands still
+        finally:
+            unsubscribe()
         nav.evacuating = True
         self.tasks.abort(CUT_OFF)
         nav.cancel_goal()  # abandons the goal and lets go of every door held
-        self._report("stopped")
+        self._report("stopped", stopped_at=stopped[0] if stopped else None)
         payload: dict[str, Any] = message.payload
         words: dict[str, str] = payload.get("words") or {}
         if words:
@@ -119,7 +131,11 @@ class Evacuation(Service):
             self.navigator.evacuating = False
             self.state = None
 
-    def _report(self, state: EvacuationStateName, *, why: str = "") -> None:
+    def _report(
+        self, state: EvacuationStateName, *, why: str = "", stopped_at: float | None = None
+    ) -> None:
         self.state = state
         log.warning("%s: evacuation %s at %s %s", self.robot, state, self.navigator.node, why)
-        self.ep.publish(EvacuationState(state=state, node=self.navigator.node, why=why))
+        self.ep.publish(
+            EvacuationState(state=state, node=self.navigator.node, why=why, stopped_at=stopped_at)
+        )

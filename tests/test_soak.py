@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.soak_faults import KINDS, schedule
+from bench.soak_faults import ALL_KINDS, KINDS, schedule
 from bench.soak_watch import TaskSeen, Watch
 from guidebot.invariants import InvariantChecker
 
@@ -25,6 +25,7 @@ KEYS = [
     "area_violations",
     "door_violations",
     "elevator_violations",
+    "alarm_violations",
     "faults_injected",
     "unhandled_errors",
     "max_rss_mb",
@@ -40,6 +41,22 @@ def test_the_fault_plan_is_reproducible_and_deals_every_kind() -> None:
 
     assert plan(SEED) == plan(SEED)
     assert plan(SEED) != plan(SEED + 1)
+
+
+def test_the_fire_alarm_fault_is_dealt_on_demand_for_site_seconds() -> None:
+    """``--fire-alarm``: the kind joins the deck; it lasts 20-60 site seconds, wall seconds
+    at the time scale; the default deck stays as it was."""
+    targets = (["R1"], ["m1"], ["lift"], ["d1"])
+    faults = schedule(
+        SEED, 120.0, 5.0, *targets, alarms=["fire_main"], kinds=ALL_KINDS, time_scale=10.0
+    )
+    alarms = [f for f in faults if f.kind == "fire_alarm"]
+    assert alarms and all(f.target == "fire_main" and 2.0 <= f.hold_s <= 6.0 for f in alarms)
+    assert "fire_alarm" not in {f.kind for f in schedule(SEED, 120.0, 5.0, *targets)}
+    with pytest.raises(ValueError, match="needs an alarm input"):
+        schedule(SEED, 60.0, 5.0, *targets, kinds=ALL_KINDS)
+    with pytest.raises(ValueError, match="unknown fault kind"):
+        schedule(SEED, 60.0, 5.0, *targets, kinds=("flood",))
 
 
 def test_failure_reasons_are_counted_with_their_numbers_blurred() -> None:
@@ -77,6 +94,7 @@ async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path
     assert result["area_violations"] == 0, report
     assert result["door_violations"] == 0, report
     assert result["elevator_violations"] == 0, report
+    assert result["alarm_violations"] == 0, report
     assert result["unhandled_errors"] == 0, report
     assert set(result["faults_injected"]) == set(KINDS)
     assert sum(result["faults_injected"].values()) >= 6, result["faults_injected"]

@@ -49,3 +49,6 @@ class EvacuationState(PayloadModel):
     state: EvacuationStateName
     node: str | None = None
     why: str = ""
+    stopped_at: float | None = None
+    """``stopped`` only: when (Unix seconds) the zero-velocity command reached the base, i.e.
+    its frame went out on the robot's CAN bus (the base sends it inline); None: not seen."""

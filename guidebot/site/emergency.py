@@ -24,6 +24,7 @@ __all__ = [
     "Emergency",
     "emergency_problems",
     "nearest_safe_spot",
+    "safety_table",
     "zone_nodes",
 ]
 
@@ -147,11 +148,24 @@ def closed_nodes(site: Site, emergency: Emergency) -> set[str]:
     return escape_nodes(site, emergency) | {d.node for d in site.doors}
 
 
-def nearest_safe_spot(site: Site, emergency: Emergency, start: str) -> list[str] | None:
+SafetyTable = dict[str, tuple[float, str, str | None]]
+"""node -> (distance, its nearest safe spot, the next node on the way there)."""
+
+
+def safety_table(site: Site, emergency: Emergency) -> SafetyTable:
+    """One search from every safe spot at once, for every robot's way (``nearest_safe_spot``):
+    compute it once per site and alarm, not once per robot."""
+    return _to_safety(site, emergency.safe_spots, closed_nodes(site, emergency))
+
+
+def nearest_safe_spot(
+    site: Site, emergency: Emergency, start: str, table: SafetyTable | None = None
+) -> list[str] | None:
     """The path (start first, safe spot last) to the nearest safe spot without an elevator,
     entering no escape route and no door node (leaving one the robot stands on by the shortest
-    way); None when there is no such way."""
-    table = _to_safety(site, emergency.safe_spots, closed_nodes(site, emergency))
+    way); None when there is no such way. ``table``: ``safety_table`` of the same site."""
+    if table is None:
+        table = safety_table(site, emergency)
     if start not in table:
         return None
     path = [start]

@@ -76,6 +76,9 @@ async def test_alarm_stops_the_robot_sends_it_to_safety_and_resume_runs_its_tour
                     "no zero-velocity frame on the CAN bus after the alarm"
                 ) from None
             stops = stops_seen()
+            # The robot says when its stop went out on the bus (guidebot bench emergency).
+            [stopped] = reported("stopped")
+            assert stopped.payload["stopped_at"] >= stops[0].timestamp
             print(f"alarm_to_stop_ms={(stops[0].timestamp - raised) * 1000:.0f}")
             # It says the words in its visitor's language, and drives to its safe spot.
             said = [m.payload for m in fleet.onboard_of("say")]

@@ -95,6 +95,15 @@ export class EditMap extends EventTarget {
       });
       line.addTo(this.layer);
     });
+    // The fire alarm's escape routes: their nodes' edges drawn over, red and dashed.
+    const em = doc.emergency;
+    const escape = new Set((doc.areas ?? []).filter((a) => em?.escape_routes?.includes(a.id)).flatMap((a) => a.nodes ?? []));
+    doc.edges.forEach((edge) => {
+      const a = nodes.get(edge.a);
+      const b = nodes.get(edge.b);
+      if (!a || !b || a.floor !== floorId || b.floor !== floorId || !escape.has(edge.a) || !escape.has(edge.b)) return;
+      L.polyline([[a.y, a.x], [b.y, b.x]], { className: "map-escape", weight: 10, interactive: false }).addTo(this.layer);
+    });
     doc.nodes.forEach((node, i) => {
       if (node.floor !== floorId) return;
       const marker = L.marker([node.y, node.x], {
@@ -153,6 +162,26 @@ export class EditMap extends EventTarget {
         });
         marker.addTo(this.layer);
       });
+    }
+    (em?.safe_spots ?? []).forEach((spot) => {
+      const n = nodes.get(spot);
+      if (!n || !here(spot)) return;
+      const marker = L.marker([n.y - 0.9, n.x + 0.9], {
+        icon: icon(`edit-safe${selected?.section === "emergency" ? " selected" : ""}`, `safe spot ${spot}`, "S"),
+        keyboard: true,
+        title: `safe spot ${spot}`,
+        zIndexOffset: 400,
+      });
+      marker.on("click", (e) => {
+        L.DomEvent.stop(e);
+        this.#emit("select", { section: "emergency", index: null });
+      });
+      marker.addTo(this.layer);
+    });
+    for (const node of escape) {
+      const n = nodes.get(node);
+      if (!n || !here(node)) continue;
+      L.circleMarker([n.y, n.x], { radius: 12, className: "map-escape-node", interactive: false }).addTo(this.layer);
     }
     if (!this.fitted.has(floorId)) {
       this.fitted.add(floorId);

@@ -8,6 +8,7 @@ import { Api, ApiError } from "/lib/rest.js";
 import { EditMap } from "/config/editmap.js";
 import { KINDS, elementForm, newElement, round } from "/config/forms.js";
 import { DraftModel } from "/config/model.js";
+import { emergencyForm, toggleSafeSpot } from "/config/emergency.js";
 
 const $ = (id) => document.getElementById(id);
 let token = currentToken();
@@ -93,6 +94,14 @@ async function start(me) {
 
   map.addEventListener("select", (e) => select(e.detail.section, e.detail.index));
   map.addEventListener("node", (e) => {
+    if (ui.tool === "safe") {
+      const on = model.doc.emergency?.safe_spots?.includes(e.detail.id);
+      toggleSafeSpot(model, e.detail.id);
+      ui.section = "emergency";
+      ui.selected = null;
+      say(`Node ${e.detail.id} ${on ? "is no longer a safe spot" : "is a safe spot"}.`);
+      return;
+    }
     if (ui.tool === "edge") {
       if (!ui.edgeFrom) { ui.edgeFrom = e.detail.id; say(`Edge from ${e.detail.id}: now click the other node.`); return; }
       const a = ui.edgeFrom;
@@ -283,6 +292,9 @@ async function start(me) {
     if (ui.selected && !doc[ui.selected.section]?.[ui.selected.index]) ui.selected = null;
     map.draw(doc, ui.floor, byElement, ui.selected);
     const count = model.issues.length;
+    const em = doc.emergency;
+    const emIssues = model.issues.filter((i) => i.loc.startsWith("emergency")).length;
+    const zonesHere = (em?.alarms ?? []).filter((a) => !a.zone?.areas?.length && (!a.zone?.floors?.length || a.zone.floors.includes(ui.floor)));
     render(html`
       <span>${me.name} <span class="badge">${me.role}</span></span>
       <span class="muted" id="draft-status">Draft revision ${model.revision} · live version ${model.liveVersion}</span>
@@ -305,7 +317,10 @@ async function start(me) {
         const bad = [...byElement.keys()].filter((k) => k.startsWith(`${section}/`)).length;
         return html`<li><button type="button" class=${ui.section === section ? "kind current" : "kind secondary"} aria-pressed=${ui.section === section ? "true" : "false"}
           @click=${() => select(section, null)}>${kind.label} (${(doc[section] ?? []).length})${bad ? html` <span class="error">⚠ ${bad}</span>` : nothing}</button></li>`;
-      })}</ul></nav>
+      })}<li><button type="button" class=${ui.section === "emergency" ? "kind current" : "kind secondary"} aria-pressed=${ui.section === "emergency" ? "true" : "false"}
+          @click=${() => select("emergency", null)}>Fire alarm (${em ? `${em.alarms.length} input(s)` : "none"})${emIssues ? html` <span class="error">⚠ ${emIssues}</span>` : nothing}</button></li></ul></nav>
+      ${ui.section === "emergency" ? html`<h2 id="list-title">Fire alarm</h2>
+      <p class="muted">${em ? `${em.alarms.length} alarm input(s), ${em.safe_spots.length} safe spot(s), ${em.escape_routes.length} escape route(s): edit them on the right, safe spots also on the plan.` : "Not set up yet."}</p>` : html`
       <h2 id="list-title">${KINDS[ui.section].label}</h2>
       <ul class="elements" aria-labelledby="list-title">${(doc[ui.section] ?? []).map((item, i) => {
         const label = ui.section === "edges" ? `${item.a} ${item.one_way ? "→" : "↔"} ${item.b}` : `${item.name && item.id ? `${item.name} (${item.id})` : item.name || item.id}`;
@@ -317,16 +332,17 @@ async function start(me) {
         const item = newElement(doc, ui.section, { x: 0, y: 0, floor: ui.floor });
         model.edit(`add ${KINDS[ui.section].one}`, (d) => { d[ui.section] ??= []; d[ui.section].push(item); });
         select(ui.section, model.doc[ui.section].length - 1);
-      }}>Add ${KINDS[ui.section].one}</button>`, $("lists"));
+      }}>Add ${KINDS[ui.section].one}</button>`}`, $("lists"));
     render(html`
       <label for="floor-select">Floor</label> <select id="floor-select" @change=${(e) => { ui.floor = e.target.value; draw(); }}>
         ${doc.floors.map((f) => html`<option value=${f.id} ?selected=${f.id === ui.floor}>${f.name || f.id}</option>`)}</select>
       <fieldset class="tools"><legend class="sr-only">Tool</legend>
-        ${[["select", "Select"], ["node", "Add node"], ["edge", "Add edge"]].map(([t, label]) => html`
+        ${[["select", "Select"], ["node", "Add node"], ["edge", "Add edge"], ["safe", "Safe spot"]].map(([t, label]) => html`
           <label class="tool"><input type="radio" name="tool" value=${t} .checked=${ui.tool === t}
             @change=${() => { ui.tool = t; ui.edgeFrom = null; draw(); }}> ${label}</label>`)}
         <label class="tool"><input type="checkbox" .checked=${ui.oneWay} @change=${(e) => { ui.oneWay = e.target.checked; }}> one-way</label>
       </fieldset>
+      ${zonesHere.length ? html`<span class="alarm-zone" id="alarm-zones">Fire alarm on this floor: ${zonesHere.map((a) => `${a.id} (${a.zone?.floors?.length ? "floor" : "whole site"})`).join(", ")}</span>` : nothing}
       ${ui.calibration ? html`<form class="calibrate" @submit=${applyCalibration} aria-label="Calibrate the plan">
         <span>Calibrate: click two points on the plan a known distance apart (${ui.calibration.points.length} of 2).</span>
         ${ui.calibration.points.length >= 2 ? html`
@@ -337,11 +353,13 @@ async function start(me) {
         <button type="button" class="secondary" @click=${() => { ui.calibration = null; ui.tool = "select"; draw(); }}>Cancel</button></form>` : nothing}`, $("map-toolbar"));
     render(html`
       <section aria-labelledby="details-title"><h2 id="details-title" class="sr-only">Selected element</h2>
-        ${ui.selected ? elementForm(ctxFor(ui.selected.section, ui.selected.index)) : html`<p class="muted">Select an element on the plan or in the list.</p>`}</section>
+        ${ui.section === "emergency" ? emergencyForm({ doc, issues: model.issues, edit: (label, fn) => model.edit(label, fn) })
+          : ui.selected ? elementForm(ctxFor(ui.selected.section, ui.selected.index)) : html`<p class="muted">Select an element on the plan or in the list.</p>`}</section>
       <section aria-labelledby="problems-title"><h2 id="problems-title">Problems (${model.issues.length})</h2>
         ${model.issues.length ? html`<ul class="problems">${model.issues.map((issue) => {
           const m = /^([a-z_]+)\[(\d+)\]/.exec(issue.loc);
-          return html`<li><button type="button" class="link" @click=${() => m && select(m[1], Number(m[2]))}>${model.describeLoc(issue.loc)}</button>: ${issue.msg}</li>`;
+          const go = () => (issue.loc.startsWith("emergency") ? select("emergency", null) : m && select(m[1], Number(m[2])));
+          return html`<li><button type="button" class="link" @click=${go}>${model.describeLoc(issue.loc)}</button>: ${issue.msg}</li>`;
         })}</ul>` : html`<p class="ok-text">The draft passes every check of <code>guidebot site check</code>.</p>`}</section>
       <section aria-labelledby="publish-title"><h2 id="publish-title">Published versions</h2>
         ${ui.rollout ? html`<p role="status" id="rollout">${rolloutText(ui.rollout)}</p>` : nothing}
