@@ -1,0 +1,102 @@
+"""REST of the RoboGraph editor (/nets/, docs/nets.md): open a library net or a PNML file as the
+editor's JSON, check a net with the engine's own rules, export it as PNML with its drawing.
+
+Nothing here changes the server: the net being edited lives in the page. Staff (operators and
+admins) may call every route; the page lets admins edit and shows operators the nets read-only.
+Status codes: 404 for a net the library does not have, 413 for a file above ``MAX_PNML_BYTES``,
+422 for a PNML file that cannot be read (every problem with its line) or a net document that
+is not one (FastAPI's validation errors).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, HTTPException, Path, Request, Response, status
+
+from backend.api.deps import Staff, not_found
+from guidebot.messages import known_types, payload_model
+from petri_nets.library import UnknownNet
+from petri_nets.model import ACTION_KINDS, CONDITION_KINDS, GUARD_TESTS, OUTCOMES
+from petri_nets.netjson import (
+    EditorNet,
+    check_net,
+    doc_to_editor,
+    editor_to_pnml,
+    pnml_to_editor,
+)
+from petri_nets.validate import NET_OUTCOMES
+
+__all__ = ["MAX_PNML_BYTES", "router"]
+
+router = APIRouter(prefix="/api/net-editor", tags=["net editor"])
+
+MAX_PNML_BYTES = 2_000_000
+"""The largest PNML file the editor opens (the library's largest is under 30 kB)."""
+
+Name = Annotated[str, Path(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.\-]+$")]
+
+
+def _fields(type_name: str) -> list[str]:
+    return list(payload_model(type_name).model_fields)
+
+
+@router.get("/vocabulary")
+async def vocabulary(_: Staff) -> dict[str, Any]:
+    """What the engine knows, offered as choices: action and condition kinds, guard tests,
+    outcomes, and every registered message type with its payload fields."""
+    return {
+        "action_kinds": list(ACTION_KINDS),
+        "condition_kinds": list(CONDITION_KINDS),
+        "guard_tests": list(GUARD_TESTS),
+        "final_outcomes": list(OUTCOMES),
+        "net_outcomes": list(NET_OUTCOMES),
+        "orders": ["sequence", "random"],
+        "message_types": {t: _fields(t) for t in sorted(known_types())},
+    }
+
+
+@router.get("/library/{net}")
+async def library_net(request: Request, _: Staff, net: Name) -> dict[str, Any]:
+    """A net of the server's library as the editor's document (its PNML drawing)."""
+    try:
+        doc = request.app.state.rgm.library.get(net).doc
+    except UnknownNet:
+        raise not_found(f"net {net!r}") from None
+    return doc_to_editor(doc)
+
+
+@router.post("/check")
+async def check(_: Staff, body: Annotated[EditorNet, Body()]) -> dict[str, Any]:
+    """The problems ``guidebot petri check`` finds in the net, each naming its element
+    ("net", "param:NAME", "place:ID", "transition:ID", "arc:ID")."""
+    return {"problems": check_net(body)}
+
+
+@router.post(
+    "/import",
+    openapi_extra={"requestBody": {"content": {"application/xml": {"schema": {"type": "string"}}}}},
+)
+async def import_pnml(request: Request, _: Staff) -> dict[str, Any]:
+    """A PNML file (the request body) as the editor's document; one the reader cannot make a
+    net of is refused (422, every problem with its line)."""
+    raw = await request.body()
+    if len(raw) > MAX_PNML_BYTES:
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "PNML file too large")
+    if not raw.strip():
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, ["the PNML file is empty"])
+    net, problems = pnml_to_editor(raw, "upload.pnml")
+    if net is None:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, problems)
+    return {"net": net, "problems": problems}
+
+
+@router.post("/export")
+async def export_pnml(_: Staff, body: Annotated[EditorNet, Body()]) -> Response:
+    """The net as a PNML file with its drawing, for download (``guidebot petri run`` runs it)."""
+    data = editor_to_pnml(body)
+    return Response(
+        data,
+        media_type="application/xml",
+        headers={"Content-Disposition": f'attachment; filename="{body.id}.pnml"'},
+    )

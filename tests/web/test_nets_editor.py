@@ -1,0 +1,106 @@
+"""The RoboGraph editor (/nets/) in a real browser against a real server: open a library net,
+add a place and an arc, see the engine's problem on its element and in the list, fix it, export
+PNML that the reader takes back; operators read only."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+from playwright.async_api import expect
+
+from petri_nets.pnml import read_pnml
+from petri_nets.validate import validate
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
+
+PROBLEMS = re.compile(r"^\d+ problem\(s\)$")
+
+
+async def open_editor(open_page: Any, fleet: Any, token: str) -> Any:
+    watch = await open_page(f"{fleet.server.url}/nets/")
+    page = watch.page
+    await page.get_by_label("Staff token").fill(token)
+    await page.get_by_label("Staff token").press("Enter")
+    await page.get_by_label("Library net").wait_for()
+    return watch
+
+
+async def test_edit_a_library_net_see_a_problem_come_and_go_and_export_it(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_label("Library net").select_option("explain_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await expect(page.locator("#problem-count")).to_have_text("No problems")
+        canvas = page.locator("#canvas svg")
+        await expect(canvas.locator("g.net-node")).to_have_count(10)
+        await web.axe_check(page)
+        # A new place, away from the drawing.
+        await page.get_by_label("Add place").check()
+        box = await canvas.bounding_box()
+        assert box is not None
+        await page.mouse.click(box["x"] + box["width"] - 30, box["y"] + box["height"] - 30)
+        new_place = canvas.locator('g[data-id="p1"]')
+        await expect(new_place).to_be_visible()
+        # An arc from it into the first transition: that transition can never fire now.
+        first = await page.evaluate("guidebotNets.model.doc.transitions[0].id")
+        await page.get_by_label("Add arc").check()
+        await new_place.click()
+        await canvas.locator(f'g[data-id="{first}"]').click()
+        await expect(page.locator("#problem-count")).to_have_text(PROBLEMS)
+        on_element = canvas.locator(f'g[data-id="{first}"]')
+        await expect(on_element).to_have_class("net-node transition has-issue")
+        await expect(page.locator("#problems")).to_contain_text("can never be enabled")
+        await expect(page.locator("#problems")).to_contain_text(
+            f"transition:{first}: transition {first} can never be enabled: input place(s) p1"
+        )
+        await web.axe_check(page)
+        await web.screenshot(page, "nets-problem")
+        # Fixed: the new place starts marked.
+        await page.get_by_label("Select and move").check()
+        await new_place.click()
+        await page.get_by_label("Initial tokens").fill("1")
+        await page.get_by_label("Initial tokens").press("Enter")
+        await expect(page.locator("#problem-count")).to_have_text("No problems")
+        await expect(on_element).not_to_have_class("net-node transition has-issue")
+        # Undo brings the problem back, redo fixes it again.
+        await page.get_by_role("button", name="Undo").click()
+        await expect(page.locator("#problem-count")).to_have_text(PROBLEMS)
+        await page.get_by_role("button", name="Redo").click()
+        await expect(page.locator("#problem-count")).to_have_text("No problems")
+        # Export: the reader takes the file back, with the new place where it was drawn.
+        async with page.expect_download() as download_info:
+            await page.get_by_role("button", name="Export PNML").click()
+        download = await download_info.value
+        path = tmp_path / "explain_point.pnml"
+        await download.save_as(path)
+        doc, problems = read_pnml(path.read_bytes(), str(path))
+        assert doc is not None and problems == []
+        assert validate(doc) == []
+        place = next(p for p in doc.places if p.id == "p1")
+        assert place.initial == 1 and place.graphics is not None
+        assert any(a.source == "p1" and a.target == first for a in doc.arcs)
+
+
+async def test_an_operator_reads_a_net_without_editing_tools(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, web.operator_token)).page
+        await page.get_by_label("Library net").select_option("give_tour")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await expect(page.locator("#canvas g.net-node").first).to_be_visible()
+        await expect(page.get_by_text("Read only: administrators edit nets.")).to_be_visible()
+        await expect(page.get_by_label("Add place")).to_have_count(0)
+        await (
+            page.locator("#lists")
+            .get_by_role("button", name="give_tour (parameters, description)")
+            .click()
+        )
+        await expect(page.get_by_label("Description")).to_be_disabled()
+        await web.axe_check(page)

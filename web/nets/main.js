@@ -1,0 +1,254 @@
+// The RoboGraph editor (/nets/, docs/nets.md): open a library net or a PNML file, draw and edit
+// it, checked by the engine's rules as you edit, export it as PNML. Admins edit; operators read.
+import { html, nothing, render } from "lit-html";
+import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
+import { Api, ApiError } from "/lib/rest.js";
+import { NetCanvas } from "/nets/canvas.js";
+import { detailsForm } from "/nets/forms.js";
+import { NetModel, emptyNet } from "/nets/model.js";
+
+const $ = (id) => document.getElementById(id);
+const STAFF = ["admin", "operator"];
+let token = currentToken();
+const api = new Api(() => token);
+
+function showSignIn(message = "") {
+  $("editor").hidden = true;
+  const section = $("signin");
+  section.hidden = false;
+  const submit = async (event) => {
+    event.preventDefault();
+    token = new FormData(event.target).get("token").trim();
+    const me = await api.get("/api/me").catch((err) => err);
+    if (me instanceof Error || !STAFF.includes(me.role)) {
+      const why = me instanceof Error ? me.message : `This token belongs to ${me.name} (role ${me.role}); the editor is for staff.`;
+      token = null;
+      return showSignIn(why);
+    }
+    saveToken(token);
+    start(me);
+  };
+  render(html`<h2>Sign in</h2><p>Administrators edit nets; operators read them.</p>
+    <form @submit=${submit}><label>Staff token <input name="token" type="password" autocomplete="current-password" required></label>
+    <button type="submit">Sign in</button></form>
+    ${message ? html`<p class="notice error" role="alert">${message}</p>` : ""}`, section);
+  section.querySelector("input").focus();
+}
+
+async function boot() {
+  if (!token) return showSignIn();
+  const me = await api.get("/api/me").catch((err) => err);
+  if (me instanceof Error || !STAFF.includes(me.role)) {
+    forgetToken();
+    token = null;
+    return showSignIn(me instanceof Error ? me.message : "The editor is for staff.");
+  }
+  start(me);
+}
+
+/** A request whose body is a file: rest.js sends JSON only. */
+async function sendFile(path, body) {
+  let response;
+  try {
+    response = await fetch(path, { method: "POST", body, headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/xml", Accept: "application/json" } });
+  } catch {
+    throw new ApiError(0, "The server cannot be reached: check the network.");
+  }
+  const data = await response.json().catch(() => ({}));
+  if (!response.ok) {
+    const detail = data.detail ?? null;
+    const text = Array.isArray(detail) ? detail.map((d) => (typeof d === "string" ? d : d.msg)).join("; ") : detail ?? `the server answered ${response.status}`;
+    throw new ApiError(response.status, text, detail);
+  }
+  return data;
+}
+
+async function start(me) {
+  $("signin").hidden = true;
+  $("editor").hidden = false;
+  const readOnly = me.role !== "admin";
+  const model = new NetModel(api);
+  const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary: null, libraryNet: "" };
+  window.guidebotNets = ui; // for the browser tests
+  api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
+  const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
+  const select = (kind, id) => { ui.selected = kind ? { kind, id } : null; draw(); };
+
+  const canvas = new NetCanvas($("canvas"), {
+    select,
+    add(tool, x, y) {
+      const kind = tool === "place" ? "place" : "transition";
+      const id = model.freshId(kind === "place" ? "p" : "t");
+      model.edit(`add ${kind}`, (d) => {
+        if (kind === "place") d.places.push({ id, name: id, x, y, initial: 0, final: false, outcome: "done", action: null });
+        else d.transitions.push({ id, name: id, x, y, priority: 0, condition: null });
+      });
+      select(kind, id);
+      say(`${kind === "place" ? "Place" : "Transition"} ${id} added.`);
+    },
+    move(id, x, y) {
+      model.edit("move", () => { const n = model.node(id); n.x = x; n.y = y; });
+    },
+    connect(a, b) {
+      const isPlace = (id) => model.doc.places.some((p) => p.id === id);
+      if (isPlace(a) === isPlace(b)) return say("An arc joins a place and a transition.", true);
+      const existing = model.doc.arcs.find((arc) => arc.source === a && arc.target === b);
+      if (existing) return say(`There is already an arc ${a} → ${b}: change its weight instead.`, true);
+      const id = model.freshId("a");
+      model.edit("add arc", (d) => d.arcs.push({ id, source: a, target: b, weight: 1 }));
+      select("arc", id);
+      say(`Arc ${a} → ${b} added.`);
+    },
+  });
+
+  function remove(kind, id) {
+    model.edit(`delete ${kind}`, (d) => {
+      if (kind === "arc") d.arcs = d.arcs.filter((a) => a.id !== id);
+      else {
+        d.places = d.places.filter((p) => p.id !== id);
+        d.transitions = d.transitions.filter((t) => t.id !== id);
+        d.arcs = d.arcs.filter((a) => a.source !== id && a.target !== id);
+      }
+    });
+    select(null);
+  }
+
+  /** Give a node a new id: its arcs follow. */
+  function rename(kind, id, next) {
+    if (!next || next === id) return;
+    if (model.node(next) || model.doc.arcs.some((a) => a.id === next)) return say(`The id ${next} is taken.`, true);
+    model.edit(`rename ${kind}`, (d) => {
+      if (kind === "arc") { d.arcs.find((a) => a.id === id).id = next; return; }
+      const list = kind === "place" ? d.places : d.transitions;
+      list.find((n) => n.id === id).id = next;
+      for (const a of d.arcs) { if (a.source === id) a.source = next; if (a.target === id) a.target = next; }
+    });
+    select(kind, next);
+  }
+
+  async function openLibrary(name) {
+    try {
+      model.open(await api.get(`/api/net-editor/library/${encodeURIComponent(name)}`));
+      canvas.fit(model.doc);
+      select(null);
+      say(`Net ${name} opened from the library.`);
+    } catch (err) {
+      say(err.message, true);
+    }
+  }
+
+  async function openFile(input) {
+    const file = input.files?.[0];
+    if (!file) return;
+    try {
+      const reply = await sendFile("/api/net-editor/import", await file.text());
+      model.open(reply.net);
+      canvas.fit(model.doc);
+      select(null);
+      say(`${file.name} opened${reply.net.layout === "layered" ? " (it had no drawing: laid out in layers)" : ""}.`);
+    } catch (err) {
+      say(`${file.name} cannot be opened: ${err.message}`, true);
+    }
+    input.value = "";
+  }
+
+  async function exportPnml() {
+    try {
+      const blob = await api.post("/api/net-editor/export", model.doc);
+      const a = document.createElement("a");
+      a.href = URL.createObjectURL(blob);
+      a.download = `${model.doc.id}.pnml`;
+      a.click();
+      say(`${model.doc.id}.pnml exported${model.problems.length ? ` (with ${model.problems.length} problem(s): guidebot petri check will refuse it)` : ""}.`);
+    } catch (err) {
+      say(`Export refused: ${err.message}`, true);
+    }
+  }
+
+  document.addEventListener("keydown", (e) => {
+    if (e.target.closest?.("input, textarea, select")) return;
+    if ((e.ctrlKey || e.metaKey) && e.key === "z" && !readOnly) { e.preventDefault(); model.undo(); }
+    if ((e.ctrlKey || e.metaKey) && (e.key === "y" || (e.shiftKey && e.key === "Z")) && !readOnly) { e.preventDefault(); model.redo(); }
+    if ((e.key === "Delete" || e.key === "Backspace") && ui.selected && !readOnly) { e.preventDefault(); remove(ui.selected.kind, ui.selected.id); }
+    if (e.key === "Escape") { canvas.pending = null; select(null); }
+  });
+  model.addEventListener("change", () => draw());
+  model.addEventListener("checked", () => draw());
+
+  function elementList(doc, byElement) {
+    const item = (kind, id, label) => {
+      const bad = byElement.has(`${kind}:${id}`);
+      const current = ui.selected?.kind === kind && ui.selected.id === id;
+      return html`<li><button type="button" class=${`element${bad ? " has-issue" : ""}${current ? " current" : ""}`}
+        aria-current=${current ? "true" : "false"} @click=${() => select(kind, id)}>${label}${bad ? " ⚠" : ""}</button></li>`;
+    };
+    return html`
+      <h2>Net</h2><ul class="elements">${item("net", doc.id, `${doc.id} (parameters, description)`)}</ul>
+      <h2 id="places-title">Places (${doc.places.length})</h2>
+      <ul class="elements" aria-labelledby="places-title">${doc.places.map((p) => item("place", p.id, p.name && p.name !== p.id ? `${p.name} (${p.id})` : p.id))}</ul>
+      <h2 id="transitions-title">Transitions (${doc.transitions.length})</h2>
+      <ul class="elements" aria-labelledby="transitions-title">${doc.transitions.map((t) => item("transition", t.id, t.name && t.name !== t.id ? `${t.name} (${t.id})` : t.id))}</ul>
+      <h2 id="arcs-title">Arcs (${doc.arcs.length})</h2>
+      <ul class="elements" aria-labelledby="arcs-title">${doc.arcs.map((a) => item("arc", a.id, `${a.source} → ${a.target}${a.weight > 1 ? ` ×${a.weight}` : ""}`))}</ul>`;
+  }
+
+  function problemTarget(key) {
+    const [kind, ...rest] = key.split(":");
+    const id = rest.join(":");
+    if (kind === "net" || kind === "param") return () => select("net", model.doc.id);
+    return () => select(kind, id);
+  }
+
+  function draw() {
+    const doc = model.doc;
+    const byElement = model.problemsByElement();
+    const count = model.problems.length;
+    if (ui.selected && ui.selected.kind !== "net" && !(ui.selected.kind === "arc" ? doc.arcs.some((a) => a.id === ui.selected.id) : model.node(ui.selected.id))) ui.selected = null;
+    render(html`
+      <span>${me.name} <span class="badge">${me.role}</span>${readOnly ? html` <span class="badge">read only</span>` : nothing}</span>
+      <label>Library net <select id="library-select" @change=${(e) => { ui.libraryNet = e.target.value; }}>
+        ${ui.library.map((n) => html`<option value=${n} ?selected=${n === ui.libraryNet}>${n}</option>`)}</select></label>
+      <button type="button" class="secondary" @click=${() => openLibrary(ui.libraryNet || ui.library[0])}>Open</button>
+      <label>Open a PNML file <input type="file" accept=".pnml,.xml,application/xml,text/xml" @change=${(e) => openFile(e.target)}></label>
+      ${readOnly ? nothing : html`<button type="button" class="secondary" @click=${() => { model.open(emptyNet()); select("net", "new_net"); }}>New net</button>`}
+      ${readOnly ? nothing : html`
+        <button type="button" class="secondary" ?disabled=${!model.undoStack.length} @click=${() => model.undo()}
+          title=${model.undoStack.length ? `Undo ${model.undoStack.at(-1).label}` : "Nothing to undo"}>Undo</button>
+        <button type="button" class="secondary" ?disabled=${!model.redoStack.length} @click=${() => model.redo()}>Redo</button>`}
+      <button type="button" ?disabled=${!doc} @click=${exportPnml}>Export PNML</button>
+      <span id="problem-count" role="status" class=${count ? "error" : "ok-text"}>${!doc ? "" : count ? `${count} problem(s)` : "No problems"}</span>`, $("bar"));
+    render(ui.notice ? html`<div class=${`notice ${ui.notice.error ? "error" : "ok"}`} role=${ui.notice.error ? "alert" : "status"}>${ui.notice.text}</div>` : nothing, $("notices"));
+    if (!doc) {
+      render(html`<p class="muted">Open a net of the library or a PNML file${readOnly ? "" : ", or start a new net"}.</p>`, $("lists"));
+      render(nothing, $("details"));
+      return;
+    }
+    render(elementList(doc, byElement), $("lists"));
+    render(readOnly ? html`<span class="muted">Read only: administrators edit nets.</span>` : html`
+      <fieldset class="tools"><legend class="sr-only">Tool</legend>
+        ${[["select", "Select and move"], ["place", "Add place"], ["transition", "Add transition"], ["arc", "Add arc"]].map(([t, label]) => html`
+          <label><input type="radio" name="tool" value=${t} .checked=${ui.tool === t}
+            @change=${() => { ui.tool = t; canvas.pending = null; draw(); }}> ${label}</label>`)}
+      </fieldset>
+      ${ui.selected && ui.selected.kind !== "net" ? html`<button type="button" class="danger small" @click=${() => remove(ui.selected.kind, ui.selected.id)}>Delete ${ui.selected.kind} ${ui.selected.id}</button>` : nothing}
+      <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it; drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
+    canvas.draw(doc, { tool: ui.tool, selected: ui.selected, problems: byElement, readOnly });
+    render(html`
+      <section aria-labelledby="details-title"><h2 id="details-title">${ui.selected ? `${ui.selected.kind} ${ui.selected.id}` : "Selected element"}</h2>
+        ${ui.selected ? detailsForm({ doc, selected: ui.selected, vocabulary: ui.vocabulary, library: ui.library, readOnly, problems: byElement,
+          edit: (label, fn) => model.edit(label, fn), rename, remove }) : html`<p class="muted">Select an element in the drawing or the list.</p>`}</section>
+      <section aria-labelledby="problems-title"><h2 id="problems-title">Problems (${count})</h2>
+        ${count ? html`<ul class="problems" id="problems">${model.problems.map((p) => html`<li><button type="button" class="link" @click=${problemTarget(p.element)}>${p.element}</button>: ${p.message}</li>`)}</ul>`
+          : html`<p class="ok-text" id="problems">The net passes every check of <code>guidebot petri check</code>.</p>`}</section>`, $("details"));
+  }
+
+  try {
+    [ui.library, ui.vocabulary] = await Promise.all([api.get("/api/nets"), api.get("/api/net-editor/vocabulary")]);
+  } catch (err) {
+    say(err.message, true);
+  }
+  ui.libraryNet = ui.library[0] ?? "";
+  draw();
+}
+
+boot();
