@@ -4,17 +4,20 @@ editor's JSON, check a net with the engine's own rules, export it as PNML with i
 Nothing here changes the server: the net being edited lives in the page. Staff (operators and
 admins) may call every route; the page lets admins edit and shows operators the nets read-only.
 Status codes: 404 for a net the library does not have, 413 for a file above ``MAX_PNML_BYTES``,
-422 for a PNML file that cannot be read (every problem with its line) or a net document that
-is not one (FastAPI's validation errors).
+422 for a PNML file that cannot be read (every problem with its line), a net document that is
+not one (FastAPI's validation errors) or a net the simulation cannot run (the engine's reasons).
 """
 
 from __future__ import annotations
 
+import asyncio
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Request, Response, status
+from pydantic import Field
 
 from backend.api.deps import Staff, not_found
+from backend.api.models import RequestBody
 from guidebot.messages import known_types, payload_model
 from petri_nets.library import UnknownNet
 from petri_nets.model import ACTION_KINDS, CONDITION_KINDS, GUARD_TESTS, OUTCOMES
@@ -25,6 +28,7 @@ from petri_nets.netjson import (
     editor_to_pnml,
     pnml_to_editor,
 )
+from petri_nets.simulate import MAX_SIMULATED_FIRINGS, SimulationRefused, simulate
 from petri_nets.validate import NET_OUTCOMES
 
 __all__ = ["MAX_PNML_BYTES", "router"]
@@ -100,3 +104,41 @@ async def export_pnml(_: Staff, body: Annotated[EditorNet, Body()]) -> Response:
         media_type="application/xml",
         headers={"Content-Disposition": f'attachment; filename="{body.id}.pnml"'},
     )
+
+
+class Simulation(RequestBody):
+    """A net to run against the scripted environment of ``guidebot petri run``."""
+
+    net: EditorNet
+    params: dict[str, Any] = Field(default_factory=dict)
+    replies: dict[str, list[dict[str, Any]]] = Field(default_factory=dict)
+    """Per message type, the replies instead of the default ones (``[]``: never answered)."""
+    max_time: float = Field(default=3600.0, gt=0, le=86_400)
+    max_firings: int = Field(default=MAX_SIMULATED_FIRINGS, ge=1, le=MAX_SIMULATED_FIRINGS)
+
+
+@router.post("/simulate")
+async def simulate_net(
+    request: Request, _: Staff, body: Annotated[Simulation, Body()]
+) -> dict[str, Any]:
+    """Run the net at once on a virtual clock (sub-nets from the server's library) and return
+    the outcome and the whole trace for the page to step through; 422 when it cannot run."""
+    for message_type, replies in body.replies.items():
+        if not all(isinstance(r.get("type"), str) for r in replies):
+            raise HTTPException(
+                status.HTTP_422_UNPROCESSABLE_CONTENT,
+                f'replies to {message_type}: each reply needs a "type"',
+            )
+    folder = request.app.state.rgm.library.folder
+    try:
+        return await asyncio.to_thread(
+            simulate,
+            body.net,
+            body.params,
+            body.replies,
+            folder,
+            max_time=body.max_time,
+            max_firings=body.max_firings,
+        )
+    except SimulationRefused as exc:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc)) from None

@@ -174,3 +174,42 @@ async def test_library_nets_and_vocabulary_for_staff_only(
         body = small_net() if method == "POST" else None
         assert (await panel.request(method, path, json=body)).status_code == 403, path
         assert (await http(None).request(method, path, json=body)).status_code == 401, path
+
+
+async def test_simulate_runs_the_net_against_the_scripted_environment(
+    server: RunningServer, http: Http
+) -> None:
+    operator = http(OPERATOR_TOKEN)
+    r = await operator.post("/api/net-editor/simulate", json={"net": small_net()})
+    assert r.status_code == 200, r.text
+    result = r.json()
+    assert result["outcome"] == "done" and result["fired"] == ["go"]
+    assert result["final_marking"] == {"end": 1}
+    said = [m for m in result["trace"] if m["type"] == "say"]
+    assert [m["payload"] for m in said] == [{"text": "hello"}]
+    # Never answered: the net waits for ever (stuck).
+    r = await operator.post(
+        "/api/net-editor/simulate",
+        json={"net": small_net(), "params": {"text": "bye"}, "replies": {"say": []}},
+    )
+    assert r.json()["outcome"] == "stuck" and r.json()["final_marking"] == {"start": 1}
+
+
+async def test_a_net_that_cannot_run_is_refused_with_the_reason(
+    server: RunningServer, http: Http
+) -> None:
+    admin = http(server.admin_token)
+    net = small_net()
+    net["params"] = [{"name": "text", "required": True}]
+    r = await admin.post("/api/net-editor/simulate", json={"net": net})
+    assert r.status_code == 422
+    assert "text" in r.json()["detail"]
+    net = small_net()
+    net["transitions"].append({"id": "loose"})
+    r = await admin.post("/api/net-editor/simulate", json={"net": net})
+    assert r.status_code == 422
+    assert "transition loose has no input place" in r.json()["detail"]
+    r = await admin.post(
+        "/api/net-editor/simulate", json={"net": small_net(), "replies": {"say": [{"x": 1}]}}
+    )
+    assert r.status_code == 422 and "needs a" in r.json()["detail"]

@@ -13,6 +13,7 @@ import pytest
 from playwright.async_api import expect
 
 from petri_nets.pnml import read_pnml
+from petri_nets.trace import read_trace, replay
 from petri_nets.validate import validate
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
@@ -104,3 +105,42 @@ async def test_an_operator_reads_a_net_without_editing_tools(
         )
         await expect(page.get_by_label("Description")).to_be_disabled()
         await web.axe_check(page)
+
+
+async def test_simulate_a_net_step_by_step_to_its_end(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_label("Library net").select_option("explain_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await expect(page.locator("#problem-count")).to_have_text("No problems")
+        await page.get_by_label("Parameters (JSON object)").fill('{"text": "Hello"}')
+        await page.get_by_role("button", name="Run simulation").click()
+        status = page.locator("#sim-status")
+        await expect(status).to_contain_text("Step 0 of 5")
+        start = page.locator('#canvas g[data-id="address_people"]')
+        await expect(start).to_have_attribute("aria-label", re.compile(r"1 token\(s\)"))
+        await page.get_by_role("button", name="Step", exact=True).click()
+        await expect(status).to_contain_text("Step 1 of 5")
+        await expect(status).to_contain_text("fired people_faced")
+        await expect(start).not_to_have_attribute("aria-label", re.compile("token"))
+        await expect(page.locator('#canvas g[data-id="people_faced"]')).to_have_class(
+            re.compile(r"\bfired\b")
+        )
+        await expect(page.get_by_label("Messages of the simulation")).to_contain_text(
+            "published face_people"
+        )
+        await web.axe_check(page)
+        await web.screenshot(page, "nets-simulation")
+        await page.get_by_role("button", name="To the end").click()
+        await expect(status).to_contain_text("outcome done")
+        await expect(page.locator('#canvas g[data-id="explained"]')).to_have_attribute(
+            "aria-label", re.compile(r"1 token\(s\)")
+        )
+        await expect(page.get_by_label("Messages of the simulation")).to_contain_text('"Hello"')
+        async with page.expect_download() as download_info:
+            await page.get_by_role("button", name="Download trace").click()
+        path = tmp_path / "trace.jsonl"
+        await (await download_info.value).save_as(path)
+        assert replay(read_trace(path))["explain_point#run"] == {"explained": 1}

@@ -67,7 +67,7 @@ export class NetCanvas {
 
   draw(doc, state) {
     this.last = [doc, state];
-    const { tool, selected, problems, readOnly } = state;
+    const { tool, selected, problems, readOnly, marking, fired } = state;
     const byId = new Map([...doc.places.map((p) => [p.id, { ...p, place: true }]), ...doc.transitions.map((t) => [t.id, { ...t, place: false }])]);
     const box = this.host.getBoundingClientRect();
     const vb = `${this.view.x} ${this.view.y} ${(box.width || 800) / this.view.scale} ${(box.height || 500) / this.view.scale}`;
@@ -142,11 +142,12 @@ export class NetCanvas {
       const key = `${n.place ? "place" : "transition"}:${n.id}`;
       const bad = issues(key);
       const label = n.name || n.id;
-      const cls = `net-node ${n.place ? "place" : "transition"}${n.final ? " final" : ""}${isSel(n.place ? "place" : "transition", n.id) ? " selected" : ""}${bad.length ? " has-issue" : ""}`;
-      const tokens = n.place ? (n.initial > 3 ? svg`<text x=${n.x} y=${n.y + 4} text-anchor="middle">${n.initial}</text>`
-        : [...Array(n.initial)].map((_, i) => svg`<circle class="token" r="3.5" cx=${n.x + (n.initial === 1 ? 0 : (i - (n.initial - 1) / 2) * 8)} cy=${n.y}></circle>`)) : null;
+      const cls = `net-node ${n.place ? "place" : "transition"}${n.final ? " final" : ""}${!n.place && fired?.includes(n.id) ? " fired" : ""}${isSel(n.place ? "place" : "transition", n.id) ? " selected" : ""}${bad.length ? " has-issue" : ""}`;
+      const count = marking ? marking.get(n.id) ?? 0 : n.initial; // a simulation's marking, else the initial one
+      const tokens = n.place ? (count > 3 ? svg`<text x=${n.x} y=${n.y + 4} text-anchor="middle">${count}</text>`
+        : [...Array(count)].map((_, i) => svg`<circle class="token" r="3.5" cx=${n.x + (count === 1 ? 0 : (i - (count - 1) / 2) * 8)} cy=${n.y}></circle>`)) : null;
       return svg`<g class=${cls} data-id=${n.id} data-kind=${n.place ? "place" : "transition"} tabindex="0" role="button"
-        aria-label=${`${n.place ? "place" : "transition"} ${label}${bad.length ? `, ${bad.length} problem(s)` : ""}`}
+        aria-label=${`${n.place ? "place" : "transition"} ${label}${n.place && count ? `, ${count} token(s)` : ""}${bad.length ? `, ${bad.length} problem(s)` : ""}`}
         aria-pressed=${isSel(n.place ? "place" : "transition", n.id) ? "true" : "false"}
         @pointerdown=${(e) => nodeDown(e, n)} @keydown=${(e) => keyOnNode(e, n)}>
         <title>${bad.length ? bad.join("; ") : label}</title>

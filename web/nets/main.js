@@ -6,6 +6,7 @@ import { Api, ApiError } from "/lib/rest.js";
 import { NetCanvas } from "/nets/canvas.js";
 import { detailsForm } from "/nets/forms.js";
 import { NetModel, emptyNet } from "/nets/model.js";
+import { Run, defaultParams, parseReplies, simulationPanel } from "/nets/simulation.js";
 
 const $ = (id) => document.getElementById(id);
 const STAFF = ["admin", "operator"];
@@ -68,7 +69,8 @@ async function start(me) {
   $("editor").hidden = false;
   const readOnly = me.role !== "admin";
   const model = new NetModel(api);
-  const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary: null, libraryNet: "" };
+  const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary: null, libraryNet: "",
+    run: null, playing: null, simParams: "{}", simReplies: "" };
   window.guidebotNets = ui; // for the browser tests
   api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
@@ -126,11 +128,65 @@ async function start(me) {
     select(kind, next);
   }
 
+  /** A net opened: its parameters' defaults fill the simulation form. */
+  function opened() {
+    canvas.fit(model.doc);
+    stopSimulating();
+    ui.simParams = defaultParams(model.doc);
+    select(null);
+  }
+
+  function stopSimulating() {
+    if (ui.playing) clearInterval(ui.playing);
+    ui.playing = null;
+    ui.run = null;
+  }
+
+  const simulation = {
+    async start(form) {
+      stopSimulating();
+      ui.simParams = form.get("params");
+      ui.simReplies = form.get("replies");
+      let params;
+      let replies;
+      try {
+        params = JSON.parse(ui.simParams || "{}");
+        replies = parseReplies(ui.simReplies);
+      } catch (err) {
+        return say(`Simulation refused: ${err.message}`, true);
+      }
+      try {
+        ui.run = new Run(await api.post("/api/net-editor/simulate", { net: model.doc, params, replies }));
+        say(`Simulated: ${ui.run.steps.length - 1} step(s), outcome ${ui.run.result.outcome}. Step through it.`);
+      } catch (err) {
+        say(`Simulation refused: ${err.message}`, true);
+      }
+    },
+    step() { if (!ui.run.done) ui.run.at += 1; draw(); },
+    reset() { ui.run.at = 0; draw(); },
+    end() { ui.run.at = ui.run.steps.length - 1; draw(); },
+    play() {
+      ui.playing = setInterval(() => {
+        if (!ui.run || ui.run.done) { simulation.pause(); return; }
+        ui.run.at += 1;
+        draw();
+      }, 500);
+      draw();
+    },
+    pause() { clearInterval(ui.playing); ui.playing = null; draw(); },
+    close() { stopSimulating(); draw(); },
+    download() {
+      const a = document.createElement("a");
+      a.href = URL.createObjectURL(new Blob([ui.run.traceFile()], { type: "application/x-ndjson" }));
+      a.download = `${model.doc.id}.trace.jsonl`;
+      a.click();
+    },
+  };
+
   async function openLibrary(name) {
     try {
       model.open(await api.get(`/api/net-editor/library/${encodeURIComponent(name)}`));
-      canvas.fit(model.doc);
-      select(null);
+      opened();
       say(`Net ${name} opened from the library.`);
     } catch (err) {
       say(err.message, true);
@@ -143,8 +199,7 @@ async function start(me) {
     try {
       const reply = await sendFile("/api/net-editor/import", await file.text());
       model.open(reply.net);
-      canvas.fit(model.doc);
-      select(null);
+      opened();
       say(`${file.name} opened${reply.net.layout === "layered" ? " (it had no drawing: laid out in layers)" : ""}.`);
     } catch (err) {
       say(`${file.name} cannot be opened: ${err.message}`, true);
@@ -172,7 +227,7 @@ async function start(me) {
     if ((e.key === "Delete" || e.key === "Backspace") && ui.selected && !readOnly) { e.preventDefault(); remove(ui.selected.kind, ui.selected.id); }
     if (e.key === "Escape") { canvas.pending = null; select(null); }
   });
-  model.addEventListener("change", () => draw());
+  model.addEventListener("change", () => { if (ui.run) stopSimulating(); draw(); });
   model.addEventListener("checked", () => draw());
 
   function elementList(doc, byElement) {
@@ -210,7 +265,7 @@ async function start(me) {
         ${ui.library.map((n) => html`<option value=${n} ?selected=${n === ui.libraryNet}>${n}</option>`)}</select></label>
       <button type="button" class="secondary" @click=${() => openLibrary(ui.libraryNet || ui.library[0])}>Open</button>
       <label>Open a PNML file <input type="file" accept=".pnml,.xml,application/xml,text/xml" @change=${(e) => openFile(e.target)}></label>
-      ${readOnly ? nothing : html`<button type="button" class="secondary" @click=${() => { model.open(emptyNet()); select("net", "new_net"); }}>New net</button>`}
+      ${readOnly ? nothing : html`<button type="button" class="secondary" @click=${() => { model.open(emptyNet()); opened(); select("net", "new_net"); }}>New net</button>`}
       ${readOnly ? nothing : html`
         <button type="button" class="secondary" ?disabled=${!model.undoStack.length} @click=${() => model.undo()}
           title=${model.undoStack.length ? `Undo ${model.undoStack.at(-1).label}` : "Nothing to undo"}>Undo</button>
@@ -232,14 +287,16 @@ async function start(me) {
       </fieldset>
       ${ui.selected && ui.selected.kind !== "net" ? html`<button type="button" class="danger small" @click=${() => remove(ui.selected.kind, ui.selected.id)}>Delete ${ui.selected.kind} ${ui.selected.id}</button>` : nothing}
       <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it; drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
-    canvas.draw(doc, { tool: ui.tool, selected: ui.selected, problems: byElement, readOnly });
+    canvas.draw(doc, { tool: ui.tool, selected: ui.selected, problems: byElement, readOnly,
+      marking: ui.run?.marking() ?? null, fired: ui.run?.fired() ?? [] });
     render(html`
       <section aria-labelledby="details-title"><h2 id="details-title">${ui.selected ? `${ui.selected.kind} ${ui.selected.id}` : "Selected element"}</h2>
         ${ui.selected ? detailsForm({ doc, selected: ui.selected, vocabulary: ui.vocabulary, library: ui.library, readOnly, problems: byElement,
           edit: (label, fn) => model.edit(label, fn), rename, remove }) : html`<p class="muted">Select an element in the drawing or the list.</p>`}</section>
       <section aria-labelledby="problems-title"><h2 id="problems-title">Problems (${count})</h2>
         ${count ? html`<ul class="problems" id="problems">${model.problems.map((p) => html`<li><button type="button" class="link" @click=${problemTarget(p.element)}>${p.element}</button>: ${p.message}</li>`)}</ul>`
-          : html`<p class="ok-text" id="problems">The net passes every check of <code>guidebot petri check</code>.</p>`}</section>`, $("details"));
+          : html`<p class="ok-text" id="problems">The net passes every check of <code>guidebot petri check</code>.</p>`}</section>
+      ${simulationPanel(ui, simulation)}`, $("details"));
   }
 
   try {
