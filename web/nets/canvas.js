@@ -122,7 +122,10 @@ export class NetCanvas {
       if (d && !d.pan && d.moved) this.handlers.move(d.id, d.x, d.y);
     };
     const keyOnNode = (e, n) => {
-      if (e.key === "Enter" || e.key === " ") { e.preventDefault(); nodeDown(e, n); }
+      if (e.key !== "Enter" && e.key !== " ") return;
+      e.preventDefault();
+      if (tool === "arc" && !readOnly) return nodeDown(e, n); // source, then target
+      this.handlers.select(n.place ? "place" : "transition", n.id);
     };
     const arcs = doc.arcs.map((a) => {
       const s = byId.get(a.source);
