@@ -4,20 +4,24 @@ PNML that the reader takes back; operators read only."""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
+from click.testing import CliRunner
 from playwright.async_api import expect
 
+from petri_nets.cli import petri
 from petri_nets.pnml import read_pnml
 from petri_nets.trace import read_trace, replay
 from petri_nets.validate import validate
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
 
+ROOT = Path(__file__).resolve().parents[2]
 PROBLEMS = re.compile(r"^\d+ problem\(s\)$")
 
 
@@ -144,3 +148,106 @@ async def test_simulate_a_net_step_by_step_to_its_end(
         path = tmp_path / "trace.jsonl"
         await (await download_info.value).save_as(path)
         assert replay(read_trace(path))["explain_point#run"] == {"explained": 1}
+
+
+async def click_at(page: Any, x: float, y: float) -> None:
+    """A click on the drawing at (x, y) of the drawing's own units (the page's view of it)."""
+    point = await page.evaluate(
+        """([x, y]) => {
+          const svg = document.querySelector('#canvas svg');
+          const m = svg.getScreenCTM();
+          return {x: m.a * x + m.e, y: m.d * y + m.f};
+        }""",
+        [x, y],
+    )
+    await page.mouse.click(point["x"], point["y"])
+
+
+async def test_draw_a_net_from_nothing_simulate_it_and_run_the_saved_file(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_role("button", name="New net").click()
+        await page.get_by_label("Net id").fill("hello")
+        await page.get_by_label("Net id").press("Enter")
+        canvas = page.locator("#canvas svg")
+        count = page.locator("#problem-count")
+        await page.get_by_label("Add place").check()
+        await click_at(page, 100, 100)
+        await click_at(page, 100, 260)
+        await page.get_by_label("Add transition").check()
+        await click_at(page, 100, 180)
+        await expect(canvas.locator("g.net-node")).to_have_count(3)
+        # A transition with no input: the engine's problem, on it.
+        t1 = canvas.locator('g[data-id="t1"]')
+        await expect(t1).to_have_class(re.compile(r"\bhas-issue\b"))
+        await expect(page.locator("#problems")).to_contain_text("t1 has no input place")
+        await page.get_by_label("Add arc").check()
+        await canvas.locator('g[data-id="p1"]').click()
+        await t1.click()
+        await t1.click()
+        await canvas.locator('g[data-id="p2"]').click()
+        await expect(page.locator("#problems")).not_to_contain_text("t1 has no input place")
+        await expect(page.locator("#problems")).to_contain_text(
+            "transition t1 can never be enabled: input place(s) p1 can never be marked"
+        )
+        # The start is marked, the end is final; the transition says something first.
+        await page.get_by_label("Select and move").check()
+        await canvas.locator('g[data-id="p1"]').click()
+        await page.get_by_label("Initial tokens").fill("1")
+        await page.get_by_label("Initial tokens").press("Enter")
+        await expect(t1).not_to_have_class(re.compile(r"\bhas-issue\b"))
+        await page.get_by_label("Action").select_option("publish")
+        await page.get_by_label("Message type").select_option("say")
+        await page.get_by_label("Payload (JSON").fill('{"text": "Hello, visitors"}')
+        await page.get_by_label("Payload (JSON").press("Tab")
+        await canvas.locator('g[data-id="t1"]').click()
+        await page.get_by_label("Condition").select_option("message")
+        await page.get_by_label("Message type").select_option("speech_ended")
+        await canvas.locator('g[data-id="p2"]').click()
+        await page.get_by_label("Final place").check()
+        await expect(count).to_have_text("No problems")
+        await web.axe_check(page)
+        # Simulated to its end.
+        await page.get_by_role("button", name="Run simulation").click()
+        await page.get_by_role("button", name="To the end").click()
+        await expect(page.locator("#sim-status")).to_contain_text("outcome done")
+        await expect(page.get_by_label("Messages of the simulation")).to_contain_text(
+            "published say"
+        )
+        # Saved, and run by `guidebot petri run` as it is.
+        async with page.expect_download() as download_info:
+            await page.get_by_role("button", name="Export PNML").click()
+        download = await download_info.value
+        assert download.suggested_filename == "hello.pnml"
+        path = tmp_path / "hello.pnml"
+        await download.save_as(path)
+        result = CliRunner().invoke(petri, ["run", str(path), "--json"])
+        assert result.exit_code == 0, result.output
+        outcome = json.loads(result.output.strip().splitlines()[-1])
+        assert outcome["outcome"] == "done" and outcome["final_marking"] == {"p2": 1}
+        assert outcome["published"] == ["say"]
+
+
+async def test_a_pnml_file_from_another_tool_opens_with_its_drawing(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    woped = ROOT / "tests" / "petri" / "foreign" / "woped_claim.pnml"
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_editor(open_page, fleet, fleet.server.admin_token)
+        page = watch.page
+        await page.get_by_label("Open a PNML file").set_input_files(str(woped))
+        await expect(page.locator("#notices")).to_contain_text("woped_claim.pnml opened")
+        p1 = page.locator('#canvas g[data-id="p1"] circle:not(.token)')
+        await expect(p1).to_have_attribute("cx", "60")
+        await expect(p1).to_have_attribute("cy", "120")
+        await expect(page.locator("#problem-count")).to_have_text("No problems")
+        # A file that is not a net: refused, with the reader's words.
+        watch.expect_error(r"status of 422")
+        await page.get_by_label("Open a PNML file").set_input_files(
+            files=[{"name": "broken.pnml", "mimeType": "application/xml", "buffer": b"<pnml><net>"}]
+        )
+        await expect(page.get_by_role("alert")).to_contain_text("broken.pnml cannot be opened")
+        await expect(page.get_by_role("alert")).to_contain_text("upload.pnml:1:")
+        await web.axe_check(page)
