@@ -25,9 +25,11 @@ from petri_nets.netjson import (
     EditorNet,
     check_net,
     doc_to_editor,
+    editor_to_doc,
     editor_to_pnml,
     pnml_to_editor,
 )
+from petri_nets.reachability import DEFAULT_MAX_STATES, analyse
 from petri_nets.simulate import MAX_SIMULATED_FIRINGS, SimulationRefused, simulate
 from petri_nets.validate import NET_OUTCOMES
 
@@ -142,3 +144,17 @@ async def simulate_net(
         )
     except SimulationRefused as exc:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc)) from None
+
+
+class Analysis(RequestBody):
+    net: EditorNet
+    max_states: int = Field(default=DEFAULT_MAX_STATES, ge=1, le=100_000)
+
+
+@router.post("/analyse")
+async def analyse_net(_: Staff, body: Annotated[Analysis, Body()]) -> dict[str, Any]:
+    """Boundedness, dead transitions and dead ends from the net's reachability graph, explored
+    up to ``max_states`` markings (``complete`` false when it gave up there)."""
+    doc, _ = editor_to_doc(body.net)
+    result = await asyncio.to_thread(analyse, doc, body.max_states)
+    return result.as_dict()

@@ -213,3 +213,24 @@ async def test_a_net_that_cannot_run_is_refused_with_the_reason(
         "/api/net-editor/simulate", json={"net": small_net(), "replies": {"say": [{"x": 1}]}}
     )
     assert r.status_code == 422 and "needs a" in r.json()["detail"]
+
+
+async def test_analyse_explores_the_reachability_graph(server: RunningServer, http: Http) -> None:
+    operator = http(OPERATOR_TOKEN)
+    r = await operator.post("/api/net-editor/analyse", json={"net": small_net()})
+    assert r.status_code == 200, r.text
+    assert r.json() == {
+        "states": 2,
+        "complete": True,
+        "bounded": True,
+        "bound": 1,
+        "unbounded_places": [],
+        "dead_transitions": [],
+        "dead_ends": 0,
+    }
+    pump = small_net()
+    pump["arcs"].append({"id": "a3", "source": "go", "target": "start"})
+    r = await operator.post("/api/net-editor/analyse", json={"net": pump, "max_states": 10})
+    assert r.json()["bounded"] is False and r.json()["unbounded_places"] == ["end"]
+    r = await operator.post("/api/net-editor/analyse", json={"net": pump, "max_states": 0})
+    assert r.status_code == 422

@@ -64,6 +64,9 @@ async def test_edit_a_library_net_see_a_problem_come_and_go_and_export_it(
         await expect(page.locator("#problems")).to_contain_text(
             f"transition:{first}: transition {first} can never be enabled: input place(s) p1"
         )
+        analyse = page.get_by_role("button", name="Analyse the reachability graph")
+        await analyse.click()
+        await expect(page.locator("#analysis")).to_contain_text(f"Never fire: {first}")
         await web.axe_check(page)
         await web.screenshot(page, "nets-problem")
         # Fixed: the new place starts marked.
@@ -78,6 +81,10 @@ async def test_edit_a_library_net_see_a_problem_come_and_go_and_export_it(
         await expect(page.locator("#problem-count")).to_have_text(PROBLEMS)
         await page.get_by_role("button", name="Redo").click()
         await expect(page.locator("#problem-count")).to_have_text("No problems")
+        await expect(page.locator("#analysis")).to_have_count(0)  # the net changed
+        await analyse.click()
+        await expect(page.locator("#analysis")).to_contain_text("Bounded: at most 1 token(s)")
+        await expect(page.locator("#analysis")).to_contain_text("Every transition can fire.")
         # Export: the reader takes the file back, with the new place where it was drawn.
         async with page.expect_download() as download_info:
             await page.get_by_role("button", name="Export PNML").click()

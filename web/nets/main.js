@@ -70,7 +70,7 @@ async function start(me) {
   const readOnly = me.role !== "admin";
   const model = new NetModel(api);
   const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary: null, libraryNet: "",
-    run: null, playing: null, simParams: "{}", simReplies: "" };
+    run: null, playing: null, simParams: "{}", simReplies: "", analysis: null };
   window.guidebotNets = ui; // for the browser tests
   api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
@@ -227,7 +227,29 @@ async function start(me) {
     if ((e.key === "Delete" || e.key === "Backspace") && ui.selected && !readOnly) { e.preventDefault(); remove(ui.selected.kind, ui.selected.id); }
     if (e.key === "Escape") { canvas.pending = null; select(null); }
   });
-  model.addEventListener("change", () => { if (ui.run) stopSimulating(); draw(); });
+  model.addEventListener("change", () => { if (ui.run) stopSimulating(); ui.analysis = null; draw(); });
+
+  async function analyse() {
+    try {
+      ui.analysis = await api.post("/api/net-editor/analyse", { net: model.doc });
+      draw();
+    } catch (err) {
+      say(`Analysis refused: ${err.message}`, true);
+    }
+  }
+
+  function analysisView(a) {
+    const summary = a.bounded === false
+      ? `Unbounded: ${a.unbounded_places.join(", ")} can grow for ever.`
+      : a.bounded ? `Bounded: at most ${a.bound} token(s) in a place, ${a.states} marking(s) in all.`
+        : `Gave up after ${a.states} markings: boundedness not known (at most ${a.bound} token(s) seen in a place).`;
+    return html`<div id="analysis" role="status"><p>${summary}</p>
+      <p>${a.dead_transitions.length ? html`${a.complete ? "Never fire" : "Fire in none of the markings explored"}:
+        ${a.dead_transitions.map((t, i) => html`${i ? ", " : ""}<button type="button" class="link" @click=${() => select("transition", t)}>${t}</button>`)}`
+        : a.complete ? "Every transition can fire." : "Every transition fired in the markings explored."}
+      ${a.dead_ends ? ` ${a.dead_ends} dead end(s): markings where nothing can fire and no final place is marked.` : ""}</p>
+      <p class="muted">Every condition taken as possibly true: a transition found dead here is dead whatever the robot answers.</p></div>`;
+  }
   model.addEventListener("checked", () => draw());
 
   function elementList(doc, byElement) {
@@ -295,7 +317,9 @@ async function start(me) {
           edit: (label, fn) => model.edit(label, fn), rename, remove }) : html`<p class="muted">Select an element in the drawing or the list.</p>`}</section>
       <section aria-labelledby="problems-title"><h2 id="problems-title">Problems (${count})</h2>
         ${count ? html`<ul class="problems" id="problems">${model.problems.map((p) => html`<li><button type="button" class="link" @click=${problemTarget(p.element)}>${p.element}</button>: ${p.message}</li>`)}</ul>`
-          : html`<p class="ok-text" id="problems">The net passes every check of <code>guidebot petri check</code>.</p>`}</section>
+          : html`<p class="ok-text" id="problems">The net passes every check of <code>guidebot petri check</code>.</p>`}
+        <button type="button" class="secondary" @click=${analyse}>Analyse the reachability graph</button>
+        ${ui.analysis ? analysisView(ui.analysis) : nothing}</section>
       ${simulationPanel(ui, simulation)}`, $("details"));
   }
 
