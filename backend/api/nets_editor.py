@@ -155,6 +155,6 @@ class Analysis(RequestBody):
 async def analyse_net(_: Staff, body: Annotated[Analysis, Body()]) -> dict[str, Any]:
     """Boundedness, dead transitions and dead ends from the net's reachability graph, explored
     up to ``max_states`` markings (``complete`` false when it gave up there)."""
-    doc, _ = editor_to_doc(body.net)
+    doc, _where = editor_to_doc(body.net)
     result = await asyncio.to_thread(analyse, doc, body.max_states)
     return result.as_dict()
