@@ -10,9 +10,10 @@ import httpx
 import pytest
 
 from backend.testing import RunningServer
+from petri_nets.builder import NetBuilder
 from petri_nets.library import NetLibrary
 from petri_nets.netjson import EditorNet, check_net, doc_to_editor, editor_to_pnml
-from petri_nets.pnml import read_pnml
+from petri_nets.pnml import read_pnml, write_pnml
 from petri_nets.validate import validate
 from tests.server.conftest import OPERATOR_TOKEN, PANEL_TOKEN
 
@@ -234,3 +235,28 @@ async def test_analyse_explores_the_reachability_graph(server: RunningServer, ht
     assert r.json()["bounded"] is False and r.json()["unbounded_places"] == ["end"]
     r = await operator.post("/api/net-editor/analyse", json={"net": pump, "max_states": 0})
     assert r.status_code == 422
+
+
+def chain(places: int) -> bytes:
+    """A net of ``places`` places in a row: larger than the API's default body limit."""
+    builder = NetBuilder("chain").place("p0", initial=1)
+    for i in range(1, places):
+        builder.place(f"p{i}", final=i == places - 1)
+        builder.transition(f"t{i}", [f"p{i - 1}"], [f"p{i}"])
+    return write_pnml(builder.build())
+
+
+async def test_a_200_place_net_opens_checks_and_exports(server: RunningServer, http: Http) -> None:
+    admin = http(server.admin_token)
+    pnml = chain(200)
+    assert len(pnml) > 64 * 1024  # above the default body limit of the API
+    r = await admin.post(
+        "/api/net-editor/import", content=pnml, headers={"Content-Type": "application/xml"}
+    )
+    assert r.status_code == 200, r.text
+    net = r.json()["net"]
+    assert len(net["places"]) == 200
+    r = await admin.post("/api/net-editor/check", json=net)
+    assert r.status_code == 200 and r.json() == {"problems": []}
+    r = await admin.post("/api/net-editor/export", json=net)
+    assert r.status_code == 200 and len(r.content) > 64 * 1024
