@@ -47,9 +47,8 @@ async def test_edit_a_library_net_see_a_problem_come_and_go_and_export_it(
         await web.axe_check(page)
         # A new place, away from the drawing.
         await page.get_by_label("Add place").check()
-        box = await canvas.bounding_box()
-        assert box is not None
-        await page.mouse.click(box["x"] + box["width"] - 30, box["y"] + box["height"] - 30)
+        right = await page.evaluate("Math.max(...guidebotNets.model.doc.places.map(p => p.x))")
+        await click_at(page, right + 120, 200)
         new_place = canvas.locator('g[data-id="p1"]')
         await expect(new_place).to_be_visible()
         # An arc from it into the first transition: that transition can never fire now.
@@ -257,4 +256,50 @@ async def test_a_pnml_file_from_another_tool_opens_with_its_drawing(
         )
         await expect(page.get_by_role("alert")).to_contain_text("broken.pnml cannot be opened")
         await expect(page.get_by_role("alert")).to_contain_text("upload.pnml:1:")
+        await web.axe_check(page)
+
+
+async def test_select_several_copy_paste_move_and_delete_them_together(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_label("Library net").select_option("navigate_to_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        canvas = page.locator("#canvas svg")
+        await expect(canvas.locator("g.net-node")).to_have_count(5)
+        await canvas.locator('g[data-id="navigate"]').click()
+        await canvas.locator('g[data-id="goal_reached"]').click(modifiers=["Shift"])
+        await expect(canvas.locator("g.net-node.selected")).to_have_count(2)
+        await page.get_by_role("button", name="Copy", exact=True).click()
+        await page.get_by_role("button", name="Paste", exact=True).click()
+        await expect(canvas.locator("g.net-node")).to_have_count(7)
+        await expect(page.locator("#notices")).to_contain_text("2 node(s) pasted")
+        doc = await page.evaluate("guidebotNets.model.doc")
+        new = {p["id"] for p in doc["places"]} | {t["id"] for t in doc["transitions"]}
+        new -= {"navigate", "arrived", "failed", "goal_reached", "navigation_failed"}
+        assert len(new) == 2
+        # The arc between the two came along; the pasted pair is selected and moves together.
+        assert [a for a in doc["arcs"] if a["source"] in new and a["target"] in new]
+        pasted = await page.evaluate(
+            "[...guidebotNets.group].map(id => guidebotNets.model.node(id)).map(n => [n.x, n.y])"
+        )
+        first = canvas.locator(f'g[data-id="{sorted(new)[0]}"]')
+        box = await first.bounding_box()
+        assert box is not None
+        await page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        await page.mouse.down()
+        await page.mouse.move(box["x"] + 100, box["y"] + 60, steps=5)
+        await page.mouse.up()
+        moved = await page.evaluate(
+            "[...guidebotNets.group].map(id => guidebotNets.model.node(id)).map(n => [n.x, n.y])"
+        )
+        shifts = {(m[0] - p[0], m[1] - p[1]) for m, p in zip(moved, pasted, strict=True)}
+        assert len(shifts) == 1 and shifts != {(0, 0)}
+        await page.get_by_role("button", name="Delete 2 nodes").click()
+        await expect(canvas.locator("g.net-node")).to_have_count(5)
+        await page.keyboard.press("Control+z")
+        await expect(canvas.locator("g.net-node")).to_have_count(7)
+        await page.get_by_role("button", name="Zoom in").click()
+        await page.get_by_role("button", name="Fit").click()
         await web.axe_check(page)

@@ -47,8 +47,15 @@ export class NetCanvas {
 
   zoom(e) {
     e.preventDefault();
-    const factor = e.deltaY < 0 ? 1.2 : 1 / 1.2;
-    const p = this.point(e);
+    this.zoomBy(e.deltaY < 0 ? 1.2 : 1 / 1.2, this.point(e));
+  }
+
+  /** Zoom by `factor` around the drawing's point `p` (its centre when none). */
+  zoomBy(factor, p = null) {
+    if (!p) {
+      const box = this.host.getBoundingClientRect();
+      p = { x: this.view.x + (box.width || 800) / 2 / this.view.scale, y: this.view.y + (box.height || 500) / 2 / this.view.scale };
+    }
     this.view.scale *= factor;
     this.view.x = p.x - (p.x - this.view.x) / factor;
     this.view.y = p.y - (p.y - this.view.y) / factor;
@@ -68,6 +75,7 @@ export class NetCanvas {
   draw(doc, state) {
     this.last = [doc, state];
     const { tool, selected, problems, readOnly, marking, fired } = state;
+    const group = state.group ?? new Set();
     const byId = new Map([...doc.places.map((p) => [p.id, { ...p, place: true }]), ...doc.transitions.map((t) => [t.id, { ...t, place: false }])]);
     const box = this.host.getBoundingClientRect();
     const vb = `${this.view.x} ${this.view.y} ${(box.width || 800) / this.view.scale} ${(box.height || 500) / this.view.scale}`;
@@ -93,10 +101,12 @@ export class NetCanvas {
         if (from !== n.id) this.handlers.connect(from, n.id);
         return;
       }
-      this.handlers.select(n.place ? "place" : "transition", n.id);
+      if (e.shiftKey && !readOnly) { this.handlers.toggle(n.place ? "place" : "transition", n.id); return; }
+      const ids = group.has(n.id) && group.size > 1 ? [...group] : [n.id];
+      if (ids.length === 1) this.handlers.select(n.place ? "place" : "transition", n.id);
       if (readOnly) return;
       const p = this.point(e);
-      this.drag = { id: n.id, dx: p.x - n.x, dy: p.y - n.y, x: n.x, y: n.y, moved: false };
+      this.drag = { id: n.id, ids, dx: p.x - n.x, dy: p.y - n.y, x: n.x, y: n.y, moved: false };
       this.host.querySelector("svg").setPointerCapture?.(e.pointerId);
     };
     const move = (e) => {
@@ -113,13 +123,13 @@ export class NetCanvas {
       d.x = snap(p.x - d.dx);
       d.y = snap(p.y - d.dy);
       d.moved = true;
-      const g = this.host.querySelector(`[data-id="${CSS.escape(d.id)}"]`);
-      g?.setAttribute("transform", `translate(${d.x - byId.get(d.id).x} ${d.y - byId.get(d.id).y})`);
+      const shift = `translate(${d.x - byId.get(d.id).x} ${d.y - byId.get(d.id).y})`;
+      for (const id of d.ids) this.host.querySelector(`[data-id="${CSS.escape(id)}"]`)?.setAttribute("transform", shift);
     };
     const up = () => {
       const d = this.drag;
       this.drag = null;
-      if (d && !d.pan && d.moved) this.handlers.move(d.id, d.x, d.y);
+      if (d && !d.pan && d.moved) this.handlers.move(d.ids, d.x - byId.get(d.id).x, d.y - byId.get(d.id).y);
     };
     const keyOnNode = (e, n) => {
       if (e.key !== "Enter" && e.key !== " ") return;
@@ -145,13 +155,13 @@ export class NetCanvas {
       const key = `${n.place ? "place" : "transition"}:${n.id}`;
       const bad = issues(key);
       const label = n.name || n.id;
-      const cls = `net-node ${n.place ? "place" : "transition"}${n.final ? " final" : ""}${!n.place && fired?.includes(n.id) ? " fired" : ""}${isSel(n.place ? "place" : "transition", n.id) ? " selected" : ""}${bad.length ? " has-issue" : ""}`;
+      const cls = `net-node ${n.place ? "place" : "transition"}${n.final ? " final" : ""}${!n.place && fired?.includes(n.id) ? " fired" : ""}${isSel(n.place ? "place" : "transition", n.id) || group.has(n.id) ? " selected" : ""}${bad.length ? " has-issue" : ""}`;
       const count = marking ? marking.get(n.id) ?? 0 : n.initial; // a simulation's marking, else the initial one
       const tokens = n.place ? (count > 3 ? svg`<text x=${n.x} y=${n.y + 4} text-anchor="middle">${count}</text>`
         : [...Array(count)].map((_, i) => svg`<circle class="token" r="3.5" cx=${n.x + (count === 1 ? 0 : (i - (count - 1) / 2) * 8)} cy=${n.y}></circle>`)) : null;
       return svg`<g class=${cls} data-id=${n.id} data-kind=${n.place ? "place" : "transition"} tabindex="0" role="button"
         aria-label=${`${n.place ? "place" : "transition"} ${label}${n.place && count ? `, ${count} token(s)` : ""}${bad.length ? `, ${bad.length} problem(s)` : ""}`}
-        aria-pressed=${isSel(n.place ? "place" : "transition", n.id) ? "true" : "false"}
+        aria-pressed=${isSel(n.place ? "place" : "transition", n.id) || group.has(n.id) ? "true" : "false"}
         @pointerdown=${(e) => nodeDown(e, n)} @keydown=${(e) => keyOnNode(e, n)}>
         <title>${bad.length ? bad.join("; ") : label}</title>
         ${n.place ? svg`<circle cx=${n.x} cy=${n.y} r=${PLACE_R}></circle>` : svg`<rect x=${n.x - BAR.w / 2} y=${n.y - BAR.h / 2} width=${BAR.w} height=${BAR.h}></rect>`}

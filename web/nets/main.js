@@ -70,14 +70,26 @@ async function start(me) {
   const readOnly = me.role !== "admin";
   const model = new NetModel(api);
   const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary: null, libraryNet: "",
-    run: null, playing: null, simParams: "{}", simReplies: "", analysis: null };
+    group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null };
   window.guidebotNets = ui; // for the browser tests
   api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
-  const select = (kind, id) => { ui.selected = kind ? { kind, id } : null; draw(); };
+  const select = (kind, id) => {
+    ui.selected = kind ? { kind, id } : null;
+    ui.group = new Set(kind === "place" || kind === "transition" ? [id] : []);
+    draw();
+  };
+  /** Shift+click: a node joins (or leaves) the selection; moved, copied and deleted together. */
+  const toggle = (kind, id) => {
+    if (ui.group.has(id)) ui.group.delete(id);
+    else { ui.group.add(id); ui.selected = { kind, id }; }
+    if (ui.selected?.id === id && !ui.group.has(id)) ui.selected = null;
+    draw();
+  };
 
   const canvas = new NetCanvas($("canvas"), {
     select,
+    toggle,
     add(tool, x, y) {
       const kind = tool === "place" ? "place" : "transition";
       const id = model.freshId(kind === "place" ? "p" : "t");
@@ -88,8 +100,10 @@ async function start(me) {
       select(kind, id);
       say(`${kind === "place" ? "Place" : "Transition"} ${id} added.`);
     },
-    move(id, x, y) {
-      model.edit("move", () => { const n = model.node(id); n.x = x; n.y = y; });
+    move(ids, dx, dy) {
+      model.edit(ids.length > 1 ? `move ${ids.length} nodes` : "move", () => {
+        for (const id of ids) { const n = model.node(id); n.x += dx; n.y += dy; }
+      });
     },
     connect(a, b) {
       const isPlace = (id) => model.doc.places.some((p) => p.id === id);
@@ -104,15 +118,50 @@ async function start(me) {
   });
 
   function remove(kind, id) {
-    model.edit(`delete ${kind}`, (d) => {
+    const ids = kind !== "arc" && ui.group.has(id) ? new Set(ui.group) : new Set([id]);
+    model.edit(ids.size > 1 ? `delete ${ids.size} nodes` : `delete ${kind}`, (d) => {
       if (kind === "arc") d.arcs = d.arcs.filter((a) => a.id !== id);
       else {
-        d.places = d.places.filter((p) => p.id !== id);
-        d.transitions = d.transitions.filter((t) => t.id !== id);
-        d.arcs = d.arcs.filter((a) => a.source !== id && a.target !== id);
+        d.places = d.places.filter((p) => !ids.has(p.id));
+        d.transitions = d.transitions.filter((t) => !ids.has(t.id));
+        d.arcs = d.arcs.filter((a) => !ids.has(a.source) && !ids.has(a.target));
       }
     });
     select(null);
+  }
+
+  /** The selected nodes and the arcs between them, kept for Paste. */
+  function copy() {
+    const ids = ui.group;
+    if (!ids.size) return say("Select one or more places or transitions to copy (Shift+click adds one).", true);
+    const doc = model.doc;
+    ui.clipboard = structuredClone({
+      places: doc.places.filter((p) => ids.has(p.id)),
+      transitions: doc.transitions.filter((t) => ids.has(t.id)),
+      arcs: doc.arcs.filter((a) => ids.has(a.source) && ids.has(a.target)),
+    });
+    say(`${ids.size} node(s) copied.`);
+  }
+
+  /** The copied nodes again, shifted, with new ids (their arcs follow). */
+  function paste() {
+    const clip = ui.clipboard;
+    if (!clip) return say("Nothing copied yet.", true);
+    const pasted = [];
+    model.edit("paste", (d) => {
+      const renamed = new Map();
+      const fresh = (id) => {
+        const base = id.replace(/_?\d+$/, "") || "n";
+        renamed.set(id, model.freshId(`${base}_`));
+        return renamed.get(id);
+      };
+      for (const p of clip.places) { const id = fresh(p.id); d.places.push({ ...structuredClone(p), id, x: p.x + 40, y: p.y + 40 }); pasted.push(id); }
+      for (const t of clip.transitions) { const id = fresh(t.id); d.transitions.push({ ...structuredClone(t), id, x: t.x + 40, y: t.y + 40 }); pasted.push(id); }
+      for (const a of clip.arcs) d.arcs.push({ ...a, id: model.freshId("a"), source: renamed.get(a.source), target: renamed.get(a.target) });
+    });
+    ui.group = new Set(pasted);
+    ui.selected = null;
+    say(`${pasted.length} node(s) pasted: ${pasted.join(", ")}.`);
   }
 
   /** Give a node a new id: its arcs follow. */
@@ -225,6 +274,8 @@ async function start(me) {
     if ((e.ctrlKey || e.metaKey) && e.key === "z" && !readOnly) { e.preventDefault(); model.undo(); }
     if ((e.ctrlKey || e.metaKey) && (e.key === "y" || (e.shiftKey && e.key === "Z")) && !readOnly) { e.preventDefault(); model.redo(); }
     if ((e.key === "Delete" || e.key === "Backspace") && ui.selected && !readOnly) { e.preventDefault(); remove(ui.selected.kind, ui.selected.id); }
+    if ((e.ctrlKey || e.metaKey) && e.key === "c" && !readOnly) { e.preventDefault(); copy(); }
+    if ((e.ctrlKey || e.metaKey) && e.key === "v" && !readOnly) { e.preventDefault(); paste(); }
     if (e.key === "Escape") { canvas.pending = null; select(null); }
   });
   model.addEventListener("change", () => { if (ui.run) stopSimulating(); ui.analysis = null; draw(); });
@@ -301,15 +352,22 @@ async function start(me) {
       return;
     }
     render(elementList(doc, byElement), $("lists"));
-    render(readOnly ? html`<span class="muted">Read only: administrators edit nets.</span>` : html`
+    const zoom = html`<span class="zoom"><button type="button" class="secondary small" aria-label="Zoom in" @click=${() => canvas.zoomBy(1.25)}>+</button>
+      <button type="button" class="secondary small" aria-label="Zoom out" @click=${() => canvas.zoomBy(0.8)}>−</button>
+      <button type="button" class="secondary small" @click=${() => { canvas.fit(model.doc); canvas.redraw(); }}>Fit</button></span>`;
+    render(readOnly ? html`${zoom}<span class="muted">Read only: administrators edit nets.</span>` : html`${zoom}
       <fieldset class="tools"><legend class="sr-only">Tool</legend>
         ${[["select", "Select and move"], ["place", "Add place"], ["transition", "Add transition"], ["arc", "Add arc"]].map(([t, label]) => html`
           <label><input type="radio" name="tool" value=${t} .checked=${ui.tool === t}
             @change=${() => { ui.tool = t; canvas.pending = null; draw(); }}> ${label}</label>`)}
       </fieldset>
-      ${ui.selected && ui.selected.kind !== "net" ? html`<button type="button" class="danger small" @click=${() => remove(ui.selected.kind, ui.selected.id)}>Delete ${ui.selected.kind} ${ui.selected.id}</button>` : nothing}
-      <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it; drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
-    canvas.draw(doc, { tool: ui.tool, selected: ui.selected, problems: byElement, readOnly,
+      <button type="button" class="secondary small" ?disabled=${!ui.group.size} @click=${copy}>Copy</button>
+      <button type="button" class="secondary small" ?disabled=${!ui.clipboard} @click=${paste}>Paste</button>
+      ${ui.group.size > 1 ? html`<button type="button" class="danger small" @click=${() => remove("place", [...ui.group][0])}>Delete ${ui.group.size} nodes</button>`
+        : ui.selected && ui.selected.kind !== "net" ? html`<button type="button" class="danger small" @click=${() => remove(ui.selected.kind, ui.selected.id)}>Delete ${ui.selected.kind} ${ui.selected.id}</button>` : nothing}
+      <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it (Shift+click selects several); drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
+    for (const id of [...ui.group]) if (!model.node(id)) ui.group.delete(id);
+    canvas.draw(doc, { tool: ui.tool, selected: ui.selected, group: ui.group, problems: byElement, readOnly,
       marking: ui.run?.marking() ?? null, fired: ui.run?.fired() ?? [] });
     render(html`
       <section aria-labelledby="details-title"><h2 id="details-title">${ui.selected ? `${ui.selected.kind} ${ui.selected.id}` : "Selected element"}</h2>
