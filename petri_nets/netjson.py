@@ -113,6 +113,8 @@ class EditorArc(_Strict):
     source: str = Field(min_length=1, max_length=100)
     target: str = Field(min_length=1, max_length=100)
     weight: int = Field(default=1, ge=1, le=1_000_000)
+    points: list[tuple[float, float]] = Field(default_factory=list, max_length=100)
+    """Bend points from source to target (PNML arc graphics positions)."""
 
 
 class EditorNet(_Strict):
@@ -144,6 +146,24 @@ def _position(graphics: Node | None) -> tuple[float, float] | None:
 def _graphics(x: float, y: float) -> Node:
     position = Node("position", {"x": str(round(x)), "y": str(round(y))}, 0)
     return Node("graphics", {}, 0, [position])
+
+
+def _bends(graphics: Node | None) -> list[tuple[float, float]]:
+    """An arc's bend points: its graphics positions, in order (unreadable ones skipped)."""
+    out = []
+    for position in graphics.findall("position") if graphics is not None else []:
+        try:
+            out.append((float(position.attrib["x"]), float(position.attrib["y"])))
+        except (KeyError, ValueError):
+            continue
+    return out
+
+
+def _arc_graphics(points: list[tuple[float, float]]) -> Node | None:
+    if not points:
+        return None
+    positions = [Node("position", {"x": str(round(x)), "y": str(round(y))}, 0) for x, y in points]
+    return Node("graphics", {}, 0, positions)
 
 
 def _drop_none(data: dict[str, Any]) -> dict[str, Any]:
@@ -212,7 +232,14 @@ def doc_to_editor(doc: NetDoc) -> dict[str, Any]:
             for t in doc.transitions
         ],
         "arcs": [
-            {"id": a.id, "source": a.source, "target": a.target, "weight": a.weight}
+            {
+                "id": a.id,
+                "source": a.source,
+                "target": a.target,
+                "weight": a.weight,
+                # bends only with the file's own drawing: a layered one moved the nodes
+                "points": _bends(a.graphics) if drawing.source == "pnml" else [],
+            }
             for a in doc.arcs
         ],
     }
@@ -299,7 +326,15 @@ def editor_to_doc(net: EditorNet) -> tuple[NetDoc, dict[int, str]]:
         )
     for arc in net.arcs:
         doc.arcs.append(
-            ArcSpec(arc.id, arc.source, arc.target, line(f"arc:{arc.id}"), "page1", arc.weight)
+            ArcSpec(
+                arc.id,
+                arc.source,
+                arc.target,
+                line(f"arc:{arc.id}"),
+                "page1",
+                arc.weight,
+                graphics=_arc_graphics(arc.points),
+            )
         )
     return doc, where
 

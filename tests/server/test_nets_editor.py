@@ -260,3 +260,15 @@ async def test_a_200_place_net_opens_checks_and_exports(server: RunningServer, h
     assert r.status_code == 200 and r.json() == {"problems": []}
     r = await admin.post("/api/net-editor/export", json=net)
     assert r.status_code == 200 and len(r.content) > 64 * 1024
+
+
+async def test_bend_points_go_out_and_come_back(server: RunningServer, http: Http) -> None:
+    admin = http(server.admin_token)
+    net = small_net()
+    net["arcs"][0]["points"] = [[80, 60], [80, 90]]
+    pnml = (await admin.post("/api/net-editor/export", json=net)).content
+    r = await admin.post(
+        "/api/net-editor/import", content=pnml, headers={"Content-Type": "application/xml"}
+    )
+    arcs = r.json()["net"]["arcs"]
+    assert [a["points"] for a in arcs] == [[[80, 60], [80, 90]], []]

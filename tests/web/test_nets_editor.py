@@ -156,9 +156,9 @@ async def test_simulate_a_net_step_by_step_to_its_end(
         assert replay(read_trace(path))["explain_point#run"] == {"explained": 1}
 
 
-async def click_at(page: Any, x: float, y: float) -> None:
-    """A click on the drawing at (x, y) of the drawing's own units (the page's view of it)."""
-    point = await page.evaluate(
+async def screen_point(page: Any, x: float, y: float) -> dict[str, float]:
+    """Where the drawing's point (x, y) (its own units) is on the page."""
+    return await page.evaluate(  # type: ignore[no-any-return]
         """([x, y]) => {
           const svg = document.querySelector('#canvas svg');
           const m = svg.getScreenCTM();
@@ -166,6 +166,11 @@ async def click_at(page: Any, x: float, y: float) -> None:
         }""",
         [x, y],
     )
+
+
+async def click_at(page: Any, x: float, y: float) -> None:
+    """A click on the drawing at (x, y) of the drawing's own units."""
+    point = await screen_point(page, x, y)
     await page.mouse.click(point["x"], point["y"])
 
 
@@ -215,6 +220,18 @@ async def test_draw_a_net_from_nothing_simulate_it_and_run_the_saved_file(
         await page.get_by_label("Final place").check()
         await expect(count).to_have_text("No problems")
         await web.axe_check(page)
+        # A bend in the arc p1 -> t1: double-click it, drag the bend aside.
+        await page.get_by_label("Select and move").check()
+        middle = await screen_point(page, 100, 150)
+        await page.mouse.dblclick(middle["x"], middle["y"])
+        bend = canvas.locator('g[data-arc="a1"] rect.bend')
+        await expect(bend).to_have_count(1)
+        aside = await screen_point(page, 160, 140)
+        await page.mouse.move(middle["x"], middle["y"])
+        await page.mouse.down()
+        await page.mouse.move(aside["x"], aside["y"], steps=4)
+        await page.mouse.up()
+        await expect(page.locator("#details")).to_contain_text("Bend points: (160, 140)")
         # Simulated to its end.
         await page.get_by_role("button", name="Run simulation").click()
         await page.get_by_role("button", name="To the end").click()
@@ -234,6 +251,13 @@ async def test_draw_a_net_from_nothing_simulate_it_and_run_the_saved_file(
         outcome = json.loads(result.output.strip().splitlines()[-1])
         assert outcome["outcome"] == "done" and outcome["final_marking"] == {"p2": 1}
         assert outcome["published"] == ["say"]
+        doc, _ = read_pnml(path.read_bytes(), str(path))
+        assert doc is not None
+        arc = next(a for a in doc.arcs if a.source == "p1")
+        assert arc.graphics is not None
+        assert [(p.attrib["x"], p.attrib["y"]) for p in arc.graphics.findall("position")] == [
+            ("160", "140")
+        ]
 
 
 async def test_a_pnml_file_from_another_tool_opens_with_its_drawing(

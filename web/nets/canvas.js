@@ -9,6 +9,15 @@ export const GRID = 10; // positions snap to this grid
 
 const snap = (v) => Math.round(v / GRID) * GRID;
 
+/** Distance from point p to the segment a-b. */
+function distToSegment(p, a, b) {
+  const dx = b.x - a.x;
+  const dy = b.y - a.y;
+  const len = dx * dx + dy * dy;
+  const t = len ? Math.max(0, Math.min(1, ((p.x - a.x) * dx + (p.y - a.y) * dy) / len)) : 0;
+  return Math.hypot(p.x - (a.x + t * dx), p.y - (a.y + t * dy));
+}
+
 /** Where a line from `from` towards `to` leaves the node drawn at `from`. */
 function border(node, toward, isPlace) {
   const dx = toward.x - node.x;
@@ -119,6 +128,14 @@ export class NetCanvas {
         this.redraw();
         return;
       }
+      if (d.bend) {
+        const at = this.point(e);
+        d.x = snap(at.x);
+        d.y = snap(at.y);
+        d.moved = true;
+        this.host.querySelector(`[data-arc="${CSS.escape(d.arc)}"] [data-bend="${d.index}"]`)?.setAttribute("transform", `translate(${d.x - d.x0} ${d.y - d.y0})`);
+        return;
+      }
       const p = this.point(e);
       d.x = snap(p.x - d.dx);
       d.y = snap(p.y - d.dy);
@@ -129,6 +146,10 @@ export class NetCanvas {
     const up = () => {
       const d = this.drag;
       this.drag = null;
+      if (d?.bend) {
+        if (d.moved) this.handlers.bend(d.arc, (points) => { points[d.index] = [d.x, d.y]; });
+        return;
+      }
       if (d && !d.pan && d.moved) this.handlers.move(d.ids, d.x - byId.get(d.id).x, d.y - byId.get(d.id).y);
     };
     const keyOnNode = (e, n) => {
@@ -141,15 +162,42 @@ export class NetCanvas {
       const s = byId.get(a.source);
       const t = byId.get(a.target);
       if (!s || !t) return null;
-      const p = border(s, t, s.place);
-      const q = border(t, s, t.place);
+      const bends = (a.points ?? []).map(([x, y]) => ({ x, y }));
+      const p = border(s, bends[0] ?? t, s.place);
+      const q = border(t, bends.at(-1) ?? s, t.place);
+      const all = [p, ...bends, q];
+      const line = all.map((v) => `${v.x},${v.y}`).join(" ");
+      const mid = bends.length ? bends[Math.floor(bends.length / 2)] : { x: (p.x + q.x) / 2, y: (p.y + q.y) / 2 };
       const bad = issues(`arc:${a.id}`);
-      return svg`<g class=${`net-arc${isSel("arc", a.id) ? " selected" : ""}${bad.length ? " has-issue" : ""}`} data-arc=${a.id}
-        @pointerdown=${(e) => { e.stopPropagation(); this.handlers.select("arc", a.id); }}>
+      const selectedArc = isSel("arc", a.id);
+      const bendAt = (e) => {
+        if (readOnly || tool !== "select") return;
+        e.stopPropagation();
+        const at = this.point(e);
+        // the new bend goes into the segment nearest the double click
+        let best = 0;
+        let bestDist = Infinity;
+        for (let i = 0; i < all.length - 1; i += 1) {
+          const d = distToSegment(at, all[i], all[i + 1]);
+          if (d < bestDist) { bestDist = d; best = i; }
+        }
+        this.handlers.bend(a.id, (points) => points.splice(best, 0, [snap(at.x), snap(at.y)]));
+      };
+      const handleDown = (e, i) => {
+        e.stopPropagation();
+        if (readOnly) return;
+        this.drag = { bend: true, arc: a.id, index: i, x: bends[i].x, y: bends[i].y, x0: bends[i].x, y0: bends[i].y, moved: false };
+        this.host.querySelector("svg").setPointerCapture?.(e.pointerId);
+      };
+      return svg`<g class=${`net-arc${selectedArc ? " selected" : ""}${bad.length ? " has-issue" : ""}`} data-arc=${a.id}
+        @pointerdown=${(e) => { e.stopPropagation(); this.handlers.select("arc", a.id); }} @dblclick=${bendAt}>
         <title>${`arc ${a.source} → ${a.target}${a.weight > 1 ? ` (weight ${a.weight})` : ""}${bad.length ? `: ${bad.join("; ")}` : ""}`}</title>
-        <line class="hit" x1=${p.x} y1=${p.y} x2=${q.x} y2=${q.y}></line>
-        <line class="shown" x1=${p.x} y1=${p.y} x2=${q.x} y2=${q.y} marker-end="url(#arrow)"></line>
-        ${a.weight > 1 ? svg`<text x=${(p.x + q.x) / 2 + 4} y=${(p.y + q.y) / 2 - 4}>${a.weight}</text>` : null}</g>`;
+        <polyline class="hit" points=${line}></polyline>
+        <polyline class="shown" points=${line} marker-end="url(#arrow)"></polyline>
+        ${a.weight > 1 ? svg`<text x=${mid.x + 4} y=${mid.y - 4}>${a.weight}</text>` : null}
+        ${selectedArc && !readOnly ? bends.map((b, i) => svg`<rect class="bend" data-bend=${i} x=${b.x - 4} y=${b.y - 4} width="8" height="8"
+          @pointerdown=${(e) => handleDown(e, i)}
+          @dblclick=${(e) => { e.stopPropagation(); this.handlers.bend(a.id, (points) => points.splice(i, 1)); }}></rect>`) : null}</g>`;
     });
     const nodes = [...byId.values()].map((n) => {
       const key = `${n.place ? "place" : "transition"}:${n.id}`;

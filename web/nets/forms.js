@@ -131,7 +131,10 @@ export function detailsForm(ctx) {
   else if (selected.kind === "arc") {
     const arc = doc.arcs.find((a) => a.id === selected.id);
     body = html`${issuesOf(ctx, `arc:${arc.id}`)}<p>${arc.source} → ${arc.target}</p>
-      ${text("Weight", arc.weight, (w) => edit("change weight", (d) => { d.arcs.find((a) => a.id === arc.id).weight = Math.max(1, Math.round(w) || 1); }), { id: "f-arc-weight", type: "number" })}`;
+      ${text("Weight", arc.weight, (w) => edit("change weight", (d) => { d.arcs.find((a) => a.id === arc.id).weight = Math.max(1, Math.round(w) || 1); }), { id: "f-arc-weight", type: "number" })}
+      <p class="muted">Bend points: ${arc.points?.length ? arc.points.map(([x, y]) => `(${x}, ${y})`).join(" → ") : "none (straight)"}.
+        Double-click the arc to add one, drag it to move it, double-click it to remove it.</p>
+      ${arc.points?.length ? html`<button type="button" class="secondary small" @click=${() => edit("straighten arc", (d) => { d.arcs.find((a) => a.id === arc.id).points = []; })}>Straighten</button>` : nothing}`;
   } else {
     const place = selected.kind === "place";
     const node = (place ? doc.places : doc.transitions).find((n) => n.id === selected.id);

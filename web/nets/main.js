@@ -105,13 +105,22 @@ async function start(me) {
         for (const id of ids) { const n = model.node(id); n.x += dx; n.y += dy; }
       });
     },
+    /** Change an arc's bend points (`fn` edits the list in place). */
+    bend(arcId, fn) {
+      model.edit("bend arc", (d) => {
+        const arc = d.arcs.find((x) => x.id === arcId);
+        arc.points ??= [];
+        fn(arc.points);
+      });
+      select("arc", arcId);
+    },
     connect(a, b) {
       const isPlace = (id) => model.doc.places.some((p) => p.id === id);
       if (isPlace(a) === isPlace(b)) return say("An arc joins a place and a transition.", true);
       const existing = model.doc.arcs.find((arc) => arc.source === a && arc.target === b);
       if (existing) return say(`There is already an arc ${a} → ${b}: change its weight instead.`, true);
       const id = model.freshId("a");
-      model.edit("add arc", (d) => d.arcs.push({ id, source: a, target: b, weight: 1 }));
+      model.edit("add arc", (d) => d.arcs.push({ id, source: a, target: b, weight: 1, points: [] }));
       select("arc", id);
       say(`Arc ${a} → ${b} added.`);
     },
@@ -157,7 +166,8 @@ async function start(me) {
       };
       for (const p of clip.places) { const id = fresh(p.id); d.places.push({ ...structuredClone(p), id, x: p.x + 40, y: p.y + 40 }); pasted.push(id); }
       for (const t of clip.transitions) { const id = fresh(t.id); d.transitions.push({ ...structuredClone(t), id, x: t.x + 40, y: t.y + 40 }); pasted.push(id); }
-      for (const a of clip.arcs) d.arcs.push({ ...a, id: model.freshId("a"), source: renamed.get(a.source), target: renamed.get(a.target) });
+      for (const a of clip.arcs) d.arcs.push({ ...a, id: model.freshId("a"), source: renamed.get(a.source), target: renamed.get(a.target),
+        points: (a.points ?? []).map(([x, y]) => [x + 40, y + 40]) });
     });
     ui.group = new Set(pasted);
     ui.selected = null;
