@@ -33,6 +33,7 @@ BENCHMARKS: dict[str, str] = {
     "modbus": "bench.modbus:main",
     "reconfigure": "bench.reconfigure:main",
     "console": "bench.console:main",
+    "nets": "bench.nets:main",
     "reaction": "bench.reaction:main",
     "soak": "bench.soak:main",
     "failover": "bench.failover:main",

@@ -252,17 +252,25 @@ async function start(me) {
     }
   }
 
+  /** Open a PNML file's text (the file input's, or the benchmark's); resolves once it is
+   * drawn and checked. */
+  async function openPnml(text, name) {
+    try {
+      const reply = await sendFile("/api/net-editor/import", text);
+      model.open(reply.net);
+      opened();
+      say(`${name} opened${reply.net.layout === "layered" ? " (it had no drawing: laid out in layers)" : ""}.`);
+      await model.checked;
+    } catch (err) {
+      say(`${name} cannot be opened: ${err.message}`, true);
+    }
+  }
+  ui.openPnml = openPnml;
+
   async function openFile(input) {
     const file = input.files?.[0];
     if (!file) return;
-    try {
-      const reply = await sendFile("/api/net-editor/import", await file.text());
-      model.open(reply.net);
-      opened();
-      say(`${file.name} opened${reply.net.layout === "layered" ? " (it had no drawing: laid out in layers)" : ""}.`);
-    } catch (err) {
-      say(`${file.name} cannot be opened: ${err.message}`, true);
-    }
+    await openPnml(await file.text(), file.name);
     input.value = "";
   }
 
