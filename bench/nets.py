@@ -4,9 +4,9 @@
 
 A server in this process (no site, no robots: the editor needs neither) and headless Chromium
 (/usr/bin/chromium) with /nets/ open. A chain of ``--places`` places (and as many transitions
-less one, drawn by the layered layout) is opened from its PNML text ``--rounds`` times, and one edit (a place's
-marking) re-checked after each. Last line: {"places", "rounds", "open_ms": {"p50", "p99"},
-"check_ms": {"p50", "p99"}, "publish_ms": null}.
+less one, drawn by the layered layout) is opened from its PNML text ``--rounds`` times, and
+one edit (a place's marking) re-checked after each. Last line: {"places", "rounds",
+"open_ms": {"p50", "p99"}, "check_ms": {"p50", "p99"}, "publish_ms": null}.
 
 open_ms: in the page, from handing the file's text to the editor to the net drawn and checked
 by the server (POST /api/net-editor/import, the drawing, POST /api/net-editor/check, the
