@@ -1,8 +1,10 @@
 """REST of the RoboGraph editor (/nets/, docs/nets.md): open a library net or a PNML file as the
 editor's JSON, check a net with the engine's own rules, export it as PNML with its drawing.
 
-Nothing here changes the server: the net being edited lives in the page. Staff (operators and
-admins) may call every route; the page lets admins edit and shows operators the nets read-only.
+Nothing here changes the server: the net being edited lives in the page. Reading, checking and
+writing a net run in a thread (a 2 MB file takes a while to parse): the event loop keeps
+serving. Staff (operators and admins) may call every route; the page lets admins edit and shows
+operators the nets read-only.
 Status codes: 404 for a net the library does not have, 413 for a file above ``MAX_PNML_BYTES``,
 422 for a PNML file that cannot be read (every problem with its line), a net document that is
 not one (FastAPI's validation errors) or a net the simulation cannot run (the engine's reasons).
@@ -76,7 +78,7 @@ async def library_net(request: Request, _: Staff, net: Name) -> dict[str, Any]:
 async def check(_: Staff, body: Annotated[EditorNet, Body()]) -> dict[str, Any]:
     """The problems ``guidebot petri check`` finds in the net, each naming its element
     ("net", "param:NAME", "place:ID", "transition:ID", "arc:ID")."""
-    return {"problems": check_net(body)}
+    return {"problems": await asyncio.to_thread(check_net, body)}
 
 
 @router.post(
@@ -91,7 +93,7 @@ async def import_pnml(request: Request, _: Staff) -> dict[str, Any]:
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, "PNML file too large")
     if not raw.strip():
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, ["the PNML file is empty"])
-    net, problems = pnml_to_editor(raw, "upload.pnml")
+    net, problems = await asyncio.to_thread(pnml_to_editor, raw, "upload.pnml")
     if net is None:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, problems)
     return {"net": net, "problems": problems}
@@ -100,7 +102,7 @@ async def import_pnml(request: Request, _: Staff) -> dict[str, Any]:
 @router.post("/export")
 async def export_pnml(_: Staff, body: Annotated[EditorNet, Body()]) -> Response:
     """The net as a PNML file with its drawing, for download (``guidebot petri run`` runs it)."""
-    data = editor_to_pnml(body)
+    data = await asyncio.to_thread(editor_to_pnml, body)
     return Response(
         data,
         media_type="application/xml",
