@@ -203,7 +203,7 @@ export class NetCanvas {
       const key = `${n.place ? "place" : "transition"}:${n.id}`;
       const bad = issues(key);
       const label = n.name || n.id;
-      const cls = `net-node ${n.place ? "place" : "transition"}${n.final ? " final" : ""}${!n.place && fired?.includes(n.id) ? " fired" : ""}${isSel(n.place ? "place" : "transition", n.id) || group.has(n.id) ? " selected" : ""}${bad.length ? " has-issue" : ""}`;
+      const cls = `net-node ${n.place ? "place" : "transition"}${n.final ? " final" : ""}${!n.place && fired?.includes(n.id) ? " fired" : ""}${isSel(n.place ? "place" : "transition", n.id) || group.has(n.id) ? " selected" : ""}${bad.length ? " has-issue" : ""}${this.pending === n.id ? " pending" : ""}`;
       const count = marking ? marking.get(n.id) ?? 0 : n.initial; // a simulation's marking, else the initial one
       const tokens = n.place ? (count > 3 ? svg`<text x=${n.x} y=${n.y + 4} text-anchor="middle">${count}</text>`
         : [...Array(count)].map((_, i) => svg`<circle class="token" r="3.5" cx=${n.x + (count === 1 ? 0 : (i - (count - 1) / 2) * 8)} cy=${n.y}></circle>`)) : null;
