@@ -9,7 +9,7 @@ a line of its own when the document is built, and a problem's line leads back to
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -40,12 +40,17 @@ __all__ = [
     "pnml_to_editor",
 ]
 
+Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+"""[x, y] (a JSON array: strict models take no tuple from JSON)."""
 Id = Field(min_length=1, max_length=100, pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 Text = Field(default=None, max_length=10_000)
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """Unknown keys refused, no coercion (``true`` is not 1, ``"2"`` not 2), as every request
+    body of the API (tests/server/test_contract.py)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class EditorParam(_Strict):
@@ -113,7 +118,7 @@ class EditorArc(_Strict):
     source: str = Field(min_length=1, max_length=100)
     target: str = Field(min_length=1, max_length=100)
     weight: int = Field(default=1, ge=1, le=1_000_000)
-    points: list[tuple[float, float]] = Field(default_factory=list, max_length=100)
+    points: list[Point] = Field(default_factory=list, max_length=100)
     """Bend points from source to target (PNML arc graphics positions)."""
 
 
@@ -148,18 +153,18 @@ def _graphics(x: float, y: float) -> Node:
     return Node("graphics", {}, 0, [position])
 
 
-def _bends(graphics: Node | None) -> list[tuple[float, float]]:
+def _bends(graphics: Node | None) -> list[list[float]]:
     """An arc's bend points: its graphics positions, in order (unreadable ones skipped)."""
     out = []
     for position in graphics.findall("position") if graphics is not None else []:
         try:
-            out.append((float(position.attrib["x"]), float(position.attrib["y"])))
+            out.append([float(position.attrib["x"]), float(position.attrib["y"])])
         except (KeyError, ValueError):
             continue
     return out
 
 
-def _arc_graphics(points: list[tuple[float, float]]) -> Node | None:
+def _arc_graphics(points: list[list[float]]) -> Node | None:
     if not points:
         return None
     positions = [Node("position", {"x": str(round(x)), "y": str(round(y))}, 0) for x, y in points]
