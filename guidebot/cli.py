@@ -35,6 +35,7 @@ BENCHMARKS: dict[str, str] = {
     "modbus": "bench.modbus:main",
     "reconfigure": "bench.reconfigure:main",
     "console": "bench.console:main",
+    "nets": "bench.nets:main",
     "reaction": "bench.reaction:main",
     "emergency": "bench.emergency:main",
     "soak": "bench.soak:main",

@@ -1,7 +1,18 @@
 """REST API of the server brain (site, robots, tasks, tours, points of interest, locks,
 events) and the component that runs the services behind it."""
 
-from backend.api import events, locks, robots, site, site_editor, tasks, tours, visitor, web
+from backend.api import (
+    events,
+    locks,
+    nets_editor,
+    robots,
+    site,
+    site_editor,
+    tasks,
+    tours,
+    visitor,
+    web,
+)
 
 ROUTERS = [
     site.router,
@@ -13,6 +24,7 @@ ROUTERS = [
     events.router,
     web.router,
     visitor.router,
+    nets_editor.router,
 ]
 
 __all__ = ["ROUTERS"]

@@ -15,8 +15,9 @@ from guidebot.site.yamlio import MAX_SITE_BYTES
 
 __all__ = ["BodyLimit", "BodyTooLarge", "limit_for"]
 
-LARGE_BODY_PATHS = ("/api/site",)
-"""Path prefixes that take a whole site document (up to the site file limit)."""
+LARGE_BODY_PATHS = ("/api/site", "/api/net-editor")
+"""Path prefixes that take a whole site document or a whole net (up to the site file limit;
+the net editor's routes keep a tighter limit of their own)."""
 
 
 def limit_for(path: str, default: int) -> int:
