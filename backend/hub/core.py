@@ -458,6 +458,14 @@ class Hub:
                 message.id,
             )
             return
+        model = self._models.get(type_)
+        if model is None:
+            model = self._models[type_] = payload_model(type_)
+        try:
+            model.model_validate(message.payload)
+        except ValidationError as exc:
+            client.error("invalid_payload", _short(exc, "payload"), message.id)
+            return
         refusal = publish_refusal(client.role, client.name, type_, message.payload)
         if refusal is not None:
             client.error(*refusal, message.id)
@@ -465,14 +473,6 @@ class Hub:
         message.source = client.name
         if type_ in CONTROL_TYPES and message.destination in (None, HUB_NAME):
             self._control(client, message)
-            return
-        model = self._models.get(type_)
-        if model is None:
-            model = self._models[type_] = payload_model(type_)
-        try:
-            model.model_validate(message.payload)
-        except ValidationError as exc:
-            client.error("invalid_payload", _short(exc), message.id)
             return
         destination = message.destination
         if destination is not None and (
@@ -512,14 +512,12 @@ class Hub:
         if message.type == "ping":
             client.send_direct(message.reply("pong", {}, source=HUB_NAME))
             return
-        patterns = message.payload.get("patterns")
-        if (
-            not isinstance(patterns, list)
-            or not patterns
-            or not all(isinstance(p, str) and 0 < len(p) <= 64 for p in patterns)
-        ):
+        patterns: list[str] = message.payload["patterns"]  # validated (Subscribe)
+        if not all(0 < len(p) <= 64 for p in patterns):
             client.error(
-                "invalid_payload", "patterns must be a list of 1-64 character strings", message.id
+                "invalid_payload",
+                "payload.patterns: each pattern is 1-64 characters",
+                message.id,
             )
             return
         for pattern in patterns:
@@ -529,9 +527,28 @@ class Hub:
                 client.unsubscribe(pattern)
 
 
-def _short(exc: ValidationError) -> str:
+def _short(exc: ValidationError, within: str = "") -> str:
+    """The first three mistakes, each by its place (``payload.priority: Input should be a
+    valid integer (got a boolean)``): the sender learns which field to fix."""
     parts = []
     for err in exc.errors()[:3]:
-        where = ".".join(str(p) for p in err["loc"]) or "message"
-        parts.append(f"{where}: {err['msg']}")
+        where = ".".join(str(p) for p in (within, *err["loc"]) if p != "") or "message"
+        given = "" if err["type"] in ("missing", "extra_forbidden") else _kind(err["input"])
+        parts.append(f"{where}: {err['msg']}{given}")
     return "; ".join(parts)
+
+
+_JSON_KINDS = {
+    bool: "a boolean",
+    int: "an integer",
+    float: "a number",
+    str: "a string",
+    list: "an array",
+    dict: "an object",
+    type(None): "null",
+}
+
+
+def _kind(value: Any) -> str:
+    kind = _JSON_KINDS.get(type(value))
+    return f" (got {kind})" if kind is not None else ""
