@@ -87,6 +87,10 @@ def _always() -> bool:
     return True
 
 
+def _never() -> bool:
+    return False
+
+
 class ClientState(enum.Enum):
     OPEN = "open"
     CLOSING = "closing"
@@ -258,6 +262,11 @@ class Hub:
         """Whether the modules that handle must-arrive messages run here and may decide: always
         with one process; with a broker, on the serving leader within its lease (cluster.py).
         Elsewhere nothing is acknowledged: the leader does it (backend/hub/broker.py)."""
+        self.starting: Callable[[], bool] = _never
+        """With a broker: this process has won the leadership and its deciding modules are
+        starting (cluster.py). Those already up would handle a must-arrive message while
+        nothing may acknowledge it yet, and handle again the copy the sender sends for want of
+        an ack: such a message is not published until they all serve."""
         self.forward: Callable[[Message], None] | None = None
         """With a broker: hand a message to the other processes only (a copy sent again, which
         this process's clients already have)."""
@@ -497,6 +506,8 @@ class Hub:
             self.bus.publish(message)
             return
         if not self.decides():
+            if self.starting():
+                return  # sent again for want of an ack, handled once they all serve
             # The leader handles and acknowledges it; every copy goes on (the first may have
             # found no leader), this process's clients see the first.
             if self.acks.first_passed(client.name, message):
