@@ -152,6 +152,8 @@ async def clustered(
     hub.forwards_unknown = True
     # Robots' must-arrive messages are acknowledged where they are handled (backend/hub/acks.py).
     hub.decides = lambda: leadership.serving and leadership.may_decide()
+    # Won but not serving yet: the deciding components are starting (docs/scaling.md).
+    hub.starting = lambda: leadership.leading and not leadership.serving
     await bridge.start()
     tokens = _FollowerTokens(app, settings.db_url)
     await tokens.load()

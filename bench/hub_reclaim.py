@@ -6,8 +6,10 @@ server's event loop, and what the reclaim pass that follows costs.
 A running server holds a synthetic site of ``--nodes`` nodes; ``--clients`` of its robots
 connect from another process (bench/site_followers.py) and the hub freezes their objects; then
 the process ends and they all leave at once. Last line: {"nodes", "clients",
-"leave_max_stall_ms" (the longest stall of the server's loop from the leave until the hub has
-detached them all), "reclaim_ms" (the reclaim's own pass: unfreeze, full collection, freeze),
+"freeze_ms" (the freeze after they connected: a collection of what is not frozen yet, then
+``gc.freeze()``), "leave_max_stall_ms" (the longest stall of the server's loop from the leave
+until the hub has detached them all), "reclaim_ms" (the reclaim's own pass: a collection of what
+is not frozen, then a freeze; it never walks the frozen site),
 "reclaim_max_stall_ms" (the longest stall while waiting for it: the pass, on its own timer),
 "reclaims"}. ``--quiet-s`` sets how long the hub waits for clients to settle before it
 reclaims (default: the server's 5 s; shorter than the leave itself, the reclaim runs inside the
@@ -64,6 +66,7 @@ async def bench_reclaim(
     async with LoopStall() as reclaim:
         await until(lambda: memory.reclaims > 0, "the reclaim ran")
     return {
+        "freeze_ms": round(memory.last_freeze_s * 1000, 1),
         "leave_max_stall_ms": round(leave.max_ms, 1),
         "reclaim_ms": round(memory.last_reclaim_s * 1000, 1),
         "reclaim_max_stall_ms": round(reclaim.max_ms, 1),

@@ -13,7 +13,7 @@ import os
 import time
 from typing import Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, Strict
 
 __all__ = [
     "ENVELOPE_VERSION",
@@ -21,6 +21,7 @@ __all__ = [
     "Payload",
     "PayloadModel",
     "UnknownMessageType",
+    "WireEnum",
     "known_types",
     "make_message",
     "new_message_id",
@@ -41,9 +42,10 @@ def new_message_id() -> str:
 
 
 class Message(BaseModel):
-    """The envelope. ``payload`` is plain JSON; its schema is given by ``type``."""
+    """The envelope. ``payload`` is plain JSON; its schema is given by ``type``. Strict as the
+    payloads are (``"version": true`` is not 1)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     type: str = Field(min_length=1, max_length=64, pattern=r"^[a-z][a-z0-9_.]*$")
     id: str = Field(default_factory=new_message_id, min_length=1, max_length=64)
@@ -66,9 +68,19 @@ class Message(BaseModel):
 
 
 class PayloadModel(BaseModel):
-    """Base class for payloads: unknown fields are refused so typos surface at once."""
+    """Base class for payloads: a closed object of strict values, as the REST bodies are
+    (backend/api/models.py): unknown fields are refused so typos surface at once, and nothing
+    is coerced (``true`` is not 1, ``"2"`` not 2, 1 is a number, ``1`` not ``true``).
 
-    model_config = ConfigDict(extra="forbid")
+    JSON says an enum's member by its value: an enum field is annotated ``WireEnum`` (lax for
+    that field only), so ``"idle"`` is a ``RobotMode`` and ``1`` is not."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+
+WireEnum = Strict(False)
+"""``Annotated[SomeStrEnum, WireEnum]``: a strict model's enum field that takes the member's
+JSON value (pydantic's strict mode wants the member itself)."""
 
 
 M = TypeVar("M", bound=BaseModel)

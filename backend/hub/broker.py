@@ -182,7 +182,7 @@ class BrokerBridge(Service):
                     self._publish(message)
                 self.hub.bus.publish(acks.ack(message))
                 return
-            if not acks.first_passed(message.source, message):
+            if self.hub.starting() or not acks.first_passed(message.source, message):
                 return
         self._publish(message)
 

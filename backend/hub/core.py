@@ -87,6 +87,10 @@ def _always() -> bool:
     return True
 
 
+def _never() -> bool:
+    return False
+
+
 class ClientState(enum.Enum):
     OPEN = "open"
     CLOSING = "closing"
@@ -258,6 +262,11 @@ class Hub:
         """Whether the modules that handle must-arrive messages run here and may decide: always
         with one process; with a broker, on the serving leader within its lease (cluster.py).
         Elsewhere nothing is acknowledged: the leader does it (backend/hub/broker.py)."""
+        self.starting: Callable[[], bool] = _never
+        """With a broker: this process has won the leadership and its deciding modules are
+        starting (cluster.py). Those already up would handle a must-arrive message while
+        nothing may acknowledge it yet, and handle again the copy the sender sends for want of
+        an ack: such a message is not published until they all serve."""
         self.forward: Callable[[Message], None] | None = None
         """With a broker: hand a message to the other processes only (a copy sent again, which
         this process's clients already have)."""
@@ -458,6 +467,14 @@ class Hub:
                 message.id,
             )
             return
+        model = self._models.get(type_)
+        if model is None:
+            model = self._models[type_] = payload_model(type_)
+        try:
+            model.model_validate(message.payload)
+        except ValidationError as exc:
+            client.error("invalid_payload", _short(exc, "payload"), message.id)
+            return
         refusal = publish_refusal(client.role, client.name, type_, message.payload)
         if refusal is not None:
             client.error(*refusal, message.id)
@@ -465,14 +482,6 @@ class Hub:
         message.source = client.name
         if type_ in CONTROL_TYPES and message.destination in (None, HUB_NAME):
             self._control(client, message)
-            return
-        model = self._models.get(type_)
-        if model is None:
-            model = self._models[type_] = payload_model(type_)
-        try:
-            model.model_validate(message.payload)
-        except ValidationError as exc:
-            client.error("invalid_payload", _short(exc), message.id)
             return
         destination = message.destination
         if destination is not None and (
@@ -497,6 +506,8 @@ class Hub:
             self.bus.publish(message)
             return
         if not self.decides():
+            if self.starting():
+                return  # sent again for want of an ack, handled once they all serve
             # The leader handles and acknowledges it; every copy goes on (the first may have
             # found no leader), this process's clients see the first.
             if self.acks.first_passed(client.name, message):
@@ -512,14 +523,12 @@ class Hub:
         if message.type == "ping":
             client.send_direct(message.reply("pong", {}, source=HUB_NAME))
             return
-        patterns = message.payload.get("patterns")
-        if (
-            not isinstance(patterns, list)
-            or not patterns
-            or not all(isinstance(p, str) and 0 < len(p) <= 64 for p in patterns)
-        ):
+        patterns: list[str] = message.payload["patterns"]  # validated (Subscribe)
+        if not all(0 < len(p) <= 64 for p in patterns):
             client.error(
-                "invalid_payload", "patterns must be a list of 1-64 character strings", message.id
+                "invalid_payload",
+                "payload.patterns: each pattern is 1-64 characters",
+                message.id,
             )
             return
         for pattern in patterns:
@@ -529,9 +538,28 @@ class Hub:
                 client.unsubscribe(pattern)
 
 
-def _short(exc: ValidationError) -> str:
+def _short(exc: ValidationError, within: str = "") -> str:
+    """The first three mistakes, each by its place (``payload.priority: Input should be a
+    valid integer (got a boolean)``): the sender learns which field to fix."""
     parts = []
     for err in exc.errors()[:3]:
-        where = ".".join(str(p) for p in err["loc"]) or "message"
-        parts.append(f"{where}: {err['msg']}")
+        where = ".".join(str(p) for p in (within, *err["loc"]) if p != "") or "message"
+        given = "" if err["type"] in ("missing", "extra_forbidden") else _kind(err["input"])
+        parts.append(f"{where}: {err['msg']}{given}")
     return "; ".join(parts)
+
+
+_JSON_KINDS = {
+    bool: "a boolean",
+    int: "an integer",
+    float: "a number",
+    str: "a string",
+    list: "an array",
+    dict: "an object",
+    type(None): "null",
+}
+
+
+def _kind(value: Any) -> str:
+    kind = _JSON_KINDS.get(type(value))
+    return f" (got {kind})" if kind is not None else ""

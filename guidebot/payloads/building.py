@@ -8,10 +8,11 @@ module health. Field names are the contract in docs/messages.md.
 from __future__ import annotations
 
 from enum import StrEnum
+from typing import Annotated
 
 from pydantic import Field
 
-from guidebot.messages import PayloadModel, register_payload
+from guidebot.messages import PayloadModel, WireEnum, register_payload
 
 __all__ = [
     "BuildingInputChanged",
@@ -90,7 +91,7 @@ class ElevatorState(PayloadModel):
     floor: str | None
     """Its floor, or the last one it was seen at while moving; None before any."""
     door_open: bool
-    state: CabinState
+    state: Annotated[CabinState, WireEnum]
     calls: list[str] = Field(default_factory=list)
     """Floors it is called to (their call coils are set)."""
 

@@ -8,11 +8,11 @@ registered here: the on-board bus does not require registration.
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field
 
-from guidebot.messages import PayloadModel, register_payload
+from guidebot.messages import PayloadModel, WireEnum, register_payload
 
 __all__ = [
     "ENDED_REPORTED",
@@ -60,7 +60,7 @@ class RobotState(PayloadModel):
     node: str | None = None
     floor: str | None = None
     battery: float = Field(default=1.0, ge=0.0, le=1.0)
-    mode: RobotMode = RobotMode.IDLE
+    mode: Annotated[RobotMode, WireEnum] = RobotMode.IDLE
     navigation: str | None = None
     """The navigator's state (moving, waiting_door, door_blocked, riding, ...)."""
     task_id: str | None = None
@@ -148,7 +148,7 @@ class RobocanModule(PayloadModel):
     """motor_controller, sonar_ring, head_io, battery_monitor, other or kind_N; None before the
     module described itself."""
     firmware: str | None
-    state: CanModuleState
+    state: Annotated[CanModuleState, WireEnum]
     critical: bool
     elements: list[str] = Field(default_factory=list)
     frames_rx: int = Field(ge=0)

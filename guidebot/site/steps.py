@@ -9,20 +9,30 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any, ClassVar
+
+from pydantic import ConfigDict, Strict
 
 __all__ = ["PathStep"]
+
+_Strict = Strict()
+"""Each field strict when pydantic validates a step of a ``path`` payload (as every payload
+field is, guidebot/messages.py): annotations only, nothing runs when the graph builds one.
+Strictness is per field because a strict dataclass would take only PathStep instances, not the
+JSON objects a ``path`` message carries."""
 
 
 @dataclass(frozen=True, slots=True)
 class PathStep:
-    node: str
-    floor: str
-    x: float
-    y: float
-    door: str | None = None
-    elevator: str | None = None
-    area: str | None = None
+    __pydantic_config__: ClassVar[ConfigDict] = ConfigDict(extra="forbid")
+
+    node: Annotated[str, _Strict]
+    floor: Annotated[str, _Strict]
+    x: Annotated[float, _Strict]
+    y: Annotated[float, _Strict]
+    door: Annotated[str | None, _Strict] = None
+    elevator: Annotated[str | None, _Strict] = None
+    area: Annotated[str | None, _Strict] = None
 
     def as_dict(self) -> dict[str, object]:
         return {
