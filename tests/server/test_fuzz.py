@@ -20,12 +20,17 @@ from backend.testing import RunningServer
 from .conftest import OPERATOR_TOKEN, PANEL_TOKEN
 
 MAX_EXAMPLES = 250
+ALARM = "/api/emergency/declare"
+"""Left out of the fuzz: a declared fire alarm puts the server in another mode for every later
+case (new tasks refused with 503 "emergency", by design; docs/emergency.md). Its contract and
+bad input are tested in tests/building/test_emergency.py."""
 STATEFUL_EXAMPLES = 40
 
 
 def fuzz(base_url: str, openapi: dict[str, object], tokens: list[str]) -> list[str]:
     """Runs in a worker thread (requests is blocking); returns the failures found."""
     schema = schemathesis.openapi.from_dict(openapi).include(path_regex="^/api/(?!hub)")
+    schema = schema.exclude(path=ALARM, method="POST")
     failures: list[str] = []
     session = requests.Session()
 
@@ -159,6 +164,7 @@ def contract_fuzz(base_url: str, openapi: dict[str, object], admin: str) -> list
     (negative_data_rejection), and without a token 401 before anything else. Runs in a worker
     thread; returns the failures found."""
     schema = schemathesis.openapi.from_dict(openapi).include(path_regex="^/(api/(?!hub)|media/)")
+    schema = schema.exclude(path=ALARM, method="POST")
     operations = cast(dict[str, Any], openapi["paths"])
     failures: list[str] = []
     session = requests.Session()
