@@ -61,6 +61,9 @@ class Grant:
     robot: str
     area: str
     request_id: str | None
+    again: bool = False
+    """The robot held the area already (it asked again: a lost answer, a restart, a new
+    leader): answered, but no new grant."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -390,6 +393,7 @@ class AreaLocks:
             now = time.time()
             for a in wait.areas:
                 lock = self._locks[a]
+                again = lock.holder == wait.robot
                 if lock.holder is None:
                     lock.move(LockState.HELD)
                     lock.holder = wait.robot
@@ -398,7 +402,7 @@ class AreaLocks:
                     if wait.robot in self._offline:
                         lock.move(LockState.HOLDER_OFFLINE)
                         lock.offline_since = time.monotonic()
-                grants.append(Grant(wait.robot, a, wait.request_id))
+                grants.append(Grant(wait.robot, a, wait.request_id, again))
         return grants
 
     def _waits_on(self, wait: _Wait, robot: str) -> bool:

@@ -575,7 +575,8 @@ class TrafficManager(Service):
                 correlation_id=g.request_id,
             )
             self.courier.post(granted, key=(g.robot, g.area))
-            self._emit("area_granted", {"robot": g.robot, "area": g.area})
+            again = {"again": True} if g.again else {}
+            self._emit("area_granted", {"robot": g.robot, "area": g.area, **again})
 
     def _send_yields(self, yields: list[Yield], now: float) -> None:
         for y in yields:

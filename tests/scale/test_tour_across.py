@@ -58,13 +58,15 @@ def _first(events: list[dict[str, Any]], kind: str, **data: str) -> int:
 
 
 def _fresh_grants(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Grants the Traffic Manager decided, not a new life's restored locks or a robot's resync."""
+    """Grants the Traffic Manager decided, not a new life's restored locks, a robot's resync or
+    the answer to a holder asking again."""
     return [
         e["data"]
         for e in events
         if e["kind"] == "area_granted"
         and not e["data"].get("restored")
         and not e["data"].get("resync")
+        and not e["data"].get("again")
     ]
 
 
