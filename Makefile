@@ -31,8 +31,7 @@ typecheck: $(STAMP)
 
 # The suite waits far more than it computes (servers, browsers, robots at work): four pytest-xdist
 # workers share 2 CPUs. `--dist loadgroup` keeps the docker tests in one worker; the tests
-# marked `alone` (robots on simulated CAN hardware, the demo) run after, by themselves
-# (tests/conftest.py).
+# marked `alone` (the demo's, on ports it picks) run after, by themselves (tests/conftest.py).
 test: $(STAMP) system-deps lint typecheck
 	$(BIN)/python -m pytest -n 4 --dist loadgroup -m "not alone"
 	$(BIN)/python -m pytest -m alone

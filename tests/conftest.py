@@ -10,21 +10,12 @@ from collections.abc import Iterator
 import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
-ALONE = frozenset(
-    {
-        "test_e2e.py",
-        "test_doors.py",
-        "test_invariants.py",
-        "test_restart.py",
-        "test_evacuation.py",
-        "test_demo.py",
-    }
-)
+ALONE = frozenset({"test_demo.py"})
 """Test files marked ``alone``: the Makefile runs them after the rest, with nothing beside
-them. Robots on simulated RoboCAN hardware hold the watchdog's 350 ms and their goals' time
-budgets only with a CPU to run on: beside four busy workers a robot was now and then taken for
-'stuck'. The demo's test starts it on free ports it picked, which a neighbour's connection
-could take before the demo bound them."""
+them. The demo's test starts it on free ports it picked, which a neighbour's connection could
+take before the demo bound them. (The robots on simulated RoboCAN hardware ran alone too until
+their base paired its wheels' frames by time: beside four busy workers they were taken for
+"stuck", and the safety rig waited for door states published before it listened.)"""
 
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups

@@ -10,10 +10,11 @@ on board; the base driver, the largest, is a third of it.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from guidebot.messages import Message
@@ -45,14 +46,48 @@ def _number(payload: dict[str, Any], key: str, default: float = 0.0) -> float:
 
 
 @dataclass
+class Sample:
+    """One ENCODER frame of a wheel: when it arrived, the travel since the previous one."""
+
+    time: float
+    delta_m: float
+    velocity: float
+
+
+PENDING_MAX = 64
+"""Samples a wheel keeps waiting for the other wheel's (a stalled master drains one ID's queue
+before the next: up to 16 at once); older ones are folded into the next."""
+
+
+@dataclass
 class Wheel:
     side: str
     pid_element: int | None = None
     last_ticks: int | None = None
-    delta_m: float = 0.0
-    velocity: float = 0.0
-    fresh: bool = False
+    pending: collections.deque[Sample] = field(default_factory=collections.deque)
+    """Samples not yet paired with the other wheel's sample of the same period."""
+    carry_m: float = 0.0
+    """Travel of samples that found no partner, added to this wheel's next sample."""
     online: bool = False
+
+    def add(self, sample: Sample) -> None:
+        sample.delta_m += self.carry_m
+        self.carry_m = 0.0
+        self.pending.append(sample)
+        if len(self.pending) > PENDING_MAX:
+            self.fold()
+
+    def fold(self) -> None:
+        """The oldest sample has no partner: its travel goes with the next one."""
+        self.carry_m += self.pending.popleft().delta_m
+        if self.pending:
+            self.pending[0].delta_m += self.carry_m
+            self.carry_m = 0.0
+
+    def reset(self) -> None:
+        self.last_ticks = None
+        self.pending.clear()
+        self.carry_m = 0.0
 
 
 class BaseDriver(Driver):
@@ -138,7 +173,8 @@ class BaseDriver(Driver):
 
     def on_online(self, module: Module) -> None:
         for wheel in self._wheels_of(module):
-            wheel.online, wheel.last_ticks, wheel.fresh = True, None, False
+            wheel.online = True
+            wheel.reset()
         self.faults.discard(module.module_id)
 
     def on_lost(self, module: Module, reason: str) -> None:
@@ -212,24 +248,45 @@ class BaseDriver(Driver):
         if wheel is None:
             return  # a motor that is not a wheel
         _, ticks, velocity = p.parse_encoder(data)
+        delta = 0.0
         if wheel.last_ticks is not None:
-            delta = ((ticks - wheel.last_ticks + 2**31) % 2**32) - 2**31
-            wheel.delta_m += delta / self.config.ticks_per_m
+            delta = (((ticks - wheel.last_ticks + 2**31) % 2**32) - 2**31) / self.config.ticks_per_m
         wheel.last_ticks = ticks
-        wheel.velocity = velocity
-        wheel.fresh = True
+        wheel.add(Sample(module.frame_time, delta, velocity))
+        self._pair()
+
+    def _pair(self) -> None:
+        """Odometry from the two wheels' samples of one period: paired by when they arrived
+        (within half an encoder period), never by the order the master handles them in. A
+        master back from a stall handles one module's queued frames before the next module's,
+        and a wheel that comes online after the other starts between two of its frames: "the
+        next frame of each" then paired one wheel's period with the other's previous one for
+        good. A sample without a partner (the other wheel's frame lost, or not online) adds
+        its travel to its wheel's next sample: the encoder ticks count on meanwhile."""
         sides = {w.side: w for w in self.wheels.values() if w.online}
         left, right = sides.get("left"), sides.get("right")
-        if left is None or right is None or not (left.fresh and right.fresh):
+        if left is None or right is None:
+            for wheel in sides.values():  # nothing to pair with: keep only the latest
+                while len(wheel.pending) > 1:
+                    wheel.fold()
             return
+        tolerance = self.config.encoder_period_ms / 2000
+        while left.pending and right.pending:
+            a, b = left.pending[0], right.pending[0]
+            if abs(a.time - b.time) > tolerance:
+                (left if a.time < b.time else right).fold()
+                continue
+            left.pending.popleft()
+            right.pending.popleft()
+            self._integrate(a, b)
+
+    def _integrate(self, left: Sample, right: Sample) -> None:
         base = self.config.wheel_base_m
         ds = (left.delta_m + right.delta_m) / 2
         dtheta = (right.delta_m - left.delta_m) / base
         self.x += ds * math.cos(self.theta + dtheta / 2)
         self.y += ds * math.sin(self.theta + dtheta / 2)
         self.theta = math.remainder(self.theta + dtheta, math.tau)
-        left.delta_m = right.delta_m = 0.0
-        left.fresh = right.fresh = False
         self.endpoint.publish(
             "odometry",
             {

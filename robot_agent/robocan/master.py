@@ -323,6 +323,7 @@ class Master(Service):
             self._start_bring_up(module)
             self._reschedule()
         module.last_seen = now
+        module.frame_time = msg.timestamp or time.time()  # an interface may give no timestamp
         module.frames_rx += 1
         if module.state is ModuleState.LOST or (
             module.state is ModuleState.FAILED and now >= module.retry_at

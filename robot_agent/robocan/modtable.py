@@ -86,6 +86,10 @@ class Module:
     announced: bool = False
     disabling: bool = False  # the master disabled it: a DISABLED watchdog is no reset
     enabling: bool = False  # ENABLE on is on its way: its ACK makes the module ONLINE
+    frame_time: float = 0.0
+    """When the frame being handled reached the bus interface (python-can's receive timestamp,
+    seconds): drivers that pair frames of several modules (the base's two wheels) pair them by
+    it, since the master may handle them in another order (section 7, the queues per ID)."""
 
     @property
     def name(self) -> str:

@@ -271,8 +271,14 @@ async def fleet(
             hub = server.app.state.hub
             await f.wait_for(lambda: set(f.agents) <= set(hub.clients))
             # The building's doors and cabins are known (first samples) before anyone moves.
+            # Asked of the interface, not of its first door_closed / elevator_in_position: it
+            # polls from the server's start on, and on a loaded machine some of those went
+            # out before this monitor subscribed (then the rig waited for them for ever).
+            building = server.app.state.building
             await f.wait_for(
-                lambda: f.of("door_closed", door="D0") and f.of("door_closed", door="D1")
+                lambda: (
+                    all(p.health.polls for p in building.pollers.values())
+                    and all(keeper.is_open is not None for keeper in building.doors.values())
+                )
             )
-            await f.wait_for(lambda: len(f.of("elevator_in_position")) >= 4)
             yield f
