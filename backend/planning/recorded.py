@@ -1,0 +1,74 @@
+"""A recorded day's tour requests, read from a server's event log (its ``task_created``
+events), to replay them over other fleets (docs/planning.md, "A recorded day")."""
+
+from __future__ import annotations
+
+import math
+import random
+from typing import Any
+
+from sqlalchemy import select
+
+from backend.db import make_engine, make_sessionmaker
+from backend.db.models import EventRow
+from backend.planning.profile import PlanError, Request, follow_count
+from backend.reports.period import BadPeriod, parse_period
+from guidebot.site.schema import Site
+
+__all__ = ["Recording", "read_day"]
+
+
+class Recording:
+    """The requests of a recorded day, shifted so the first hour with one is hour 0."""
+
+    def __init__(self, requests: list[Request], day_s: float, skipped: int, start: float) -> None:
+        self.requests = requests
+        self.day_s = day_s
+        self.skipped = skipped
+        """Tour requests for tours the site no longer has (left out)."""
+        self.start = start
+        """Epoch seconds of the hour the day's requests start from."""
+
+
+def requests_of(
+    rows: list[tuple[float, dict[str, Any]]], site: Site, stop_following: float, seed: int
+) -> Recording:
+    """The tour requests among ``(at, data)`` of task_created events, in time order."""
+    rng = random.Random(seed)
+    tours = [(at, str(d.get("tour"))) for at, d in rows if d.get("kind") == "tour"]
+    kept = sorted((at, t) for at, t in tours if site.tour(t) is not None)
+    if not kept:
+        raise PlanError("the recording holds no tour request for a tour of this site")
+    start = kept[0][0] // 3600 * 3600
+    day_s = max(3600.0, math.ceil((kept[-1][0] - start + 1) / 3600) * 3600)
+    requests = [
+        Request(at - start, t, follow_count(rng, site, t, stop_following)) for at, t in kept
+    ]
+    return Recording(requests, day_s, len(tours) - len(kept), start)
+
+
+async def read_day(
+    db_url: str, date: str, tz: str, site: Site, *, stop_following: float, seed: int
+) -> Recording:
+    """The tour requests of day ``date`` (in ``tz``) from the event log at ``db_url``."""
+    try:
+        period = parse_period(day=date, tz=tz)
+    except BadPeriod as exc:
+        raise PlanError(str(exc)) from None
+    engine = make_engine(db_url)
+    try:
+        query = (
+            select(EventRow.at, EventRow.data)
+            .where(
+                EventRow.at >= period.start,
+                EventRow.at < period.end,
+                EventRow.kind == "task_created",
+            )
+            .order_by(EventRow.at, EventRow.id)
+        )
+        async with make_sessionmaker(engine)() as session:
+            rows = (await session.execute(query)).all()
+    finally:
+        await engine.dispose()
+    found = [(at, data if isinstance(data, dict) else {}) for at, data in rows]
+    return requests_of(found, site, stop_following, seed)
