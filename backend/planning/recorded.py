@@ -7,7 +7,7 @@ import math
 import random
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import or_, select
 
 from backend.db import make_engine, make_sessionmaker
 from backend.db.models import EventRow
@@ -31,18 +31,33 @@ class Recording:
 
 
 def requests_of(
-    rows: list[tuple[float, dict[str, Any]]], site: Site, stop_following: float, seed: int
+    rows: list[tuple[float, str, dict[str, Any]]], site: Site, stop_following: float, seed: int
 ) -> Recording:
-    """The tour requests among ``(at, data)`` of task_created events, in time order."""
+    """The tour requests among ``(at, kind, data)`` of task events, in time order. How many
+    points a group followed is the recording's (its last ``explained`` point) where it says;
+    else drawn with ``stop_following``."""
     rng = random.Random(seed)
-    tours = [(at, str(d.get("tour"))) for at, d in rows if d.get("kind") == "tour"]
-    kept = sorted((at, t) for at, t in tours if site.tour(t) is not None)
+    followed: dict[str, int] = {}
+    for _, kind, d in rows:
+        if kind.startswith("task_point") and d.get("stage") == "explained":
+            index, task = d.get("index"), str(d.get("task_id"))
+            if isinstance(index, int) and index > followed.get(task, 0):
+                followed[task] = index
+    tours = [
+        (at, str(d.get("tour")), str(d.get("task_id")))
+        for at, kind, d in rows
+        if kind == "task_created" and d.get("kind") == "tour"
+    ]
+    kept = sorted(t for t in tours if site.tour(t[1]) is not None)
     if not kept:
         raise PlanError("the recording holds no tour request for a tour of this site")
     start = kept[0][0] // 3600 * 3600
     day_s = max(3600.0, math.ceil((kept[-1][0] - start + 1) / 3600) * 3600)
     requests = [
-        Request(at - start, t, follow_count(rng, site, t, stop_following)) for at, t in kept
+        Request(
+            at - start, tour, followed.get(task) or follow_count(rng, site, tour, stop_following)
+        )
+        for at, tour, task in kept
     ]
     return Recording(requests, day_s, len(tours) - len(kept), start)
 
@@ -58,11 +73,11 @@ async def read_day(
     engine = make_engine(db_url)
     try:
         query = (
-            select(EventRow.at, EventRow.data)
+            select(EventRow.at, EventRow.kind, EventRow.data)
             .where(
                 EventRow.at >= period.start,
                 EventRow.at < period.end,
-                EventRow.kind == "task_created",
+                or_(EventRow.kind == "task_created", EventRow.kind.like("task_point %")),
             )
             .order_by(EventRow.at, EventRow.id)
         )
@@ -70,5 +85,5 @@ async def read_day(
             rows = (await session.execute(query)).all()
     finally:
         await engine.dispose()
-    found = [(at, data if isinstance(data, dict) else {}) for at, data in rows]
+    found = [(at, kind, data if isinstance(data, dict) else {}) for at, kind, data in rows]
     return requests_of(found, site, stop_following, seed)

@@ -92,12 +92,18 @@ async def test_a_recorded_day_replays_its_tour_requests(tmp_path: Path) -> None:
             data={"task_id": "c", "kind": "charge", "state": "queued"},
         )
     )
+    explained = {"task_id": "t0", "index": 2, "total": 5, "stage": "explained"}
+    rows.append(
+        EventRow(at=noon + 500, kind="task_point 2/5 explained", source="tm", data=explained)
+    )
     async with make_sessionmaker(engine)() as session:
         session.add_all(rows)
         await session.commit()
     await engine.dispose()
     date = dt.datetime.fromtimestamp(noon, dt.UTC).date().isoformat()
     day = await read_day(url, date, "UTC", load_site_file(DEMO), stop_following=0.0, seed=1)
+    assert day.requests[0].follow == 2  # the recording's: it left after the second point
+    assert day.requests[2].follow == 5  # nobody stops by default: the whole ground tour
     assert [(r.at, r.tour) for r in day.requests] == [
         (0, "ground"),
         (60, "highlights"),
