@@ -42,6 +42,7 @@ BENCHMARKS: dict[str, str] = {
     "vda5050": "bench.vda5050:main",
     "reports": "bench.reports:main",
     "plan": "bench.plan:main",
+    "plan-check": "bench.plan_check:main",
 }
 
 

@@ -28,6 +28,8 @@ class Request:
     at: float
     tour: str
     follow: int
+    ref: str = ""
+    """The recorded task's id (a recorded day), else empty."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -55,7 +55,10 @@ def requests_of(
     day_s = max(3600.0, math.ceil((kept[-1][0] - start + 1) / 3600) * 3600)
     requests = [
         Request(
-            at - start, tour, followed.get(task) or follow_count(rng, site, tour, stop_following)
+            at - start,
+            tour,
+            followed.get(task) or follow_count(rng, site, tour, stop_following),
+            task,
         )
         for at, tour, task in kept
     ]

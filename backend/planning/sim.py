@@ -104,6 +104,8 @@ class Outcome:
     requests: int
     waits_s: list[float] = field(default_factory=list)
     """Request to the robot's arrival at the tour's first point, per served request."""
+    wait_of: dict[int, float] = field(default_factory=dict)
+    """The same waits by the request's index."""
     refused: int = 0
     abandoned: int = 0
     busy_s: float = 0.0
@@ -243,6 +245,7 @@ def simulate(
             task.robot = robot.name
             first, took, last = _tour_time(eta.segments(task, robot.node), req.follow)
             out.waits_s.append(now - req.at + first)
+            out.wait_of[i] = out.waits_s[-1]
             out.busy_s += took
             del free[robot.name]
             parking.pop(robot.name, None)

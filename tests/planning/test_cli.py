@@ -3,6 +3,7 @@ wrong options refused with the reason (docs/planning.md)."""
 
 from __future__ import annotations
 
+import asyncio
 import datetime as dt
 import json
 from pathlib import Path
@@ -120,3 +121,41 @@ def test_the_bench_times_a_day_and_prints_one_json_line() -> None:
     last = json.loads(result.output.strip().splitlines()[-1])
     assert (last["requests"], last["robots"], last["hours"]) == (60, 3, 2)
     assert last["wall_s"] >= last["sim_s"] >= 0 and last["goal_s"] == 180.0
+
+
+async def write_live_day(url: str, noon: float) -> None:
+    """One robot connected; two ground tours asked a minute apart, the robot at the first
+    point 30 s and 200 s after each request."""
+    engine = make_engine(url)
+    await migrate(engine)
+    rows = [EventRow(at=noon - 10, kind="robot_connected", source="hub", data={"robot": "R1"})]
+    for i, (asked, waited) in enumerate([(0, 30), (60, 200)]):
+        task = {"task_id": f"t{i}", "kind": "tour", "tour": "ground", "state": "queued"}
+        rows.append(EventRow(at=noon + asked, kind="task_created", source="tm", data=task))
+        arrived = {"task_id": f"t{i}", "index": 1, "total": 5, "stage": "arrived"}
+        rows.append(
+            EventRow(
+                at=noon + asked + waited, kind="task_point 1/5 arrived", source="tm", data=arrived
+            )
+        )
+    async with make_sessionmaker(engine)() as session:
+        session.add_all(rows)
+        await session.commit()
+    await engine.dispose()
+
+
+def test_the_check_compares_measured_waits_with_the_plan(tmp_path: Path) -> None:
+    url = f"sqlite+aiosqlite:///{tmp_path / 'live.db'}"
+    noon = 1_780_000_000 // 86400 * 86400 + 12 * 3600
+    asyncio.run(write_live_day(url, noon))
+    date = dt.datetime.fromtimestamp(noon, dt.UTC).date().isoformat()
+    result = CliRunner().invoke(
+        main,
+        ["bench", "plan-check", "--site", str(DEMO), "--db", url, "--date", date, "--json"],
+    )
+    assert result.exit_code == 0, result.output
+    last = json.loads(result.output.strip().splitlines()[-1])
+    assert (last["requests"], last["compared"], last["robots"]) == (2, 2, 1)
+    assert last["measured"] == {"p50_s": 30.0, "p95_s": 200.0}
+    planned = last["planned"]
+    assert last["error"]["p50"] == round(planned["p50_s"] / 30.0 - 1, 3)
