@@ -159,3 +159,17 @@ def test_the_check_compares_measured_waits_with_the_plan(tmp_path: Path) -> None
     assert last["measured"] == {"p50_s": 30.0, "p95_s": 200.0}
     planned = last["planned"]
     assert last["error"]["p50"] == round(planned["p50_s"] / 30.0 - 1, 3)
+
+
+def test_plan_replays_a_recorded_day_over_other_fleets(tmp_path: Path) -> None:
+    url = f"sqlite+aiosqlite:///{tmp_path / 'live.db'}"
+    noon = 1_780_000_000 // 86400 * 86400 + 12 * 3600
+    asyncio.run(write_live_day(url, noon))
+    date = dt.datetime.fromtimestamp(noon, dt.UTC).date().isoformat()
+    code, output = plan("--day", url, "--date", date, "--robots", "1..2", "--json")
+    assert code == 0, output
+    result = json.loads(output.strip().splitlines()[-1])
+    assert result["source"] == {"date": date, "tz": "UTC", "skipped": 0, "from": noon}
+    assert [(r["robots"], r["served"]) for r in result["fleets"]] == [(1, 2), (2, 2)]
+    code, output = plan("--day", url, "--date", "2026-13-01")
+    assert code == 2 and "2026-13-01" in output
