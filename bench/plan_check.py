@@ -88,7 +88,9 @@ def main(site_path: Path, db_url: str, date: str, tz: str, as_json: bool) -> Non
     waits, robots = asyncio.run(measured(db_url, date, tz))
     day = asyncio.run(read_day(db_url, date, tz, site, stop_following=0.0, seed=1))
     size = max(1, len(robots))
-    outcome = simulate(site, SiteGraph(site), day.requests, robots=size, day_s=day.day_s)
+    outcome = simulate(
+        site, SiteGraph(site), day.requests, robots=size, day_s=day.day_s, pace=day.pace
+    )
     pairs = [
         (waits[req.ref], outcome.wait_of[i])
         for i, req in enumerate(day.requests)
@@ -108,6 +110,7 @@ def main(site_path: Path, db_url: str, date: str, tz: str, as_json: bool) -> Non
         "measured": live,
         "planned": plan,
         "error": error,
+        "pace": {"move": day.pace.move, "talk": day.pace.talk},
     }
     if not as_json:
         click.echo(f"measured {live}, planned {plan}, error {error}")

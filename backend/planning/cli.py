@@ -12,7 +12,7 @@ from typing import Any
 
 import click
 
-from backend.planning.profile import PlanError, draw, load_profile
+from backend.planning.profile import Pace, PlanError, draw, load_profile
 from backend.planning.sim import POLICIES, simulate
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
@@ -54,6 +54,7 @@ def plan(
     within_min: float,
     patience_s: float | None = None,
     queue_limit: int | None = None,
+    pace: Pace = Pace(),
 ) -> list[dict[str, Any]]:
     """One summary per fleet size and policy (the same requests for each)."""
     graph = SiteGraph(site)
@@ -69,6 +70,7 @@ def plan(
                 day_s=day_s,
                 patience_s=patience_s,
                 queue_limit=queue_limit,
+                pace=pace,
             )
             rows.append(outcome.summary(within_min))
     return rows
@@ -207,6 +209,7 @@ def _run(
         day_s = len(profile.hours) * 3600.0
         patience_s = None if profile.patience_min is None else profile.patience_min * 60
         queue_limit = profile.queue_limit
+        pace = profile.pace
         source = {"profile": profile.name, "hours": len(profile.hours), "seed": profile.seed}
     else:
         from backend.planning.recorded import read_day
@@ -215,7 +218,7 @@ def _run(
         recording = asyncio.run(
             read_day(db_url, date, tz, site, stop_following=stop_following or 0.0, seed=seed or 1)
         )
-        requests, day_s = recording.requests, recording.day_s
+        requests, day_s, pace = recording.requests, recording.day_s, recording.pace
         source = {"date": date, "tz": tz, "skipped": recording.skipped, "from": recording.start}
     rows = plan(
         site,
@@ -226,7 +229,9 @@ def _run(
         within_min=within_min,
         patience_s=patience_s,
         queue_limit=queue_limit,
+        pace=pace,
     )
+    source["pace"] = {"move": pace.move, "talk": pace.talk}
     return {
         "site": site.name,
         "source": source,

@@ -13,11 +13,20 @@ import yaml
 
 from guidebot.site.schema import Site
 
-__all__ = ["PlanError", "Profile", "Request", "draw", "load_profile", "parse_profile"]
+__all__ = ["Pace", "PlanError", "Profile", "Request", "draw", "load_profile", "parse_profile"]
 
 
 class PlanError(ValueError):
     """A profile, a recording or an option the planner cannot use; the text says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class Pace:
+    """Real over nominal seconds, for legs and for explanations: the two factors the ETA model
+    learns from a running fleet (1.0: as predicted)."""
+
+    move: float = 1.0
+    talk: float = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,9 +56,12 @@ class Profile:
     spacing: str
     """"random" (uniform in the hour, seeded) or "even" (evenly spread in the hour)."""
     seed: int
+    pace: Pace = Pace()
+    """How much slower than nominal the fleet's legs and explanations run."""
 
 
 _KEYS = {
+    "pace",
     "name",
     "start_hour",
     "hours",
@@ -121,6 +133,10 @@ def parse_profile(data: Any, site: Site) -> Profile:
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise PlanError(f"profile: seed must be an integer (got {seed!r})")
     limit = _number(data, "queue_limit", None, 1, 1_000_000)
+    pace = data.get("pace") or {}
+    if not isinstance(pace, dict) or set(pace) - {"move", "talk"}:
+        raise PlanError(f"profile: pace must be {{move: FACTOR, talk: FACTOR}} (got {pace!r})")
+    factors = {k: float(_number(pace, k, 1.0, 0.1, 10.0)) for k in ("move", "talk")}
     return Profile(
         name=str(data.get("name") or "profile"),
         start_hour=float(_number(data, "start_hour", 9, 0, 23)),
@@ -130,6 +146,7 @@ def parse_profile(data: Any, site: Site) -> Profile:
         queue_limit=None if limit is None else int(limit),
         spacing=str(spacing),
         seed=seed,
+        pace=Pace(**factors),
     )
 
 

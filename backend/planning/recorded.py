@@ -11,18 +11,62 @@ from sqlalchemy import or_, select
 
 from backend.db import make_engine, make_sessionmaker
 from backend.db.models import EventRow
-from backend.planning.profile import PlanError, Request, follow_count
+from backend.planning.profile import Pace, PlanError, Request, follow_count
+from backend.planning.sim import nominal_segments
 from backend.reports.period import BadPeriod, parse_period
+from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 
-__all__ = ["Recording", "read_day"]
+__all__ = ["Recording", "learn_pace", "read_day", "requests_of"]
+
+
+def learn_pace(rows: list[tuple[float, str, dict[str, Any]]], site: Site) -> Pace:
+    """Real over nominal seconds of the legs between points (explained i-1 to arrived i) and of
+    the explanations (arrived i to explained i) the recording's tours took, as the ETA model
+    learns them (nominal where the recording has none)."""
+    graph = SiteGraph(site)
+    tour_of: dict[str, str] = {}
+    marks: dict[str, dict[tuple[int, str], float]] = {}
+    for at, kind, d in rows:
+        task = str(d.get("task_id"))
+        if kind == "task_created" and d.get("kind") == "tour" and site.tour(str(d.get("tour"))):
+            tour_of[task] = str(d.get("tour"))
+        elif kind.startswith("task_point") and task in tour_of:
+            index, stage = d.get("index"), d.get("stage")
+            if isinstance(index, int) and stage in ("arrived", "explained"):
+                marks.setdefault(task, {}).setdefault((index, str(stage)), at)
+    sums = {"move": [0.0, 0.0], "talk": [0.0, 0.0]}
+    nominal: dict[str, dict[tuple[int, str], float]] = {}
+    for task, seen in marks.items():
+        tour = tour_of[task]
+        if tour not in nominal:
+            nominal[tour] = {
+                (s.index, s.kind): s.nominal_s for s in nominal_segments(site, graph, tour, None)
+            }
+        for (index, stage), at in seen.items():
+            if stage == "explained" and (index, "arrived") in seen:
+                kind, began = "talk", seen[(index, "arrived")]
+            elif stage == "arrived" and (index - 1, "explained") in seen:
+                kind, began = "move", seen[(index - 1, "explained")]
+            else:
+                continue
+            predicted = nominal[tour].get((index, kind))
+            if predicted and at > began:
+                sums[kind][0] += at - began
+                sums[kind][1] += predicted
+    move, talk = (sums[k][0] / sums[k][1] if sums[k][1] else 1.0 for k in ("move", "talk"))
+    return Pace(move=round(move, 3), talk=round(talk, 3))
 
 
 class Recording:
     """The requests of a recorded day, shifted so the first hour with one is hour 0."""
 
-    def __init__(self, requests: list[Request], day_s: float, skipped: int, start: float) -> None:
+    def __init__(
+        self, requests: list[Request], day_s: float, skipped: int, start: float, pace: Pace
+    ) -> None:
         self.requests = requests
+        self.pace = pace
+        """How much slower than nominal the recorded tours went (``learn_pace``)."""
         self.day_s = day_s
         self.skipped = skipped
         """Tour requests for tours the site no longer has (left out)."""
@@ -62,7 +106,7 @@ def requests_of(
         )
         for at, tour, task in kept
     ]
-    return Recording(requests, day_s, len(tours) - len(kept), start)
+    return Recording(requests, day_s, len(tours) - len(kept), start, learn_pace(rows, site))
 
 
 async def read_day(

@@ -15,7 +15,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from backend.planning.profile import PlanError, Request
+from backend.planning.profile import Pace, PlanError, Request
 from backend.tasks.choice import choose_robot, idle_errands
 from backend.tasks.eta import EtaEstimator, Segment
 from backend.tasks.model import Task
@@ -25,7 +25,7 @@ from backend.tasks.targets import target_node
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import RobotConfig, Site
 
-__all__ = ["POLICIES", "Outcome", "fleet", "simulate"]
+__all__ = ["POLICIES", "Outcome", "Pace", "fleet", "nominal_segments", "simulate"]
 
 POLICIES = ("nearest", "longest-idle")
 """nearest: the Task Manager's own choice (cheapest to reach the tour's first point);
@@ -70,6 +70,14 @@ class _Fleet:
 
     def target_of(self, kind: str, params: dict[str, Any]) -> str:
         return target_node(self._site, self._graph, kind, params)
+
+
+def nominal_segments(site: Site, graph: SiteGraph, tour: str, start: str | None) -> list[Segment]:
+    """The ETA model's nominal segments of ``tour`` for a robot starting at ``start``."""
+    robots = fleet(site, 1)
+    task = Task(id="nominal", kind="tour", params={"tour": tour}, priority=0, requester="", seq=0)
+    task.robot = next(iter(robots))
+    return EtaEstimator(_Fleet(site, graph, robots)).segments(task, start)
 
 
 def fleet(site: Site, size: int) -> dict[str, RobotInfo]:
@@ -147,12 +155,18 @@ def quantile(ordered: Sequence[float], q: float) -> float | None:
     return ordered[min(len(ordered) - 1, max(0, math.ceil(q * len(ordered)) - 1))]
 
 
-def _tour_time(segments: list[Segment], follow: int) -> tuple[float, float, int]:
+def _tour_time(
+    segments: list[Segment], follow: int, pace: Pace = Pace()
+) -> tuple[float, float, int]:
     """(seconds to the first point, seconds of the whole task, index of the last point) when
     the visitors follow ``follow`` points (the tour ends after that point's explanation)."""
-    first = segments[0].nominal_s if segments else 0.0
+
+    def real(s: Segment) -> float:
+        return s.nominal_s * (pace.move if s.kind == "move" else pace.talk)
+
+    first = real(segments[0]) if segments else 0.0
     taken = [s for s in segments if s.index <= follow]
-    return first, sum(s.nominal_s for s in taken), max((s.index for s in taken), default=1)
+    return first, sum(real(s) for s in taken), max((s.index for s in taken), default=1)
 
 
 def simulate(
@@ -165,10 +179,12 @@ def simulate(
     day_s: float,
     patience_s: float | None = None,
     queue_limit: int | None = None,
+    pace: Pace = Pace(),
 ) -> Outcome:
     """Play ``requests`` (time order) over ``robots`` robots; the queue is first come, first
     served, as the Task Manager's for tours of one priority. A request is refused when
-    ``queue_limit`` already wait, and abandoned when it waited ``patience_s`` for a robot."""
+    ``queue_limit`` already wait, and abandoned when it waited ``patience_s`` for a robot.
+    ``pace`` scales the nominal legs and explanations (a recording's, ``recorded.learn_pace``)."""
     if policy not in POLICIES:
         raise PlanError(f"unknown policy {policy!r}; known: {', '.join(POLICIES)}")
     if robots < 1:
@@ -243,7 +259,7 @@ def simulate(
                 queued.add(i)
                 break
             task.robot = robot.name
-            first, took, last = _tour_time(eta.segments(task, robot.node), req.follow)
+            first, took, last = _tour_time(eta.segments(task, robot.node), req.follow, pace)
             out.waits_s.append(now - req.at + first)
             out.wait_of[i] = out.waits_s[-1]
             out.busy_s += took

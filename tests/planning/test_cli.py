@@ -169,7 +169,13 @@ def test_plan_replays_a_recorded_day_over_other_fleets(tmp_path: Path) -> None:
     code, output = plan("--day", url, "--date", date, "--robots", "1..2", "--json")
     assert code == 0, output
     result = json.loads(output.strip().splitlines()[-1])
-    assert result["source"] == {"date": date, "tz": "UTC", "skipped": 0, "from": noon}
+    assert result["source"] == {
+        "date": date,
+        "tz": "UTC",
+        "skipped": 0,
+        "from": noon,
+        "pace": {"move": 1.0, "talk": 1.0},  # no point both reached and explained: nominal
+    }
     assert [(r["robots"], r["served"]) for r in result["fleets"]] == [(1, 2), (2, 2)]
     code, output = plan("--day", url, "--date", "2026-13-01")
     assert code == 2 and "2026-13-01" in output

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from backend.planning.profile import PlanError, Request, draw, load_profile, parse_profile
+from backend.planning.recorded import learn_pace
 from backend.planning.sim import simulate
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
@@ -125,3 +126,23 @@ def test_an_unknown_policy_or_no_robot_is_refused() -> None:
         simulate(site, SiteGraph(site), [], robots=1, policy="fastest", day_s=3600)
     with pytest.raises(PlanError, match="at least one robot"):
         simulate(site, SiteGraph(site), [], robots=0, day_s=3600)
+
+
+def test_the_pace_learned_from_a_recording_scales_the_tours() -> None:
+    # The tiny tour recorded twice as slow as nominal: 4 s at A (nominal 2), 206 s to B (103).
+    site = tiny_site()
+    created = {"task_id": "t", "kind": "tour", "tour": "ab"}
+    rows = [(0.0, "task_created", created)]
+    for at, index, stage in [(0.0, 1, "arrived"), (4.0, 1, "explained"), (210.0, 2, "arrived")]:
+        mark = {"task_id": "t", "index": index, "stage": stage}
+        rows.append((at, f"task_point {index}/2 {stage}", mark))
+    pace = learn_pace(rows, site)
+    assert (pace.move, pace.talk) == (2.0, 2.0)
+    outcome = simulate(
+        site, SiteGraph(site), [Request(0.0, "ab", 2)], robots=1, day_s=3600, pace=pace
+    )
+    assert outcome.busy_s == pytest.approx(2 * TOUR_FROM_A_S)
+    profile = parse_profile({"hours": [{"ab": 1}], "pace": {"move": 2, "talk": 2}}, site)
+    assert profile.pace == pace
+    with pytest.raises(PlanError, match="pace must be"):
+        parse_profile({"hours": [{"ab": 1}], "pace": {"walk": 2}}, site)
