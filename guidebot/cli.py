@@ -22,6 +22,7 @@ COMMANDS: dict[str, str] = {
     "building-sim": "building_sim.cli:building_sim",
     "vda5050-sim": "guidebot.vda5050.cli:vda5050_sim",
     "replay": "backend.reports.cli:replay_command",
+    "plan": "backend.planning.cli:plan_command",
 }
 
 BENCHMARKS: dict[str, str] = {
@@ -42,6 +43,8 @@ BENCHMARKS: dict[str, str] = {
     "failover": "bench.failover:main",
     "vda5050": "bench.vda5050:main",
     "reports": "bench.reports:main",
+    "plan": "bench.plan:main",
+    "plan-check": "bench.plan_check:main",
 }
 
 
