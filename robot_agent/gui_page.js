@@ -130,6 +130,30 @@ function stateView(s) {
     </p>`;
 }
 
+/** The last captions shown, {started_at (Unix s), shown_at (Unix ms), text}: how late each
+ * came, for tests and for a look from the browser's console. */
+const captionsShown = [];
+window.captionsShown = captionsShown;
+
+/** Captions: the words the robot is saying now, in their language, while it says them. The
+ * page notes when each utterance first showed (data-shown-at, Unix ms) next to the time its
+ * speech started (data-started-at): tests compare the two. Not a live region: the explanation
+ * above is one already, and a screen reader would read the words twice. */
+function captionView(s) {
+  const said = s.speaking;
+  if (!said || !said.text) return "";
+  if (state.caption?.started_at !== said.started_at) {
+    state.caption = { started_at: said.started_at, shown_at: Date.now(), text: said.text };
+    captionsShown.push(state.caption);
+    if (captionsShown.length > 50) captionsShown.shift();
+  }
+  return html`<section class="captions" aria-labelledby="captions-title">
+    <h2 id="captions-title" class="sr-only">${t("captions")}</h2>
+    <p class="caption" lang=${said.lang ?? s.lang} data-started-at=${Math.round(said.started_at * 1000)}
+      data-shown-at=${state.caption.shown_at}>${said.text}</p>
+  </section>`;
+}
+
 function nowView(s) {
   const e = s.explanation;
   if (!e) return html`<p>${t("touch_idle")}</p>`;
@@ -181,6 +205,7 @@ function draw() {
       ${languages(s)}
     </header>
     ${stateView(s)}
+    ${captionView(s)}
     ${questionView(s.question)}
     <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}

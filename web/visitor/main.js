@@ -427,7 +427,7 @@ function requestView() {
       ${r.robot ? html`<p class="robot-name">${t("robot", { robot: r.robot })}</p>` : ""}
     </header>
     ${errorBox()}
-    <div class=${`request-state ${r.state}`} role="status" aria-live="polite" aria-atomic="true">
+    <div class=${`request-state ${r.state}`}>
       ${statusLines(r).map((line) => html`<p>${line}</p>`)}
     </div>
     ${progress && progress.total ? html`<label class="progress">${t("progress_label")}
@@ -508,6 +508,23 @@ function draw() {
   if (alarm()) render(evacuationView(), app);
   else if (offer) render(offerView(offer), app);
   else render(state.view === "request" ? requestView() : startView(), app);
+  announce();
+}
+
+const announcer = document.getElementById("announcer");
+let announced = "";
+
+/** Screen readers hear each change of the request's state (place in line, the robot coming,
+ * stop N of M, the end) from one live region that is always in the page: a region inserted
+ * with its text is not read, and the request's view is drawn anew. Said once per change, not
+ * at every countdown tick. */
+function announce() {
+  const r = state.view === "request" && !alarm() && !offered() ? state.requests.get(state.current) : null;
+  const p = r?.progress;
+  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by]) : "";
+  if (key === announced) return;
+  announced = key;
+  announcer.textContent = r ? statusLines(r).join(" ") : "";
 }
 
 // --- kiosk --------------------------------------------------------------------------------------
