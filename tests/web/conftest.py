@@ -156,6 +156,7 @@ async def axe_check(page: Any) -> None:
     report = [
         f"{v['id']} ({v['impact']}): {v['help']} — "
         + "; ".join(n["target"][0] if n["target"] else "?" for n in v["nodes"][:5])
+        + f" ({' '.join(v['nodes'][0].get('failureSummary', '').split())})"
         for v in bad
     ]
     assert not bad, "accessibility violations:\n" + "\n".join(report)
