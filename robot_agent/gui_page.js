@@ -6,7 +6,7 @@ import { html, render } from "/vendor/lit-html/lit-html.js";
 import { loadTexts } from "/lib/i18n.js";
 
 const app = document.getElementById("app");
-const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now() };
+const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now(), large: false, contrast: false };
 const t = (key, vars) => state.texts.t(key, vars);
 /** language tag -> its name in itself, for the picker */
 const names = new Map();
@@ -74,6 +74,7 @@ async function refresh() {
     return refresh();
   }
   if (screen.task && !state.screen?.task) state.message = ""; // the request became a tour
+  if (!screen.task && state.screen?.task) state.large = state.contrast = false; // the next visitor
   state.screen = screen;
   if (!state.texts || state.texts.lang !== screen.lang) state.texts = await loadTexts(screen.lang);
   if (!names.size) for (const lang of screen.languages) names.set(lang, (await loadTexts(lang)).name);
@@ -180,6 +181,15 @@ function alarmView(s) {
   </section>`;
 }
 
+/** Larger text and high contrast, for this visitor (back to the defaults when the tour ends). */
+function viewOptions() {
+  const toggle = (key) => () => { state[key] = !state[key]; draw(); };
+  return html`<div class="view-options" role="group" aria-label=${t("view_options")}>
+    <button class="secondary" aria-pressed=${String(state.large)} @click=${toggle("large")}>${t("larger_text")}</button>
+    <button class="secondary" aria-pressed=${String(state.contrast)} @click=${toggle("contrast")}>${t("high_contrast")}</button>
+  </div>`;
+}
+
 function languages(s) {
   return s.languages.length > 1 ? html`<div class="languages" role="group" aria-label=${t("choose_language")}>
     ${s.languages.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === s.lang)}
@@ -195,6 +205,8 @@ function draw() {
     app.dataset.drawn = "1";
   }
   document.body.classList.toggle("alarm", Boolean(s.alarm));
+  document.body.classList.toggle("large-text", state.large);
+  document.body.classList.toggle("high-contrast", state.contrast);
   if (s.alarm) {
     render(alarmView(s), app);
     return;
@@ -203,6 +215,7 @@ function draw() {
   render(html`<header class="visitor-top">
       <h1>${t("touch_title", { robot: s.robot })}</h1>
       ${languages(s)}
+      ${viewOptions()}
     </header>
     ${stateView(s)}
     ${captionView(s)}
