@@ -131,7 +131,7 @@ function stateView(s) {
     </p>`;
 }
 
-/** The last captions shown, {started_at (Unix s), shown_at (Unix ms), text}: how late each
+/** The last captions shown, {started_at (Unix s), shown_at (Unix ms), text, lang}: how late each
  * came, for tests and for a look from the browser's console. */
 const captionsShown = [];
 window.captionsShown = captionsShown;
@@ -144,7 +144,7 @@ function captionView(s) {
   const said = s.speaking;
   if (!said || !said.text) return "";
   if (state.caption?.started_at !== said.started_at) {
-    state.caption = { started_at: said.started_at, shown_at: Date.now(), text: said.text };
+    state.caption = { started_at: said.started_at, shown_at: Date.now(), text: said.text, lang: said.lang };
     captionsShown.push(state.caption);
     if (captionsShown.length > 50) captionsShown.shift();
   }

@@ -456,7 +456,7 @@ function captionView(r) {
   if (!said || !said.text) return "";
   if (!said.shown_at) {
     said.shown_at = Date.now();
-    captionsShown.push({ started_at: said.started_at, shown_at: said.shown_at, text: said.text });
+    captionsShown.push({ started_at: said.started_at, shown_at: said.shown_at, text: said.text, lang: said.lang });
     if (captionsShown.length > 50) captionsShown.shift();
   }
   return html`<section class="captions" aria-labelledby="captions-title">
