@@ -181,12 +181,16 @@ function alarmView(s) {
   </section>`;
 }
 
+/** A tick on a toggle that is on: its state is not told by colour alone (aria-pressed tells
+ * screen readers). */
+const on = (value) => (value ? html`<span aria-hidden="true">✓ </span>` : "");
+
 /** Larger text and high contrast, for this visitor (back to the defaults when the tour ends). */
 function viewOptions() {
   const toggle = (key) => () => { state[key] = !state[key]; draw(); };
   return html`<div class="view-options" role="group" aria-label=${t("view_options")}>
-    <button class="secondary" aria-pressed=${String(state.large)} @click=${toggle("large")}>${t("larger_text")}</button>
-    <button class="secondary" aria-pressed=${String(state.contrast)} @click=${toggle("contrast")}>${t("high_contrast")}</button>
+    <button class="secondary" aria-pressed=${String(state.large)} @click=${toggle("large")}>${on(state.large)}${t("larger_text")}</button>
+    <button class="secondary" aria-pressed=${String(state.contrast)} @click=${toggle("contrast")}>${on(state.contrast)}${t("high_contrast")}</button>
   </div>`;
 }
 
