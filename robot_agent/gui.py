@@ -126,7 +126,9 @@ class OnboardScreen(Service):
         self.explanation: dict[str, Any] | None = None
         self.skipped: list[dict[str, Any]] = []
         """Stops the running tour skipped (closed off): index, name, poi, reason."""
-        self.speaking: str | None = None
+        self.speaking: dict[str, Any] | None = None
+        """The words being said (the captions): {text, lang, started_at: Unix time of its
+        speech_started}; None when the robot is silent."""
         self.question: dict[str, Any] | None = None
         self.answers: list[str] = []
         self._question_timer: asyncio.TimerHandle | None = None
@@ -315,7 +317,15 @@ class OnboardScreen(Service):
 
     def _on_speech(self, message: Message) -> None:
         started = message.type == "speech_started"
-        self.speaking = str(message.payload.get("text", "")) if started else None
+        self.speaking = (
+            {
+                "text": str(message.payload.get("text", "")),
+                "lang": message.payload.get("lang"),
+                "started_at": message.timestamp,
+            }
+            if started
+            else None
+        )
         self._push(message.type, message.payload)
 
     def _on_task_ended(self, message: Message) -> None:

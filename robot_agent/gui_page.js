@@ -7,7 +7,7 @@ import { loadTexts } from "/lib/i18n.js";
 import { skippedLines } from "/lib/skipped.js";
 
 const app = document.getElementById("app");
-const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now() };
+const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now(), large: false, contrast: false };
 const t = (key, vars) => state.texts.t(key, vars);
 /** language tag -> its name in itself, for the picker */
 const names = new Map();
@@ -75,6 +75,7 @@ async function refresh() {
     return refresh();
   }
   if (screen.task && !state.screen?.task) state.message = ""; // the request became a tour
+  if (!screen.task && state.screen?.task) state.large = state.contrast = false; // the next visitor
   state.screen = screen;
   if (!state.texts || state.texts.lang !== screen.lang) state.texts = await loadTexts(screen.lang);
   if (!names.size) for (const lang of screen.languages) names.set(lang, (await loadTexts(lang)).name);
@@ -137,6 +138,30 @@ function skippedView(s) {
     <ul>${skippedLines(t, s.skipped, (k) => k.name ?? k.poi).map((line) => html`<li>${line}</li>`)}</ul></section>`;
 }
 
+/** The last captions shown, {started_at (Unix s), shown_at (Unix ms), text, lang}: how late each
+ * came, for tests and for a look from the browser's console. */
+const captionsShown = [];
+window.captionsShown = captionsShown;
+
+/** Captions: the words the robot is saying now, in their language, while it says them. The
+ * page notes when each utterance first showed (data-shown-at, Unix ms) next to the time its
+ * speech started (data-started-at): tests compare the two. Not a live region: the explanation
+ * above is one already, and a screen reader would read the words twice. */
+function captionView(s) {
+  const said = s.speaking;
+  if (!said || !said.text) return "";
+  if (state.caption?.started_at !== said.started_at) {
+    state.caption = { started_at: said.started_at, shown_at: Date.now(), text: said.text, lang: said.lang };
+    captionsShown.push(state.caption);
+    if (captionsShown.length > 50) captionsShown.shift();
+  }
+  return html`<section class="captions" aria-labelledby="captions-title">
+    <h2 id="captions-title" class="sr-only">${t("captions")}</h2>
+    <p class="caption" lang=${said.lang ?? s.lang} data-started-at=${Math.round(said.started_at * 1000)}
+      data-shown-at=${state.caption.shown_at}>${said.text}</p>
+  </section>`;
+}
+
 function nowView(s) {
   const e = s.explanation;
   if (!e) return html`<p>${t("touch_idle")}</p>${skippedView(s)}`;
@@ -163,6 +188,19 @@ function alarmView(s) {
   </section>`;
 }
 
+/** A tick on a toggle that is on: its state is not told by colour alone (aria-pressed tells
+ * screen readers). */
+const on = (value) => (value ? html`<span aria-hidden="true">✓ </span>` : "");
+
+/** Larger text and high contrast, for this visitor (back to the defaults when the tour ends). */
+function viewOptions() {
+  const toggle = (key) => () => { state[key] = !state[key]; draw(); };
+  return html`<div class="view-options" role="group" aria-label=${t("view_options")}>
+    <button class="secondary" aria-pressed=${String(state.large)} @click=${toggle("large")}>${on(state.large)}${t("larger_text")}</button>
+    <button class="secondary" aria-pressed=${String(state.contrast)} @click=${toggle("contrast")}>${on(state.contrast)}${t("high_contrast")}</button>
+  </div>`;
+}
+
 function languages(s) {
   return s.languages.length > 1 ? html`<div class="languages" role="group" aria-label=${t("choose_language")}>
     ${s.languages.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === s.lang)}
@@ -178,6 +216,8 @@ function draw() {
     app.dataset.drawn = "1";
   }
   document.body.classList.toggle("alarm", Boolean(s.alarm));
+  document.body.classList.toggle("large-text", state.large);
+  document.body.classList.toggle("high-contrast", state.contrast);
   if (s.alarm) {
     render(alarmView(s), app);
     return;
@@ -186,8 +226,10 @@ function draw() {
   render(html`<header class="visitor-top">
       <h1>${t("touch_title", { robot: s.robot })}</h1>
       ${languages(s)}
+      ${viewOptions()}
     </header>
     ${stateView(s)}
+    ${captionView(s)}
     ${questionView(s.question)}
     <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}

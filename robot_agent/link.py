@@ -62,11 +62,14 @@ UP_TYPES: tuple[str, ...] = (
     "petri_net_event",
     "robocan_status",
     "evacuation_state",
+    "speech_started",
+    "speech_ended",
 )
 """On-board message types sent to the hub (petri_net_event: the console's RoboGraph monitor;
-robocan_status: its robot view's CAN modules and counters)."""
+robocan_status: its robot view's CAN modules and counters; speech_started/ended: the visitor's
+phone captions what its robot says)."""
 
-LIVE_ONLY = frozenset({"petri_net_event", "robocan_status"})
+LIVE_ONLY = frozenset({"petri_net_event", "robocan_status", "speech_started", "speech_ended"})
 """Up types sent only while the link is up (never queued offline): the console's monitor
 follows live markings and CAN counters; queued, they would push reports out of the bounded
 offline queue (a stale status is worth nothing: the next one is a second away)."""

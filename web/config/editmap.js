@@ -126,7 +126,7 @@ export class EditMap extends EventTarget {
     doc.pois.forEach((poi, i) => {
       const n = nodes.get(poi.node);
       if (!n || !here(poi.node)) return;
-      const marker = L.marker([n.y + 0.9, n.x + 0.9], {
+      const marker = L.marker([n.y, n.x], { // drawn beside its node (config.css)
         icon: icon(`edit-poi${flagged("pois", i)}${isSel("pois", i)}`, `point ${poi.name || poi.id}`, "★"),
         draggable: true,
         keyboard: true,
@@ -139,19 +139,19 @@ export class EditMap extends EventTarget {
       });
       marker.on("dragend", () => {
         const p = marker.getLatLng();
-        this.#emit("poidrop", { index: i, x: p.lng - 0.9, y: p.lat - 0.9 });
+        this.#emit("poidrop", { index: i, x: p.lng, y: p.lat });
       });
       marker.addTo(this.layer);
     });
     const fixtures = [
-      ["charging_stations", "edit-station", "⚡", -0.9],
-      ["wait_points", "edit-wait", "W", -0.9],
+      ["charging_stations", "edit-station", "⚡"],
+      ["wait_points", "edit-wait", "W"],
     ];
-    for (const [section, cls, text, dy] of fixtures) {
+    for (const [section, cls, text] of fixtures) {
       (doc[section] ?? []).forEach((item, i) => {
         const n = nodes.get(item.node);
         if (!n || !here(item.node)) return;
-        const marker = L.marker([n.y + dy, n.x - 0.9], {
+        const marker = L.marker([n.y, n.x], { // drawn beside its node (config.css)
           icon: icon(`${cls}${flagged(section, i)}${isSel(section, i)}`, `${section} ${item.id}`, text),
           keyboard: true,
           title: `${section.replace("_", " ")} ${item.id}`,

@@ -74,7 +74,13 @@ const state = {
   emergency: null,
   /** this device's requests a fire alarm cut off, not yet answered after it (the offer) */
   cutOff: new Set(),
+  /** robot -> what it is saying now {text, lang, started_at (Unix s), shown_at (Unix ms)} */
+  speaking: new Map(),
 };
+
+/** The last captions shown, as on the touch screen: how late each came (tests, the console). */
+const captionsShown = [];
+window.captionsShown = captionsShown;
 
 const t = (key, vars) => state.texts.t(key, vars);
 const about = (seconds) => t("about", { t: state.texts.duration(seconds) });
@@ -430,11 +436,12 @@ function requestView() {
       ${r.robot ? html`<p class="robot-name">${t("robot", { robot: r.robot })}</p>` : ""}
     </header>
     ${errorBox()}
-    <div class=${`request-state ${r.state}`} role="status" aria-live="polite" aria-atomic="true">
+    <div class=${`request-state ${r.state}`}>
       ${statusLines(r).map((line) => html`<p>${line}</p>`)}
     </div>
     ${r.skipped?.length ? html`<section class="skipped" aria-labelledby="skipped-title"><h3 id="skipped-title">${t("skipped_title")}</h3>
       <ul>${skippedLines(t, r.skipped, placeOf).map((line) => html`<li>${line}</li>`)}</ul></section>` : ""}
+    ${captionView(r)}
     ${progress && progress.total ? html`<label class="progress">${t("progress_label")}
       <progress max=${progress.total} value=${progress.index}>${progress.index} / ${progress.total}</progress></label>` : ""}
     <div class="actions">
@@ -444,6 +451,23 @@ function requestView() {
         : html`<button class="big secondary" @click=${() => { state.confirming = true; draw(); }}>${t("cancel")}</button>`}
       <button class="big" @click=${backToStart}>${final ? t(r.kind === "go_to_poi" ? "new_request_point" : "new_request") : t("back")}</button>
     </div>`;
+}
+
+/** Captions: what the visitor's robot is saying now, in the tour's language, while it says it
+ * (speech_started/speech_ended of that robot, docs/visitor.md "Captions"). Not a live region:
+ * the robot is heard; the announcer says the state changes. */
+function captionView(r) {
+  const said = r.robot && !FINAL.has(r.state) ? state.speaking.get(r.robot) : null;
+  if (!said || !said.text) return "";
+  if (!said.shown_at) {
+    said.shown_at = Date.now();
+    captionsShown.push({ started_at: said.started_at, shown_at: said.shown_at, text: said.text, lang: said.lang });
+    if (captionsShown.length > 50) captionsShown.shift();
+  }
+  return html`<section class="captions" aria-labelledby="captions-title">
+    <h3 id="captions-title" class="sr-only">${t("captions")}</h3>
+    <p class="caption" lang=${said.lang ?? state.lang}>${said.text}</p>
+  </section>`;
 }
 
 /** The site's words for the alarm in the page's language (its default language's otherwise). */
@@ -513,6 +537,23 @@ function draw() {
   if (alarm()) render(evacuationView(), app);
   else if (offer) render(offerView(offer), app);
   else render(state.view === "request" ? requestView() : startView(), app);
+  announce();
+}
+
+const announcer = document.getElementById("announcer");
+let announced = "";
+
+/** Screen readers hear each change of the request's state (place in line, the robot coming,
+ * stop N of M, the end) from one live region that is always in the page: a region inserted
+ * with its text is not read, and the request's view is drawn anew. Said once per change, not
+ * at every countdown tick. */
+function announce() {
+  const r = state.view === "request" && !alarm() && !offered() ? state.requests.get(state.current) : null;
+  const p = r?.progress;
+  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by]) : "";
+  if (key === announced) return;
+  announced = key;
+  announcer.textContent = r ? statusLines(r).join(" ") : "";
 }
 
 // --- kiosk --------------------------------------------------------------------------------------
@@ -575,7 +616,18 @@ async function live() {
   for (const lang of state.menu.languages) names.set(lang, (await loadTexts(lang)).name);
   draw();
   const hub = new HubClient({ token }).start();
-  hub.subscribe("task_event", "visitor_service", "emergency_changed");
+  hub.subscribe("task_event", "visitor_service", "emergency_changed", "speech_started", "speech_ended");
+  // What each robot is saying: the request's robot's words are its captions.
+  hub.on("speech_started", (message) => {
+    const p = message.payload;
+    state.speaking.set(message.source, { text: p.text, lang: p.lang, started_at: message.timestamp });
+    if (state.requests.get(state.current)?.robot === message.source) draw();
+  });
+  hub.on("speech_ended", (message) => {
+    if (state.speaking.get(message.source)?.text !== message.payload.text) return;
+    state.speaking.delete(message.source);
+    if (state.requests.get(state.current)?.robot === message.source) draw();
+  });
   hub.on("task_event", (message) => {
     const p = message.payload;
     refreshMenuSoon();
