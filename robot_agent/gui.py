@@ -206,7 +206,11 @@ class OnboardScreen(Service):
         params = message.payload.get("params") or {}
         lang = params.get("lang")
         self.lang = lang if isinstance(lang, str) else None
-        self.task = {"id": message.payload.get("task_id"), "tour": params.get("tour")}
+        self.task = {
+            "id": message.payload.get("task_id"),
+            "tour": params.get("tour"),
+            "handover": message.payload.get("handover"),  # taken up from another robot
+        }
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
 
     def _on_robot_state(self, message: Message) -> None:

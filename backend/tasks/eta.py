@@ -157,6 +157,9 @@ class _Progress:
     """The reported point's name in the task's language (from what its robot was given)."""
     stage: str = "assigned"
     learned: bool = False
+    first: int = 1
+    """The tour's index of the first place in ``segments`` (a handed-over tour starts at the
+    visitor's stop: backend/tasks/handover.py)."""
 
     def __post_init__(self) -> None:
         move = talk = 0.0
@@ -261,7 +264,8 @@ class EtaEstimator:
         if run is None:
             run = self._running[task.id] = self._track(task, None)
         now = self.tm.clock()
-        done = 2 * index - 1 if stage == "arrived" else 2 * index
+        at = index - run.first + 1  # the place in this robot's list
+        done = 2 * at - 1 if stage == "arrived" else 2 * at
         if done == run.done + 1 and done <= len(run.segments):
             seg = run.segments[done - 1]
             (self.move if seg.kind == "move" else self.talk).learn(now - run.mark_at, seg.nominal_s)
@@ -381,7 +385,12 @@ class EtaEstimator:
         points = self._points(task)
         segments = self._segments(points, start, self._speed(task.robot))
         total = sum(1 for _, text in points if text is not None)
-        return _Progress(segments, self.tm.clock(), total=total)
+        first = 1
+        sent = task.assigned_params.get("points") if task.assigned_params else None
+        if isinstance(sent, list) and sent and isinstance(sent[0], dict):
+            first = int(sent[0].get("index") or 1)
+            total = int(sent[0].get("total") or total)
+        return _Progress(segments, self.tm.clock(), total=total, first=first)
 
     def _segments(
         self, points: list[tuple[str, str | None]], start: str | None, speed: float

@@ -25,6 +25,7 @@ from typing import Any, Protocol
 from backend.tasks.battery import BatteryAlarms
 from backend.tasks.choice import available, choose_robot, idle_errands
 from backend.tasks.eta import EtaEstimator
+from backend.tasks.handover import note_break, resumed_points
 from backend.tasks.model import (
     FINAL_STATES,
     Held,
@@ -457,7 +458,11 @@ class TaskManager(Service):
 
     def _params_for_net(self, task: Task) -> dict[str, Any]:
         """``net_params`` looked up once per kind and parameters on this site (the texts of a
-        tour's five points are the same for every visitor who asks for it)."""
+        tour's five points are the same for every visitor who asks for it); a handed-over tour
+        gets its points from the visitor's stop on (backend/tasks/handover.py)."""
+        return resumed_points(self._site_params_for_net(task), task.resume_from)
+
+    def _site_params_for_net(self, task: Task) -> dict[str, Any]:
         try:
             key = (task.kind, tuple(sorted(task.params.items())))
             found = self._net_params.get(key)
@@ -471,7 +476,11 @@ class TaskManager(Service):
         """task_assigned, sent again until the robot acknowledges it (guidebot/delivery.py)."""
         assigned = make_message(
             TaskAssigned(
-                task_id=task.id, robot=robot.name, net=task.net, params=task.assigned_params
+                task_id=task.id,
+                robot=robot.name,
+                net=task.net,
+                params=task.assigned_params,
+                handover=task.handover_view(),
             ),
             source=self.endpoint.name,
             destination=robot.name,
@@ -551,6 +560,10 @@ class TaskManager(Service):
             task.move(TaskState.CANCELLED, reason=reason)
             self.changed(task, "cancelled")
             return
+        if task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
+            note_break(task, self.estimator, reason)  # a tour goes on from the visitor's stop
+            if task.resume_from:  # its wait is foretold from there too (eta.py)
+                task.assigned_params = resumed_points(task.assigned_params, task.resume_from)
         self._leave_robot(task, reason)
         try:
             self.target_of(task.kind, task.params)
@@ -608,6 +621,7 @@ class TaskManager(Service):
             progress=self.estimator.progress_view(task),
             reason=task.reason,
             cancelled_by=task.cancelled_by,
+            handover=task.handover_view(),
         )
 
     def publish_event(self, task: Task) -> None:

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
+from backend.tasks.handover import arrived
 from backend.tasks.model import Task, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
@@ -129,4 +130,6 @@ class TaskReports:
         tm.estimator.progress(task, p.index, p.stage, p.poi)
         if tm.store is not None:
             tm.store.record(task, f"point {p.index}/{p.total} {p.stage}")
+        if arrived(task, p.index, p.stage) and tm.store is not None and task.handover:
+            tm.store.record(task, f"handover: {robot.name} at the visitor's stop {p.index}")
         tm.publish_event(task)
