@@ -215,6 +215,7 @@ class Fleet(Protocol):
     def queue(self) -> TaskQueue: ...
     def has_free_robot(self) -> bool: ...
     def target_of(self, kind: str, params: dict[str, Any]) -> str: ...
+    def lift_wait_s(self, start: str | None, goal: str) -> float: ...
 
 
 class EtaEstimator:
@@ -380,6 +381,18 @@ class EtaEstimator:
         ``UNKNOWN_TRAVEL_M`` to the first point)."""
         return self._segments(self._points(task), start, self._speed(task.robot))
 
+    def first_node(self, task: Task) -> str | None:
+        """Where a task given to a robot now starts: a handed-over tour's visitor's stop (its
+        points from there on), else None (its kind's target)."""
+        if not task.resume_from:
+            return None
+        points = self._points(task)
+        return points[0][0] if points else None
+
+    def task_s(self, task: Task, start: str | None) -> float:
+        """Real seconds ``task`` would take a robot at ``start`` (battery check: charging.py)."""
+        return self._real(self.segments(task, start))
+
     def _track(self, task: Task, start: str | None) -> _Progress:
         """Start following a task on its robot (its places are looked up once)."""
         points = self._points(task)
@@ -397,7 +410,8 @@ class EtaEstimator:
     ) -> list[Segment]:
         if not points:
             return []
-        first = Segment("move", self._metres(start, points[0][0]) / speed, 1)
+        lift = self.tm.lift_wait_s(start, points[0][0])  # its turn at the lift (lifts.py)
+        first = Segment("move", self._metres(start, points[0][0]) / speed + lift, 1)
         return [first, *self._rest(points, speed).segments]
 
     def _rest(self, points: list[tuple[str, str | None]], speed: float) -> _Rest:
@@ -600,6 +614,7 @@ class EtaEstimator:
         rest = self._rest(points, speed)
         move, talk = self.move.value, self.talk.value
         first = self._metres(node, points[0][0]) / speed * move
+        first += self.tm.lift_wait_s(node, points[0][0]) * move
         took = first + rest.move_s * move + rest.talk_s * talk
         heapq.heappush(heap, (free_at + took, tie, name, points[-1][0]))
         return free_at, free_at + first, name

@@ -23,9 +23,11 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from backend.tasks.battery import BatteryAlarms
+from backend.tasks.charging import can_finish, station_for
 from backend.tasks.choice import available, choose_robot, idle_errands
 from backend.tasks.eta import EtaEstimator
 from backend.tasks.handover import note_break, resumed_points
+from backend.tasks.lifts import LiftWait
 from backend.tasks.model import (
     FINAL_STATES,
     Held,
@@ -132,6 +134,11 @@ class TaskManager(Service):
         self.assign_times_ms: list[float] | None = None
         self._net_params: dict[tuple[str, tuple[tuple[str, Any], ...]], dict[str, Any]] = {}
         """(kind, params) -> what its net is given on this site (shared, never changed)."""
+        self.on_robot_since: dict[str, float] = {}
+        """Visitor task -> when (Unix seconds) its robot was given it: its touring time."""
+        self.lifts = LiftWait()
+        """The lifts' queue (set ``lifts.queue`` to read the Traffic Manager's) and turns."""
+        self._lift_queued: tuple[float, int] | None = None
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
@@ -180,6 +187,7 @@ class TaskManager(Service):
         """New site while running: robots added or removed, new map for costs."""
         self.site = site
         self.graph = graph or SiteGraph(site)
+        self.lifts.site_changed(site)
         self.estimator.site_changed()
         self._net_params.clear()
         for cfg in site.robots:
@@ -350,6 +358,32 @@ class TaskManager(Service):
         self.dispatch()
         return robot
 
+    def send_to_charge(self, name: str, *, by: str = "", priority: int = 10) -> Task:
+        """Staff send a robot to charge (the console): a charge task pinned to it, at the
+        station it stands at, else the nearest free one (else the nearest: it waits there).
+        A robot on a visitor's task goes after it; it takes no new tour meanwhile."""
+        robot = self.robots.get(name)
+        if robot is None:
+            raise TaskNotFound(f"no robot {name!r}")
+        if not self.site.charging_stations:
+            raise InvalidTask("the site has no charging station")
+        taken = {
+            t.params.get("station")
+            for r in self.robots.values()
+            if r.name != name and (t := self.current_of(r)) is not None and t.kind == "charge"
+        }
+        taken |= {
+            s.id
+            for s in self.site.charging_stations
+            for r in self.robots.values()
+            if r.name != name and r.node == s.node
+        }
+        station = station_for(robot, self.site, taken, self.graph.distances_to)
+        assert station is not None
+        return self.request(
+            "charge", {"station": station.id}, priority=priority, requester=by, robot=name
+        )
+
     def queue_position(self, task: Task) -> int | None:
         return self.queue.position(task) if task.state is TaskState.QUEUED else None
 
@@ -430,13 +464,26 @@ class TaskManager(Service):
             self._assign(task, robot)
 
     def _best_robot(self, task: Task, free: dict[str, RobotInfo]) -> RobotInfo | None:
+        target = self.target_of(task.kind, task.params)
+        first = self.estimator.first_node(task) or target  # a handed-over tour: the visitor
         return choose_robot(
             task,
             free,
-            lambda: self.graph.distances_to(self.target_of(task.kind, task.params)),
+            lambda: self.graph.distances_to(first),
             avoid=self._avoid.get(task.id, ()),
             rather_not=self.rather_not.get(task.id, ()),
+            extra_cost=lambda robot: self.lift_wait_s(robot.node, first),
+            fits=lambda robot: can_finish(robot, self.estimator.task_s(task, robot.node)),
         )
+
+    def lift_wait_s(self, start: str | None, goal: str) -> float:
+        """Seconds a robot at ``start`` waits for a lift to ``goal``'s floor behind the robots
+        in the lifts' queue (backend/tasks/lifts.py; the queue read at most once a second)."""
+        now = self.clock()
+        cached = self._lift_queued
+        if cached is None or now - cached[0] > 1.0:
+            cached = self._lift_queued = (now, self.lifts.queued())
+        return self.lifts.wait_s(self.graph, start, goal, cached[1])
 
     def _assign(self, task: Task, robot: RobotInfo) -> None:
         if robot.current is not None:
@@ -451,6 +498,8 @@ class TaskManager(Service):
         task.assigned_params = self._params_for_net(task)
         task.move(TaskState.ASSIGNED, reason="")
         self.set_current(robot, task.id)
+        if not task.internal:
+            self.on_robot_since[task.id] = time.time()
         self.assigned_at[task.id] = self.clock()
         self.unconfirmed.pop(task.id, None)
         self.send_assigned(task, robot)
@@ -576,9 +625,18 @@ class TaskManager(Service):
         self.queue.push(task)
         self.changed(task, "requeued")
 
+    def count_touring(self, task: Task) -> None:
+        """``task`` leaves its robot (ended, taken away): its time there counts for the robot's
+        turn (backend/tasks/choice.py) and its utilisation."""
+        since = self.on_robot_since.pop(task.id, None)
+        robot = self.robots.get(task.robot or "")
+        if since is not None and robot is not None:
+            robot.touring_s += max(0.0, time.time() - since)
+
     def _leave_robot(self, task: Task, reason: str) -> None:
         if task.robot is None:
             return
+        self.count_touring(task)
         robot = self.robots.get(task.robot)
         if task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
             self.send_cancel(task.robot, task.id, reason)

@@ -76,6 +76,7 @@ class TaskReports:
         if state is TaskState.FAILED and not reason:
             reason = f"{robot.name} reported the task failed without saying why"
         task.move(state, reason=reason)
+        tm.count_touring(task)
         if robot.current == task.id:
             tm.set_current(robot, None)
         if task.kind == "charge" and state is TaskState.DONE:
