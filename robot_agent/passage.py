@@ -462,8 +462,9 @@ class Passage:
                         log.info("%s: waiting for %s", self.robot, what)
                     else:
                         log.warning(
-                            "%s: still waiting for %s after %.0f s (gives up after %.0f s)",
+                            "%s: still waiting for %s after %.0f s (gives up after %.0f s%s)",
                             *(self.robot, what, now - started, self.wait_timeout_s),
+                            " without the link" if patient else "",
                         )
                     next_log = now + WAIT_LOG_S
                 if now >= deadline:

@@ -56,7 +56,7 @@ from guidebot.service import Service
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import site_languages
 from guidebot.site.schema import Site
-from guidebot.task_kinds import KINDS
+from guidebot.task_kinds import KINDS, VISITOR_KINDS
 
 __all__ = ["TaskManager", "TaskStore"]
 
@@ -473,7 +473,11 @@ class TaskManager(Service):
             avoid=self._avoid.get(task.id, ()),
             rather_not=self.rather_not.get(task.id, ()),
             extra_cost=lambda robot: self.lift_wait_s(robot.node, first),
-            fits=lambda robot: can_finish(robot, self.estimator.task_s(task, robot.node)),
+            fits=(
+                (lambda robot: can_finish(robot, self.estimator.task_s(task, robot.node)))
+                if task.kind in VISITOR_KINDS  # a charge or a move by staff goes regardless
+                else None
+            ),
         )
 
     def lift_wait_s(self, start: str | None, goal: str) -> float:
