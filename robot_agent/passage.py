@@ -171,8 +171,8 @@ class Passage:
             self.ep.publish(RequestArea(robot=self.robot, area=self._waiting_area))
         for door in sorted(self._held_doors):
             self._open_door(door)
-        if self._wait_retry is not None:
-            self._wait_retry()
+        if self._wait_retry is not None and self._waiting_area is None:
+            self._wait_retry()  # (the area waited for was asked again above)
 
     # -- restricted areas -------------------------------------------------------------------------
 
