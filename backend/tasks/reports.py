@@ -7,6 +7,7 @@ from it gets that task cancelled on the robot again (docs/server.md, "Task Manag
 from __future__ import annotations
 
 import logging
+import re
 import time
 from typing import TYPE_CHECKING
 
@@ -27,6 +28,8 @@ __all__ = ["TaskReports"]
 log = logging.getLogger(__name__)
 
 _ENDED = {"done": TaskState.DONE, "failed": TaskState.FAILED}
+BROKE = re.compile(r"\bbase fault\b")
+"""A failure reason that says the robot broke, not the task: its task goes to another robot."""
 """A task_ended outcome -> the task's final state (anything else: cancelled)."""
 
 
@@ -75,6 +78,13 @@ class TaskReports:
         reason = str(reason or "").strip()
         if state is TaskState.FAILED and not reason:
             reason = f"{robot.name} reported the task failed without saying why"
+        if state is TaskState.FAILED and not task.internal and BROKE.search(reason):
+            # The robot broke (a motor lost, a base fault), not the visit: another robot
+            # takes it up, a tour from the visitor's stop (backend/tasks/handover.py).
+            tm.rather_not.setdefault(task.id, set()).add(robot.name)
+            tm.requeue(task, f"{robot.name} broke down: {reason}")
+            tm.dispatch()
+            return
         task.move(state, reason=reason)
         tm.count_touring(task)
         if robot.current == task.id:

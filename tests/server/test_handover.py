@@ -127,3 +127,20 @@ async def test_a_tour_broken_before_its_first_stop_starts_again(
     order = await r2.wait_for("task_assigned")
     assert [p["poi"] for p in order.payload["params"]["points"]] == GROUND
     assert order.payload["handover"] is None and last_event(events, task.id)["handover"] is None
+
+
+async def test_a_tour_its_robot_failed_on_a_base_fault_is_handed_over_not_failed(
+    bus: Bus, manager: TaskManager, events: list[Message]
+) -> None:
+    r1, r2, task_id = await tour_at_stop_3(bus, manager)
+    reason = "navigation to ga2 failed: base fault: motor controller 0x02 lost: time-out"
+    r1.end(task_id, "failed", reason)
+    order = await r2.wait_for("task_assigned")
+    assert order.payload["task_id"] == task_id
+    assert [p["index"] for p in order.payload["params"]["points"]] == [3, 4, 5]
+    assert order.payload["handover"]["reason"] == f"R1 broke down: {reason}"
+    assert "failed" not in [m.payload["state"] for m in events if m.payload["task_id"] == task_id]
+    # A failure of the visit itself (not of the robot) still fails it.
+    r2.start(task_id)
+    r2.end(task_id, "failed", "navigation to gc1 failed: no path")
+    assert manager.get(task_id).state is TaskState.FAILED
