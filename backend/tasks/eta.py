@@ -278,6 +278,26 @@ class EtaEstimator:
         self._schedule = None
         return self.progress_view(task) or {}
 
+    def seen_at(self, task: Task, poi: str) -> None:
+        """Its robot says it showed ``poi`` (robot_state ``poi``): the stop the visitor is at,
+        kept when this process has no report of it (a restarted server: a handover then still
+        goes on from there, backend/tasks/handover.py). Nothing is learned from it."""
+        run = self._running.get(task.id)
+        if run is not None and run.index > 0:
+            return
+        tour = self.tm.site.tour(str(task.params.get("tour")))
+        if tour is None or poi not in tour.points:
+            return
+        if run is None:
+            run = self._running[task.id] = self._track(task, None)
+        run.index, run.total, run.stage, run.poi = (
+            tour.points.index(poi) + 1,
+            len(tour.points),
+            "arrived",
+            poi,
+        )
+        run.name = _point_name(task, poi)
+
     def ended(self, task: Task, took_s: float | None) -> None:
         """Learn from a task that ended done: the whole, when no segment was reported."""
         run = self._running.pop(task.id, None)

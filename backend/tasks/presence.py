@@ -71,6 +71,9 @@ class Presence:
         tm.reports.ended_in_state(robot, p.get("ended"))  # before a restored task is requeued
         self.reconcile(robot, reported)
         current = tm.current_of(robot)
+        if current is not None and current.kind == "tour" and isinstance(p.get("poi"), str):
+            if current.state is TaskState.RUNNING and reported == current.id:
+                tm.estimator.seen_at(current, p["poi"])  # its stop, after our restart
         if returned and current is not None and current.state is TaskState.ASSIGNED:
             if reported != current.id:
                 # Its link went before it acknowledged task_assigned (retries stop when a

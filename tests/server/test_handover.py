@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from backend.tasks import TaskManager, TaskState
+from backend.tasks import Task, TaskManager, TaskState
 from guidebot.bus import Bus
 from guidebot.messages import Message
 
@@ -144,3 +144,23 @@ async def test_a_tour_its_robot_failed_on_a_base_fault_is_handed_over_not_failed
     r2.start(task_id)
     r2.end(task_id, "failed", "navigation to gc1 failed: no path")
     assert manager.get(task_id).state is TaskState.FAILED
+
+
+async def test_after_a_server_restart_the_robots_own_stop_is_where_the_tour_goes_on(
+    bus: Bus, manager: TaskManager
+) -> None:
+    """A restarted server has no tour_progress of a running tour: the robot_state's ``poi``
+    (its last shown point) tells the visitor's stop (the soak's battery panics after a server
+    kill started tours again from stop 1)."""
+    running = Task("t1", "tour", {"tour": "ground"}, 5, "panel", 1, TaskState.RUNNING, "R1")
+    manager.restore([running])
+    r1 = RobotStub(bus, "R1", "hall")
+    r1.task_id = "t1"
+    r1.state("busy", poi="amphorae")
+    assert running.state is TaskState.RUNNING
+    r2 = RobotStub(bus, "R2", "charge_b")
+    r2.state()
+    r1.endpoint.publish("battery_panic", {"robot": "R1", "level": 0.05})
+    order = await r2.wait_for("task_assigned")
+    assert [p["poi"] for p in order.payload["params"]["points"]] == GROUND[2:]
+    assert order.payload["handover"]["stop"] == 3
