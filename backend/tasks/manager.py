@@ -336,6 +336,10 @@ class TaskManager(Service):
         self.dispatch()
         return task
 
+    def avoid(self, task_id: str, robot: str) -> None:
+        """``task_id`` never goes back to ``robot`` (unless staff name it)."""
+        self._avoid.setdefault(task_id, set()).add(robot)
+
     def set_out_of_service(self, name: str, out: bool, *, by: str = "") -> RobotInfo:
         """Take a robot out of service (its task goes back to the queue for another robot)
         or put it back. Out of service it gets no tasks, not even going home, except the

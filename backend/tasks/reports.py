@@ -81,7 +81,9 @@ class TaskReports:
         if state is TaskState.FAILED and not task.internal and BROKE.search(reason):
             # The robot broke (a motor lost, a base fault), not the visit: another robot
             # takes it up, a tour from the visitor's stop (backend/tasks/handover.py).
-            tm.rather_not.setdefault(task.id, set()).add(robot.name)
+            # Never back to it: its own report of this failure (robot_state ``ended``) would
+            # end the task again each time (the soak saw 58 000 requeues in a loop).
+            tm.avoid(task.id, robot.name)
             tm.requeue(task, f"{robot.name} broke down: {reason}")
             tm.dispatch()
             return

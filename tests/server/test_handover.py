@@ -140,8 +140,16 @@ async def test_a_tour_its_robot_failed_on_a_base_fault_is_handed_over_not_failed
     assert [p["index"] for p in order.payload["params"]["points"]] == [3, 4, 5]
     assert order.payload["handover"]["reason"] == f"R1 broke down: {reason}"
     assert "failed" not in [m.payload["state"] for m in events if m.payload["task_id"] == task_id]
-    # A failure of the visit itself (not of the robot) still fails it.
+    # Its robot_state repeats that it ended the task failed: nothing more happens to the task.
+    before = len(events)
+    ended = [{"task_id": task_id, "outcome": "failed", "reason": reason}]
+    r1.state("fault", ended=ended)
+    r1.state("idle", ended=ended)
+    assert manager.get(task_id).robot == "R2"
+    assert not [m for m in events[before:] if m.payload["task_id"] == task_id]
+    # Alone, the broken robot never gets it back (it waits for another robot).
     r2.start(task_id)
+    # A failure of the visit itself (not of the robot) still fails it.
     r2.end(task_id, "failed", "navigation to gc1 failed: no path")
     assert manager.get(task_id).state is TaskState.FAILED
 
@@ -164,3 +172,25 @@ async def test_after_a_server_restart_the_robots_own_stop_is_where_the_tour_goes
     order = await r2.wait_for("task_assigned")
     assert [p["poi"] for p in order.payload["params"]["points"]] == GROUND[2:]
     assert order.payload["handover"]["stop"] == 3
+
+
+async def test_a_robot_broken_on_a_tour_alone_never_gets_it_back(
+    bus: Bus, manager: TaskManager, events: list[Message]
+) -> None:
+    r1 = RobotStub(bus, "R1", "hall")
+    r1.state()
+    task = manager.request("tour", {"tour": "ground"})
+    await r1.wait_for("task_assigned")
+    r1.start(task.id)
+    reason = "navigation to ga2 failed: base fault: motor controller 0x02 lost: time-out"
+    r1.end(task.id, "failed", reason)
+    ended = [{"task_id": task.id, "outcome": "failed", "reason": reason}]
+    for _ in range(3):
+        r1.state("idle", ended=ended)
+    assert task.state is TaskState.QUEUED and task.robot is None
+    assert [m.payload["state"] for m in events if m.payload["task_id"] == task.id] == [
+        "queued",
+        "assigned",
+        "running",
+        "queued",
+    ]
