@@ -34,6 +34,7 @@ from backend.site.graph_build import build_site_graph
 from backend.site.offloop import release
 from backend.site.service import SiteService
 from backend.tasks.buttons import ButtonWatcher
+from backend.tasks.lifts import lift_queue
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
@@ -112,6 +113,8 @@ class ServerBrain(Service):
             store=store,
             report_grace_s=REPORT_GRACE_S if settings.broker_url else 0.0,
         )
+        # Elevator-aware dispatch: the lifts' queue as the Traffic Manager's locks hold it.
+        tasks.lifts.queue = lift_queue(traffic.lock_views, lambda: traffic.graph)
         buttons = ButtonWatcher(deciding_endpoint(app, "buttons"), tasks, site)
         known_tokens: dict[str, str] = {}
         _sync_robot_tokens(app.state.tokens, site, known_tokens)

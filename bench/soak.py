@@ -359,6 +359,7 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
     soak = Soak(opts, work)
     duration = opts.minutes * 60.0
     stuck: dict[str, Any] = {}
+    measured: dict[str, Any] = {}
     try:
         await soak.start()
         assert soak.watch is not None
@@ -390,7 +391,14 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         await referee
         _log("faults over, requests stopped: draining")
         await soak.drain()
+        ended = time.time()
         watch = soak.watch
+        with contextlib.suppress(httpx.HTTPError):
+            async with httpx.AsyncClient(timeout=15.0) as http:
+                await watch.poll_histories(http)
+        measured = watch.measures.result(
+            watch.tasks, list(soak.robots), time.monotonic() - soak.t0, ended
+        )
         open_now = watch.open_tasks()
         stuck = {i: t for i, t in open_now.items() if t.state != "queued"}
         for task_id, t in stuck.items():
@@ -414,7 +422,9 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
     ):
         _log(line)
     _log(f"invariant checks: {watch.checker.counts}")
-    _log(f"failure reasons: {watch.failure_reasons()}")
+    reasons = watch.failure_reasons()
+    _log(f"failure reasons: {reasons}")
+    _log(f"touring seconds per robot: {measured.get('touring_s')}")
     memory = {n: (watch.rss_first[n], watch.rss_last[n]) for n in watch.rss_last}
     _log(f"rss first/last MB: {memory}")
     _log(f"restarts: { {c.name: c.restarts for c in soak.children() if c.restarts} }")
@@ -431,6 +441,12 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         "faults_injected": soak.injected,
         "unhandled_errors": len(errors),
         "max_rss_mb": watch.rss_mb,
+        "done_share": measured.get("done_share"),
+        "failures_by_reason": reasons,
+        "handover_s": measured.get("handover_s"),
+        "skipped_stops": measured.get("skipped_stops"),
+        "utilisation": measured.get("utilisation"),
+        "touring_spread": measured.get("touring_spread"),
     }
 
 

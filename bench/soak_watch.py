@@ -24,6 +24,7 @@ from typing import Any
 import httpx
 import psutil
 
+from bench.soak_measures import Measures
 from guidebot.invariants import InvariantChecker
 
 __all__ = ["Watch", "unhandled_errors"]
@@ -32,6 +33,17 @@ FINAL = {"done", "failed", "cancelled"}
 UNHANDLED = re.compile(
     r"Traceback \(most recent call last\)|exception was never retrieved|Unhandled exception"
 )
+
+
+def _seen(t: dict[str, Any]) -> TaskSeen:
+    return TaskSeen(
+        str(t["state"]),
+        str(t.get("reason") or ""),
+        t["requester"],
+        t.get("robot"),
+        str(t.get("cancelled_by") or ""),
+        str(t.get("kind") or ""),
+    )
 
 
 def unhandled_errors(logs: list[Path]) -> list[str]:
@@ -58,6 +70,8 @@ class TaskSeen:
     reason: str
     requester: str
     robot: str | None = None
+    cancelled_by: str = ""
+    kind: str = ""
 
 
 @dataclass
@@ -75,6 +89,8 @@ class Watch:
     rss_first: dict[str, float] = field(default_factory=dict)
     rss_last: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    measures: Measures = field(default_factory=Measures)
+    """Tours done, handovers, skipped stops, touring time per robot (bench/soak_measures.py)."""
 
     def _headers(self) -> dict[str, str]:
         return {"Authorization": f"Bearer {self.token}"}
@@ -99,6 +115,10 @@ class Watch:
             r.raise_for_status()
             page = r.json()
             self.checker.feed_events(page["events"])
+            for event in page["events"]:
+                at = event.get("at")
+                at = float(at) if isinstance(at, int | float) else None
+                self.measures.feed_event(str(event["kind"]), event.get("data") or {}, at)
             self.after_id = page["next_after_id"]
             if len(page["events"]) < 1000:
                 return
@@ -122,9 +142,8 @@ class Watch:
     async def poll_tasks(self, http: httpx.AsyncClient) -> None:
         listed = await self.listed_tasks(http)
         for task_id, t in listed.items():
-            self.tasks[task_id] = TaskSeen(
-                str(t["state"]), str(t.get("reason") or ""), t["requester"]
-            )
+            self.tasks[task_id] = _seen(t)
+            self.measures.feed_task(task_id, t)
         for task_id in set(self.tasks) - set(listed) - self.vanished:
             # Not in this listing (pages shift while tasks change): ask for it by id.
             r = await http.get(f"{self.url}/api/tasks/{task_id}", headers=self._headers())
@@ -133,11 +152,20 @@ class Watch:
                 self.notes.append(f"task {task_id} vanished (404 after it was acknowledged)")
             elif r.status_code == 200:
                 t = r.json()
-                self.tasks[task_id] = TaskSeen(
-                    str(t["state"]), str(t.get("reason") or ""), t["requester"]
-                )
+                self.tasks[task_id] = _seen(t)
+                self.measures.feed_task(task_id, t)
             else:
                 r.raise_for_status()
+
+    async def poll_histories(self, http: httpx.AsyncClient) -> None:
+        """Each tour's history, for the stops it skipped (once, at the end)."""
+        for task_id, t in self.tasks.items():
+            if t.kind != "tour":
+                continue
+            r = await http.get(f"{self.url}/api/tasks/{task_id}/history", headers=self._headers())
+            if r.status_code == 200:
+                rows = r.json()
+                self.measures.feed_history(task_id, rows if isinstance(rows, list) else [])
 
     def expect(self, task_id: str, requester: str) -> None:
         """A task the server acknowledged (201): it must never vanish."""

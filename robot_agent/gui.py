@@ -238,7 +238,11 @@ class OnboardScreen(Service):
         params = message.payload.get("params") or {}
         lang = params.get("lang")
         self.lang = lang if isinstance(lang, str) else None
-        self.task = {"id": message.payload.get("task_id"), "tour": params.get("tour")}
+        self.task = {
+            "id": message.payload.get("task_id"),
+            "tour": params.get("tour"),
+            "handover": message.payload.get("handover"),  # taken up from another robot
+        }
         self.skipped = []
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
 

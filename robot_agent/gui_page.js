@@ -230,6 +230,7 @@ function draw() {
     </header>
     ${stateView(s)}
     ${captionView(s)}
+    ${s.task?.handover ? html`<p class="notice" role="status">${t("handover", { robot: s.robot, i: s.task.handover.stop })}</p>` : ""}
     ${questionView(s.question)}
     <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}

@@ -171,8 +171,8 @@ class Passage:
             self.ep.publish(RequestArea(robot=self.robot, area=self._waiting_area))
         for door in sorted(self._held_doors):
             self._open_door(door)
-        if self._wait_retry is not None:
-            self._wait_retry()
+        if self._wait_retry is not None and self._waiting_area is None:
+            self._wait_retry()  # (the area waited for was asked again above)
 
     # -- restricted areas -------------------------------------------------------------------------
 
@@ -206,10 +206,20 @@ class Passage:
         else:
             log.warning("%s: link down: area %s is not entered until it is back", self.robot, area)
         self._waiting_area = area
+
+        def ask_again() -> None:  # keeps its place in line (backend/traffic/locks.py)
+            if not self._link_down:
+                self.ep.publish(RequestArea(robot=self.robot, area=area))
+
         try:
+            # Patient: the server grants areas in order, breaks deadlocks and frees those of
+            # lost robots, so only time without the link counts towards the time-out (issue
+            # 36: tours failed "timed out waiting for area elevator" behind a long lift queue).
             await self._wait_until(
                 lambda: (area in self._granted or area in self._gone) and not self._link_down,
                 f"area {area}",
+                retry=ask_again,
+                patient=True,
             )
         finally:
             self._waiting_area = None
@@ -418,8 +428,15 @@ class Passage:
         )
 
     async def _wait_until(
-        self, ready: Callable[[], bool], what: str, *, retry: Callable[[], None] | None = None
+        self,
+        ready: Callable[[], bool],
+        what: str,
+        *,
+        retry: Callable[[], None] | None = None,
+        patient: bool = False,
     ) -> None:
+        """Wait until ``ready``; NavigationError after ``wait_timeout_s`` (``patient``: of
+        time with the link down only)."""
         started = self.clock.now()
         deadline = started + self.wait_timeout_s
         # Re-ask no sooner than the building's own time-out (a few wall seconds).
@@ -438,13 +455,16 @@ class Passage:
                         log.info("%s: %s came after %.0f s", self.robot, what, waited)
                     return
                 now = self.clock.now()
+                if patient and not self._link_down:
+                    deadline = now + self.wait_timeout_s
                 if next_log is None or now >= next_log:
                     if next_log is None:
                         log.info("%s: waiting for %s", self.robot, what)
                     else:
                         log.warning(
-                            "%s: still waiting for %s after %.0f s (gives up after %.0f s)",
+                            "%s: still waiting for %s after %.0f s (gives up after %.0f s%s)",
                             *(self.robot, what, now - started, self.wait_timeout_s),
+                            " without the link" if patient else "",
                         )
                     next_log = now + WAIT_LOG_S
                 if now >= deadline:

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from bench.soak_faults import ALL_KINDS, KINDS, schedule
+from bench.soak_measures import Measures, percentiles
 from bench.soak_watch import TaskSeen, Watch
 from guidebot.invariants import InvariantChecker
 
@@ -29,6 +30,12 @@ KEYS = [
     "faults_injected",
     "unhandled_errors",
     "max_rss_mb",
+    "done_share",
+    "failures_by_reason",
+    "handover_s",
+    "skipped_stops",
+    "utilisation",
+    "touring_spread",
 ]
 SEED = 3
 
@@ -73,6 +80,38 @@ def test_failure_reasons_are_counted_with_their_numbers_blurred() -> None:
     }
 
 
+def test_tours_done_handovers_skips_and_touring_time_are_measured() -> None:
+    m = Measures()
+    events = [  # a tour on R1, handed over to R2 at t=30; a visit on R2 from t=100
+        ("task_created", {"task_id": "a", "state": "queued", "robot": None}, 0.0),
+        ("task_assigned", {"task_id": "a", "state": "assigned", "robot": "R1"}, 10.0),
+        ("task_started", {"task_id": "a", "state": "running", "robot": "R1"}, 12.0),
+        ("task_requeued", {"task_id": "a", "state": "queued", "robot": None}, 30.0),
+        ("task_assigned", {"task_id": "a", "state": "assigned", "robot": "R2"}, 31.0),
+        ("task_done", {"task_id": "a", "state": "done", "robot": "R2"}, 91.0),
+        ("task_assigned", {"task_id": "b", "state": "assigned", "robot": "R2"}, 100.0),
+        ("task_assigned", {"task_id": "z", "state": "assigned", "robot": "R1"}, 100.0),
+    ]
+    for kind, data, at in events:
+        m.feed_event(kind, data, at)
+    m.feed_task("a", {"handover": {"arrived_after_s": 12.5}})
+    m.feed_task("b", {"handover": None})
+    m.feed_history("a", [{"event": "point 2/5 skipped"}, {"event": "point 3/5 arrived"}])
+    tasks = {
+        "a": TaskSeen("done", "", "p", kind="tour"),
+        "b": TaskSeen("failed", "door jammed", "p", kind="go_to_poi"),
+        "c": TaskSeen("cancelled", "", "p", cancelled_by="requester"),
+    }  # "z" is an internal errand: not a visitor's task
+    result = m.result(tasks, ["R1", "R2", "R3"], 200.0, 110.0)
+    assert result["done_share"] == 0.5  # a done, b failed; c cancelled by its visitor: left out
+    assert result["handover_s"] == {"p50": 12.5, "p99": 12.5, "n": 1}
+    assert result["skipped_stops"] == 1
+    assert result["utilisation"] == {"R1": 0.1, "R2": 0.35, "R3": 0.0}  # 20 s, 60 + 10 s, 0
+    assert result["touring_spread"] == round(70 / 30, 3)
+    assert percentiles([]) == {"p50": None, "p99": None}
+    assert percentiles(float(i) for i in range(1, 101)) == {"p50": 50.0, "p99": 99.0}
+
+
 @pytest.mark.timeout(480)
 async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path) -> None:
     process = await asyncio.create_subprocess_exec(
@@ -99,3 +138,6 @@ async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path
     assert set(result["faults_injected"]) == set(KINDS)
     assert sum(result["faults_injected"].values()) >= 6, result["faults_injected"]
     assert {"server", "building_sim", "R1", "R2", "R3"} <= set(result["max_rss_mb"])
+    assert 0 <= result["done_share"] <= 1, result
+    assert set(result["utilisation"]) == {"R1", "R2", "R3"}, result
+    assert set(result["handover_s"]) == {"p50", "p99", "n"}, result

@@ -110,6 +110,8 @@ class TaskStatus(BaseModel):
     the robot reported, by id and by name in the task's language."""
     cancelled_by: str = ""
     """Cancelled tasks: "staff", "requester" or "" (the system; not kept across a restart)."""
+    handover: dict[str, Any] | None = None
+    """A tour taken up from another robot mid-way (docs/protocol.md, "Handover")."""
 
 
 class TaskPage(BaseModel):

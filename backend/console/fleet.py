@@ -111,6 +111,24 @@ async def send_fleet_home(who: Staff, manager: Tasks, db: Store) -> dict[str, An
     return {"sent": sent, "skipped": skipped}
 
 
+@router.post("/robots/{name}/charge", status_code=status.HTTP_201_CREATED)
+async def send_to_charge(who: Staff, manager: Tasks, db: Store, name: Name) -> dict[str, Any]:
+    """Send one robot to charge (a charge task pinned to it, priority 10): at the station it
+    stands at, else the nearest free one; a robot on a tour goes after it (docs/console.md,
+    "Fleet"; backend/tasks/manager.py, ``send_to_charge``)."""
+    robot = manager.robots.get(name)
+    if robot is None:
+        raise not_found(f"robot {name!r}")
+    if not robot.online:
+        raise HTTPException(status.HTTP_409_CONFLICT, f"{name} is offline")
+    task = manager.send_to_charge(name, by=who.name, priority=HOME_PRIORITY)
+    station = task.params.get("station")
+    db.record_event(
+        "robot_sent_to_charge", "console", {"robot": name, "station": station, "by": who.name}
+    )
+    return {"robot": name, "station": station, "task_id": task.id}
+
+
 def _building(request: Request) -> Any:
     building = getattr(request.app.state, "building", None)
     if building is None:

@@ -71,6 +71,10 @@ class _Fleet:
     def target_of(self, kind: str, params: dict[str, Any]) -> str:
         return target_node(self._site, self._graph, kind, params)
 
+    def lift_wait_s(self, start: str | None, goal: str) -> float:
+        """No lift queue in the plan (a ride is travel time: docs/planning.md, "Not modelled")."""
+        return 0.0
+
 
 def nominal_segments(site: Site, graph: SiteGraph, tour: str, start: str | None) -> list[Segment]:
     """The ETA model's nominal segments of ``tour`` for a robot starting at ``start``."""

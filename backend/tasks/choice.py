@@ -16,6 +16,8 @@ from guidebot.task_kinds import MANUAL_KINDS
 __all__ = [
     "BATTERY_WEIGHT_S",
     "MANUAL_KINDS",
+    "OPPORTUNISTIC_BELOW",
+    "TURN_SLACK_S",
     "UNKNOWN_POSITION_COST_S",
     "Distances",
     "Errand",
@@ -29,6 +31,11 @@ __all__ = [
 BATTERY_WEIGHT_S = 120.0
 """Cost in seconds of an empty battery when ranking robots (a full one costs nothing)."""
 UNKNOWN_POSITION_COST_S = 3600.0
+OPPORTUNISTIC_BELOW = 0.8
+"""An idle robot at a wait point below this level goes to charge when a station is free."""
+TURN_SLACK_S = 60.0
+"""Turn taking: a robot up to this many seconds costlier than the cheapest may get a task in
+its stead when it has toured less (a visitor waits at most this much more for fairness)."""
 
 P = TypeVar("P")
 
@@ -62,14 +69,19 @@ def choose_robot(
     *,
     avoid: Collection[str] = (),
     rather_not: Collection[str] = (),
+    extra_cost: Callable[[RobotInfo], float] | None = None,
+    fits: Callable[[RobotInfo], bool] | None = None,
 ) -> RobotInfo | None:
     """The robot for ``task`` among ``free`` ones, None if none fits.
 
-    A pinned task takes its robot or waits. Otherwise the cheapest (``robot_cost``) robot not
-    in ``avoid`` nor out of service; one in ``rather_not`` (the task was taken from it) only
-    if no other is free now, so a visitor never waits for a busy robot while the returning one
-    stands idle. ``distances()`` (node -> metres to the task's start) is only called when the
-    task is not pinned; it may raise TaskError.
+    A pinned task takes its robot or waits. Otherwise the cheapest (``robot_cost`` plus
+    ``extra_cost``: the wait for the lift to another floor) robot not in ``avoid`` nor out of
+    service, and able to finish it on its battery (``fits``); one in ``rather_not`` (the task
+    was taken from it) only if no other is free now, so a visitor never waits for a busy robot
+    while the returning one stands idle. Idle robots take turns: among the robots within
+    ``TURN_SLACK_S`` of the cheapest, the one that has toured least (``touring_s``) gets it.
+    ``distances()`` (node -> metres to the task's start) is only called when the task is not
+    pinned; it may raise TaskError.
     """
     if task.pinned_robot is not None:
         robot = free.get(task.pinned_robot)
@@ -77,19 +89,23 @@ def choose_robot(
             return None
         return robot
     dist = distances()
-    best: RobotInfo | None = None
-    best_cost = math.inf
-    best_is_fallback = True
+    ranked: list[tuple[bool, float, RobotInfo]] = []
     for robot in free.values():
         if robot.name in avoid or robot.out_of_service:
             continue
-        fallback = robot.name in rather_not
+        if fits is not None and not fits(robot):
+            continue
         cost = robot_cost(robot, dist.get(robot.node) if robot.node is not None else None)
-        if (best_is_fallback and not fallback) or (
-            fallback == best_is_fallback and cost < best_cost
-        ):
-            best, best_cost, best_is_fallback = robot, cost, fallback
-    return best
+        if extra_cost is not None:
+            cost += extra_cost(robot)
+        ranked.append((robot.name in rather_not, cost, robot))
+    if not ranked:
+        return None
+    fallback = all(f for f, _, _ in ranked)
+    pool = [(cost, r) for f, cost, r in ranked if f == fallback]
+    cheapest = min(cost for cost, _ in pool)
+    near = [(r.touring_s, cost, r.name, r) for cost, r in pool if cost <= cheapest + TURN_SLACK_S]
+    return min(near, key=lambda x: x[:3])[3]
 
 
 def nearest(
@@ -121,10 +137,17 @@ def idle_errands(
 ) -> list[Errand]:
     """Where the ``idle`` robots (free as far as tasks go) go: charge if they must, else a
     free charging station, else the nearest wait point; nowhere if already at one, or if
-    ``has_work`` (a queued task it can take). ``charging_at``: stations a charge task holds."""
-    candidates = [
-        r for r in idle if r.current is None and r.online and not r.fault and not r.out_of_service
-    ]
+    ``has_work`` (a queued task it can take). ``charging_at``: stations a charge task holds.
+    Stations go to the emptiest robots first (those that must charge, then by battery), and a
+    robot at a wait point below ``OPPORTUNISTIC_BELOW`` goes to a station that is free."""
+    candidates = sorted(
+        (
+            r
+            for r in idle
+            if r.current is None and r.online and not r.fault and not r.out_of_service
+        ),
+        key=lambda r: (not r.needs_charge, r.battery, r.name),
+    )
     if not candidates:
         return []
     at = {s.node: s.id for s in site.charging_stations}
@@ -141,7 +164,10 @@ def idle_errands(
                 errands.append((robot, "charge", {"station": at[robot.node]}))
             continue
         if robot.node in wait_nodes and not robot.needs_charge:
-            continue
+            if robot.battery >= OPPORTUNISTIC_BELOW or not any(
+                s.id not in taken for s in free_stations
+            ):
+                continue
         station = nearest(robot.node, [s for s in free_stations if s.id not in taken], distances_to)
         if station is not None:
             taken.add(station.id)

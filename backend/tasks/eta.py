@@ -159,6 +159,9 @@ class _Progress:
     learned: bool = False
     skipped: list[dict[str, Any]] = field(default_factory=list)
     """Points the tour skipped (closed off): index, poi, name, reason (what the visitor sees)."""
+    first: int = 1
+    """The tour's index of the first place in ``segments`` (a handed-over tour starts at the
+    visitor's stop: backend/tasks/handover.py)."""
 
     def __post_init__(self) -> None:
         move = talk = 0.0
@@ -214,6 +217,7 @@ class Fleet(Protocol):
     def queue(self) -> TaskQueue: ...
     def has_free_robot(self) -> bool: ...
     def target_of(self, kind: str, params: dict[str, Any]) -> str: ...
+    def lift_wait_s(self, start: str | None, goal: str) -> float: ...
 
 
 class EtaEstimator:
@@ -269,14 +273,15 @@ class EtaEstimator:
         if run is None:
             run = self._running[task.id] = self._track(task, None)
         now = self.tm.clock()
+        at = index - run.first + 1  # the place in this robot's list
         if stage == "skipped":
             name = _point_name(task, poi)
             run.skipped.append({"index": index, "poi": poi, "name": name, "reason": reason})
-            run.done = max(run.done, min(2 * index, len(run.segments)))
+            run.done = max(run.done, min(2 * at, len(run.segments)))
             run.mark_at = now
             self._schedule = None
             return self.progress_view(task) or {}
-        done = 2 * index - 1 if stage == "arrived" else 2 * index
+        done = 2 * at - 1 if stage == "arrived" else 2 * at
         if done == run.done + 1 and done <= len(run.segments):
             seg = run.segments[done - 1]
             (self.move if seg.kind == "move" else self.talk).learn(now - run.mark_at, seg.nominal_s)
@@ -287,6 +292,26 @@ class EtaEstimator:
         run.name = _point_name(task, poi)
         self._schedule = None
         return self.progress_view(task) or {}
+
+    def seen_at(self, task: Task, poi: str) -> None:
+        """Its robot says it showed ``poi`` (robot_state ``poi``): the stop the visitor is at,
+        kept when this process has no report of it (a restarted server: a handover then still
+        goes on from there, backend/tasks/handover.py). Nothing is learned from it."""
+        run = self._running.get(task.id)
+        if run is not None and run.index > 0:
+            return
+        tour = self.tm.site.tour(str(task.params.get("tour")))
+        if tour is None or poi not in tour.points:
+            return
+        if run is None:
+            run = self._running[task.id] = self._track(task, None)
+        run.index, run.total, run.stage, run.poi = (
+            tour.points.index(poi) + 1,
+            len(tour.points),
+            "arrived",
+            poi,
+        )
+        run.name = _point_name(task, poi)
 
     def ended(self, task: Task, took_s: float | None) -> None:
         """Learn from a task that ended done: the whole, when no segment was reported."""
@@ -392,19 +417,37 @@ class EtaEstimator:
         ``UNKNOWN_TRAVEL_M`` to the first point)."""
         return self._segments(self._points(task), start, self._speed(task.robot))
 
+    def first_node(self, task: Task) -> str | None:
+        """Where a task given to a robot now starts: a handed-over tour's visitor's stop (its
+        points from there on), else None (its kind's target)."""
+        if not task.resume_from:
+            return None
+        points = self._points(task)
+        return points[0][0] if points else None
+
+    def task_s(self, task: Task, start: str | None) -> float:
+        """Real seconds ``task`` would take a robot at ``start`` (battery check: charging.py)."""
+        return self._real(self.segments(task, start))
+
     def _track(self, task: Task, start: str | None) -> _Progress:
         """Start following a task on its robot (its places are looked up once)."""
         points = self._points(task)
         segments = self._segments(points, start, self._speed(task.robot))
         total = sum(1 for _, text in points if text is not None)
-        return _Progress(segments, self.tm.clock(), total=total)
+        first = 1
+        sent = task.assigned_params.get("points") if task.assigned_params else None
+        if isinstance(sent, list) and sent and isinstance(sent[0], dict):
+            first = int(sent[0].get("index") or 1)
+            total = int(sent[0].get("total") or total)
+        return _Progress(segments, self.tm.clock(), total=total, first=first)
 
     def _segments(
         self, points: list[tuple[str, str | None]], start: str | None, speed: float
     ) -> list[Segment]:
         if not points:
             return []
-        first = Segment("move", self._metres(start, points[0][0]) / speed, 1)
+        lift = self.tm.lift_wait_s(start, points[0][0])  # its turn at the lift (lifts.py)
+        first = Segment("move", self._metres(start, points[0][0]) / speed + lift, 1)
         return [first, *self._rest(points, speed).segments]
 
     def _rest(self, points: list[tuple[str, str | None]], speed: float) -> _Rest:
@@ -615,6 +658,7 @@ class EtaEstimator:
         rest = self._rest(points, speed)
         move, talk = self.move.value, self.talk.value
         first = self._metres(node, points[0][0]) / speed * move
+        first += self.tm.lift_wait_s(node, points[0][0]) * move
         took = first + rest.move_s * move + rest.talk_s * talk
         heapq.heappush(heap, (free_at + took, tie, name, points[-1][0]))
         return free_at, free_at + first, name

@@ -23,8 +23,11 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from backend.tasks.battery import BatteryAlarms
+from backend.tasks.charging import can_finish, station_for
 from backend.tasks.choice import available, choose_robot, idle_errands
 from backend.tasks.eta import EtaEstimator
+from backend.tasks.handover import note_break, resumed_points
+from backend.tasks.lifts import LiftWait
 from backend.tasks.model import (
     FINAL_STATES,
     Held,
@@ -53,7 +56,7 @@ from guidebot.service import Service
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import site_languages
 from guidebot.site.schema import Site
-from guidebot.task_kinds import KINDS
+from guidebot.task_kinds import KINDS, VISITOR_KINDS
 
 __all__ = ["TaskManager", "TaskStore"]
 
@@ -131,6 +134,11 @@ class TaskManager(Service):
         self.assign_times_ms: list[float] | None = None
         self._net_params: dict[tuple[str, tuple[tuple[str, Any], ...]], dict[str, Any]] = {}
         """(kind, params) -> what its net is given on this site (shared, never changed)."""
+        self.on_robot_since: dict[str, float] = {}
+        """Visitor task -> when (Unix seconds) its robot was given it: its touring time."""
+        self.lifts = LiftWait()
+        """The lifts' queue (set ``lifts.queue`` to read the Traffic Manager's) and turns."""
+        self._lift_queued: tuple[float, int] | None = None
         self.site = site
         self.graph = graph or SiteGraph(site)
         self.estimator = EtaEstimator(self)
@@ -179,6 +187,7 @@ class TaskManager(Service):
         """New site while running: robots added or removed, new map for costs."""
         self.site = site
         self.graph = graph or SiteGraph(site)
+        self.lifts.site_changed(site)
         self.estimator.site_changed()
         self._net_params.clear()
         for cfg in site.robots:
@@ -327,6 +336,10 @@ class TaskManager(Service):
         self.dispatch()
         return task
 
+    def avoid(self, task_id: str, robot: str) -> None:
+        """``task_id`` never goes back to ``robot`` (unless staff name it)."""
+        self._avoid.setdefault(task_id, set()).add(robot)
+
     def set_out_of_service(self, name: str, out: bool, *, by: str = "") -> RobotInfo:
         """Take a robot out of service (its task goes back to the queue for another robot)
         or put it back. Out of service it gets no tasks, not even going home, except the
@@ -348,6 +361,32 @@ class TaskManager(Service):
         self.endpoint.publish(RobotService(robot=name, out_of_service=out, by=by))
         self.dispatch()
         return robot
+
+    def send_to_charge(self, name: str, *, by: str = "", priority: int = 10) -> Task:
+        """Staff send a robot to charge (the console): a charge task pinned to it, at the
+        station it stands at, else the nearest free one (else the nearest: it waits there).
+        A robot on a visitor's task goes after it; it takes no new tour meanwhile."""
+        robot = self.robots.get(name)
+        if robot is None:
+            raise TaskNotFound(f"no robot {name!r}")
+        if not self.site.charging_stations:
+            raise InvalidTask("the site has no charging station")
+        taken = {
+            t.params.get("station")
+            for r in self.robots.values()
+            if r.name != name and (t := self.current_of(r)) is not None and t.kind == "charge"
+        }
+        taken |= {
+            s.id
+            for s in self.site.charging_stations
+            for r in self.robots.values()
+            if r.name != name and r.node == s.node
+        }
+        station = station_for(robot, self.site, taken, self.graph.distances_to)
+        assert station is not None
+        return self.request(
+            "charge", {"station": station.id}, priority=priority, requester=by, robot=name
+        )
 
     def queue_position(self, task: Task) -> int | None:
         return self.queue.position(task) if task.state is TaskState.QUEUED else None
@@ -429,13 +468,30 @@ class TaskManager(Service):
             self._assign(task, robot)
 
     def _best_robot(self, task: Task, free: dict[str, RobotInfo]) -> RobotInfo | None:
+        target = self.target_of(task.kind, task.params)
+        first = self.estimator.first_node(task) or target  # a handed-over tour: the visitor
         return choose_robot(
             task,
             free,
-            lambda: self.graph.distances_to(self.target_of(task.kind, task.params)),
+            lambda: self.graph.distances_to(first),
             avoid=self._avoid.get(task.id, ()),
             rather_not=self.rather_not.get(task.id, ()),
+            extra_cost=lambda robot: self.lift_wait_s(robot.node, first),
+            fits=(
+                (lambda robot: can_finish(robot, self.estimator.task_s(task, robot.node)))
+                if task.kind in VISITOR_KINDS  # a charge or a move by staff goes regardless
+                else None
+            ),
         )
+
+    def lift_wait_s(self, start: str | None, goal: str) -> float:
+        """Seconds a robot at ``start`` waits for a lift to ``goal``'s floor behind the robots
+        in the lifts' queue (backend/tasks/lifts.py; the queue read at most once a second)."""
+        now = self.clock()
+        cached = self._lift_queued
+        if cached is None or now - cached[0] > 1.0:
+            cached = self._lift_queued = (now, self.lifts.queued())
+        return self.lifts.wait_s(self.graph, start, goal, cached[1])
 
     def _assign(self, task: Task, robot: RobotInfo) -> None:
         if robot.current is not None:
@@ -450,6 +506,8 @@ class TaskManager(Service):
         task.assigned_params = self._params_for_net(task)
         task.move(TaskState.ASSIGNED, reason="")
         self.set_current(robot, task.id)
+        if not task.internal:
+            self.on_robot_since[task.id] = time.time()
         self.assigned_at[task.id] = self.clock()
         self.unconfirmed.pop(task.id, None)
         self.send_assigned(task, robot)
@@ -457,7 +515,11 @@ class TaskManager(Service):
 
     def _params_for_net(self, task: Task) -> dict[str, Any]:
         """``net_params`` looked up once per kind and parameters on this site (the texts of a
-        tour's five points are the same for every visitor who asks for it)."""
+        tour's five points are the same for every visitor who asks for it); a handed-over tour
+        gets its points from the visitor's stop on (backend/tasks/handover.py)."""
+        return resumed_points(self._site_params_for_net(task), task.resume_from)
+
+    def _site_params_for_net(self, task: Task) -> dict[str, Any]:
         try:
             key = (task.kind, tuple(sorted(task.params.items())))
             found = self._net_params.get(key)
@@ -471,7 +533,11 @@ class TaskManager(Service):
         """task_assigned, sent again until the robot acknowledges it (guidebot/delivery.py)."""
         assigned = make_message(
             TaskAssigned(
-                task_id=task.id, robot=robot.name, net=task.net, params=task.assigned_params
+                task_id=task.id,
+                robot=robot.name,
+                net=task.net,
+                params=task.assigned_params,
+                handover=task.handover_view(),
             ),
             source=self.endpoint.name,
             destination=robot.name,
@@ -551,6 +617,10 @@ class TaskManager(Service):
             task.move(TaskState.CANCELLED, reason=reason)
             self.changed(task, "cancelled")
             return
+        if task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
+            note_break(task, self.estimator, reason)  # a tour goes on from the visitor's stop
+            if task.resume_from:  # its wait is foretold from there too (eta.py)
+                task.assigned_params = resumed_points(task.assigned_params, task.resume_from)
         self._leave_robot(task, reason)
         try:
             self.target_of(task.kind, task.params)
@@ -563,9 +633,18 @@ class TaskManager(Service):
         self.queue.push(task)
         self.changed(task, "requeued")
 
+    def count_touring(self, task: Task) -> None:
+        """``task`` leaves its robot (ended, taken away): its time there counts for the robot's
+        turn (backend/tasks/choice.py) and its utilisation."""
+        since = self.on_robot_since.pop(task.id, None)
+        robot = self.robots.get(task.robot or "")
+        if since is not None and robot is not None:
+            robot.touring_s += max(0.0, time.time() - since)
+
     def _leave_robot(self, task: Task, reason: str) -> None:
         if task.robot is None:
             return
+        self.count_touring(task)
         robot = self.robots.get(task.robot)
         if task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
             self.send_cancel(task.robot, task.id, reason)
@@ -608,6 +687,7 @@ class TaskManager(Service):
             progress=self.estimator.progress_view(task),
             reason=task.reason,
             cancelled_by=task.cancelled_by,
+            handover=task.handover_view(),
         )
 
     def publish_event(self, task: Task) -> None:

@@ -99,6 +99,12 @@ class Task:
     cancelled_by: str = ""
     """Who cancelled it: "staff", "requester", or "" (not cancelled, or the system); the
     visitor is told "cancelled by staff" (docs/visitor.md). Not kept across a restart."""
+    resume_from: int | None = None
+    """A tour handed over mid-way: the stop (1-based) the visitor is at, where the next robot
+    takes it up (backend/tasks/handover.py); None: from the start. Not kept across a restart."""
+    handover: dict[str, Any] | None = None
+    """The last handover of a tour: from_robot, stop, total, poi, name, reason, at (Unix
+    seconds), arrived_after_s (None until the new robot is at the visitor's stop)."""
     created_at: float = field(default_factory=time.time)
     updated_at: float = field(default_factory=time.time)
     started_at: float | None = None
@@ -125,6 +131,13 @@ class Task:
     def final(self) -> bool:
         return self.state in FINAL_STATES
 
+    def handover_view(self) -> dict[str, Any] | None:
+        """The last handover as panels, robot screens and staff see it (docs/protocol.md,
+        "Handover"): who took the tour up (``robot``), from which robot, at which stop."""
+        if self.handover is None:
+            return None
+        return {k: v for k, v in self.handover.items() if k != "at"} | {"robot": self.robot}
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "id": self.id,
@@ -140,6 +153,8 @@ class Task:
             "net": self.net,
             "reason": self.reason,
             "cancelled_by": self.cancelled_by,
+            "resume_from": self.resume_from,
+            "handover": self.handover_view(),
             "created_at": self.created_at,
             "updated_at": self.updated_at,
             "started_at": self.started_at,

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
+from backend.tasks.charging import learn_drain
 from backend.tasks.model import TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
@@ -55,6 +56,7 @@ class Presence:
         battery = p.get("battery")
         if isinstance(battery, int | float) and 0 <= battery <= 1:
             robot.battery = float(battery)
+            learn_drain(robot, robot.battery, robot.mode, tm.clock())
             if robot.needs_charge and robot.battery >= 0.95:
                 robot.needs_charge = False
                 came_back = True  # available again: worth a dispatch
@@ -69,6 +71,9 @@ class Presence:
         tm.reports.ended_in_state(robot, p.get("ended"))  # before a restored task is requeued
         self.reconcile(robot, reported)
         current = tm.current_of(robot)
+        if current is not None and current.kind == "tour" and isinstance(p.get("poi"), str):
+            if current.state is TaskState.RUNNING and reported == current.id:
+                tm.estimator.seen_at(current, p["poi"])  # its stop, after our restart
         if returned and current is not None and current.state is TaskState.ASSIGNED:
             if reported != current.id:
                 # Its link went before it acknowledged task_assigned (retries stop when a

@@ -7,11 +7,13 @@ from it gets that task cancelled on the robot again (docs/server.md, "Task Manag
 from __future__ import annotations
 
 import logging
+import re
 import time
 from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
+from backend.tasks.handover import arrived
 from backend.tasks.model import Task, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
@@ -26,6 +28,8 @@ __all__ = ["TaskReports"]
 log = logging.getLogger(__name__)
 
 _ENDED = {"done": TaskState.DONE, "failed": TaskState.FAILED}
+BROKE = re.compile(r"\bbase fault\b")
+"""A failure reason that says the robot broke, not the task: its task goes to another robot."""
 """A task_ended outcome -> the task's final state (anything else: cancelled)."""
 
 
@@ -74,7 +78,17 @@ class TaskReports:
         reason = str(reason or "").strip()
         if state is TaskState.FAILED and not reason:
             reason = f"{robot.name} reported the task failed without saying why"
+        if state is TaskState.FAILED and not task.internal and BROKE.search(reason):
+            # The robot broke (a motor lost, a base fault), not the visit: another robot
+            # takes it up, a tour from the visitor's stop (backend/tasks/handover.py).
+            # Never back to it: its own report of this failure (robot_state ``ended``) would
+            # end the task again each time (the soak saw 58 000 requeues in a loop).
+            tm.avoid(task.id, robot.name)
+            tm.requeue(task, f"{robot.name} broke down: {reason}")
+            tm.dispatch()
+            return
         task.move(state, reason=reason)
+        tm.count_touring(task)
         if robot.current == task.id:
             tm.set_current(robot, None)
         if task.kind == "charge" and state is TaskState.DONE:
@@ -131,4 +145,6 @@ class TaskReports:
         if tm.store is not None:
             detail = {"index": p.index, "total": p.total, "poi": p.poi, "stage": p.stage}
             tm.store.record(task, f"point {p.index}/{p.total} {p.stage}", detail)
+        if arrived(task, p.index, p.stage) and tm.store is not None and task.handover:
+            tm.store.record(task, f"handover: {robot.name} at the visitor's stop {p.index}")
         tm.publish_event(task)

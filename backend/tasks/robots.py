@@ -32,6 +32,14 @@ class RobotInfo:
     area (backend/tasks/presence.py): nobody can tell when it is free (docs/visitor.md)."""
     waiting_since: float | None = None
     """When its navigation started waiting for a door or an area (None: not waiting)."""
+    touring_s: float = 0.0
+    """Seconds it has spent on visitors' tasks since this server started (turn taking:
+    backend/tasks/choice.py)."""
+    drain_per_s: float | None = None
+    """Battery fraction it uses per second on a task, learned from its robot_state (None: not
+    yet known): a tour it cannot finish is not given to it (backend/tasks/charging.py)."""
+    battery_at: tuple[float, float] | None = None
+    """(when, level) of its last battery reading while not charging (to learn the drain)."""
     refused: bool = False
     """It refused a task as busy with another: no new task until a robot_state shows it runs
     nothing or only what we gave it."""
@@ -50,5 +58,6 @@ class RobotInfo:
             "fault": self.fault,
             "out_of_service": self.out_of_service,
             "held_up": self.held_up,
+            "touring_s": round(self.touring_s, 1),
             "last_seen": self.last_seen,
         }

@@ -210,8 +210,13 @@ class AreaLocks:
             self._lock(a)
         if robot not in self._waits and len(self._waits) >= self.max_waiting:
             raise LockError(f"too many robots waiting ({self.max_waiting})")
-        # A new request replaces the robot's previous one (it asks for one thing at a time).
-        self._waits[robot] = _Wait(robot, chain, request_id, next(self._seq))
+        # A new request replaces the robot's previous one (it asks for one thing at a time);
+        # the same request again (a re-ask, a resync) keeps its place in line (dispatch, issue
+        # 36: a robot waiting for the lift is never sent to the back by asking again).
+        old = self._waits.get(robot)
+        seq = old.seq if old is not None and old.areas == chain else next(self._seq)
+        since = old.since if old is not None and old.areas == chain else time.monotonic()
+        self._waits[robot] = _Wait(robot, chain, request_id, seq, since)
         grants = self._grant_waiting()
         if robot not in self._waits:
             return grants, []

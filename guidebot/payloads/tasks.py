@@ -44,6 +44,9 @@ class TaskAssigned(PayloadModel):
     robot: str
     net: str
     params: dict[str, Any] = Field(default_factory=dict)
+    handover: dict[str, Any] | None = None
+    """A tour taken up from another robot: {from_robot, robot, stop, total, poi, name, reason,
+    arrived_after_s}; the robot's screen says so (docs/protocol.md, "Handover")."""
 
 
 @register_payload("task_cancel")
@@ -122,6 +125,9 @@ class TaskEvent(PayloadModel):
     reason: str = ""
     cancelled_by: str = ""
     """Cancelled tasks: "staff", "requester" or "" (the system)."""
+    handover: dict[str, Any] | None = None
+    """A tour handed over mid-way (docs/protocol.md, "Handover"): {from_robot, robot, stop,
+    total, poi, name, reason, arrived_after_s}; ``arrival_s`` is when ``robot`` is at ``stop``."""
 
 
 @register_payload("visitor_service")

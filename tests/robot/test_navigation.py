@@ -409,3 +409,25 @@ async def test_a_silent_base_ends_the_goal_with_no_odometry() -> None:
             await asyncio.wait_for(nav.turn_to(0.0), 10.0)
     finally:
         await nav.stop()
+
+
+async def test_a_robot_waiting_its_turn_for_an_area_does_not_give_up_while_linked(
+    rig: Rig,
+) -> None:
+    """Issue 36: tours failed "timed out waiting for area elevator" behind a long lift queue.
+    The wait is patient while the link is up (only time without it counts) and the robot asks
+    again now and then, keeping its place in line."""
+    rig.nav.passage.wait_timeout_s = 30.0  # robot seconds: 1.5 s of wall time here
+    r2 = rig.bus.endpoint("R2")
+    r2.publish("request_area", {"robot": "R2", "area": "corridor"})
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+
+    def asked() -> list[Any]:
+        return [m for m in rig.seen.of("request_area") if m.payload["robot"] == "R1"]
+
+    await rig.seen.wait_for(lambda: asked())
+    # Asked again after 140 robot seconds, long past the time-out: still waiting, not failed.
+    await rig.seen.wait_for(lambda: len(asked()) >= 2, timeout=30)
+    assert not rig.seen.of("navigation_failed") and rig.nav.state == "waiting_area"
+    r2.publish("release_area", {"robot": "R2", "area": "corridor"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached"), timeout=30)

@@ -393,6 +393,14 @@ function statusLines(r) {
   const progress = r.progress;
   const point = r.kind === "go_to_poi";
   const arrival = countdown(r.arrival_s, r.toldAt);
+  const handover = r.handover && r.handover.arrived_after_s == null ? r.handover : null; // handover
+  if (handover && r.state === "queued") lines.push(t("handover_waiting", { robot: handover.from_robot, i: handover.stop }));
+  if (handover && handover.robot && (r.state === "assigned" || r.state === "running")) {
+    lines.push(arrival !== null && arrival > 0
+      ? t("handover_arrival", { robot, i: handover.stop, t: state.texts.duration(arrival) })
+      : t("handover", { robot, i: handover.stop }));
+    return lines;
+  }
   if (r.state === "queued") {
     if (r.service === "unavailable") lines.push(t("state_unavailable"));
     else {

@@ -22,7 +22,7 @@ function actions(ui, robot) {
   const send = (kind, params) => ui.act(`${kind} ${name}`, () => ui.api.post("/api/tasks", { kind, params, robot: name, priority: 10 }));
   const nodeSelect = `node-${name}`;
   return html`<div class="actions">
-    <button type="button" @click=${() => send("charge", {})}>Send ${name} to charge</button>
+    <button type="button" @click=${() => ui.act(`charge ${name}`, () => ui.api.post(`/api/robots/${encodeURIComponent(name)}/charge`, {}))}>Send ${name} to charge</button>
     <label for=${nodeSelect} class="sr-only">Node for ${name}</label>
     <select id=${nodeSelect}>
       ${ui.store.site.nodes.map((n) => html`<option value=${n.id}>${placeName(ui.store.site, n.id)} · ${n.id}</option>`)}

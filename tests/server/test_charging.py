@@ -1,0 +1,100 @@
+"""Charging and elevator-aware waits in the Task Manager (issue 36), over a real bus with
+scripted robots: staff send a robot to charge, a charging robot is not given a tour it cannot
+finish, touring time is counted for turns, and a wait foretold across floors counts the lift's
+queue."""
+
+from __future__ import annotations
+
+from backend.tasks import Task, TaskManager, TaskState
+from guidebot.bus import Bus
+from guidebot.messages import Message
+
+from .conftest import Clock
+from .helpers import RobotStub
+
+
+async def given(robot: RobotStub, task_id: str) -> Message:
+    """The task_assigned of ``task_id`` to ``robot`` (idle errands may come before it)."""
+    for count in range(1, 10):
+        msg = await robot.wait_for("task_assigned", count)
+        if msg.payload["task_id"] == task_id:
+            return msg
+    raise AssertionError(f"{task_id} never assigned to {robot.name}")
+
+
+async def test_staff_send_a_robot_to_charge_at_the_nearest_free_station_after_its_tour(
+    bus: Bus, manager: TaskManager
+) -> None:
+    r1 = RobotStub(bus, "R1", "charge_a")  # stands on station_a
+    manager.robots["R2"].node = "entrance"  # (offline) off station_b, where the site starts it
+    r3 = RobotStub(bus, "R3", "hall")
+    r1.state()
+    r3.state()
+    tour = manager.request("tour", {"tour": "ground"})
+    await given(r3, tour.id)
+    r3.start(tour.id)
+    charge = manager.send_to_charge("R3", by="desk")
+    assert charge.params == {"station": "station_b"}  # station_a is R1's: the free one
+    assert charge.pinned_robot == "R3" and charge.state is TaskState.QUEUED  # after its tour
+    r3.end(tour.id)
+    order = await given(r3, charge.id)
+    assert order.payload["net"] == "battery_charge"
+    # A robot standing on a station charges there.
+    assert manager.send_to_charge("R1", by="desk").params == {"station": "station_a"}
+
+
+async def test_a_charging_robot_is_not_given_a_tour_it_cannot_finish(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    probe = Task("p", "tour", {"tour": "ground"}, 5, "", 0)
+    visit = Task("v", "go_to_poi", {"poi": "welcome"}, 5, "", 0)
+    tour_s = manager.estimator.task_s(probe, "charge_a")
+    visit_s = manager.estimator.task_s(visit, "charge_a")
+    assert visit_s < tour_s / 2
+    # It drains 0.2 (its level 0.4 down to the finish floor) in the time of a third of a tour.
+    drain = 0.2 / (tour_s / 3)
+    r1 = RobotStub(bus, "R1", "hall", battery=0.4 + drain * 100)
+    r1.state("busy")
+    clock.now += 100
+    r1.battery = 0.4
+    r1.state("busy")
+    assert abs((manager.robots["R1"].drain_per_s or 0) - drain) < 1e-9
+    # Now charging at its station (an internal task a tour may preempt) at 0.4.
+    r1.node = "charge_a"
+    r1.state("charging")
+    tour = manager.request("tour", {"tour": "ground"})
+    assert tour.state is TaskState.QUEUED  # it would end the tour far below the floor
+    r2 = RobotStub(bus, "R2", "charge_b")
+    r2.state()
+    await given(r2, tour.id)
+    short = manager.request("go_to_poi", {"poi": "welcome"})
+    await given(r1, short.id)  # a short visit it can finish
+
+
+async def test_touring_time_is_counted_per_robot(bus: Bus, manager: TaskManager) -> None:
+    r1 = RobotStub(bus, "R1", "hall")
+    r1.state()
+    task = manager.request("go_to_poi", {"poi": "welcome"})
+    await r1.wait_for("task_assigned")
+    r1.start(task.id)
+    r1.end(task.id)
+    assert manager.robots["R1"].touring_s > 0
+    assert manager.robots["R1"].as_dict()["touring_s"] >= 0
+
+
+async def test_a_wait_across_floors_counts_the_lift_queue(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    upstairs = next(n.id for n in manager.site.nodes if n.floor != "F0")
+    empty = manager.estimator.preview("go_to_poi", {"poi": "welcome"})
+    assert empty.arrival_s is None  # no robot online yet
+    r1 = RobotStub(bus, "R1", upstairs)
+    r1.state()
+    alone = manager.estimator.preview("go_to_poi", {"poi": "welcome"})
+    manager.lifts.queue = lambda: 4  # four robots hold or wait for the lift
+    clock.now += 2  # the queue is read again, the foretold line rebuilt
+    queued = manager.estimator.preview("go_to_poi", {"poi": "welcome"})
+    assert alone.arrival_s is not None and queued.arrival_s is not None
+    assert queued.arrival_s >= alone.arrival_s + 4 * manager.lifts.turn_s - 1
+    assert manager.lift_wait_s(upstairs, "hall") == 4 * manager.lifts.turn_s
+    assert manager.lift_wait_s("entrance", "hall") == 0.0
