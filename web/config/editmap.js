@@ -166,7 +166,7 @@ export class EditMap extends EventTarget {
     (em?.safe_spots ?? []).forEach((spot) => {
       const n = nodes.get(spot);
       if (!n || !here(spot)) return;
-      const marker = L.marker([n.y - 0.9, n.x + 0.9], {
+      const marker = L.marker([n.y, n.x], { // drawn beside its node (config.css)
         icon: icon(`edit-safe${selected?.section === "emergency" ? " selected" : ""}`, `safe spot ${spot}`, "S"),
         keyboard: true,
         title: `safe spot ${spot}`,
