@@ -548,7 +548,12 @@ class TaskManager(Service):
         """Robots with nothing to do: charge if they must, else a free station, else the
         wait point (backend/tasks/choice.py, ``idle_errands``)."""
         robots = self.robots
-        idle = [r for n in self._idle if (r := robots.get(n)) is not None and r.online]
+        # A robot that refused a task waits for its next robot_state (backend/tasks/reports.py):
+        # an errand now would be refused too, and a robot that refuses at once (in-process,
+        # a VDA 5050 vehicle) would make dispatch loop for ever.
+        idle = [
+            r for n in self._idle if (r := robots.get(n)) is not None and r.online and not r.refused
+        ]
         if self.hold is not None:
             idle = [r for r in idle if not self.hold.holds(r)]
         if not idle:

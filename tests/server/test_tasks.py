@@ -557,3 +557,33 @@ async def test_an_assignment_the_robot_reported_on_is_not_sent_again(
     assert manager.courier.pending == 1
     link.publish("task_ended", {"robot": "R3", "task_id": second.id, "outcome": "done"})
     assert manager.courier.pending == 0  # an end without a start withdraws it too
+
+
+async def test_a_robot_that_refuses_at_once_gets_no_errand_until_its_state_comes(
+    bus: Bus, manager: TaskManager
+) -> None:
+    """A robot whose refusal arrives inside the assignment (an in-process VDA 5050 vehicle)
+    made dispatch give it errand after errand for ever, freezing the server: a refused robot
+    waits for its next robot_state, errands included."""
+    r1 = RobotStub(bus, "R1", "hall")  # not at its station: idle, it would be sent there
+
+    def refuse(msg: Message) -> None:
+        if msg.destination == "R1":
+            r1.endpoint.publish(
+                "task_ended",
+                {
+                    "task_id": msg.payload["task_id"],
+                    "robot": "R1",
+                    "outcome": "refused",
+                    "reason": "robot busy with task x",
+                },
+            )
+
+    r1.endpoint.subscribe("task_assigned", refuse)
+    r1.state()
+    created = [t for t in manager.tasks.values() if t.robot == "R1" or t.pinned_robot == "R1"]
+    assert len(created) <= 1
+    assert manager.robots["R1"].refused
+    # Its next state clears the refusal: one errand again, not a storm.
+    r1.state()
+    assert len([t for t in manager.tasks.values() if t.pinned_robot == "R1"]) <= 2
