@@ -11,8 +11,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-__all__ = ["LABEL_CHAR_PX", "LAYER_PX", "Drawing", "layered", "net_drawing"]
+if TYPE_CHECKING:
+    from petri_nets.model import NetDoc
+    from petri_nets.xmlsafe import Node
+
+__all__ = [
+    "LABEL_CHAR_PX",
+    "LAYER_PX",
+    "Drawing",
+    "doc_drawing",
+    "graphics_position",
+    "layered",
+    "net_drawing",
+]
 
 LAYER_PX = 60.0
 """Vertical distance between two layers."""
@@ -152,3 +165,23 @@ def net_drawing(
     nodes = [(p[0], p[1]) for p in places] + [(t[0], t[1]) for t in transitions]
     starts = [p[0] for p in places if p[3] > 0]
     return Drawing(layered(nodes, arcs, starts), "layered")
+
+
+def graphics_position(graphics: Node | None) -> tuple[float, float] | None:
+    """A place's or transition's PNML position; None when it has none or it is unreadable."""
+    position = graphics.find("position") if graphics is not None else None
+    if position is None:
+        return None
+    try:
+        return float(position.attrib["x"]), float(position.attrib["y"])
+    except (KeyError, ValueError):
+        return None
+
+
+def doc_drawing(doc: NetDoc) -> Drawing:
+    """``net_drawing`` of a net read from a file (the console's monitor, the net editor)."""
+    return net_drawing(
+        [(p.id, p.name or p.id, graphics_position(p.graphics), p.initial) for p in doc.places],
+        [(t.id, t.name or t.id, graphics_position(t.graphics)) for t in doc.transitions],
+        [(a.source, a.target) for a in doc.arcs],
+    )

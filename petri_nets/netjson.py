@@ -13,7 +13,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from petri_nets.layout import net_drawing
+from petri_nets.layout import doc_drawing
 from petri_nets.model import (
     REQUIRED,
     ActionSpec,
@@ -138,16 +138,6 @@ class EditorNet(_Strict):
     arcs: list[EditorArc] = Field(default_factory=list, max_length=20000)
 
 
-def _position(graphics: Node | None) -> tuple[float, float] | None:
-    position = graphics.find("position") if graphics is not None else None
-    if position is None:
-        return None
-    try:
-        return float(position.attrib["x"]), float(position.attrib["y"])
-    except (KeyError, ValueError):
-        return None
-
-
 def _graphics(x: float, y: float) -> Node:
     position = Node("position", {"x": str(round(x)), "y": str(round(y))}, 0)
     return Node("graphics", {}, 0, [position])
@@ -177,11 +167,7 @@ def _drop_none(data: dict[str, Any]) -> dict[str, Any]:
 
 def doc_to_editor(doc: NetDoc) -> dict[str, Any]:
     """The editor's document of a net read from a file: its drawing, else a layered one."""
-    drawing = net_drawing(
-        [(p.id, p.name or p.id, _position(p.graphics), p.initial) for p in doc.places],
-        [(t.id, t.name or t.id, _position(t.graphics)) for t in doc.transitions],
-        [(a.source, a.target) for a in doc.arcs],
-    )
+    drawing = doc_drawing(doc)
     at = drawing.positions
 
     def action(a: ActionSpec | None) -> dict[str, Any] | None:

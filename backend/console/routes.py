@@ -23,7 +23,7 @@ from backend.api.deps import (
 from backend.api.models import RequestBody
 from backend.console.feed import ConsoleFeed
 from backend.tasks.model import TaskNotFound
-from petri_nets.layout import net_drawing
+from petri_nets.layout import doc_drawing
 from petri_nets.library import UnknownNet
 
 __all__ = ["router"]
@@ -116,16 +116,6 @@ async def list_nets(request: Request, _: Staff) -> list[str]:
     return list(_library(request).names())
 
 
-def _position(graphics: Any) -> tuple[float, float] | None:
-    position = graphics.find("position") if graphics is not None else None
-    if position is None:
-        return None
-    try:
-        return float(position.attrib["x"]), float(position.attrib["y"])
-    except (KeyError, ValueError):
-        return None
-
-
 @router.get("/nets/{net}/structure")
 async def net_structure(request: Request, _: Staff, net: Name) -> dict[str, Any]:
     """Places, transitions and arcs of a library net with positions: the PNML drawing where
@@ -134,11 +124,7 @@ async def net_structure(request: Request, _: Staff, net: Name) -> dict[str, Any]
         doc = _library(request).get(net).doc
     except UnknownNet:
         raise not_found(f"net {net!r}") from None
-    drawing = net_drawing(
-        [(p.id, p.name or p.id, _position(p.graphics), p.initial) for p in doc.places],
-        [(t.id, t.name or t.id, _position(t.graphics)) for t in doc.transitions],
-        [(a.source, a.target) for a in doc.arcs],
-    )
+    drawing = doc_drawing(doc)
 
     def node(item: Any, **extra: Any) -> dict[str, Any]:
         x, y = drawing.positions[item.id]
