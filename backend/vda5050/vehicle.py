@@ -99,11 +99,6 @@ class VdaRobot:
         self.online = False
         self.task_id: str | None = None
         self.runner: asyncio.Task[None] | None = None
-        self.cancelled: str | None = None
-        """The running task a cancel has ended (its runner is winding down)."""
-        self.next: Message | None = None
-        """An assignment that came while the cancelled task wound down (the Task Manager
-        preempts an errand with a visitor's tour: cancel, then assign): started after it."""
         self.order_id: str | None = None
         self.granted: set[str] = set()
         self.requested: set[str] = set()
@@ -316,9 +311,6 @@ class VdaRobot:
         task_id = str(p["task_id"])
         if task_id == self.task_id:
             return  # the same task again
-        if self.task_id is not None and self.task_id == self.cancelled:
-            self.next = msg  # after the cancelled one has ended (its locks given back)
-            return
         if self.task_id is not None:
             self.ep.publish(
                 TaskEnded(
@@ -340,7 +332,6 @@ class VdaRobot:
         task_id = msg.payload.get("task_id")
         if task_id != self.task_id or self.runner is None:
             return
-        self.cancelled = task_id
         self.runner.cancel()
 
     async def _run(self, task_id: str, net: str, params: dict[str, Any]) -> None:
@@ -377,9 +368,6 @@ class VdaRobot:
         self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self.ep.publish(TaskEnded(task_id=task_id, robot=self.name, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self._publish_state()
-        self.cancelled, waiting, self.next = None, self.next, None
-        if waiting is not None:
-            self._on_task_assigned(waiting)
 
     async def _take_over(self) -> None:
         """A vehicle still on an order this master did not give (before a restart of the
