@@ -78,7 +78,7 @@ async def test_the_fire_alarm_part_is_drawn_edited_checked_and_published(
         await web.axe_check(page)
 
         await page.get_by_role("button", name="Publish", exact=True).click()
-        await expect(page.get_by_role("status").filter(has_text="is live")).to_be_visible()
+        await expect(page.get_by_role("status").filter(has_text="is live").first).to_be_visible()
         async with fleet.http() as http:
             live = (await http.get("/api/site")).json()["site"]["emergency"]
         assert live["alarms"][0]["zone"]["floors"] == ["F1"] and "hall" in live["safe_spots"]
