@@ -204,7 +204,7 @@ async def run(robots: int, rate: float, seconds: float, folder: Path) -> dict[st
                 "sessionStorage.setItem('guidebot.view', 'map');"
             )
             await page.goto(f"{url}/admin/")
-            await page.wait_for_function("window.guidebotConsole && guidebotConsole.map")
+            await page.wait_for_function("() => window.guidebotConsole && guidebotConsole.map")
             cdp = await page.context.new_cdp_session(page)
             stop = asyncio.Event()
             publisher = asyncio.create_task(

@@ -94,7 +94,7 @@ async def test_event_log_has_the_history_and_concurrent_reloads_agree(
             await web.open_view(page, "Event log")
             count = page.locator("#event-count")
             await page.wait_for_function(
-                f"guidebotConsole.store.events.length >= {logged}", timeout=20_000
+                f"() => guidebotConsole.store.events.length >= {logged}", timeout=20_000
             )
             now = (await http.get("/api/events", params={"latest": "true", "limit": 1000})).json()
             await expect(count).to_contain_text(f"{len(now['events'])} events")
