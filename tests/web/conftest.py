@@ -210,11 +210,14 @@ async def web_fleet(
     robots: int = 1,
     time_scale: float = ROBOT_TIME_SCALE,
     edit: Callable[[dict[str, Any]], None] | None = None,
+    screens: bool = False,
     **settings: Any,
 ) -> AsyncIterator[WebFleet]:
     """Start the building simulator (with its control API), the server and ``robots`` robot
     agents (bare simulated bases, no CAN: light) on loopback; ``edit`` may change the site
-    document first. The plan images are copied next to the site file."""
+    document first. The plan images are copied next to the site file. Without ``screens`` a
+    robot has no touch screen, so nobody answers "continue the tour?" and a tour ends after its
+    first stop (the visitor left); with them a simulated visitor answers yes."""
     config = BuildingConfig(
         modules=demo_site.modules,
         doors=demo_site.doors,
@@ -264,6 +267,7 @@ async def web_fleet(
                             state_period_s=0.2,
                             site=site_file,
                             auto_answer="yes",
+                            gui_port=0 if screens else None,
                         )
                     )
                     await agent.__aenter__()

@@ -240,3 +240,41 @@ async def test_event_log_names_places_and_shows_times_as_times(
         await expect(reached).to_contain_text("reported=", timeout=30_000)
         text = await reached.inner_text()
         assert not re.search(r"=\d{9,}\.\d", text), text
+
+
+async def test_a_running_tour_shows_the_stop_its_visitor_is_told(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The Tasks view says "stop N of M" from the task's own progress (what the visitor's phone
+    says), never "at near ..." from the robot's place, at each stop of a whole tour."""
+    async with fleet_factory(robots=1, time_scale=4, screens=True) as fleet:
+        async with fleet.http() as http:
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await expect(page.get_by_role("button", name="robot R1")).to_be_visible(timeout=20_000)
+            await web.open_view(page, "Tasks")
+            [task] = await request_tours(http, ["highlights"])
+            row = f'table[aria-label="Running tasks"] tr[data-task="{task}"]'
+            cell = page.locator(f"{row} td").nth(3)
+            await expect(cell).to_have_text("on the way to stop 1 of 3", timeout=30_000)
+            shown = re.compile(r"^stop ([123]) of 3: (at .+|.+ explained, going on)$")
+            row_text = f"() => document.querySelector('{row}')?.cells[3].textContent.trim() ?? null"
+            text: str | None = "on the way to stop 1 of 3"
+            seen = []
+            while True:
+                changed = await page.wait_for_function(
+                    f"was => {{ const now = ({row_text})(); return now !== was && {{ now }}; }}",
+                    arg=text,
+                    timeout=60_000,
+                )
+                text = (await changed.json_value())["now"]
+                if text is None:
+                    break
+                match = shown.match(text)
+                assert match, text
+                seen.append(int(match[1]))
+                progress = (await http.get(f"/api/tasks/{task}")).json()["progress"]
+                assert progress is None or progress["index"] >= seen[-1], (text, progress)
+            assert seen and seen == sorted(seen) and seen[-1] == 3, seen
+            assert (await http.get(f"/api/tasks/{task}")).json()["state"] == "done"

@@ -89,14 +89,21 @@ async function showHistory(ui, task) {
   });
 }
 
+/** Where a running task stands, from the task's own progress (what its visitor is told: the
+ * stop the robot reported, skipped stops left out), else the robot's place. */
 function progress(ui, task) {
-  const robot = task.robot ? ui.store.robots.get(task.robot) : null;
-  const s = robot?.state;
-  if (task.kind === "tour" && s?.poi) {
-    const tour = ui.store.site.tours.find((t) => t.id === task.params.tour);
-    if (tour) return `${tour.points.indexOf(s.poi) + 1} of ${tour.points.length} (${poiName(ui.store.site, s.poi)})`;
+  const p = task.progress;
+  if (p?.total) {
+    if (!p.index) return `on the way to stop 1 of ${p.total}`;
+    const name = p.name ?? poiName(ui.store.site, p.poi);
+    return p.stage === "explained"
+      ? `stop ${p.index} of ${p.total}: ${name} explained, going on`
+      : `stop ${p.index} of ${p.total}: at ${name}`;
   }
-  return s?.node ? `at ${placeName(ui.store.site, s.node)}` : "—";
+  const s = task.robot ? ui.store.robots.get(task.robot)?.state : null;
+  if (!s?.node) return "—";
+  const place = placeName(ui.store.site, s.node);
+  return place.startsWith("near ") ? place : `at ${place}`;
 }
 
 export function tasksView(ui) {
