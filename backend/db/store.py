@@ -37,7 +37,7 @@ from sqlalchemy import (
     update,
 )
 from sqlalchemy.dialects import postgresql, sqlite
-from sqlalchemy.exc import StatementError
+from sqlalchemy.exc import OperationalError, StatementError
 
 from backend.db.models import (
     EventRow,
@@ -323,6 +323,17 @@ class DbStore(Service):
             ).scalars()
             return [_task(row) for row in rows]
 
+    async def _flush_for_read(self) -> None:
+        """Write what is pending before a read, so the read is as current as memory. When the
+        database stays locked past its busy time-out (another writer's long transaction on a
+        loaded machine), the read goes on with what is written: a moment behind, not an error
+        for the page asking; the pending rows stay queued and the writer tries again."""
+        try:
+            await self.flush()
+        except OperationalError as exc:
+            log.warning("database busy, reading what is written so far: %s", exc.orig)
+            self._wake.set()
+
     async def list_tasks(
         self,
         *,
@@ -339,7 +350,7 @@ class DbStore(Service):
         ``owner`` = (requester, robot): only tasks that one requested or that robot runs.
         Pending changes are written first, so the page is as current as memory.
         """
-        await self.flush()
+        await self._flush_for_read()
         query = select(TaskRow)
         if states:
             query = query.where(TaskRow.state.in_(states))
@@ -373,7 +384,7 @@ class DbStore(Service):
             return _task(row) if row is not None else None
 
     async def history(self, task_id: str) -> list[dict[str, Any]]:
-        await self.flush()
+        await self._flush_for_read()
         async with self.sessionmaker() as session:
             rows = (
                 await session.execute(
@@ -404,7 +415,7 @@ class DbStore(Service):
     ) -> list[dict[str, Any]]:
         """Events after ``after_id`` (and before ``before_id``) in id order; ``latest``: the
         last ``limit`` of them."""
-        await self.flush()
+        await self._flush_for_read()
         query = select(EventRow).where(EventRow.id > after_id)
         if before_id is not None:
             query = query.where(EventRow.id < before_id)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import sqlite3
+from pathlib import Path
+
 from sqlalchemy import inspect
 
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
@@ -58,6 +61,39 @@ async def test_the_locks_of_the_last_server_life_are_replayed_from_the_event_log
         log("area_force_released", "traffic_manager", {"area": "stairs", "robot": "R3", "by": "x"})
         log("area_granted", "traffic_manager", {"robot": 7, "area": "bad row"})
         assert await store.lock_holders() == {"corridor": "R4", "elevator": "R2"}
+        await store.stop()
+    finally:
+        await engine.dispose()
+
+
+async def test_a_read_while_another_writer_holds_the_database_answers_what_is_written(
+    tmp_path: Path,
+) -> None:
+    """GET /api/tasks flushes pending rows first; when another writer holds SQLite's write lock
+    past the busy time-out (the reports' rollup on a loaded machine did), the read answers what
+    is written instead of failing with 500, and nothing pending is lost."""
+    path = tmp_path / "guidebot.db"
+    engine = make_engine(f"sqlite+aiosqlite:///{path}")
+    try:
+        await migrate(engine)
+        store = DbStore(make_sessionmaker(engine))
+        await store.start()
+        first = Task("t1", "go_to", {"node": "hall"}, 3, "admin", 1)
+        store.record(first, "created")
+        await store.flush()
+        other = sqlite3.connect(path, isolation_level=None)
+        other.execute("BEGIN IMMEDIATE")  # holds the write lock, as a long transaction does
+        try:
+            second = Task("t2", "go_to", {"node": "hall"}, 3, "admin", 2)
+            store.record(second, "created")
+            total, tasks = await store.list_tasks()
+            assert (total, [t.id for t in tasks]) == (1, ["t1"])
+        finally:
+            other.execute("ROLLBACK")
+            other.close()
+        await store.flush()
+        total, tasks = await store.list_tasks()
+        assert sorted(t.id for t in tasks) == ["t1", "t2"]
         await store.stop()
     finally:
         await engine.dispose()
