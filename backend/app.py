@@ -21,7 +21,7 @@ from contextlib import AbstractAsyncContextManager
 from typing import Any
 
 import uvicorn
-from fastapi import APIRouter, FastAPI, HTTPException
+from fastapi import APIRouter, Depends, FastAPI, HTTPException
 from fastapi.responses import Response
 
 import guidebot
@@ -31,6 +31,7 @@ from backend.api.errors import install_error_handlers
 from backend.api.limits import BodyLimit
 from backend.api.methods import install_method_answers
 from backend.api.openapi import install_contract_openapi
+from backend.api.query import known_query
 from backend.api.warmup import warm_routes
 from backend.auth import Authenticator, Role, TokenStore
 from backend.brain import server_brain
@@ -154,6 +155,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
         docs_url=None,
         redoc_url=None,
+        dependencies=[Depends(known_query)],  # unknown query parameters: 422 (api/query.py)
     )
     app.state.settings = settings
 

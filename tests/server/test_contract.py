@@ -113,6 +113,38 @@ async def test_request_bodies_are_closed_objects_of_strict_values(
     assert checked > 30  # every body was walked, nested ones too
 
 
+async def test_an_unknown_query_parameter_is_refused_naming_what_the_route_takes(
+    lenient: RunningServer,
+) -> None:
+    """``GET /api/tasks?states=done`` (for ``state``) answered every task, 200: a client took
+    the whole list for the finished ones. Every operation now answers a query parameter it
+    does not declare with 422 ``extra_forbidden`` at ``["query", name]``, after the token
+    check (401 without one); a declared one, and ``?token=``, still pass."""
+    openapi = lenient.app.openapi()
+    admin = {"Authorization": f"Bearer {lenient.admin_token}"}
+    wrong: list[str] = []
+    async with httpx.AsyncClient(base_url=lenient.url, timeout=10) as http:
+        for method, path, _operation in operations(openapi):
+            url = concrete(path)
+            answer = await http.request(method, url, params={"zz_unknown": "1"}, headers=admin)
+            detail = answer.json().get("detail") if answer.status_code == 422 else None
+            if not (
+                isinstance(detail, list)
+                and {"loc": ["query", "zz_unknown"], "type": "extra_forbidden"}.items()
+                <= detail[0].items()
+            ):
+                wrong.append(f"{method} {path} -> {answer.status_code} {answer.text[:120]}")
+        no_token = await http.get("/api/tasks", params={"states": "done"})
+        misspelt = await http.get("/api/tasks", params={"states": "done"}, headers=admin)
+        spelt = await http.get("/api/tasks", params={"state": "done"}, headers=admin)
+        by_query = await http.get("/api/tasks", params={"token": lenient.admin_token})
+    assert wrong == []
+    assert no_token.status_code == 401
+    assert misspelt.status_code == 422
+    assert "takes include_internal, limit, offset, robot, state, token" in misspelt.text
+    assert spelt.status_code == 200 and by_query.status_code == 200
+
+
 async def test_the_token_is_checked_before_the_body(lenient: RunningServer) -> None:
     """A body that is not JSON (or not even text) is 401 without a token and 403 for a role
     the operation is not for, as any other body: the token first, everywhere."""
