@@ -81,6 +81,11 @@ class Passage:
         self._door_requests: dict[str, str] = {}
         self._door_failed: dict[str, str] = {}
         self._elevators: dict[str, str] = {}
+        self.cabins: dict[str, str] = {}
+        """Elevator -> the floor where its cabin stands with its door open now, as the
+        building last said (kept while riding, unlike ``_elevators``)."""
+        self.riding: tuple[str, str, str] | None = None
+        """(elevator, from floor, to floor) while the robot rides a cabin."""
         self._granted: set[str] = set()
         self._gone: set[str] = set()
         """Areas of this path the server says a publish removed: not asked for again."""
@@ -121,8 +126,12 @@ class Passage:
         elevator, floor = str(p.get("elevator")), str(p.get("floor"))
         if p.get("door_open", True):
             self._elevators[elevator] = floor
-        elif self._elevators.get(elevator) == floor:
-            del self._elevators[elevator]
+            self.cabins[elevator] = floor
+        else:
+            if self._elevators.get(elevator) == floor:
+                del self._elevators[elevator]
+            if self.cabins.get(elevator) == floor:
+                del self.cabins[elevator]
         self._news.set()
 
     def _on_area_granted(self, message: Message) -> None:
@@ -148,6 +157,7 @@ class Passage:
     def _forget_building(self) -> None:
         self._doors_open.clear()
         self._elevators.clear()
+        self.cabins.clear()
         self._news.set()
 
     def resync(self) -> None:
@@ -421,11 +431,23 @@ class Passage:
         def resend() -> None:
             self.ep.publish(CallElevator(elevator=elevator, floor=exit_.floor))
 
-        await self._wait_until(
-            lambda: self._elevators.get(elevator) == exit_.floor,
-            f"elevator {elevator} to {exit_.floor}",
-            retry=resend,
-        )
+        self.riding = (elevator, cabin.floor, exit_.floor)
+        try:
+            await self._wait_until(
+                lambda: self._elevators.get(elevator) == exit_.floor,
+                f"elevator {elevator} to {exit_.floor}",
+                retry=resend,
+            )
+        finally:
+            self.riding = None
+
+    async def wait_landing(self, elevator: str) -> str:
+        """In ``elevator``'s cabin, calling nothing: the floor where it next stands with its
+        door open (a fire alarm's evacuation gets out there)."""
+        self.motion.state = NavState.RIDING
+        self.motion.halt()
+        await self._wait_until(lambda: elevator in self.cabins, f"elevator {elevator} to stop")
+        return self.cabins[elevator]
 
     async def _wait_until(
         self,

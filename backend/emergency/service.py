@@ -28,7 +28,12 @@ from backend.tasks.manager import TaskManager
 from backend.tasks.robots import RobotInfo
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
-from guidebot.payloads.emergency import EmergencyChanged, Evacuate, EvacuationState
+from guidebot.payloads.emergency import (
+    EmergencyChanged,
+    Evacuate,
+    EvacuationState,
+    LandingWay,
+)
 from guidebot.service import Service
 from guidebot.site.emergency import (
     Alarm,
@@ -210,7 +215,9 @@ class EmergencyService(Service):
         nodes = next((set(a.nodes) for a in self.site.areas if a.id == area), set())
         if not nodes & held:
             return None
-        if nodes & set(self.evacuation.get(robot, {}).get("path", [])):
+        entry = self.evacuation.get(robot, {})
+        ways = [entry.get("path", []), *entry.get("landings", {}).values()]
+        if any(nodes & set(way) for way in ways):
             return None
         return f"fire alarm: area {area} is closed to robots not on their way to a safe spot"
 
@@ -275,18 +282,17 @@ class EmergencyService(Service):
 
     def _hold_robots(self) -> None:
         """Cut off the tasks of the robots the alarm holds and send each one to safety."""
-        em = self._emergency()
         for robot in list(self.tasks.robots.values()):
             if not robot.online or not self.holds(robot) or robot.name in self.evacuation:
                 continue
-            path = (
-                nearest_safe_spot(self.site, em, robot.node, self.safety()) if robot.node else None
-            )
+            way = self._way(robot.node)
+            landings = self._landings(robot.node)
             order = Evacuate(
-                safe_spot=path[-1] if path else None,
-                path=path or [],
-                steps=self._steps(path or []),
+                safe_spot=way.safe_spot,
+                path=way.path,
+                steps=way.steps,
                 words=self._words(),
+                landings=landings,
             )
             message = make_message(order, source=self.endpoint.name, destination=robot.name)
             self.courier.post(message, key=("evacuate", robot.name))
@@ -301,14 +307,32 @@ class EmergencyService(Service):
                 "path": order.path,
                 "state": "ordered",
                 "node": robot.node,
-                "why": "" if path else "no way to a safe spot without an elevator",
+                "why": "" if way.path else "no way to a safe spot without an elevator",
                 "at": time.time(),
+                **({"landings": {f: w.path for f, w in landings.items()}} if landings else {}),
             }
             self.store.record_event(
                 "robot_evacuation",
                 "emergency",
                 {"robot": robot.name, "state": "ordered", "safe_spot": order.safe_spot},
             )
+
+    def _way(self, node: str | None) -> LandingWay:
+        """The way from ``node`` to its nearest safe spot (none: no way, or nowhere known)."""
+        path = (
+            nearest_safe_spot(self.site, self._emergency(), node, self.safety()) if node else None
+        )
+        return LandingWay(
+            safe_spot=path[-1] if path else None, path=path or [], steps=self._steps(path or [])
+        )
+
+    def _landings(self, node: str | None) -> dict[str, LandingWay]:
+        """A robot last seen on a cabin's node may be riding it: the way from each landing of
+        that elevator, by floor (it gets out where the cabin stops, docs/emergency.md)."""
+        for elevator in self.site.elevators:
+            if any(stop.node == node for stop in elevator.stops):
+                return {stop.floor: self._way(stop.node) for stop in elevator.stops}
+        return {}
 
     def _steps(self, path: list[str]) -> list[dict[str, Any]]:
         nodes = {n.id: n for n in self.site.nodes}
@@ -416,6 +440,10 @@ class EmergencyService(Service):
         report = msg.payload_as(EvacuationState)
         entry = self.evacuation.setdefault(msg.source, {"safe_spot": None, "path": []})
         entry.update(state=report.state, node=report.node, why=report.why, at=time.time())
+        for way in entry.get("landings", {}).values():
+            if way and report.node == way[0] and way != entry["path"]:
+                # It got out of the cabin at this landing: its way is this landing's.
+                entry.update(safe_spot=way[-1], path=way)
         self.store.record_event(
             "robot_evacuation",
             msg.source,
