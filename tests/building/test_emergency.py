@@ -256,3 +256,32 @@ async def test_a_robot_connecting_or_restarting_during_the_alarm_hears_of_it(
         assert again.payload["safe_spot"] == first.payload["safe_spot"]
         await above.wait_for("emergency_changed", count=2)
         assert len(below.of_type("emergency_changed")) == 1
+
+
+async def test_the_alarm_input_is_read_on_its_own_poll(tmp_path: Path) -> None:
+    """The fire alarm does not wait for its module's whole poll: its input is also read on its
+    own, every ALARM_POLL_MS (docs/emergency.md, "Measured"). Here the module's own poll
+    comes once a minute (its first a minute after start): the alarm is declared before it."""
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    ground = next(m for m in site["modules"] if m["id"] == "otb_ground")
+    ground["sampling_period_ms"] = 60_000
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        (tmp_path / "site.yaml").write_text(yaml.safe_dump(site), encoding="utf-8")
+        settings = Settings(
+            db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=tmp_path / "site.yaml"
+        )
+        async with running_server(settings) as server:
+            building = server.app.state.building
+            assert set(building.alarm_pollers) == {"otb_ground"}
+            own = building.alarm_pollers["otb_ground"]
+            await wait_until(lambda: own.health.polls > 0)
+            polls = building.pollers["otb_ground"].health.polls
+            sim.write(IORef(module="otb_ground", point="fire_alarm"), 1)
+            await wait_until(lambda: server.app.state.emergency.state == "alarm")
+            assert building.pollers["otb_ground"].health.polls == polls
+            # That poll reads the alarm input alone (the module's poll reads every point).
+            assert own.module.points == [
+                p for p in building.config.module("otb_ground").points if p.name == "fire_alarm"
+            ]
