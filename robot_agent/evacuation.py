@@ -86,8 +86,7 @@ class Evacuation(Service):
         self.tasks.abort(CUT_OFF)
         nav.cancel_goal()  # abandons the goal and lets go of every door held
         payload: dict[str, Any] = message.payload
-        landings_in = payload.get("landings") or {}
-        cabin = riding[0] if riding is not None and landings_in else None
+        cabin = riding[0] if riding is not None else None
         why = f"in elevator {cabin}'s cabin: gets out where it stops" if cabin else ""
         self._report("stopped", why=why, stopped_at=stopped[0] if stopped else None)
         words: dict[str, str] = payload.get("words") or {}
@@ -96,15 +95,19 @@ class Evacuation(Service):
             self.ep.publish(Say(text=words[lang], lang=lang))
         try:
             steps = _steps(payload)
-            landings = {floor: _steps(way) for floor, way in landings_in.items()}
+            landings = {
+                elevator: {floor: _steps(way) for floor, way in ways.items()}
+                for elevator, ways in (payload.get("landings") or {}).items()
+            }
         except (KeyError, ValueError, TypeError, AttributeError) as exc:
             self._report("stuck", why=f"bad evacuation path: {exc}")
             return
         if cabin is not None:
-            nav.start_evacuation(self._leave_cabin(cabin, landings))
+            nav.start_evacuation(self._leave_cabin(cabin, landings.get(cabin, {})))
             return
         # The server's way starts where it last saw the robot; a landing's, where it is now.
-        here = [way for way in landings.values() if way and way[0].node == nav.node]
+        ways = [way for each in landings.values() for way in each.values()]
+        here = [way for way in ways if way and way[0].node == nav.node]
         if here and (not steps or steps[0].node != nav.node):
             steps = here[0]
         if not steps:

@@ -54,10 +54,11 @@ class Evacuate(PayloadModel):
     elevator: the robot asks for neither on this way)."""
     words: dict[str, str] = Field(default_factory=dict)
     """What to say, per language; the site's default language first."""
-    landings: dict[str, LandingWay] = Field(default_factory=dict)
-    """A robot last seen on a cabin's node: the way from each landing of that elevator, by
-    floor. A robot riding the cabin when the order comes stays in it and gets out at the
-    landing where it next stands with its door open, then takes that landing's way."""
+    landings: dict[str, dict[str, LandingWay]] = Field(default_factory=dict)
+    """Elevator -> floor -> the way from that landing, for each elevator the robot may be
+    riding (it was last seen on one of its cabin's nodes or next to one). A robot riding a
+    cabin when the order comes stays in it and gets out at the landing where it next stands
+    with its door open, then takes that landing's way."""
 
 
 @register_payload("evacuation_state")

@@ -66,8 +66,8 @@ async def test_a_robot_riding_the_lift_gets_out_at_the_landing_the_cabin_goes_to
         [order] = fleet.of("evacuate")
         # The server saw it last in the cabin at F0: it sends the way from each landing.
         assert order.payload["path"][0] == "lift0"
-        assert order.payload["landings"]["F1"]["path"] == ["lift1", "landing"]
-        assert order.payload["landings"]["F0"]["path"] == order.payload["path"]
+        assert order.payload["landings"]["lift"]["F1"]["path"] == ["lift1", "landing"]
+        assert order.payload["landings"]["lift"]["F0"]["path"] == order.payload["path"]
         assert "in elevator lift's cabin" in reported("stopped")[0].payload["why"]
 
         # It stays in the cabin (it does not drive out on the ground floor) until the cabin
