@@ -33,7 +33,7 @@ def _node_floors(site: Any) -> dict[str, str]:
     return {node.id: node.floor for node in getattr(site, "nodes", [])}
 
 
-Part = tuple[dict[str, Any], dict[str, str], tuple[tuple[str, str], ...]]
+Part = tuple[dict[str, Any], dict[str, str], tuple[tuple[str, str, int], ...]]
 
 
 def _building_part(site: Any, floors: dict[str, str]) -> Part:
@@ -49,7 +49,11 @@ def _building_part(site: Any, floors: dict[str, str]) -> Part:
     }
     emergency = getattr(site, "emergency", None)
     alarms = tuple(
-        sorted({(a.input.module, a.input.point) for a in emergency.alarms} if emergency else ())
+        sorted(
+            {(a.input.module, a.input.point, a.active_when) for a in emergency.alarms}
+            if emergency
+            else ()
+        )
     )
     return data, {node: floors[node] for node in sorted(named) if node in floors}, alarms
 
@@ -68,7 +72,10 @@ class _Runner:
         """The building part the current interface was built from."""
 
     def _build(
-        self, data: dict[str, Any], floors: dict[str, str], alarms: tuple[tuple[str, str], ...]
+        self,
+        data: dict[str, Any],
+        floors: dict[str, str],
+        alarms: tuple[tuple[str, str, int], ...],
     ) -> BuildingInterface | None:
         config = load_building(data)
         if self.settings.environment != "development":
@@ -80,7 +87,7 @@ class _Runner:
             config,
             filter_ms=getattr(self.settings, "building_filter_ms", 200.0),
             floor_of_node=floors,
-            alarm_inputs=alarms,
+            alarm_inputs={(module, point): value for module, point, value in alarms},
         )
         interface.gate = self._gate
         return interface

@@ -20,7 +20,7 @@ import asyncio
 import functools
 import logging
 import time
-from collections.abc import Awaitable, Callable, Collection, Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
 from pydantic import ValidationError
@@ -83,13 +83,15 @@ class BuildingInterface(Service):
         command_margin_s: float = 5.0,
         health_interval_s: float = 5.0,
         floor_of_node: Mapping[str, str] | None = None,
-        alarm_inputs: Collection[tuple[str, str]] = (),
+        alarm_inputs: Mapping[tuple[str, str], int] | None = None,
     ) -> None:
         super().__init__()
         self.endpoint = endpoint
         self.config = config.check()
         self.filter_s = filter_ms / 1000
-        self._filter_of = {key: ALARM_FILTER_MS / 1000 for key in alarm_inputs}
+        self._alarm_value = dict(alarm_inputs or {})
+        """(module, point) -> the value that means alarm, for the fire alarm's inputs."""
+        self._filter_of = {key: ALARM_FILTER_MS / 1000 for key in self._alarm_value}
         """(module, point) -> its own filter (the fire alarm's inputs)."""
         self.command_margin_s = command_margin_s
         count = max(1, len(config.modules))
@@ -277,7 +279,11 @@ class BuildingInterface(Service):
         if key not in self.values:  # first sample: the baseline, not an event
             self.values[key] = raw
             if point.kind == PointKind.discrete_input:
-                self._filters[key] = InputFilter(self._filter_of.get(key, self.filter_s), raw)
+                self._filters[key] = InputFilter(
+                    self._filter_of.get(key, self.filter_s),
+                    raw,
+                    active=self._alarm_value.get(key, 1),
+                )
             self._wake(key, raw)
             return
         if point.kind == PointKind.discrete_input:
