@@ -70,6 +70,9 @@ class Evacuation(Service):
             return
         nav = self.navigator
         riding = nav.passage.riding  # read before the cancel below ends the ride
+        arrivals = nav.passage.arrived(riding[0]) if riding is not None else 0
+        # Already at the floor it rode to (the news came just before the order): out there.
+        landed = riding[2] if riding and nav.passage.open_at(riding[0]) == riding[2] else None
         stopped: list[float] = []
 
         def on_velocity(command: Message) -> None:
@@ -103,7 +106,8 @@ class Evacuation(Service):
             self._report("stuck", why=f"bad evacuation path: {exc}")
             return
         if cabin is not None:
-            nav.start_evacuation(self._leave_cabin(cabin, landings.get(cabin, {})))
+            mine = landings.get(cabin, {})
+            nav.start_evacuation(self._leave_cabin(cabin, landed, arrivals, mine))
             return
         # The server's way starts where it last saw the robot; a landing's, where it is now.
         ways = [way for each in landings.values() for way in each.values()]
@@ -115,12 +119,19 @@ class Evacuation(Service):
             return
         nav.start_evacuation(self._drive(steps))
 
-    async def _leave_cabin(self, elevator: str, landings: dict[str, list[PathStep]]) -> None:
+    async def _leave_cabin(
+        self,
+        elevator: str,
+        landed: str | None,
+        arrivals: int,
+        landings: dict[str, list[PathStep]],
+    ) -> None:
         """Riding when the alarm came: call nothing, get out at the landing where the cabin
-        next stands with its door open (docs/emergency.md) and take that landing's way."""
+        next stands with its door open (docs/emergency.md; ``landed``: it is there already)
+        and take that landing's way."""
         nav = self.navigator
         try:
-            floor = await nav.passage.wait_landing(elevator)
+            floor = landed or await nav.passage.wait_landing(elevator, arrivals)
         except NavigationError as exc:
             self._report("stuck", why=f"in elevator {elevator}'s cabin: {exc.reason}")
             return
