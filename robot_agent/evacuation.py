@@ -10,6 +10,7 @@ for as on any path, and the Traffic Manager grants them to a robot on its way to
 from __future__ import annotations
 
 import logging
+import math
 import time
 from typing import Any
 
@@ -17,6 +18,7 @@ from guidebot.bus import Endpoint
 from guidebot.messages import Message
 from guidebot.payloads.emergency import EvacuationState, EvacuationStateName
 from guidebot.payloads.petri import Say
+from guidebot.payloads.robot import NodeReached
 from guidebot.service import Service
 from guidebot.site.steps import PathStep
 from robot_agent.motion import NavigationError
@@ -67,6 +69,10 @@ class Evacuation(Service):
         if message.destination not in (None, self.robot):
             return
         nav = self.navigator
+        riding = nav.passage.riding  # read before the cancel below ends the ride
+        arrivals = nav.passage.arrived(riding[0]) if riding is not None else 0
+        # Already at the floor it rode to (the news came just before the order): out there.
+        landed = riding[2] if riding and nav.passage.open_at(riding[0]) == riding[2] else None
         stopped: list[float] = []
 
         def on_velocity(command: Message) -> None:
@@ -82,31 +88,76 @@ class Evacuation(Service):
         nav.evacuating = True
         self.tasks.abort(CUT_OFF)
         nav.cancel_goal()  # abandons the goal and lets go of every door held
-        self._report("stopped", stopped_at=stopped[0] if stopped else None)
         payload: dict[str, Any] = message.payload
+        cabin = riding[0] if riding is not None else None
+        why = f"in elevator {cabin}'s cabin: gets out where it stops" if cabin else ""
+        self._report("stopped", why=why, stopped_at=stopped[0] if stopped else None)
         words: dict[str, str] = payload.get("words") or {}
         if words:
             lang = self.lang if self.lang in words else next(iter(words))
             self.ep.publish(Say(text=words[lang], lang=lang))
         try:
-            steps = [PathStep.from_dict(s) for s in payload.get("steps") or []]
-        except (KeyError, ValueError) as exc:
+            steps = _steps(payload)
+            landings = {
+                elevator: {floor: _steps(way) for floor, way in ways.items()}
+                for elevator, ways in (payload.get("landings") or {}).items()
+            }
+        except (KeyError, ValueError, TypeError, AttributeError) as exc:
             self._report("stuck", why=f"bad evacuation path: {exc}")
             return
-        if len(steps) < 2:
-            if steps or payload.get("safe_spot") == nav.node:
-                self._report("safe")
-            else:
-                self._report("stuck", why="no way to a safe spot without an elevator")
+        if cabin is not None:
+            mine = landings.get(cabin, {})
+            nav.start_evacuation(self._leave_cabin(cabin, landed, arrivals, mine))
+            return
+        # The server's way starts where it last saw the robot; a landing's, where it is now.
+        ways = [way for each in landings.values() for way in each.values()]
+        here = [way for way in ways if way and way[0].node == nav.node]
+        if here and (not steps or steps[0].node != nav.node):
+            steps = here[0]
+        if not steps:
+            self._report("stuck", why="no way to a safe spot without an elevator")
             return
         nav.start_evacuation(self._drive(steps))
+
+    async def _leave_cabin(
+        self,
+        elevator: str,
+        landed: str | None,
+        arrivals: int,
+        landings: dict[str, list[PathStep]],
+    ) -> None:
+        """Riding when the alarm came: call nothing, get out at the landing where the cabin
+        next stands with its door open (docs/emergency.md; ``landed``: it is there already)
+        and take that landing's way."""
+        nav = self.navigator
+        try:
+            floor = landed or await nav.passage.wait_landing(elevator, arrivals)
+        except NavigationError as exc:
+            self._report("stuck", why=f"in elevator {elevator}'s cabin: {exc.reason}")
+            return
+        except YieldRequested as exc:
+            self._report("stuck", why=f"in elevator {elevator}'s cabin: asked to yield {exc.area}")
+            return
+        steps = landings.get(floor) or []
+        if not steps:
+            self._report("stuck", why=f"no way to a safe spot from elevator {elevator} at {floor}")
+            return
+        first = steps[0]
+        if first.node != nav.node:  # the cabin took it to another floor: it is there now
+            nav.relocalize(first)
+            self.ep.publish(
+                NodeReached(robot=self.robot, node=first.node, floor=first.floor, at=time.time())
+            )
+        await self._drive(steps)
 
     async def _drive(self, steps: list[PathStep]) -> None:
         """Follow the way; stuck (reported with why), wait and try again from where it is."""
         for attempt in range(1, ATTEMPTS + 1):
             self._report("moving")
             try:
-                await self.navigator.follow(self._from_here(steps))
+                way = self._from_here(steps)
+                await self._back_to(way[0])
+                await self.navigator.follow(way)
             except NavigationError as exc:
                 why = exc.reason
             except YieldRequested as exc:
@@ -118,6 +169,18 @@ class Evacuation(Service):
             self._report("stuck", why=f"{why} (attempt {attempt} of {ATTEMPTS})")
             if attempt < ATTEMPTS:
                 await self.navigator.clock.sleep(RETRY_S)
+
+    async def _back_to(self, start: PathStep) -> None:
+        """The way starts at the node the robot last reached, which it may have just left (the
+        alarm came on its way on): it drives back onto it first. Else a robot whose safe spot
+        that node is would report ``safe`` where it stopped, a few metres on, and one with a
+        longer way would take the node's place on the map for where it is."""
+        nav = self.navigator
+        if start.node != nav.node or not nav.localized or nav.floor not in (None, start.floor):
+            return
+        if math.hypot(start.x - nav.x, start.y - nav.y) > nav.tolerance_m:
+            await nav.drive_to(start.x, start.y, stop=True)
+            nav.halt()
 
     def _from_here(self, steps: list[PathStep]) -> list[PathStep]:
         """The rest of the way from the node the robot last reached on it."""
@@ -139,3 +202,8 @@ class Evacuation(Service):
         self.ep.publish(
             EvacuationState(state=state, node=self.navigator.node, why=why, stopped_at=stopped_at)
         )
+
+
+def _steps(way: dict[str, Any]) -> list[PathStep]:
+    """A way's ``steps`` (an ``evacuate`` or one of its ``landings``) as path steps."""
+    return [PathStep.from_dict(step) for step in way.get("steps") or []]

@@ -81,6 +81,13 @@ class Passage:
         self._door_requests: dict[str, str] = {}
         self._door_failed: dict[str, str] = {}
         self._elevators: dict[str, str] = {}
+        self.arrivals: dict[str, tuple[int, str]] = {}
+        """Elevator -> (how many times the building's broadcasts said its cabin came to stand
+        at a floor with its door open, that floor the last time): a riding robot waits for the
+        next one. Replies to calls are not counted: one to a call that kept the door open
+        while the robot drove in may come after the cabin left."""
+        self.riding: tuple[str, str, str] | None = None
+        """(elevator, from floor, to floor) while the robot rides a cabin."""
         self._granted: set[str] = set()
         self._gone: set[str] = set()
         """Areas of this path the server says a publish removed: not asked for again."""
@@ -121,6 +128,8 @@ class Passage:
         elevator, floor = str(p.get("elevator")), str(p.get("floor"))
         if p.get("door_open", True):
             self._elevators[elevator] = floor
+            if message.destination is None:
+                self.arrivals[elevator] = (self.arrived(elevator) + 1, floor)
         elif self._elevators.get(elevator) == floor:
             del self._elevators[elevator]
         self._news.set()
@@ -421,11 +430,36 @@ class Passage:
         def resend() -> None:
             self.ep.publish(CallElevator(elevator=elevator, floor=exit_.floor))
 
+        self.riding = (elevator, cabin.floor, exit_.floor)
+        try:
+            await self._wait_until(
+                lambda: self._elevators.get(elevator) == exit_.floor,
+                f"elevator {elevator} to {exit_.floor}",
+                retry=resend,
+            )
+        finally:
+            self.riding = None
+
+    def open_at(self, elevator: str) -> str | None:
+        """The floor where the robot last heard ``elevator``'s door open (None while riding,
+        until the cabin is somewhere)."""
+        return self._elevators.get(elevator)
+
+    def arrived(self, elevator: str) -> int:
+        """How many arrivals of ``elevator``'s cabin the building has reported so far."""
+        return self.arrivals.get(elevator, (0, ""))[0]
+
+    async def wait_landing(self, elevator: str, after: int) -> str:
+        """In ``elevator``'s cabin, calling nothing: the floor of its next arrival (door open)
+        after the ``after``-th (a fire alarm's evacuation gets out there). Not the floor where
+        the robot last knew the door open: the building's sensors lag, and the cabin may
+        already be on its way."""
+        self.motion.state = NavState.RIDING
+        self.motion.halt()
         await self._wait_until(
-            lambda: self._elevators.get(elevator) == exit_.floor,
-            f"elevator {elevator} to {exit_.floor}",
-            retry=resend,
+            lambda: self.arrived(elevator) > after, f"elevator {elevator} to stop"
         )
+        return self.arrivals[elevator][1]
 
     async def _wait_until(
         self,

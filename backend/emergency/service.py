@@ -28,8 +28,14 @@ from backend.tasks.manager import TaskManager
 from backend.tasks.robots import RobotInfo
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
-from guidebot.payloads.emergency import EmergencyChanged, Evacuate, EvacuationState
+from guidebot.payloads.emergency import (
+    EmergencyChanged,
+    Evacuate,
+    EvacuationState,
+    LandingWay,
+)
 from guidebot.service import Service
+from guidebot.site.building import Elevator
 from guidebot.site.emergency import (
     Alarm,
     AlarmZone,
@@ -96,6 +102,8 @@ class EmergencyService(Service):
         self._told: dict[str, object] = {}
         """Robot -> the boot id of its agent process that was told of this alarm: a robot
         that connects, or whose agent restarts, during the alarm hears of it at once."""
+        self._near_cabins: tuple[Site | None, dict[str, list[Elevator]]] = (None, {})
+        """Node -> the elevators whose cabin a robot there may be in (per site, built once)."""
         self._safety: tuple[Site | None, SafetyTable] = (None, {})
         """Every node's way to its nearest safe spot, per site (one search, not one a robot:
         on a 3000-node site 20 searches took 0.9-4 s between the alarm and the last order)."""
@@ -128,6 +136,7 @@ class EmergencyService(Service):
             self.on_cleanup(unsubscribe)
         self.on_cleanup(self.courier.close)
         self.safety()  # now rather than when the alarm sounds
+        self._landings(None)
         self.spawn(self._first_values(), name="emergency-first-values")
         if self.state is not EmergencyState.normal:
             self._publish()
@@ -210,7 +219,9 @@ class EmergencyService(Service):
         nodes = next((set(a.nodes) for a in self.site.areas if a.id == area), set())
         if not nodes & held:
             return None
-        if nodes & set(self.evacuation.get(robot, {}).get("path", [])):
+        entry = self.evacuation.get(robot, {})
+        ways = [entry.get("path", []), *_landing_paths(entry)]
+        if any(nodes & set(way) for way in ways):
             return None
         return f"fire alarm: area {area} is closed to robots not on their way to a safe spot"
 
@@ -275,18 +286,17 @@ class EmergencyService(Service):
 
     def _hold_robots(self) -> None:
         """Cut off the tasks of the robots the alarm holds and send each one to safety."""
-        em = self._emergency()
         for robot in list(self.tasks.robots.values()):
             if not robot.online or not self.holds(robot) or robot.name in self.evacuation:
                 continue
-            path = (
-                nearest_safe_spot(self.site, em, robot.node, self.safety()) if robot.node else None
-            )
+            way = self._way(robot.node)
+            landings = self._landings(robot.node)
             order = Evacuate(
-                safe_spot=path[-1] if path else None,
-                path=path or [],
-                steps=self._steps(path or []),
+                safe_spot=way.safe_spot,
+                path=way.path,
+                steps=way.steps,
                 words=self._words(),
+                landings=landings,
             )
             message = make_message(order, source=self.endpoint.name, destination=robot.name)
             self.courier.post(message, key=("evacuate", robot.name))
@@ -301,14 +311,44 @@ class EmergencyService(Service):
                 "path": order.path,
                 "state": "ordered",
                 "node": robot.node,
-                "why": "" if path else "no way to a safe spot without an elevator",
+                "why": "" if way.path else "no way to a safe spot without an elevator",
                 "at": time.time(),
+                **(
+                    {
+                        "landings": {
+                            e: {f: w.path for f, w in ways.items()} for e, ways in landings.items()
+                        }
+                    }
+                    if landings
+                    else {}
+                ),
             }
             self.store.record_event(
                 "robot_evacuation",
                 "emergency",
                 {"robot": robot.name, "state": "ordered", "safe_spot": order.safe_spot},
             )
+
+    def _way(self, node: str | None) -> LandingWay:
+        """The way from ``node`` to its nearest safe spot (none: no way, or nowhere known)."""
+        path = (
+            nearest_safe_spot(self.site, self._emergency(), node, self.safety()) if node else None
+        )
+        return LandingWay(
+            safe_spot=path[-1] if path else None, path=path or [], steps=self._steps(path or [])
+        )
+
+    def _landings(self, node: str | None) -> dict[str, dict[str, LandingWay]]:
+        """A robot last seen on a cabin's node, or next to one (it may have got in since its
+        last report), may be riding it: the way from each landing of those elevators, by
+        elevator and floor (it gets out where the cabin stops, docs/emergency.md)."""
+        site = self.site
+        if self._near_cabins[0] is not site:
+            self._near_cabins = (site, cabins_near(site))
+        return {
+            elevator.id: {stop.floor: self._way(stop.node) for stop in elevator.stops}
+            for elevator in self._near_cabins[1].get(node or "", [])
+        }
 
     def _steps(self, path: list[str]) -> list[dict[str, Any]]:
         nodes = {n.id: n for n in self.site.nodes}
@@ -416,6 +456,10 @@ class EmergencyService(Service):
         report = msg.payload_as(EvacuationState)
         entry = self.evacuation.setdefault(msg.source, {"safe_spot": None, "path": []})
         entry.update(state=report.state, node=report.node, why=report.why, at=time.time())
+        for way in _landing_paths(entry):
+            if way and report.node == way[0] and way != entry["path"]:
+                # It got out of the cabin at this landing: its way is this landing's.
+                entry.update(safe_spot=way[-1], path=way)
         self.store.record_event(
             "robot_evacuation",
             msg.source,
@@ -465,3 +509,22 @@ class EmergencyService(Service):
                 for a in self._alarms()
             ],
         }
+
+
+def cabins_near(site: Site) -> dict[str, list[Elevator]]:
+    """Node -> the elevators with a cabin's node at it or one edge away."""
+    near: dict[str, list[Elevator]] = {}
+    stops = {stop.node: elevator for elevator in site.elevators for stop in elevator.stops}
+    for node, elevator in stops.items():
+        near.setdefault(node, []).append(elevator)
+    for edge in site.edges:
+        for a, b in ((edge.a, edge.b), (edge.b, edge.a)):
+            lift = stops.get(b)
+            if lift is not None and a not in stops and lift not in near.get(a, []):
+                near.setdefault(a, []).append(lift)
+    return near
+
+
+def _landing_paths(entry: dict[str, Any]) -> list[list[str]]:
+    """Every landing's way in a robot's evacuation record."""
+    return [path for ways in entry.get("landings", {}).values() for path in ways.values()]

@@ -8,7 +8,13 @@ from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["EmergencyChanged", "Evacuate", "EvacuationState", "EvacuationStateName"]
+__all__ = [
+    "EmergencyChanged",
+    "Evacuate",
+    "EvacuationState",
+    "EvacuationStateName",
+    "LandingWay",
+]
 
 EvacuationStateName = Literal["stopped", "moving", "safe", "stuck"]
 
@@ -27,6 +33,14 @@ class EmergencyChanged(PayloadModel):
     words: dict[str, str] = Field(default_factory=dict)
 
 
+class LandingWay(PayloadModel):
+    """The way to safety from one landing of an elevator (the cabin's node on that floor)."""
+
+    safe_spot: str | None
+    path: list[str] = Field(default_factory=list)
+    steps: list[dict[str, Any]] = Field(default_factory=list)
+
+
 @register_payload("evacuate")
 class Evacuate(PayloadModel):
     """Server -> one robot of an alarm's zone: stop now, then drive ``path`` to ``safe_spot``."""
@@ -40,6 +54,11 @@ class Evacuate(PayloadModel):
     elevator: the robot asks for neither on this way)."""
     words: dict[str, str] = Field(default_factory=dict)
     """What to say, per language; the site's default language first."""
+    landings: dict[str, dict[str, LandingWay]] = Field(default_factory=dict)
+    """Elevator -> floor -> the way from that landing, for each elevator the robot may be
+    riding (it was last seen on one of its cabin's nodes or next to one). A robot riding a
+    cabin when the order comes stays in it and gets out at the landing where it next stands
+    with its door open, then takes that landing's way."""
 
 
 @register_payload("evacuation_state")

@@ -84,6 +84,17 @@ def test_filter_counts_a_press_only_after_it_held() -> None:
     assert f.update(0, 0.30) == 0  # release counts at once
 
 
+def test_filter_times_the_alarm_of_a_normally_closed_contact() -> None:
+    """A fire alarm wired to a relay's normally-closed contact alarms at 0: that is the value
+    that must hold (a one-sample drop of the contact is no alarm); the way back counts at once."""
+    f = InputFilter(0.05, 1, active=0)
+    assert f.update(0, 0.00) is None
+    assert f.update(1, 0.02) is None  # a glitch: never counted
+    assert f.update(0, 0.10) is None
+    assert f.update(0, 0.15) == 0  # held 50 ms: the alarm
+    assert f.update(1, 0.20) == 1  # the contact closes again: at once
+
+
 def test_filter_drops_a_short_pulse_and_restarts_its_clock() -> None:
     f = InputFilter(0.2)
     assert f.update(1, 0.0) is None

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 import yaml
 
 from backend.settings import Settings
@@ -256,3 +257,39 @@ async def test_a_robot_connecting_or_restarting_during_the_alarm_hears_of_it(
         assert again.payload["safe_spot"] == first.payload["safe_spot"]
         await above.wait_for("emergency_changed", count=2)
         assert len(below.of_type("emergency_changed")) == 1
+
+
+@pytest.mark.parametrize("active_when", [1, 0], ids=["normally-open", "normally-closed"])
+async def test_the_alarm_input_is_read_on_its_own_poll(tmp_path: Path, active_when: int) -> None:
+    """The fire alarm does not wait for its module's whole poll: its input is also read on its
+    own, every ALARM_POLL_MS (docs/emergency.md, "Measured"). Here the module's own poll
+    comes once a minute (its first a minute after start): the alarm is declared before it,
+    from either contact of the panel's relay."""
+    site = yaml.safe_load(DEMO_SITE.read_text(encoding="utf-8"))
+    ground = next(m for m in site["modules"] if m["id"] == "otb_ground")
+    ground["sampling_period_ms"] = 60_000
+    site["emergency"]["alarms"][0]["active_when"] = active_when
+    alarm = IORef(module="otb_ground", point="fire_alarm")
+    async with BuildingSimulator(load_building(site), time_scale=20, port_zero=True) as sim:
+        sim.write(alarm, 1 - active_when)  # all is well
+        for module in site["modules"]:
+            module["port"] = sim.ports[module["id"]]
+        (tmp_path / "site.yaml").write_text(yaml.safe_dump(site), encoding="utf-8")
+        settings = Settings(
+            db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db", site=tmp_path / "site.yaml"
+        )
+        async with running_server(settings) as server:
+            building = server.app.state.building
+            assert set(building.alarm_pollers) == {"otb_ground"}
+            own = building.alarm_pollers["otb_ground"]
+            await wait_until(lambda: own.health.polls > 0)
+            polls = building.pollers["otb_ground"].health.polls
+            await wait_until(lambda: building.values.get(("otb_ground", "fire_alarm")) is not None)
+            assert server.app.state.emergency.state == "normal"
+            sim.write(alarm, active_when)
+            await wait_until(lambda: server.app.state.emergency.state == "alarm")
+            assert building.pollers["otb_ground"].health.polls == polls
+            # That poll reads the alarm input alone (the module's poll reads every point).
+            assert own.module.points == [
+                p for p in building.config.module("otb_ground").points if p.name == "fire_alarm"
+            ]

@@ -3,6 +3,7 @@ raised at the building simulator's control port (issue 35, docs/emergency.md).""
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from building_sim.control import serve_control
 from guidebot.messages import Message
 from guidebot.site.schema import Site
 from guidebot.testing import wait_until
+from robot_agent.navigation import Navigator
 from robot_agent.robocan import protocol as p
 
 from .test_e2e import fleet_up
@@ -113,3 +115,46 @@ async def test_alarm_stops_the_robot_sends_it_to_safety_and_resume_runs_its_tour
                 ),
                 timeout=60,
             )
+
+
+async def test_a_robot_that_had_just_left_its_safe_spot_goes_back_onto_it(
+    tmp_path: Path, demo_site: Site
+) -> None:
+    """The server's way starts at the last node the robot reached: its safe spot. The robot,
+    already on its way out of it, drives back onto it before it says it is safe."""
+    async with fleet_up(tmp_path, demo_site) as fleet:
+        nav = fleet.agent.navigator
+        there = await fleet.request_task("go_to", {"node": "charge_b"})
+        await fleet.wait_for(lambda: fleet.ended(there), timeout=60)
+        assert nav.node == "charge_b"
+        nav.max_speed = 0.05  # 1 m/s of wall time: the alarm comes on the way out
+        # Where the base really is: its own odometry (the map pose is re-anchored on the
+        # first node of every path, so it would say "at charge_b" anyway).
+        spot = base_position(nav)
+
+        def away() -> float:
+            here = base_position(nav)
+            return math.hypot(here[0] - spot[0], here[1] - spot[1])
+
+        await fleet.request_task("go_to", {"node": "charge_a"})
+        await fleet.wait_for(lambda: nav.node == "charge_b" and away() > 0.5, timeout=60)
+        headers = {"Authorization": f"Bearer {fleet.server.admin_token}"}
+        async with httpx.AsyncClient(base_url=fleet.server.url, headers=headers) as http:
+            declared = await http.post("/api/emergency/declare", json={"reason": "drill"})
+            assert declared.status_code == 200, declared.text
+
+        def reported(state: str) -> list[Message]:
+            return [m for m in fleet.of("evacuation_state") if m.payload["state"] == state]
+
+        await fleet.wait_for(lambda: reported("safe") or len(reported("stuck")) >= 3, 60)
+        [order] = fleet.of("evacuate")
+        assert order.payload["path"] == ["charge_b"], order.payload
+        assert reported("safe"), [m.payload for m in reported("stuck")]
+        assert reported("safe")[0].payload["node"] == "charge_b"
+        assert nav.node == "charge_b" and away() <= 2 * nav.tolerance_m, away()
+
+
+def base_position(nav: Navigator) -> tuple[float, float]:
+    """The base's odometry (its own frame, which nothing re-anchors)."""
+    assert nav._odom is not None
+    return nav._odom[0], nav._odom[1]

@@ -6,6 +6,7 @@ input still reads alarm, and works once it is cleared; "Declare emergency" asks 
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 from typing import Any
 
@@ -125,12 +126,19 @@ async def test_declare_emergency_asks_first_then_holds_the_site_until_resumed(
         )
         await expect(page.locator("#details")).to_contain_text("Evacuation")
         await expect(page.locator("#details")).to_contain_text("safe at")
+        # The marker's ring says it too: green, double, while the alarm holds.
+        ring = page.locator('[aria-label="robot R1"] .robot-body')
+        await expect(ring).to_have_class(re.compile(r"\bevac-safe\b"))
+        await expect(ring).to_have_css("border-color", "rgb(27, 122, 58)")
+        await expect(ring).to_have_css("border-top-style", "double")
+        await expect(page.locator("#map-toolbar")).to_contain_text("fire alarm, double ring")
         await web.axe_check(page)
 
         # Declared by a person, no input reads alarm: resumed in one step.
         await banner.get_by_role("button", name="Resume service").click()
         await expect(banner).to_be_hidden(timeout=LONG)
         await expect(page.locator("#details")).not_to_contain_text("Evacuation")
+        await expect(ring).not_to_have_class(re.compile(r"\bevac\b"))
         async with fleet.http() as http:
             state = (await http.get("/api/emergency")).json()
         assert state["state"] == "normal"

@@ -186,6 +186,9 @@ async function start() {
   const map = new FloorMap($("map"), (url) => api.get(url));
   ui.map = map;
   map.describeRobot = (s) => robotDoing(store, s);
+  map.evacuationOf = (name) => store.evacuation(name)?.state ?? null;
+  store.addEventListener("evacuation", () => map.restyleRobots());
+  let alarmShown = false;
   ui.monitor = new Monitor(ui);
   ui.modes = new Modes(ui);
   let pathKey = "";
@@ -244,6 +247,10 @@ async function start() {
     render(alertBar(ui, open), $("alert-bar"));
     const alarm = ui.store.emergency && ui.store.emergency.state !== "normal";
     if (!alarm) ui.resumeRefusal = null;
+    if (Boolean(alarm) !== alarmShown) {
+      alarmShown = Boolean(alarm);
+      map.restyleRobots(); // the evacuation rings come and go with the alarm
+    }
     $("emergency-banner").hidden = !alarm;
     render(emergencyBanner(ui), $("emergency-banner"));
     render(declareButton(ui), $("declare"));

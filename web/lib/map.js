@@ -348,7 +348,10 @@ export class FloorMap extends EventTarget {
     const element = robot.marker.getElement();
     if (!element) return;
     const waiting = WAITING.has(s.navigation) ? ` waiting nav-${s.navigation}` : "";
-    const cls = `robot-body mode-${s.mode}${waiting} ${batteryClass(s.battery)}${robot.selected ? " selected" : ""}`;
+    // During a fire alarm the ring says the robot's evacuation (docs/emergency.md).
+    const evacuation = this.evacuationOf?.(s.robot);
+    const evac = evacuation ? ` evac evac-${evacuation}` : "";
+    const cls = `robot-body mode-${s.mode}${waiting}${evac} ${batteryClass(s.battery)}${robot.selected ? " selected" : ""}`;
     if (cls !== robot.cls) {
       robot.parts.body.className = cls;
       robot.cls = cls;
@@ -423,6 +426,12 @@ export class FloorMap extends EventTarget {
       this.#placeRobot(name, robot);
       this.#spread();
     }
+  }
+
+  /** Draw every robot's ring again (something the rings show changed, not the robots: a fire
+   * alarm's evacuation). */
+  restyleRobots() {
+    for (const robot of this.robots.values()) this.#style(robot);
   }
 
   selectRobot(name) {

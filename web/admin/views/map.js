@@ -18,6 +18,9 @@ export function toolbarView(ui) {
     </span>
     <span class="legend" aria-label="Ring colours">
       <span>blue ring: busy</span> <span>orange dotted: waiting (door, area, elevator)</span> <span>red: fault or door blocked</span>
+      ${ui.store.emergency && ui.store.emergency.state !== "normal"
+        ? html`<span>fire alarm, double ring: orange evacuating, green safe, red stuck</span>`
+        : ""}
     </span>
     <span class="muted">${[...store.robots.values()].filter((r) => r.online).length} robots online</span>`;
 }
