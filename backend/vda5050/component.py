@@ -6,9 +6,12 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections.abc import AsyncIterator
+from typing import Any
 
 from fastapi import FastAPI
 
+from backend.tasks.manager import NETS
+from backend.tasks.targets import net_params
 from backend.vda5050.master import MasterControl
 from guidebot.vda5050.topics import parse_broker
 
@@ -52,6 +55,20 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
         if alerts.is_active(kind, subject):
             alerts.resolve(kind, subject, why)
 
+    tasks = getattr(app.state, "task_manager", None)
+
+    def task_of(robot: str, task_id: str) -> tuple[str, dict[str, Any]] | None:
+        """The Task Manager's word on a task a vehicle still runs (after a fail-over)."""
+        task = tasks.tasks.get(task_id) if tasks is not None else None
+        if task is None or task.final or task.robot != robot:
+            return None
+        try:
+            params = task.assigned_params or net_params(site, task)
+        except (KeyError, ValueError, AssertionError) as exc:
+            log.warning("VDA 5050: %s's task %s: %s", robot, task_id, exc)
+            return None
+        return task.net or NETS[task.kind], params
+
     master = MasterControl(
         site,
         broker,
@@ -59,6 +76,7 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
         cafile=settings.mqtt_cafile,
         alert=alert,
         resolve=resolve,
+        task_of=task_of,
     )
     async with master:
         app.state.vda5050 = master

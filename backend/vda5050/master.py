@@ -12,6 +12,7 @@ from typing import Any
 from backend.vda5050.vehicle import Send, VdaRobot, vehicle_of
 from guidebot.bus import BusEndpoint
 from guidebot.service import Service
+from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 from guidebot.vda5050.mqtt import MqttSession
 from guidebot.vda5050.schemas import SchemaViolation, check
@@ -26,6 +27,9 @@ INCOMING = frozenset({"state", "connection", "factsheet"})
 Alert = Callable[[str, str, str, bool], None]
 """raise (kind, subject, message, lasting) an alert for staff."""
 Resolve = Callable[[str, str, str], None]
+TaskLookup = Callable[[str, str], tuple[str, dict[str, Any]] | None]
+"""(robot, task id) -> the net and parameters of that robot's task, if the Task Manager has it
+on that task (not ended): what a new master resumes a vehicle's running order with."""
 
 
 class MasterControl(Service):
@@ -40,8 +44,10 @@ class MasterControl(Service):
         cafile: str | None = None,
         alert: Alert | None = None,
         resolve: Resolve | None = None,
+        task_of: TaskLookup | None = None,
     ) -> None:
         super().__init__()
+        self.task_of = task_of
         self.site = site
         self.broker = broker
         self.endpoint = endpoint
@@ -67,15 +73,28 @@ class MasterControl(Service):
     async def on_start(self) -> None:
         announce = self.endpoint("vda5050")
         self.on_cleanup(announce.close)  # type: ignore[attr-defined]
+        graph = SiteGraph(self.site, warm=False, tables=False)
         for config in self._configs:
             vehicle = vehicle_of(config)
             ep = self.endpoint(config.name)
-            robot = VdaRobot(config, self.site, ep, announce, self._sender(vehicle.topic))
+            robot = VdaRobot(
+                config,
+                self.site,
+                ep,
+                announce,
+                self._sender(vehicle.topic),
+                task_of=self._task_lookup(config.name),
+                step_of=lambda node: graph.step(node).as_dict(),
+            )
             self.robots[(vehicle.interface, vehicle.manufacturer, vehicle.serial_number)] = robot
             self.on_cleanup(ep.close)  # type: ignore[attr-defined]
             self.on_cleanup(robot.close)
         await self.enter(self.session)
         log.info("VDA 5050: %d robot(s) on MQTT broker %s", len(self.robots), self.broker)
+
+    def _task_lookup(self, robot: str) -> Callable[[str], tuple[str, dict[str, Any]] | None]:
+        lookup = self.task_of
+        return lambda task_id: lookup(robot, task_id) if lookup is not None else None
 
     def _sender(self, topic: Callable[[str], str]) -> Send:
         async def send(name: str, message: dict[str, Any]) -> bool:

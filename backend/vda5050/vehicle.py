@@ -45,6 +45,11 @@ log = logging.getLogger(__name__)
 
 Send = Callable[[str, dict[str, Any]], Awaitable[bool]]
 """Publish a message on one of the vehicle's topics (``order``, ``instantActions``)."""
+TaskOf = Callable[[str], tuple[str, dict[str, Any]] | None]
+"""The net and parameters of a task the Task Manager has this robot on (not ended), or None:
+what a new master control (a new leader, a restarted server) resumes a vehicle's order with."""
+StepOf = Callable[[str], dict[str, Any]]
+"""A site node as a path step ({node, floor, x, y, door, elevator, area})."""
 
 ACK_TIMEOUT_S = 3.0
 """An order the vehicle's state does not name this long after it was sent is sent again."""
@@ -83,8 +88,13 @@ class VdaRobot:
         endpoint: BusEndpoint,
         announce: BusEndpoint,
         send: Send,
+        *,
+        task_of: TaskOf | None = None,
+        step_of: StepOf | None = None,
     ) -> None:
         self.name = config.name
+        self.task_of = task_of
+        self.step_of = step_of
         self.vehicle = vehicle_of(config)
         self.map_ids: Mapping[str, str] = config.map_ids
         self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
@@ -206,6 +216,8 @@ class VdaRobot:
         if not self.online:
             self.on_connection({"connectionState": "ONLINE"})
         self.state = message
+        if self.task_id is None and self.runner is None:
+            self._adopt(message)
         position = message.get("agvPosition")
         if position is not None:
             self.floor = self.floor_of_map.get(position["mapId"], self.floor)
@@ -334,18 +346,29 @@ class VdaRobot:
             return
         self.runner.cancel()
 
-    async def _run(self, task_id: str, net: str, params: dict[str, Any]) -> None:
+    async def _run(
+        self,
+        task_id: str,
+        net: str,
+        params: dict[str, Any],
+        resume: dict[str, Any] | None = None,
+    ) -> None:
+        """Run a task; ``resume``: the vehicle's state when a new master control took over
+        the task while the vehicle ran its order (``_adopt``)."""
         outcome, reason = "done", ""
         try:
-            await self._take_over()
-            if (self.state or {}).get("batteryState", {}).get("charging"):
-                await self.instant("stopCharging")
+            if resume is None:
+                await self._take_over()
+                if (self.state or {}).get("batteryState", {}).get("charging"):
+                    await self.instant("stopCharging")
             points = params.get("points")
             if isinstance(points, list):
-                for point in points:
-                    await self._visit(task_id, point, str(params.get("lang") or ""))
+                first = 0 if resume is None else self._resumed_point(task_id, points, resume)
+                for point in points[first:]:
+                    await self._visit(task_id, point, str(params.get("lang") or ""), resume)
+                    resume = None
             else:
-                await self.drive(task_id, str(params["node"]))
+                await self.drive(task_id, str(params["node"]), resume=resume)
                 if net == "battery_charge":
                     await self.instant("startCharging")
         except DriveFailed as exc:
@@ -369,6 +392,62 @@ class VdaRobot:
         self.ep.publish(TaskEnded(task_id=task_id, robot=self.name, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self._publish_state()
 
+    def _adopt(self, state: dict[str, Any]) -> None:
+        """A new master control (a new leader, a restarted server) finds the vehicle on an
+        order of a task the Task Manager still has it on (order ids are ``<task id>-<n>``):
+        it goes on with that task from the vehicle's state, the same order extended by
+        updates (no order lost, none sent twice), instead of cancelling it. The areas and
+        doors on the vehicle's released base were granted to it: they are its own again."""
+        order_id = str(state.get("orderId") or "")
+        task_id, dash, n = order_id.rpartition("-")
+        if not dash or not n.isdigit() or self.task_of is None or self.step_of is None:
+            return
+        if any(e.task_id == task_id for e in self.ended):
+            return  # ended here: the Task Manager has not heard it yet
+        found = self.task_of(task_id)
+        if found is None:
+            return
+        net, params = found
+        self._orders = max(self._orders, int(n))
+        here = [str(state["lastNodeId"])]
+        ahead = [str(s["nodeId"]) for s in state.get("nodeStates", []) if s["released"]]
+        for node in here + ahead:
+            if node not in self.nodes:
+                continue
+            step = self.step_of(node)
+            if step.get("area"):
+                self.granted.add(step["area"])
+                self.requested.add(step["area"])
+            if step.get("door") and node in ahead and step["door"] not in self.doors:
+                self.doors.add(step["door"])
+                self.ep.publish(OpenDoor(door=step["door"]))
+        log.warning(
+            "%s: resumes task %s on the vehicle's order %s (update %s, at %s)",
+            self.name,
+            task_id,
+            order_id,
+            state.get("orderUpdateId"),
+            state["lastNodeId"],
+        )
+        self.task_id = task_id
+        self.runner = asyncio.get_running_loop().create_task(
+            self._run(task_id, net, params, resume=state), name=f"vda5050 {self.name} {task_id}"
+        )
+
+    def _resumed_point(
+        self, task_id: str, points: list[dict[str, Any]], state: dict[str, Any]
+    ) -> int:
+        """The tour point a resumed vehicle is at: the last whose stop action it knows, or the
+        one after when that action is over; else the first."""
+        statuses = {a["actionId"]: a["actionStatus"] for a in state.get("actionStates", [])}
+        at = 0
+        for i, point in enumerate(points):
+            for kind in ("speak", "wait"):
+                status = statuses.get(f"{task_id}-{kind}-{point['index']}")
+                if status is not None:
+                    at = i + 1 if status in DONE_ACTIONS else i
+        return at
+
     async def _take_over(self) -> None:
         """A vehicle still on an order this master did not give (before a restart of the
         server, or from another master) is stopped with ``cancelOrder`` first: it would refuse
@@ -391,7 +470,13 @@ class VdaRobot:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.changed.wait(), 0.5)
 
-    async def _visit(self, task_id: str, point: Mapping[str, Any], lang: str) -> None:
+    async def _visit(
+        self,
+        task_id: str,
+        point: Mapping[str, Any],
+        lang: str,
+        resume: dict[str, Any] | None = None,
+    ) -> None:
         """One tour stop: drive there, explain it with a ``speak`` node action."""
         index, total = int(point["index"]), int(point["total"])
         text = str(point.get("text") or point.get("name") or "")
@@ -423,7 +508,7 @@ class VdaRobot:
                 )
             )
 
-        await self.drive(task_id, str(point["node"]), [action], on_arrival=arrived)
+        await self.drive(task_id, str(point["node"]), [action], on_arrival=arrived, resume=resume)
         self.ep.publish(
             TourProgress(
                 task_id=task_id,
@@ -443,29 +528,28 @@ class VdaRobot:
         actions: list[dict[str, Any]] | None = None,
         *,
         on_arrival: Callable[[], None] | None = None,
+        resume: dict[str, Any] | None = None,
     ) -> None:
         """Bring the vehicle to ``goal``: one order per floor of the path (a leg), its base
         released as far as the areas granted, the doors open and the cabin at the landing
         allow, extended by an update at each grant, opening or arrival; between two legs an
-        elevator ride. The ``actions`` run at the goal. Raises DriveFailed with the reason."""
-        try:
-            reply = await self.ep.request(
-                GetPath(robot=self.name, from_node=self.node, to_node=goal), timeout=5.0
-            )
-        except RequestTimeout:
-            raise DriveFailed(f"no path to {goal}: the Traffic Manager did not answer") from None
-        steps: list[dict[str, Any]] = reply.payload.get("steps") or []
-        if reply.type != "path" or not steps:
-            raise DriveFailed(f"no path to {goal}: {reply.payload.get('error', 'none')}")
+        elevator ride. The ``actions`` run at the goal. ``resume``: the vehicle's state, whose
+        order to ``goal`` (given by an earlier master control) is extended rather than a new
+        one sent. Raises DriveFailed with the reason."""
+        resumed = await self._resumed_path(goal, resume) if resume is not None else None
+        if resumed is not None:
+            steps, start, lead = resumed
+        else:
+            steps, start, lead = await self._path(self.node, goal), 0, None
         last = len(steps) - 1
         rides = [
             i
-            for i in range(last)
+            for i in range(start, last)
             if steps[i].get("elevator")
             and steps[i + 1].get("elevator") == steps[i]["elevator"]
             and steps[i + 1]["floor"] != steps[i]["floor"]
         ]
-        starts = [0, *(r + 1 for r in rides)]
+        starts = [start, *(r + 1 for r in rides)]
         ends = [*rides, last]
         for n, (first, end) in enumerate(zip(starts, ends, strict=True)):
             if n:
@@ -477,7 +561,43 @@ class VdaRobot:
                 first,
                 actions if final else None,
                 on_arrival if final else None,
+                lead if n == 0 else None,
             )
+
+    async def _path(self, start: str | None, goal: str) -> list[dict[str, Any]]:
+        """The Traffic Manager's path from ``start`` to ``goal`` (its steps)."""
+        try:
+            reply = await self.ep.request(
+                GetPath(robot=self.name, from_node=start, to_node=goal), timeout=5.0
+            )
+        except RequestTimeout:
+            raise DriveFailed(f"no path to {goal}: the Traffic Manager did not answer") from None
+        steps: list[dict[str, Any]] = reply.payload.get("steps") or []
+        if reply.type != "path" or not steps:
+            raise DriveFailed(f"no path to {goal}: {reply.payload.get('error', 'none')}")
+        return steps
+
+    async def _resumed_path(
+        self, goal: str, state: dict[str, Any]
+    ) -> tuple[list[dict[str, Any]], int, tuple[str, int, int]] | None:
+        """When the vehicle's order (in ``state``) goes to ``goal``: the steps indexed as its
+        sequence ids (step i is node sequence id 2 i; the steps it has passed are empty), the
+        step it stands at, and (order id, update id, the step its base ends at) to extend it;
+        the path after the base is the Traffic Manager's. None: that order goes elsewhere."""
+        nodes = sorted(state.get("nodeStates", []), key=lambda n: int(n["sequenceId"]))
+        here, seq = str(state["lastNodeId"]), int(state["lastNodeSequenceId"])
+        if (str(nodes[-1]["nodeId"]) if nodes else here) != goal or self.step_of is None:
+            return None
+        chain = [here] + [str(n["nodeId"]) for n in nodes if n["released"]]
+        if not all(node in self.nodes for node in chain):
+            return None
+        start = step_of_seq(seq)
+        base_end = start + len(chain) - 1
+        after = await self._path(chain[-1], goal)
+        steps: list[dict[str, Any]] = [{} for _ in range(start)]
+        steps += [self.step_of(node) for node in chain[:-1]] + after
+        self.node = here
+        return steps, start, (str(state["orderId"]), int(state["orderUpdateId"]), base_end)
 
     async def _ride(self, cabin: Mapping[str, Any], exit_: Mapping[str, Any]) -> None:
         """The vehicle stands in the cabin: call it to the exit's floor, and once it is there
@@ -502,15 +622,22 @@ class VdaRobot:
         first: int,
         actions: list[dict[str, Any]] | None,
         on_arrival: Callable[[], None] | None,
+        lead: tuple[str, int, int] | None = None,
     ) -> None:
-        """One order: the vehicle from ``steps[first]`` to the last of ``steps``."""
-        self._orders += 1
-        order_id = self.order_id = f"{task_id}-{self._orders}"
+        """One order: the vehicle from ``steps[first]`` to the last of ``steps``; ``lead``:
+        (order id, update id, the step its base ends at) of the vehicle's order to extend
+        (``_resumed_path``) instead of a new one."""
+        update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
+        if lead is None:
+            order_id = self.order_id = self._new_order_id(task_id)
+        else:
+            order_id, update, base_end = lead
+            self.order_id = order_id
+            tries, sent_at = 1, asyncio.get_running_loop().time()
         last = len(steps) - 1
         self.route = {node_seq(i): str(steps[i]["node"]) for i in range(first + 1, len(steps))}
         self.route_seq = node_seq(first)
         action_ids = {a["actionId"] for a in actions or []}
-        update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
         order: dict[str, Any] = {}
         arrived = False
         loop = asyncio.get_running_loop()
@@ -536,6 +663,8 @@ class VdaRobot:
                 )
                 base_end, tries = released_to, 0
             acked = ours and state.get("orderUpdateId", -1) >= update
+            if not acked and not order:  # the resumed order, gone from the vehicle
+                raise DriveFailed(f"{self.name} no longer runs order {order_id}")
             if not acked and (tries == 0 or loop.time() - sent_at > ACK_TIMEOUT_S):
                 if tries >= ORDER_TRIES:
                     raise DriveFailed(
@@ -564,6 +693,16 @@ class VdaRobot:
                     return
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.changed.wait(), 0.5)
+
+    def _new_order_id(self, task_id: str) -> str:
+        """``<task id>-<n>``, n after any order of this task the vehicle last had (from an
+        earlier master control): an order id is never given twice."""
+        last = str((self.state or {}).get("orderId") or "")
+        head, dash, n = last.rpartition("-")
+        if dash and head == task_id and n.isdigit():
+            self._orders = max(self._orders, int(n))
+        self._orders += 1
+        return f"{task_id}-{self._orders}"
 
     def _refusal(self, order_id: str) -> str | None:
         """The vehicle's error that names this order, if any (its description)."""
