@@ -295,7 +295,6 @@ class VdaRobot:
         battery = state.get("batteryState", {}).get("batteryCharge", 100.0)
         velocity = state.get("velocity") or {}
         self.seq += 1
-        driving = bool(state.get("driving"))
         self.ep.publish(
             RobotState(
                 robot=self.name,
@@ -306,7 +305,7 @@ class VdaRobot:
                 floor=self.floor,
                 battery=min(1.0, max(0.0, float(battery) / 100)),
                 mode=self._mode(),
-                navigation="moving" if driving else (self.waiting or "idle"),
+                navigation=self._navigation(state),
                 task_id=self.task_id,
                 speed=math.hypot(velocity.get("vx", 0.0), velocity.get("vy", 0.0)),
                 areas=sorted(self.granted)[:64],
@@ -314,6 +313,21 @@ class VdaRobot:
                 seq=self.seq,
             )
         )
+
+    def _navigation(self, state: Mapping[str, Any]) -> str:
+        """``paused`` while the vehicle says it is (staff's pause, or its own pause button),
+        else moving, else what it waits for."""
+        if state.get("paused"):
+            return "paused"
+        if state.get("driving"):
+            return "moving"
+        return self.waiting or "idle"
+
+    async def pause(self, paused: bool) -> None:
+        """Staff pause the vehicle where it stands (``startPause``) or let it go on
+        (``stopPause``): its order is kept (docs/vda5050.md, "Pause")."""
+        log.info("%s: %s", self.name, "paused by staff" if paused else "resumed by staff")
+        await self.instant("startPause" if paused else "stopPause")
 
     # -- tasks -----------------------------------------------------------------------------
     def _on_task_assigned(self, msg: Message) -> None:
