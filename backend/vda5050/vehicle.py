@@ -67,6 +67,15 @@ class DriveFailed(Exception):
     """A goal the vehicle cannot reach, with the reason the task fails with."""
 
 
+class OrderLost(Exception):
+    """The vehicle's state no longer names the order it had taken (it restarted, or lost it
+    while its connection was down): the drive is planned again from where it stands."""
+
+
+REPLANS = 3
+"""Times one goal is planned again after the vehicle lost its order, before the task fails."""
+
+
 def vehicle_of(config: RobotConfig) -> Vehicle:
     """The vehicle's names on the broker, from its site entry."""
     assert config.manufacturer is not None and config.serial_number is not None
@@ -550,6 +559,30 @@ class VdaRobot:
         elevator ride. The ``actions`` run at the goal. ``resume``: the vehicle's state, whose
         order to ``goal`` (given by an earlier master control) is extended rather than a new
         one sent. Raises DriveFailed with the reason."""
+        for replans in range(REPLANS + 1):
+            try:
+                await self._drive(task_id, goal, actions, on_arrival, resume)
+                return
+            except OrderLost as exc:
+                log.warning(
+                    "%s: the vehicle no longer runs order %s: planned again from %s (%d)",
+                    self.name,
+                    exc,
+                    self.node,
+                    replans + 1,
+                )
+                resume = None
+        raise DriveFailed(f"{self.name} lost its order {REPLANS + 1} times on the way to {goal}")
+
+    async def _drive(
+        self,
+        task_id: str,
+        goal: str,
+        actions: list[dict[str, Any]] | None,
+        on_arrival: Callable[[], None] | None,
+        resume: dict[str, Any] | None,
+    ) -> None:
+        """``drive`` once: OrderLost when the vehicle drops the order on the way."""
         resumed = await self._resumed_path(goal, resume) if resume is not None else None
         if resumed is not None:
             steps, start, lead = resumed
@@ -642,6 +675,7 @@ class VdaRobot:
         (order id, update id, the step its base ends at) of the vehicle's order to extend
         (``_resumed_path``) instead of a new one."""
         update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
+        taken = lead is not None  # the vehicle has had this order (then losing it is news)
         if lead is None:
             order_id = self.order_id = self._new_order_id(task_id)
         else:
@@ -677,9 +711,10 @@ class VdaRobot:
                 )
                 base_end, tries = released_to, 0
             acked = ours and state.get("orderUpdateId", -1) >= update
-            if not acked and not order:  # the resumed order, gone from the vehicle
-                raise DriveFailed(f"{self.name} no longer runs order {order_id}")
-            if not acked and (tries == 0 or loop.time() - sent_at > ACK_TIMEOUT_S):
+            taken = taken or ours
+            if taken and not ours and self.online:  # restarted, or lost it while away
+                raise OrderLost(order_id)
+            if not acked and self.online and (tries == 0 or loop.time() - sent_at > ACK_TIMEOUT_S):
                 if tries >= ORDER_TRIES:
                     raise DriveFailed(
                         f"{self.name} never acknowledged order {order_id} "

@@ -350,3 +350,36 @@ async def test_a_vehicle_on_an_order_of_another_master_is_cancelled_first(
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
         assert "cancelOrder" in kinds
         assert sim.order.order_id.startswith(task) and sim.last_node == "a"
+
+
+async def test_a_vehicle_back_within_the_grace_period_is_planned_again_from_where_it_stands(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """The vehicle waits at b for the corridor, goes away (its process stops), is pushed back
+    to a by hand and comes back restarted there without its order, within the grace period:
+    the master control plans the drive again from a with a new order, instead of extending
+    the lost one from b, which the vehicle would refuse (it is not at b)."""
+    async with fleet(tmp_path, broker.url) as f:
+        other = f.server.app.state.hub.endpoint("R1")
+        other.publish(RequestArea(robot="R1", area="corridor"))
+        traffic = f.server.app.state.traffic
+        await wait_until(lambda: traffic.locks.holder("corridor") == "R1")
+        async with vehicle(broker.url) as first:
+            await wait_until(lambda: f.robot("V1").online, 15)
+            task = await f.task("go_to", {"node": "e"})
+            await wait_until(lambda: first.last_node == "b" and not first.driving, 20)
+        await wait_until(lambda: not f.robot("V1").online, 15)
+        async with vehicle(broker.url) as again:  # restarted at a
+            await wait_until(lambda: f.robot("V1").online, 15)
+            await wait_until(lambda: f.robot("V1").node == "a", 15)
+            other.publish(ReleaseArea(robot="R1", area="corridor"))
+            result = await until_done(f, task)
+        other.close()
+        assert result["state"] == "done", result
+        assert again.last_node == "e" and not again.errors
+        sent = [(o["orderId"], o["nodes"][0]["nodeId"]) for o in again.orders_received]
+        assert sent and sent[0] == (f"{task}-2", "a"), sent
+        all_valid(again.orders_received, "order")
+        history = (await f.http.get(f"/api/tasks/{task}/history")).json()
+        events = [h["event"] for h in history]
+        assert events.count("assigned") == 1 and "requeued" not in events, history
