@@ -11,6 +11,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Mapping
+from dataclasses import replace
 from datetime import datetime
 from typing import Any
 
@@ -21,6 +22,7 @@ from backend.vda5050.order import (
     node_seq,
     step_of_seq,
 )
+from backend.vda5050.zones import responses, zone_sets
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
 from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
@@ -36,6 +38,7 @@ from guidebot.payloads.robot import (
 from guidebot.payloads.tasks import RobotLink, TaskEnded, TaskStarted, TourProgress
 from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
 from guidebot.site.schema import RobotConfig, Site
+from guidebot.vda5050.schemas import version_of
 from guidebot.vda5050.sim import speak_seconds
 from guidebot.vda5050.topics import Vehicle
 
@@ -56,6 +59,11 @@ ACK_TIMEOUT_S = 3.0
 ORDER_TRIES = 3
 """Sends of one order before the task fails: never resent forever."""
 DONE_ACTIONS = frozenset({"FINISHED", "FAILED"})
+REPORTED_LEVELS = frozenset({"WARNING", "URGENT", "CRITICAL", "FATAL"})
+"""Error levels that become a robot_fault (2.1.0 has WARNING and FATAL; 3.0.0 adds URGENT and
+CRITICAL)."""
+FAULT_LEVELS = frozenset({"CRITICAL", "FATAL"})
+"""Error levels that put the robot in mode fault: it cannot go on with its order."""
 BATTERY_REARM = 0.05
 RECALL_S = 2.0
 """While a vehicle waits for a cabin, drives into it or out of it, its call is repeated this
@@ -109,6 +117,16 @@ class VdaRobot:
         self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
         self.nodes = {n.id: n for n in site.nodes}
         self.area_nodes = {a.id: frozenset(a.nodes) for a in site.areas}
+        self.site = site
+        self.v3 = False
+        self.zone_sets: dict[str, dict[str, Any]] = {}
+        """3.x: the restricted areas as RELEASE zones, one zone set per floor."""
+        self.zone_area: dict[tuple[str, str], str] = {}
+        self._speak(self.vehicle.version)
+        self.zone_requests: dict[str, str] = {}
+        """The vehicle's open ACCESS zone requests: requestId -> area."""
+        self._answered: dict[str, str] = {}
+        self._zones_sent: set[str] = set()
         self.ep = endpoint
         self.announce = announce
         self.send = send
@@ -193,6 +211,7 @@ class VdaRobot:
         was = self.online
         self.online = state == "ONLINE"
         if self.online and not was:
+            self._zones_sent.clear()
             self.announce.publish("robot_connected", RobotLink(robot=self.name))
             self._spawn(self.instant("stateRequest", "factsheetRequest"))
         elif not self.online and was:
@@ -207,27 +226,51 @@ class VdaRobot:
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
+    def _speak(self, version: str) -> None:
+        """Speak the vehicle's version: the one its site entry says, then the one its own
+        messages declare (``version``: 2.x or 3.x) when they say another. 3.x gets zones."""
+        wanted = version_of({"version": version}, self.vehicle.version)
+        if wanted != self.vehicle.version:
+            log.warning(
+                "%s: the vehicle speaks VDA 5050 %s (its site entry says %s): followed",
+                self.name,
+                version,
+                self.vehicle.version,
+            )
+            self.vehicle = replace(self.vehicle, version=wanted)
+        self.v3 = wanted.startswith("3.")
+        if self.v3 and not self.zone_sets:
+            self.zone_sets = zone_sets(self.site, self.map_ids)
+            self.zone_area = {
+                (zs["zoneSetId"], z["zoneId"]): str(z["zoneId"])
+                for zs in self.zone_sets.values()
+                for z in zs["zones"]
+            }
+
     def on_factsheet(self, message: dict[str, Any]) -> None:
         """What the vehicle can do: whether a tour stop is a ``speak`` or a timed ``wait``."""
+        self._speak(str(message["version"]))
         self.factsheet = message
-        actions = message["protocolFeatures"]["agvActions"]
+        features = message["protocolFeatures"]
+        actions = features.get("agvActions") or features.get("mobileRobotActions") or []
         self.speaks = any(
             a["actionType"] == "speak" and "NODE" in a["actionScopes"] for a in actions
         )
         log.info(
             "%s: factsheet of %s: tour stops by %s",
             self.name,
-            message["typeSpecification"]["seriesName"],
+            message["typeSpecification"].get("seriesName", "?"),
             "speech (speak)" if self.speaks else "a timed wait (no speak action)",
         )
 
     def on_state(self, message: dict[str, Any]) -> None:
         if not self.online:
             self.on_connection({"connectionState": "ONLINE"})
+        self._speak(str(message["version"]))
         self.state = message
         if self.task_id is None and self.runner is None:
             self._adopt(message)
-        position = message.get("agvPosition")
+        position = _position(message)
         if position is not None:
             self.floor = self.floor_of_map.get(position["mapId"], self.floor)
         at = datetime.fromisoformat(message["timestamp"]).timestamp()
@@ -239,9 +282,71 @@ class VdaRobot:
             self.floor = self.nodes[node].floor
             self.ep.publish(NodeReached(robot=self.name, node=node, floor=self.floor, at=at))
         self._report_errors(message["errors"])
-        self._battery(float(message["batteryState"]["batteryCharge"]) / 100)
+        self._battery(_battery(message)[0] / 100)
+        if self.v3:
+            self._zones(message)
         self._publish_state()
         self.changed.set()
+
+    # -- 3.0.0 zones -----------------------------------------------------------------------
+    def _zones(self, state: dict[str, Any]) -> None:
+        """Give the vehicle the site's zone sets (``zoneSet``, then ``enableZoneSet``) unless
+        it reports them enabled, and answer its zone requests through the lock table."""
+        have = {z["zoneSetId"]: z["zoneSetStatus"] for z in state.get("zoneSets") or []}
+        for zone_set in self.zone_sets.values():
+            zid = zone_set["zoneSetId"]
+            if have.get(zid) == "ENABLED" or zid in self._zones_sent:
+                continue
+            self._zones_sent.add(zid)
+            self._spawn(self._give_zone_set(zone_set, upload=zid not in have))
+        self._zone_requests(state.get("zoneRequests") or [])
+
+    async def _give_zone_set(self, zone_set: dict[str, Any], *, upload: bool) -> None:
+        if upload:
+            header = self.vehicle.header(self._header_id("zoneSet"))
+            await self.send("zoneSet", {**header, "zoneSet": zone_set})
+        await self.instant("enableZoneSet", parameters={"zoneSetId": zone_set["zoneSetId"]})
+
+    def _zone_requests(self, requests: list[dict[str, Any]]) -> None:
+        """An ACCESS request for one of our zones is a ``request_area``: answered QUEUED,
+        then GRANTED when the Traffic Manager grants the area (at once if the robot holds
+        it); any other request REJECTED. A granted request the vehicle drops (it left the
+        zone) gives the area back when no task of ours holds it."""
+        now: dict[str, str] = {}
+        for request in requests:
+            rid = str(request["requestId"])
+            area = self.zone_area.get((request["zoneSetId"], request["zoneId"]))
+            if request["requestType"] != "ACCESS" or area is None:
+                self._answer(rid, "REJECTED")
+                continue
+            now[rid] = area
+            if request["requestStatus"] != "REQUESTED":
+                continue  # GRANTED: inside; REVOKED, EXPIRED: its own business
+            if area in self.granted:
+                self._answer(rid, "GRANTED")
+                continue
+            if area not in self.requested:
+                self.requested.add(area)
+                self.ep.publish(RequestArea(robot=self.name, area=area))
+            self._answer(rid, "QUEUED")
+        for rid, area in self.zone_requests.items():
+            if rid in now or area in now.values() or self.task_id is not None:
+                continue
+            if area in self.granted | self.requested and not self._stands_in(area, self.node):
+                self._release_area(area)
+        self._answered = {r: g for r, g in self._answered.items() if r in now}
+        self.zone_requests = now
+
+    def _answer(self, request_id: str, grant: str) -> None:
+        if self._answered.get(request_id) == grant:
+            return
+        self._answered[request_id] = grant
+        message = responses(self.vehicle, self._header_id("responses"), [(request_id, grant)])
+
+        async def send() -> None:
+            await self.send("responses", message)
+
+        self._spawn(send())
 
     def _reached(self, message: dict[str, Any]) -> list[str]:
         """The nodes reached since the last state, in order: a state is a sample, and a
@@ -275,7 +380,7 @@ class VdaRobot:
         now = {(e["errorType"], e.get("errorDescription", "")) for e in errors}
         for error in errors:
             key = (error["errorType"], error.get("errorDescription", ""))
-            if key in self.faults or error["errorLevel"] not in ("WARNING", "FATAL"):
+            if key in self.faults or error["errorLevel"] not in REPORTED_LEVELS:
                 continue
             detail = f"{error['errorLevel']} {error['errorType']}: {key[1]}".strip(": ")
             self.ep.publish(
@@ -289,19 +394,19 @@ class VdaRobot:
         state = self.state or {}
         if not self.online:
             return RobotMode.OFFLINE
-        if any(e["errorLevel"] == "FATAL" for e in state.get("errors", [])):
+        if any(e["errorLevel"] in FAULT_LEVELS for e in state.get("errors", [])):
             return RobotMode.FAULT
         if self.task_id is not None:
             return RobotMode.BUSY
-        if state.get("batteryState", {}).get("charging"):
+        if _battery(state)[1]:
             return RobotMode.CHARGING
         return RobotMode.IDLE
 
     def _publish_state(self) -> None:
         state = self.state or {}
-        position = state.get("agvPosition") or {}
+        position = _position(state) or {}
         node = self.nodes.get(self.node or "")
-        battery = state.get("batteryState", {}).get("batteryCharge", 100.0)
+        battery = _battery(state)[0]
         velocity = state.get("velocity") or {}
         self.seq += 1
         self.ep.publish(
@@ -382,7 +487,7 @@ class VdaRobot:
         try:
             if resume is None:
                 await self._take_over()
-                if (self.state or {}).get("batteryState", {}).get("charging"):
+                if _battery(self.state or {})[1]:
                     await self.instant("stopCharging")
             points = params.get("points")
             if isinstance(points, list):
@@ -836,6 +941,9 @@ class VdaRobot:
             log.info("%s: area %s removed: %s", self.name, area, p.get("reason"))
         if area in self.requested:
             self.granted.add(area)
+        for rid, asked in self.zone_requests.items():
+            if asked == area:
+                self._answer(rid, "REJECTED" if p.get("removed") else "GRANTED")
         self.changed.set()
 
     def _on_cabin(self, msg: Message) -> None:
@@ -857,3 +965,16 @@ class VdaRobot:
         else:
             self.open_doors.discard(door)
         self.changed.set()
+
+
+def _position(state: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The vehicle's pose: ``agvPosition`` (2.x) or ``mobileRobotPosition`` (3.x)."""
+    found = state.get("agvPosition") or state.get("mobileRobotPosition")
+    return dict(found) if found else None
+
+
+def _battery(state: Mapping[str, Any]) -> tuple[float, bool]:
+    """(charge in %, charging): ``batteryState`` (2.x) or ``powerSupply`` (3.x); 100 % and
+    not charging before a state says."""
+    b = state.get("batteryState") or state.get("powerSupply") or {}
+    return float(b.get("batteryCharge", b.get("stateOfCharge", 100.0))), bool(b.get("charging"))

@@ -55,6 +55,19 @@ def test_instant_actions_follow_the_schema() -> None:
     check("instantActions", instant_actions(V, 3, [("x1", "cancelOrder")]))
 
 
+def test_orders_and_instant_actions_for_a_3_0_0_vehicle_follow_its_schemas() -> None:
+    """The official 3.0.0 order schema has trailing commas (read leniently): checking a 3.0.0
+    order raised a JSON error; its edges name no nodes and instant actions block NONE."""
+    v3 = Vehicle("Acme", "sn-1", version="3.0.0")
+    order = build_order(v3, 0, "o1", 0, STEPS, start=0, released_to=1, map_ids={})
+    assert problems("order", order, "3.0.0") == []
+    assert "startNodeId" not in order["edges"][0]
+    actions = instant_actions(v3, 0, [("x1", "enableZoneSet")], {"zoneSetId": "z"})
+    assert problems("instantActions", actions, "3.0.0") == []
+    for topic in ("order", "factsheet", "visualization", "state", "zoneSet", "responses"):
+        assert problems(topic, {}, "3.0.0")  # every official 3.0.0 schema loads
+
+
 def test_the_schema_names_what_is_wrong() -> None:
     with pytest.raises(SchemaViolation, match=r"order refused by the VDA 5050 schema: .*orderId"):
         check("order", {**V.header(0), "nodes": [], "edges": [], "orderUpdateId": 0})
