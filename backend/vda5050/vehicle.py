@@ -65,6 +65,8 @@ CRITICAL)."""
 FAULT_LEVELS = frozenset({"CRITICAL", "FATAL"})
 """Error levels that put the robot in mode fault: it cannot go on with its order."""
 BATTERY_REARM = 0.05
+CHARGED = 0.95
+"""A charge task ends at this battery level (as the robot agent's dock: robot_agent/battery.py)."""
 RECALL_S = 2.0
 """While a vehicle waits for a cabin, drives into it or out of it, its call is repeated this
 often (wall seconds), as a person keeps the button pressed: the building's door hold does not
@@ -498,7 +500,7 @@ class VdaRobot:
             else:
                 await self.drive(task_id, str(params["node"]), resume=resume)
                 if net == "battery_charge":
-                    await self.instant("startCharging")
+                    await self._charge()
         except DriveFailed as exc:
             outcome, reason = "failed", str(exc)
             log.warning("%s: task %s failed: %s", self.name, task_id, reason)
@@ -519,6 +521,31 @@ class VdaRobot:
         self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self.ep.publish(TaskEnded(task_id=task_id, robot=self.name, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self._publish_state()
+
+    async def _charge(self) -> None:
+        """At the station: ``startCharging``, and the task goes on until the battery is full
+        (``stopCharging`` then), as a GuideBot robot's dock does, or until the vehicle stops
+        charging by itself; one that never starts fails the task."""
+        self.order_id = None  # its order is done: a cancel now has no order to cancel
+        await self.instant("startCharging")
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + ACK_TIMEOUT_S * ORDER_TRIES
+        started = False
+        while True:
+            self.changed.clear()
+            level, charging = _battery(self.state or {})
+            started = started or charging
+            if level / 100 >= CHARGED:
+                if charging:
+                    await self.instant("stopCharging")
+                return
+            if started and not charging:
+                log.info("%s stopped charging at %.0f %%", self.name, level)
+                return
+            if not started and loop.time() > deadline:
+                raise DriveFailed(f"{self.name} did not start charging")
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.changed.wait(), 0.5)
 
     def _adopt(self, state: dict[str, Any]) -> None:
         """A new master control (a new leader, a restarted server) finds the vehicle on an

@@ -268,7 +268,9 @@ async def test_a_broken_connection_is_a_robot_disconnected(
         assert sim.session.connected.is_set()
 
 
-async def test_a_low_battery_sends_the_vehicle_to_charge(tmp_path: Path, broker: Mosquitto) -> None:
+async def test_a_low_battery_sends_the_vehicle_to_charge_until_it_is_full(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
     dock = [{"id": "dock", "node": "a"}]
     async with fleet(tmp_path, broker.url, charging_stations=dock) as f, vehicle(broker.url) as sim:
         await wait_until(lambda: f.robot("V1").online, 15)
@@ -283,11 +285,14 @@ async def test_a_low_battery_sends_the_vehicle_to_charge(tmp_path: Path, broker:
         assert sim.last_node == "a"
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
         assert "startCharging" in kinds
-        await wait_on(
-            f.changed,
-            lambda: f.of("robot_state")[-1].payload["mode"] == "charging",
-            10,
-        )
+        tm = f.server.app.state.task_manager
+        (charge,) = [t for t in tm.tasks.values() if t.kind == "charge" and t.robot == "V1"]
+        assert charge.state == TaskState.RUNNING  # not over when charging starts
+        sim.battery = 0.94  # nearly full: the rest at the simulated charger's pace
+        await wait_until(lambda: charge.state in FINAL_STATES, 30)
+        assert charge.state == TaskState.DONE and sim.battery >= 0.95 and not sim.charging
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert kinds[-2:] == ["startCharging", "stopCharging"], kinds
 
 
 async def test_a_vehicle_process_killed_mid_order_loses_its_task_after_the_grace_period(
