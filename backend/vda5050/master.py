@@ -6,8 +6,11 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Iterable
 from typing import Any
+
+from prometheus_client.core import CounterMetricFamily, Metric
 
 from backend.vda5050.vehicle import Send, VdaRobot, vehicle_of
 from guidebot.bus import BusEndpoint
@@ -56,6 +59,8 @@ class MasterControl(Service):
         self.robots: dict[tuple[str, str, str], VdaRobot] = {}
         self.refused = 0
         """Messages from vehicles that were not JSON or that their schema refused."""
+        self.refused_by: Counter[str] = Counter()
+        """The same, by robot (the metric guidebot_vda5050_messages_refused_total)."""
         self.received = 0
         configs = [r for r in site.robots if r.interface == "vda5050"]
         subscriptions = [vehicle_of(r).topic(kind) for r in configs for kind in sorted(INCOMING)]
@@ -143,8 +148,25 @@ class MasterControl(Service):
         else:
             robot.on_factsheet(message)
 
+    def metrics(self) -> Iterable[Metric]:
+        """Read at scrape time (backend/metrics/server.py; docs/metrics.md)."""
+        received = CounterMetricFamily(
+            "guidebot_vda5050_messages_received",
+            "Messages from VDA 5050 vehicles on the MQTT broker",
+        )
+        received.add_metric([], self.received)
+        refused = CounterMetricFamily(
+            "guidebot_vda5050_messages_refused",
+            "Messages from VDA 5050 vehicles ignored: not JSON, or refused by their schema",
+            labels=["robot"],
+        )
+        for name in sorted(r.name for r in self.robots.values()):
+            refused.add_metric([name], self.refused_by[name])
+        yield from (received, refused)
+
     def _refuse(self, robot: VdaRobot, topic: str, exc: Exception) -> None:
         self.refused += 1
+        self.refused_by[robot.name] += 1
         why = str(exc) if isinstance(exc, SchemaViolation) else f"not JSON: {exc}"
         log.warning("VDA 5050: %s: message on %s ignored: %s", robot.name, topic, why)
         if self.alert is not None:

@@ -216,6 +216,8 @@ async def test_a_bad_message_is_logged_counted_and_alerted_and_nothing_is_lost(
             bad = sim.state() | {"batteryState": {"batteryCharge": "full"}}
             await client.publish(V1.topic("state"), json.dumps(bad), qos=1)
         await wait_until(lambda: f.master.refused == 2, 10)
+        scrape = (await f.http.get("/metrics")).text
+        assert 'guidebot_vda5050_messages_refused_total{robot="V1"} 2.0' in scrape
         alerts = f.server.app.state.alerts
         alert = alerts.get("vda5050_message", "V1")
         assert alert is not None and alert.count == 2
