@@ -78,7 +78,7 @@ class MasterControl(Service):
     async def on_start(self) -> None:
         announce = self.endpoint("vda5050")
         self.on_cleanup(announce.close)  # type: ignore[attr-defined]
-        graph = SiteGraph(self.site, warm=False, tables=False)
+        self._graph = SiteGraph(self.site, warm=False, tables=False)
         for config in self._configs:
             vehicle = vehicle_of(config)
             ep = self.endpoint(config.name)
@@ -89,13 +89,32 @@ class MasterControl(Service):
                 announce,
                 self._sender(vehicle.topic),
                 task_of=self._task_lookup(config.name),
-                step_of=lambda node: graph.step(node).as_dict(),
+                step_of=lambda node: self._graph.step(node).as_dict(),
             )
             self.robots[(vehicle.interface, vehicle.manufacturer, vehicle.serial_number)] = robot
             self.on_cleanup(ep.close)  # type: ignore[attr-defined]
             self.on_cleanup(robot.close)
         await self.enter(self.session)
         log.info("VDA 5050: %d robot(s) on MQTT broker %s", len(self.robots), self.broker)
+
+    @staticmethod
+    def identities(site: Site) -> list[tuple[str, ...]]:
+        """What of the site's VDA 5050 robots the MQTT session and the hub endpoints are made
+        of: a change of these needs a new master control."""
+        return sorted(
+            (r.name, str(r.manufacturer), str(r.serial_number), r.mqtt_interface, r.vda_version)
+            for r in site.robots
+            if r.interface == "vda5050"
+        )
+
+    def use_site(self, site: Site) -> None:
+        """A published site with the same VDA 5050 robots: maps, nodes, areas, zones and
+        battery thresholds from now on (docs/vda5050.md, "Site edits")."""
+        self.site = site
+        self._graph = SiteGraph(site, warm=False, tables=False)
+        configs = {r.name: r for r in site.robots if r.interface == "vda5050"}
+        for robot in self.robots.values():
+            robot.use_site(site, configs[robot.name])
 
     def _task_lookup(self, robot: str) -> Callable[[str], tuple[str, dict[str, Any]] | None]:
         lookup = self.task_of

@@ -177,6 +177,19 @@ class VdaRobot:
             endpoint.subscribe("elevator_in_position", self._on_cabin),
         ]
 
+    def use_site(self, site: Site, config: RobotConfig) -> None:
+        """A published site (same vehicle, same names): its maps, nodes, areas, zones and
+        battery thresholds from now on; a task running keeps its path."""
+        self.site = site
+        self.map_ids = config.map_ids
+        self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
+        self.nodes = {n.id: n for n in site.nodes}
+        self.area_nodes = {a.id: frozenset(a.nodes) for a in site.areas}
+        self.battery_low, self.battery_panic = config.battery_low, config.battery_panic
+        if self.v3:  # new zones have new ids: given to the vehicle with its next state
+            self.zone_sets = {}
+            self._speak(self.vehicle.version)
+
     async def close(self) -> None:
         self.closing = True
         for unsubscribe in self._unsubscribe:

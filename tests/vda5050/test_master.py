@@ -17,12 +17,15 @@ from guidebot.payloads.traffic import ReleaseArea, RequestArea
 from guidebot.processes import spawn_guidebot
 from guidebot.testing import wait_on, wait_until
 from guidebot.vda5050.schemas import problems
-from guidebot.vda5050.sim import speak_seconds
+from guidebot.vda5050.sim import SimVehicle, speak_seconds
+from guidebot.vda5050.topics import Vehicle, parse_broker
 
 from .broker import Mosquitto, mosquitto
-from .fleet import LINE, V1, Fleet, fleet, vehicle
+from .fleet import LINE, V1, Fleet, fleet, site_dict, vehicle
 
 pytestmark = pytest.mark.timeout(90)
+
+V2 = Vehicle(manufacturer="Acme", serial_number="sn-0002")
 
 
 @pytest.fixture
@@ -390,3 +393,56 @@ async def test_a_vehicle_back_within_the_grace_period_is_planned_again_from_wher
         history = (await f.http.get(f"/api/tasks/{task}/history")).json()
         events = [h["event"] for h in history]
         assert events.count("assigned") == 1 and "requeued" not in events, history
+
+
+async def test_a_site_edit_reaches_the_master_control_without_a_restart(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """A published site adds vehicle V2: it joins (online, a task done) and V1 goes on; one
+    that changes an area only reaches the same master control."""
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as v1:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        site = site_dict()
+        site["robots"].append(
+            {
+                "name": "V2",
+                "token": "robot-V2-test-token",
+                "start_node": "b",
+                "interface": "vda5050",
+                "manufacturer": V2.manufacturer,
+                "serial_number": V2.serial_number,
+                "map_ids": {"F0": "ground"},
+            }
+        )
+        answer = await f.http.put("/api/site", json=site)
+        assert answer.status_code == 200, answer.text
+        v2 = SimVehicle(
+            parse_broker(broker.url),
+            V2,
+            x=4.0,
+            map_id="ground",
+            node="b",
+            time_scale=10.0,
+            state_period_s=0.2,
+        )
+        async with v2:
+            await wait_until(lambda: "V2" in f.server.app.state.task_manager.robots, 15)
+            await wait_until(lambda: f.robot("V2").online, 15)
+            answer = await f.http.post(
+                "/api/tasks", json={"kind": "go_to", "params": {"node": "e"}, "robot": "V2"}
+            )
+            assert answer.status_code == 201, answer.text
+            result = await until_done(f, answer.json()["id"])
+            assert result["state"] == "done" and v2.last_node == "e", result
+            task = await f.task("go_to", {"node": "b"})
+            result = await until_done(f, task)
+            assert result["robot"] == "V1" and result["state"] == "done" and v1.last_node == "b"
+            # the same robots, a smaller corridor: the same master control, the new area
+            master = f.master
+            site["areas"] = [{"id": "corridor", "nodes": ["c"]}]
+            answer = await f.http.put("/api/site", json=site)
+            assert answer.status_code == 200, answer.text
+            assert f.master is master
+            robot = next(r for r in master.robots.values() if r.name == "V1")
+            assert robot.area_nodes["corridor"] == {"c"}
+        all_valid(v2.orders_received, "order")
