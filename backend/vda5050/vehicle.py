@@ -138,6 +138,10 @@ class VdaRobot:
         self.online = False
         self.task_id: str | None = None
         self.runner: asyncio.Task[None] | None = None
+        self.cancelling: str | None = None
+        """The task a cancel is ending (its runner winds down)."""
+        self.held: Message | None = None
+        """An assignment that came while the cancelled task wound down: started after it."""
         self.order_id: str | None = None
         self.granted: set[str] = set()
         self.requested: set[str] = set()
@@ -466,6 +470,11 @@ class VdaRobot:
         task_id = str(p["task_id"])
         if task_id == self.task_id:
             return  # the same task again
+        if self.task_id is not None and self.task_id == self.cancelling:
+            # The Task Manager preempts an errand: cancel, then assign. The cancelled task
+            # winds down (cancelOrder, its locks given back) and ends; then this one starts.
+            self.held = msg
+            return
         if self.task_id is not None:
             self.ep.publish(
                 TaskEnded(
@@ -478,15 +487,27 @@ class VdaRobot:
             return
         self.task_id = task_id
         self.ep.publish(TaskStarted(task_id=task_id, robot=self.name))
-        self.runner = asyncio.get_running_loop().create_task(
-            self._run(task_id, str(p.get("net", "")), dict(p.get("params") or {})),
-            name=f"vda5050 {self.name} {task_id}",
-        )
+        self._start(task_id, self._run(task_id, str(p.get("net", "")), dict(p.get("params") or {})))
+
+    def _start(self, task_id: str, run: Coroutine[Any, Any, None]) -> None:
+        """Run ``task_id``; a runner cancelled before its first step (or again while it
+        winds down) is ended by ``_runner_done``: every task ends once."""
+        runner = asyncio.get_running_loop().create_task(run, name=f"vda5050 {self.name} {task_id}")
+        self.runner = runner
+        runner.add_done_callback(self._runner_done)
+
+    def _runner_done(self, runner: asyncio.Task[None]) -> None:
+        if runner is self.runner and runner.cancelled() and not self.closing and self.task_id:
+            self._end(self.task_id, "cancelled", "cancelled")
 
     def _on_task_cancel(self, msg: Message) -> None:
         task_id = msg.payload.get("task_id")
-        if task_id != self.task_id or self.runner is None:
+        if self.held is not None and self.held.payload.get("task_id") == task_id:
+            self.held = None  # cancelled before it started: never started
             return
+        if task_id != self.task_id or self.runner is None or task_id == self.cancelling:
+            return  # not ours, or already winding down
+        self.cancelling = task_id
         self.runner.cancel()
 
     async def _run(
@@ -523,17 +544,22 @@ class VdaRobot:
             outcome, reason = "cancelled", "cancelled"
             if self.order_id is not None:
                 await self.instant("cancelOrder")
-        finally:
-            if not self.closing:
-                self._release_all()
-            self.order_id = None
-            self.route = {}
-            self.waiting = None
-        self.task_id = None
-        self.runner = None
+        self._end(task_id, outcome, reason)
+
+    def _end(self, task_id: str, outcome: str, reason: str) -> None:
+        """The task is over: doors and areas given back, ``task_ended``; then an assignment
+        that came while it was being cancelled starts."""
+        self._release_all()
+        self.order_id = None
+        self.route = {}
+        self.waiting = None
+        self.task_id = self.runner = self.cancelling = None
         self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self.ep.publish(TaskEnded(task_id=task_id, robot=self.name, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self._publish_state()
+        held, self.held = self.held, None
+        if held is not None:
+            self._on_task_assigned(held)
 
     async def _charge(self) -> None:
         """At the station: ``startCharging``, and the task goes on until the battery is full
@@ -598,9 +624,7 @@ class VdaRobot:
             state["lastNodeId"],
         )
         self.task_id = task_id
-        self.runner = asyncio.get_running_loop().create_task(
-            self._run(task_id, net, params, resume=state), name=f"vda5050 {self.name} {task_id}"
-        )
+        self._start(task_id, self._run(task_id, net, params, resume=state))
 
     def _resumed_point(
         self, task_id: str, points: list[dict[str, Any]], state: dict[str, Any]

@@ -446,3 +446,31 @@ async def test_a_site_edit_reaches_the_master_control_without_a_restart(
             robot = next(r for r in master.robots.values() if r.name == "V1")
             assert robot.area_nodes["corridor"] == {"c"}
         all_valid(v2.orders_received, "order")
+
+
+async def test_a_visitors_tour_preempts_an_errand_without_a_refusal(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """V1 on its idle errand (to the wait point at e) when a visitor asks for a tour: the
+    Task Manager cancels the errand and assigns the tour at once; the vehicle ends the errand
+    (cancelOrder) and then takes the tour, instead of refusing it as busy."""
+    wait = [{"id": "rest", "node": "e"}]
+    async with (
+        fleet(tmp_path, broker.url, wait_points=wait) as f,
+        vehicle(broker.url) as sim,
+    ):
+        sim.speed = 0.2  # still on its errand when the visitor asks
+        tm = f.server.app.state.task_manager
+        await wait_until(lambda: f.robot("V1").online, 15)
+        await wait_until(lambda: sim.driving, 20)
+        (errand,) = [t for t in tm.tasks.values() if t.robot == "V1" and t.internal]
+        sim.speed = 1.0
+        tour = await f.task("tour", {"tour": "line"})
+        result = await until_done(f, tour, 60)
+        assert result["state"] == "done", result
+        assert errand.state == TaskState.CANCELLED
+        history = (await f.http.get(f"/api/tasks/{tour}/history")).json()
+        events = [h["event"] for h in history]
+        assert events.count("assigned") == 1 and "requeued" not in events, history
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert "cancelOrder" in kinds

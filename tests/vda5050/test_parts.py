@@ -13,6 +13,7 @@ from backend.vda5050.vehicle import VdaRobot
 from guidebot.bus import Bus
 from guidebot.messages import Message
 from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.testing import wait_until
 from guidebot.vda5050.schemas import SCHEMA_DIR, SchemaViolation, check, problems
 from guidebot.vda5050.sim import SimVehicle
 from guidebot.vda5050.topics import Vehicle, parse_broker
@@ -177,3 +178,31 @@ async def test_a_server_that_stops_leaves_the_task_to_the_next_one() -> None:
     await robot.close()
     assert not [m for m in seen if m.type in ("task_ended", "release_area", "release_door")]
     assert "instantActions" not in sent
+
+
+async def test_a_task_cancelled_before_its_first_step_ends_and_the_next_one_starts() -> None:
+    """The Task Manager preempts at once: assign T1, cancel it, assign T2 in one go. T1 ends
+    cancelled (once: its runner never ran a step), then T2 starts; nothing is refused."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    manager = bus.endpoint("task_manager")
+    for kind, task in (("task_assigned", "T1"), ("task_cancel", "T1"), ("task_assigned", "T2")):
+        payload = {"task_id": task, "robot": "V1", "net": "navigate_to_point"}
+        manager.publish(kind, payload | {"params": {"node": "e"}}, destination="V1")
+
+    def ended() -> list[tuple[str, str]]:
+        ends = [m.payload for m in seen if m.type == "task_ended"]
+        return [(p["task_id"], p["outcome"]) for p in ends]
+
+    await wait_until(lambda: robot.task_id == "T2", 5)
+    assert ended() == [("T1", "cancelled")]
+    assert [m.payload["task_id"] for m in seen if m.type == "task_started"] == ["T1", "T2"]
+    await robot.close()
