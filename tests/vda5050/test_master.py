@@ -474,3 +474,35 @@ async def test_a_visitors_tour_preempts_an_errand_without_a_refusal(
         assert events.count("assigned") == 1 and "requeued" not in events, history
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
         assert "cancelOrder" in kinds
+
+
+async def test_a_restarted_server_goes_on_with_the_tour_the_vehicle_runs(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """The server stops while V1 drives to the tour's second stop (the first explained); the
+    next server life finds the vehicle on that order and goes on with it: the tour ends
+    done, assigned once, the second stop explained, nothing cancelled or sent twice."""
+    async with vehicle(broker.url) as sim:
+        sim.speed = 0.1  # slow: still on its way to e while the server restarts
+        async with fleet(tmp_path, broker.url) as f:
+            await wait_until(lambda: f.robot("V1").online, 15)
+            tour = await f.task("tour", {"tour": "line"})
+            await wait_until(lambda: sim.last_node == "c", 30)
+        async with fleet(tmp_path, broker.url) as f:
+            result = await until_done(f, tour, 60)
+            assert result["state"] == "done", result
+            explained = [
+                m.payload["index"]
+                for m in f.of("tour_progress")
+                if m.payload["stage"] == "explained"
+            ]
+            assert explained == [2], explained
+            history = (await f.http.get(f"/api/tasks/{tour}/history")).json()
+        events = [h["event"] for h in history]
+        assert events.count("assigned") == 1 and "requeued" not in events, history
+        assert sim.last_node == "e"
+        sent = [(o["orderId"], o["orderUpdateId"]) for o in sim.orders_received]
+        assert len(sent) == len(set(sent)) and all(o.startswith(f"{tour}-") for o, _ in sent)
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert "cancelOrder" not in kinds, kinds
+        all_valid(sim.orders_received, "order")
