@@ -19,6 +19,7 @@ from guidebot.testing import wait_on, wait_until
 from guidebot.vda5050.schemas import problems
 from guidebot.vda5050.sim import SimVehicle, speak_seconds
 from guidebot.vda5050.topics import Vehicle, parse_broker
+from tests.promtool import promtool_accepts
 
 from .broker import Mosquitto, mosquitto
 from .fleet import LINE, V1, Fleet, fleet, site_dict, vehicle
@@ -221,6 +222,7 @@ async def test_a_bad_message_is_logged_counted_and_alerted_and_nothing_is_lost(
         await wait_until(lambda: f.master.refused == 2, 10)
         scrape = (await f.http.get("/metrics")).text
         assert 'guidebot_vda5050_messages_refused_total{robot="V1"} 2.0' in scrape
+        await promtool_accepts(scrape)
         alerts = f.server.app.state.alerts
         alert = alerts.get("vda5050_message", "V1")
         assert alert is not None and alert.count == 2
