@@ -371,12 +371,15 @@ class VdaRobot:
         """The nodes reached since the last state, in order: a state is a sample, and a
         vehicle may pass several nodes of its order between two (every one is reported, for
         the area locks and the fleet's invariants)."""
-        if message.get("orderId") == self.order_id and self.route:
+        if self.order_id is not None and message.get("orderId") == self.order_id:
+            # On our order its sequence ids are the progress, never lastNodeId alone: a state
+            # sent before an elevator ride's initPosition, read after it, names the cabin on
+            # the floor left (the fleet's invariants saw V1 "enter" a lift gone upstairs).
             seq = int(message["lastNodeSequenceId"])
             passed = [n for s, n in sorted(self.route.items()) if self.route_seq < s <= seq]
             if passed:
                 self.route_seq = seq
-                return passed
+            return passed
         last = str(message["lastNodeId"])
         return [last] if last in self.nodes else []
 

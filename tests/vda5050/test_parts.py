@@ -206,3 +206,29 @@ async def test_a_task_cancelled_before_its_first_step_ends_and_the_next_one_star
     assert ended() == [("T1", "cancelled")]
     assert [m.payload["task_id"] for m in seen if m.type == "task_started"] == ["T1", "T2"]
     await robot.close()
+
+
+async def test_a_stale_state_on_the_current_order_reports_no_node_again() -> None:
+    """After an elevator ride the master has put V1 on the exit node; a state the vehicle sent
+    before its initPosition (its order unchanged, the cabin below as lastNodeId) comes late:
+    no node_reached for the cabin left behind."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.order_id = "o1"
+    robot.route = {2: "b"}
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    state = sim.state() | {"orderId": "o1", "lastNodeId": "b", "lastNodeSequenceId": 2}
+    robot.on_state(state)
+    robot.node = "e"  # where the ride put it
+    robot.on_state(state)  # the late one
+    assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["b"]
+    assert robot.node == "e"
+    await robot.close()
