@@ -57,6 +57,7 @@ from backend.reports import api as reports_routes
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
+from backend.vda5050 import routes as vda5050_routes
 from backend.vda5050.component import vda5050
 from backend.webpages import WebFiles, page
 
@@ -91,6 +92,7 @@ ROUTERS: list[APIRouter] = [
     console_fleet.router,
     metrics_routes.router,
     reports_routes.router,
+    vda5050_routes.router,
 ]
 
 

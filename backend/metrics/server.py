@@ -229,6 +229,9 @@ class _ScrapeCollector(Collector):
         yield from self._tasks(getattr(state, "task_manager", None))
         yield _counter("guidebot_tasks_ended", "Tasks ended, by outcome", "outcome", m.tasks_ended)
         yield from self._modbus(getattr(state, "building", None))
+        master = getattr(state, "vda5050", None)  # the VDA 5050 master control, when it runs
+        if master is not None:
+            yield from master.metrics()
         steps = GaugeMetricFamily(
             "guidebot_reaction_steps_info",
             "Reaction steps and the paper's step they match",

@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Iterable
 from typing import Any
+
+from prometheus_client.core import CounterMetricFamily, Metric
 
 from backend.vda5050.vehicle import Send, VdaRobot, vehicle_of
 from guidebot.bus import BusEndpoint
 from guidebot.service import Service
+from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 from guidebot.vda5050.mqtt import MqttSession
 from guidebot.vda5050.schemas import SchemaViolation, check
@@ -26,6 +30,9 @@ INCOMING = frozenset({"state", "connection", "factsheet"})
 Alert = Callable[[str, str, str, bool], None]
 """raise (kind, subject, message, lasting) an alert for staff."""
 Resolve = Callable[[str, str, str], None]
+TaskLookup = Callable[[str, str], tuple[str, dict[str, Any]] | None]
+"""(robot, task id) -> the net and parameters of that robot's task, if the Task Manager has it
+on that task (not ended): what a new master resumes a vehicle's running order with."""
 
 
 class MasterControl(Service):
@@ -40,8 +47,10 @@ class MasterControl(Service):
         cafile: str | None = None,
         alert: Alert | None = None,
         resolve: Resolve | None = None,
+        task_of: TaskLookup | None = None,
     ) -> None:
         super().__init__()
+        self.task_of = task_of
         self.site = site
         self.broker = broker
         self.endpoint = endpoint
@@ -50,6 +59,8 @@ class MasterControl(Service):
         self.robots: dict[tuple[str, str, str], VdaRobot] = {}
         self.refused = 0
         """Messages from vehicles that were not JSON or that their schema refused."""
+        self.refused_by: Counter[str] = Counter()
+        """The same, by robot (the metric guidebot_vda5050_messages_refused_total)."""
         self.received = 0
         configs = [r for r in site.robots if r.interface == "vda5050"]
         subscriptions = [vehicle_of(r).topic(kind) for r in configs for kind in sorted(INCOMING)]
@@ -67,15 +78,47 @@ class MasterControl(Service):
     async def on_start(self) -> None:
         announce = self.endpoint("vda5050")
         self.on_cleanup(announce.close)  # type: ignore[attr-defined]
+        self._graph = SiteGraph(self.site, warm=False, tables=False)
         for config in self._configs:
             vehicle = vehicle_of(config)
             ep = self.endpoint(config.name)
-            robot = VdaRobot(config, self.site, ep, announce, self._sender(vehicle.topic))
+            robot = VdaRobot(
+                config,
+                self.site,
+                ep,
+                announce,
+                self._sender(vehicle.topic),
+                task_of=self._task_lookup(config.name),
+                step_of=lambda node: self._graph.step(node).as_dict(),
+            )
             self.robots[(vehicle.interface, vehicle.manufacturer, vehicle.serial_number)] = robot
             self.on_cleanup(ep.close)  # type: ignore[attr-defined]
             self.on_cleanup(robot.close)
         await self.enter(self.session)
         log.info("VDA 5050: %d robot(s) on MQTT broker %s", len(self.robots), self.broker)
+
+    @staticmethod
+    def identities(site: Site) -> list[tuple[str, ...]]:
+        """What of the site's VDA 5050 robots the MQTT session and the hub endpoints are made
+        of: a change of these needs a new master control."""
+        return sorted(
+            (r.name, str(r.manufacturer), str(r.serial_number), r.mqtt_interface, r.vda_version)
+            for r in site.robots
+            if r.interface == "vda5050"
+        )
+
+    def use_site(self, site: Site) -> None:
+        """A published site with the same VDA 5050 robots: maps, nodes, areas, zones and
+        battery thresholds from now on (docs/vda5050.md, "Site edits")."""
+        self.site = site
+        self._graph = SiteGraph(site, warm=False, tables=False)
+        configs = {r.name: r for r in site.robots if r.interface == "vda5050"}
+        for robot in self.robots.values():
+            robot.use_site(site, configs[robot.name])
+
+    def _task_lookup(self, robot: str) -> Callable[[str], tuple[str, dict[str, Any]] | None]:
+        lookup = self.task_of
+        return lambda task_id: lookup(robot, task_id) if lookup is not None else None
 
     def _sender(self, topic: Callable[[str], str]) -> Send:
         async def send(name: str, message: dict[str, Any]) -> bool:
@@ -124,8 +167,25 @@ class MasterControl(Service):
         else:
             robot.on_factsheet(message)
 
+    def metrics(self) -> Iterable[Metric]:
+        """Read at scrape time (backend/metrics/server.py; docs/metrics.md)."""
+        received = CounterMetricFamily(
+            "guidebot_vda5050_messages_received",
+            "Messages from VDA 5050 vehicles on the MQTT broker",
+        )
+        received.add_metric([], self.received)
+        refused = CounterMetricFamily(
+            "guidebot_vda5050_messages_refused",
+            "Messages from VDA 5050 vehicles ignored: not JSON, or refused by their schema",
+            labels=["robot"],
+        )
+        for name in sorted(r.name for r in self.robots.values()):
+            refused.add_metric([name], self.refused_by[name])
+        yield from (received, refused)
+
     def _refuse(self, robot: VdaRobot, topic: str, exc: Exception) -> None:
         self.refused += 1
+        self.refused_by[robot.name] += 1
         why = str(exc) if isinstance(exc, SchemaViolation) else f"not JSON: {exc}"
         log.warning("VDA 5050: %s: message on %s ignored: %s", robot.name, topic, why)
         if self.alert is not None:

@@ -42,6 +42,7 @@ def build_order(
     if not 0 <= start <= released_to < len(steps):
         raise ValueError(f"bad order window: start {start}, released to {released_to}")
     actions = actions or {}
+    v3 = vehicle.version.startswith("3.")  # 3.0.0 edges name no start and end node
     nodes = []
     edges = []
     for i in range(start, len(steps)):
@@ -62,16 +63,14 @@ def build_order(
         )
         if i + 1 < len(steps):
             nxt = steps[i + 1]
-            edges.append(
-                {
-                    "edgeId": f"{step['node']}->{nxt['node']}",
-                    "sequenceId": node_seq(i) + 1,
-                    "released": i + 1 <= released_to,
-                    "startNodeId": str(step["node"]),
-                    "endNodeId": str(nxt["node"]),
-                    "actions": [],
-                }
-            )
+            edge: dict[str, Any] = {
+                "edgeId": f"{step['node']}->{nxt['node']}",
+                "sequenceId": node_seq(i) + 1,
+                "released": i + 1 <= released_to,
+            }
+            if not v3:
+                edge |= {"startNodeId": str(step["node"]), "endNodeId": str(nxt["node"])}
+            edges.append(edge | {"actions": []})
     return {
         **vehicle.header(header_id),
         "orderId": order_id,
@@ -87,13 +86,14 @@ def instant_actions(
     actions: Sequence[tuple[str, str]],
     parameters: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """``instantActions`` of (actionId, actionType) pairs, each HARD blocking, each with
-    ``parameters`` (key -> value) when given."""
+    """``instantActions`` of (actionId, actionType) pairs, each with ``parameters`` (key ->
+    value) when given; blocking HARD (2.x), NONE (3.x: the only value its schema allows)."""
     params = [{"key": k, "value": v} for k, v in (parameters or {}).items()]
+    blocking = "NONE" if vehicle.version.startswith("3.") else "HARD"
     return {
         **vehicle.header(header_id),
         "actions": [
-            {"actionId": action_id, "actionType": kind, "blockingType": "HARD"}
+            {"actionId": action_id, "actionType": kind, "blockingType": blocking}
             | ({"actionParameters": params} if params else {})
             for action_id, kind in actions
         ],

@@ -11,6 +11,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine, Mapping
+from dataclasses import replace
 from datetime import datetime
 from typing import Any
 
@@ -21,6 +22,7 @@ from backend.vda5050.order import (
     node_seq,
     step_of_seq,
 )
+from backend.vda5050.zones import responses, zone_sets
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
 from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
@@ -36,6 +38,7 @@ from guidebot.payloads.robot import (
 from guidebot.payloads.tasks import RobotLink, TaskEnded, TaskStarted, TourProgress
 from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
 from guidebot.site.schema import RobotConfig, Site
+from guidebot.vda5050.schemas import version_of
 from guidebot.vda5050.sim import speak_seconds
 from guidebot.vda5050.topics import Vehicle
 
@@ -45,13 +48,25 @@ log = logging.getLogger(__name__)
 
 Send = Callable[[str, dict[str, Any]], Awaitable[bool]]
 """Publish a message on one of the vehicle's topics (``order``, ``instantActions``)."""
+TaskOf = Callable[[str], tuple[str, dict[str, Any]] | None]
+"""The net and parameters of a task the Task Manager has this robot on (not ended), or None:
+what a new master control (a new leader, a restarted server) resumes a vehicle's order with."""
+StepOf = Callable[[str], dict[str, Any]]
+"""A site node as a path step ({node, floor, x, y, door, elevator, area})."""
 
 ACK_TIMEOUT_S = 3.0
 """An order the vehicle's state does not name this long after it was sent is sent again."""
 ORDER_TRIES = 3
 """Sends of one order before the task fails: never resent forever."""
 DONE_ACTIONS = frozenset({"FINISHED", "FAILED"})
+REPORTED_LEVELS = frozenset({"WARNING", "URGENT", "CRITICAL", "FATAL"})
+"""Error levels that become a robot_fault (2.1.0 has WARNING and FATAL; 3.0.0 adds URGENT and
+CRITICAL)."""
+FAULT_LEVELS = frozenset({"CRITICAL", "FATAL"})
+"""Error levels that put the robot in mode fault: it cannot go on with its order."""
 BATTERY_REARM = 0.05
+CHARGED = 0.95
+"""A charge task ends at this battery level (as the robot agent's dock: robot_agent/battery.py)."""
 RECALL_S = 2.0
 """While a vehicle waits for a cabin, drives into it or out of it, its call is repeated this
 often (wall seconds), as a person keeps the button pressed: the building's door hold does not
@@ -60,6 +75,15 @@ run out under it."""
 
 class DriveFailed(Exception):
     """A goal the vehicle cannot reach, with the reason the task fails with."""
+
+
+class OrderLost(Exception):
+    """The vehicle's state no longer names the order it had taken (it restarted, or lost it
+    while its connection was down): the drive is planned again from where it stands."""
+
+
+REPLANS = 3
+"""Times one goal is planned again after the vehicle lost its order, before the task fails."""
 
 
 def vehicle_of(config: RobotConfig) -> Vehicle:
@@ -83,13 +107,28 @@ class VdaRobot:
         endpoint: BusEndpoint,
         announce: BusEndpoint,
         send: Send,
+        *,
+        task_of: TaskOf | None = None,
+        step_of: StepOf | None = None,
     ) -> None:
         self.name = config.name
+        self.task_of = task_of
+        self.step_of = step_of
         self.vehicle = vehicle_of(config)
         self.map_ids: Mapping[str, str] = config.map_ids
         self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
         self.nodes = {n.id: n for n in site.nodes}
         self.area_nodes = {a.id: frozenset(a.nodes) for a in site.areas}
+        self.site = site
+        self.v3 = False
+        self.zone_sets: dict[str, dict[str, Any]] = {}
+        """3.x: the restricted areas as RELEASE zones, one zone set per floor."""
+        self.zone_area: dict[tuple[str, str], str] = {}
+        self._speak(self.vehicle.version)
+        self.zone_requests: dict[str, str] = {}
+        """The vehicle's open ACCESS zone requests: requestId -> area."""
+        self._answered: dict[str, str] = {}
+        self._zones_sent: set[str] = set()
         self.ep = endpoint
         self.announce = announce
         self.send = send
@@ -99,6 +138,10 @@ class VdaRobot:
         self.online = False
         self.task_id: str | None = None
         self.runner: asyncio.Task[None] | None = None
+        self.cancelling: str | None = None
+        """The task a cancel is ending (its runner winds down)."""
+        self.held: Message | None = None
+        """An assignment that came while the cancelled task wound down: started after it."""
         self.order_id: str | None = None
         self.granted: set[str] = set()
         self.requested: set[str] = set()
@@ -138,6 +181,19 @@ class VdaRobot:
             endpoint.subscribe("elevator_in_position", self._on_cabin),
         ]
 
+    def use_site(self, site: Site, config: RobotConfig) -> None:
+        """A published site (same vehicle, same names): its maps, nodes, areas, zones and
+        battery thresholds from now on; a task running keeps its path."""
+        self.site = site
+        self.map_ids = config.map_ids
+        self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
+        self.nodes = {n.id: n for n in site.nodes}
+        self.area_nodes = {a.id: frozenset(a.nodes) for a in site.areas}
+        self.battery_low, self.battery_panic = config.battery_low, config.battery_panic
+        if self.v3:  # new zones have new ids: given to the vehicle with its next state
+            self.zone_sets = {}
+            self._speak(self.vehicle.version)
+
     async def close(self) -> None:
         self.closing = True
         for unsubscribe in self._unsubscribe:
@@ -174,6 +230,7 @@ class VdaRobot:
         was = self.online
         self.online = state == "ONLINE"
         if self.online and not was:
+            self._zones_sent.clear()
             self.announce.publish("robot_connected", RobotLink(robot=self.name))
             self._spawn(self.instant("stateRequest", "factsheetRequest"))
         elif not self.online and was:
@@ -188,25 +245,51 @@ class VdaRobot:
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
+    def _speak(self, version: str) -> None:
+        """Speak the vehicle's version: the one its site entry says, then the one its own
+        messages declare (``version``: 2.x or 3.x) when they say another. 3.x gets zones."""
+        wanted = version_of({"version": version}, self.vehicle.version)
+        if wanted != self.vehicle.version:
+            log.warning(
+                "%s: the vehicle speaks VDA 5050 %s (its site entry says %s): followed",
+                self.name,
+                version,
+                self.vehicle.version,
+            )
+            self.vehicle = replace(self.vehicle, version=wanted)
+        self.v3 = wanted.startswith("3.")
+        if self.v3 and not self.zone_sets:
+            self.zone_sets = zone_sets(self.site, self.map_ids)
+            self.zone_area = {
+                (zs["zoneSetId"], z["zoneId"]): str(z["zoneId"])
+                for zs in self.zone_sets.values()
+                for z in zs["zones"]
+            }
+
     def on_factsheet(self, message: dict[str, Any]) -> None:
         """What the vehicle can do: whether a tour stop is a ``speak`` or a timed ``wait``."""
+        self._speak(str(message["version"]))
         self.factsheet = message
-        actions = message["protocolFeatures"]["agvActions"]
+        features = message["protocolFeatures"]
+        actions = features.get("agvActions") or features.get("mobileRobotActions") or []
         self.speaks = any(
             a["actionType"] == "speak" and "NODE" in a["actionScopes"] for a in actions
         )
         log.info(
             "%s: factsheet of %s: tour stops by %s",
             self.name,
-            message["typeSpecification"]["seriesName"],
+            message["typeSpecification"].get("seriesName", "?"),
             "speech (speak)" if self.speaks else "a timed wait (no speak action)",
         )
 
     def on_state(self, message: dict[str, Any]) -> None:
         if not self.online:
             self.on_connection({"connectionState": "ONLINE"})
+        self._speak(str(message["version"]))
         self.state = message
-        position = message.get("agvPosition")
+        if self.task_id is None and self.runner is None:
+            self._adopt(message)
+        position = _position(message)
         if position is not None:
             self.floor = self.floor_of_map.get(position["mapId"], self.floor)
         at = datetime.fromisoformat(message["timestamp"]).timestamp()
@@ -218,20 +301,85 @@ class VdaRobot:
             self.floor = self.nodes[node].floor
             self.ep.publish(NodeReached(robot=self.name, node=node, floor=self.floor, at=at))
         self._report_errors(message["errors"])
-        self._battery(float(message["batteryState"]["batteryCharge"]) / 100)
+        self._battery(_battery(message)[0] / 100)
+        if self.v3:
+            self._zones(message)
         self._publish_state()
         self.changed.set()
+
+    # -- 3.0.0 zones -----------------------------------------------------------------------
+    def _zones(self, state: dict[str, Any]) -> None:
+        """Give the vehicle the site's zone sets (``zoneSet``, then ``enableZoneSet``) unless
+        it reports them enabled, and answer its zone requests through the lock table."""
+        have = {z["zoneSetId"]: z["zoneSetStatus"] for z in state.get("zoneSets") or []}
+        for zone_set in self.zone_sets.values():
+            zid = zone_set["zoneSetId"]
+            if have.get(zid) == "ENABLED" or zid in self._zones_sent:
+                continue
+            self._zones_sent.add(zid)
+            self._spawn(self._give_zone_set(zone_set, upload=zid not in have))
+        self._zone_requests(state.get("zoneRequests") or [])
+
+    async def _give_zone_set(self, zone_set: dict[str, Any], *, upload: bool) -> None:
+        if upload:
+            header = self.vehicle.header(self._header_id("zoneSet"))
+            await self.send("zoneSet", {**header, "zoneSet": zone_set})
+        await self.instant("enableZoneSet", parameters={"zoneSetId": zone_set["zoneSetId"]})
+
+    def _zone_requests(self, requests: list[dict[str, Any]]) -> None:
+        """An ACCESS request for one of our zones is a ``request_area``: answered QUEUED,
+        then GRANTED when the Traffic Manager grants the area (at once if the robot holds
+        it); any other request REJECTED. A granted request the vehicle drops (it left the
+        zone) gives the area back when no task of ours holds it."""
+        now: dict[str, str] = {}
+        for request in requests:
+            rid = str(request["requestId"])
+            area = self.zone_area.get((request["zoneSetId"], request["zoneId"]))
+            if request["requestType"] != "ACCESS" or area is None:
+                self._answer(rid, "REJECTED")
+                continue
+            now[rid] = area
+            if request["requestStatus"] != "REQUESTED":
+                continue  # GRANTED: inside; REVOKED, EXPIRED: its own business
+            if area in self.granted:
+                self._answer(rid, "GRANTED")
+                continue
+            if area not in self.requested:
+                self.requested.add(area)
+                self.ep.publish(RequestArea(robot=self.name, area=area))
+            self._answer(rid, "QUEUED")
+        for rid, area in self.zone_requests.items():
+            if rid in now or area in now.values() or self.task_id is not None:
+                continue
+            if area in self.granted | self.requested and not self._stands_in(area, self.node):
+                self._release_area(area)
+        self._answered = {r: g for r, g in self._answered.items() if r in now}
+        self.zone_requests = now
+
+    def _answer(self, request_id: str, grant: str) -> None:
+        if self._answered.get(request_id) == grant:
+            return
+        self._answered[request_id] = grant
+        message = responses(self.vehicle, self._header_id("responses"), [(request_id, grant)])
+
+        async def send() -> None:
+            await self.send("responses", message)
+
+        self._spawn(send())
 
     def _reached(self, message: dict[str, Any]) -> list[str]:
         """The nodes reached since the last state, in order: a state is a sample, and a
         vehicle may pass several nodes of its order between two (every one is reported, for
         the area locks and the fleet's invariants)."""
-        if message.get("orderId") == self.order_id and self.route:
+        if self.order_id is not None and message.get("orderId") == self.order_id:
+            # On our order its sequence ids are the progress, never lastNodeId alone: a state
+            # sent before an elevator ride's initPosition, read after it, names the cabin on
+            # the floor left (the fleet's invariants saw V1 "enter" a lift gone upstairs).
             seq = int(message["lastNodeSequenceId"])
             passed = [n for s, n in sorted(self.route.items()) if self.route_seq < s <= seq]
             if passed:
                 self.route_seq = seq
-                return passed
+            return passed
         last = str(message["lastNodeId"])
         return [last] if last in self.nodes else []
 
@@ -254,7 +402,7 @@ class VdaRobot:
         now = {(e["errorType"], e.get("errorDescription", "")) for e in errors}
         for error in errors:
             key = (error["errorType"], error.get("errorDescription", ""))
-            if key in self.faults or error["errorLevel"] not in ("WARNING", "FATAL"):
+            if key in self.faults or error["errorLevel"] not in REPORTED_LEVELS:
                 continue
             detail = f"{error['errorLevel']} {error['errorType']}: {key[1]}".strip(": ")
             self.ep.publish(
@@ -268,22 +416,21 @@ class VdaRobot:
         state = self.state or {}
         if not self.online:
             return RobotMode.OFFLINE
-        if any(e["errorLevel"] == "FATAL" for e in state.get("errors", [])):
+        if any(e["errorLevel"] in FAULT_LEVELS for e in state.get("errors", [])):
             return RobotMode.FAULT
         if self.task_id is not None:
             return RobotMode.BUSY
-        if state.get("batteryState", {}).get("charging"):
+        if _battery(state)[1]:
             return RobotMode.CHARGING
         return RobotMode.IDLE
 
     def _publish_state(self) -> None:
         state = self.state or {}
-        position = state.get("agvPosition") or {}
+        position = _position(state) or {}
         node = self.nodes.get(self.node or "")
-        battery = state.get("batteryState", {}).get("batteryCharge", 100.0)
+        battery = _battery(state)[0]
         velocity = state.get("velocity") or {}
         self.seq += 1
-        driving = bool(state.get("driving"))
         self.ep.publish(
             RobotState(
                 robot=self.name,
@@ -294,7 +441,7 @@ class VdaRobot:
                 floor=self.floor,
                 battery=min(1.0, max(0.0, float(battery) / 100)),
                 mode=self._mode(),
-                navigation="moving" if driving else (self.waiting or "idle"),
+                navigation=self._navigation(state),
                 task_id=self.task_id,
                 speed=math.hypot(velocity.get("vx", 0.0), velocity.get("vy", 0.0)),
                 areas=sorted(self.granted)[:64],
@@ -302,6 +449,21 @@ class VdaRobot:
                 seq=self.seq,
             )
         )
+
+    def _navigation(self, state: Mapping[str, Any]) -> str:
+        """``paused`` while the vehicle says it is (staff's pause, or its own pause button),
+        else moving, else what it waits for."""
+        if state.get("paused"):
+            return "paused"
+        if state.get("driving"):
+            return "moving"
+        return self.waiting or "idle"
+
+    async def pause(self, paused: bool) -> None:
+        """Staff pause the vehicle where it stands (``startPause``) or let it go on
+        (``stopPause``): its order is kept (docs/vda5050.md, "Pause")."""
+        log.info("%s: %s", self.name, "paused by staff" if paused else "resumed by staff")
+        await self.instant("startPause" if paused else "stopPause")
 
     # -- tasks -----------------------------------------------------------------------------
     def _on_task_assigned(self, msg: Message) -> None:
@@ -311,6 +473,11 @@ class VdaRobot:
         task_id = str(p["task_id"])
         if task_id == self.task_id:
             return  # the same task again
+        if self.task_id is not None and self.task_id == self.cancelling:
+            # The Task Manager preempts an errand: cancel, then assign. The cancelled task
+            # winds down (cancelOrder, its locks given back) and ends; then this one starts.
+            self.held = msg
+            return
         if self.task_id is not None:
             self.ep.publish(
                 TaskEnded(
@@ -323,31 +490,54 @@ class VdaRobot:
             return
         self.task_id = task_id
         self.ep.publish(TaskStarted(task_id=task_id, robot=self.name))
-        self.runner = asyncio.get_running_loop().create_task(
-            self._run(task_id, str(p.get("net", "")), dict(p.get("params") or {})),
-            name=f"vda5050 {self.name} {task_id}",
-        )
+        self._start(task_id, self._run(task_id, str(p.get("net", "")), dict(p.get("params") or {})))
+
+    def _start(self, task_id: str, run: Coroutine[Any, Any, None]) -> None:
+        """Run ``task_id``; a runner cancelled before its first step (or again while it
+        winds down) is ended by ``_runner_done``: every task ends once."""
+        runner = asyncio.get_running_loop().create_task(run, name=f"vda5050 {self.name} {task_id}")
+        self.runner = runner
+        runner.add_done_callback(self._runner_done)
+
+    def _runner_done(self, runner: asyncio.Task[None]) -> None:
+        if runner is self.runner and runner.cancelled() and not self.closing and self.task_id:
+            self._end(self.task_id, "cancelled", "cancelled")
 
     def _on_task_cancel(self, msg: Message) -> None:
         task_id = msg.payload.get("task_id")
-        if task_id != self.task_id or self.runner is None:
+        if self.held is not None and self.held.payload.get("task_id") == task_id:
+            self.held = None  # cancelled before it started: never started
             return
+        if task_id != self.task_id or self.runner is None or task_id == self.cancelling:
+            return  # not ours, or already winding down
+        self.cancelling = task_id
         self.runner.cancel()
 
-    async def _run(self, task_id: str, net: str, params: dict[str, Any]) -> None:
+    async def _run(
+        self,
+        task_id: str,
+        net: str,
+        params: dict[str, Any],
+        resume: dict[str, Any] | None = None,
+    ) -> None:
+        """Run a task; ``resume``: the vehicle's state when a new master control took over
+        the task while the vehicle ran its order (``_adopt``)."""
         outcome, reason = "done", ""
         try:
-            await self._take_over()
-            if (self.state or {}).get("batteryState", {}).get("charging"):
-                await self.instant("stopCharging")
+            if resume is None:
+                await self._take_over()
+                if _battery(self.state or {})[1]:
+                    await self.instant("stopCharging")
             points = params.get("points")
             if isinstance(points, list):
-                for point in points:
-                    await self._visit(task_id, point, str(params.get("lang") or ""))
+                first = 0 if resume is None else self._resumed_point(task_id, points, resume)
+                for point in points[first:]:
+                    await self._visit(task_id, point, str(params.get("lang") or ""), resume)
+                    resume = None
             else:
-                await self.drive(task_id, str(params["node"]))
+                await self.drive(task_id, str(params["node"]), resume=resume)
                 if net == "battery_charge":
-                    await self.instant("startCharging")
+                    await self._charge()
         except DriveFailed as exc:
             outcome, reason = "failed", str(exc)
             log.warning("%s: task %s failed: %s", self.name, task_id, reason)
@@ -357,17 +547,101 @@ class VdaRobot:
             outcome, reason = "cancelled", "cancelled"
             if self.order_id is not None:
                 await self.instant("cancelOrder")
-        finally:
-            if not self.closing:
-                self._release_all()
-            self.order_id = None
-            self.route = {}
-            self.waiting = None
-        self.task_id = None
-        self.runner = None
+        self._end(task_id, outcome, reason)
+
+    def _end(self, task_id: str, outcome: str, reason: str) -> None:
+        """The task is over: doors and areas given back, ``task_ended``; then an assignment
+        that came while it was being cancelled starts."""
+        self._release_all()
+        self.order_id = None
+        self.route = {}
+        self.waiting = None
+        self.task_id = self.runner = self.cancelling = None
         self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self.ep.publish(TaskEnded(task_id=task_id, robot=self.name, outcome=outcome, reason=reason))  # type: ignore[arg-type]
         self._publish_state()
+        held, self.held = self.held, None
+        if held is not None:
+            self._on_task_assigned(held)
+
+    async def _charge(self) -> None:
+        """At the station: ``startCharging``, and the task goes on until the battery is full
+        (``stopCharging`` then), as a GuideBot robot's dock does, or until the vehicle stops
+        charging by itself; one that never starts fails the task."""
+        self.order_id = None  # its order is done: a cancel now has no order to cancel
+        await self.instant("startCharging")
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + ACK_TIMEOUT_S * ORDER_TRIES
+        started = False
+        while True:
+            self.changed.clear()
+            level, charging = _battery(self.state or {})
+            started = started or charging
+            if level / 100 >= CHARGED:
+                if charging:
+                    await self.instant("stopCharging")
+                return
+            if started and not charging:
+                log.info("%s stopped charging at %.0f %%", self.name, level)
+                return
+            if not started and loop.time() > deadline:
+                raise DriveFailed(f"{self.name} did not start charging")
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.changed.wait(), 0.5)
+
+    def _adopt(self, state: dict[str, Any]) -> None:
+        """A new master control (a new leader, a restarted server) finds the vehicle on an
+        order of a task the Task Manager still has it on (order ids are ``<task id>-<n>``):
+        it goes on with that task from the vehicle's state, the same order extended by
+        updates (no order lost, none sent twice), instead of cancelling it. The areas and
+        doors on the vehicle's released base were granted to it: they are its own again."""
+        order_id = str(state.get("orderId") or "")
+        task_id, dash, n = order_id.rpartition("-")
+        if not dash or not n.isdigit() or self.task_of is None or self.step_of is None:
+            return
+        if any(e.task_id == task_id for e in self.ended):
+            return  # ended here: the Task Manager has not heard it yet
+        found = self.task_of(task_id)
+        if found is None:
+            return
+        net, params = found
+        self._orders = max(self._orders, int(n))
+        here = [str(state["lastNodeId"])]
+        ahead = [str(s["nodeId"]) for s in state.get("nodeStates", []) if s["released"]]
+        for node in here + ahead:
+            if node not in self.nodes:
+                continue
+            step = self.step_of(node)
+            if step.get("area"):
+                self.granted.add(step["area"])
+                self.requested.add(step["area"])
+            if step.get("door") and node in ahead and step["door"] not in self.doors:
+                self.doors.add(step["door"])
+                self.ep.publish(OpenDoor(door=step["door"]))
+        log.warning(
+            "%s: resumes task %s on the vehicle's order %s (update %s, at %s)",
+            self.name,
+            task_id,
+            order_id,
+            state.get("orderUpdateId"),
+            state["lastNodeId"],
+        )
+        self.task_id = task_id
+        self._start(task_id, self._run(task_id, net, params, resume=state))
+
+    def _resumed_point(
+        self, task_id: str, points: list[dict[str, Any]], state: dict[str, Any]
+    ) -> int:
+        """The tour point a resumed vehicle is at: the last whose stop action it knows, or the
+        one after when that action is over; else the first."""
+        statuses = {a["actionId"]: a["actionStatus"] for a in state.get("actionStates", [])}
+        at = 0
+        for i, point in enumerate(points):
+            for kind in ("speak", "wait"):
+                status = statuses.get(f"{task_id}-{kind}-{point['index']}")
+                if status is not None:
+                    at = i + 1 if status in DONE_ACTIONS else i
+        return at
 
     async def _take_over(self) -> None:
         """A vehicle still on an order this master did not give (before a restart of the
@@ -391,7 +665,13 @@ class VdaRobot:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.changed.wait(), 0.5)
 
-    async def _visit(self, task_id: str, point: Mapping[str, Any], lang: str) -> None:
+    async def _visit(
+        self,
+        task_id: str,
+        point: Mapping[str, Any],
+        lang: str,
+        resume: dict[str, Any] | None = None,
+    ) -> None:
         """One tour stop: drive there, explain it with a ``speak`` node action."""
         index, total = int(point["index"]), int(point["total"])
         text = str(point.get("text") or point.get("name") or "")
@@ -423,7 +703,7 @@ class VdaRobot:
                 )
             )
 
-        await self.drive(task_id, str(point["node"]), [action], on_arrival=arrived)
+        await self.drive(task_id, str(point["node"]), [action], on_arrival=arrived, resume=resume)
         self.ep.publish(
             TourProgress(
                 task_id=task_id,
@@ -443,29 +723,52 @@ class VdaRobot:
         actions: list[dict[str, Any]] | None = None,
         *,
         on_arrival: Callable[[], None] | None = None,
+        resume: dict[str, Any] | None = None,
     ) -> None:
         """Bring the vehicle to ``goal``: one order per floor of the path (a leg), its base
         released as far as the areas granted, the doors open and the cabin at the landing
         allow, extended by an update at each grant, opening or arrival; between two legs an
-        elevator ride. The ``actions`` run at the goal. Raises DriveFailed with the reason."""
-        try:
-            reply = await self.ep.request(
-                GetPath(robot=self.name, from_node=self.node, to_node=goal), timeout=5.0
-            )
-        except RequestTimeout:
-            raise DriveFailed(f"no path to {goal}: the Traffic Manager did not answer") from None
-        steps: list[dict[str, Any]] = reply.payload.get("steps") or []
-        if reply.type != "path" or not steps:
-            raise DriveFailed(f"no path to {goal}: {reply.payload.get('error', 'none')}")
+        elevator ride. The ``actions`` run at the goal. ``resume``: the vehicle's state, whose
+        order to ``goal`` (given by an earlier master control) is extended rather than a new
+        one sent. Raises DriveFailed with the reason."""
+        for replans in range(REPLANS + 1):
+            try:
+                await self._drive(task_id, goal, actions, on_arrival, resume)
+                return
+            except OrderLost as exc:
+                log.warning(
+                    "%s: the vehicle no longer runs order %s: planned again from %s (%d)",
+                    self.name,
+                    exc,
+                    self.node,
+                    replans + 1,
+                )
+                resume = None
+        raise DriveFailed(f"{self.name} lost its order {REPLANS + 1} times on the way to {goal}")
+
+    async def _drive(
+        self,
+        task_id: str,
+        goal: str,
+        actions: list[dict[str, Any]] | None,
+        on_arrival: Callable[[], None] | None,
+        resume: dict[str, Any] | None,
+    ) -> None:
+        """``drive`` once: OrderLost when the vehicle drops the order on the way."""
+        resumed = await self._resumed_path(goal, resume) if resume is not None else None
+        if resumed is not None:
+            steps, start, lead = resumed
+        else:
+            steps, start, lead = await self._path(self.node, goal), 0, None
         last = len(steps) - 1
         rides = [
             i
-            for i in range(last)
+            for i in range(start, last)
             if steps[i].get("elevator")
             and steps[i + 1].get("elevator") == steps[i]["elevator"]
             and steps[i + 1]["floor"] != steps[i]["floor"]
         ]
-        starts = [0, *(r + 1 for r in rides)]
+        starts = [start, *(r + 1 for r in rides)]
         ends = [*rides, last]
         for n, (first, end) in enumerate(zip(starts, ends, strict=True)):
             if n:
@@ -477,7 +780,43 @@ class VdaRobot:
                 first,
                 actions if final else None,
                 on_arrival if final else None,
+                lead if n == 0 else None,
             )
+
+    async def _path(self, start: str | None, goal: str) -> list[dict[str, Any]]:
+        """The Traffic Manager's path from ``start`` to ``goal`` (its steps)."""
+        try:
+            reply = await self.ep.request(
+                GetPath(robot=self.name, from_node=start, to_node=goal), timeout=5.0
+            )
+        except RequestTimeout:
+            raise DriveFailed(f"no path to {goal}: the Traffic Manager did not answer") from None
+        steps: list[dict[str, Any]] = reply.payload.get("steps") or []
+        if reply.type != "path" or not steps:
+            raise DriveFailed(f"no path to {goal}: {reply.payload.get('error', 'none')}")
+        return steps
+
+    async def _resumed_path(
+        self, goal: str, state: dict[str, Any]
+    ) -> tuple[list[dict[str, Any]], int, tuple[str, int, int]] | None:
+        """When the vehicle's order (in ``state``) goes to ``goal``: the steps indexed as its
+        sequence ids (step i is node sequence id 2 i; the steps it has passed are empty), the
+        step it stands at, and (order id, update id, the step its base ends at) to extend it;
+        the path after the base is the Traffic Manager's. None: that order goes elsewhere."""
+        nodes = sorted(state.get("nodeStates", []), key=lambda n: int(n["sequenceId"]))
+        here, seq = str(state["lastNodeId"]), int(state["lastNodeSequenceId"])
+        if (str(nodes[-1]["nodeId"]) if nodes else here) != goal or self.step_of is None:
+            return None
+        chain = [here] + [str(n["nodeId"]) for n in nodes if n["released"]]
+        if not all(node in self.nodes for node in chain):
+            return None
+        start = step_of_seq(seq)
+        base_end = start + len(chain) - 1
+        after = await self._path(chain[-1], goal)
+        steps: list[dict[str, Any]] = [{} for _ in range(start)]
+        steps += [self.step_of(node) for node in chain[:-1]] + after
+        self.node = here
+        return steps, start, (str(state["orderId"]), int(state["orderUpdateId"]), base_end)
 
     async def _ride(self, cabin: Mapping[str, Any], exit_: Mapping[str, Any]) -> None:
         """The vehicle stands in the cabin: call it to the exit's floor, and once it is there
@@ -502,15 +841,23 @@ class VdaRobot:
         first: int,
         actions: list[dict[str, Any]] | None,
         on_arrival: Callable[[], None] | None,
+        lead: tuple[str, int, int] | None = None,
     ) -> None:
-        """One order: the vehicle from ``steps[first]`` to the last of ``steps``."""
-        self._orders += 1
-        order_id = self.order_id = f"{task_id}-{self._orders}"
+        """One order: the vehicle from ``steps[first]`` to the last of ``steps``; ``lead``:
+        (order id, update id, the step its base ends at) of the vehicle's order to extend
+        (``_resumed_path``) instead of a new one."""
+        update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
+        taken = lead is not None  # the vehicle has had this order (then losing it is news)
+        if lead is None:
+            order_id = self.order_id = self._new_order_id(task_id)
+        else:
+            order_id, update, base_end = lead
+            self.order_id = order_id
+            tries, sent_at = 1, asyncio.get_running_loop().time()
         last = len(steps) - 1
         self.route = {node_seq(i): str(steps[i]["node"]) for i in range(first + 1, len(steps))}
         self.route_seq = node_seq(first)
         action_ids = {a["actionId"] for a in actions or []}
-        update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
         order: dict[str, Any] = {}
         arrived = False
         loop = asyncio.get_running_loop()
@@ -536,7 +883,10 @@ class VdaRobot:
                 )
                 base_end, tries = released_to, 0
             acked = ours and state.get("orderUpdateId", -1) >= update
-            if not acked and (tries == 0 or loop.time() - sent_at > ACK_TIMEOUT_S):
+            taken = taken or ours
+            if taken and not ours and self.online:  # restarted, or lost it while away
+                raise OrderLost(order_id)
+            if not acked and self.online and (tries == 0 or loop.time() - sent_at > ACK_TIMEOUT_S):
                 if tries >= ORDER_TRIES:
                     raise DriveFailed(
                         f"{self.name} never acknowledged order {order_id} "
@@ -564,6 +914,16 @@ class VdaRobot:
                     return
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.changed.wait(), 0.5)
+
+    def _new_order_id(self, task_id: str) -> str:
+        """``<task id>-<n>``, n after any order of this task the vehicle last had (from an
+        earlier master control): an order id is never given twice."""
+        last = str((self.state or {}).get("orderId") or "")
+        head, dash, n = last.rpartition("-")
+        if dash and head == task_id and n.isdigit():
+            self._orders = max(self._orders, int(n))
+        self._orders += 1
+        return f"{task_id}-{self._orders}"
 
     def _refusal(self, order_id: str) -> str | None:
         """The vehicle's error that names this order, if any (its description)."""
@@ -648,6 +1008,9 @@ class VdaRobot:
             log.info("%s: area %s removed: %s", self.name, area, p.get("reason"))
         if area in self.requested:
             self.granted.add(area)
+        for rid, asked in self.zone_requests.items():
+            if asked == area:
+                self._answer(rid, "REJECTED" if p.get("removed") else "GRANTED")
         self.changed.set()
 
     def _on_cabin(self, msg: Message) -> None:
@@ -669,3 +1032,16 @@ class VdaRobot:
         else:
             self.open_doors.discard(door)
         self.changed.set()
+
+
+def _position(state: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The vehicle's pose: ``agvPosition`` (2.x) or ``mobileRobotPosition`` (3.x)."""
+    found = state.get("agvPosition") or state.get("mobileRobotPosition")
+    return dict(found) if found else None
+
+
+def _battery(state: Mapping[str, Any]) -> tuple[float, bool]:
+    """(charge in %, charging): ``batteryState`` (2.x) or ``powerSupply`` (3.x); 100 % and
+    not charging before a state says."""
+    b = state.get("batteryState") or state.get("powerSupply") or {}
+    return float(b.get("batteryCharge", b.get("stateOfCharge", 100.0))), bool(b.get("charging"))

@@ -4,13 +4,14 @@ topic and version (vendored in ``schemas/``, MIT, © VDA: ``schemas/LICENSE.txt`
 from __future__ import annotations
 
 import json
+import re
 from functools import cache
 from pathlib import Path
 from typing import Any
 
 from jsonschema import Draft202012Validator
 
-__all__ = ["SCHEMA_DIR", "TOPICS", "VERSIONS", "SchemaViolation", "check", "problems"]
+__all__ = ["SCHEMA_DIR", "TOPICS", "VERSIONS", "SchemaViolation", "check", "problems", "version_of"]
 
 SCHEMA_DIR = Path(__file__).with_name("schemas")
 VERSIONS = ("2.1.0", "3.0.0")
@@ -39,8 +40,20 @@ def _validator(version: str, topic: str) -> Draft202012Validator:
     path = SCHEMA_DIR / version / f"{topic}.schema"
     if not path.is_file():
         raise ValueError(f"VDA 5050 {version} has no topic {topic!r}")
-    schema = json.loads(path.read_text(encoding="utf-8"))
-    return Draft202012Validator(schema)
+    return Draft202012Validator(_read(path.read_text(encoding="utf-8")))
+
+
+_TRAILING_COMMA = re.compile(r",(\s*[}\]])")
+
+
+def _read(text: str) -> Any:
+    """A schema file's JSON. The official 3.0.0 ``order``, ``factsheet`` and ``visualization``
+    schemas have commas before a closing brace (not JSON: ``json.loads`` refuses them); the
+    files stay unchanged and are read with those commas dropped."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return json.loads(_TRAILING_COMMA.sub(r"\1", text))
 
 
 def problems(topic: str, message: Any, version: str | None = None) -> list[str]:

@@ -26,9 +26,10 @@ V1 = Vehicle(manufacturer="Acme", serial_number="sn-0001")
 TIME_SCALE = 10.0
 
 
-def site_dict(**more: Any) -> dict[str, Any]:
-    """The line; ``more``: other site sections (no charging station or wait point by default:
-    an idle robot stays where its task left it)."""
+def site_dict(v1: dict[str, Any] | None = None, **more: Any) -> dict[str, Any]:
+    """The line; ``v1``: more fields of V1's entry (``vda_version``); ``more``: other site
+    sections (no charging station or wait point by default: an idle robot stays where its
+    task left it)."""
     return more | {
         "name": "VDA 5050 test line",
         "floors": [{"id": "F0", "name": "Ground", "level": 0}],
@@ -53,7 +54,8 @@ def site_dict(**more: Any) -> dict[str, Any]:
                 "manufacturer": V1.manufacturer,
                 "serial_number": V1.serial_number,
                 "map_ids": {"F0": "ground"},
-            },
+            }
+            | (v1 or {}),
         ],
     }
 
@@ -107,9 +109,11 @@ def vehicle(broker_url: str, **options: Any) -> SimVehicle:
 
 
 @contextlib.asynccontextmanager
-async def fleet(tmp_path: Path, broker_url: str, **more: Any) -> AsyncIterator[Fleet]:
+async def fleet(
+    tmp_path: Path, broker_url: str, v1: dict[str, Any] | None = None, **more: Any
+) -> AsyncIterator[Fleet]:
     site = tmp_path / "site.yaml"
-    site.write_text(yaml.safe_dump(site_dict(**more), sort_keys=False), encoding="utf-8")
+    site.write_text(yaml.safe_dump(site_dict(v1, **more), sort_keys=False), encoding="utf-8")
     settings = Settings(
         db_url=f"sqlite+aiosqlite:///{tmp_path}/t.db",
         site=site,

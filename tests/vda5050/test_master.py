@@ -17,12 +17,16 @@ from guidebot.payloads.traffic import ReleaseArea, RequestArea
 from guidebot.processes import spawn_guidebot
 from guidebot.testing import wait_on, wait_until
 from guidebot.vda5050.schemas import problems
-from guidebot.vda5050.sim import speak_seconds
+from guidebot.vda5050.sim import SimVehicle, speak_seconds
+from guidebot.vda5050.topics import Vehicle, parse_broker
+from tests.promtool import promtool_accepts
 
 from .broker import Mosquitto, mosquitto
-from .fleet import LINE, V1, Fleet, fleet, vehicle
+from .fleet import LINE, V1, Fleet, fleet, site_dict, vehicle
 
 pytestmark = pytest.mark.timeout(90)
+
+V2 = Vehicle(manufacturer="Acme", serial_number="sn-0002")
 
 
 @pytest.fixture
@@ -216,6 +220,9 @@ async def test_a_bad_message_is_logged_counted_and_alerted_and_nothing_is_lost(
             bad = sim.state() | {"batteryState": {"batteryCharge": "full"}}
             await client.publish(V1.topic("state"), json.dumps(bad), qos=1)
         await wait_until(lambda: f.master.refused == 2, 10)
+        scrape = (await f.http.get("/metrics")).text
+        assert 'guidebot_vda5050_messages_refused_total{robot="V1"} 2.0' in scrape
+        await promtool_accepts(scrape)
         alerts = f.server.app.state.alerts
         alert = alerts.get("vda5050_message", "V1")
         assert alert is not None and alert.count == 2
@@ -268,7 +275,9 @@ async def test_a_broken_connection_is_a_robot_disconnected(
         assert sim.session.connected.is_set()
 
 
-async def test_a_low_battery_sends_the_vehicle_to_charge(tmp_path: Path, broker: Mosquitto) -> None:
+async def test_a_low_battery_sends_the_vehicle_to_charge_until_it_is_full(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
     dock = [{"id": "dock", "node": "a"}]
     async with fleet(tmp_path, broker.url, charging_stations=dock) as f, vehicle(broker.url) as sim:
         await wait_until(lambda: f.robot("V1").online, 15)
@@ -283,11 +292,14 @@ async def test_a_low_battery_sends_the_vehicle_to_charge(tmp_path: Path, broker:
         assert sim.last_node == "a"
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
         assert "startCharging" in kinds
-        await wait_on(
-            f.changed,
-            lambda: f.of("robot_state")[-1].payload["mode"] == "charging",
-            10,
-        )
+        tm = f.server.app.state.task_manager
+        (charge,) = [t for t in tm.tasks.values() if t.kind == "charge" and t.robot == "V1"]
+        assert charge.state == TaskState.RUNNING  # not over when charging starts
+        sim.battery = 0.94  # nearly full: the rest at the simulated charger's pace
+        await wait_until(lambda: charge.state in FINAL_STATES, 30)
+        assert charge.state == TaskState.DONE and sim.battery >= 0.95 and not sim.charging
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert kinds[-2:] == ["startCharging", "stopCharging"], kinds
 
 
 async def test_a_vehicle_process_killed_mid_order_loses_its_task_after_the_grace_period(
@@ -350,3 +362,149 @@ async def test_a_vehicle_on_an_order_of_another_master_is_cancelled_first(
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
         assert "cancelOrder" in kinds
         assert sim.order.order_id.startswith(task) and sim.last_node == "a"
+
+
+async def test_a_vehicle_back_within_the_grace_period_is_planned_again_from_where_it_stands(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """The vehicle waits at b for the corridor, goes away (its process stops), is pushed back
+    to a by hand and comes back restarted there without its order, within the grace period:
+    the master control plans the drive again from a with a new order, instead of extending
+    the lost one from b, which the vehicle would refuse (it is not at b)."""
+    async with fleet(tmp_path, broker.url) as f:
+        other = f.server.app.state.hub.endpoint("R1")
+        other.publish(RequestArea(robot="R1", area="corridor"))
+        traffic = f.server.app.state.traffic
+        await wait_until(lambda: traffic.locks.holder("corridor") == "R1")
+        async with vehicle(broker.url) as first:
+            await wait_until(lambda: f.robot("V1").online, 15)
+            task = await f.task("go_to", {"node": "e"})
+            await wait_until(lambda: first.last_node == "b" and not first.driving, 20)
+        await wait_until(lambda: not f.robot("V1").online, 15)
+        async with vehicle(broker.url) as again:  # restarted at a
+            await wait_until(lambda: f.robot("V1").online, 15)
+            await wait_until(lambda: f.robot("V1").node == "a", 15)
+            other.publish(ReleaseArea(robot="R1", area="corridor"))
+            result = await until_done(f, task)
+        other.close()
+        assert result["state"] == "done", result
+        assert again.last_node == "e" and not again.errors
+        sent = [(o["orderId"], o["nodes"][0]["nodeId"]) for o in again.orders_received]
+        assert sent and sent[0] == (f"{task}-2", "a"), sent
+        all_valid(again.orders_received, "order")
+        history = (await f.http.get(f"/api/tasks/{task}/history")).json()
+        events = [h["event"] for h in history]
+        assert events.count("assigned") == 1 and "requeued" not in events, history
+
+
+async def test_a_site_edit_reaches_the_master_control_without_a_restart(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """A published site adds vehicle V2: it joins (online, a task done) and V1 goes on; one
+    that changes an area only reaches the same master control."""
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as v1:
+        await wait_until(lambda: f.robot("V1").online, 15)
+        site = site_dict()
+        site["robots"].append(
+            {
+                "name": "V2",
+                "token": "robot-V2-test-token",
+                "start_node": "b",
+                "interface": "vda5050",
+                "manufacturer": V2.manufacturer,
+                "serial_number": V2.serial_number,
+                "map_ids": {"F0": "ground"},
+            }
+        )
+        answer = await f.http.put("/api/site", json=site)
+        assert answer.status_code == 200, answer.text
+        v2 = SimVehicle(
+            parse_broker(broker.url),
+            V2,
+            x=4.0,
+            map_id="ground",
+            node="b",
+            time_scale=10.0,
+            state_period_s=0.2,
+        )
+        async with v2:
+            await wait_until(lambda: "V2" in f.server.app.state.task_manager.robots, 15)
+            await wait_until(lambda: f.robot("V2").online, 15)
+            answer = await f.http.post(
+                "/api/tasks", json={"kind": "go_to", "params": {"node": "e"}, "robot": "V2"}
+            )
+            assert answer.status_code == 201, answer.text
+            result = await until_done(f, answer.json()["id"])
+            assert result["state"] == "done" and v2.last_node == "e", result
+            task = await f.task("go_to", {"node": "b"})
+            result = await until_done(f, task)
+            assert result["robot"] == "V1" and result["state"] == "done" and v1.last_node == "b"
+            # the same robots, a smaller corridor: the same master control, the new area
+            master = f.master
+            site["areas"] = [{"id": "corridor", "nodes": ["c"]}]
+            answer = await f.http.put("/api/site", json=site)
+            assert answer.status_code == 200, answer.text
+            assert f.master is master
+            robot = next(r for r in master.robots.values() if r.name == "V1")
+            assert robot.area_nodes["corridor"] == {"c"}
+        all_valid(v2.orders_received, "order")
+
+
+async def test_a_visitors_tour_preempts_an_errand_without_a_refusal(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """V1 on its idle errand (to the wait point at e) when a visitor asks for a tour: the
+    Task Manager cancels the errand and assigns the tour at once; the vehicle ends the errand
+    (cancelOrder) and then takes the tour, instead of refusing it as busy."""
+    wait = [{"id": "rest", "node": "e"}]
+    async with (
+        fleet(tmp_path, broker.url, wait_points=wait) as f,
+        vehicle(broker.url) as sim,
+    ):
+        sim.speed = 0.2  # still on its errand when the visitor asks
+        tm = f.server.app.state.task_manager
+        await wait_until(lambda: f.robot("V1").online, 15)
+        await wait_until(lambda: sim.driving, 20)
+        (errand,) = [t for t in tm.tasks.values() if t.robot == "V1" and t.internal]
+        sim.speed = 1.0
+        tour = await f.task("tour", {"tour": "line"})
+        result = await until_done(f, tour, 60)
+        assert result["state"] == "done", result
+        assert errand.state == TaskState.CANCELLED
+        history = (await f.http.get(f"/api/tasks/{tour}/history")).json()
+        events = [h["event"] for h in history]
+        assert events.count("assigned") == 1 and "requeued" not in events, history
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert "cancelOrder" in kinds
+
+
+async def test_a_restarted_server_goes_on_with_the_tour_the_vehicle_runs(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """The server stops while V1 drives to the tour's second stop (the first explained); the
+    next server life finds the vehicle on that order and goes on with it: the tour ends
+    done, assigned once, the second stop explained, nothing cancelled or sent twice."""
+    async with vehicle(broker.url) as sim:
+        sim.speed = 0.1  # slow: still on its way to e while the server restarts
+        async with fleet(tmp_path, broker.url) as f:
+            await wait_until(lambda: f.robot("V1").online, 15)
+            tour = await f.task("tour", {"tour": "line"})
+            await wait_until(lambda: sim.last_node == "c", 30)
+        async with fleet(tmp_path, broker.url) as f:
+            result = await until_done(f, tour, 60)
+            assert result["state"] == "done", result
+            explained = [
+                m.payload["index"]
+                for m in f.of("tour_progress")
+                if m.payload["stage"] == "explained"
+            ]
+            assert explained == [2], explained
+            history = (await f.http.get(f"/api/tasks/{tour}/history")).json()
+        events = [h["event"] for h in history]
+        assert events.count("assigned") == 1 and "requeued" not in events, history
+        assert sim.last_node == "e"
+        sent = [(o["orderId"], o["orderUpdateId"]) for o in sim.orders_received]
+        assert len(sent) == len(set(sent)) and all(o.startswith(f"{tour}-") for o, _ in sent)
+        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+        assert "cancelOrder" not in kinds, kinds
+        all_valid(sim.orders_received, "order")

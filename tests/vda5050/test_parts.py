@@ -13,6 +13,7 @@ from backend.vda5050.vehicle import VdaRobot
 from guidebot.bus import Bus
 from guidebot.messages import Message
 from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.testing import wait_until
 from guidebot.vda5050.schemas import SCHEMA_DIR, SchemaViolation, check, problems
 from guidebot.vda5050.sim import SimVehicle
 from guidebot.vda5050.topics import Vehicle, parse_broker
@@ -53,6 +54,19 @@ def test_an_update_starts_at_the_last_node_of_the_base() -> None:
 
 def test_instant_actions_follow_the_schema() -> None:
     check("instantActions", instant_actions(V, 3, [("x1", "cancelOrder")]))
+
+
+def test_orders_and_instant_actions_for_a_3_0_0_vehicle_follow_its_schemas() -> None:
+    """The official 3.0.0 order schema has trailing commas (read leniently): checking a 3.0.0
+    order raised a JSON error; its edges name no nodes and instant actions block NONE."""
+    v3 = Vehicle("Acme", "sn-1", version="3.0.0")
+    order = build_order(v3, 0, "o1", 0, STEPS, start=0, released_to=1, map_ids={})
+    assert problems("order", order, "3.0.0") == []
+    assert "startNodeId" not in order["edges"][0]
+    actions = instant_actions(v3, 0, [("x1", "enableZoneSet")], {"zoneSetId": "z"})
+    assert problems("instantActions", actions, "3.0.0") == []
+    for topic in ("order", "factsheet", "visualization", "state", "zoneSet", "responses"):
+        assert problems(topic, {}, "3.0.0")  # every official 3.0.0 schema loads
 
 
 def test_the_schema_names_what_is_wrong() -> None:
@@ -164,3 +178,57 @@ async def test_a_server_that_stops_leaves_the_task_to_the_next_one() -> None:
     await robot.close()
     assert not [m for m in seen if m.type in ("task_ended", "release_area", "release_door")]
     assert "instantActions" not in sent
+
+
+async def test_a_task_cancelled_before_its_first_step_ends_and_the_next_one_starts() -> None:
+    """The Task Manager preempts at once: assign T1, cancel it, assign T2 in one go. T1 ends
+    cancelled (once: its runner never ran a step), then T2 starts; nothing is refused."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    manager = bus.endpoint("task_manager")
+    for kind, task in (("task_assigned", "T1"), ("task_cancel", "T1"), ("task_assigned", "T2")):
+        payload = {"task_id": task, "robot": "V1", "net": "navigate_to_point"}
+        manager.publish(kind, payload | {"params": {"node": "e"}}, destination="V1")
+
+    def ended() -> list[tuple[str, str]]:
+        ends = [m.payload for m in seen if m.type == "task_ended"]
+        return [(p["task_id"], p["outcome"]) for p in ends]
+
+    await wait_until(lambda: robot.task_id == "T2", 5)
+    assert ended() == [("T1", "cancelled")]
+    assert [m.payload["task_id"] for m in seen if m.type == "task_started"] == ["T1", "T2"]
+    await robot.close()
+
+
+async def test_a_stale_state_on_the_current_order_reports_no_node_again() -> None:
+    """After an elevator ride the master has put V1 on the exit node; a state the vehicle sent
+    before its initPosition (its order unchanged, the cabin below as lastNodeId) comes late:
+    no node_reached for the cabin left behind."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.order_id = "o1"
+    robot.route = {2: "b"}
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    state = sim.state() | {"orderId": "o1", "lastNodeId": "b", "lastNodeSequenceId": 2}
+    robot.on_state(state)
+    robot.node = "e"  # where the ride put it
+    robot.on_state(state)  # the late one
+    assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["b"]
+    assert robot.node == "e"
+    await robot.close()

@@ -1,5 +1,6 @@
 // Robots: connection, battery, pose, task and tour step, nets, RoboCAN modules, last errors;
-// actions: charge, send to a node, out of service and back, cancel the task.
+// actions: charge, send to a node, out of service and back, pause a VDA 5050 vehicle and let it
+// go on, cancel the task.
 import { html } from "lit-html";
 import { clock, percent } from "/lib/dom.js";
 import { evacuationText, floorName, placeName, poiName, taskLabel, waitingFor } from "/admin/names.js";
@@ -21,6 +22,9 @@ function actions(ui, robot) {
   const taskId = robot.state?.task_id ?? robot.info?.task_id;
   const send = (kind, params) => ui.act(`${kind} ${name}`, () => ui.api.post("/api/tasks", { kind, params, robot: name, priority: 10 }));
   const nodeSelect = `node-${name}`;
+  const vda = ui.store.site.robots.find((r) => r.name === name)?.interface === "vda5050";
+  const paused = robot.state?.navigation === "paused";
+  const pause = paused ? `Let ${name} go on` : `Pause ${name}`;
   return html`<div class="actions">
     <button type="button" @click=${() => ui.act(`charge ${name}`, () => ui.api.post(`/api/robots/${encodeURIComponent(name)}/charge`, {}))}>Send ${name} to charge</button>
     <label for=${nodeSelect} class="sr-only">Node for ${name}</label>
@@ -31,6 +35,10 @@ function actions(ui, robot) {
     <button type="button" class=${out ? "" : "secondary"}
       @click=${() => ui.act(out ? `Put ${name} back in service` : `Take ${name} out of service`, () => ui.api.post(`/api/robots/${encodeURIComponent(name)}/service`, { out_of_service: !out }))}>
       ${out ? `Put ${name} back in service` : `Take ${name} out of service`}</button>
+    ${vda
+      ? html`<button type="button" class=${paused ? "" : "secondary"}
+          @click=${() => ui.act(pause, () => ui.api.post(`/api/robots/${encodeURIComponent(name)}/pause`, { paused: !paused }))}>${pause}</button>`
+      : ""}
     ${taskId
       ? html`<button type="button" class="danger" @click=${() => cancelTask(ui, ui.store.tasks.get(taskId) ?? { id: taskId, kind: "task", state: "running", robot: name })}>Cancel ${name}'s task</button>`
       : ""}
@@ -82,7 +90,8 @@ export function robotsView(ui) {
       return html`<section class="robot-card" aria-labelledby=${`robot-${robot.name}`}>
         <h3 id=${`robot-${robot.name}`}>${robot.name}
           <span class=${`badge ${link[0]}`}>${link[1]}</span>
-          ${info.out_of_service ? html`<span class="badge warn">out of service</span>` : ""}</h3>
+          ${info.out_of_service ? html`<span class="badge warn">out of service</span>` : ""}
+          ${robot.online && s.navigation === "paused" ? html`<span class="badge warn">paused</span>` : ""}</h3>
         <dl class="facts">
           ${evacuationText(ui.store, robot.name) ? html`<dt>Evacuation</dt><dd class="state-evacuation" data-evacuation=${robot.name}>${evacuationText(ui.store, robot.name).replace("evacuation: ", "")}</dd>` : ""}
           <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : "offline"}</dd>
