@@ -5,13 +5,17 @@ petri_net_event (monitoring), and routes incoming messages to the instances wait
 Sub-nets are started in-process (the same as a run_petri_net carrying the parent's id). Main
 tasks run one at a time: the idle net ("waiting" by default) is killed when a main task starts
 and started again when it ends.
+
+A net and its sub-nets run on the library's published nets as they were when the net was
+started (``NetLibrary.installed``, pinned per instance): publishing a new version changes the
+next start, never a task already running.
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from pydantic import ValidationError
@@ -20,7 +24,7 @@ from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.petri import KillPetriNet, RunPetriNet
 from petri_nets.clock import Clock
-from petri_nets.compiled import missing_params
+from petri_nets.compiled import CompiledNet, missing_params
 from petri_nets.engine import STEP_BUDGET, Instance
 from petri_nets.library import NetLibrary, UnknownNet
 
@@ -61,6 +65,8 @@ class Dispatch:
         self.max_instances = max_instances
         self.step_budget = step_budget
         self._instances: dict[str, Instance] = {}
+        self._pins: dict[Instance, Mapping[str, CompiledNet]] = {}
+        """The published nets each instance starts its sub-nets from."""
         self._waiting: dict[str, dict[Instance, None]] = {}
         self._unsubscribe: dict[str, Callable[[], None]] = {}
         self._own: list[Callable[[], None]] = []
@@ -224,8 +230,9 @@ class Dispatch:
         instance_id: str | None,
         main: bool,
     ) -> Instance:
+        pin = self.library.installed if parent is None else self._pins.get(parent)
         try:
-            net = self.library.get(net_name)
+            net = self.library.get(net_name, pin)
         except UnknownNet as exc:
             raise DispatchError(f"unknown net {exc.args[0]}") from None
         missing = missing_params(net, params)
@@ -242,6 +249,7 @@ class Dispatch:
             raise DispatchError(f"too many instances ({self.max_instances})")
         instance = Instance(self, net, instance_id, params, parent, main)
         self._instances[instance_id] = instance
+        self._pins[instance] = self.library.installed if pin is None else pin
         for message_type in net.by_type:
             waiting = self._waiting.get(message_type)
             if waiting is None:
@@ -294,6 +302,7 @@ class Dispatch:
 
     def ended(self, instance: Instance) -> None:
         self._instances.pop(instance.id, None)
+        self._pins.pop(instance, None)
         for message_type in instance.net.by_type:
             waiting = self._waiting.get(message_type)
             if waiting is not None:

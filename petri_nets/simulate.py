@@ -9,12 +9,14 @@ from __future__ import annotations
 import io
 import json
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import click
 
 from petri_nets.cli import run_net
+from petri_nets.compiled import CompiledNet
 from petri_nets.netjson import EditorNet, editor_to_pnml
 from petri_nets.scripted import DEFAULT_REPLIES, Reply
 
@@ -36,9 +38,11 @@ def simulate(
     *,
     max_time: float = 3600.0,
     max_firings: int = MAX_SIMULATED_FIRINGS,
+    published: Mapping[str, CompiledNet] | None = None,
 ) -> dict[str, Any]:
-    """Run ``net`` (sub-nets from ``library``; the net replaces a library net of its name)
-    with the default scripted replies, ``replies`` replacing them per message type."""
+    """Run ``net`` (sub-nets from ``library``, its ``published`` nets in front; the net
+    replaces a library net of its name) with the default scripted replies, ``replies``
+    replacing them per message type."""
     script = dict(DEFAULT_REPLIES) | replies
     trace = io.StringIO()
     with tempfile.TemporaryDirectory(prefix="guidebot-sim-") as folder:
@@ -53,6 +57,7 @@ def simulate(
                 max_time=max_time,
                 max_firings=max_firings,
                 trace=trace,
+                installed=published,
             )
         except click.ClickException as exc:
             raise SimulationRefused(exc.message) from None
