@@ -106,8 +106,11 @@ async def test_an_operator_reads_a_net_without_editing_tools(
         await page.get_by_label("Library net").select_option("give_tour")
         await page.get_by_role("button", name="Open", exact=True).click()
         await expect(page.locator("#canvas g.net-node").first).to_be_visible()
-        await expect(page.get_by_text("Read only: administrators edit nets.")).to_be_visible()
+        await expect(page.get_by_text("Read only: your role may not publish nets.")).to_be_visible()
         await expect(page.get_by_label("Add place")).to_have_count(0)
+        # The versions are there to read; publishing and restoring are not.
+        await expect(page.get_by_role("heading", name="Versions of give_tour")).to_be_visible()
+        await expect(page.get_by_role("button", name=re.compile("^Publish"))).to_have_count(0)
         await (
             page.locator("#lists")
             .get_by_role("button", name="give_tour (parameters, description)")

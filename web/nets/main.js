@@ -1,17 +1,29 @@
 // The RoboGraph editor (/nets/, docs/nets.md): open a library net or a PNML file, draw and edit
-// it, checked by the engine's rules as you edit, export it as PNML. Admins edit; operators read.
+// it, checked by the engine's rules as you edit, export it as PNML, publish it to the fleet.
+// Who may publish (the server's edit_nets rule) edits; other staff read.
 import { html, nothing, render } from "lit-html";
 import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { NetCanvas } from "/nets/canvas.js";
 import { detailsForm } from "/nets/forms.js";
+import { libraryPanel } from "/nets/library.js";
 import { NetModel, emptyNet } from "/nets/model.js";
 import { Run, defaultParams, parseReplies, simulationPanel } from "/nets/simulation.js";
 
 const $ = (id) => document.getElementById(id);
-const STAFF = ["admin", "operator"];
 let token = currentToken();
 const api = new Api(() => token);
+
+/** The token's name and role, and the editor's vocabulary (which says whether it may publish);
+ * an Error when the token is unknown or not staff's. */
+async function whoAndWhat() {
+  const me = await api.get("/api/me").catch((err) => err);
+  if (me instanceof Error) return me;
+  const vocabulary = await api.get("/api/net-editor/vocabulary").catch((err) => err);
+  if (vocabulary instanceof ApiError && vocabulary.status === 403) return new Error(`This token belongs to ${me.name} (role ${me.role}); the editor is for staff.`);
+  if (vocabulary instanceof Error) return vocabulary;
+  return { me, vocabulary };
+}
 
 function showSignIn(message = "") {
   $("editor").hidden = true;
@@ -20,16 +32,15 @@ function showSignIn(message = "") {
   const submit = async (event) => {
     event.preventDefault();
     token = new FormData(event.target).get("token").trim();
-    const me = await api.get("/api/me").catch((err) => err);
-    if (me instanceof Error || !STAFF.includes(me.role)) {
-      const why = me instanceof Error ? me.message : `This token belongs to ${me.name} (role ${me.role}); the editor is for staff.`;
+    const known = await whoAndWhat();
+    if (known instanceof Error) {
       token = null;
-      return showSignIn(why);
+      return showSignIn(known.message);
     }
     saveToken(token);
-    start(me);
+    start(known);
   };
-  render(html`<h2>Sign in</h2><p>Administrators edit nets; operators read them.</p>
+  render(html`<h2>Sign in</h2><p>Those who may publish nets edit them; other staff read them.</p>
     <form @submit=${submit}><label>Staff token <input name="token" type="password" autocomplete="current-password" required></label>
     <button type="submit">Sign in</button></form>
     ${message ? html`<p class="notice error" role="alert">${message}</p>` : ""}`, section);
@@ -38,13 +49,13 @@ function showSignIn(message = "") {
 
 async function boot() {
   if (!token) return showSignIn();
-  const me = await api.get("/api/me").catch((err) => err);
-  if (me instanceof Error || !STAFF.includes(me.role)) {
+  const known = await whoAndWhat();
+  if (known instanceof Error) {
     forgetToken();
     token = null;
-    return showSignIn(me instanceof Error ? me.message : "The editor is for staff.");
+    return showSignIn(known.message);
   }
-  start(me);
+  start(known);
 }
 
 /** A request whose body is a file: rest.js sends JSON only. */
@@ -64,13 +75,14 @@ async function sendFile(path, body) {
   return data;
 }
 
-async function start(me) {
+async function start({ me, vocabulary }) {
   $("signin").hidden = true;
   $("editor").hidden = false;
-  const readOnly = me.role !== "admin";
+  const readOnly = !vocabulary.may_publish;
   const model = new NetModel(api);
-  const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary: null, libraryNet: "",
-    group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null };
+  const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary, libraryNet: "",
+    group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null,
+    versions: null, diff: null };
   window.guidebotNets = ui; // for the browser tests
   api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
@@ -247,10 +259,66 @@ async function start(me) {
       model.open(await api.get(`/api/net-editor/library/${encodeURIComponent(name)}`));
       opened();
       say(`Net ${name} opened from the library.`);
+      await loadVersions(name);
     } catch (err) {
       say(err.message, true);
     }
   }
+
+  /** The open net's published versions (none: a net the library does not have yet). */
+  async function loadVersions(name) {
+    ui.diff = null;
+    try {
+      ui.versions = await api.get(`/api/net-editor/versions/${encodeURIComponent(name)}`);
+    } catch (err) {
+      if (!(err instanceof ApiError && err.status === 404)) say(err.message, true);
+      ui.versions = null;
+    }
+    draw();
+  }
+
+  const versionsPath = (v) => `/api/net-editor/versions/${encodeURIComponent(ui.versions.net)}/${v}`;
+  const library = {
+    async publish(form) {
+      const name = model.doc.id;
+      try {
+        const saved = await api.post("/api/net-editor/publish", { net: model.doc, note: form.get("note") ?? "" });
+        ui.library = await api.get("/api/nets");
+        ui.libraryNet = name;
+        await loadVersions(name);
+        say(`${name} version ${saved.version} published: robots start it at their next task.`);
+      } catch (err) {
+        say(`Not published: ${err.message}`, true);
+      }
+    },
+    async open(version) {
+      try {
+        model.open(await api.get(versionsPath(version)));
+        opened();
+        say(`${ui.versions.net} version ${version} opened${version === ui.versions.live ? "" : " (not the live one: publish it, or restore it, to put it back to work)"}.`);
+      } catch (err) {
+        say(err.message, true);
+      }
+    },
+    async compare(old, current) {
+      try {
+        ui.diff = await api.get(`/api/net-editor/diff/${encodeURIComponent(ui.versions.net)}?old=${old}&new=${current}`);
+        draw();
+      } catch (err) {
+        say(err.message, true);
+      }
+    },
+    async restore(version) {
+      const name = ui.versions.net;
+      try {
+        const saved = await api.post(`/api/net-editor/restore/${encodeURIComponent(name)}/${version}`, {});
+        await openLibrary(name);
+        say(`${name} version ${version} restored as version ${saved.version}: robots start it at their next task.`);
+      } catch (err) {
+        say(`Not restored: ${err.message}`, true);
+      }
+    },
+  };
 
   /** Open a PNML file's text (the file input's, or the benchmark's); resolves once it is
    * drawn and checked. */
@@ -373,7 +441,7 @@ async function start(me) {
     const zoom = html`<span class="zoom"><button type="button" class="secondary small" aria-label="Zoom in" @click=${() => canvas.zoomBy(1.25)}>+</button>
       <button type="button" class="secondary small" aria-label="Zoom out" @click=${() => canvas.zoomBy(0.8)}>−</button>
       <button type="button" class="secondary small" @click=${() => { canvas.fit(model.doc); canvas.redraw(); }}>Fit</button></span>`;
-    render(readOnly ? html`${zoom}<span class="muted">Read only: administrators edit nets.</span>` : html`${zoom}
+    render(readOnly ? html`${zoom}<span class="muted">Read only: your role may not publish nets.</span>` : html`${zoom}
       <fieldset class="tools"><legend class="sr-only">Tool</legend>
         ${[["select", "Select and move"], ["place", "Add place"], ["transition", "Add transition"], ["arc", "Add arc"]].map(([t, label]) => html`
           <label><input type="radio" name="tool" value=${t} .checked=${ui.tool === t}
@@ -396,11 +464,12 @@ async function start(me) {
           : html`<p class="ok-text" id="problems">The net passes every check of <code>guidebot petri check</code>.</p>`}
         <button type="button" class="secondary" @click=${analyse}>Analyse the reachability graph</button>
         ${ui.analysis ? analysisView(ui.analysis) : nothing}</section>
+      ${libraryPanel(ui, library)}
       ${simulationPanel(ui, simulation)}`, $("details"));
   }
 
   try {
-    [ui.library, ui.vocabulary] = await Promise.all([api.get("/api/nets"), api.get("/api/net-editor/vocabulary")]);
+    ui.library = await api.get("/api/nets");
   } catch (err) {
     say(err.message, true);
   }
