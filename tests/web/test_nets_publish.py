@@ -5,7 +5,6 @@ shows who published what, compares it with the shipped file and restores it."""
 
 from __future__ import annotations
 
-import asyncio
 from types import SimpleNamespace
 from typing import Any
 
@@ -24,12 +23,6 @@ def two_point_tour(data: dict[str, Any]) -> None:
     data["tours"] += [{"id": "short", "name": "Short tour", "points": ["welcome", "mosaics"]}]
 
 
-async def task_done(fleet: Any, task_id: str) -> None:
-    async with fleet.http() as http:
-        while (await http.get(f"/api/tasks/{task_id}")).json()["state"] != "done":
-            await asyncio.sleep(0.05)
-
-
 async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
@@ -42,6 +35,8 @@ async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words
         visitor = robot.bus.endpoint("test-visitor")
         visitor.subscribe("speech_started", spoken.append, tap=True)
         visitor.subscribe("ask_continue", asked.append, tap=True)
+        ended: list[Message] = []
+        visitor.subscribe("task_ended", ended.append, tap=True)
         watch = await open_page(f"{fleet.server.url}/nets/")
         page = watch.page
         await page.get_by_label("Staff token").fill(fleet.server.admin_token)
@@ -49,7 +44,8 @@ async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words
         await page.get_by_label("Library net").select_option("explain_point")
         await page.get_by_role("button", name="Open", exact=True).click()
         await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
-        await page.locator("#lists").get_by_role("button", name="synthesize text (synthesize_text)").click()
+        elements = page.locator("#lists")
+        await elements.get_by_role("button", name="synthesize text (synthesize_text)").click()
         payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
         await payload.fill(NEW_WORDS)
         await payload.press("Tab")
@@ -68,9 +64,7 @@ async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words
         assert not spoken[0].payload["text"].startswith("New words")
 
         await page.get_by_role("button", name="Publish explain_point to the fleet").click()
-        await expect(page.locator("#notices")).to_contain_text(
-            "explain_point version 1 published"
-        )
+        await expect(page.locator("#notices")).to_contain_text("explain_point version 1 published")
         await wait_until(lambda: robot.net_follower.version == 1)
         versions = page.get_by_role("list", name="Versions of explain_point")
         await expect(versions).to_contain_text("Version 1 live")
@@ -80,7 +74,7 @@ async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words
 
         # The tour running goes on with the words it started with.
         visitor.publish("continue_answer", {"answer": "yes"})
-        await asyncio.wait_for(task_done(fleet, first_tour), 60)
+        await wait_until(lambda: any(m.payload["task_id"] == first_tour for m in ended), timeout=60)
         assert len(spoken) == 2
         assert not spoken[1].payload["text"].startswith("New words"), spoken[1].payload
 
@@ -94,12 +88,8 @@ async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words
         assert spoken[2].payload["text"] == f"New words: {spoken[0].payload['text']}"
 
         # The history compares with the shipped file and restores it.
-        await page.get_by_role(
-            "button", name="Compare with live: version 0 (shipped)"
-        ).click()
-        await expect(page.locator("#diff")).to_contain_text(
-            "~ place synthesize_text: action.body"
-        )
+        await page.get_by_role("button", name="Compare with live: version 0 (shipped)").click()
+        await expect(page.locator("#diff")).to_contain_text("~ place synthesize_text: action.body")
         await page.get_by_role("button", name="Restore version 0 (shipped)").click()
         await expect(page.locator("#notices")).to_contain_text(
             "explain_point version 0 restored as version 2"
