@@ -15,7 +15,7 @@ the library refuses to publish (the engine's reasons).
 from __future__ import annotations
 
 import asyncio
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import (
     APIRouter,
@@ -34,8 +34,10 @@ from backend.actions import allowed_roles
 from backend.api.deps import Staff, app_service, not_found, require_action
 from backend.api.models import RequestBody
 from backend.auth import Principal
+from backend.console.feed import ConsoleFeed
 from backend.net_library.service import NetPublisher, NetRefused
 from guidebot.messages import known_types, payload_model
+from guidebot.payloads.petri import PetriNetDebug
 from petri_nets.library import NetLibrary, UnknownNet
 from petri_nets.model import ACTION_KINDS, CONDITION_KINDS, GUARD_TESTS, OUTCOMES
 from petri_nets.netdiff import net_diff
@@ -316,3 +318,36 @@ async def restore(
 async def rollout(_: Staff, nets: Publisher) -> dict[str, Any]:
     """The library's version and the version each robot said it starts nets from."""
     return nets.status()
+
+
+class Debug(RequestBody):
+    """A debugger's command for one running instance (docs/nets.md, "Attach")."""
+
+    target: str = Field(min_length=1, max_length=64)
+    """A robot name, or "rgm" for the server's own nets."""
+    instance_id: str = Field(min_length=1, max_length=200)
+    command: Literal["break", "step", "resume"]
+    breakpoints: list[str] = Field(default_factory=list, max_length=1000)
+    lease_s: float = Field(default=30.0, gt=0, le=3600)
+
+
+@router.post("/debug")
+async def debug(request: Request, who: NetAuthor, body: Annotated[Debug, Body()]) -> dict[str, Any]:
+    """Set an instance's breakpoints (for ``lease_s`` seconds: the page renews them while it
+    is attached), step past the transition it is paused before, or resume it; on a robot
+    (``petri_net_debug``) or on the server. 404 for an instance not running there."""
+    feed: ConsoleFeed = app_service(request, "console", ConsoleFeed)
+    known = {n["instance_id"] for n in feed.running_nets(body.target)}
+    if body.instance_id not in known:
+        raise not_found(f"net instance {body.instance_id!r} on {body.target!r}")
+    command = PetriNetDebug(
+        instance_id=body.instance_id,
+        command=body.command,
+        breakpoints=body.breakpoints,
+        lease_s=body.lease_s,
+    )
+    if body.target == "rgm":
+        request.app.state.rgm.debug(command)
+    else:
+        feed.endpoint.publish(command, destination=body.target)
+    return {"target": body.target, "instance_id": body.instance_id, "by": who.name}

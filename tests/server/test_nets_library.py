@@ -134,6 +134,11 @@ async def test_a_new_net_joins_the_library_and_only_who_may_edit_nets_publishes(
     assert history["live"] == 1 and history["shipped"] is False
     refused = await operator.post("/api/net-editor/restore/explain_again/1", json={})
     assert refused.status_code == 403
+    # The debugger's commands name a running instance (docs/nets.md, "Attach").
+    body = {"target": "R1", "instance_id": "nothing#1", "command": "step"}
+    assert (await operator.post("/api/net-editor/debug", json=body)).status_code == 403
+    missing = await admin.post("/api/net-editor/debug", json=body)
+    assert missing.status_code == 404 and "nothing#1" in missing.json()["detail"]
 
 
 async def test_published_nets_are_kept_across_a_restart(tmp_path: Path) -> None:

@@ -6,6 +6,7 @@ import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { NetCanvas } from "/nets/canvas.js";
 import { detailsForm } from "/nets/forms.js";
+import { Attachment, attachPanel } from "/nets/attach.js";
 import { libraryPanel } from "/nets/library.js";
 import { NetModel, emptyNet } from "/nets/model.js";
 import { Run, defaultParams, parseReplies, simulationPanel } from "/nets/simulation.js";
@@ -82,8 +83,9 @@ async function start({ me, vocabulary }) {
   const model = new NetModel(api);
   const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary, libraryNet: "",
     group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null,
-    versions: null, diff: null };
+    versions: null, diff: null, mayDebug: vocabulary.may_publish };
   window.guidebotNets = ui; // for the browser tests
+  ui.draw = () => draw();
   api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
   const select = (kind, id) => {
@@ -277,6 +279,45 @@ async function start({ me, vocabulary }) {
     draw();
   }
 
+  const attachment = new Attachment(api, token, () => draw());
+  ui.attachment = attachment;
+  const attaching = {
+    async list() {
+      try { await attachment.list(); } catch (err) { say(err.message, true); }
+    },
+    async attach(item) {
+      try {
+        if (model.doc?.id !== item.net) {
+          model.open(await api.get(`/api/net-editor/library/${encodeURIComponent(item.net)}`));
+          opened();
+          await loadVersions(item.net);
+        }
+        ui.libraryNet = item.net;
+        stopSimulating();
+        await attachment.attach(item);
+        say(`Attached to ${item.instance_id} on ${attachment.target}: its live marking is drawn.`);
+      } catch (err) {
+        say(err.message, true);
+      }
+    },
+    async toggle(transition) {
+      try { await attachment.toggle(transition); } catch (err) { say(`Breakpoint refused: ${err.message}`, true); }
+    },
+    async step() {
+      try { await attachment.step(); } catch (err) { say(err.message, true); }
+    },
+    async resume() {
+      try { await attachment.resume(); } catch (err) { say(err.message, true); }
+    },
+    async kill() {
+      try { await attachment.kill(); say(`${attachment.instance.instance_id} killed.`); } catch (err) { say(err.message, true); }
+    },
+    async detach() {
+      await attachment.detach();
+      say("Detached: its breakpoints are cleared.");
+    },
+  };
+
   const versionsPath = (v) => `/api/net-editor/versions/${encodeURIComponent(ui.versions.net)}/${v}`;
   const library = {
     async publish(form) {
@@ -284,6 +325,7 @@ async function start({ me, vocabulary }) {
       try {
         const saved = await api.post("/api/net-editor/publish", { net: model.doc, note: form.get("note") ?? "" });
         ui.library = await api.get("/api/nets");
+    await attachment.loadTargets();
         ui.libraryNet = name;
         await loadVersions(name);
         say(`${name} version ${saved.version} published: robots start it at their next task.`);
@@ -434,7 +476,7 @@ async function start({ me, vocabulary }) {
     render(ui.notice ? html`<div class=${`notice ${ui.notice.error ? "error" : "ok"}`} role=${ui.notice.error ? "alert" : "status"}>${ui.notice.text}</div>` : nothing, $("notices"));
     if (!doc) {
       render(html`<p class="muted">Open a net of the library or a PNML file${readOnly ? "" : ", or start a new net"}.</p>`, $("lists"));
-      render(nothing, $("details"));
+      render(attachPanel(ui, attachment, attaching), $("details"));
       return;
     }
     render(elementList(doc, byElement), $("lists"));
@@ -453,8 +495,9 @@ async function start({ me, vocabulary }) {
         : ui.selected && ui.selected.kind !== "net" ? html`<button type="button" class="danger small" @click=${() => remove(ui.selected.kind, ui.selected.id)}>Delete ${ui.selected.kind} ${ui.selected.id}</button>` : nothing}
       <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it (Shift+click selects several); drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
     for (const id of [...ui.group]) if (!model.node(id)) ui.group.delete(id);
+    const live = !ui.run && attachment.instance?.net === doc.id && !attachment.ended;
     canvas.draw(doc, { tool: ui.tool, selected: ui.selected, group: ui.group, problems: byElement, readOnly,
-      marking: ui.run?.marking() ?? null, fired: ui.run?.fired() ?? [] });
+      marking: ui.run?.marking() ?? (live ? attachment.marking : null), fired: ui.run?.fired() ?? (live ? attachment.last : []) });
     render(html`
       <section aria-labelledby="details-title"><h2 id="details-title">${ui.selected ? `${ui.selected.kind} ${ui.selected.id}` : "Selected element"}</h2>
         ${ui.selected ? detailsForm({ doc, selected: ui.selected, vocabulary: ui.vocabulary, library: ui.library, readOnly, problems: byElement,
@@ -465,11 +508,13 @@ async function start({ me, vocabulary }) {
         <button type="button" class="secondary" @click=${analyse}>Analyse the reachability graph</button>
         ${ui.analysis ? analysisView(ui.analysis) : nothing}</section>
       ${libraryPanel(ui, library)}
+      ${attachPanel(ui, attachment, attaching)}
       ${simulationPanel(ui, simulation)}`, $("details"));
   }
 
   try {
     ui.library = await api.get("/api/nets");
+    await attachment.loadTargets();
   } catch (err) {
     say(err.message, true);
   }
