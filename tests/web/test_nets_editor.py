@@ -330,3 +330,38 @@ async def test_select_several_copy_paste_move_and_delete_them_together(
         await page.get_by_role("button", name="Zoom in").click()
         await page.get_by_role("button", name="Fit").click()
         await web.axe_check(page)
+
+
+async def test_a_rubber_band_selects_the_nodes_inside_it(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_label("Library net").select_option("navigate_to_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        canvas = page.locator("#canvas svg")
+        await expect(canvas.locator("g.net-node")).to_have_count(5)
+        doc = await page.evaluate("guidebotNets.model.doc")
+        nodes = {n["id"]: (n["x"], n["y"]) for n in doc["places"] + doc["transitions"]}
+        # A band over the upper part of the drawing: down to the transitions' row.
+        row = nodes["goal_reached"][1]
+        xs = [x for x, _ in nodes.values()]
+        corner = await screen_point(page, min(xs) - 30, min(y for _, y in nodes.values()) - 30)
+        other = await screen_point(page, max(xs) + 30, row + 5)
+        inside = {n for n, (_, y) in nodes.items() if y <= row + 5}
+        assert 1 < len(inside) < len(nodes)
+        await page.keyboard.down("Shift")
+        await page.mouse.move(corner["x"], corner["y"])
+        await page.mouse.down()
+        await page.mouse.move(other["x"], other["y"], steps=5)
+        await expect(canvas.locator("rect.band")).to_be_visible()
+        await page.mouse.up()
+        await page.keyboard.up("Shift")
+        await expect(canvas.locator("rect.band")).to_have_count(0)
+        selected = canvas.locator("g.net-node.selected")
+        await expect(selected).to_have_count(len(inside))
+        assert {await g.get_attribute("data-id") for g in await selected.all()} == inside
+        await expect(page.locator("#notices")).to_contain_text(f"{len(inside)} node(s) selected")
+        await page.get_by_role("button", name=f"Delete {len(inside)} nodes").click()
+        await expect(canvas.locator("g.net-node")).to_have_count(len(nodes) - len(inside))
+        await web.axe_check(page)

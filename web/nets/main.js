@@ -104,6 +104,12 @@ async function start({ me, vocabulary }) {
   const canvas = new NetCanvas($("canvas"), {
     select,
     toggle,
+    /** A rubber band: the nodes inside it become the selection (moved, copied, deleted together). */
+    selectMany(ids) {
+      ui.group = new Set(ids);
+      ui.selected = null;
+      say(ids.length ? `${ids.length} node(s) selected: ${ids.join(", ")}.` : "No node inside the band.");
+    },
     add(tool, x, y) {
       const kind = tool === "place" ? "place" : "transition";
       const id = model.freshId(kind === "place" ? "p" : "t");
@@ -493,7 +499,7 @@ async function start({ me, vocabulary }) {
       <button type="button" class="secondary small" ?disabled=${!ui.clipboard} @click=${paste}>Paste</button>
       ${ui.group.size > 1 ? html`<button type="button" class="danger small" @click=${() => remove("place", [...ui.group][0])}>Delete ${ui.group.size} nodes</button>`
         : ui.selected && ui.selected.kind !== "net" ? html`<button type="button" class="danger small" @click=${() => remove(ui.selected.kind, ui.selected.id)}>Delete ${ui.selected.kind} ${ui.selected.id}</button>` : nothing}
-      <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it (Shift+click selects several); drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
+      <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it (Shift+click selects several, Shift+drag the background selects those inside); drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
     for (const id of [...ui.group]) if (!model.node(id)) ui.group.delete(id);
     const live = !ui.run && attachment.instance?.net === doc.id && !attachment.ended;
     canvas.draw(doc, { tool: ui.tool, selected: ui.selected, group: ui.group, problems: byElement, readOnly,
