@@ -45,10 +45,14 @@ async def test_edit_a_library_net_see_a_problem_come_and_go_and_export_it(
         canvas = page.locator("#canvas svg")
         await expect(canvas.locator("g.net-node")).to_have_count(10)
         await web.axe_check(page)
-        # A new place, away from the drawing.
+        # A new place, left of and above the first transition: its arc into it crosses no node
+        # and no label (the screenshot nets-problem shows it).
+        await page.get_by_role("button", name="Zoom out").click()  # room on the left
         await page.get_by_label("Add place").check()
-        right = await page.evaluate("Math.max(...guidebotNets.model.doc.places.map(p => p.x))")
-        await click_at(page, right + 120, 200)
+        at = await page.evaluate(
+            "[guidebotNets.model.doc.transitions[0].x, guidebotNets.model.doc.transitions[0].y]"
+        )
+        await click_at(page, at[0] - 100, at[1] - 60)
         new_place = canvas.locator('g[data-id="p1"]')
         await expect(new_place).to_be_visible()
         # An arc from it into the first transition: that transition can never fire now.
