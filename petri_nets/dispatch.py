@@ -167,6 +167,15 @@ class Dispatch:
             out.append(item)
         return out
 
+    def awaited(self) -> list[dict[str, Any]]:
+        """What every running instance waits for: instance_id, net, transition, type and the
+        payload fields it matches (``Instance.awaited``)."""
+        return [
+            {"instance_id": i.id, "net": i.net.name, **waiting}
+            for i in self._instances.values()
+            for waiting in i.awaited()
+        ]
+
     def debug(self, request: PetriNetDebug) -> bool:
         """Breakpoints, step or resume on one instance (False: no such instance, or a step or
         resume of one not paused). Breakpoints go after ``lease_s`` unless renewed."""

@@ -549,6 +549,24 @@ class Instance:
 
     # ---------------------------------------------------------------- views
 
+    def awaited(self) -> list[dict[str, Any]]:
+        """The messages the instance waits for now: each enabled message transition with its
+        type and the field values it must carry (a simulation offers them as replies)."""
+        net = self.net
+        out = []
+        for type_, transitions in net.by_type.items():
+            for t in transitions:
+                if not self._enabled_any(t):
+                    continue
+                payload: dict[str, Any] = {}
+                for field, value in net.conditions[t].matches:
+                    try:
+                        payload[field] = value(self.env)
+                    except TemplateError:
+                        continue  # a variable not set yet: any value does
+                out.append({"transition": net.trans_ids[t], "type": type_, "payload": payload})
+        return out
+
     def marking(self) -> dict[str, int]:
         """Marks per place id (places with marks only)."""
         return {pid: m for pid, m in zip(self.net.place_ids, self.marks, strict=True) if m}

@@ -50,7 +50,12 @@ from petri_nets.netjson import (
     pnml_to_editor,
 )
 from petri_nets.reachability import DEFAULT_MAX_STATES, analyse
-from petri_nets.simulate import MAX_SIMULATED_FIRINGS, SimulationRefused, simulate
+from petri_nets.simulate import (
+    MAX_SIMULATED_FIRINGS,
+    SimulationRefused,
+    simulate,
+    simulate_stepwise,
+)
 from petri_nets.validate import NET_OUTCOMES
 
 __all__ = ["MAX_PNML_BYTES", "router"]
@@ -148,6 +153,9 @@ class Simulation(RequestBody):
     """Per message type, the replies instead of the default ones (``[]``: never answered)."""
     max_time: float = Field(default=3600.0, gt=0, le=86_400)
     max_firings: int = Field(default=MAX_SIMULATED_FIRINGS, ge=1, le=MAX_SIMULATED_FIRINGS)
+    chosen: list[dict[str, Any]] | None = Field(default=None, max_length=10_000)
+    """Replies chosen one at a time (``{"type", "payload"}``, or ``{"wait": true}``: to the
+    next timer) instead of the scripted ones: the answer says what the net waits for next."""
 
 
 @router.post("/simulate")
@@ -163,6 +171,25 @@ async def simulate_net(
                 f'replies to {message_type}: each reply needs a "type"',
             )
     library: NetLibrary = request.app.state.rgm.library
+    if body.chosen is not None:
+        for choice in body.chosen:
+            if choice.get("wait") is not True and not isinstance(choice.get("type"), str):
+                raise HTTPException(
+                    status.HTTP_422_UNPROCESSABLE_CONTENT,
+                    'each chosen reply needs a "type" (or "wait": true)',
+                )
+        try:
+            return await asyncio.to_thread(
+                simulate_stepwise,
+                body.net,
+                body.params,
+                body.chosen,
+                library.folder,
+                max_firings=body.max_firings,
+                published=library.installed,
+            )
+        except SimulationRefused as exc:
+            raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc)) from None
     try:
         return await asyncio.to_thread(
             simulate,

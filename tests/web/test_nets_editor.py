@@ -369,3 +369,35 @@ async def test_a_rubber_band_selects_the_nodes_inside_it(
         await page.get_by_role("button", name=f"Delete {len(inside)} nodes").click()
         await expect(canvas.locator("g.net-node")).to_have_count(len(nodes) - len(inside))
         await web.axe_check(page)
+
+
+async def test_choose_each_reply_while_simulating(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_label("Library net").select_option("explain_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await page.get_by_label("Parameters (JSON object)").fill('{"text": "Hello"}')
+        await page.get_by_label("Choose each reply myself").check()
+        await page.get_by_role("button", name="Run simulation").click()
+        waiting = page.get_by_role("group", name=re.compile("The net waits"))
+        await expect(waiting).to_contain_text("people_faced (face_people: people_faced)")
+        # No visitor turns up: time passes to face_people's time-out, and it goes on.
+        await waiting.get_by_role("button", name="Let time pass to 10.0 s").click()
+        await expect(waiting).to_contain_text("The net waits (at 10.0 s)")
+        await expect(waiting).to_contain_text("speech_ended (explain_point: text_spoken)")
+        synthesize = page.locator('#canvas g[data-id="synthesize_text"]')
+        await expect(synthesize).to_have_attribute("aria-label", re.compile(r"1 token\(s\)"))
+        await web.axe_check(page)
+        await waiting.get_by_role("button", name=re.compile("^speech_ended")).click()
+        # rest_expression waits for each servo: answered one by one, in any order.
+        servo = waiting.get_by_role("button", name=re.compile("^servo_in_position"))
+        await expect(servo).to_have_count(3)
+        for left in (2, 1):
+            await servo.last.click()
+            await expect(servo).to_have_count(left)
+        await servo.click()
+        await expect(page.locator("#sim-status")).to_contain_text("outcome done")
+        await expect(waiting).to_have_count(0)
+        await expect(page.locator("#notices")).to_contain_text("outcome done")

@@ -83,7 +83,7 @@ async function start({ me, vocabulary }) {
   const model = new NetModel(api);
   const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary, libraryNet: "",
     group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null,
-    versions: null, diff: null, mayDebug: vocabulary.may_publish };
+    versions: null, diff: null, mayDebug: vocabulary.may_publish, stepwise: null };
   window.guidebotNets = ui; // for the browser tests
   ui.draw = () => draw();
   api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
@@ -221,6 +221,19 @@ async function start({ me, vocabulary }) {
     ui.run = null;
   }
 
+  /** One run with the replies chosen so far: drawn at its last step. */
+  async function runChosen() {
+    const { params, chosen } = ui.stepwise;
+    try {
+      ui.run = new Run(await api.post("/api/net-editor/simulate", { net: model.doc, params, chosen }));
+      ui.run.at = ui.run.steps.length - 1;
+      const outcome = ui.run.result.outcome;
+      say(outcome === "waiting" ? `${chosen.length} repl${chosen.length === 1 ? "y" : "ies"} chosen: the net waits for the next.` : `Simulated with the replies chosen: outcome ${outcome}.`);
+    } catch (err) {
+      say(`Simulation refused: ${err.message}`, true);
+    }
+  }
+
   const simulation = {
     async start(form) {
       stopSimulating();
@@ -234,12 +247,21 @@ async function start({ me, vocabulary }) {
       } catch (err) {
         return say(`Simulation refused: ${err.message}`, true);
       }
+      if (form.get("stepwise")) {
+        ui.stepwise = { params, chosen: [] };
+        return runChosen();
+      }
+      ui.stepwise = null;
       try {
         ui.run = new Run(await api.post("/api/net-editor/simulate", { net: model.doc, params, replies }));
         say(`Simulated: ${ui.run.steps.length - 1} step(s), outcome ${ui.run.result.outcome}. Step through it.`);
       } catch (err) {
         say(`Simulation refused: ${err.message}`, true);
       }
+    },
+    choose(reply) {
+      ui.stepwise.chosen.push(reply);
+      return runChosen();
     },
     step() { if (!ui.run.done) ui.run.at += 1; draw(); },
     reset() { ui.run.at = 0; draw(); },
