@@ -65,6 +65,9 @@ router = APIRouter(prefix="/api/net-editor", tags=["net editor"])
 MAX_PNML_BYTES = 2_000_000
 """The largest PNML file the editor opens (the library's largest is under 30 kB)."""
 
+MAX_VERSION = 2**31 - 1
+"""A version number the database's integer column can hold (larger: 422, not a 500)."""
+
 Name = Annotated[str, Path(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.\-]+$")]
 NetAuthor = Annotated[Principal, Depends(require_action("edit_nets"))]
 """Who may publish nets to the fleet and restore old versions (docs/server.md)."""
@@ -297,7 +300,7 @@ async def version(
     _: Staff,
     nets: Publisher,
     net: Name,
-    version: Annotated[int, Path(ge=0)],
+    version: Annotated[int, Path(ge=0, le=MAX_VERSION)],
 ) -> dict[str, Any]:
     """One version of the net as the editor's document (0: the library folder's file)."""
     return await _editor_doc(await _pnml_of(request, nets, net, version), net)
@@ -309,8 +312,8 @@ async def diff(
     _: Staff,
     nets: Publisher,
     net: Name,
-    old: Annotated[int, Query(ge=0)],
-    new: Annotated[int, Query(ge=0)],
+    old: Annotated[int, Query(ge=0, le=MAX_VERSION)],
+    new: Annotated[int, Query(ge=0, le=MAX_VERSION)],
 ) -> dict[str, Any]:
     """What changed from version ``old`` to ``new``, one readable line per element."""
     before = await _editor_doc(await _pnml_of(request, nets, net, old), net)
@@ -328,7 +331,7 @@ async def restore(
     who: NetAuthor,
     nets: Publisher,
     net: Name,
-    version: Annotated[int, Path(ge=0)],
+    version: Annotated[int, Path(ge=0, le=MAX_VERSION)],
     body: Annotated[Restore, Body()],
 ) -> dict[str, Any]:
     """Publish an old version again, as the net's next version (the history only grows)."""

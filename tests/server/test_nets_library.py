@@ -82,6 +82,8 @@ async def test_publish_keeps_every_version_compares_them_and_restores_one(
     assert diff["changes"] == []
     missing = await admin.get("/api/net-editor/versions/explain_point/9")
     assert missing.status_code == 404
+    huge = await admin.get(f"/api/net-editor/versions/explain_point/{2**63}")  # the fuzz's
+    assert huge.status_code == 422
 
 
 async def test_a_net_the_engine_or_the_library_would_not_run_is_refused(
