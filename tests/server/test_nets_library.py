@@ -59,6 +59,14 @@ async def test_publish_keeps_every_version_compares_them_and_restores_one(
     assert reply.status_code == 200, reply.text
     assert reply.json()["version"] == 1 and reply.json()["published_by"] == "admin"
     assert speech_body(await explain_point(admin)) == NEW_WORDS
+    # The editor's simulation runs the published version of a sub-net too.
+    go_to_poi = (await admin.get("/api/net-editor/library/go_to_poi")).json()
+    run = await admin.post(
+        "/api/net-editor/simulate",
+        json={"net": go_to_poi, "params": {"node": "n1", "text": "Look"}},
+    )
+    said = [m["payload"]["text"] for m in run.json()["trace"] if m["type"] == "say"]
+    assert said == ["New words: Look"]
 
     history = (await admin.get("/api/net-editor/versions/explain_point")).json()
     assert history["live"] == 1
