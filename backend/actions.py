@@ -43,6 +43,7 @@ RULES: dict[str, frozenset[Role]] = {
     "plan_path": _ROBOT_OR_OPERATOR,
     "read_metrics": _OPERATOR,  # GET /metrics (or the metrics token)
     "read_reports": _OPERATOR,  # GET /api/reports (docs/reports.md)
+    "edit_nets": frozenset(),  # publish nets to the fleet, restore a version (docs/nets.md)
     "read": _READERS,  # tours, points of interest, the visitor menu, the map, /api/me
     # Actions that arrive over REST and the hub alike
     "task_request": _REQUESTERS | {Role.MODULE},  # POST /api/tasks
@@ -68,6 +69,7 @@ RULES: dict[str, frozenset[Role]] = {
             "petri_net_event",  # markings for the console's RoboGraph monitor
             "robocan_status",  # CAN modules and counters for the console's robot view
             "site_loaded",
+            "nets_loaded",  # which published nets it starts (docs/nets.md, "Publish")
             "get_path",
             "request_area",
             "release_area",
@@ -102,6 +104,7 @@ REST_ONLY = frozenset(
         "plan_path",
         "read_metrics",
         "read_reports",
+        "edit_nets",
         "read",
     }
 )

@@ -52,6 +52,7 @@ from backend.hub import websocket as hub_websocket
 from backend.hub.listener import hub_listener
 from backend.metrics import routes as metrics_routes
 from backend.metrics.component import metrics
+from backend.net_library.component import net_library
 from backend.ratelimit import RateLimiter
 from backend.reports import api as reports_routes
 from backend.rgm import rgm
@@ -75,6 +76,7 @@ COMPONENTS: list[Component] = [
     emergency,
     closures,
     rgm,
+    net_library,
     site_editor,
     console,
     vda5050,

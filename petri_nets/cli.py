@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import IO, Any
 
@@ -13,6 +14,7 @@ import click
 from guidebot.bus import Bus
 from guidebot.messages import Message
 from petri_nets.clock import VirtualClock
+from petri_nets.compiled import CompiledNet
 from petri_nets.dispatch import Dispatch, DispatchError
 from petri_nets.engine import STEP_BUDGET
 from petri_nets.library import DEFAULT_LIBRARY, NetLibrary
@@ -76,14 +78,19 @@ def run_net(
     max_firings: int = MAX_FIRINGS,
     echo: Any = None,
     trace: IO[str] | None = None,
+    installed: Mapping[str, CompiledNet] | None = None,
 ) -> dict[str, Any]:
     """Run one net on a virtual clock against scripted replies; the result of ``petri run``.
+    ``installed``: nets published from the editor, in front of the folder's (the net run
+    itself excepted).
 
     It stops at ``max_time`` virtual seconds or after ``max_firings`` firings of the net and
     its sub-nets (a plain net may loop forever without letting time pass): outcome "running".
     """
     library = NetLibrary(library_folder or path.parent, watch=False)
     name = library.add_file(path)
+    if installed:
+        library.installed = {n: net for n, net in installed.items() if n != name}
     problems = library.problems_of(name)
     if problems:
         raise click.ClickException("\n".join(map(str, problems)))

@@ -5,22 +5,26 @@ petri_net_event (monitoring), and routes incoming messages to the instances wait
 Sub-nets are started in-process (the same as a run_petri_net carrying the parent's id). Main
 tasks run one at a time: the idle net ("waiting" by default) is killed when a main task starts
 and started again when it ends.
+
+A net and its sub-nets run on the library's published nets as they were when the net was
+started (``NetLibrary.installed``, pinned per instance): publishing a new version changes the
+next start, never a task already running.
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from pydantic import ValidationError
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.petri import KillPetriNet, RunPetriNet
-from petri_nets.clock import Clock
-from petri_nets.compiled import missing_params
+from guidebot.payloads.petri import KillPetriNet, PetriNetDebug, RunPetriNet
+from petri_nets.clock import Clock, TimerHandle
+from petri_nets.compiled import CompiledNet, missing_params
 from petri_nets.engine import STEP_BUDGET, Instance
 from petri_nets.library import NetLibrary, UnknownNet
 
@@ -61,6 +65,10 @@ class Dispatch:
         self.max_instances = max_instances
         self.step_budget = step_budget
         self._instances: dict[str, Instance] = {}
+        self._leases: dict[str, TimerHandle] = {}
+        """Instance id -> when its breakpoints go (a debugger that stops renewing them)."""
+        self._pins: dict[Instance, Mapping[str, CompiledNet]] = {}
+        """The published nets each instance starts its sub-nets from."""
         self._waiting: dict[str, dict[Instance, None]] = {}
         self._unsubscribe: dict[str, Callable[[], None]] = {}
         self._own: list[Callable[[], None]] = []
@@ -79,6 +87,7 @@ class Dispatch:
         self._own = [
             self.bus.subscribe("run_petri_net", self._on_run),
             self.bus.subscribe("kill_petri_net", self._on_kill),
+            self.bus.subscribe("petri_net_debug", self._on_debug),
         ]
         self._start_idle()
 
@@ -138,17 +147,69 @@ class Dispatch:
         return len(victims)
 
     def running(self) -> list[dict[str, Any]]:
-        """Every running instance: id, net, main, parent, marking (for GUIs and robot_state)."""
-        return [
-            {
+        """Every running instance: id, net, main, parent, marking (for GUIs and robot_state);
+        ``paused_at`` and ``breakpoints`` while a debugger holds it."""
+        out = []
+        for i in self._instances.values():
+            item: dict[str, Any] = {
                 "instance_id": i.id,
                 "net": i.net.name,
                 "main": i.main,
                 "parent": i.parent.id if i.parent else None,
                 "marking": i.marking(),
             }
+            if i.breakpoints is not None or i.paused_at is not None:
+                ids = i.net.trans_ids
+                item["paused_at"] = None if i.paused_at is None else ids[i.paused_at]
+                item["breakpoints"] = (
+                    sorted(ids[t] for t in i.breakpoints.at) if i.breakpoints else []
+                )
+            out.append(item)
+        return out
+
+    def awaited(self) -> list[dict[str, Any]]:
+        """What every running instance waits for: instance_id, net, transition, type and the
+        payload fields it matches (``Instance.awaited``)."""
+        return [
+            {"instance_id": i.id, "net": i.net.name, **waiting}
             for i in self._instances.values()
+            for waiting in i.awaited()
         ]
+
+    def debug(self, request: PetriNetDebug) -> bool:
+        """Breakpoints, step or resume on one instance (False: no such instance, or a step or
+        resume of one not paused). Breakpoints go after ``lease_s`` unless renewed."""
+        instance = self._instances.get(request.instance_id)
+        if instance is None:
+            return False
+        if request.command == "step":
+            return instance.step()
+        if request.command == "resume":
+            return instance.resume()
+        unknown = instance.set_breakpoints(request.breakpoints)
+        if unknown:
+            log.info("%s: no transition(s) %s to break at", instance.id, ", ".join(unknown))
+        lease = self._leases.pop(instance.id, None)
+        if lease is not None:
+            lease.cancel()
+        if request.breakpoints:
+            self._leases[instance.id] = self.clock.call_later(
+                request.lease_s, lambda: self._lease_over(instance.id)
+            )
+        return True
+
+    def _lease_over(self, instance_id: str) -> None:
+        self._leases.pop(instance_id, None)
+        instance = self._instances.get(instance_id)
+        if instance is not None:
+            log.info("%s: breakpoints not renewed: cleared", instance_id)
+            instance.set_breakpoints([])
+
+    def _on_debug(self, message: Message) -> None:
+        try:
+            self.debug(message.payload_as(PetriNetDebug))
+        except ValidationError as exc:
+            log.warning("petri_net_debug refused: %s", exc)
 
     def get(self, instance_id: str) -> Instance | None:
         return self._instances.get(instance_id)
@@ -224,8 +285,9 @@ class Dispatch:
         instance_id: str | None,
         main: bool,
     ) -> Instance:
+        pin = self.library.installed if parent is None else self._pins.get(parent)
         try:
-            net = self.library.get(net_name)
+            net = self.library.get(net_name, pin)
         except UnknownNet as exc:
             raise DispatchError(f"unknown net {exc.args[0]}") from None
         missing = missing_params(net, params)
@@ -242,6 +304,7 @@ class Dispatch:
             raise DispatchError(f"too many instances ({self.max_instances})")
         instance = Instance(self, net, instance_id, params, parent, main)
         self._instances[instance_id] = instance
+        self._pins[instance] = self.library.installed if pin is None else pin
         for message_type in net.by_type:
             waiting = self._waiting.get(message_type)
             if waiting is None:
@@ -294,6 +357,10 @@ class Dispatch:
 
     def ended(self, instance: Instance) -> None:
         self._instances.pop(instance.id, None)
+        self._pins.pop(instance, None)
+        lease = self._leases.pop(instance.id, None)
+        if lease is not None:
+            lease.cancel()
         for message_type in instance.net.by_type:
             waiting = self._waiting.get(message_type)
             if waiting is not None:

@@ -14,6 +14,10 @@ Rules (docs/petri-nets.md has the long form):
   outcome "failed" if a marked final place says so, else "done". A plain net (another tool's
   PNML) ends when no transition is enabled: "done" in a declared final marking (or when it
   declares none), else "stuck". Ending (or kill) kills all sub-nets.
+- Breakpoints (a debugger attached, docs/nets.md "Attach"): an instance pauses before firing a
+  transition with a breakpoint (the event that enabled it is kept); while paused every event
+  waits in the inbox. ``step`` fires it and pauses before the next firing, ``resume`` fires it
+  and runs to the next breakpoint. Without breakpoints the check is one attribute test.
 - Monitoring costs one list append per firing: the firings of a step are reported together,
   in order, with the new counts of the places they changed, when the step is over or before
   an action runs (so monitors hear of firings before the messages they cause).
@@ -40,6 +44,7 @@ __all__ = [
     "INBOX_LIMIT",
     "REPORT_EVERY",
     "STEP_BUDGET",
+    "Breakpoints",
     "Host",
     "Instance",
     "InstanceState",
@@ -61,6 +66,24 @@ transitions must not freeze the robot)."""
 
 class StateError(RuntimeError):
     """An illegal life-cycle transition; says what was expected."""
+
+
+class Breakpoints:
+    """Where an instance pauses: before the transitions of ``at`` (indexes), or before any
+    firing while ``stepping``; ``passing`` is the transition a step or resume fires anyway."""
+
+    __slots__ = ("at", "passing", "stepping")
+
+    def __init__(self, at: frozenset[int] = frozenset()) -> None:
+        self.at = at
+        self.stepping = False
+        self.passing: int | None = None
+
+    def hit(self, t: int) -> bool:
+        if self.passing == t:
+            self.passing = None
+            return False
+        return self.stepping or t in self.at
 
 
 class InstanceState(enum.Enum):
@@ -131,6 +154,7 @@ class Instance:
         "_inbox",
         "_nonfinal",
         "_trail",
+        "breakpoints",
         "children",
         "cursors",
         "env",
@@ -141,6 +165,7 @@ class Instance:
         "net",
         "outcome",
         "parent",
+        "paused_at",
         "state",
     )
 
@@ -176,6 +201,9 @@ class Instance:
         self.cursors: dict[str, int] = {}
         self.state = InstanceState.CREATED
         self.outcome: str | None = None
+        self.breakpoints: Breakpoints | None = None
+        self.paused_at: int | None = None
+        """The transition the instance is paused before (a breakpoint), or None."""
 
     # ---------------------------------------------------------------- life cycle
 
@@ -217,6 +245,56 @@ class Instance:
         if self.state is not InstanceState.ENDED:
             self._end("killed")
 
+    # ---------------------------------------------------------------- debugging
+
+    def set_breakpoints(self, transitions: list[str]) -> list[str]:
+        """Pause before these transitions (ids; [] clears them and resumes a paused instance).
+        Returns the ids that are not transitions of the net (ignored)."""
+        index = {tid: i for i, tid in enumerate(self.net.trans_ids)}
+        unknown = [t for t in transitions if t not in index]
+        at = frozenset(index[t] for t in transitions if t in index)
+        if not at:
+            self.breakpoints = None
+            if self.paused_at is not None:
+                self._release(stepping=False)
+            return unknown
+        if self.breakpoints is None:
+            self.breakpoints = Breakpoints(at)
+        else:
+            self.breakpoints.at = at
+        return unknown
+
+    def step(self) -> bool:
+        """Fire the transition paused before and pause before the next firing (False: not
+        paused)."""
+        return self._release(stepping=True)
+
+    def resume(self) -> bool:
+        """Fire the transition paused before and run to the next breakpoint."""
+        return self._release(stepping=False)
+
+    def _release(self, *, stepping: bool) -> bool:
+        t = self.paused_at
+        if t is None or self.state is not InstanceState.RUNNING:
+            return False
+        self.paused_at = None
+        if self.breakpoints is None:
+            if stepping:
+                self.breakpoints = Breakpoints()
+        if self.breakpoints is not None:
+            self.breakpoints.stepping = stepping
+            self.breakpoints.passing = t
+        self._post(self._fire_paused, t)
+        return True
+
+    def _fire_paused(self, t: int) -> None:
+        if self._enabled_any(t):
+            self._fire(t)
+        elif self.breakpoints is not None:
+            self.breakpoints.passing = None
+        if self.net.conditions[t].kind in ("immediate", "timer", "guard"):
+            heapq.heappush(self._heap, t)  # fires again if still enabled, as in _settle
+
     def _end(self, outcome: str) -> None:
         self._report_firings()
         self._move(InstanceState.ENDED)
@@ -236,10 +314,10 @@ class Instance:
     # ---------------------------------------------------------------- events
 
     def _post(self, handler: Callable[..., None], *args: Any) -> None:
-        """Handle an event now, or after the current step when busy (reentrancy)."""
+        """Handle an event now, or after the current step when busy (reentrancy) or paused."""
         if self.state is not InstanceState.RUNNING:
             return
-        if self._busy:
+        if self._busy or self.paused_at is not None:
             if len(self._inbox) >= INBOX_LIMIT:
                 dropped = self._inbox.popleft()
                 log.warning("%s: inbox full, dropped the oldest event %r", self.id, dropped[0])
@@ -249,7 +327,7 @@ class Instance:
         try:
             handler(*args)
             self._settle()
-            while self._inbox and self.state is InstanceState.RUNNING:
+            while self._inbox and self.state is InstanceState.RUNNING and self.paused_at is None:
                 handler, args = self._inbox.popleft()
                 handler(*args)
                 self._settle()
@@ -347,6 +425,8 @@ class Instance:
 
     def _settle(self) -> None:
         """Fire enabled immediate transitions, lowest rank first, then check for the end."""
+        if self.paused_at is not None:
+            return
         heap = self._heap
         budget = self.host.step_budget
         while heap and self.state is InstanceState.RUNNING:
@@ -355,6 +435,8 @@ class Instance:
                 heapq.heappop(heap)
             if self._enabled_ready(t):
                 self._fire(t)
+                if self.paused_at is not None:  # a breakpoint: t fires on step or resume
+                    return
                 if self._enabled_any(t):  # enough marks left to fire again
                     heapq.heappush(heap, t)
                 budget -= 1
@@ -372,6 +454,11 @@ class Instance:
             self._end("failed" if failed else "done")
 
     def _fire(self, t: int) -> None:
+        if self.breakpoints is not None and self.breakpoints.hit(t):
+            self.paused_at = t
+            self._report_firings()
+            self.host.event(self, "paused", [self.net.trans_ids[t]], self.marking())
+            return
         net = self.net
         marks = self.marks
         final = net.final
@@ -461,6 +548,24 @@ class Instance:
             self._recheck_guards()
 
     # ---------------------------------------------------------------- views
+
+    def awaited(self) -> list[dict[str, Any]]:
+        """The messages the instance waits for now: each enabled message transition with its
+        type and the field values it must carry (a simulation offers them as replies)."""
+        net = self.net
+        out = []
+        for type_, transitions in net.by_type.items():
+            for t in transitions:
+                if not self._enabled_any(t):
+                    continue
+                payload: dict[str, Any] = {}
+                for field, value in net.conditions[t].matches:
+                    try:
+                        payload[field] = value(self.env)
+                    except TemplateError:
+                        continue  # a variable not set yet: any value does
+                out.append({"transition": net.trans_ids[t], "type": type_, "payload": payload})
+        return out
 
     def marking(self) -> dict[str, int]:
         """Marks per place id (places with marks only)."""

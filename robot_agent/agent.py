@@ -30,6 +30,7 @@ from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
 from robot_agent.metrics import RobotMetrics
 from robot_agent.navigation import Navigator
+from robot_agent.net_sync import NetFollower
 from robot_agent.reaction import ReactionTracker
 from robot_agent.site_sync import SiteFollower
 from robot_agent.speech import Speech
@@ -153,6 +154,7 @@ class RobotAgent(Service):
         self.link: Link | None = None
         self.screen: OnboardScreen | None = None
         self.site_follower: SiteFollower | None = None
+        self.net_follower: NetFollower | None = None
         self.screen_server: ScreenServer | None = None
         self.reaction: ReactionTracker | None = None
         self.metrics: RobotMetrics | None = None
@@ -341,6 +343,11 @@ class RobotAgent(Service):
         )
         await self.enter(follower)
         self.site_follower = follower
+        nets = None
+        if self.dispatch is not None:
+            nets = NetFollower(self.bus.endpoint("nets"), c.name, self.dispatch.library)
+            await self.enter(nets)
+        self.net_follower = nets
         navigator = self.navigator
         assert navigator is not None
 
@@ -348,6 +355,8 @@ class RobotAgent(Service):
             state.publish_now()  # first: the server takes back the areas it holds
             navigator.resync()
             follower.announce()
+            if nets is not None:
+                nets.announce()
 
         self.link = Link(
             self.bus.endpoint("link"),

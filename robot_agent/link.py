@@ -59,6 +59,7 @@ UP_TYPES: tuple[str, ...] = (
     "node_reached",
     "petri_net_ended",
     "site_loaded",
+    "nets_loaded",
     "petri_net_event",
     "robocan_status",
     "evacuation_state",
@@ -89,16 +90,18 @@ DOWN_TYPES: tuple[str, ...] = (
     "elevator_in_position",
     "command_failed",
     "site_changed",
+    "nets_changed",
     "error",
     "kill_petri_net",
+    "petri_net_debug",
     "evacuate",
     "emergency_changed",
     "closures_changed",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
 
-ADDRESSED_ONLY = frozenset({"kill_petri_net"})
-"""Down types taken only when addressed to this robot (staff kill one robot's net)."""
+ADDRESSED_ONLY = frozenset({"kill_petri_net", "petri_net_debug"})
+"""Down types taken only when addressed to this robot (staff kill or debug one robot's net)."""
 
 MAX_PENDING_REPLIES = 1000
 

@@ -49,6 +49,8 @@ class RunningNet:
     started: float
     marking: dict[str, int] = field(default_factory=dict)
     firings: deque[tuple[str, float]] = field(default_factory=lambda: deque(maxlen=LAST_FIRINGS))
+    paused_at: str | None = None
+    """The transition a breakpoint holds it before (the net editor's debugger)."""
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -58,6 +60,7 @@ class RunningNet:
             "started": self.started,
             "marking": dict(self.marking),
             "firings": [{"transition": t, "time": at} for t, at in self.firings],
+            "paused_at": self.paused_at,
         }
 
 
@@ -149,6 +152,7 @@ class ConsoleFeed(Service):
         net.marking.update({str(k): int(v) for k, v in (p.get("marking") or {}).items()})
         if kind == "fired" and p.get("transition"):
             net.firings.append((str(p["transition"]), float(p.get("time") or 0.0)))
+        net.paused_at = str(p["transition"]) if kind == "paused" else None
 
     def running_nets(self, target: str) -> list[dict[str, Any]]:
         return [n.as_dict() for (t, _), n in self.nets.items() if t == target]

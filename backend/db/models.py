@@ -1,17 +1,18 @@
 """Database tables: the site document, tasks, their history, the event log, which robots
-staff took out of service and what staff closed (building modes)."""
+staff took out of service, what staff closed (building modes) and the published nets."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, Float, Index, Integer, String, Text
+from sqlalchemy import JSON, Boolean, Float, Index, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 __all__ = [
     "Base",
     "ClosureRow",
     "EventRow",
+    "NetVersionRow",
     "ReportCursorRow",
     "ReportDayRow",
     "ReportRollupRow",
@@ -44,6 +45,21 @@ class SiteVersionRow(Base):
     __tablename__ = "site_versions"
     version: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
     data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    published_by: Mapped[str] = mapped_column(String(64), default="")
+    published_at: Mapped[float] = mapped_column(Float)
+    note: Mapped[str] = mapped_column(Text, default="")
+
+
+class NetVersionRow(Base):
+    """Every net published from the RoboGraph editor (docs/nets.md): the newest version of a
+    net is its live one; ``seq`` orders publications across nets (the library's version)."""
+
+    __tablename__ = "net_versions"
+    __table_args__ = (UniqueConstraint("net", "version", name="uq_net_versions_net_version"),)
+    seq: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
+    net: Mapped[str] = mapped_column(String(100), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    pnml: Mapped[str] = mapped_column(Text)
     published_by: Mapped[str] = mapped_column(String(64), default="")
     published_at: Mapped[float] = mapped_column(Float)
     note: Mapped[str] = mapped_column(Text, default="")

@@ -9,6 +9,7 @@ from guidebot.payloads import (  # noqa: F401
     console,
     emergency,
     hub,
+    nets,
     petri,
     robot,
     site,

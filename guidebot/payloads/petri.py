@@ -13,6 +13,7 @@ __all__ = [
     "ContinueAnswer",
     "KillPetriNet",
     "MoveServos",
+    "PetriNetDebug",
     "PetriNetEnded",
     "PetriNetEvent",
     "RunPetriNet",
@@ -50,15 +51,29 @@ class PetriNetEnded(PayloadModel):
 class PetriNetEvent(PayloadModel):
     """Monitoring: "started" carries the whole marking; "fired" the firings of one step in
     order (``transitions``; ``transition`` is the last) and the new counts of the places they
-    changed."""
+    changed; "paused": a breakpoint holds the instance before ``transition`` (whole marking)."""
 
     instance_id: str
     net: str
-    kind: Literal["started", "fired", "ended"]
+    kind: Literal["started", "fired", "paused", "ended"]
     transition: str | None = None
     transitions: list[str] = Field(default_factory=list)
     marking: dict[str, int] = Field(default_factory=dict)
     time: float
+
+
+@register_payload("petri_net_debug")
+class PetriNetDebug(PayloadModel):
+    """A debugger attached to a running instance (docs/nets.md, "Attach"): ``break`` sets its
+    breakpoints (transition ids; [] clears them and lets it go on) for ``lease_s`` seconds of
+    the dispatch's clock, renewed by the next ``break`` (a page that closes stops renewing:
+    its breakpoints go); ``step`` fires the transition it is paused before and pauses before
+    the next firing; ``resume`` fires it and runs to the next breakpoint."""
+
+    instance_id: str = Field(min_length=1, max_length=200)
+    command: Literal["break", "step", "resume"]
+    breakpoints: list[str] = Field(default_factory=list, max_length=1000)
+    lease_s: float = Field(default=30.0, gt=0, le=3600)
 
 
 @register_payload("move_servos")

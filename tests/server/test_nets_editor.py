@@ -272,3 +272,31 @@ async def test_bend_points_go_out_and_come_back(server: RunningServer, http: Htt
     )
     arcs = r.json()["net"]["arcs"]
     assert [a["points"] for a in arcs] == [[[80, 60], [80, 90]], []]
+
+
+async def test_simulate_with_the_replies_chosen_one_at_a_time(
+    server: RunningServer, http: Http
+) -> None:
+    """Nothing answers but the replies chosen: the answer says what the net waits for."""
+    admin = http(server.admin_token)
+    first = await admin.post("/api/net-editor/simulate", json={"net": small_net(), "chosen": []})
+    assert first.status_code == 200, first.text
+    result = first.json()
+    assert result["outcome"] == "waiting" and result["next_timer"] is None
+    assert result["waiting_for"] == [
+        {
+            "instance_id": "small#run",
+            "net": "small",
+            "transition": "go",
+            "type": "speech_ended",
+            "payload": {},
+        }
+    ]
+    assert [m["type"] for m in result["trace"] if m["source"] == "dispatch"].count("say") == 1
+    chosen = [{"type": "speech_ended", "payload": {"text": "hello"}}]
+    done = await admin.post("/api/net-editor/simulate", json={"net": small_net(), "chosen": chosen})
+    assert done.json()["outcome"] == "done" and done.json()["waiting_for"] == []
+    bad = await admin.post(
+        "/api/net-editor/simulate", json={"net": small_net(), "chosen": [{"payload": {}}]}
+    )
+    assert bad.status_code == 422 and "type" in bad.json()["detail"]

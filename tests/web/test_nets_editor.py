@@ -45,10 +45,14 @@ async def test_edit_a_library_net_see_a_problem_come_and_go_and_export_it(
         canvas = page.locator("#canvas svg")
         await expect(canvas.locator("g.net-node")).to_have_count(10)
         await web.axe_check(page)
-        # A new place, away from the drawing.
+        # A new place, left of and above the first transition: its arc into it crosses no node
+        # and no label (the screenshot nets-problem shows it).
+        await page.get_by_role("button", name="Zoom out").click()  # room on the left
         await page.get_by_label("Add place").check()
-        right = await page.evaluate("Math.max(...guidebotNets.model.doc.places.map(p => p.x))")
-        await click_at(page, right + 120, 200)
+        at = await page.evaluate(
+            "[guidebotNets.model.doc.transitions[0].x, guidebotNets.model.doc.transitions[0].y]"
+        )
+        await click_at(page, at[0] - 100, at[1] - 60)
         new_place = canvas.locator('g[data-id="p1"]')
         await expect(new_place).to_be_visible()
         # An arc from it into the first transition: that transition can never fire now.
@@ -106,8 +110,11 @@ async def test_an_operator_reads_a_net_without_editing_tools(
         await page.get_by_label("Library net").select_option("give_tour")
         await page.get_by_role("button", name="Open", exact=True).click()
         await expect(page.locator("#canvas g.net-node").first).to_be_visible()
-        await expect(page.get_by_text("Read only: administrators edit nets.")).to_be_visible()
+        await expect(page.get_by_text("Read only: your role may not publish nets.")).to_be_visible()
         await expect(page.get_by_label("Add place")).to_have_count(0)
+        # The versions are there to read; publishing and restoring are not.
+        await expect(page.get_by_role("heading", name="Versions of give_tour")).to_be_visible()
+        await expect(page.get_by_role("button", name=re.compile("^Publish"))).to_have_count(0)
         await (
             page.locator("#lists")
             .get_by_role("button", name="give_tour (parameters, description)")
@@ -327,3 +334,70 @@ async def test_select_several_copy_paste_move_and_delete_them_together(
         await page.get_by_role("button", name="Zoom in").click()
         await page.get_by_role("button", name="Fit").click()
         await web.axe_check(page)
+
+
+async def test_a_rubber_band_selects_the_nodes_inside_it(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_label("Library net").select_option("navigate_to_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        canvas = page.locator("#canvas svg")
+        await expect(canvas.locator("g.net-node")).to_have_count(5)
+        doc = await page.evaluate("guidebotNets.model.doc")
+        nodes = {n["id"]: (n["x"], n["y"]) for n in doc["places"] + doc["transitions"]}
+        # A band over the upper part of the drawing: down to the transitions' row.
+        row = nodes["goal_reached"][1]
+        xs = [x for x, _ in nodes.values()]
+        corner = await screen_point(page, min(xs) - 30, min(y for _, y in nodes.values()) - 30)
+        other = await screen_point(page, max(xs) + 30, row + 5)
+        inside = {n for n, (_, y) in nodes.items() if y <= row + 5}
+        assert 1 < len(inside) < len(nodes)
+        await page.keyboard.down("Shift")
+        await page.mouse.move(corner["x"], corner["y"])
+        await page.mouse.down()
+        await page.mouse.move(other["x"], other["y"], steps=5)
+        await expect(canvas.locator("rect.band")).to_be_visible()
+        await page.mouse.up()
+        await page.keyboard.up("Shift")
+        await expect(canvas.locator("rect.band")).to_have_count(0)
+        selected = canvas.locator("g.net-node.selected")
+        await expect(selected).to_have_count(len(inside))
+        assert {await g.get_attribute("data-id") for g in await selected.all()} == inside
+        await expect(page.locator("#notices")).to_contain_text(f"{len(inside)} node(s) selected")
+        await page.get_by_role("button", name=f"Delete {len(inside)} nodes").click()
+        await expect(canvas.locator("g.net-node")).to_have_count(len(nodes) - len(inside))
+        await web.axe_check(page)
+
+
+async def test_choose_each_reply_while_simulating(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
+        await page.get_by_label("Library net").select_option("explain_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await page.get_by_label("Parameters (JSON object)").fill('{"text": "Hello"}')
+        await page.get_by_label("Choose each reply myself").check()
+        await page.get_by_role("button", name="Run simulation").click()
+        waiting = page.get_by_role("group", name=re.compile("The net waits"))
+        await expect(waiting).to_contain_text("people_faced (face_people: people_faced)")
+        # No visitor turns up: time passes to face_people's time-out, and it goes on.
+        await waiting.get_by_role("button", name="Let time pass to 10.0 s").click()
+        await expect(waiting).to_contain_text("The net waits (at 10.0 s)")
+        await expect(waiting).to_contain_text("speech_ended (explain_point: text_spoken)")
+        synthesize = page.locator('#canvas g[data-id="synthesize_text"]')
+        await expect(synthesize).to_have_attribute("aria-label", re.compile(r"1 token\(s\)"))
+        await web.axe_check(page)
+        await waiting.get_by_role("button", name=re.compile("^speech_ended")).click()
+        # rest_expression waits for each servo: answered one by one, in any order.
+        servo = waiting.get_by_role("button", name=re.compile("^servo_in_position"))
+        await expect(servo).to_have_count(3)
+        for left in (2, 1):
+            await servo.last.click()
+            await expect(servo).to_have_count(left)
+        await servo.click()
+        await expect(page.locator("#sim-status")).to_contain_text("outcome done")
+        await expect(waiting).to_have_count(0)
+        await expect(page.locator("#notices")).to_contain_text("outcome done")

@@ -1,6 +1,7 @@
 // The drawing: places, transitions and arcs in SVG at their positions, problems marked on their
-// element, zoom (wheel) and pan (drag the background). Tools: select and move, add place, add
-// transition, add arc (click its source, then its target). Events go to the page's handlers.
+// element, zoom (wheel) and pan (drag the background). Tools: select and move (Shift+drag the
+// background: a rubber band selects the nodes inside it), add place, add transition, add arc
+// (click its source, then its target). Events go to the page's handlers.
 import { html, render, svg } from "lit-html";
 
 export const PLACE_R = 16;
@@ -37,6 +38,7 @@ export class NetCanvas {
     this.fitted = null;
     this.drag = null;
     this.pending = null; // the source of an arc being drawn
+    this.band = null; // the rubber band being drawn: {x, y, w, h} in the drawing's units
     host.addEventListener("wheel", (e) => this.zoom(e), { passive: false });
   }
 
@@ -93,6 +95,12 @@ export class NetCanvas {
     const background = (e) => {
       if (e.target !== e.currentTarget && !e.target.classList.contains("bg")) return;
       const p = this.point(e);
+      if (tool === "select" && e.shiftKey && !readOnly) {
+        this.drag = { band: true, from: p };
+        this.band = { x: p.x, y: p.y, w: 0, h: 0 };
+        e.currentTarget.setPointerCapture?.(e.pointerId);
+        return;
+      }
       if (readOnly || tool === "select" || tool === "arc") {
         this.pending = null;
         this.drag = { pan: true, start: { x: e.clientX, y: e.clientY }, view: { ...this.view }, moved: false };
@@ -121,6 +129,12 @@ export class NetCanvas {
     const move = (e) => {
       const d = this.drag;
       if (!d) return;
+      if (d.band) {
+        const at = this.point(e);
+        this.band = { x: Math.min(at.x, d.from.x), y: Math.min(at.y, d.from.y), w: Math.abs(at.x - d.from.x), h: Math.abs(at.y - d.from.y) };
+        this.redraw();
+        return;
+      }
       if (d.pan) {
         this.view.x = d.view.x - (e.clientX - d.start.x) / this.view.scale;
         this.view.y = d.view.y - (e.clientY - d.start.y) / this.view.scale;
@@ -146,6 +160,13 @@ export class NetCanvas {
     const up = () => {
       const d = this.drag;
       this.drag = null;
+      if (d?.band) {
+        const b = this.band;
+        this.band = null;
+        const inside = [...byId.values()].filter((n) => n.x >= b.x && n.x <= b.x + b.w && n.y >= b.y && n.y <= b.y + b.h);
+        this.handlers.selectMany(inside.map((n) => n.id));
+        return;
+      }
       if (d?.bend) {
         if (d.moved) this.handlers.bend(d.arc, (points) => { points[d.index] = [d.x, d.y]; });
         return;
@@ -221,6 +242,7 @@ export class NetCanvas {
       <defs><marker id="arrow" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" markerHeight="7" orient="auto-start-reverse">
         <path d="M 0 0 L 10 5 L 0 10 z" fill="#444"></path></marker></defs>
       <rect class="bg" x=${this.view.x - 5000} y=${this.view.y - 5000} width="20000" height="20000" fill="transparent"></rect>
-      ${arcs}${nodes}</svg>`, this.host);
+      ${arcs}${nodes}
+      ${this.band ? svg`<rect class="band" x=${this.band.x} y=${this.band.y} width=${this.band.w} height=${this.band.h}></rect>` : null}</svg>`, this.host);
   }
 }

@@ -1,17 +1,30 @@
 // The RoboGraph editor (/nets/, docs/nets.md): open a library net or a PNML file, draw and edit
-// it, checked by the engine's rules as you edit, export it as PNML. Admins edit; operators read.
+// it, checked by the engine's rules as you edit, export it as PNML, publish it to the fleet.
+// Who may publish (the server's edit_nets rule) edits; other staff read.
 import { html, nothing, render } from "lit-html";
 import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { NetCanvas } from "/nets/canvas.js";
 import { detailsForm } from "/nets/forms.js";
+import { Attachment, attachPanel } from "/nets/attach.js";
+import { libraryPanel } from "/nets/library.js";
 import { NetModel, emptyNet } from "/nets/model.js";
 import { Run, defaultParams, parseReplies, simulationPanel } from "/nets/simulation.js";
 
 const $ = (id) => document.getElementById(id);
-const STAFF = ["admin", "operator"];
 let token = currentToken();
 const api = new Api(() => token);
+
+/** The token's name and role, and the editor's vocabulary (which says whether it may publish);
+ * an Error when the token is unknown or not staff's. */
+async function whoAndWhat() {
+  const me = await api.get("/api/me").catch((err) => err);
+  if (me instanceof Error) return me;
+  const vocabulary = await api.get("/api/net-editor/vocabulary").catch((err) => err);
+  if (vocabulary instanceof ApiError && vocabulary.status === 403) return new Error(`This token belongs to ${me.name} (role ${me.role}); the editor is for staff.`);
+  if (vocabulary instanceof Error) return vocabulary;
+  return { me, vocabulary };
+}
 
 function showSignIn(message = "") {
   $("editor").hidden = true;
@@ -20,16 +33,15 @@ function showSignIn(message = "") {
   const submit = async (event) => {
     event.preventDefault();
     token = new FormData(event.target).get("token").trim();
-    const me = await api.get("/api/me").catch((err) => err);
-    if (me instanceof Error || !STAFF.includes(me.role)) {
-      const why = me instanceof Error ? me.message : `This token belongs to ${me.name} (role ${me.role}); the editor is for staff.`;
+    const known = await whoAndWhat();
+    if (known instanceof Error) {
       token = null;
-      return showSignIn(why);
+      return showSignIn(known.message);
     }
     saveToken(token);
-    start(me);
+    start(known);
   };
-  render(html`<h2>Sign in</h2><p>Administrators edit nets; operators read them.</p>
+  render(html`<h2>Sign in</h2><p>Those who may publish nets edit them; other staff read them.</p>
     <form @submit=${submit}><label>Staff token <input name="token" type="password" autocomplete="current-password" required></label>
     <button type="submit">Sign in</button></form>
     ${message ? html`<p class="notice error" role="alert">${message}</p>` : ""}`, section);
@@ -38,13 +50,13 @@ function showSignIn(message = "") {
 
 async function boot() {
   if (!token) return showSignIn();
-  const me = await api.get("/api/me").catch((err) => err);
-  if (me instanceof Error || !STAFF.includes(me.role)) {
+  const known = await whoAndWhat();
+  if (known instanceof Error) {
     forgetToken();
     token = null;
-    return showSignIn(me instanceof Error ? me.message : "The editor is for staff.");
+    return showSignIn(known.message);
   }
-  start(me);
+  start(known);
 }
 
 /** A request whose body is a file: rest.js sends JSON only. */
@@ -64,14 +76,16 @@ async function sendFile(path, body) {
   return data;
 }
 
-async function start(me) {
+async function start({ me, vocabulary }) {
   $("signin").hidden = true;
   $("editor").hidden = false;
-  const readOnly = me.role !== "admin";
+  const readOnly = !vocabulary.may_publish;
   const model = new NetModel(api);
-  const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary: null, libraryNet: "",
-    group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null };
+  const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary, libraryNet: "",
+    group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null,
+    versions: null, diff: null, mayDebug: vocabulary.may_publish, stepwise: null };
   window.guidebotNets = ui; // for the browser tests
+  ui.draw = () => draw();
   api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
   const select = (kind, id) => {
@@ -90,6 +104,12 @@ async function start(me) {
   const canvas = new NetCanvas($("canvas"), {
     select,
     toggle,
+    /** A rubber band: the nodes inside it become the selection (moved, copied, deleted together). */
+    selectMany(ids) {
+      ui.group = new Set(ids);
+      ui.selected = null;
+      say(ids.length ? `${ids.length} node(s) selected: ${ids.join(", ")}.` : "No node inside the band.");
+    },
     add(tool, x, y) {
       const kind = tool === "place" ? "place" : "transition";
       const id = model.freshId(kind === "place" ? "p" : "t");
@@ -201,6 +221,19 @@ async function start(me) {
     ui.run = null;
   }
 
+  /** One run with the replies chosen so far: drawn at its last step. */
+  async function runChosen() {
+    const { params, chosen } = ui.stepwise;
+    try {
+      ui.run = new Run(await api.post("/api/net-editor/simulate", { net: model.doc, params, chosen }));
+      ui.run.at = ui.run.steps.length - 1;
+      const outcome = ui.run.result.outcome;
+      say(outcome === "waiting" ? `${chosen.length} repl${chosen.length === 1 ? "y" : "ies"} chosen: the net waits for the next.` : `Simulated with the replies chosen: outcome ${outcome}.`);
+    } catch (err) {
+      say(`Simulation refused: ${err.message}`, true);
+    }
+  }
+
   const simulation = {
     async start(form) {
       stopSimulating();
@@ -214,12 +247,21 @@ async function start(me) {
       } catch (err) {
         return say(`Simulation refused: ${err.message}`, true);
       }
+      if (form.get("stepwise")) {
+        ui.stepwise = { params, chosen: [] };
+        return runChosen();
+      }
+      ui.stepwise = null;
       try {
         ui.run = new Run(await api.post("/api/net-editor/simulate", { net: model.doc, params, replies }));
         say(`Simulated: ${ui.run.steps.length - 1} step(s), outcome ${ui.run.result.outcome}. Step through it.`);
       } catch (err) {
         say(`Simulation refused: ${err.message}`, true);
       }
+    },
+    choose(reply) {
+      ui.stepwise.chosen.push(reply);
+      return runChosen();
     },
     step() { if (!ui.run.done) ui.run.at += 1; draw(); },
     reset() { ui.run.at = 0; draw(); },
@@ -247,10 +289,106 @@ async function start(me) {
       model.open(await api.get(`/api/net-editor/library/${encodeURIComponent(name)}`));
       opened();
       say(`Net ${name} opened from the library.`);
+      await loadVersions(name);
     } catch (err) {
       say(err.message, true);
     }
   }
+
+  /** The open net's published versions (none: a net the library does not have yet). */
+  async function loadVersions(name) {
+    ui.diff = null;
+    try {
+      ui.versions = await api.get(`/api/net-editor/versions/${encodeURIComponent(name)}`);
+    } catch (err) {
+      if (!(err instanceof ApiError && err.status === 404)) say(err.message, true);
+      ui.versions = null;
+    }
+    draw();
+  }
+
+  const attachment = new Attachment(api, token, () => draw());
+  ui.attachment = attachment;
+  const attaching = {
+    async list() {
+      try { await attachment.list(); } catch (err) { say(err.message, true); }
+    },
+    async attach(item) {
+      try {
+        if (model.doc?.id !== item.net) {
+          model.open(await api.get(`/api/net-editor/library/${encodeURIComponent(item.net)}`));
+          opened();
+          await loadVersions(item.net);
+        }
+        ui.libraryNet = item.net;
+        stopSimulating();
+        await attachment.attach(item);
+        say(`Attached to ${item.instance_id} on ${attachment.target}: its live marking is drawn.`);
+      } catch (err) {
+        say(err.message, true);
+      }
+    },
+    async toggle(transition) {
+      try { await attachment.toggle(transition); } catch (err) { say(`Breakpoint refused: ${err.message}`, true); }
+    },
+    async step() {
+      try { await attachment.step(); } catch (err) { say(err.message, true); }
+    },
+    async resume() {
+      try { await attachment.resume(); } catch (err) { say(err.message, true); }
+    },
+    async kill() {
+      try { await attachment.kill(); say(`${attachment.instance.instance_id} killed.`); } catch (err) { say(err.message, true); }
+    },
+    async detach() {
+      await attachment.detach();
+      say("Detached: its breakpoints are cleared.");
+    },
+  };
+
+  const versionsPath = (v) => `/api/net-editor/versions/${encodeURIComponent(ui.versions.net)}/${v}`;
+  const library = {
+    async publish(form) {
+      const name = model.doc.id;
+      try {
+        const saved = await api.post("/api/net-editor/publish", { net: model.doc, note: form.get("note") ?? "" });
+        ui.library = await api.get("/api/nets");
+    await attachment.loadTargets();
+        ui.libraryNet = name;
+        await loadVersions(name);
+        say(`${name} version ${saved.version} published: robots start it at their next task.`);
+      } catch (err) {
+        say(`Not published: ${err.message}`, true);
+      }
+    },
+    async open(version) {
+      try {
+        model.open(await api.get(versionsPath(version)));
+        opened();
+        say(`${ui.versions.net} version ${version} opened${version === ui.versions.live ? "" : " (not the live one: publish it, or restore it, to put it back to work)"}.`);
+      } catch (err) {
+        say(err.message, true);
+      }
+    },
+    async compare(old, current) {
+      try {
+        ui.diff = await api.get(`/api/net-editor/diff/${encodeURIComponent(ui.versions.net)}?old=${old}&new=${current}`);
+        draw();
+      } catch (err) {
+        say(err.message, true);
+      }
+    },
+    async restore(version) {
+      const name = ui.versions.net;
+      try {
+        const saved = await api.post(`/api/net-editor/restore/${encodeURIComponent(name)}/${version}`, {});
+        await openLibrary(name);
+        say(`${name} version ${version} restored as version ${saved.version}: robots start it at their next task.`);
+      } catch (err) {
+        say(`Not restored: ${err.message}`, true);
+      }
+    },
+  };
 
   /** Open a PNML file's text (the file input's, or the benchmark's); resolves once it is
    * drawn and checked. */
@@ -366,14 +504,14 @@ async function start(me) {
     render(ui.notice ? html`<div class=${`notice ${ui.notice.error ? "error" : "ok"}`} role=${ui.notice.error ? "alert" : "status"}>${ui.notice.text}</div>` : nothing, $("notices"));
     if (!doc) {
       render(html`<p class="muted">Open a net of the library or a PNML file${readOnly ? "" : ", or start a new net"}.</p>`, $("lists"));
-      render(nothing, $("details"));
+      render(attachPanel(ui, attachment, attaching), $("details"));
       return;
     }
     render(elementList(doc, byElement), $("lists"));
     const zoom = html`<span class="zoom"><button type="button" class="secondary small" aria-label="Zoom in" @click=${() => canvas.zoomBy(1.25)}>+</button>
       <button type="button" class="secondary small" aria-label="Zoom out" @click=${() => canvas.zoomBy(0.8)}>−</button>
       <button type="button" class="secondary small" @click=${() => { canvas.fit(model.doc); canvas.redraw(); }}>Fit</button></span>`;
-    render(readOnly ? html`${zoom}<span class="muted">Read only: administrators edit nets.</span>` : html`${zoom}
+    render(readOnly ? html`${zoom}<span class="muted">Read only: your role may not publish nets.</span>` : html`${zoom}
       <fieldset class="tools"><legend class="sr-only">Tool</legend>
         ${[["select", "Select and move"], ["place", "Add place"], ["transition", "Add transition"], ["arc", "Add arc"]].map(([t, label]) => html`
           <label><input type="radio" name="tool" value=${t} .checked=${ui.tool === t}
@@ -383,10 +521,11 @@ async function start(me) {
       <button type="button" class="secondary small" ?disabled=${!ui.clipboard} @click=${paste}>Paste</button>
       ${ui.group.size > 1 ? html`<button type="button" class="danger small" @click=${() => remove("place", [...ui.group][0])}>Delete ${ui.group.size} nodes</button>`
         : ui.selected && ui.selected.kind !== "net" ? html`<button type="button" class="danger small" @click=${() => remove(ui.selected.kind, ui.selected.id)}>Delete ${ui.selected.kind} ${ui.selected.id}</button>` : nothing}
-      <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it (Shift+click selects several); drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
+      <span class="muted">${ui.tool === "arc" ? "Click the arc's source, then its target." : ui.tool === "select" ? "Drag a node to move it (Shift+click selects several, Shift+drag the background selects those inside); drag the background to pan; the wheel zooms." : "Click the drawing where it goes."}</span>`, $("toolbar"));
     for (const id of [...ui.group]) if (!model.node(id)) ui.group.delete(id);
+    const live = !ui.run && attachment.instance?.net === doc.id && !attachment.ended;
     canvas.draw(doc, { tool: ui.tool, selected: ui.selected, group: ui.group, problems: byElement, readOnly,
-      marking: ui.run?.marking() ?? null, fired: ui.run?.fired() ?? [] });
+      marking: ui.run?.marking() ?? (live ? attachment.marking : null), fired: ui.run?.fired() ?? (live ? attachment.last : []) });
     render(html`
       <section aria-labelledby="details-title"><h2 id="details-title">${ui.selected ? `${ui.selected.kind} ${ui.selected.id}` : "Selected element"}</h2>
         ${ui.selected ? detailsForm({ doc, selected: ui.selected, vocabulary: ui.vocabulary, library: ui.library, readOnly, problems: byElement,
@@ -396,11 +535,14 @@ async function start(me) {
           : html`<p class="ok-text" id="problems">The net passes every check of <code>guidebot petri check</code>.</p>`}
         <button type="button" class="secondary" @click=${analyse}>Analyse the reachability graph</button>
         ${ui.analysis ? analysisView(ui.analysis) : nothing}</section>
+      ${libraryPanel(ui, library)}
+      ${attachPanel(ui, attachment, attaching)}
       ${simulationPanel(ui, simulation)}`, $("details"));
   }
 
   try {
-    [ui.library, ui.vocabulary] = await Promise.all([api.get("/api/nets"), api.get("/api/net-editor/vocabulary")]);
+    ui.library = await api.get("/api/nets");
+    await attachment.loadTargets();
   } catch (err) {
     say(err.message, true);
   }

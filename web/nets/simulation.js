@@ -1,6 +1,8 @@
 // The simulation: the net run at once by the server against the scripted environment of
 // `guidebot petri run` (POST /api/net-editor/simulate), then stepped through here: the marking
 // of the net after each of its firings, the messages it published and the replies it got.
+// Or, with "Choose each reply", the net waits after each request and the user picks the reply
+// (or lets time pass to its next timer); the server runs it again with the replies chosen.
 import { html, nothing } from "lit-html";
 
 /** Steps of a run: each firing (or the end) of the simulated net itself. */
@@ -68,8 +70,10 @@ export function simulationPanel(ui, actions) {
         <textarea id="sim-params" name="params" rows="3" .value=${ui.simParams}></textarea></div>
       <div class="field"><label for="sim-replies">Replies instead of the defaults (one TYPE=JSON a line; [] never answers)</label>
         <textarea id="sim-replies" name="replies" rows="2" .value=${ui.simReplies}></textarea></div>
+      <div class="field"><label><input type="checkbox" name="stepwise" .checked=${ui.stepwise !== null}> Choose each reply myself</label></div>
       <button type="submit">Run simulation</button>
     </form>
+    ${run && ui.stepwise ? waitingView(run.result, actions) : nothing}
     ${run ? html`
       <p id="sim-status" role="status">Step ${run.at} of ${run.steps.length - 1} · ${run.time().toFixed(1)} s
         ${run.fired().length ? html` · fired ${run.fired().join(", ")}` : nothing}
@@ -87,6 +91,18 @@ export function simulationPanel(ui, actions) {
       <ol class="sim-log" aria-label="Messages of the simulation">${messages.slice(-50).map((m) => html`<li>
         ${m.source === "dispatch" ? "published" : "reply"} <code>${m.type}</code> ${JSON.stringify(m.payload)}</li>`)}</ol>` : nothing}
   </section>`;
+}
+
+/** What the net waits for, each a button that gives that reply; or time passing. */
+function waitingView(result, actions) {
+  if (result.outcome !== "waiting") return nothing;
+  const waiting = result.waiting_for;
+  return html`<div id="sim-waiting" role="group" aria-labelledby="sim-waiting-title"><h3 id="sim-waiting-title">The net waits (at ${result.time.toFixed(1)} s): reply</h3>
+    ${waiting.length ? html`<ul class="elements">${waiting.map((w) => html`<li><button type="button" class="element" @click=${() => actions.choose({ type: w.type, payload: w.payload })}>
+      ${w.type} ${Object.keys(w.payload).length ? JSON.stringify(w.payload) : ""}<span class="muted"> (${w.net}: ${w.transition})</span></button></li>`)}</ul>`
+      : html`<p class="muted">No message would move it on.</p>`}
+    ${result.next_timer !== null ? html`<button type="button" class="secondary" @click=${() => actions.choose({ wait: true })}>Let time pass to ${result.next_timer.toFixed(1)} s (its next timer)</button>` : nothing}
+    ${!waiting.length && result.next_timer === null ? html`<p>Stuck: nothing can move it on.</p>` : nothing}</div>`;
 }
 
 /** `TYPE=JSON` lines to the replies object (the --reply option of `guidebot petri run`). */

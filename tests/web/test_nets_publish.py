@@ -1,0 +1,100 @@
+"""Publishing from the RoboGraph editor (/nets/, docs/nets.md "Publish") in a real browser
+against a real server and a real robot agent: explain_point's words edited and published while
+a tour runs; the running tour keeps its words, the next tour speaks the new ones; the history
+shows who published what, compares it with the shipped file and restores it."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+from playwright.async_api import expect
+
+from guidebot.messages import Message
+from guidebot.testing import wait_until
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
+
+NEW_WORDS = '{"text": "New words: ${text}", "lang": "${lang}"}'
+
+
+def two_point_tour(data: dict[str, Any]) -> None:
+    data["tours"] += [{"id": "short", "name": "Short tour", "points": ["welcome", "mosaics"]}]
+
+
+async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=1, time_scale=4, edit=two_point_tour) as fleet:
+        robot = fleet.agents["R1"]
+        # The robot has no touch screen here: the visitor answers "continue?" when the test
+        # says so, and the tour waits there (for patience_s, 30 s robot time).
+        spoken: list[Message] = []
+        asked: list[Message] = []
+        visitor = robot.bus.endpoint("test-visitor")
+        visitor.subscribe("speech_started", spoken.append, tap=True)
+        visitor.subscribe("ask_continue", asked.append, tap=True)
+        ended: list[Message] = []
+        visitor.subscribe("task_ended", ended.append, tap=True)
+        watch = await open_page(f"{fleet.server.url}/nets/")
+        page = watch.page
+        await page.get_by_label("Staff token").fill(fleet.server.admin_token)
+        await page.get_by_label("Staff token").press("Enter")
+        await page.get_by_label("Library net").select_option("explain_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
+        elements = page.locator("#lists")
+        await elements.get_by_role("button", name="synthesize text (synthesize_text)").click()
+        payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
+        await payload.fill(NEW_WORDS)
+        await payload.press("Tab")
+        await expect(page.locator("#problem-count")).to_have_text("No problems")
+        await page.get_by_label("What changed").fill("A warmer welcome")
+
+        # A tour starts on the shipped words and waits at its first "continue?".
+        async with fleet.http() as http:
+            reply = await http.post(
+                "/api/tasks", json={"kind": "tour", "params": {"tour": "short"}, "robot": "R1"}
+            )
+            assert reply.status_code == 201, reply.text
+            first_tour = reply.json()["id"]
+        await wait_until(lambda: bool(asked), timeout=60)
+        assert [m.payload["text"] for m in spoken] == [spoken[0].payload["text"]]
+        assert not spoken[0].payload["text"].startswith("New words")
+
+        await page.get_by_role("button", name="Publish explain_point to the fleet").click()
+        await expect(page.locator("#notices")).to_contain_text("explain_point version 1 published")
+        await wait_until(lambda: robot.net_follower.version == 1)
+        versions = page.get_by_role("list", name="Versions of explain_point")
+        await expect(versions).to_contain_text("Version 1 live")
+        await expect(versions).to_contain_text("A warmer welcome")
+        await web.axe_check(page)
+        await web.screenshot(page, "nets-publish")
+
+        # The tour running goes on with the words it started with.
+        visitor.publish("continue_answer", {"answer": "yes"})
+        await wait_until(lambda: any(m.payload["task_id"] == first_tour for m in ended), timeout=60)
+        assert len(spoken) == 2
+        assert not spoken[1].payload["text"].startswith("New words"), spoken[1].payload
+
+        # The next tour speaks the new ones.
+        async with fleet.http() as http:
+            reply = await http.post(
+                "/api/tasks", json={"kind": "tour", "params": {"tour": "short"}, "robot": "R1"}
+            )
+            assert reply.status_code == 201, reply.text
+        await wait_until(lambda: len(spoken) == 3, timeout=60)
+        assert spoken[2].payload["text"] == f"New words: {spoken[0].payload['text']}"
+
+        # The history compares with the shipped file and restores it.
+        await page.get_by_role("button", name="Compare with live: version 0 (shipped)").click()
+        await expect(page.locator("#diff")).to_contain_text("~ place synthesize_text: action.body")
+        await page.get_by_role("button", name="Restore version 0 (shipped)").click()
+        await expect(page.locator("#notices")).to_contain_text(
+            "explain_point version 0 restored as version 2"
+        )
+        await expect(versions).to_contain_text("Version 2 live")
+        await wait_until(lambda: robot.net_follower.version == 2)
+        await expect(page.locator("#lists")).to_contain_text("synthesize_text")
+        await web.axe_check(page)
