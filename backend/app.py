@@ -25,6 +25,9 @@ from fastapi import APIRouter, FastAPI, HTTPException
 from fastapi.responses import Response
 
 import guidebot
+from backend.accounts import routes as accounts_routes
+from backend.accounts.audit import AuditTrail
+from backend.accounts.component import accounts
 from backend.api import ROUTERS as api_routers
 from backend.api.deps import ERRORS
 from backend.api.errors import install_error_handlers
@@ -69,6 +72,7 @@ Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 COMPONENTS: list[Component] = [
     metrics,
     server_brain,
+    accounts,
     building_interface,
     emergency,
     closures,
@@ -90,6 +94,7 @@ ROUTERS: list[APIRouter] = [
     console_fleet.router,
     metrics_routes.router,
     reports_routes.router,
+    accounts_routes.router,
 ]
 
 
@@ -185,6 +190,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return page(path)
 
     install_error_handlers(app)
+    app.add_middleware(AuditTrail)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     if settings.broker_url:
         app.add_middleware(FollowerRest)

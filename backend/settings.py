@@ -128,6 +128,10 @@ class Settings(BaseSettings):
     task_requests_per_minute: float = Field(default=10.0, ge=0)
     task_request_burst: int = Field(default=5, ge=1)
     max_body_bytes: int = Field(default=64 * 1024, ge=1024)
+    # People's accounts (docs/security.md, "Accounts"): session expiry, password length.
+    session_idle_minutes: float = Field(default=120.0, gt=0)
+    session_max_hours: float = Field(default=12.0, gt=0)
+    password_min_length: int = Field(default=12, ge=8, le=128)
     # Traffic Manager: release a lock whose holder went offline before entering its area.
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
     # After a restart: how long area requests wait for the robots that had tasks to resync.

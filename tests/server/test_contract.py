@@ -122,6 +122,8 @@ async def test_the_token_is_checked_before_the_body(lenient: RunningServer) -> N
         for method, path, operation in operations(openapi):
             if "requestBody" not in operation or "401" not in operation["responses"]:
                 continue
+            if operation.get("x-sign-in"):
+                continue  # signing in: the credentials are the body (test_accounts.py)
             for body in (b"{not json", b"\xff\xfe\xfa"):
                 headers = {"Content-Type": "application/json"}
                 answer = await http.request(method, concrete(path), content=body, headers=headers)
