@@ -117,20 +117,22 @@ async def sign_in(request: Request, body: SignIn, service: Accounts) -> Response
     return response
 
 
-@router.get("/api/session")
-async def current_session(request: Request, who: Reader) -> dict[str, Any]:
-    """Who this page is: a person's session (with its CSRF token and when it expires) or a
-    token's name and role (``csrf`` null)."""
-    session: Session | None = getattr(request.state, "session", None)
-    if session is not None:
-        return _view(session)
-    return {
-        "name": who.name,
-        "display_name": "",
-        "role": who.role.value,
-        "csrf": None,
-        "expires_at": None,
-    }
+@router.get("/api/session", responses=_SIGN_IN_ERRORS, openapi_extra=SIGN_IN)
+async def current_session(request: Request, service: Accounts) -> dict[str, Any]:
+    """This browser's session, if its cookie has a live one: ``signed_in`` true with the
+    name, display name, role, the CSRF token and when it expires; else ``signed_in`` false
+    (never 401: a page asks before it knows; tokens ask ``GET /api/me``)."""
+    session = await CookieGate(service).session(request)
+    if session is None:
+        return {
+            "signed_in": False,
+            "name": None,
+            "display_name": None,
+            "role": None,
+            "csrf": None,
+            "expires_at": None,
+        }
+    return {"signed_in": True, **_view(session)}
 
 
 @router.delete(

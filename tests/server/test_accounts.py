@@ -67,7 +67,7 @@ async def test_a_person_signs_in_with_a_password_into_an_httponly_strict_cookie(
         assert "httponly" in cookie and "samesite=strict" in cookie and "path=/" in cookie
         assert "secure" not in cookie  # development: plain http on the LAN demo
         me = (await http.get("/api/session")).json()
-        assert me["name"] == "ada" and me["role"] == "operator"
+        assert me["signed_in"] is True and me["name"] == "ada" and me["role"] == "operator"
         assert me["csrf"] == answer.json()["csrf"]
         assert (await http.get("/api/robots")).status_code == 200  # operator's route
         assert (await http.get("/api/me")).json() == {"name": "ada", "role": "operator"}
@@ -99,7 +99,7 @@ async def test_a_state_changing_request_without_the_csrf_token_is_refused(
         made = await http.post("/api/accounts", json=body, headers={CSRF_HEADER: csrf})
         assert made.status_code == 201, made.text
         assert (await http.delete("/api/session")).status_code == 403  # sign-out too
-        assert (await http.get("/api/session")).status_code == 200
+        assert (await http.get("/api/session")).json()["signed_in"] is True
 
 
 async def test_a_cookie_replayed_after_sign_out_is_refused(server: RunningServer) -> None:
@@ -112,7 +112,7 @@ async def test_a_cookie_replayed_after_sign_out_is_refused(server: RunningServer
         base_url=server.url, cookies={SESSION_COOKIE: stolen}, timeout=10
     ) as replay:
         assert (await replay.get("/api/robots")).status_code == 401
-        assert (await replay.get("/api/session")).status_code == 401
+        assert (await replay.get("/api/session")).json()["signed_in"] is False
 
 
 async def test_sign_out_everywhere_ends_every_session_of_the_account(
@@ -195,7 +195,7 @@ async def test_a_viewer_is_refused_every_route_the_docs_leave_out(server: Runnin
                 answer = await http.request(method, url, json=body, headers={CSRF_HEADER: csrf})
                 if (answer.status_code == 403) is (Role.VIEWER in row.roles):
                     wrong.append(f"{method} {url} -> {answer.status_code}")
-        assert (await http.get("/api/session")).status_code == 200  # still signed in
+        assert (await http.get("/api/session")).json()["signed_in"]  # still signed in
     assert wrong == []
     assert ROBOT_NAME  # the table's paths name the demo's robot
 

@@ -1,0 +1,36 @@
+// The sign-in form shared by the console, the site editor and the net editor: an account
+// (name and password) first, a token second (kiosks, displays, scripts, the demo's dev
+// tokens). One "Sign in" button: a typed token wins, else the account is used.
+import { html } from "lit-html";
+
+/**
+ * @param {{intro: string, tokenLabel?: string, message?: string,
+ *          onAccount: (name: string, password: string) => void,
+ *          onToken: (token: string) => void}} options
+ */
+export function signInForm({ intro, tokenLabel = "Staff token", message = "", onAccount, onToken }) {
+  const submit = (event) => {
+    event.preventDefault();
+    const form = new FormData(event.target);
+    const token = String(form.get("token") ?? "").trim();
+    const name = String(form.get("name") ?? "").trim();
+    const password = String(form.get("password") ?? "");
+    if (token) return onToken(token);
+    return onAccount(name, password);
+  };
+  return html`<h2>Sign in</h2>
+    <p>${intro}</p>
+    <form class="signin-form" @submit=${submit}>
+      <fieldset>
+        <legend>Your account</legend>
+        <label>Account name <input name="name" autocomplete="username" autocapitalize="none" spellcheck="false"></label>
+        <label>Password <input name="password" type="password" autocomplete="current-password"></label>
+      </fieldset>
+      <fieldset>
+        <legend>Or a token (kiosks, displays, scripts, the demo)</legend>
+        <label>${tokenLabel} <input name="token" type="password" autocomplete="off"></label>
+      </fieldset>
+      <button type="submit">Sign in</button>
+    </form>
+    ${message ? html`<p class="notice error" role="alert">${message}</p>` : ""}`;
+}
