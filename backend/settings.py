@@ -132,6 +132,10 @@ class Settings(BaseSettings):
     session_idle_minutes: float = Field(default=120.0, gt=0)
     session_max_hours: float = Field(default=12.0, gt=0)
     password_min_length: int = Field(default=12, ge=8, le=128)
+    # Passkeys: the host name they are for and the pages' origin (default: as the browser
+    # asked, from the Host header; set both behind a TLS proxy: docs/security.md).
+    passkey_rp_id: str | None = Field(default=None, pattern=r"^[a-z0-9.-]{1,253}$")
+    passkey_origin: str | None = Field(default=None, pattern=r"^https?://[^/\s]+$")
     # Traffic Manager: release a lock whose holder went offline before entering its area.
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
     # After a restart: how long area requests wait for the robots that had tasks to resync.

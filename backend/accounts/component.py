@@ -14,6 +14,7 @@ from typing import Any
 from fastapi import FastAPI
 
 from backend.accounts.cookies import CookieGate
+from backend.accounts.passkeys import PasskeyService
 from backend.accounts.service import AccountService
 from backend.accounts.store import AccountStore
 from backend.ratelimit import RateLimiter
@@ -56,6 +57,7 @@ async def accounts(app: FastAPI) -> AsyncIterator[None]:
         reserved=lambda: reserved_names(app),
     )
     app.state.accounts = service
+    app.state.passkeys = PasskeyService(service)
     app.state.sessions = CookieGate(service)
 
     async def sweep() -> None:
@@ -74,4 +76,5 @@ async def accounts(app: FastAPI) -> AsyncIterator[None]:
         with contextlib.suppress(asyncio.CancelledError):
             await sweeper
         app.state.sessions = None
+        app.state.passkeys = None
         app.state.accounts = None

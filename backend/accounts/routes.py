@@ -14,6 +14,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response,
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.accounts.cookies import CookieGate, clear_cookie, set_cookie
+from backend.accounts.passkeys import PasskeyService, RelyingParty
 from backend.accounts.passwords import verify_password
 from backend.accounts.service import AccountError, AccountService, Session
 from backend.actions import require_action
@@ -64,6 +65,16 @@ class NewPassword(_Body):
     password: str = Field(min_length=1, max_length=1024)
 
 
+class PasskeyAnswer(_Body):
+    challenge_id: str = Field(min_length=1, max_length=64)
+    credential: dict[str, Any]
+    """The browser's PublicKeyCredential as JSON (``credential.toJSON()``)."""
+
+
+class NewPasskey(PasskeyAnswer):
+    label: str = Field(default="", max_length=64)
+
+
 class OwnPassword(_Body):
     current: str = Field(min_length=1, max_length=1024)
     password: str = Field(min_length=1, max_length=1024)
@@ -77,6 +88,26 @@ def accounts(request: Request) -> AccountService:
 
 
 Accounts = Annotated[AccountService, Depends(accounts)]
+
+
+def passkeys(request: Request) -> PasskeyService:
+    service = getattr(request.app.state, "passkeys", None)
+    if not isinstance(service, PasskeyService):
+        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "accounts are not running")
+    return service
+
+
+Passkeys = Annotated[PasskeyService, Depends(passkeys)]
+
+
+def relying_party(request: Request) -> RelyingParty:
+    """The passkeys' host name and origin: the settings', else the page's own (the Host
+    header the browser sent; its origin is checked against it)."""
+    settings = request.app.state.settings
+    host = request.headers.get("host", "")
+    rp_id = settings.passkey_rp_id or (request.url.hostname or "")
+    origin = settings.passkey_origin or f"{request.url.scheme}://{host}"
+    return RelyingParty(rp_id=rp_id, origin=origin)
 
 
 def _view(session: Session) -> dict[str, Any]:
@@ -112,9 +143,7 @@ async def sign_in(request: Request, body: SignIn, service: Accounts) -> Response
         )
     except SignInRefused as exc:
         raise _refused(exc) from None
-    response = Response(orjson.dumps(_view(session)), media_type="application/json")
-    set_cookie(response, cookie, max_age=int(service.max_s), secure=_secure(request))
-    return response
+    return _with_cookie(request, service, cookie, session)
 
 
 @router.get("/api/session", responses=_SIGN_IN_ERRORS, openapi_extra=SIGN_IN)
@@ -195,6 +224,77 @@ async def change_own_password(
     except AccountError as exc:
         raise _refused(exc) from None
     return {"name": name}
+
+
+def _with_cookie(
+    request: Request, service: AccountService, cookie: str, session: Session
+) -> Response:
+    """The session's view, with its cookie set."""
+    response = Response(orjson.dumps(_view(session)), media_type="application/json")
+    set_cookie(response, cookie, max_age=int(service.max_s), secure=_secure(request))
+    return response
+
+
+@router.post("/api/session/passkey/options", responses=_SIGN_IN_ERRORS, openapi_extra=SIGN_IN)
+async def passkey_sign_in_options(request: Request, keys: Passkeys) -> dict[str, Any]:
+    """Start a passkey sign-in: ``options`` for ``navigator.credentials.get`` (no account
+    named: the authenticator offers the person's passkeys) and the ``challenge_id`` to send
+    back. 429 while the address is over its failure budget."""
+    try:
+        keys.accounts.refuse_if_locked(client_address(request.client))
+    except SignInRefused as exc:
+        raise _refused(exc) from None
+    return keys.sign_in_options(relying_party(request))
+
+
+@router.post("/api/session/passkey", responses=_SIGN_IN_ERRORS, openapi_extra=SIGN_IN)
+async def passkey_sign_in(request: Request, body: PasskeyAnswer, keys: Passkeys) -> Response:
+    """Sign in with the authenticator's answer: the session cookie as ``POST /api/session``.
+    401 for a passkey not accepted (unknown, another challenge, a bad signature), counted
+    as a failed sign-in; 403 for a disabled account."""
+    try:
+        cookie, session = await keys.sign_in(
+            relying_party(request),
+            body.challenge_id,
+            body.credential,
+            client_address(request.client),
+        )
+    except SignInRefused as exc:
+        raise _refused(exc) from None
+    return _with_cookie(request, keys.accounts, cookie, session)
+
+
+@router.get("/api/session/passkeys")
+async def own_passkeys(request: Request, _: Reader, keys: Passkeys) -> dict[str, Any]:
+    """This person's passkeys (the start of each id, label, added, last used). 409 for a
+    token."""
+    return {"passkeys": await keys.listed(_own_session(request).principal.name)}
+
+
+@router.post("/api/session/passkeys/options")
+async def passkey_options(request: Request, _: Reader, keys: Passkeys) -> dict[str, Any]:
+    """Start adding a passkey to this person's account: ``options`` for
+    ``navigator.credentials.create`` and the ``challenge_id``. 409 for a token."""
+    return await keys.registration_options(_own_session(request), relying_party(request))
+
+
+@router.post("/api/session/passkeys", status_code=status.HTTP_201_CREATED)
+async def add_passkey(
+    request: Request, _: Reader, body: NewPasskey, keys: Passkeys
+) -> dict[str, Any]:
+    """Keep the passkey the authenticator made (its public key only). 409: the challenge
+    expired or was used; 422: the answer is not a valid passkey for this server."""
+    try:
+        return await keys.register(
+            _own_session(request),
+            relying_party(request),
+            body.challenge_id,
+            body.credential,
+            body.label,
+            client_address(request.client),
+        )
+    except AccountError as exc:
+        raise _refused(exc) from None
 
 
 @router.get("/api/accounts")

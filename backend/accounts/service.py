@@ -123,10 +123,12 @@ class AccountService:
             )
 
     def _failed(self, name: str, address: str, why: str) -> SignInRefused:
-        for limiter, key in ((self.failures, address), (self.lockouts, name)):
+        spent = [(self.failures, address)] + ([(self.lockouts, name)] if name else [])
+        for limiter, key in spent:
             with contextlib.suppress(RateLimited):
                 limiter.spend(key, "failed sign-ins")
-        self.audit("sign_in_failed", name, {"account": name, "address": address, "why": why})
+        source = name or "unknown"
+        self.audit("sign_in_failed", source, {"account": name, "address": address, "why": why})
         return SignInRefused(status.HTTP_401_UNAUTHORIZED, "wrong account name or password")
 
     async def sign_in(self, name: str, password: str, address: str) -> tuple[str, Session]:
@@ -147,19 +149,33 @@ class AccountService:
         self.lockouts.forget(name)
         if passwords.needs_rehash(account.password_hash):
             await self.store.change(name, password_hash=await passwords.hash_password(password))
+        return await self.open_session(account, address, "password")
+
+    async def open_session(self, account: Account, address: str, how: str) -> tuple[str, Session]:
+        """A new session for ``account`` (signed in by ``how``: password, passkey): its
+        cookie value, then the session."""
         cookie = secrets.token_urlsafe(32)
         now = time.time()
         row = StoredSession(
             digest=token_digest(cookie),
-            account=name,
+            account=account.name,
             created_at=now,
             seen_at=now,
             address=address[:64],
         )
         await self.store.add_session(row)
-        await self.store.change(name, last_sign_in=now)
-        self.audit("signed_in", name, {"account": name, "address": address})
+        await self.store.change(account.name, last_sign_in=now)
+        signed_in = {"account": account.name, "address": address, "with": how}
+        self.audit("signed_in", account.name, signed_in)
         return cookie, self._session(row, account, cookie)
+
+    def refuse_if_locked(self, address: str, name: str = "") -> None:
+        """SignInRefused 429 while this address (or account) is over its failure budget."""
+        self._refuse_if_locked(address, name)
+
+    def failed(self, name: str, address: str, why: str) -> SignInRefused:
+        """Count a failed sign-in (address and account) and record it; the 401 to raise."""
+        return self._failed(name, address, why)
 
     def _session(self, row: StoredSession, account: Account, cookie: str) -> Session:
         return Session(

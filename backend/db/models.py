@@ -14,6 +14,7 @@ __all__ = [
     "Base",
     "ClosureRow",
     "EventRow",
+    "PasskeyRow",
     "ReportCursorRow",
     "ReportDayRow",
     "ReportRollupRow",
@@ -193,3 +194,19 @@ class AccountSessionRow(Base):
     created_at: Mapped[float] = mapped_column(Float)
     seen_at: Mapped[float] = mapped_column(Float)
     address: Mapped[str] = mapped_column(String(64), default="")
+
+
+class PasskeyRow(Base):
+    """A person's passkey (WebAuthn credential): its id and public key (nothing secret: the
+    private key never leaves the authenticator), its signature counter, when it was last used."""
+
+    __tablename__ = "account_passkeys"
+    credential_id: Mapped[str] = mapped_column(String(1400), primary_key=True)
+    """base64url, as the browser names it."""
+    account: Mapped[str] = mapped_column(String(32), index=True)
+    public_key: Mapped[str] = mapped_column(Text)
+    """The COSE public key, base64url."""
+    sign_count: Mapped[int] = mapped_column(Integer, default=0)
+    label: Mapped[str] = mapped_column(String(64), default="")
+    created_at: Mapped[float] = mapped_column(Float)
+    last_used: Mapped[float | None] = mapped_column(Float, nullable=True)

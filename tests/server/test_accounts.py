@@ -318,3 +318,31 @@ def test_guidebot_users_add_creates_the_first_admin_and_prints_nothing_secret(
     assert weak.exit_code == 1 and "at least 12" in weak.output
     listed = runner.invoke(users, ["list", "--db-url", url])
     assert listed.output.startswith("alice\tadmin\tlast sign-in never")
+
+
+async def test_a_passkey_answer_that_is_not_accepted_counts_as_a_failed_sign_in(
+    server: RunningServer,
+) -> None:
+    """A made-up credential, or a real challenge answered twice: 401 like a wrong password,
+    and the address's budget shrinks (the real passkey flow: tests/web/test_accounts.py)."""
+    async with httpx.AsyncClient(base_url=server.url, timeout=10) as http:
+        start = (await http.post("/api/session/passkey/options", json={})).json()
+        assert start["options"]["rpId"] == "127.0.0.1"
+        assert start["options"]["userVerification"] == "required"
+        bogus = {"id": "AAAA", "rawId": "AAAA", "type": "public-key", "response": {}}
+        for challenge in (start["challenge_id"], start["challenge_id"], "made-up"):
+            answer = await http.post(
+                "/api/session/passkey", json={"challenge_id": challenge, "credential": bogus}
+            )
+            assert answer.status_code == 401, answer.text
+        for _ in range(7):
+            await http.post("/api/session/passkey", json={"challenge_id": "x", "credential": bogus})
+        limited = await http.post("/api/session/passkey/options", json={})
+        assert limited.status_code == 429
+        token = {"Authorization": f"Bearer {server.admin_token}"}
+    server.app.state.auth.failures.forget("127.0.0.1")
+    async with httpx.AsyncClient(base_url=server.url, timeout=10, headers=token) as admin:
+        refused = await admin.post("/api/session/passkeys/options", json={})
+    assert refused.status_code == 409  # a token has no account to add a passkey to
+    events = await server.app.state.store.events(kind="sign_in_failed", limit=100)
+    assert {e["data"]["why"] for e in events} == {"passkey"}

@@ -73,9 +73,7 @@ async def test_an_expired_session_is_back_at_the_sign_in(
         await watch.page.get_by_label("Floor", exact=True).wait_for()
         accounts = fleet.server.app.state.accounts
         store = accounts.store
-        (digest,) = [
-            row.digest for row in await _sessions(store) if row.account == "ada"
-        ]
+        (digest,) = [row.digest for row in await _sessions(store) if row.account == "ada"]
         await store.change_session(digest, seen_at=0.0)  # idle since 1970
         await watch.page.reload()
         await expect(watch.page.get_by_role("heading", name="Sign in")).to_be_visible()
@@ -147,3 +145,53 @@ async def test_an_installer_signs_in_on_the_site_editor_and_a_viewer_is_told_why
         await web.axe_check(page)
         await page.reload()  # the session, not the tab, keeps the installer signed in
         await page.get_by_label("Floor", exact=True).wait_for()
+
+
+async def virtual_authenticator(page: Any) -> Any:
+    """Chromium's virtual authenticator (DevTools protocol, WebAuthn domain) on this page: a
+    platform authenticator that keeps passkeys and verifies its user without asking."""
+    cdp = await page.context.new_cdp_session(page)
+    await cdp.send("WebAuthn.enable")
+    await cdp.send(
+        "WebAuthn.addVirtualAuthenticator",
+        {
+            "options": {
+                "protocol": "ctap2",
+                "transport": "internal",
+                "hasResidentKey": True,
+                "hasUserVerification": True,
+                "isUserVerified": True,
+                "automaticPresenceSimulation": True,
+            }
+        },
+    )
+    return cdp
+
+
+async def test_a_passkey_is_added_and_then_signs_in_without_a_password(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """Passkeys need a secure context and a host name (not an IP address) for their relying
+    party: the page is opened as http://localhost."""
+    async with fleet_factory(robots=0) as fleet:
+        await make(fleet, "ada", Role.OPERATOR, "Ada Lovelace")
+        watch = await open_page("")
+        page = watch.page
+        await virtual_authenticator(page)
+        await page.goto(fleet.admin_url.replace("127.0.0.1", "localhost"))
+        await password_sign_in(watch, "ada")
+        await page.get_by_label("Floor", exact=True).wait_for()
+        await web.open_view(page, "Robots")
+        await page.get_by_role("button", name="Add a passkey").click()
+        await expect(page.get_by_text("Add a passkey: done.")).to_be_visible()
+        await page.get_by_role("button", name="Sign out", exact=True).click()
+        await expect(page.get_by_role("heading", name="Sign in")).to_be_visible()
+        await web.axe_check(page)
+        await page.get_by_role("button", name="Use a passkey").click()
+        await expect(page.locator("#who")).to_contain_text("Ada Lovelace")  # no name typed
+        await expect(page.get_by_role("heading", name="Robots")).to_be_visible()
+        events = await fleet.server.app.state.store.events(source="ada", limit=100)
+        signed_in = [e["data"]["with"] for e in events if e["kind"] == "signed_in"]
+        assert signed_in == ["password", "passkey"]
+        changes = [e["data"]["change"] for e in events if e["kind"] == "account_changed"]
+        assert changes == ["passkey_added"]

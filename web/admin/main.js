@@ -1,7 +1,8 @@
 // The staff console (/admin/): sign-in, then the live map and the fleet views.
 import { html, render } from "lit-html";
 import {
-  currentSession, currentToken, forgetToken, saveToken, sessionHeaders, signInWithPassword, signOut, signOutEverywhere,
+  addPasskey, currentSession, currentToken, forgetToken, passkeysAvailable, saveToken, sessionHeaders, signInWithPasskey,
+  signInWithPassword, signOut, signOutEverywhere,
 } from "/lib/auth.js";
 import { connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
@@ -87,12 +88,22 @@ function showSignIn(message = "") {
     token = null;
     start();
   };
+  const onPasskey = async () => {
+    try {
+      session = await signInWithPasskey();
+    } catch (err) {
+      return showSignIn(err.message);
+    }
+    token = null;
+    start();
+  };
   render(
     signInForm({
       intro: "Staff sign in with their account; a shared screen or the demo with a staff token.",
       message,
       onAccount,
       onToken,
+      onPasskey,
     }),
     section,
   );
@@ -195,7 +206,10 @@ async function start() {
     html`<span id="server-status" role="status"></span>
       <span>${session?.display_name || me.name} <span class="badge">${me.role}</span></span>
       <button type="button" @click=${() => leave(false)}>Sign out</button>
-      ${session ? html`<button type="button" class="secondary" @click=${() => leave(true)}>Sign out everywhere</button>` : ""}`,
+      ${session ? html`<button type="button" class="secondary" @click=${() => leave(true)}>Sign out everywhere</button>` : ""}
+      ${session && passkeysAvailable()
+        ? html`<button type="button" class="secondary" @click=${() => ui.act("Add a passkey", () => addPasskey(navigator.platform || ""))}>Add a passkey</button>`
+        : ""}`,
     $("who"),
   );
   const showServer = () => serverStatus(api).then((view) => render(view, $("server-status")));

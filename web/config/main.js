@@ -1,7 +1,9 @@
 // The site editor (/config, installers and admins): edit the draft on the plan, publish it
 // live, history.
 import { html, nothing, render } from "lit-html";
-import { currentSession, currentToken, forgetToken, saveToken, sessionHeaders, signInWithPassword } from "/lib/auth.js";
+import {
+  currentSession, currentToken, forgetToken, saveToken, sessionHeaders, signInWithPasskey, signInWithPassword,
+} from "/lib/auth.js";
 import { signInForm } from "/lib/signin.js";
 import { confirmAction } from "/lib/confirm.js";
 import { clock, connectionBanner } from "/lib/dom.js";
@@ -61,8 +63,11 @@ function showSignIn(message = "") {
   };
   const onAccount = async (name, password) => {
     if (!name || !password) return showSignIn("Enter your account name and password, or an admin token.");
+    await signedIn(() => signInWithPassword(name, password));
+  };
+  const signedIn = async (how) => {
     try {
-      await signInWithPassword(name, password);
+      await how();
     } catch (err) {
       return showSignIn(err.message);
     }
@@ -77,6 +82,7 @@ function showSignIn(message = "") {
     message,
     onAccount,
     onToken,
+    onPasskey: () => signedIn(signInWithPasskey),
   }), section);
   section.querySelector("input").focus();
 }

@@ -49,21 +49,8 @@ async function answer(response) {
   return body;
 }
 
-/**
- * Sign in with an account name and password. Resolves to the session ({name, display_name,
- * role, csrf, expires_at}) or rejects with an Error whose message the page can show.
- */
-export async function signInWithPassword(name, password) {
-  let response;
-  try {
-    response = await fetch("/api/session", {
-      method: "POST",
-      headers: { "Content-Type": "application/json", Accept: "application/json" },
-      body: JSON.stringify({ name, password }),
-    });
-  } catch {
-    throw new Error("The server cannot be reached: check the network.");
-  }
+/** The session a sign-in answered, or an Error whose message the page can show. */
+async function sessionFrom(response) {
   const body = await answer(response);
   if (response.ok) {
     csrf = body.csrf;
@@ -73,10 +60,73 @@ export async function signInWithPassword(name, password) {
     const wait = response.headers.get("Retry-After");
     throw new Error(`Too many failed sign-ins: try again in ${wait ?? "a few"} seconds.`);
   }
-  if (response.status === 401) throw new Error("Wrong account name or password.");
+  if (response.status === 401) throw new Error(typeof body?.detail === "string" && body.detail.includes("passkey") ? "This passkey was not accepted." : "Wrong account name or password.");
   if (response.status === 403) throw new Error("This account is disabled: ask an administrator.");
   if (response.status === 422) throw new Error("Enter your account name and password.");
   throw new Error(`The server answered ${response.status}.`);
+}
+
+async function send(path, body, headers = {}) {
+  try {
+    return await fetch(path, {
+      method: "POST",
+      headers: { "Content-Type": "application/json", Accept: "application/json", ...headers },
+      body: JSON.stringify(body),
+    });
+  } catch {
+    throw new Error("The server cannot be reached: check the network.");
+  }
+}
+
+/**
+ * Sign in with an account name and password. Resolves to the session ({name, display_name,
+ * role, csrf, expires_at}) or rejects with an Error whose message the page can show.
+ */
+export async function signInWithPassword(name, password) {
+  return sessionFrom(await send("/api/session", { name, password }));
+}
+
+/** Whether this browser can use passkeys here (WebAuthn with its JSON helpers, a secure
+ * context: https, or http on localhost). */
+export function passkeysAvailable() {
+  return typeof window.PublicKeyCredential === "function"
+    && typeof PublicKeyCredential.parseRequestOptionsFromJSON === "function"
+    && window.isSecureContext;
+}
+
+function noPasskey(err) {
+  return new Error(err?.name === "NotAllowedError" ? "No passkey was used (cancelled or timed out)." : `The passkey could not be used: ${err?.message ?? err}.`);
+}
+
+/** Sign in with a passkey: the authenticator offers the person's passkeys for this server. */
+export async function signInWithPasskey() {
+  const start = await send("/api/session/passkey/options", {});
+  if (!start.ok) return sessionFrom(start);
+  const { challenge_id: challengeId, options } = await start.json();
+  let credential;
+  try {
+    credential = await navigator.credentials.get({ publicKey: PublicKeyCredential.parseRequestOptionsFromJSON(options) });
+  } catch (err) {
+    throw noPasskey(err);
+  }
+  return sessionFrom(await send("/api/session/passkey", { challenge_id: challengeId, credential: credential.toJSON() }));
+}
+
+/** Add a passkey to the signed-in person's account (this device's authenticator). */
+export async function addPasskey(label = "") {
+  const start = await send("/api/session/passkeys/options", {}, sessionHeaders());
+  if (!start.ok) throw new Error(`The server answered ${start.status}.`);
+  const { challenge_id: challengeId, options } = await start.json();
+  let credential;
+  try {
+    credential = await navigator.credentials.create({ publicKey: PublicKeyCredential.parseCreationOptionsFromJSON(options) });
+  } catch (err) {
+    throw noPasskey(err);
+  }
+  const done = await send("/api/session/passkeys", { challenge_id: challengeId, credential: credential.toJSON(), label }, sessionHeaders());
+  const body = await answer(done);
+  if (!done.ok) throw new Error(typeof body?.detail === "string" ? body.detail : `The server answered ${done.status}.`);
+  return body;
 }
 
 /** This browser's session (the cookie's), or null when none is live. */

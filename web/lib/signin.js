@@ -1,14 +1,16 @@
-// The sign-in form shared by the console, the site editor and the net editor: an account
-// (name and password) first, a token second (kiosks, displays, scripts, the demo's dev
-// tokens). One "Sign in" button: a typed token wins, else the account is used.
+// The sign-in form shared by the console, the site editor and the net editor: a passkey first
+// (where the browser can use one), then an account's name and password, then a token
+// (kiosks, displays, scripts, the demo's dev tokens). One "Sign in" button for the form: a
+// typed token wins, else the account is used.
 import { html } from "lit-html";
+import { passkeysAvailable } from "/lib/auth.js";
 
 /**
  * @param {{intro: string, tokenLabel?: string, message?: string,
  *          onAccount: (name: string, password: string) => void,
- *          onToken: (token: string) => void}} options
+ *          onToken: (token: string) => void, onPasskey?: () => void}} options
  */
-export function signInForm({ intro, tokenLabel = "Staff token", message = "", onAccount, onToken }) {
+export function signInForm({ intro, tokenLabel = "Staff token", message = "", onAccount, onToken, onPasskey }) {
   const submit = (event) => {
     event.preventDefault();
     const form = new FormData(event.target);
@@ -20,6 +22,9 @@ export function signInForm({ intro, tokenLabel = "Staff token", message = "", on
   };
   return html`<h2>Sign in</h2>
     <p>${intro}</p>
+    ${onPasskey && passkeysAvailable()
+      ? html`<p><button type="button" class="passkey" @click=${onPasskey}>Use a passkey</button></p>`
+      : ""}
     <form class="signin-form" @submit=${submit}>
       <fieldset>
         <legend>Your account</legend>
