@@ -14,6 +14,7 @@ from typing import Any
 from fastapi import FastAPI
 
 from backend.accounts.cookies import CookieGate
+from backend.accounts.oidc import OidcConfig, SingleSignOn
 from backend.accounts.passkeys import PasskeyService
 from backend.accounts.service import AccountService
 from backend.accounts.store import AccountStore
@@ -58,6 +59,8 @@ async def accounts(app: FastAPI) -> AsyncIterator[None]:
     )
     app.state.accounts = service
     app.state.passkeys = PasskeyService(service)
+    sso = OidcConfig.from_settings(settings)
+    app.state.sso = SingleSignOn(sso, service) if sso is not None else None
     app.state.sessions = CookieGate(service)
 
     async def sweep() -> None:
@@ -77,4 +80,5 @@ async def accounts(app: FastAPI) -> AsyncIterator[None]:
             await sweeper
         app.state.sessions = None
         app.state.passkeys = None
+        app.state.sso = None
         app.state.accounts = None

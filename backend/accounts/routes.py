@@ -9,11 +9,14 @@ import io
 import time
 from typing import Annotated, Any
 
+import httpx
 import orjson
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
+from fastapi.responses import RedirectResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.accounts.cookies import CookieGate, clear_cookie, set_cookie
+from backend.accounts.oidc import SingleSignOn
 from backend.accounts.passkeys import PasskeyService, RelyingParty
 from backend.accounts.passwords import verify_password
 from backend.accounts.service import AccountError, AccountService, Session
@@ -152,16 +155,18 @@ async def current_session(request: Request, service: Accounts) -> dict[str, Any]
     name, display name, role, the CSRF token and when it expires; else ``signed_in`` false
     (never 401: a page asks before it knows; tokens ask ``GET /api/me``)."""
     session = await CookieGate(service).session(request)
+    sso = getattr(request.app.state, "sso", None)
     if session is None:
         return {
             "signed_in": False,
+            "sso": sso.config.name if isinstance(sso, SingleSignOn) else None,
             "name": None,
             "display_name": None,
             "role": None,
             "csrf": None,
             "expires_at": None,
         }
-    return {"signed_in": True, **_view(session)}
+    return {"signed_in": True, "sso": None, **_view(session)}
 
 
 @router.delete(
@@ -262,6 +267,67 @@ async def passkey_sign_in(request: Request, body: PasskeyAnswer, keys: Passkeys)
     except SignInRefused as exc:
         raise _refused(exc) from None
     return _with_cookie(request, keys.accounts, cookie, session)
+
+
+_SSO_ANSWERS: dict[int | str, dict[str, Any]] = {
+    **_SIGN_IN_ERRORS,
+    302: {"description": "to the identity provider, or back to the page once signed in"},
+    404: error_response("single sign-on is not set up (GUIDEBOT_OIDC_ISSUER)"),
+    502: error_response("the identity provider cannot be reached"),
+}
+_NEXT = r"^/[A-Za-z0-9/_.-]{0,64}$"
+"""Where a sign-in may send the browser back to: a path of this server, never a URL."""
+
+
+def _sso(request: Request) -> SingleSignOn:
+    sso = getattr(request.app.state, "sso", None)
+    if not isinstance(sso, SingleSignOn):
+        raise HTTPException(status.HTTP_404_NOT_FOUND, "single sign-on is not set up")
+    return sso
+
+
+def _callback_url(request: Request) -> str:
+    configured = request.app.state.settings.oidc_redirect_uri
+    host = request.headers.get("host", "")
+    return configured or f"{request.url.scheme}://{host}/api/session/oidc/callback"
+
+
+@router.get("/api/session/oidc/start", responses=_SSO_ANSWERS, openapi_extra=SIGN_IN)
+async def sso_start(
+    request: Request, then: Annotated[str, Query(alias="next", pattern=_NEXT)] = "/admin/"
+) -> RedirectResponse:
+    """Single sign-on: to the venue's identity provider (authorization code with PKCE), and
+    back to ``next`` (a path of this server) once signed in."""
+    sso = _sso(request)
+    try:
+        url = await sso.start(_callback_url(request), then)
+    except httpx.HTTPError:
+        raise HTTPException(
+            status.HTTP_502_BAD_GATEWAY, "the identity provider cannot be reached"
+        ) from None
+    return RedirectResponse(url, status_code=status.HTTP_302_FOUND)
+
+
+@router.get("/api/session/oidc/callback", responses=_SSO_ANSWERS, openapi_extra=SIGN_IN)
+async def sso_callback(
+    request: Request,
+    state: Annotated[str, Query(max_length=128)] = "",
+    code: Annotated[str, Query(max_length=2048)] = "",
+) -> Response:
+    """Where the identity provider sends the browser back: with the right state, a code for
+    an ID token with the right nonce, and a group mapped to a role, the session cookie and
+    302 to the page; else 401 (a wrong state, nonce or token: a failed sign-in) or 403."""
+    sso = _sso(request)
+    try:
+        if not state or not code:
+            address = client_address(request.client)
+            raise sso.accounts.failed("", address, "sso answer", "single sign-on refused")
+        cookie, _, then = await sso.finish(state, code, client_address(request.client))
+    except SignInRefused as exc:
+        raise _refused(exc) from None
+    response = RedirectResponse(then, status_code=status.HTTP_302_FOUND)
+    set_cookie(response, cookie, max_age=int(sso.accounts.max_s), secure=_secure(request))
+    return response
 
 
 @router.get("/api/session/passkeys")

@@ -173,9 +173,13 @@ class AccountService:
         """SignInRefused 429 while this address (or account) is over its failure budget."""
         self._refuse_if_locked(address, name)
 
-    def failed(self, name: str, address: str, why: str) -> SignInRefused:
-        """Count a failed sign-in (address and account) and record it; the 401 to raise."""
-        return self._failed(name, address, why)
+    def failed(self, name: str, address: str, why: str, reason: str = "") -> SignInRefused:
+        """Count a failed sign-in (address and account) and record it; the 401 to raise
+        (``reason``: its text, else the password sign-in's)."""
+        refused = self._failed(name, address, why)
+        if reason:
+            refused.reason = reason
+        return refused
 
     def _session(self, row: StoredSession, account: Account, cookie: str) -> Session:
         return Session(

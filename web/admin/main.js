@@ -1,7 +1,7 @@
 // The staff console (/admin/): sign-in, then the live map and the fleet views.
 import { html, render } from "lit-html";
 import {
-  addPasskey, currentSession, currentToken, forgetToken, passkeysAvailable, saveToken, sessionHeaders, signInWithPasskey,
+  addPasskey, currentSession, currentToken, singleSignOn, forgetToken, passkeysAvailable, saveToken, sessionHeaders, signInWithPasskey,
   signInWithPassword, signOut, signOutEverywhere,
 } from "/lib/auth.js";
 import { connectionBanner } from "/lib/dom.js";
@@ -104,6 +104,7 @@ function showSignIn(message = "") {
       onAccount,
       onToken,
       onPasskey,
+      sso: singleSignOn(),
     }),
     section,
   );

@@ -2,7 +2,7 @@
 // live, history.
 import { html, nothing, render } from "lit-html";
 import {
-  currentSession, currentToken, forgetToken, saveToken, sessionHeaders, signInWithPasskey, signInWithPassword,
+  currentSession, currentToken, singleSignOn, forgetToken, saveToken, sessionHeaders, signInWithPasskey, signInWithPassword,
 } from "/lib/auth.js";
 import { signInForm } from "/lib/signin.js";
 import { confirmAction } from "/lib/confirm.js";
@@ -83,6 +83,7 @@ function showSignIn(message = "") {
     onAccount,
     onToken,
     onPasskey: () => signedIn(signInWithPasskey),
+    sso: singleSignOn(),
   }), section);
   section.querySelector("input").focus();
 }

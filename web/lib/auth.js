@@ -129,12 +129,20 @@ export async function addPasskey(label = "") {
   return body;
 }
 
+let sso = null;
+
+/** The name of the server's single sign-on, or null (known after currentSession()). */
+export function singleSignOn() {
+  return sso;
+}
+
 /** This browser's session (the cookie's), or null when none is live. */
 export async function currentSession() {
   try {
     const response = await fetch("/api/session", { headers: { Accept: "application/json" } });
     if (!response.ok) return null;
     const body = await response.json();
+    sso = body.sso ?? null;
     if (!body.signed_in) return null;
     csrf = body.csrf;
     return body;

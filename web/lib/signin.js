@@ -8,9 +8,11 @@ import { passkeysAvailable } from "/lib/auth.js";
 /**
  * @param {{intro: string, tokenLabel?: string, message?: string,
  *          onAccount: (name: string, password: string) => void,
- *          onToken: (token: string) => void, onPasskey?: () => void}} options
+ *          onToken: (token: string) => void, onPasskey?: () => void, sso?: string | null,
+ *          back?: string}} options  sso: the single sign-on's name when the server has one;
+ *          back: the page to come back to after it
  */
-export function signInForm({ intro, tokenLabel = "Staff token", message = "", onAccount, onToken, onPasskey }) {
+export function signInForm({ intro, tokenLabel = "Staff token", message = "", onAccount, onToken, onPasskey, sso = null, back = location.pathname }) {
   const submit = (event) => {
     event.preventDefault();
     const form = new FormData(event.target);
@@ -24,6 +26,9 @@ export function signInForm({ intro, tokenLabel = "Staff token", message = "", on
     <p>${intro}</p>
     ${onPasskey && passkeysAvailable()
       ? html`<p><button type="button" class="passkey" @click=${onPasskey}>Use a passkey</button></p>`
+      : ""}
+    ${sso
+      ? html`<p><button type="button" @click=${() => location.assign(`/api/session/oidc/start?next=${encodeURIComponent(back)}`)}>Use ${sso}</button></p>`
       : ""}
     <form class="signin-form" @submit=${submit}>
       <fieldset>
