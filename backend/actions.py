@@ -28,22 +28,26 @@ SERVER_ROLES = frozenset({Role.ADMIN, Role.MODULE})
 """Trusted like server code on the hub: every registered message type, server-only ones too."""
 
 _OPERATOR = frozenset({Role.OPERATOR})
+_PEOPLE = frozenset({Role.OPERATOR, Role.INSTALLER, Role.AUTHOR, Role.VIEWER})
+"""Every role an account may have but admin (backend/accounts)."""
 _REQUESTERS = frozenset({Role.OPERATOR, Role.PANEL, Role.ROBOT})
-_READERS = frozenset({Role.OPERATOR, Role.PANEL, Role.ROBOT, Role.GUI})
+_READERS = _PEOPLE | {Role.PANEL, Role.ROBOT, Role.GUI}
 _ROBOT = frozenset({Role.ROBOT})
 _ROBOT_OR_OPERATOR = frozenset({Role.OPERATOR, Role.ROBOT})
 
 RULES: dict[str, frozenset[Role]] = {
     # REST-only actions (their routes: docs/server.md, "REST API and roles")
-    "administer": frozenset(),  # the site, its drafts, versions, uploads
+    "administer": frozenset({Role.INSTALLER}),  # the site editor: site, drafts, versions, uploads
+    "manage_accounts": frozenset(),  # people's accounts (backend/accounts)
     "operate": _OPERATOR,  # the staff console: robots, locks, events, alerts, nets, building
     "building_modes": _OPERATOR,  # close a gallery, nodes, a door or a lift (backend/closures)
     "follow_tasks": _REQUESTERS,  # tasks one may see and cancel (own only for panels, robots)
     "see_robot": _ROBOT_OR_OPERATOR,  # one robot's view (a robot: itself only)
     "plan_path": _ROBOT_OR_OPERATOR,
     "read_metrics": _OPERATOR,  # GET /metrics (or the metrics token)
-    "read_reports": _OPERATOR,  # GET /api/reports (docs/reports.md)
-    "edit_nets": frozenset(),  # publish nets to the fleet, restore a version (docs/nets.md)
+    "read_reports": _OPERATOR | {Role.VIEWER},  # GET /api/reports (docs/reports.md)
+    "read_nets": _OPERATOR | {Role.AUTHOR, Role.VIEWER},  # the net editor's reads (docs/nets.md)
+    "edit_nets": frozenset({Role.AUTHOR}),  # publish nets, restore a version (docs/nets.md)
     "read": _READERS,  # tours, points of interest, the visitor menu, the map, /api/me
     # Actions that arrive over REST and the hub alike
     "task_request": _REQUESTERS | {Role.MODULE},  # POST /api/tasks
@@ -97,6 +101,7 @@ server-only (admin and module tokens: ``SERVER_ROLES``)."""
 REST_ONLY = frozenset(
     {
         "administer",
+        "manage_accounts",
         "operate",
         "building_modes",
         "follow_tasks",

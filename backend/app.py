@@ -25,6 +25,9 @@ from fastapi import APIRouter, Depends, FastAPI, HTTPException
 from fastapi.responses import Response
 
 import guidebot
+from backend.accounts import routes as accounts_routes
+from backend.accounts.audit import AuditTrail
+from backend.accounts.component import accounts
 from backend.api import ROUTERS as api_routers
 from backend.api.deps import ERRORS
 from backend.api.errors import install_error_handlers
@@ -72,6 +75,7 @@ Component = Callable[[FastAPI], AbstractAsyncContextManager[None]]
 COMPONENTS: list[Component] = [
     metrics,
     server_brain,
+    accounts,
     building_interface,
     emergency,
     closures,
@@ -95,6 +99,7 @@ ROUTERS: list[APIRouter] = [
     metrics_routes.router,
     reports_routes.router,
     vda5050_routes.router,
+    accounts_routes.router,
 ]
 
 
@@ -191,6 +196,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return page(path)
 
     install_error_handlers(app)
+    app.add_middleware(AuditTrail)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     if settings.broker_url:
         app.add_middleware(FollowerRest)

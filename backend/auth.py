@@ -25,10 +25,12 @@ from fastapi import HTTPException, Request, status
 from backend.ratelimit import RateLimited, RateLimiter
 
 __all__ = [
+    "PERSON_ROLES",
     "Authenticator",
     "Principal",
     "Role",
     "RoleCheck",
+    "SessionGate",
     "SignInRefused",
     "TokenStore",
     "bearer_token",
@@ -49,6 +51,14 @@ class Role(enum.StrEnum):
     GUI = "gui"
     MODULE = "module"
     ROBOT = "robot"
+    # People with accounts (backend/accounts): the site editor, the net editor, read-only staff
+    INSTALLER = "installer"
+    AUTHOR = "author"
+    VIEWER = "viewer"
+
+
+PERSON_ROLES = frozenset({Role.ADMIN, Role.OPERATOR, Role.INSTALLER, Role.AUTHOR, Role.VIEWER})
+"""The roles an account (a person) may have; tokens may have any role."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,6 +169,14 @@ def client_address(request_client: object) -> str:
     return str(host) if host else "unknown"
 
 
+class SessionGate(Protocol):
+    """A person's session cookie as a principal (backend/accounts, on ``app.state.sessions``):
+    None without a live session; HTTPException 403 for a state-changing request without the
+    session's CSRF token."""
+
+    async def __call__(self, request: Request) -> Principal | None: ...
+
+
 class RoleCheck(Protocol):
     """A route's token check; ``roles`` and ``action`` say what it lets through (the docs'
     tables are tested against them)."""
@@ -170,21 +188,27 @@ class RoleCheck(Protocol):
 
 
 def require_roles(*roles: Role, action: str | None = None) -> RoleCheck:
-    """FastAPI dependency: 401 without a known token, 429 after too many failed attempts,
-    403 for another role; admin passes all. ``action``: the rule these roles come from."""
+    """FastAPI dependency: 401 without a known token or live session, 429 after too many
+    failed attempts, 403 for another role; admin passes all. A request without a token is
+    checked for a person's session cookie (``SessionGate``). ``action``: the rule these roles
+    come from. The principal is kept on ``request.state.principal`` (the audit trail)."""
     allowed = frozenset(roles) | {Role.ADMIN}
 
     async def dependency(request: Request) -> Principal:
         auth: Authenticator = request.app.state.auth
         headers, query = request.headers, request.query_params
         token = bearer_token(headers.get("authorization"), query.get("token"))
+        sessions: SessionGate | None = getattr(request.app.state, "sessions", None)
+        principal = await sessions(request) if token is None and sessions is not None else None
         try:
-            principal = auth.authenticate(token, client_address(request.client))
+            if principal is None:
+                principal = auth.authenticate(token, client_address(request.client))
         except SignInRefused as exc:
             extra = {"WWW-Authenticate": "Bearer"}
             if exc.retry_after is not None:
                 extra["Retry-After"] = str(exc.retry_after)
             raise HTTPException(exc.status_code, exc.reason, headers=extra) from None
+        request.state.principal = principal
         if principal.role is not Role.ADMIN and principal.role not in allowed:
             raise HTTPException(
                 status.HTTP_403_FORBIDDEN,

@@ -128,6 +128,23 @@ class Settings(BaseSettings):
     task_requests_per_minute: float = Field(default=10.0, ge=0)
     task_request_burst: int = Field(default=5, ge=1)
     max_body_bytes: int = Field(default=64 * 1024, ge=1024)
+    # People's accounts (docs/security.md, "Accounts"): session expiry, password length.
+    session_idle_minutes: float = Field(default=120.0, gt=0)
+    session_max_hours: float = Field(default=12.0, gt=0)
+    password_min_length: int = Field(default=12, ge=8, le=128)
+    # Passkeys: the host name they are for and the pages' origin (default: as the browser
+    # asked, from the Host header; set both behind a TLS proxy: docs/security.md).
+    passkey_rp_id: str | None = Field(default=None, pattern=r"^[a-z0-9.-]{1,253}$")
+    passkey_origin: str | None = Field(default=None, pattern=r"^https?://[^/\s]+$")
+    # Single sign-on (OpenID Connect, docs/security.md "Single sign-on"): off without an issuer.
+    oidc_issuer: str | None = Field(default=None, pattern=r"^https?://\S+$")
+    oidc_client_id: str = Field(default="guidebot", min_length=1, max_length=256)
+    oidc_client_secret: str | None = Field(default=None, min_length=1)
+    oidc_name: str = Field(default="single sign-on", min_length=1, max_length=64)
+    oidc_groups_claim: str = Field(default="groups", min_length=1, max_length=64)
+    oidc_roles: dict[str, str] = Field(default_factory=dict)
+    """The provider's group -> GuideBot role (admin, operator, installer, author, viewer)."""
+    oidc_redirect_uri: str | None = Field(default=None, pattern=r"^https?://\S+$")
     # Traffic Manager: release a lock whose holder went offline before entering its area.
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
     # After a restart: how long area requests wait for the robots that had tasks to resync.

@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "vda5050-sim": "guidebot.vda5050.cli:vda5050_sim",
     "replay": "backend.reports.cli:replay_command",
     "plan": "backend.planning.cli:plan_command",
+    "users": "backend.accounts.cli:users",
 }
 
 BENCHMARKS: dict[str, str] = {

@@ -7,12 +7,26 @@
 # redis-server: the broker between server processes; tests run a private one (tests/scale).
 # nginx-light: tests/scale/test_proxy.py runs deploy/cluster/nginx.conf in front of two servers.
 # mosquitto: the MQTT broker of VDA 5050 vehicles; tests run a private one (tests/vda5050).
+# nodejs, npm: the OpenID Connect provider the single sign-on tests start (tests/oidc: node
+#   oidc-provider, installed there with npm ci; it wants Node.js 20 or later).
 # With arguments, only those packages (make demo: mosquitto).
 set -euo pipefail
-wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light prometheus mosquitto)
-[ $# -gt 0 ] && wanted=("$@")
+wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light prometheus mosquitto nodejs npm)
+all=1
+[ $# -gt 0 ] && wanted=("$@") && all=0
+oidc="$(cd "$(dirname "$0")/.." && pwd)/tests/oidc"
+oidc_provider() {
+  if [ "$all" = 1 ] && [ ! -d "$oidc/node_modules/oidc-provider" ] && command -v npm >/dev/null; then
+    echo "system-deps: installing the tests' OpenID provider (tests/oidc)"
+    npm ci --prefix "$oidc" --no-audit --no-fund >/dev/null
+  fi
+}
+trap oidc_provider EXIT
 missing=()
 for pkg in "${wanted[@]}"; do
+  # Node.js from another source (NodeSource's nodejs carries npm and conflicts with Debian's
+  # npm package) counts as there: the commands are what the tests need.
+  case "$pkg" in nodejs) command -v node >/dev/null && continue ;; npm) command -v npm >/dev/null && continue ;; esac
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
 done
 [ ${#missing[@]} -eq 0 ] && exit 0

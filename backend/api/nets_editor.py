@@ -4,7 +4,8 @@ publish it into the library (every version kept, compared, restorable) for the f
 
 Only publish and restore change the server (rule ``edit_nets``): the net being edited lives in
 the page. Reading, checking and writing a net run in a thread (a 2 MB file takes a while to
-parse): the event loop keeps serving. Staff (operators and admins) may call every other route;
+parse): the event loop keeps serving. Readers (rule ``read_nets``: operators, authors, viewers)
+may call every other route;
 the page lets those who may publish edit and shows the others the nets read-only.
 Status codes: 404 for a net (or version) the library does not have, 413 for a file above
 ``MAX_PNML_BYTES``, 422 for a PNML file that cannot be read (every problem with its line), a
@@ -31,7 +32,7 @@ from fastapi import (
 from pydantic import Field
 
 from backend.actions import allowed_roles
-from backend.api.deps import Staff, app_service, not_found, require_action
+from backend.api.deps import app_service, not_found, require_action
 from backend.api.models import RequestBody
 from backend.auth import Principal
 from backend.console.feed import ConsoleFeed
@@ -69,6 +70,8 @@ MAX_VERSION = 2**31 - 1
 """A version number the database's integer column can hold (larger: 422, not a 500)."""
 
 Name = Annotated[str, Path(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.\-]+$")]
+NetReader = Annotated[Principal, Depends(require_action("read_nets"))]
+"""Who may open, check, analyse, simulate and export nets and read their versions."""
 NetAuthor = Annotated[Principal, Depends(require_action("edit_nets"))]
 """Who may publish nets to the fleet and restore old versions (docs/server.md)."""
 
@@ -85,7 +88,7 @@ def _fields(type_name: str) -> list[str]:
 
 
 @router.get("/vocabulary")
-async def vocabulary(who: Staff) -> dict[str, Any]:
+async def vocabulary(who: NetReader) -> dict[str, Any]:
     """What the engine knows, offered as choices: action and condition kinds, guard tests,
     outcomes, and every registered message type with its payload fields; and whether the
     caller may publish (the page shows the others the nets read only)."""
@@ -102,7 +105,7 @@ async def vocabulary(who: Staff) -> dict[str, Any]:
 
 
 @router.get("/library/{net}")
-async def library_net(request: Request, _: Staff, net: Name) -> dict[str, Any]:
+async def library_net(request: Request, _: NetReader, net: Name) -> dict[str, Any]:
     """A net of the server's library as the editor's document (its PNML drawing)."""
     try:
         doc = request.app.state.rgm.library.get(net).doc
@@ -112,7 +115,7 @@ async def library_net(request: Request, _: Staff, net: Name) -> dict[str, Any]:
 
 
 @router.post("/check")
-async def check(_: Staff, body: Annotated[EditorNet, Body()]) -> dict[str, Any]:
+async def check(_: NetReader, body: Annotated[EditorNet, Body()]) -> dict[str, Any]:
     """The problems ``guidebot petri check`` finds in the net, each naming its element
     ("net", "param:NAME", "place:ID", "transition:ID", "arc:ID")."""
     return {"problems": await asyncio.to_thread(check_net, body)}
@@ -122,7 +125,7 @@ async def check(_: Staff, body: Annotated[EditorNet, Body()]) -> dict[str, Any]:
     "/import",
     openapi_extra={"requestBody": {"content": {"application/xml": {"schema": {"type": "string"}}}}},
 )
-async def import_pnml(request: Request, _: Staff) -> dict[str, Any]:
+async def import_pnml(request: Request, _: NetReader) -> dict[str, Any]:
     """A PNML file (the request body) as the editor's document; one the reader cannot make a
     net of is refused (422, every problem with its line)."""
     raw = await request.body()
@@ -137,7 +140,7 @@ async def import_pnml(request: Request, _: Staff) -> dict[str, Any]:
 
 
 @router.post("/export")
-async def export_pnml(_: Staff, body: Annotated[EditorNet, Body()]) -> Response:
+async def export_pnml(_: NetReader, body: Annotated[EditorNet, Body()]) -> Response:
     """The net as a PNML file with its drawing, for download (``guidebot petri run`` runs it)."""
     data = await asyncio.to_thread(editor_to_pnml, body)
     return Response(
@@ -163,7 +166,7 @@ class Simulation(RequestBody):
 
 @router.post("/simulate")
 async def simulate_net(
-    request: Request, _: Staff, body: Annotated[Simulation, Body()]
+    request: Request, _: NetReader, body: Annotated[Simulation, Body()]
 ) -> dict[str, Any]:
     """Run the net at once on a virtual clock (sub-nets from the server's library) and return
     the outcome and the whole trace for the page to step through; 422 when it cannot run."""
@@ -214,7 +217,7 @@ class Analysis(RequestBody):
 
 
 @router.post("/analyse")
-async def analyse_net(_: Staff, body: Annotated[Analysis, Body()]) -> dict[str, Any]:
+async def analyse_net(_: NetReader, body: Annotated[Analysis, Body()]) -> dict[str, Any]:
     """Boundedness, dead transitions and dead ends from the net's reachability graph, explored
     up to ``max_states`` markings (``complete`` false when it gave up there)."""
     doc, _where = editor_to_doc(body.net)
@@ -278,7 +281,7 @@ async def _editor_doc(pnml: str, net: str) -> dict[str, Any]:
 
 
 @router.get("/versions/{net}")
-async def versions(request: Request, _: Staff, nets: Publisher, net: Name) -> dict[str, Any]:
+async def versions(request: Request, _: NetReader, nets: Publisher, net: Name) -> dict[str, Any]:
     """Every published version of the net, newest first, with who, when and why; ``live`` is
     the version robots start (0: the library folder's own file, never replaced)."""
     kept = await nets.store.versions(net)
@@ -297,7 +300,7 @@ async def versions(request: Request, _: Staff, nets: Publisher, net: Name) -> di
 @router.get("/versions/{net}/{version}")
 async def version(
     request: Request,
-    _: Staff,
+    _: NetReader,
     nets: Publisher,
     net: Name,
     version: Annotated[int, Path(ge=0, le=MAX_VERSION)],
@@ -309,7 +312,7 @@ async def version(
 @router.get("/diff/{net}")
 async def diff(
     request: Request,
-    _: Staff,
+    _: NetReader,
     nets: Publisher,
     net: Name,
     old: Annotated[int, Query(ge=0, le=MAX_VERSION)],
@@ -345,7 +348,7 @@ async def restore(
 
 
 @router.get("/rollout")
-async def rollout(_: Staff, nets: Publisher) -> dict[str, Any]:
+async def rollout(_: NetReader, nets: Publisher) -> dict[str, Any]:
     """The library's version and the version each robot said it starts nets from."""
     return nets.status()
 

@@ -26,6 +26,8 @@ def _public_operations(app: FastAPI) -> set[tuple[str, str]]:
     for context in iter_route_contexts(app.routes):
         route = getattr(context, "original_route", context)
         if isinstance(route, APIRoute) and role_check(route) is None:
+            if (route.openapi_extra or {}).get("x-sign-in"):
+                continue  # takes credentials itself: its 401, 403 and 429 are real
             public |= {(route.path_format, m.lower()) for m in route.methods or ()}
     return public
 

@@ -13,10 +13,14 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.routing import APIRoute
 from starlette.requests import HTTPConnection
 
-__all__ = ["known_query", "query_names"]
+__all__ = ["OPEN_QUERY", "known_query", "query_names"]
 
 EVERY_ROUTE = frozenset({"token"})
 """Taken on every route: the bearer token as ``?token=`` (browsers; docs/security.md)."""
+
+OPEN_QUERY = "x-open-query"
+"""An operation whose caller is another party's redirect, which may add parameters of its own
+(an OpenID provider's ``iss``, ``session_state``): ``openapi_extra={OPEN_QUERY: True}``."""
 
 _NAMES = "_guidebot_query_names"
 """The attribute a route keeps its names in, found once (APIRoute is not hashable)."""
@@ -44,6 +48,8 @@ async def known_query(request: HTTPConnection) -> None:
     WebSocket route, which is no APIRoute, is left alone)."""
     route = request.scope.get("route")
     if not request.query_params or not isinstance(route, APIRoute):
+        return
+    if (route.openapi_extra or {}).get(OPEN_QUERY):
         return
     names = query_names(route)
     unknown = sorted(set(request.query_params.keys()) - names)

@@ -9,10 +9,13 @@ from sqlalchemy import JSON, Boolean, Float, Index, Integer, String, Text, Uniqu
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 __all__ = [
+    "AccountRow",
+    "AccountSessionRow",
     "Base",
     "ClosureRow",
     "EventRow",
     "NetVersionRow",
+    "PasskeyRow",
     "ReportCursorRow",
     "ReportDayRow",
     "ReportRollupRow",
@@ -180,3 +183,46 @@ class ClosureRow(Base):
     data: Mapped[dict[str, Any]] = mapped_column(JSON)
     """The closure as shown (backend.closures.model.Closure)."""
     end: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class AccountRow(Base):
+    """A person who signs in (backend/accounts): their role, their password's argon2 hash
+    (empty: no password), whether an admin disabled them, their last sign-in."""
+
+    __tablename__ = "accounts"
+    name: Mapped[str] = mapped_column(String(32), primary_key=True)
+    display_name: Mapped[str] = mapped_column(String(128), default="")
+    role: Mapped[str] = mapped_column(String(16))
+    password_hash: Mapped[str] = mapped_column(String(256), default="")
+    disabled: Mapped[bool] = mapped_column(Boolean, default=False)
+    created_at: Mapped[float] = mapped_column(Float)
+    changed_at: Mapped[float] = mapped_column(Float)
+    last_sign_in: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class AccountSessionRow(Base):
+    """A signed-in browser: the SHA-256 digest of its cookie (never the cookie; its CSRF
+    token is derived from the digest), when it began and was last used, from where."""
+
+    __tablename__ = "account_sessions"
+    digest: Mapped[str] = mapped_column(String(80), primary_key=True)
+    account: Mapped[str] = mapped_column(String(32), index=True)
+    created_at: Mapped[float] = mapped_column(Float)
+    seen_at: Mapped[float] = mapped_column(Float)
+    address: Mapped[str] = mapped_column(String(64), default="")
+
+
+class PasskeyRow(Base):
+    """A person's passkey (WebAuthn credential): its id and public key (nothing secret: the
+    private key never leaves the authenticator), its signature counter, when it was last used."""
+
+    __tablename__ = "account_passkeys"
+    credential_id: Mapped[str] = mapped_column(String(1400), primary_key=True)
+    """base64url, as the browser names it."""
+    account: Mapped[str] = mapped_column(String(32), index=True)
+    public_key: Mapped[str] = mapped_column(Text)
+    """The COSE public key, base64url."""
+    sign_count: Mapped[int] = mapped_column(Integer, default=0)
+    label: Mapped[str] = mapped_column(String(64), default="")
+    created_at: Mapped[float] = mapped_column(Float)
+    last_used: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -412,11 +412,14 @@ class DbStore(Service):
         limit: int = 100,
         kind: str | None = None,
         latest: bool = False,
+        source: str | None = None,
     ) -> list[dict[str, Any]]:
         """Events after ``after_id`` (and before ``before_id``) in id order; ``latest``: the
-        last ``limit`` of them."""
+        last ``limit`` of them; ``source``: only those of that source (a person's account)."""
         await self._flush_for_read()
         query = select(EventRow).where(EventRow.id > after_id)
+        if source:
+            query = query.where(EventRow.source == source)
         if before_id is not None:
             query = query.where(EventRow.id < before_id)
         if kind:

@@ -56,6 +56,11 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+PAGE_ROLES = frozenset(
+    {Role.GUI, Role.PANEL, Role.OPERATOR, Role.INSTALLER, Role.AUTHOR, Role.VIEWER}
+)
+"""Roles whose connections are pages, many at once under one name (``admin#1``, ...)."""
+
 HUB_NAME = "hub"
 """The source of the hub's own messages (welcome, error, pong) and the address of ping."""
 
@@ -353,9 +358,7 @@ class Hub:
                 f"a {role.value} token may only connect as {principal_name!r}, not {requested!r}"
             )
         name = requested or principal_name
-        pages = role in (Role.GUI, Role.PANEL, Role.OPERATOR) or (
-            role is Role.ADMIN and not requested
-        )
+        pages = role in PAGE_ROLES or (role is Role.ADMIN and not requested)
         if pages and self._taken(name):
             base = name
             while self._taken(name):

@@ -28,7 +28,7 @@ import contextlib
 import logging
 from collections.abc import Awaitable, Callable
 
-from backend.auth import Authenticator, SignInRefused
+from backend.auth import Authenticator, Principal, SignInRefused
 from guidebot import wire
 
 from .core import (
@@ -74,16 +74,23 @@ class Refused(Exception):
 
 
 def admit(
-    hub: Hub, auth: Authenticator, token: str | None, address: str, requested_name: str | None
+    hub: Hub,
+    auth: Authenticator,
+    token: str | None,
+    address: str,
+    requested_name: str | None,
+    principal: Principal | None = None,
 ) -> RemoteClient:
     """Sign a connection in and attach it to the hub (its welcome is queued), or raise Refused:
     4001 unknown token, 4029 too many failures from ``address``, 4003 a name not allowed.
 
     Each 4001 and 4003 is logged as a warning (address and reason, never the token): the
     failure limit per address bounds how many lines one address can cause. A 4029 (an address
-    already locked out) is logged at debug level only."""
+    already locked out) is logged at debug level only. ``principal``: already signed in (a
+    person's session cookie, backend/accounts), no token needed."""
     try:
-        principal = auth.authenticate(token, address)
+        if principal is None:
+            principal = auth.authenticate(token, address)
     except SignInRefused as exc:
         if exc.status_code == 429:
             log.debug("hub: sign-in refused from %s: 4029 %s", address, exc.reason)

@@ -28,26 +28,44 @@ router = APIRouter()
 
 @router.websocket("/ws")
 async def hub_socket(websocket: WebSocket) -> None:
-    """Token in ``Authorization: Bearer`` or ``?token=``; optional ``?name=`` (modules, admin)."""
+    """Token in ``Authorization: Bearer`` or ``?token=``, else a person's session cookie (a
+    page of this server's origin only); optional ``?name=`` (modules, admin)."""
     hub: Hub = websocket.app.state.hub
     auth: Authenticator = websocket.app.state.auth
     query = websocket.query_params
     token = bearer_token(websocket.headers.get("authorization"), query.get("token"))
+    sessions = getattr(websocket.app.state, "sessions", None)
+    session = None
+    if token is None and sessions is not None:
+        session = await sessions.websocket_session(websocket)
     await websocket.accept()
     try:
-        client = admit(hub, auth, token, client_address(websocket.client), query.get("name"))
+        client = admit(
+            hub,
+            auth,
+            token,
+            client_address(websocket.client),
+            query.get("name"),
+            session.principal if session is not None else None,
+        )
     except Refused as exc:
         await websocket.close(exc.code, exc.reason)
         return
+    if session is not None:
+        websocket.app.state.accounts.link(session, client)
 
     async def send(frame: bytes) -> None:
         await websocket.send_text(frame.decode())
 
     stall = websocket.app.state.settings.hub_send_timeout_s
-    if await serve_client(client, send, _read(websocket, hub, client), stall):
-        if client.close_code is not None:
-            with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
-                await websocket.close(client.close_code, client.close_reason)
+    try:
+        if await serve_client(client, send, _read(websocket, hub, client), stall):
+            if client.close_code is not None:
+                with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
+                    await websocket.close(client.close_code, client.close_reason)
+    finally:
+        if session is not None and (accounts := getattr(websocket.app.state, "accounts", None)):
+            accounts.unlink(session.digest, client)
 
 
 async def _read(websocket: WebSocket, hub: Hub, client: RemoteClient) -> None:

@@ -18,6 +18,7 @@ from prometheus_client import CollectorRegistry, Histogram, generate_latest
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
+from backend.auth import Role
 from backend.metrics.reaction import STEPS, ReactionJoin, steps_ms
 from guidebot.messages import Message
 from guidebot.payloads.tasks import ReactionMeasured
@@ -260,7 +261,7 @@ class _ScrapeCollector(Collector):
         )
         clients = GaugeMetricFamily("guidebot_hub_clients", "Connected clients", labels=["role"])
         roles = Tally(c.role.value for c in hub.clients.values())
-        for role in ("admin", "operator", "panel", "gui", "module", "robot"):
+        for role in (r.value for r in Role):
             clients.add_metric([role], roles.get(role, 0))
         yield clients
 

@@ -22,6 +22,12 @@ PANEL_TOKEN = "panel-token-1234"
 OPERATOR_TOKEN = "operator-token-1234"
 GUI_TOKEN = "gui-token-12345678"
 MODULE_TOKEN = "module-token-12345678"
+PERSON_TOKENS = {
+    Role.INSTALLER: "installer-token-1234",
+    Role.AUTHOR: "author-token-12345678",
+    Role.VIEWER: "viewer-token-12345678",
+}
+"""Tokens of the roles people's accounts have (backend/accounts): the lenient server's."""
 
 
 def server_settings(tmp_path: Path, db_url: str | None = None) -> Settings:
@@ -63,6 +69,8 @@ async def lenient(tmp_path: Path) -> AsyncIterator[RunningServer]:
     call every operation without a token (else the 11th answer is 429)."""
     settings = server_settings(tmp_path)
     settings.tokens.append(StaticToken(token=MODULE_TOKEN, name="module-1", role=Role.MODULE))
+    for role, token in PERSON_TOKENS.items():
+        settings.tokens.append(StaticToken(token=token, name=f"{role.value}-1", role=role))
     settings.sign_in_failure_burst = 1_000_000
     async with running_server(settings) as srv:
         yield srv

@@ -22,9 +22,26 @@ from guidebot.client import HubClient, HubError
 from guidebot.messages import known_types
 from guidebot.paths import ROOT
 
-from .conftest import GUI_TOKEN, MODULE_TOKEN, OPERATOR_TOKEN, PANEL_TOKEN, server_settings
+from .conftest import (
+    GUI_TOKEN,
+    MODULE_TOKEN,
+    OPERATOR_TOKEN,
+    PANEL_TOKEN,
+    PERSON_TOKENS,
+    server_settings,
+)
 
-ROLES = (Role.ADMIN, Role.OPERATOR, Role.PANEL, Role.ROBOT, Role.GUI, Role.MODULE)
+ROLES = (
+    Role.ADMIN,
+    Role.OPERATOR,
+    Role.PANEL,
+    Role.ROBOT,
+    Role.GUI,
+    Role.MODULE,
+    Role.INSTALLER,
+    Role.AUTHOR,
+    Role.VIEWER,
+)
 """The role columns of docs/server.md's table, in order."""
 ROBOT_NAME = "R1"
 TOKENS = {
@@ -33,6 +50,7 @@ TOKENS = {
     Role.ROBOT: "robot-R1-demo-token",
     Role.GUI: GUI_TOKEN,
     Role.MODULE: MODULE_TOKEN,
+    **PERSON_TOKENS,
 }
 NO = "—"
 

@@ -1,10 +1,15 @@
 // The staff console (/admin/): sign-in, then the live map and the fleet views.
 import { html, render } from "lit-html";
-import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
+import {
+  addPasskey, currentSession, currentToken, singleSignOn, forgetToken, passkeysAvailable, saveToken, sessionHeaders, signInWithPasskey,
+  signInWithPassword, signOut, signOutEverywhere,
+} from "/lib/auth.js";
 import { connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
 import { FloorMap } from "/lib/map.js";
 import { Api, ApiError } from "/lib/rest.js";
+import { signInForm } from "/lib/signin.js";
+import { accountsView } from "/admin/views/accounts.js";
 import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
@@ -33,6 +38,7 @@ const VIEWS = [
   ["alerts", "Alerts"],
   ["events", "Event log"],
   ["reports", "Reports"],
+  ["accounts", "Accounts", "admin"],
 ];
 const RENDER = {
   robots: robotsView,
@@ -45,11 +51,13 @@ const RENDER = {
   alerts: alertsView,
   events: eventsView,
   reports: reportsView,
+  accounts: accountsView,
 };
 const $ = (id) => document.getElementById(id);
 
 let token = currentToken();
-const api = new Api(() => token);
+let session = null; // a person's session (the cookie's), when signed in with an account
+const api = new Api(() => token, () => (token ? {} : sessionHeaders()));
 
 function showSignIn(message = "") {
   $("tabs").hidden = true;
@@ -60,10 +68,7 @@ function showSignIn(message = "") {
   $("emergency-banner").hidden = true;
   const section = $("signin");
   section.hidden = false;
-  const submit = async (event) => {
-    event.preventDefault();
-    const value = new FormData(event.target).get("token").trim();
-    if (!value) return showSignIn("Enter your staff token.");
+  const onToken = async (value) => {
     token = value;
     const me = await whoAmI();
     if (me instanceof Error) {
@@ -73,14 +78,34 @@ function showSignIn(message = "") {
     saveToken(value);
     start();
   };
+  const onAccount = async (name, password) => {
+    if (!name || !password) return showSignIn("Enter your account name and password, or a staff token.");
+    try {
+      session = await signInWithPassword(name, password);
+    } catch (err) {
+      return showSignIn(err.message);
+    }
+    token = null;
+    start();
+  };
+  const onPasskey = async () => {
+    try {
+      session = await signInWithPasskey();
+    } catch (err) {
+      return showSignIn(err.message);
+    }
+    token = null;
+    start();
+  };
   render(
-    html`<h2>Sign in</h2>
-      <p>Staff of the front desk and administrators sign in with their token.</p>
-      <form @submit=${submit}>
-        <label>Staff token <input name="token" type="password" autocomplete="current-password" required></label>
-        <button type="submit">Sign in</button>
-      </form>
-      ${message ? html`<p class="notice error" role="alert">${message}</p>` : ""}`,
+    signInForm({
+      intro: "Staff sign in with their account; a shared screen or the demo with a staff token.",
+      message,
+      onAccount,
+      onToken,
+      onPasskey,
+      sso: singleSignOn(),
+    }),
     section,
   );
   section.querySelector("input").focus();
@@ -91,7 +116,7 @@ async function whoAmI() {
   try {
     const me = await api.get("/api/me");
     if (!STAFF_ROLES.has(me.role)) {
-      return new Error(`This token belongs to ${me.name} (role ${me.role}); the console is for operators and admins.`);
+      return new Error(`You are signed in as ${me.name} (role ${me.role}); the console is for operators and admins.`);
     }
     return me;
   } catch (err) {
@@ -113,11 +138,13 @@ function beep() {
 }
 
 async function start() {
-  if (!token) return showSignIn();
+  if (!token) session = await currentSession();
+  if (!token && !session) return showSignIn();
   const me = await whoAmI();
   if (me instanceof Error) {
     forgetToken();
     token = null;
+    session = null; // another page (the site editor) may still use it: sign in as someone else here
     return showSignIn(me.message);
   }
   const hub = new HubClient({ token }).start();
@@ -170,10 +197,20 @@ async function start() {
     if (view === "map") ui.map.shown();
   };
 
+  const leave = async (everywhere) => {
+    hub.stop();
+    forgetToken();
+    if (session) await (everywhere ? signOutEverywhere() : signOut()).catch(() => {});
+    location.reload();
+  };
   render(
     html`<span id="server-status" role="status"></span>
-      <span>${me.name} <span class="badge">${me.role}</span></span>
-      <button type="button" @click=${() => { hub.stop(); forgetToken(); location.reload(); }}>Sign out</button>`,
+      <span>${session?.display_name || me.name} <span class="badge">${me.role}</span></span>
+      <button type="button" @click=${() => leave(false)}>Sign out</button>
+      ${session ? html`<button type="button" class="secondary" @click=${() => leave(true)}>Sign out everywhere</button>` : ""}
+      ${session && passkeysAvailable()
+        ? html`<button type="button" class="secondary" @click=${() => ui.act("Add a passkey", () => addPasskey(navigator.platform || ""))}>Add a passkey</button>`
+        : ""}`,
     $("who"),
   );
   const showServer = () => serverStatus(api).then((view) => render(view, $("server-status")));
@@ -259,7 +296,7 @@ async function start() {
       $("page-error"),
     );
     render(
-      VIEWS.map(
+      VIEWS.filter(([, , only]) => !only || me.role === only).map(
         ([id, label]) => html`<button type="button" class="secondary" aria-current=${ui.view === id ? "page" : "false"}
             @click=${() => ui.go(id)}>${label}${id === "alerts" && open.length ? html`<span class="count" aria-label=${`${open.length} open`}>${open.length}</span>` : ""}</button>`,
       ),

@@ -1,6 +1,10 @@
-// The site editor (/config, admin): edit the draft on the plan, publish it live, history.
+// The site editor (/config, installers and admins): edit the draft on the plan, publish it
+// live, history.
 import { html, nothing, render } from "lit-html";
-import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
+import {
+  currentSession, currentToken, singleSignOn, forgetToken, saveToken, sessionHeaders, signInWithPasskey, signInWithPassword,
+} from "/lib/auth.js";
+import { signInForm } from "/lib/signin.js";
 import { confirmAction } from "/lib/confirm.js";
 import { clock, connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
@@ -12,13 +16,25 @@ import { emergencyForm, toggleSafeSpot } from "/config/emergency.js";
 
 const $ = (id) => document.getElementById(id);
 let token = currentToken();
-const api = new Api(() => token);
+const api = new Api(() => token, () => (token ? {} : sessionHeaders()));
+const EDITORS = new Set(["admin", "installer"]);
+
+/** The signed-in person or token if it may edit the site, else an Error saying why not. */
+async function editor() {
+  const me = await api.get("/api/me").catch((err) => err);
+  if (me instanceof Error) return me;
+  if (!EDITORS.has(me.role)) {
+    return new Error(`You are signed in as ${me.name} (role ${me.role}); the site editor is for installers and administrators.`);
+  }
+  return me;
+}
 
 /** A request whose body is a file (YAML, image): rest.js sends JSON only. */
 async function sendFile(method, path, body, type) {
   let response;
   try {
-    response = await fetch(path, { method, body, headers: { Authorization: `Bearer ${token}`, "Content-Type": type, Accept: "application/json" } });
+    const auth = token ? { Authorization: `Bearer ${token}` } : sessionHeaders();
+    response = await fetch(path, { method, body, headers: { ...auth, "Content-Type": type, Accept: "application/json" } });
   } catch {
     throw new ApiError(0, "The server cannot be reached: check the network.");
   }
@@ -35,32 +51,50 @@ function showSignIn(message = "") {
   $("editor").hidden = true;
   const section = $("signin");
   section.hidden = false;
-  const submit = async (event) => {
-    event.preventDefault();
-    token = new FormData(event.target).get("token").trim();
-    const me = await api.get("/api/me").catch((err) => err);
-    if (me instanceof Error || me.role !== "admin") {
-      const why = me instanceof Error ? me.message : `This token belongs to ${me.name} (role ${me.role}); the site editor is for administrators.`;
+  const onToken = async (value) => {
+    token = value;
+    const me = await editor();
+    if (me instanceof Error) {
       token = null;
-      return showSignIn(why);
+      return showSignIn(me.message);
     }
     saveToken(token);
     start(me);
   };
-  render(html`<h2>Sign in</h2><p>The site editor is for administrators.</p>
-    <form @submit=${submit}><label>Admin token <input name="token" type="password" autocomplete="current-password" required></label>
-    <button type="submit">Sign in</button></form>
-    ${message ? html`<p class="notice error" role="alert">${message}</p>` : ""}`, section);
+  const onAccount = async (name, password) => {
+    if (!name || !password) return showSignIn("Enter your account name and password, or an admin token.");
+    await signedIn(() => signInWithPassword(name, password));
+  };
+  const signedIn = async (how) => {
+    try {
+      await how();
+    } catch (err) {
+      return showSignIn(err.message);
+    }
+    token = null;
+    const me = await editor();
+    if (me instanceof Error) return showSignIn(me.message);
+    start(me);
+  };
+  render(signInForm({
+    intro: "The site editor is for installers and administrators.",
+    tokenLabel: "Admin token",
+    message,
+    onAccount,
+    onToken,
+    onPasskey: () => signedIn(signInWithPasskey),
+    sso: singleSignOn(),
+  }), section);
   section.querySelector("input").focus();
 }
 
 async function boot() {
-  if (!token) return showSignIn();
-  const me = await api.get("/api/me").catch((err) => err);
-  if (me instanceof Error || me.role !== "admin") {
+  if (!token && !(await currentSession())) return showSignIn();
+  const me = await editor();
+  if (me instanceof Error) {
     forgetToken();
     token = null;
-    return showSignIn(me instanceof Error ? me.message : "The site editor is for administrators.");
+    return showSignIn(me.message);
   }
   start(me);
 }

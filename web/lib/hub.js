@@ -28,7 +28,7 @@ export function matches(pattern, type) {
 
 export class HubClient extends EventTarget {
   /**
-   * @param {{url?: string, token: string, backoffInitial?: number, backoffMax?: number,
+   * @param {{url?: string, token: string | null, backoffInitial?: number, backoffMax?: number,
    *          heartbeatInterval?: number, heartbeatTimeout?: number}} options
    */
   constructor(options) {
@@ -127,7 +127,9 @@ export class HubClient extends EventTarget {
   }
 
   #connect() {
-    const ws = new WebSocket(`${this.url}?token=${encodeURIComponent(this.token)}`);
+    // No token: a person's page, signed in by its session cookie (docs/security.md).
+    const query = this.token ? `?token=${encodeURIComponent(this.token)}` : "";
+    const ws = new WebSocket(`${this.url}${query}`);
     this.ws = ws;
     ws.onopen = () => {
       this.attempt = 0;
@@ -159,7 +161,7 @@ export class HubClient extends EventTarget {
       if (this.stopped) return;
       const final = FINAL_CODES.get(event.code);
       if (final) {
-        this.#setStatus("refused", final);
+        this.#setStatus("refused", event.reason || final); // the server's reason says more
         return;
       }
       this.#setStatus("reconnecting", event.reason || "connection lost");

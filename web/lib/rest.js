@@ -16,7 +16,7 @@ function describe(status, detail) {
   const text = typeof detail === "string" ? detail : Array.isArray(detail)
     ? detail.map((d) => d.msg ?? d.message ?? JSON.stringify(d)).join("; ")
     : detail ? JSON.stringify(detail) : "";
-  if (status === 401) return "Your token was not accepted (wrong or expired): sign in again.";
+  if (status === 401) return "You are signed out (the session ended, or the token was not accepted): sign in again.";
   if (status === 403) return `Not allowed for your role: ${text || "forbidden"}.`;
   if (status === 404) return text ? `Not found: ${text}.` : "Not found.";
   if (status === 409) return `Refused: ${text}.`;

@@ -1,4 +1,5 @@
-// Event log: live, filtered by robot, type and severity, downloadable as JSON lines.
+// Event log: live, filtered by robot, person, type and severity, downloadable as JSON lines
+// (admins: the audit export as CSV, docs/security.md "Audit").
 import { html } from "lit-html";
 import { clock } from "/lib/dom.js";
 import { placeName, poiName, taskName, tourName } from "/admin/names.js";
@@ -19,11 +20,29 @@ function robotOf(row) {
   return row.data?.robot ?? (row.source && row.source.match(/^R\d+$/) ? row.source : null);
 }
 
+/** The person (account or staff token name) a row is about: what they did, or who asked. */
+function personOf(row) {
+  return row.data?.account ?? row.data?.by ?? null;
+}
+
 function filtered(ui) {
   const f = ui.eventFilter ?? {};
   return ui.store.events.filter(
-    (row) => (!f.robot || robotOf(row) === f.robot) && (!f.kind || row.kind === f.kind) && (!f.severity || severity(row) === f.severity),
+    (row) => (!f.robot || robotOf(row) === f.robot) && (!f.person || personOf(row) === f.person)
+      && (!f.kind || row.kind === f.kind) && (!f.severity || severity(row) === f.severity),
   );
+}
+
+async function exportCsv(ui, person) {
+  const blob = await ui.api.get(`/api/audit/export${person ? `?person=${encodeURIComponent(person)}` : ""}`);
+  const url = URL.createObjectURL(blob);
+  const link = document.createElement("a");
+  link.href = url;
+  link.download = `guidebot-events-${person || "all"}.csv`;
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 1000);
 }
 
 function download(rows) {
@@ -65,17 +84,21 @@ export function eventsView(ui) {
   const f = ui.eventFilter;
   const set = (key) => (e) => { f[key] = e.target.value; ui.draw(); };
   const kinds = [...new Set(ui.store.events.map((r) => r.kind))].sort();
+  const people = [...new Set(ui.store.events.map(personOf).filter((p) => typeof p === "string"))].sort();
   const rows = filtered(ui);
   const shown = rows.slice(-200).reverse();
   return html`<h2>Event log</h2>
     <form class="inline" aria-label="Filter events" @submit=${(e) => e.preventDefault()}>
       <label>Robot <select @change=${set("robot")}><option value="">all</option>
         ${[...ui.store.robots.keys()].sort().map((r) => html`<option value=${r} ?selected=${f.robot === r}>${r}</option>`)}</select></label>
+      <label>Person <select @change=${set("person")}><option value="">all</option>
+        ${people.map((p) => html`<option value=${p} ?selected=${f.person === p}>${p}</option>`)}</select></label>
       <label>Type <select @change=${set("kind")}><option value="">all</option>
         ${kinds.map((k) => html`<option value=${k} ?selected=${f.kind === k}>${k}</option>`)}</select></label>
       <label>Severity <select @change=${set("severity")}><option value="">all</option>
         ${["info", "warning", "error"].map((s) => html`<option value=${s} ?selected=${f.severity === s}>${s}</option>`)}</select></label>
       <button type="button" @click=${() => download(rows)}>Download JSON lines</button>
+      ${ui.admin ? html`<button type="button" class="secondary" @click=${() => ui.act("Export for the records", () => exportCsv(ui, f.person))}>Export CSV for the records</button>` : ""}
     </form>
     <p class="muted" id="event-count">${rows.length} events loaded (the newest 200 shown; the download has all ${rows.length}).</p>
     ${ui.store.olderEvents
