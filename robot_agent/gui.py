@@ -33,6 +33,7 @@ from pydantic import BaseModel, Field
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.pace import PaceName, pace_of
 from guidebot.paths import WEB_DIR
 from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
@@ -79,6 +80,8 @@ class TourRequest(BaseModel):
     tour: str | None = Field(default=None, max_length=64)
     poi: str | None = Field(default=None, max_length=64)
     lang: str | None = Field(default=None, max_length=16)
+    pace: PaceName | None = None
+    """``slow``: a slower tour (guidebot/pace.py)."""
 
 
 class Answer(BaseModel):
@@ -241,6 +244,7 @@ class OnboardScreen(Service):
         self.task = {
             "id": message.payload.get("task_id"),
             "tour": params.get("tour"),
+            "pace": pace_of(params).name,  # a slower tour: the screen says so
             "handover": message.payload.get("handover"),  # taken up from another robot
         }
         self.skipped = []
@@ -412,6 +416,8 @@ class OnboardScreen(Service):
             params = {"poi": req.poi}
         if req.lang:
             params["lang"] = req.lang
+        if req.pace and req.pace != "normal":
+            params["pace"] = req.pace
         return self.ep.publish(
             "task_request",
             {"kind": req.kind, "params": params, "priority": 5, "requester": self.robot},

@@ -11,6 +11,7 @@ from fastapi.responses import FileResponse
 
 from backend.api.deps import Anyone, Requester, Sites, TaskRequester, Tasks, not_found
 from backend.auth import Principal, Role
+from guidebot.pace import PaceName
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_in
 from guidebot.site.schema import Site
@@ -20,6 +21,10 @@ __all__ = ["DEVICE_HEADER", "Me", "MeRequesting", "device_requester", "media_url
 router = APIRouter(tags=["visitor"])
 
 Lang = Annotated[str | None, Query(max_length=16)]
+PaceQuery = Annotated[
+    PaceName,
+    Query(description="The pace the estimates are for: `slow`, a slower tour (guidebot/pace.py)"),
+]
 
 DEVICE_HEADER = "X-Guidebot-Device"
 """A visitor device's own id under a shared panel token (docs/visitor.md, "Devices")."""
@@ -92,18 +97,19 @@ def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
 
 @router.get("/api/visitor")
 async def visitor_menu(
-    _: Anyone, service: Sites, manager: Tasks, lang: Lang = None
+    _: Anyone, service: Sites, manager: Tasks, lang: Lang = None, pace: PaceQuery = "normal"
 ) -> dict[str, Any]:
     """Tours and points in ``lang`` (the site's default when not offered), each with its
-    length and what a request would be told now: available, busy (with the wait), or
-    unavailable (no robot in service)."""
+    length at ``pace`` and what a request would be told now: available, busy (with the
+    wait), or unavailable (no robot in service)."""
     site = service.site
     estimator = manager.estimator
     chosen = resolve_language(site, lang)
+    paced = {"pace": pace} if pace != "normal" else {}
     tours = []
     for tour in site.tours:
         stops = [v for v in (_poi_view(site, p, chosen) for p in tour.points) if v is not None]
-        told = estimator.preview("tour", {"tour": tour.id, "lang": chosen}).as_dict()
+        told = estimator.preview("tour", {"tour": tour.id, "lang": chosen} | paced).as_dict()
         tours.append(
             {"id": tour.id, **tour_texts(site, tour, chosen), "stops": stops, "estimate": told}
         )
@@ -111,13 +117,14 @@ async def visitor_menu(
     for poi in site.pois:
         view = _poi_view(site, poi.id, chosen)
         assert view is not None
-        told = estimator.preview("go_to_poi", {"poi": poi.id, "lang": chosen}).as_dict()
+        told = estimator.preview("go_to_poi", {"poi": poi.id, "lang": chosen} | paced).as_dict()
         pois.append({**view, "estimate": told})
     return {
         "site": site.name,
         "languages": site_languages(site),
         "default_language": site.default_language,
         "lang": chosen,
+        "pace": pace,
         "service": estimator.service(),
         "tours": tours,
         "pois": pois,

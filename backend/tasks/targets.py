@@ -32,6 +32,8 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
     asks back. The task's parameters were checked against this site (``target_node``)."""
     p = task.params
     lang = resolve_language(site, p.get("lang"))
+    # A slower tour (guidebot/pace.py): its robot slows down from the first stop on.
+    pace = {"pace": p["pace"]} if p.get("pace") not in (None, "normal") else {}
     if task.kind == "tour":
         tour = site.tour(p["tour"])
         assert tour is not None
@@ -40,12 +42,17 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
             {"poi": q.id, "node": q.node, "index": i, "total": len(pois)} | poi_texts(site, q, lang)
             for i, q in enumerate(pois, start=1)
         ]
-        return {"tour": tour.id, "points": points, "lang": lang}
+        return {"tour": tour.id, "points": points, "lang": lang} | pace
     if task.kind == "go_to_poi":
         poi = site.poi(p["poi"])
         assert poi is not None
         texts = poi_texts(site, poi, lang)
-        return {"poi": poi.id, "node": poi.node, "text": texts["text"], "lang": texts["lang"]}
+        return {
+            "poi": poi.id,
+            "node": poi.node,
+            "text": texts["text"],
+            "lang": texts["lang"],
+        } | pace
     if task.kind == "charge":
         station = p.get("station") or site.charging_stations[0].id
         node = next(s.node for s in site.charging_stations if s.id == station)

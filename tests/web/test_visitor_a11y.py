@@ -12,11 +12,14 @@ import pytest
 from playwright.async_api import expect
 
 from guidebot.bus import Bus
+from guidebot.messages import Message
 from guidebot.site.yamlio import load_site_file
+from guidebot.testing import wait_until
 from robot_agent.clock import Clock
 from robot_agent.gui import OnboardScreen, ScreenServer
+from robot_agent.speech import simulated_duration
 from tests.web.conftest import DEMO_SITE
-from tests.web.test_visitor import KIOSK, LONG, PHONE, request_from
+from tests.web.test_visitor import KIOSK, LONG, PHONE, TIME_SCALE, request_from
 from tests.web.test_visitor import visitor_fleet as visitor_fleet  # the fixture
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
@@ -178,3 +181,99 @@ async def test_the_touch_screen_offers_larger_text_and_high_contrast(
         finally:
             await open_page.close()
             await server.stop()
+
+
+def tour_length(menu: dict[str, Any], tour: str) -> float:
+    """The length ``GET /api/visitor`` gives a tour (seconds from its first stop)."""
+    return float(next(t for t in menu["tours"] if t["id"] == tour)["estimate"]["duration_s"])
+
+
+async def test_a_phone_visitor_asks_for_a_slower_tour_and_is_told_how_long_it_takes(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with visitor_fleet() as vf:
+        agent = vf.agents["R1"]
+        assert agent.navigator is not None and agent.speech is not None
+        top = agent.navigator.max_speed
+        speeds: dict[str, list[float]] = {"normal": [], "slow": []}
+        """The base's speeds, by the pace the robot was at then."""
+
+        def odometry(m: Message) -> None:
+            assert agent.pace is not None
+            speeds[agent.pace.pace.name].append(float(m.payload["v"]))
+
+        ended: list[Message] = []
+        taps = agent.bus.endpoint("test-pace")
+        taps.subscribe("odometry", odometry, tap=True)
+        taps.subscribe("speech_ended", ended.append, tap=True)
+        async with vf.fleet.http() as staff:
+            normal = (await staff.get("/api/visitor")).json()
+            slow = (await staff.get("/api/visitor", params={"pace": "slow"})).json()
+            refused = await staff.get("/api/visitor", params={"pace": "fast"})
+        assert refused.status_code == 422, refused.text
+        assert slow["pace"] == "slow" and normal["pace"] == "normal"
+        # The slower pace is in the length told: speech 1.5 times as long, 0.6 times the speed.
+        assert tour_length(slow, "highlights") >= 1.3 * tour_length(normal, "highlights")
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        card = page.get_by_role("article", name="Highlights")
+        await expect(card).to_contain_text("Tour: ")
+        # The chosen language has a visible mark, not colour alone.
+        await expect(page.get_by_role("button", name="English")).to_contain_text("✓")
+        await expect(page.get_by_role("button", name="Español")).not_to_contain_text("✓")
+        slower = page.get_by_role("button", name="Slower tour")
+        await expect(slower).to_have_attribute("aria-pressed", "false")
+        await slower.click()
+        await expect(slower).to_have_attribute("aria-pressed", "true")
+        await expect(slower).to_contain_text("✓")
+        await expect(card).to_contain_text("Slower tour: ")
+        await web.axe_check(page)
+        await web.screenshot(page, "visitor-phone-slower")
+        await request_from(page, "Highlights")
+        await expect(page.locator(".pace")).to_contain_text(
+            "A slower tour: from the first stop it takes about"
+        )
+        await web.axe_check(page)
+        task = next(t for t in vf.fleet.server.app.state.task_manager.tasks.values())
+        assert task.params["pace"] == "slow" and task.params["tour"] == "highlights"
+        # On the robot: its usual speed to the first stop, then slower, until the tour ends.
+        await wait_until(lambda: agent.pace is not None and agent.pace.pace.name == "slow", 60)
+        assert agent.navigator.max_speed == pytest.approx(0.6 * top)
+        assert agent.speech.dwell == 1.5
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("The tour has ended", timeout=LONG)
+        await wait_until(lambda: agent.navigator is not None and agent.navigator.max_speed == top)
+        assert agent.speech.dwell == 1.0
+        before, after = max(speeds["normal"]), max(speeds["slow"])
+        print(f"top speed to the first stop {before:.2f} m/s, with the visitor {after:.2f} m/s")
+        assert 0 < after <= 0.6 * top + 0.01 < before
+        # Each explanation took 1.5 times its usual time (robot seconds, the timed speech).
+        for m in ended:
+            started = next(s for s in vf.speech if s.payload["text"] == m.payload["text"])
+            took = (m.timestamp - started.timestamp) * TIME_SCALE
+            ratio = took / simulated_duration(m.payload["text"])
+            print(f"explanation took {ratio:.2f} times its usual time")
+            assert ratio >= 1.4, (m.payload["text"], took)
+
+
+async def test_the_touch_screen_asks_for_a_slower_tour(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with visitor_fleet() as vf:
+        screen = (await open_page(vf.screen_url(), viewport=(1024, 600))).page
+        await expect(screen.get_by_role("button", name="English")).to_contain_text("✓")
+        await expect(screen.get_by_role("button", name="Español")).not_to_contain_text("✓")
+        slower = screen.get_by_role("button", name="Slower tour")
+        await slower.click()
+        await expect(slower).to_have_attribute("aria-pressed", "true")
+        await expect(slower).to_contain_text("✓")
+        await web.axe_check(screen)
+        await screen.get_by_role("button", name="Highlights").click()
+        await expect(screen.locator(".pace")).to_contain_text("A slower tour.", timeout=LONG)
+        await web.axe_check(screen)
+        tasks = vf.fleet.server.app.state.task_manager.tasks
+        assert [t.params.get("pace") for t in tasks.values()] == ["slow"]
+        agent = vf.agents["R1"]
+        await wait_until(lambda: agent.pace is not None and agent.pace.pace.name == "slow", 60)
+        # The next visitor gets the usual pace.
+        await expect(screen.locator(".pace")).to_have_count(0, timeout=LONG)
+        await expect(slower).to_have_attribute("aria-pressed", "false")

@@ -55,6 +55,9 @@ const banner = document.getElementById("connection");
 const state = {
   texts: null,
   lang: options.get("lang") ?? null,
+  /** the visitor asked for a slower tour (docs/accessibility.md): the menu's lengths and the
+   * requests are at that pace */
+  slow: false,
   menu: null,
   /** when the menu (and its waits) was read: its waits count down from then */
   menuAt: 0,
@@ -93,10 +96,12 @@ let menuAsked = 0;
 async function loadMenu() {
   const asked = ++menuAsked;
   let lang = state.lang;
-  let menu = await api.get(`/api/visitor${lang ? `?lang=${encodeURIComponent(lang)}` : ""}`);
+  const pace = state.slow ? "pace=slow" : "";
+  const query = (l) => `/api/visitor?${[l ? `lang=${encodeURIComponent(l)}` : "", pace].filter(Boolean).join("&")}`;
+  let menu = await api.get(query(lang));
   if (!lang) {
     lang = preferredLanguage(menu.languages, menu.default_language);
-    if (lang !== menu.lang) menu = await api.get(`/api/visitor?lang=${encodeURIComponent(lang)}`);
+    if (lang !== menu.lang) menu = await api.get(query(lang));
   }
   const texts = await loadTexts(menu.lang);
   if (asked !== menuAsked) return;
@@ -242,6 +247,7 @@ async function request(kind, item) {
   draw();
   const params = kind === "tour" ? { tour: item.id } : { poi: item.id };
   params.lang = state.menu.lang;
+  if (state.slow) params.pace = "slow";
   try {
     const status = await api.post("/api/tasks", { kind: KIND[kind], params });
     state.requests.set(status.id, told(status));
@@ -293,6 +299,13 @@ async function answerOffer(id, goOn) {
   focusHeading();
 }
 
+/** A slower tour, or the usual pace again: the menu's lengths follow. */
+async function toggleSlow() {
+  state.slow = !state.slow;
+  showError("", "");
+  await reload();
+}
+
 async function chooseLanguage(lang) {
   state.lang = lang;
   showError("", "");
@@ -338,7 +351,8 @@ function card(kind, item) {
   const unavailable = estimate?.service === "unavailable";
   const facts = [];
   if (kind === "tour") facts.push(t("stops", { n: item.stops.length }));
-  if (estimate?.duration_s) facts.push(t("tour_length", { t: state.texts.duration(estimate.duration_s) }));
+  const length = state.menu.pace === "slow" ? "tour_length_slow" : "tour_length";
+  if (estimate?.duration_s) facts.push(t(length, { t: state.texts.duration(estimate.duration_s) }));
   const media = kind === "tour" ? item.stops.flatMap((s) => s.media) : item.media;
   const id = `${kind}-${item.id}`;
   return html`<article class="card" aria-labelledby=${`${id}-name`}>
@@ -354,12 +368,26 @@ function card(kind, item) {
   </article>`;
 }
 
+/** A tick on a button that is on (a chosen language, a slower tour): not told by colour
+ * alone (aria-pressed tells screen readers). */
+const on = (value) => (value ? html`<span class="tick" aria-hidden="true">✓ </span>` : "");
+
 function languagePicker() {
   const langs = state.menu.languages;
   if (langs.length < 2) return "";
   return html`<div class="languages" role="group" aria-label=${t("choose_language")}>
     ${langs.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === state.menu.lang)}
-      @click=${() => chooseLanguage(lang)}>${names.get(lang) ?? lang}</button>`)}
+      @click=${() => chooseLanguage(lang)}>${on(lang === state.menu.lang)}${names.get(lang) ?? lang}</button>`)}
+  </div>`;
+}
+
+/** "Slower tour": a toggle; on, the lengths shown and the requests made are at the slow pace. */
+function paceToggle() {
+  const slow = state.menu.pace === "slow";
+  return html`<div class="pace-option">
+    <button class="secondary" aria-pressed=${String(slow)} aria-describedby="pace-help" ?disabled=${state.busy}
+      @click=${toggleSlow}>${on(slow)}${t("slower_tour")}</button>
+    <p class="muted" id="pace-help">${t("slower_tour_help")}</p>
   </div>`;
 }
 
@@ -374,6 +402,7 @@ function startView() {
       <h1 tabindex="-1">${menu.site}: ${t("title")}</h1>
       ${languagePicker()}
     </header>
+    ${paceToggle()}
     <p class=${`service ${menu.service}`} role="status">${serviceLine({ service: menu.service, eta_s: menu.tours[0]?.estimate?.eta_s ?? null })}</p>
     ${errorBox()}
     ${live.length ? html`<p>${live.map((r) => html`<button class="secondary" @click=${() => { state.current = r.id; state.view = "request"; draw(); focusHeading(); }}>${t("your_request")}: ${state.labels.get(r.id) ?? r.id}</button> `)}</p>` : ""}
@@ -443,6 +472,7 @@ function requestView() {
       <h2 tabindex="-1">${t("your_request")}: ${state.labels.get(r.id) ?? r.params.tour ?? r.params.poi}</h2>
       ${r.robot ? html`<p class="robot-name">${t("robot", { robot: r.robot })}</p>` : ""}
     </header>
+    ${paceLine(r)}
     ${errorBox()}
     <div class=${`request-state ${r.state}`}>
       ${statusLines(r).map((line) => html`<p>${line}</p>`)}
@@ -459,6 +489,14 @@ function requestView() {
         : html`<button class="big secondary" @click=${() => { state.confirming = true; draw(); }}>${t("cancel")}</button>`}
       <button class="big" @click=${backToStart}>${final ? t(r.kind === "go_to_poi" ? "new_request_point" : "new_request") : t("back")}</button>
     </div>`;
+}
+
+/** A slower tour says so, with how long it takes from the first stop (the server counts the
+ * slower pace in it). */
+function paceLine(r) {
+  if (r.params?.pace !== "slow") return "";
+  const length = r.duration_s ? t("state_slower", { t: about(r.duration_s) }) : t("state_slower_unknown");
+  return html`<p class="pace">${length}</p>`;
 }
 
 /** Captions: what the visitor's robot is saying now, in the tour's language, while it says it
@@ -579,6 +617,7 @@ function kioskMode() {
       state.confirming = false;
       showError("", "");
       state.lang = state.menu?.default_language ?? state.lang;
+      state.slow = false;
       // The next visitor is another device: the last one's requests are no longer listed here
       // (and can no longer be cancelled from here); they stay with the server.
       device = deviceId(true);
