@@ -1,10 +1,10 @@
 """A tour's pace: a visitor may ask for a slower tour (issue 41, docs/accessibility.md).
 
 One place for what "slower" means, read by the server's estimates (backend/tasks/eta.py) and
-by the robot that guides (robot_agent/pace.py), so the time a visitor is told is the time the
-robot takes. From the first stop on (the visitor walks with the robot from there, not before)
-the robot drives at ``speed`` times its top speed and speaks at 1/``dwell`` of its rate, so
-each stop lasts ``dwell`` times as long.
+by the robot that guides (robot_agent/visitor_needs.py), so the time a visitor is told is the
+time the robot takes. From the first stop on (the visitor walks with the robot from there, not
+before) the robot drives at ``speed`` times its top speed and speaks at 1/``dwell`` of its
+rate, so each stop lasts ``dwell`` times as long.
 """
 
 from __future__ import annotations

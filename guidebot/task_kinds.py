@@ -56,6 +56,9 @@ class TourParams(_Params):
     """The language the tour is explained in; None: the site's default language."""
     pace: PaceName | None = None
     """``slow``: a slower tour (guidebot/pace.py); None: the normal pace."""
+    step_free: bool | None = None
+    """True: over no edge with steps; a stop only steps lead to is skipped (docs/visitor.md,
+    "A step-free tour")."""
 
 
 class PoiParams(_Params):

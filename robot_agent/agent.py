@@ -30,12 +30,12 @@ from robot_agent.head import HeadWatchdog
 from robot_agent.link import Link
 from robot_agent.metrics import RobotMetrics
 from robot_agent.navigation import Navigator
-from robot_agent.pace import PaceKeeper
 from robot_agent.reaction import ReactionTracker
 from robot_agent.site_sync import SiteFollower
 from robot_agent.speech import Speech
 from robot_agent.state import StateReporter
 from robot_agent.tasks import TaskRunner
+from robot_agent.visitor_needs import VisitorNeeds
 
 __all__ = ["AgentConfig", "RobotAgent", "hub_ws_url"]
 
@@ -147,7 +147,7 @@ class RobotAgent(Service):
         self.head: HeadWatchdog | None = None
         self.battery: BatteryMonitor | None = None
         self.tasks: TaskRunner | None = None
-        self.pace: PaceKeeper | None = None
+        self.needs: VisitorNeeds | None = None
         self.evacuation: Evacuation | None = None
         self.state: StateReporter | None = None
         self.dispatch: Any = None
@@ -232,8 +232,8 @@ class RobotAgent(Service):
             on_start=battery.undock,
         )
         await self.enter(self.tasks)
-        self.pace = PaceKeeper(bus.endpoint("pace"), self.tasks, navigator, self.speech)
-        await self.enter(self.pace)
+        self.needs = VisitorNeeds(bus.endpoint("needs"), self.tasks, navigator, self.speech)
+        await self.enter(self.needs)
         self.evacuation = Evacuation(bus.endpoint("evacuation"), name, navigator, self.tasks)
         await self.enter(self.evacuation)
         self.state = StateReporter(

@@ -82,6 +82,8 @@ class TourRequest(BaseModel):
     lang: str | None = Field(default=None, max_length=16)
     pace: PaceName | None = None
     """``slow``: a slower tour (guidebot/pace.py)."""
+    step_free: bool | None = None
+    """A tour over no steps (docs/visitor.md, "A step-free tour")."""
 
 
 class Answer(BaseModel):
@@ -245,6 +247,7 @@ class OnboardScreen(Service):
             "id": message.payload.get("task_id"),
             "tour": params.get("tour"),
             "pace": pace_of(params).name,  # a slower tour: the screen says so
+            "step_free": params.get("step_free") is True,
             "handover": message.payload.get("handover"),  # taken up from another robot
         }
         self.skipped = []
@@ -408,7 +411,7 @@ class OnboardScreen(Service):
             known = {t["id"] for t in self.tours}
             if not req.tour or (known and req.tour not in known):
                 raise ValueError(f"unknown tour {req.tour!r}; known: {sorted(known)}")
-            params = {"tour": req.tour}
+            params: dict[str, Any] = {"tour": req.tour}
         else:
             known = {p["id"] for p in self.pois}
             if not req.poi or (known and req.poi not in known):
@@ -418,6 +421,8 @@ class OnboardScreen(Service):
             params["lang"] = req.lang
         if req.pace and req.pace != "normal":
             params["pace"] = req.pace
+        if req.step_free and req.kind == "tour":
+            params["step_free"] = True
         return self.ep.publish(
             "task_request",
             {"kind": req.kind, "params": params, "priority": 5, "requester": self.robot},

@@ -7,7 +7,7 @@ import { loadTexts } from "/lib/i18n.js";
 import { skippedLines } from "/lib/skipped.js";
 
 const app = document.getElementById("app");
-const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now(), large: false, contrast: false, slow: false };
+const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now(), large: false, contrast: false, slow: false, stepFree: false };
 const t = (key, vars) => state.texts.t(key, vars);
 /** language tag -> its name in itself, for the picker */
 const names = new Map();
@@ -75,7 +75,7 @@ async function refresh() {
     return refresh();
   }
   if (screen.task && !state.screen?.task) state.message = ""; // the request became a tour
-  if (!screen.task && state.screen?.task) state.large = state.contrast = state.slow = false; // the next visitor
+  if (!screen.task && state.screen?.task) state.large = state.contrast = state.slow = state.stepFree = false; // the next visitor
   state.screen = screen;
   if (!state.texts || state.texts.lang !== screen.lang) state.texts = await loadTexts(screen.lang);
   if (!names.size) for (const lang of screen.languages) names.set(lang, (await loadTexts(lang)).name);
@@ -87,6 +87,7 @@ async function ask(kind, item) {
   const body = kind === "tour" ? { kind, tour: item.id } : { kind, poi: item.id };
   body.lang = state.screen.lang;
   if (state.slow) body.pace = "slow";
+  if (state.stepFree && kind === "tour") body.step_free = true;
   const r = await post("/api/request", body);
   if (r.ok) state.message = r.data.queued_offline ? t("request_queued_offline") : t("requested");
   else if (r.status === 0) state.message = t("error_network");
@@ -198,12 +199,16 @@ const on = (value) => (value ? html`<span aria-hidden="true">✓ </span>` : "");
 function viewOptions(s) {
   const toggle = (key) => () => { state[key] = !state[key]; draw(); };
   const slow = s.task ? s.task.pace === "slow" : state.slow;
+  const stepFree = s.task ? Boolean(s.task.step_free) : state.stepFree;
   return html`<div class="view-options" role="group" aria-label=${t("view_options")}>
     <button class="secondary" aria-pressed=${String(state.large)} @click=${toggle("large")}>${on(state.large)}${t("larger_text")}</button>
     <button class="secondary" aria-pressed=${String(state.contrast)} @click=${toggle("contrast")}>${on(state.contrast)}${t("high_contrast")}</button>
     <button class="secondary" aria-pressed=${String(slow)} ?disabled=${Boolean(s.task)} aria-describedby="pace-help"
       @click=${toggle("slow")}>${on(slow)}${t("slower_tour")}</button>
+    <button class="secondary" aria-pressed=${String(stepFree)} ?disabled=${Boolean(s.task)} aria-describedby="step-free-help"
+      @click=${toggle("stepFree")}>${on(stepFree)}${t("step_free")}</button>
     <p class="sr-only" id="pace-help">${t("slower_tour_help")}</p>
+    <p class="sr-only" id="step-free-help">${t("step_free_help")}</p>
   </div>`;
 }
 
@@ -237,6 +242,7 @@ function draw() {
     ${stateView(s)}
     ${captionView(s)}
     ${s.task?.pace === "slow" ? html`<p class="pace">${t("state_slower_unknown")}</p>` : ""}
+    ${s.task?.step_free ? html`<p class="pace">${t("state_step_free")}</p>` : ""}
     ${s.task?.handover ? html`<p class="notice" role="status">${t("handover", { robot: s.robot, i: s.task.handover.stop })}</p>` : ""}
     ${questionView(s.question)}
     <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>

@@ -81,7 +81,7 @@ class Speech(Service):
         self.playback = playback
         self.speaking: str | None = None
         self.dwell = 1.0
-        """A slower tour speaks this many times as long (robot_agent/pace.py)."""
+        """A slower tour speaks this many times as long (robot_agent/visitor_needs.py)."""
         self.spoken = 0
         self._voices: frozenset[str] | None = None
         self._task: asyncio.Task[None] | None = None

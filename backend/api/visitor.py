@@ -12,9 +12,11 @@ from fastapi.responses import FileResponse
 from backend.api.deps import Anyone, Requester, Sites, TaskRequester, Tasks, not_found
 from backend.auth import Principal, Role
 from guidebot.pace import PaceName
+from guidebot.site.access import step_free_skips
+from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_in
-from guidebot.site.schema import Site
+from guidebot.site.schema import Site, Tour
 
 __all__ = ["DEVICE_HEADER", "Me", "MeRequesting", "device_requester", "media_url", "router"]
 
@@ -82,6 +84,21 @@ def _pictures(names: list[str]) -> list[dict[str, Any]]:
     return [{"name": n, "url": media_url(n)} for n in names]
 
 
+_skips: dict[int, tuple[SiteGraph, dict[str, list[str]]]] = {}
+"""id(graph) -> (graph, tour id -> the stops a step-free tour skips): one look per site version."""
+
+
+def _step_free_skips(site: Site, graph: SiteGraph, tour: Tour) -> list[str]:
+    found = _skips.get(id(graph))
+    if found is None or found[0] is not graph:
+        _skips.clear()  # the site changed: its graph is new
+        found = _skips[id(graph)] = (graph, {})
+    by_tour = found[1]
+    if tour.id not in by_tour:
+        by_tour[tour.id] = step_free_skips(site, graph, tour)
+    return by_tour[tour.id]
+
+
 def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
     poi = site.poi(poi_id)
     if poi is None:
@@ -110,8 +127,15 @@ async def visitor_menu(
     for tour in site.tours:
         stops = [v for v in (_poi_view(site, p, chosen) for p in tour.points) if v is not None]
         told = estimator.preview("tour", {"tour": tour.id, "lang": chosen} | paced).as_dict()
+        skips = _step_free_skips(site, manager.graph, tour)
         tours.append(
-            {"id": tour.id, **tour_texts(site, tour, chosen), "stops": stops, "estimate": told}
+            {
+                "id": tour.id,
+                **tour_texts(site, tour, chosen),
+                "stops": stops,
+                "estimate": told,
+                "step_free_skips": skips,
+            }
         )
     pois = []
     for poi in site.pois:

@@ -32,8 +32,11 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
     asks back. The task's parameters were checked against this site (``target_node``)."""
     p = task.params
     lang = resolve_language(site, p.get("lang"))
-    # A slower tour (guidebot/pace.py): its robot slows down from the first stop on.
-    pace = {"pace": p["pace"]} if p.get("pace") not in (None, "normal") else {}
+    # The visitor's needs, which its robot follows from the first stop on: a slower tour
+    # (guidebot/pace.py), a step-free one (robot_agent/visitor_needs.py).
+    needs: dict[str, Any] = {"pace": p["pace"]} if p.get("pace") not in (None, "normal") else {}
+    if task.kind == "tour" and p.get("step_free"):
+        needs["step_free"] = True
     if task.kind == "tour":
         tour = site.tour(p["tour"])
         assert tour is not None
@@ -42,7 +45,7 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
             {"poi": q.id, "node": q.node, "index": i, "total": len(pois)} | poi_texts(site, q, lang)
             for i, q in enumerate(pois, start=1)
         ]
-        return {"tour": tour.id, "points": points, "lang": lang} | pace
+        return {"tour": tour.id, "points": points, "lang": lang} | needs
     if task.kind == "go_to_poi":
         poi = site.poi(p["poi"])
         assert poi is not None
@@ -52,7 +55,7 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
             "node": poi.node,
             "text": texts["text"],
             "lang": texts["lang"],
-        } | pace
+        } | needs
     if task.kind == "charge":
         station = p.get("station") or site.charging_stations[0].id
         node = next(s.node for s in site.charging_stations if s.id == station)

@@ -79,6 +79,9 @@ class Edge(StrictModel):
     length_m: StrictFloat | None = Field(default=None, gt=0)
     one_way: StrictBool = False
     """Only from ``a`` to ``b``."""
+    steps: StrictBool = False
+    """Steps or a slope a wheelchair user cannot take: a step-free tour does not use it
+    (robots still may; docs/visitor.md, "A step-free tour")."""
 
 
 LANG_PATTERN = r"^[a-z]{2,3}(-[A-Za-z0-9]{2,8})?$"

@@ -199,8 +199,8 @@ async def test_a_phone_visitor_asks_for_a_slower_tour_and_is_told_how_long_it_ta
         """The base's speeds, by the pace the robot was at then."""
 
         def odometry(m: Message) -> None:
-            assert agent.pace is not None
-            speeds[agent.pace.pace.name].append(float(m.payload["v"]))
+            assert agent.needs is not None
+            speeds[agent.needs.pace.name].append(float(m.payload["v"]))
 
         ended: list[Message] = []
         taps = agent.bus.endpoint("test-pace")
@@ -236,7 +236,7 @@ async def test_a_phone_visitor_asks_for_a_slower_tour_and_is_told_how_long_it_ta
         task = next(t for t in vf.fleet.server.app.state.task_manager.tasks.values())
         assert task.params["pace"] == "slow" and task.params["tour"] == "highlights"
         # On the robot: its usual speed to the first stop, then slower, until the tour ends.
-        await wait_until(lambda: agent.pace is not None and agent.pace.pace.name == "slow", 60)
+        await wait_until(lambda: agent.needs is not None and agent.needs.pace.name == "slow", 60)
         assert agent.navigator.max_speed == pytest.approx(0.6 * top)
         assert agent.speech.dwell == 1.5
         state = page.locator(".request-state")
@@ -255,7 +255,7 @@ async def test_a_phone_visitor_asks_for_a_slower_tour_and_is_told_how_long_it_ta
             assert ratio >= 1.4, (m.payload["text"], took)
 
 
-async def test_the_touch_screen_asks_for_a_slower_tour(
+async def test_the_touch_screen_asks_for_a_slower_step_free_tour(
     visitor_fleet: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with visitor_fleet() as vf:
@@ -266,14 +266,85 @@ async def test_the_touch_screen_asks_for_a_slower_tour(
         await slower.click()
         await expect(slower).to_have_attribute("aria-pressed", "true")
         await expect(slower).to_contain_text("✓")
+        step_free = screen.get_by_role("button", name="Step-free only")
+        await step_free.click()
+        await expect(step_free).to_have_attribute("aria-pressed", "true")
         await web.axe_check(screen)
         await screen.get_by_role("button", name="Highlights").click()
-        await expect(screen.locator(".pace")).to_contain_text("A slower tour.", timeout=LONG)
+        await expect(screen.locator(".pace").first).to_contain_text("A slower tour.", timeout=LONG)
+        await expect(screen.locator(".pace").last).to_contain_text("A step-free tour")
         await web.axe_check(screen)
         tasks = vf.fleet.server.app.state.task_manager.tasks
-        assert [t.params.get("pace") for t in tasks.values()] == ["slow"]
+        assert [(t.params.get("pace"), t.params.get("step_free")) for t in tasks.values()] == [
+            ("slow", True)
+        ]
         agent = vf.agents["R1"]
-        await wait_until(lambda: agent.pace is not None and agent.pace.pace.name == "slow", 60)
+        await wait_until(lambda: agent.needs is not None and agent.needs.pace.name == "slow", 60)
         # The next visitor gets the usual pace.
         await expect(screen.locator(".pace")).to_have_count(0, timeout=LONG)
         await expect(slower).to_have_attribute("aria-pressed", "false")
+        await expect(step_free).to_have_attribute("aria-pressed", "false")
+
+
+async def test_a_step_free_tour_skips_the_stop_only_steps_lead_to_and_says_so(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The demo marks the three steps down to the loom (``steps: true``): a step-free tour of
+    the ground floor skips it, says why, and the robot keeps to step-free paths; others go."""
+    async with visitor_fleet() as vf:
+        agent = vf.agents["R1"]
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        card = page.get_by_role("article", name="Ground floor tour")
+        await expect(card).not_to_contain_text("Step-free")
+        step_free = page.get_by_role("button", name="Step-free only")
+        await expect(step_free).to_have_attribute("aria-pressed", "false")
+        await step_free.click()
+        await expect(step_free).to_have_attribute("aria-pressed", "true")
+        await expect(step_free).to_contain_text("✓")
+        await expect(card).to_contain_text("Step-free, it skips: Loom")
+        await web.axe_check(page)
+        await request_from(page, "Ground floor tour")
+        await expect(page.locator(".pace")).to_contain_text(
+            "A step-free tour: stops that only steps lead to are skipped."
+        )
+        task = next(iter(vf.fleet.server.app.state.task_manager.tasks.values()))
+        assert task.params["step_free"] is True
+        await wait_until(lambda: agent.needs is not None and agent.needs.step_free, 60)
+        assert agent.navigator is not None and agent.navigator.step_free
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("The tour has ended", timeout=LONG)
+        skipped = page.get_by_role("region", name="Stops skipped")
+        await expect(skipped).to_contain_text(
+            "Stop 5, Loom: only steps or a steep slope lead there"
+        )
+        await web.axe_check(page)
+        await web.screenshot(page, "visitor-phone-step-free")
+        assert not agent.navigator.step_free  # the next task is not step-free
+        # A robot may still take the steps when no step-free visitor is with it.
+        async with vf.fleet.http() as staff:
+            r = await staff.post("/api/tasks", json={"kind": "go_to", "params": {"node": "gb2"}})
+            assert r.status_code == 201, r.text
+            go_to = r.json()["id"]
+        await wait_until(lambda: vf.task(go_to).state.value == "done", 60)
+
+
+async def test_the_site_editor_marks_an_edge_with_steps(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_page(f"{fleet.server.url}/config/")).page
+        await page.get_by_label("Admin token").fill(fleet.server.admin_token)
+        await page.get_by_label("Admin token").press("Enter")
+        await page.get_by_role("button", name="Edges").click()
+        await page.get_by_role("button", name="corridor_w ↔ corridor_e").click()
+        steps = page.get_by_role("checkbox", name="steps")
+        await expect(steps).not_to_be_checked()
+        await steps.check()
+        await expect(page.locator("path.map-edge.steps")).not_to_have_count(0)
+        await web.axe_check(page)
+        await page.get_by_role("button", name="Publish", exact=True).click()
+        await expect(page.locator("#rollout")).to_contain_text("is live")
+        async with fleet.http() as http:
+            edges = (await http.get("/api/site")).json()["site"]["edges"]
+        marked = [(e["a"], e["b"]) for e in edges if e.get("steps")]
+        assert ("corridor_w", "corridor_e") in marked, marked

@@ -8,7 +8,7 @@ const num = (v) => (v === "" || v === null || v === undefined ? null : Number(v)
 export const KINDS = {
   floors: { label: "Floors", one: "floor", fields: ["id", "name", ["level", "int"], "plan_image", ["scale_px_per_m", "num"], ["plan_origin", "pair"]] },
   nodes: { label: "Nodes", one: "node", fields: ["id", ["floor", "floor"], ["x", "num"], ["y", "num"], ["passing_place", "bool"]] },
-  edges: { label: "Edges", one: "edge", fields: [["a", "node"], ["b", "node"], ["one_way", "bool"], ["length_m", "optnum"]] },
+  edges: { label: "Edges", one: "edge", fields: [["a", "node"], ["b", "node"], ["one_way", "bool"], ["steps", "bool"], ["length_m", "optnum"]] },
   pois: { label: "Points of interest", one: "point", fields: ["id", "name", ["node", "node"], ["text", "area"], "lang", ["media", "media"]] },
   tours: { label: "Tours", one: "tour", fields: ["id", "name", ["description", "area"], ["points", "points"]] },
   charging_stations: { label: "Charging stations", one: "station", fields: ["id", ["node", "node"]] },

@@ -58,6 +58,8 @@ const state = {
   /** the visitor asked for a slower tour (docs/accessibility.md): the menu's lengths and the
    * requests are at that pace */
   slow: false,
+  /** the visitor asked for step-free tours: no steps on the way, stops only steps lead to skipped */
+  stepFree: false,
   menu: null,
   /** when the menu (and its waits) was read: its waits count down from then */
   menuAt: 0,
@@ -248,6 +250,7 @@ async function request(kind, item) {
   const params = kind === "tour" ? { tour: item.id } : { poi: item.id };
   params.lang = state.menu.lang;
   if (state.slow) params.pace = "slow";
+  if (state.stepFree && kind === "tour") params.step_free = true;
   try {
     const status = await api.post("/api/tasks", { kind: KIND[kind], params });
     state.requests.set(status.id, told(status));
@@ -361,6 +364,8 @@ function card(kind, item) {
       <h3 id=${`${id}-name`}>${item.name}</h3>
       ${item.description ? html`<p>${item.description}</p>` : ""}
       <p class="muted">${facts.join(" · ")}</p>
+      ${kind === "tour" && state.stepFree && item.step_free_skips?.length
+        ? html`<p class="skips">${t("step_free_skips", { names: item.step_free_skips.map(poiName).join(", ") })}</p>` : ""}
       <p class=${`wait ${estimate?.service ?? ""}`} id=${`${id}-wait`}>${serviceLine(estimate)}</p>
       <button class="big" ?disabled=${unavailable || state.busy} aria-describedby=${`${id}-name ${id}-wait`}
         @click=${() => request(kind, item)}>${t(kind === "tour" ? "request_tour" : "request_point")}</button>
@@ -381,13 +386,20 @@ function languagePicker() {
   </div>`;
 }
 
-/** "Slower tour": a toggle; on, the lengths shown and the requests made are at the slow pace. */
+/** "Slower tour" and "Step-free only": toggles; on, the lengths shown and the requests made
+ * are at the slow pace, and tours keep off steps. */
 function paceToggle() {
   const slow = state.menu.pace === "slow";
+  const stepFree = () => { state.stepFree = !state.stepFree; draw(); };
   return html`<div class="pace-option">
     <button class="secondary" aria-pressed=${String(slow)} aria-describedby="pace-help" ?disabled=${state.busy}
       @click=${toggleSlow}>${on(slow)}${t("slower_tour")}</button>
     <p class="muted" id="pace-help">${t("slower_tour_help")}</p>
+  </div>
+  <div class="pace-option">
+    <button class="secondary" aria-pressed=${String(state.stepFree)} aria-describedby="step-free-help"
+      @click=${stepFree}>${on(state.stepFree)}${t("step_free")}</button>
+    <p class="muted" id="step-free-help">${t("step_free_help")}</p>
   </div>`;
 }
 
@@ -494,9 +506,10 @@ function requestView() {
 /** A slower tour says so, with how long it takes from the first stop (the server counts the
  * slower pace in it). */
 function paceLine(r) {
-  if (r.params?.pace !== "slow") return "";
-  const length = r.duration_s ? t("state_slower", { t: about(r.duration_s) }) : t("state_slower_unknown");
-  return html`<p class="pace">${length}</p>`;
+  const lines = [];
+  if (r.params?.pace === "slow") lines.push(r.duration_s ? t("state_slower", { t: about(r.duration_s) }) : t("state_slower_unknown"));
+  if (r.params?.step_free) lines.push(t("state_step_free"));
+  return lines.map((line) => html`<p class="pace">${line}</p>`);
 }
 
 /** Captions: what the visitor's robot is saying now, in the tour's language, while it says it
@@ -618,6 +631,7 @@ function kioskMode() {
       showError("", "");
       state.lang = state.menu?.default_language ?? state.lang;
       state.slow = false;
+      state.stepFree = false;
       // The next visitor is another device: the last one's requests are no longer listed here
       // (and can no longer be cancelled from here); they stay with the server.
       device = deviceId(true);

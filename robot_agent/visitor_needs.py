@@ -1,7 +1,9 @@
-"""A slower tour on the robot (guidebot/pace.py, docs/accessibility.md): from the first stop of
-a task that asks for ``pace: slow`` until it ends, the robot drives at a fraction of its top
-speed and speaks more slowly. Before the first stop nobody walks with it, so it goes there at
-its usual speed (the server's estimates count the same way)."""
+"""What a tour's visitor needs of the robot that guides them (docs/accessibility.md), from the
+first stop of the task until it ends: a slower tour (``pace: slow``, guidebot/pace.py) drives at
+a fraction of the top speed and speaks more slowly; a step-free tour (``step_free``) plans its
+legs over no edge with steps (robot_agent/navigation.py), and a stop that only steps lead to is
+skipped (the server's path answer says ``steps``). Before the first stop nobody walks with the
+robot, so it goes there as usual (the server's estimates count the same way)."""
 
 from __future__ import annotations
 
@@ -14,21 +16,23 @@ from guidebot.pace import PACES, Pace, pace_of
 from guidebot.service import Service
 from robot_agent.tasks import TaskRunner
 
-__all__ = ["PaceKeeper"]
+__all__ = ["VisitorNeeds"]
 
 log = logging.getLogger(__name__)
 
 
 class _Drives(Protocol):
     max_speed: float
+    step_free: bool
 
 
 class _Speaks(Protocol):
     dwell: float
 
 
-class PaceKeeper(Service):
-    """Sets the navigator's top speed and the speech's dwell to the running task's pace."""
+class VisitorNeeds(Service):
+    """Sets the navigator's top speed and step-free planning and the speech's dwell to what the
+    running task asks for."""
 
     def __init__(
         self, endpoint: BusEndpoint, tasks: TaskRunner, drive: _Drives, speech: _Speaks
@@ -40,8 +44,9 @@ class PaceKeeper(Service):
         self.speech = speech
         self.top_speed = drive.max_speed
         self.pace: Pace = PACES["normal"]
+        self.step_free = False
         self._task: str | None = None
-        """The task whose pace is applied (None: the normal pace)."""
+        """The task whose needs are applied (None: none)."""
 
     async def on_start(self) -> None:
         self.subscribe_all(
@@ -52,15 +57,16 @@ class PaceKeeper(Service):
         task = self.tasks.current
         if task is None or task.task_id == self._task:
             return
-        self._apply(pace_of(task.params), task.task_id)
+        self._apply(pace_of(task.params), task.params.get("step_free") is True, task.task_id)
 
     def _on_ended(self, message: Message) -> None:
         if self._task is not None and message.payload.get("task_id") == self._task:
-            self._apply(PACES["normal"], None)
+            self._apply(PACES["normal"], False, None)
 
-    def _apply(self, pace: Pace, task: str | None) -> None:
-        if pace != self.pace:
-            log.info("task %s: %s pace", task or self._task, pace.name)
-        self.pace, self._task = pace, task
+    def _apply(self, pace: Pace, step_free: bool, task: str | None) -> None:
+        if (pace, step_free) != (self.pace, self.step_free):
+            log.info("task %s: %s pace, step-free %s", task or self._task, pace.name, step_free)
+        self.pace, self.step_free, self._task = pace, step_free, task
         self.drive.max_speed = self.top_speed * pace.speed
+        self.drive.step_free = step_free
         self.speech.dwell = pace.dwell
