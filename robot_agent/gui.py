@@ -37,7 +37,7 @@ from guidebot.pace import PaceName, pace_of
 from guidebot.paths import WEB_DIR
 from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
-from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
+from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
 from guidebot.site.schema import Site
 from guidebot.task_kinds import KINDS, VISITOR_KINDS
@@ -196,18 +196,28 @@ class OnboardScreen(Service):
         }
 
     def alarm_words(self, lang: str | None) -> str:
-        """The site's alarm words in ``lang``, else in the first language given (the server
-        puts the site's default first); empty when none came."""
+        """The site's alarm words in ``lang``, else in the site's default language, else in the
+        first language given; empty when none came."""
         words: dict[str, str] = (self.alarm or {}).get("words") or {}
-        if lang in words:
-            return words[lang]
+        default = self.site.default_language if self.site is not None else None
+        for tag in (lang, default):
+            if tag in words:
+                return words[tag]
         return next(iter(words.values()), "")
 
     def _tours(self, lang: str) -> list[dict[str, Any]]:
         site = self.site
         if site is None:
             return self.tours
-        return [{"id": t.id, "points": t.points, **tour_texts(site, t, lang)} for t in site.tours]
+        return [
+            {
+                "id": t.id,
+                "points": t.points,
+                **tour_texts(site, t, lang),
+                "fallback": fallbacks(site, t, lang),
+            }
+            for t in site.tours
+        ]
 
     def _pois(self, lang: str) -> list[dict[str, Any]]:
         site = self.site
@@ -223,6 +233,7 @@ class OnboardScreen(Service):
                     "name": texts["name"],
                     "description": texts["description"],
                     "media": [media_link(m) for m in texts["media"]],
+                    "fallback": fallbacks(site, p, lang),
                 }
             )
         return out
@@ -303,6 +314,8 @@ class OnboardScreen(Service):
             "index": point.get("index"),
             "total": point.get("total"),
             "lang": message.payload.get("lang"),
+            # The language the text really is in (the site's default when not translated).
+            "text_lang": point.get("lang") or (site_texts or {}).get("lang"),
         }
         self._push("show_point", self.explanation)
 

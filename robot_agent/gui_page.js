@@ -2,7 +2,7 @@
 // served by the robot itself), tours and points to request, the current explanation with its
 // picture, "continue the tour?" with a visible countdown, and the robot's state. During a fire
 // alarm: the evacuation screen, the site's words in the screen's language (docs/emergency.md).
-import { html, render } from "/vendor/lit-html/lit-html.js";
+import { html, nothing, render } from "/vendor/lit-html/lit-html.js";
 import { loadTexts } from "/lib/i18n.js";
 import { skippedLines } from "/lib/skipped.js";
 
@@ -171,7 +171,8 @@ function nowView(s) {
     ${picture(e.media, e.name)}
     <div>
       ${e.index ? html`<p class="muted">${t("state_progress", { i: e.index, n: e.total, place: e.name })}</p>` : html`<h3>${e.name}</h3>`}
-      <p class="explanation" aria-live="polite">${e.text}</p>
+      <p class="explanation" aria-live="polite" lang=${e.text_lang ?? nothing}>${e.text}</p>
+      ${e.text_lang && e.text_lang !== s.lang ? html`<p class="fallback">${t("text_fallback", { language: names.get(e.text_lang) ?? e.text_lang })}</p>` : ""}
     </div>
   </div>${skippedView(s)}`;
 }
@@ -248,10 +249,10 @@ function draw() {
     <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}
     ${s.task ? "" : html`<section aria-labelledby="tours-title"><h2 id="tours-title">${t("tours")}</h2>
-      <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
+      <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} lang=${tour.fallback?.name ?? nothing} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
     </section>
     <section aria-labelledby="points-title"><h2 id="points-title">${t("points")}</h2>
-      <div class="actions">${s.pois.map((poi) => html`<button class="big secondary" ?disabled=${refused} @click=${() => ask("go_to_poi", poi)}>${poi.name}</button>`)}</div>
+      <div class="actions">${s.pois.map((poi) => html`<button class="big secondary" ?disabled=${refused} lang=${poi.fallback?.name ?? nothing} @click=${() => ask("go_to_poi", poi)}>${poi.name}</button>`)}</div>
     </section>`}`, app);
 }
 

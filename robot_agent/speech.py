@@ -50,12 +50,16 @@ def espeak_voices(engine: str) -> frozenset[str]:
 
 
 def voice_for(lang: str, voices: frozenset[str]) -> str | None:
-    """The espeak-ng voice for ``lang``: itself, else its base language, else None."""
+    """The espeak-ng voice for ``lang``: itself, else its base language, else the first regional
+    voice of that language (espeak-ng has French only as ``fr-fr``), else None."""
     tag = lang.lower()
     if tag in voices:
         return tag
     base = tag.split("-")[0]
-    return base if base in voices else None
+    if base in voices:
+        return base
+    regional = sorted(v for v in voices if v.startswith(f"{base}-"))
+    return regional[0] if regional else None
 
 
 def simulated_duration(text: str) -> float:

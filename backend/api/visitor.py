@@ -14,7 +14,7 @@ from backend.auth import Principal, Role
 from guidebot.pace import PaceName
 from guidebot.site.access import step_free_skips
 from guidebot.site.graph import SiteGraph
-from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
+from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_in
 from guidebot.site.schema import Site, Tour
 
@@ -109,6 +109,7 @@ def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
         "name": texts["name"],
         "description": texts["description"],
         "media": _pictures(texts["media"]),
+        "fallback": fallbacks(site, poi, lang),
     }
 
 
@@ -135,6 +136,7 @@ async def visitor_menu(
                 "stops": stops,
                 "estimate": told,
                 "step_free_skips": skips,
+                "fallback": fallbacks(site, tour, chosen),
             }
         )
     pois = []

@@ -227,6 +227,7 @@ async def test_a_phone_visitor_asks_for_a_slower_tour_and_is_told_how_long_it_ta
         await expect(slower).to_contain_text("✓")
         await expect(card).to_contain_text("Slower tour: ")
         await web.axe_check(page)
+        await card.locator(".muted").first.scroll_into_view_if_needed()
         await web.screenshot(page, "visitor-phone-slower")
         await request_from(page, "Highlights")
         await expect(page.locator(".pace")).to_contain_text(
@@ -318,6 +319,7 @@ async def test_a_step_free_tour_skips_the_stop_only_steps_lead_to_and_says_so(
             "Stop 5, Loom: only steps or a steep slope lead there"
         )
         await web.axe_check(page)
+        await skipped.scroll_into_view_if_needed()
         await web.screenshot(page, "visitor-phone-step-free")
         assert not agent.navigator.step_free  # the next task is not step-free
         # A robot may still take the steps when no step-free visitor is with it.
@@ -348,3 +350,39 @@ async def test_the_site_editor_marks_an_edge_with_steps(
             edges = (await http.get("/api/site")).json()["site"]["edges"]
         marked = [(e["a"], e["b"]) for e in edges if e.get("steps")]
         assert ("corridor_w", "corridor_e") in marked, marked
+
+
+async def test_a_german_visitor_gets_the_third_language_and_is_told_when_a_text_falls_back(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with visitor_fleet() as vf:
+        # Staff remove the German texts of one point: its texts fall back to English.
+        async with vf.fleet.http() as admin:
+            admin.headers["Authorization"] = f"Bearer {vf.fleet.server.admin_token}"
+            document = (await admin.get("/api/site")).json()["site"]
+            amphorae = next(p for p in document["pois"] if p["id"] == "amphorae")
+            del amphorae["translations"]["de"]
+            r = await admin.put("/api/site", json=document)
+            assert r.status_code == 200, r.text
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        await expect(page.get_by_role("button", name="Deutsch")).to_be_visible()
+        await page.get_by_role("button", name="Deutsch").click()
+        await expect(page.get_by_role("heading", level=1)).to_contain_text(
+            "Einen Führungsroboter anfordern"
+        )
+        await expect(page.get_by_role("button", name="Deutsch")).to_contain_text("✓")
+        await expect(page.get_by_role("button", name="English")).not_to_contain_text("✓")
+        amphorae_card = page.get_by_role("article", name="Amphorae")
+        await expect(amphorae_card.get_by_role("heading")).to_have_attribute("lang", "en")
+        await expect(amphorae_card).to_contain_text("Noch nicht übersetzt: auf English.")
+        mosaics = page.get_by_role("article", name="Römische Mosaike")
+        await expect(mosaics.locator(".fallback")).to_have_count(0)
+        await web.axe_check(page)
+        await amphorae_card.locator(".fallback").scroll_into_view_if_needed()
+        await web.screenshot(page, "visitor-phone-de-fallback")
+        await request_from(page, "Das Wichtigste", "Diese Führung machen")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("Die Führung ist zu Ende", timeout=LONG)
+        said = [m.payload for m in vf.speech]
+        assert said and all(p["lang"] == "de" for p in said), said
+        assert any("römischen Villa" in p["text"] for p in said), said

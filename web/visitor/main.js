@@ -2,7 +2,7 @@
 // in the visitor's language, a request, then live over the hub: which robot, place in line and
 // wait, on its way, arrived, progress, ended; cancel. During a fire alarm, the evacuation screen;
 // after it, the offer to go on with a request the alarm cut off. docs/visitor.md describes it.
-import { html, render } from "lit-html";
+import { html, nothing, render } from "lit-html";
 import { fragmentToken } from "/lib/auth.js";
 import { HubClient } from "/lib/hub.js";
 import { loadTexts, preferredLanguage } from "/lib/i18n.js";
@@ -358,11 +358,13 @@ function card(kind, item) {
   if (estimate?.duration_s) facts.push(t(length, { t: state.texts.duration(estimate.duration_s) }));
   const media = kind === "tour" ? item.stops.flatMap((s) => s.media) : item.media;
   const id = `${kind}-${item.id}`;
+  const fb = item.fallback ?? {};
   return html`<article class="card" aria-labelledby=${`${id}-name`}>
     ${picture(media, item.name)}
     <div class="card-body">
-      <h3 id=${`${id}-name`}>${item.name}</h3>
-      ${item.description ? html`<p>${item.description}</p>` : ""}
+      <h3 id=${`${id}-name`} lang=${fb.name ?? nothing}>${item.name}</h3>
+      ${item.description ? html`<p lang=${fb.description ?? nothing}>${item.description}</p>` : ""}
+      ${fallbackNote(fb)}
       <p class="muted">${facts.join(" · ")}</p>
       ${kind === "tour" && state.stepFree && item.step_free_skips?.length
         ? html`<p class="skips">${t("step_free_skips", { names: item.step_free_skips.map(poiName).join(", ") })}</p>` : ""}
@@ -376,6 +378,14 @@ function card(kind, item) {
 /** A tick on a button that is on (a chosen language, a slower tour): not told by colour
  * alone (aria-pressed tells screen readers). */
 const on = (value) => (value ? html`<span class="tick" aria-hidden="true">✓ </span>` : "");
+
+/** A text the site has not translated into the page's language is shown in the site's own
+ * language (marked with `lang` for screen readers), and the visitor is told so. */
+function fallbackNote(fallback) {
+  const langs = [...new Set(Object.values(fallback ?? {}))];
+  if (!langs.length) return "";
+  return html`<p class="fallback">${langs.map((lang) => t("text_fallback", { language: names.get(lang) ?? lang })).join(" ")}</p>`;
+}
 
 function languagePicker() {
   const langs = state.menu.languages;
