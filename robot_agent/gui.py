@@ -38,7 +38,7 @@ from guidebot.paths import WEB_DIR
 from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
-from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, SERVED_TYPES, media_file, video_url
 from guidebot.site.schema import Site
 from guidebot.task_kinds import KINDS, VISITOR_KINDS
 from robot_agent.clock import Clock
@@ -316,6 +316,10 @@ class OnboardScreen(Service):
             "lang": message.payload.get("lang"),
             # The language the text really is in (the site's default when not translated).
             "text_lang": point.get("lang") or (site_texts or {}).get("lang"),
+            # The text in sign language, where the site has a video of it.
+            "sign_video": video_url(
+                point.get("sign_video") or (site_texts or {}).get("sign_video")
+            ),
         }
         self._push("show_point", self.explanation)
 
@@ -508,7 +512,7 @@ def create_screen_app(
         if path is None:
             raise HTTPException(status_code=404, detail=f"media {name!r} not found")
         return FileResponse(
-            path, media_type=MEDIA_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS
+            path, media_type=SERVED_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS
         )
 
     for folder in SHARED_FOLDERS:

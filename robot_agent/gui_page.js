@@ -172,6 +172,8 @@ function nowView(s) {
     <div>
       ${e.index ? html`<p class="muted">${t("state_progress", { i: e.index, n: e.total, place: e.name })}</p>` : html`<h3>${e.name}</h3>`}
       <p class="explanation" aria-live="polite" lang=${e.text_lang ?? nothing}>${e.text}</p>
+      ${e.sign_video ? html`<video class="sign-video" src=${e.sign_video} controls muted autoplay loop playsinline
+        aria-label=${t("sign_video", { name: e.name })}></video>` : ""}
       ${e.text_lang && e.text_lang !== s.lang ? html`<p class="fallback">${t("text_fallback", { language: names.get(e.text_lang) ?? e.text_lang })}</p>` : ""}
     </div>
   </div>${skippedView(s)}`;

@@ -15,7 +15,7 @@ from guidebot.pace import PaceName
 from guidebot.site.access import step_free_skips
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
-from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_in
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, SERVED_TYPES, media_in, video_url
 from guidebot.site.schema import Site, Tour
 
 __all__ = ["DEVICE_HEADER", "Me", "MeRequesting", "device_requester", "media_url", "router"]
@@ -110,6 +110,7 @@ def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
         "description": texts["description"],
         "media": _pictures(texts["media"]),
         "fallback": fallbacks(site, poi, lang),
+        "sign_video": video_url(texts.get("sign_video")),
     }
 
 
@@ -169,9 +170,9 @@ async def my_requests(me: Me, manager: Tasks) -> list[dict[str, Any]]:
 
 @router.get("/media/{name:path}", response_class=FileResponse, include_in_schema=True)
 async def media(request: Request, name: Annotated[str, Path(max_length=300)]) -> FileResponse:
-    """A picture of the site (public, like the museum's own leaflets); 404 when missing,
-    and the pages show a placeholder."""
+    """A picture or a sign-language video of the site (public, like the museum's own
+    leaflets); 404 when missing, and the pages show a placeholder."""
     path = media_in(request.app.state.settings.files_dir(), name)
     if path is None:
         raise not_found(f"media {name!r}")
-    return FileResponse(path, media_type=MEDIA_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS)
+    return FileResponse(path, media_type=SERVED_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS)

@@ -54,13 +54,14 @@ def poi_texts(site: Site, poi: PointOfInterest, lang: str | None) -> dict[str, A
     description = (
         extra.description if extra is not None and extra.description else None
     ) or poi.description
+    sign = (extra.sign_video if extra is not None else None) or poi.sign_video
     return {
         "name": (extra.name if extra is not None and extra.name else None) or poi.name or poi.id,
         "description": description or text,
         "text": text,
         "media": list(extra.media if extra is not None and extra.media is not None else poi.media),
         "lang": want if extra is not None and extra.text else own,
-    }
+    } | ({"sign_video": sign} if sign else {})
 
 
 def fallbacks(site: Site, item: PointOfInterest | Tour, lang: str | None) -> dict[str, str]:

@@ -330,7 +330,7 @@ async def test_a_step_free_tour_skips_the_stop_only_steps_lead_to_and_says_so(
         await wait_until(lambda: vf.task(go_to).state.value == "done", 60)
 
 
-async def test_the_site_editor_marks_an_edge_with_steps(
+async def test_the_site_editor_marks_an_edge_with_steps_and_gives_a_point_a_sign_video(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
@@ -344,12 +344,24 @@ async def test_the_site_editor_marks_an_edge_with_steps(
         await steps.check()
         await expect(page.locator("path.map-edge.steps")).not_to_have_count(0)
         await web.axe_check(page)
+        await page.get_by_role("button", name="Points of interest").click()
+        await page.get_by_role("button", name="Roman mosaics (mosaics)").click()
+        film = {"name": "mosaics-sign.mp4", "mimeType": "video/mp4", "buffer": bytes(64)}
+        await page.get_by_label("Upload a sign-language video").set_input_files(film)
+        await expect(page.locator(".field").filter(has_text="sign video")).to_contain_text(
+            "uploads/"
+        )
+        await web.axe_check(page)
         await page.get_by_role("button", name="Publish", exact=True).click()
         await expect(page.locator("#rollout")).to_contain_text("is live")
         async with fleet.http() as http:
-            edges = (await http.get("/api/site")).json()["site"]["edges"]
-        marked = [(e["a"], e["b"]) for e in edges if e.get("steps")]
+            site = (await http.get("/api/site")).json()["site"]
+        marked = [(e["a"], e["b"]) for e in site["edges"] if e.get("steps")]
         assert ("corridor_w", "corridor_e") in marked, marked
+        mosaics = next(p for p in site["pois"] if p["id"] == "mosaics")
+        assert mosaics["sign_video"].startswith("uploads/") and mosaics["sign_video"].endswith(
+            ".mp4"
+        )
 
 
 async def test_a_german_visitor_gets_the_third_language_and_is_told_when_a_text_falls_back(
@@ -386,3 +398,42 @@ async def test_a_german_visitor_gets_the_third_language_and_is_told_when_a_text_
         said = [m.payload for m in vf.speech]
         assert said and all(p["lang"] == "de" for p in said), said
         assert any("römischen Villa" in p["text"] for p in said), said
+
+
+async def test_a_stop_s_sign_language_video_shows_on_the_phone_and_the_touch_screen(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    async with visitor_fleet(time_scale=10.0) as vf:
+        # The site gives the mosaics a sign-language video (uploaded in the site editor). The
+        # bytes are not a real film: the pages' part is to offer it during the stop.
+        async with vf.fleet.http() as admin:
+            admin.headers["Authorization"] = f"Bearer {vf.fleet.server.admin_token}"
+            film = b"\x00\x00\x00\x18ftypmp42\x00\x00\x00\x00mp42isom" + bytes(64)
+            up = await admin.post(
+                "/api/site/uploads/media", content=film, headers={"Content-Type": "video/mp4"}
+            )
+            assert up.status_code == 200, up.text
+            path = up.json()["path"]
+            document = (await admin.get("/api/site")).json()["site"]
+            next(p for p in document["pois"] if p["id"] == "mosaics")["sign_video"] = path
+            r = await admin.put("/api/site", json=document)
+            assert r.status_code == 200, r.text
+            served = await admin.get(f"/media/{path}")
+            assert served.status_code == 200 and served.headers["content-type"] == "video/mp4"
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        screen = (await open_page(vf.screen_url(), viewport=(1024, 600))).page
+        await request_from(page, "Highlights")
+        on_phone = page.locator(".sign-video video")
+        await expect(on_phone).to_have_attribute("src", f"/media/{path}", timeout=LONG)
+        await expect(
+            page.get_by_role("heading", name="Sign language: Roman mosaics")
+        ).to_be_visible()
+        on_screen = screen.locator("video.sign-video")
+        await expect(on_screen).to_have_attribute("src", f"/media/{path}", timeout=LONG)
+        await expect(on_screen).to_have_attribute("aria-label", "Sign language: Roman mosaics")
+        await web.axe_check(page)
+        await web.axe_check(screen)
+        # The next stop has none: the video goes with the stop.
+        await expect(page.locator(".request-state")).to_contain_text("Stop 2 of 3", timeout=LONG)
+        await expect(on_phone).to_have_count(0)
+        await expect(screen.locator("video")).to_have_count(0, timeout=LONG)

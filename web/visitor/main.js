@@ -502,6 +502,7 @@ function requestView() {
     ${r.skipped?.length ? html`<section class="skipped" aria-labelledby="skipped-title"><h3 id="skipped-title">${t("skipped_title")}</h3>
       <ul>${skippedLines(t, r.skipped, placeOf).map((line) => html`<li>${line}</li>`)}</ul></section>` : ""}
     ${captionView(r)}
+    ${signVideo(r)}
     ${progress && progress.total ? html`<label class="progress">${t("progress_label")}
       <progress max=${progress.total} value=${progress.index}>${progress.index} / ${progress.total}</progress></label>` : ""}
     <div class="actions">
@@ -520,6 +521,18 @@ function paceLine(r) {
   if (r.params?.pace === "slow") lines.push(r.duration_s ? t("state_slower", { t: about(r.duration_s) }) : t("state_slower_unknown"));
   if (r.params?.step_free) lines.push(t("state_step_free"));
   return lines.map((line) => html`<p class="pace">${line}</p>`);
+}
+
+/** The stop's text in sign language, where the site has a video of it: during the stop of a
+ * tour (the point its robot reported), until the tour moves on. */
+function signVideo(r) {
+  const poi = !FINAL.has(r.state) && r.progress?.index ? r.progress.poi : null;
+  const item = poi ? state.menu?.pois.find((x) => x.id === poi) : null;
+  if (!item?.sign_video) return "";
+  return html`<section class="sign-video" aria-labelledby="sign-title">
+    <h3 id="sign-title">${t("sign_video", { name: item.name })}</h3>
+    <video src=${item.sign_video} controls muted autoplay loop playsinline aria-labelledby="sign-title"></video>
+  </section>`;
 }
 
 /** Captions: what the visitor's robot is saying now, in the tour's language, while it says it
