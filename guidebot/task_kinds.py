@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from guidebot.pace import PaceName
+
 if TYPE_CHECKING:
     from guidebot.site.schema import Site
 
@@ -52,11 +54,17 @@ class TourParams(_Params):
     tour: Ref
     lang: Lang | None = None
     """The language the tour is explained in; None: the site's default language."""
+    pace: PaceName | None = None
+    """``slow``: a slower tour (guidebot/pace.py); None: the normal pace."""
+    step_free: bool | None = None
+    """True: over no edge with steps; a stop only steps lead to is skipped (docs/visitor.md,
+    "A step-free tour")."""
 
 
 class PoiParams(_Params):
     poi: Ref
     lang: Lang | None = None
+    pace: PaceName | None = None
 
 
 class ChargeParams(_Params):

@@ -36,6 +36,7 @@ from robot_agent.site_sync import SiteFollower
 from robot_agent.speech import Speech
 from robot_agent.state import StateReporter
 from robot_agent.tasks import TaskRunner
+from robot_agent.visitor_needs import VisitorNeeds
 
 __all__ = ["AgentConfig", "RobotAgent", "hub_ws_url"]
 
@@ -147,6 +148,7 @@ class RobotAgent(Service):
         self.head: HeadWatchdog | None = None
         self.battery: BatteryMonitor | None = None
         self.tasks: TaskRunner | None = None
+        self.needs: VisitorNeeds | None = None
         self.evacuation: Evacuation | None = None
         self.state: StateReporter | None = None
         self.dispatch: Any = None
@@ -232,6 +234,8 @@ class RobotAgent(Service):
             on_start=battery.undock,
         )
         await self.enter(self.tasks)
+        self.needs = VisitorNeeds(bus.endpoint("needs"), self.tasks, navigator, self.speech)
+        await self.enter(self.needs)
         self.evacuation = Evacuation(bus.endpoint("evacuation"), name, navigator, self.tasks)
         await self.enter(self.evacuation)
         self.state = StateReporter(

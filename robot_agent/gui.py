@@ -33,11 +33,12 @@ from pydantic import BaseModel, Field
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.pace import PaceName, pace_of
 from guidebot.paths import WEB_DIR
 from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
-from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
-from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_file
+from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, SERVED_TYPES, media_file, video_url
 from guidebot.site.schema import Site
 from guidebot.task_kinds import KINDS, VISITOR_KINDS
 from robot_agent.clock import Clock
@@ -79,6 +80,10 @@ class TourRequest(BaseModel):
     tour: str | None = Field(default=None, max_length=64)
     poi: str | None = Field(default=None, max_length=64)
     lang: str | None = Field(default=None, max_length=16)
+    pace: PaceName | None = None
+    """``slow``: a slower tour (guidebot/pace.py)."""
+    step_free: bool | None = None
+    """A tour over no steps (docs/visitor.md, "A step-free tour")."""
 
 
 class Answer(BaseModel):
@@ -191,18 +196,28 @@ class OnboardScreen(Service):
         }
 
     def alarm_words(self, lang: str | None) -> str:
-        """The site's alarm words in ``lang``, else in the first language given (the server
-        puts the site's default first); empty when none came."""
+        """The site's alarm words in ``lang``, else in the site's default language, else in the
+        first language given; empty when none came."""
         words: dict[str, str] = (self.alarm or {}).get("words") or {}
-        if lang in words:
-            return words[lang]
+        default = self.site.default_language if self.site is not None else None
+        for tag in (lang, default):
+            if tag in words:
+                return words[tag]
         return next(iter(words.values()), "")
 
     def _tours(self, lang: str) -> list[dict[str, Any]]:
         site = self.site
         if site is None:
             return self.tours
-        return [{"id": t.id, "points": t.points, **tour_texts(site, t, lang)} for t in site.tours]
+        return [
+            {
+                "id": t.id,
+                "points": t.points,
+                **tour_texts(site, t, lang),
+                "fallback": fallbacks(site, t, lang),
+            }
+            for t in site.tours
+        ]
 
     def _pois(self, lang: str) -> list[dict[str, Any]]:
         site = self.site
@@ -218,6 +233,7 @@ class OnboardScreen(Service):
                     "name": texts["name"],
                     "description": texts["description"],
                     "media": [media_link(m) for m in texts["media"]],
+                    "fallback": fallbacks(site, p, lang),
                 }
             )
         return out
@@ -241,6 +257,8 @@ class OnboardScreen(Service):
         self.task = {
             "id": message.payload.get("task_id"),
             "tour": params.get("tour"),
+            "pace": pace_of(params).name,  # a slower tour: the screen says so
+            "step_free": params.get("step_free") is True,
             "handover": message.payload.get("handover"),  # taken up from another robot
         }
         self.skipped = []
@@ -296,6 +314,12 @@ class OnboardScreen(Service):
             "index": point.get("index"),
             "total": point.get("total"),
             "lang": message.payload.get("lang"),
+            # The language the text really is in (the site's default when not translated).
+            "text_lang": point.get("lang") or (site_texts or {}).get("lang"),
+            # The text in sign language, where the site has a video of it.
+            "sign_video": video_url(
+                point.get("sign_video") or (site_texts or {}).get("sign_video")
+            ),
         }
         self._push("show_point", self.explanation)
 
@@ -404,7 +428,7 @@ class OnboardScreen(Service):
             known = {t["id"] for t in self.tours}
             if not req.tour or (known and req.tour not in known):
                 raise ValueError(f"unknown tour {req.tour!r}; known: {sorted(known)}")
-            params = {"tour": req.tour}
+            params: dict[str, Any] = {"tour": req.tour}
         else:
             known = {p["id"] for p in self.pois}
             if not req.poi or (known and req.poi not in known):
@@ -412,6 +436,10 @@ class OnboardScreen(Service):
             params = {"poi": req.poi}
         if req.lang:
             params["lang"] = req.lang
+        if req.pace and req.pace != "normal":
+            params["pace"] = req.pace
+        if req.step_free and req.kind == "tour":
+            params["step_free"] = True
         return self.ep.publish(
             "task_request",
             {"kind": req.kind, "params": params, "priority": 5, "requester": self.robot},
@@ -484,7 +512,7 @@ def create_screen_app(
         if path is None:
             raise HTTPException(status_code=404, detail=f"media {name!r} not found")
         return FileResponse(
-            path, media_type=MEDIA_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS
+            path, media_type=SERVED_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS
         )
 
     for folder in SHARED_FOLDERS:

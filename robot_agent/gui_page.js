@@ -2,12 +2,12 @@
 // served by the robot itself), tours and points to request, the current explanation with its
 // picture, "continue the tour?" with a visible countdown, and the robot's state. During a fire
 // alarm: the evacuation screen, the site's words in the screen's language (docs/emergency.md).
-import { html, render } from "/vendor/lit-html/lit-html.js";
+import { html, nothing, render } from "/vendor/lit-html/lit-html.js";
 import { loadTexts } from "/lib/i18n.js";
 import { skippedLines } from "/lib/skipped.js";
 
 const app = document.getElementById("app");
-const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now(), large: false, contrast: false };
+const state = { screen: null, texts: null, chosen: null, message: "", broken: new Set(), now: Date.now(), large: false, contrast: false, slow: false, stepFree: false };
 const t = (key, vars) => state.texts.t(key, vars);
 /** language tag -> its name in itself, for the picker */
 const names = new Map();
@@ -75,7 +75,7 @@ async function refresh() {
     return refresh();
   }
   if (screen.task && !state.screen?.task) state.message = ""; // the request became a tour
-  if (!screen.task && state.screen?.task) state.large = state.contrast = false; // the next visitor
+  if (!screen.task && state.screen?.task) state.large = state.contrast = state.slow = state.stepFree = false; // the next visitor
   state.screen = screen;
   if (!state.texts || state.texts.lang !== screen.lang) state.texts = await loadTexts(screen.lang);
   if (!names.size) for (const lang of screen.languages) names.set(lang, (await loadTexts(lang)).name);
@@ -86,6 +86,8 @@ async function refresh() {
 async function ask(kind, item) {
   const body = kind === "tour" ? { kind, tour: item.id } : { kind, poi: item.id };
   body.lang = state.screen.lang;
+  if (state.slow) body.pace = "slow";
+  if (state.stepFree && kind === "tour") body.step_free = true;
   const r = await post("/api/request", body);
   if (r.ok) state.message = r.data.queued_offline ? t("request_queued_offline") : t("requested");
   else if (r.status === 0) state.message = t("error_network");
@@ -169,7 +171,10 @@ function nowView(s) {
     ${picture(e.media, e.name)}
     <div>
       ${e.index ? html`<p class="muted">${t("state_progress", { i: e.index, n: e.total, place: e.name })}</p>` : html`<h3>${e.name}</h3>`}
-      <p class="explanation" aria-live="polite">${e.text}</p>
+      <p class="explanation" aria-live="polite" lang=${e.text_lang ?? nothing}>${e.text}</p>
+      ${e.sign_video ? html`<video class="sign-video" src=${e.sign_video} controls muted autoplay loop playsinline
+        aria-label=${t("sign_video", { name: e.name })}></video>` : ""}
+      ${e.text_lang && e.text_lang !== s.lang ? html`<p class="fallback">${t("text_fallback", { language: names.get(e.text_lang) ?? e.text_lang })}</p>` : ""}
     </div>
   </div>${skippedView(s)}`;
 }
@@ -192,19 +197,28 @@ function alarmView(s) {
  * screen readers). */
 const on = (value) => (value ? html`<span aria-hidden="true">✓ </span>` : "");
 
-/** Larger text and high contrast, for this visitor (back to the defaults when the tour ends). */
-function viewOptions() {
+/** Larger text, high contrast and a slower tour, for this visitor (back to the defaults when
+ * the tour ends). A slower tour is asked for with the request; during one it is shown on. */
+function viewOptions(s) {
   const toggle = (key) => () => { state[key] = !state[key]; draw(); };
+  const slow = s.task ? s.task.pace === "slow" : state.slow;
+  const stepFree = s.task ? Boolean(s.task.step_free) : state.stepFree;
   return html`<div class="view-options" role="group" aria-label=${t("view_options")}>
     <button class="secondary" aria-pressed=${String(state.large)} @click=${toggle("large")}>${on(state.large)}${t("larger_text")}</button>
     <button class="secondary" aria-pressed=${String(state.contrast)} @click=${toggle("contrast")}>${on(state.contrast)}${t("high_contrast")}</button>
+    <button class="secondary" aria-pressed=${String(slow)} ?disabled=${Boolean(s.task)} aria-describedby="pace-help"
+      @click=${toggle("slow")}>${on(slow)}${t("slower_tour")}</button>
+    <button class="secondary" aria-pressed=${String(stepFree)} ?disabled=${Boolean(s.task)} aria-describedby="step-free-help"
+      @click=${toggle("stepFree")}>${on(stepFree)}${t("step_free")}</button>
+    <p class="sr-only" id="pace-help">${t("slower_tour_help")}</p>
+    <p class="sr-only" id="step-free-help">${t("step_free_help")}</p>
   </div>`;
 }
 
 function languages(s) {
   return s.languages.length > 1 ? html`<div class="languages" role="group" aria-label=${t("choose_language")}>
     ${s.languages.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === s.lang)}
-      @click=${() => { state.chosen = lang; refresh(); }}>${names.get(lang) ?? lang}</button>`)}</div>` : "";
+      @click=${() => { state.chosen = lang; refresh(); }}>${on(lang === s.lang)}${names.get(lang) ?? lang}</button>`)}</div>` : "";
 }
 
 function draw() {
@@ -226,19 +240,21 @@ function draw() {
   render(html`<header class="visitor-top">
       <h1>${t("touch_title", { robot: s.robot })}</h1>
       ${languages(s)}
-      ${viewOptions()}
+      ${viewOptions(s)}
     </header>
     ${stateView(s)}
     ${captionView(s)}
+    ${s.task?.pace === "slow" ? html`<p class="pace">${t("state_slower_unknown")}</p>` : ""}
+    ${s.task?.step_free ? html`<p class="pace">${t("state_step_free")}</p>` : ""}
     ${s.task?.handover ? html`<p class="notice" role="status">${t("handover", { robot: s.robot, i: s.task.handover.stop })}</p>` : ""}
     ${questionView(s.question)}
     <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}
     ${s.task ? "" : html`<section aria-labelledby="tours-title"><h2 id="tours-title">${t("tours")}</h2>
-      <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
+      <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} lang=${tour.fallback?.name ?? nothing} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
     </section>
     <section aria-labelledby="points-title"><h2 id="points-title">${t("points")}</h2>
-      <div class="actions">${s.pois.map((poi) => html`<button class="big secondary" ?disabled=${refused} @click=${() => ask("go_to_poi", poi)}>${poi.name}</button>`)}</div>
+      <div class="actions">${s.pois.map((poi) => html`<button class="big secondary" ?disabled=${refused} lang=${poi.fallback?.name ?? nothing} @click=${() => ask("go_to_poi", poi)}>${poi.name}</button>`)}</div>
     </section>`}`, app);
 }
 

@@ -126,6 +126,9 @@ class Navigator(MotionControl):
         self._replan: ReplanRequested | None = None
         self._backing_off: str | None = None
         """The area being yielded while the robot drives to its passing place."""
+        self.step_free = False
+        """Guiding a step-free tour (robot_agent/visitor_needs.py): paths over no edge with
+        steps, planned by the server (its answer says when only steps lead to a goal)."""
         self.closed: frozenset[str] = frozenset()
         """Nodes closed now (closures_changed): never driven onto; plans come from the server
         while any is closed (the on-board map does not know them)."""
@@ -376,6 +379,7 @@ class Navigator(MotionControl):
         if (
             self.plan_on_board
             and not self.closed
+            and not self.step_free
             and self.planner is not None
             and self.node is not None
         ):
@@ -394,7 +398,12 @@ class Navigator(MotionControl):
         for attempt in range(attempts):
             try:
                 reply = await self.ep.request(
-                    GetPath(robot=self.robot, from_node=self.node, to_node=node),
+                    GetPath(
+                        robot=self.robot,
+                        from_node=self.node,
+                        to_node=node,
+                        step_free=self.step_free,
+                    ),
                     timeout=self.path_timeout_s,
                 )
             except RequestTimeout:
@@ -406,7 +415,7 @@ class Navigator(MotionControl):
                 reason = reply.payload.get("error") or reply.payload.get("reason") or reply.payload
                 raise NavigationError(f"no path to {node}: {reason}")
             return reply.payload
-        if self.planner is not None and self.node is not None:
+        if self.planner is not None and self.node is not None and not self.step_free:
             # The link is down: plan on the on-board map and go on alone (areas, doors and
             # elevators still wait for the server's answers).
             log.warning("%s: Traffic Manager silent, planning to %s on board", self.robot, node)

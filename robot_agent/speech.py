@@ -33,6 +33,8 @@ __all__ = ["Speech", "espeak_voices", "simulated_duration", "voice_for"]
 log = logging.getLogger(__name__)
 
 WORDS_PER_SECOND = 2.6
+ESPEAK_WPM = 175
+"""espeak-ng's default rate (words per minute), divided by ``Speech.dwell`` on a slower tour."""
 MAX_TEXT = 5000
 
 
@@ -48,12 +50,16 @@ def espeak_voices(engine: str) -> frozenset[str]:
 
 
 def voice_for(lang: str, voices: frozenset[str]) -> str | None:
-    """The espeak-ng voice for ``lang``: itself, else its base language, else None."""
+    """The espeak-ng voice for ``lang``: itself, else its base language, else the first regional
+    voice of that language (espeak-ng has French only as ``fr-fr``), else None."""
     tag = lang.lower()
     if tag in voices:
         return tag
     base = tag.split("-")[0]
-    return base if base in voices else None
+    if base in voices:
+        return base
+    regional = sorted(v for v in voices if v.startswith(f"{base}-"))
+    return regional[0] if regional else None
 
 
 def simulated_duration(text: str) -> float:
@@ -78,6 +84,8 @@ class Speech(Service):
         self.engine = shutil.which("espeak-ng") if engine == "auto" else engine
         self.playback = playback
         self.speaking: str | None = None
+        self.dwell = 1.0
+        """A slower tour speaks this many times as long (robot_agent/visitor_needs.py)."""
         self.spoken = 0
         self._voices: frozenset[str] | None = None
         self._task: asyncio.Task[None] | None = None
@@ -126,11 +134,13 @@ class Speech(Service):
             self.ep.publish(ended, correlation_id=request_id)
 
     async def _duration(self, text: str, voice: str | None) -> float:
+        dwell = self.dwell
         if not self.engine or voice is None or not text.strip():
-            return simulated_duration(text) if text.strip() else 0.0
+            return simulated_duration(text) * dwell if text.strip() else 0.0
         with tempfile.TemporaryDirectory(prefix="guidebot-speech-") as tmp:
             wav = Path(tmp) / "say.wav"
-            args = [self.engine, "-v", voice, "-w", str(wav), "--", text]
+            rate = ["-s", str(round(ESPEAK_WPM / dwell))] if dwell != 1.0 else []
+            args = [self.engine, "-v", voice, *rate, "-w", str(wav), "--", text]
             try:
                 proc = await asyncio.create_subprocess_exec(
                     *args,
@@ -139,7 +149,7 @@ class Speech(Service):
                 )
             except OSError as exc:
                 log.warning("espeak-ng failed (%s): simulating speech", exc)
-                return simulated_duration(text)
+                return simulated_duration(text) * dwell
             try:
                 _, err = await proc.communicate()
             except asyncio.CancelledError:
@@ -148,7 +158,7 @@ class Speech(Service):
                 raise
             if proc.returncode != 0 or not wav.exists():
                 log.warning("espeak-ng exit %s: %s", proc.returncode, err.decode()[:200])
-                return simulated_duration(text)
+                return simulated_duration(text) * dwell
             with wave.open(str(wav)) as w:
                 seconds = w.getnframes() / float(w.getframerate() or 1)
             if self.playback:

@@ -11,15 +11,22 @@ from fastapi.responses import FileResponse
 
 from backend.api.deps import Anyone, Requester, Sites, TaskRequester, Tasks, not_found
 from backend.auth import Principal, Role
-from guidebot.site.i18n import poi_texts, resolve_language, site_languages, tour_texts
-from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, media_in
-from guidebot.site.schema import Site
+from guidebot.pace import PaceName
+from guidebot.site.access import step_free_skips
+from guidebot.site.graph import SiteGraph
+from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
+from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, SERVED_TYPES, media_in, video_url
+from guidebot.site.schema import Site, Tour
 
 __all__ = ["DEVICE_HEADER", "Me", "MeRequesting", "device_requester", "media_url", "router"]
 
 router = APIRouter(tags=["visitor"])
 
 Lang = Annotated[str | None, Query(max_length=16)]
+PaceQuery = Annotated[
+    PaceName,
+    Query(description="The pace the estimates are for: `slow`, a slower tour (guidebot/pace.py)"),
+]
 
 DEVICE_HEADER = "X-Guidebot-Device"
 """A visitor device's own id under a shared panel token (docs/visitor.md, "Devices")."""
@@ -77,6 +84,21 @@ def _pictures(names: list[str]) -> list[dict[str, Any]]:
     return [{"name": n, "url": media_url(n)} for n in names]
 
 
+_skips: dict[int, tuple[SiteGraph, dict[str, list[str]]]] = {}
+"""id(graph) -> (graph, tour id -> the stops a step-free tour skips): one look per site version."""
+
+
+def _step_free_skips(site: Site, graph: SiteGraph, tour: Tour) -> list[str]:
+    found = _skips.get(id(graph))
+    if found is None or found[0] is not graph:
+        _skips.clear()  # the site changed: its graph is new
+        found = _skips[id(graph)] = (graph, {})
+    by_tour = found[1]
+    if tour.id not in by_tour:
+        by_tour[tour.id] = step_free_skips(site, graph, tour)
+    return by_tour[tour.id]
+
+
 def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
     poi = site.poi(poi_id)
     if poi is None:
@@ -87,37 +109,49 @@ def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
         "name": texts["name"],
         "description": texts["description"],
         "media": _pictures(texts["media"]),
+        "fallback": fallbacks(site, poi, lang),
+        "sign_video": video_url(texts.get("sign_video")),
     }
 
 
 @router.get("/api/visitor")
 async def visitor_menu(
-    _: Anyone, service: Sites, manager: Tasks, lang: Lang = None
+    _: Anyone, service: Sites, manager: Tasks, lang: Lang = None, pace: PaceQuery = "normal"
 ) -> dict[str, Any]:
     """Tours and points in ``lang`` (the site's default when not offered), each with its
-    length and what a request would be told now: available, busy (with the wait), or
-    unavailable (no robot in service)."""
+    length at ``pace`` and what a request would be told now: available, busy (with the
+    wait), or unavailable (no robot in service)."""
     site = service.site
     estimator = manager.estimator
     chosen = resolve_language(site, lang)
+    paced = {"pace": pace} if pace != "normal" else {}
     tours = []
     for tour in site.tours:
         stops = [v for v in (_poi_view(site, p, chosen) for p in tour.points) if v is not None]
-        told = estimator.preview("tour", {"tour": tour.id, "lang": chosen}).as_dict()
+        told = estimator.preview("tour", {"tour": tour.id, "lang": chosen} | paced).as_dict()
+        skips = _step_free_skips(site, manager.graph, tour)
         tours.append(
-            {"id": tour.id, **tour_texts(site, tour, chosen), "stops": stops, "estimate": told}
+            {
+                "id": tour.id,
+                **tour_texts(site, tour, chosen),
+                "stops": stops,
+                "estimate": told,
+                "step_free_skips": skips,
+                "fallback": fallbacks(site, tour, chosen),
+            }
         )
     pois = []
     for poi in site.pois:
         view = _poi_view(site, poi.id, chosen)
         assert view is not None
-        told = estimator.preview("go_to_poi", {"poi": poi.id, "lang": chosen}).as_dict()
+        told = estimator.preview("go_to_poi", {"poi": poi.id, "lang": chosen} | paced).as_dict()
         pois.append({**view, "estimate": told})
     return {
         "site": site.name,
         "languages": site_languages(site),
         "default_language": site.default_language,
         "lang": chosen,
+        "pace": pace,
         "service": estimator.service(),
         "tours": tours,
         "pois": pois,
@@ -136,9 +170,9 @@ async def my_requests(me: Me, manager: Tasks) -> list[dict[str, Any]]:
 
 @router.get("/media/{name:path}", response_class=FileResponse, include_in_schema=True)
 async def media(request: Request, name: Annotated[str, Path(max_length=300)]) -> FileResponse:
-    """A picture of the site (public, like the museum's own leaflets); 404 when missing,
-    and the pages show a placeholder."""
+    """A picture or a sign-language video of the site (public, like the museum's own
+    leaflets); 404 when missing, and the pages show a placeholder."""
     path = media_in(request.app.state.settings.files_dir(), name)
     if path is None:
         raise not_found(f"media {name!r}")
-    return FileResponse(path, media_type=MEDIA_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS)
+    return FileResponse(path, media_type=SERVED_TYPES[path.suffix.lower()], headers=MEDIA_HEADERS)

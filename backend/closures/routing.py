@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from backend.closures.model import Closure
 from guidebot.site.graph import NoPath, PathResult, SiteGraph
 
-__all__ = ["RouteClosed", "path_avoiding"]
+__all__ = ["RouteClosed", "StepsOnly", "path_avoiding", "step_free_path_of"]
 
 
 class RouteClosed(NoPath):
@@ -36,6 +36,32 @@ class RouteClosed(NoPath):
             else f"{c.what()} closed: {c.reason}"
             for c in self.closures
         )
+
+
+class StepsOnly(RouteClosed):
+    """No way to the goal for a step-free tour but over steps (``Edge.steps``): the reason is
+    ``steps`` (docs/protocol.md, "Skipped stops")."""
+
+    def __init__(self, goal: str) -> None:
+        super().__init__(goal, [])
+
+    @property
+    def reason(self) -> str:
+        return "steps"
+
+
+def step_free_path_of(
+    graph: SiteGraph, found: PathResult, closed: Mapping[str, Closure]
+) -> PathResult:
+    """``found`` when it takes no steps, else the shortest step-free path between its ends
+    avoiding ``closed`` (StepsOnly when there is none)."""
+    if not graph.uses_steps(found):
+        return found
+    start, goal = found.nodes[0], found.nodes[-1]
+    better = graph.step_free_path(start, goal, closed)
+    if better is None:
+        raise StepsOnly(goal)
+    return better
 
 
 def path_avoiding(

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from backend.tasks.model import Task, TaskState
+from guidebot.pace import Pace, pace_of
 from guidebot.site.i18n import poi_texts
 
 if TYPE_CHECKING:
@@ -130,6 +131,8 @@ class _Rest:
     points: list[tuple[str, str | None]]
     speed: float
     segments: list[Segment]
+    dwell: float = 1.0
+    """Factor on the speech at each stop (a slower tour: guidebot/pace.py)."""
     move_s: float = 0.0
     talk_s: float = 0.0
 
@@ -415,7 +418,9 @@ class EtaEstimator:
     def segments(self, task: Task, start: str | None) -> list[Segment]:
         """Nominal segments of ``task`` when its robot starts at node ``start`` (unknown:
         ``UNKNOWN_TRAVEL_M`` to the first point)."""
-        return self._segments(self._points(task), start, self._speed(task.robot))
+        return self._segments(
+            self._points(task), start, self._speed(task.robot), pace_of(task.params)
+        )
 
     def first_node(self, task: Task) -> str | None:
         """Where a task given to a robot now starts: a handed-over tour's visitor's stop (its
@@ -432,7 +437,7 @@ class EtaEstimator:
     def _track(self, task: Task, start: str | None) -> _Progress:
         """Start following a task on its robot (its places are looked up once)."""
         points = self._points(task)
-        segments = self._segments(points, start, self._speed(task.robot))
+        segments = self._segments(points, start, self._speed(task.robot), pace_of(task.params))
         total = sum(1 for _, text in points if text is not None)
         first = 1
         sent = task.assigned_params.get("points") if task.assigned_params else None
@@ -442,24 +447,34 @@ class EtaEstimator:
         return _Progress(segments, self.tm.clock(), total=total, first=first)
 
     def _segments(
-        self, points: list[tuple[str, str | None]], start: str | None, speed: float
+        self, points: list[tuple[str, str | None]], start: str | None, speed: float, pace: Pace
     ) -> list[Segment]:
+        """The leg to the first place at the robot's speed (nobody follows it yet), the rest
+        at the task's pace."""
         if not points:
             return []
         lift = self.tm.lift_wait_s(start, points[0][0])  # its turn at the lift (lifts.py)
         first = Segment("move", self._metres(start, points[0][0]) / speed + lift, 1)
-        return [first, *self._rest(points, speed).segments]
+        return [first, *self._rest(points, speed * pace.speed, pace.dwell).segments]
 
-    def _rest(self, points: list[tuple[str, str | None]], speed: float) -> _Rest:
+    def _rest(
+        self, points: list[tuple[str, str | None]], speed: float, dwell: float = 1.0
+    ) -> _Rest:
         """What follows the leg to the first place (the same whichever robot starts there)."""
         found = self._after_first.get(id(points))
-        if found is None or found.points is not points or found.speed != speed:
-            found = _Rest(points, speed, self._segments_after_first(points, speed))
+        if (
+            found is None
+            or found.points is not points
+            or found.speed != speed
+            or found.dwell != dwell
+        ):
+            segments = self._segments_after_first(points, speed, dwell)
+            found = _Rest(points, speed, segments, dwell)
             _remember(self._after_first, id(points), found)
         return found
 
     def _segments_after_first(
-        self, points: list[tuple[str, str | None]], speed: float
+        self, points: list[tuple[str, str | None]], speed: float, dwell: float
     ) -> list[Segment]:
         out: list[Segment] = []
         here = points[0][0]
@@ -468,7 +483,7 @@ class EtaEstimator:
                 metres = self._metres(here, node)
                 out.append(Segment("move", metres / speed + QUESTION_S, i))
             if text is not None:
-                out.append(Segment("talk", FACE_AND_REST_S + speech_s(text), i))
+                out.append(Segment("talk", FACE_AND_REST_S + speech_s(text) * dwell, i))
             here = node
         return out
 
@@ -655,7 +670,8 @@ class EtaEstimator:
             heapq.heappush(heap, (free_at, tie, name, node))
             return free_at, free_at, name
         speed = self._speed(task.robot)
-        rest = self._rest(points, speed)
+        pace = pace_of(task.params)
+        rest = self._rest(points, speed * pace.speed, pace.dwell)
         move, talk = self.move.value, self.talk.value
         first = self._metres(node, points[0][0]) / speed * move
         first += self.tm.lift_wait_s(node, points[0][0]) * move

@@ -32,6 +32,11 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
     asks back. The task's parameters were checked against this site (``target_node``)."""
     p = task.params
     lang = resolve_language(site, p.get("lang"))
+    # The visitor's needs, which its robot follows from the first stop on: a slower tour
+    # (guidebot/pace.py), a step-free one (robot_agent/visitor_needs.py).
+    needs: dict[str, Any] = {"pace": p["pace"]} if p.get("pace") not in (None, "normal") else {}
+    if task.kind == "tour" and p.get("step_free"):
+        needs["step_free"] = True
     if task.kind == "tour":
         tour = site.tour(p["tour"])
         assert tour is not None
@@ -40,12 +45,17 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
             {"poi": q.id, "node": q.node, "index": i, "total": len(pois)} | poi_texts(site, q, lang)
             for i, q in enumerate(pois, start=1)
         ]
-        return {"tour": tour.id, "points": points, "lang": lang}
+        return {"tour": tour.id, "points": points, "lang": lang} | needs
     if task.kind == "go_to_poi":
         poi = site.poi(p["poi"])
         assert poi is not None
         texts = poi_texts(site, poi, lang)
-        return {"poi": poi.id, "node": poi.node, "text": texts["text"], "lang": texts["lang"]}
+        return {
+            "poi": poi.id,
+            "node": poi.node,
+            "text": texts["text"],
+            "lang": texts["lang"],
+        } | needs
     if task.kind == "charge":
         station = p.get("station") or site.charging_stations[0].id
         node = next(s.node for s in site.charging_stations if s.id == station)

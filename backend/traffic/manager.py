@@ -16,7 +16,7 @@ from pydantic import ValidationError
 
 from backend.alerts import AlertStore
 from backend.closures.model import Closure
-from backend.closures.routing import RouteClosed, path_avoiding
+from backend.closures.routing import RouteClosed, path_avoiding, step_free_path_of
 from backend.traffic.locks import AreaLocks, Cut, Grant, LockError, LockView, Yield
 from backend.traffic.restarts import BootIds, release_former_holds
 from guidebot.bus import BusEndpoint
@@ -208,10 +208,12 @@ class TrafficManager(Service):
             self._emit("area_removed", {"robot": cut.robot, "area": area, "reason": reason})
 
     # --- queries used by the API ---------------------------------------------------------
-    def path(self, start: str, goal: str) -> PathResult:
-        """The shortest open path (RouteClosed when closures cut the goal off)."""
+    def path(self, start: str, goal: str, *, step_free: bool = False) -> PathResult:
+        """The shortest open path (RouteClosed when closures cut the goal off); ``step_free``:
+        over no edge with steps (StepsOnly when only steps lead there)."""
         closed = self.closures() if self.closures is not None else {}
-        return path_avoiding(self.graph, start, goal, closed)
+        found = path_avoiding(self.graph, start, goal, closed)
+        return step_free_path_of(self.graph, found, closed) if step_free else found
 
     def lock_views(self) -> list[LockView]:
         return self.locks.view()
@@ -332,7 +334,7 @@ class TrafficManager(Service):
         try:
             if start is None:
                 raise UnknownNode("the robot's position is unknown: give from_node")
-            result = self.path(start, req.to_node)
+            result = self.path(start, req.to_node, step_free=req.step_free)
         except RouteClosed as exc:
             log.info("traffic: no open path for %s to %s: %s", robot, req.to_node, exc.reason)
             self._reply(msg, "path", {"error": str(exc), "closed": True, "reason": exc.reason})

@@ -27,6 +27,9 @@ class GetPath(PayloadModel):
     from_node: str | None = None
     """None: from the robot's current node (last robot_state)."""
     to_node: str
+    step_free: bool = False
+    """A step-free tour's leg: no edge with steps (``Edge.steps``); the answer is ``closed``
+    with the reason ``steps`` when only such edges lead there."""
 
 
 @register_payload("path")

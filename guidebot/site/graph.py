@@ -18,9 +18,10 @@ has ``plan()`` computed in worker processes, ``install``s the answer and swaps
 
 from __future__ import annotations
 
+import heapq
 import math
 from array import array
-from collections.abc import Iterable
+from collections.abc import Container, Iterable
 from dataclasses import dataclass, field
 
 from guidebot.route_tables import TablePlan, Tables, Topology, compute_tables, dijkstra
@@ -90,6 +91,8 @@ class SiteGraph:
         self.radj: dict[str, list[tuple[str, float]]] = {n: [] for n in self.floor_of}
         # A cabin node is entered only to ride: edges that make it a through-way are not used.
         through = {way.edge for way in cabin_through_ways(site)}
+        self.step_edges: set[tuple[str, str]] = set()
+        """(from, to) of the edges with steps (``Edge.steps``): not for a step-free tour."""
         for i, e in enumerate(site.edges):
             if i in through:
                 continue
@@ -97,6 +100,8 @@ class SiteGraph:
             self._add(e.a, e.b, length)
             if not e.one_way:
                 self._add(e.b, e.a, length)
+            if e.steps:
+                self.step_edges.update({(e.a, e.b), (e.b, e.a)})
         self.door_at = {d.node: d.id for d in site.doors}
         self.elevator_at: dict[str, str] = {}
         for el in site.elevators:
@@ -193,6 +198,41 @@ class SiteGraph:
         if self._transit and self._component[s] != self._component[g]:
             return self._via_transit(s, g)
         return self._on_floor(s, g)
+
+    def uses_steps(self, path: PathResult) -> bool:
+        """Whether ``path`` takes an edge with steps."""
+        return bool(self.step_edges) and any(
+            (a, b) in self.step_edges for a, b in zip(path.nodes, path.nodes[1:], strict=False)
+        )
+
+    def step_free_path(
+        self, start: str, goal: str, closed: Container[str] = frozenset()
+    ) -> PathResult | None:
+        """The shortest path from ``start`` to ``goal`` over no edge with steps and no node in
+        ``closed`` (``start`` excepted); None when there is none. A plain search (Dijkstra): it
+        is asked only for a step-free tour's legs whose shortest path has steps."""
+        self.check(start, goal)
+        dist: dict[str, float] = {start: 0.0}
+        prev: dict[str, str] = {}
+        heap = [(0.0, start)]
+        while heap:
+            d, node = heapq.heappop(heap)
+            if node == goal:
+                nodes = [goal]
+                while nodes[-1] != start:
+                    nodes.append(prev[nodes[-1]])
+                nodes.reverse()
+                return PathResult(nodes, d, [self.step(n) for n in nodes])
+            if d > dist.get(node, math.inf):
+                continue
+            for nxt, cost in self.adj.get(node, ()):
+                if nxt in closed or (node, nxt) in self.step_edges:
+                    continue
+                if d + cost < dist.get(nxt, math.inf):
+                    dist[nxt] = d + cost
+                    prev[nxt] = node
+                    heapq.heappush(heap, (d + cost, nxt))
+        return None
 
     def _floor_components(self, stops: set[str]) -> list[int]:
         """Component of each node over the edges that are not elevator rides (undirected):

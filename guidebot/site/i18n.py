@@ -13,7 +13,14 @@ from typing import Any
 from guidebot.site.schema import PointOfInterest, Site, Tour
 from guidebot.site.validate import SiteIssue
 
-__all__ = ["missing_translations", "poi_texts", "resolve_language", "site_languages", "tour_texts"]
+__all__ = [
+    "fallbacks",
+    "missing_translations",
+    "poi_texts",
+    "resolve_language",
+    "site_languages",
+    "tour_texts",
+]
 
 
 def site_languages(site: Site) -> list[str]:
@@ -47,12 +54,30 @@ def poi_texts(site: Site, poi: PointOfInterest, lang: str | None) -> dict[str, A
     description = (
         extra.description if extra is not None and extra.description else None
     ) or poi.description
+    sign = (extra.sign_video if extra is not None else None) or poi.sign_video
     return {
         "name": (extra.name if extra is not None and extra.name else None) or poi.name or poi.id,
         "description": description or text,
         "text": text,
         "media": list(extra.media if extra is not None and extra.media is not None else poi.media),
         "lang": want if extra is not None and extra.text else own,
+    } | ({"sign_video": sign} if sign else {})
+
+
+def fallbacks(site: Site, item: PointOfInterest | Tour, lang: str | None) -> dict[str, str]:
+    """The texts of a point or a tour that ``lang`` lacks: field -> the language it is shown
+    in instead (the item's own), so a page can mark them (``lang``) and tell the visitor."""
+    own = (item.lang if isinstance(item, PointOfInterest) else None) or site.default_language
+    want = lang or site.default_language
+    if want == own:
+        return {}
+    extra = item.translations.get(want)
+    point = isinstance(item, PointOfInterest)
+    fields = ("name", "description", "text") if point else ("name", "description")
+    return {
+        field: own
+        for field in fields
+        if getattr(item, field) and (extra is None or not getattr(extra, field))
     }
 
 

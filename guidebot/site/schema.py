@@ -79,6 +79,9 @@ class Edge(StrictModel):
     length_m: StrictFloat | None = Field(default=None, gt=0)
     one_way: StrictBool = False
     """Only from ``a`` to ``b``."""
+    steps: StrictBool = False
+    """Steps or a slope a wheelchair user cannot take: a step-free tour does not use it
+    (robots still may; docs/visitor.md, "A step-free tour")."""
 
 
 LANG_PATTERN = r"^[a-z]{2,3}(-[A-Za-z0-9]{2,8})?$"
@@ -93,6 +96,8 @@ class PoiText(StrictModel):
     description: str | None = None
     text: str | None = None
     media: list[str] | None = None
+    sign_video: str | None = None
+    """The text in this language's sign language (a video; see ``PointOfInterest``)."""
 
 
 class TourText(StrictModel):
@@ -112,6 +117,9 @@ class PointOfInterest(StrictModel):
     """What the robot says there."""
     media: list[str] = Field(default_factory=list)
     """File names in the site's media folder (served at /media/<name>)."""
+    sign_video: str | None = None
+    """A video of ``text`` in sign language (.mp4 or .webm in the site's folder), shown on the
+    touch screen and the visitor's phone during the stop (docs/accessibility.md)."""
     lang: str | None = Field(default=None, pattern=LANG_PATTERN)
     """Language of name/description/text above; None: the site's ``default_language``."""
     translations: dict[Lang, PoiText] = Field(default_factory=dict)

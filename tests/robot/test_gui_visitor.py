@@ -63,7 +63,7 @@ async def test_texts_in_the_chosen_language_and_the_site_pictures() -> None:
     try:
         async with httpx.AsyncClient(base_url=server.url) as http:
             es: dict[str, Any] = (await http.get("/api/screen?lang=es")).json()
-            assert es["lang"] == "es" and es["languages"] == ["en", "es"]
+            assert es["lang"] == "es" and es["languages"] == ["en", "es", "de"]
             assert es["tours"][0]["name"] == "Visita de la planta baja"
             mosaics = next(p for p in es["pois"] if p["id"] == "mosaics")
             assert mosaics["name"] == "Mosaicos romanos"

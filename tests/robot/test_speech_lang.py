@@ -42,3 +42,31 @@ async def test_spanish_is_spoken_with_the_spanish_voice_and_unknown_languages_ar
     ended = seen.of("speech_ended")[1].payload
     assert ended["lang"] == "xx" and ended["voice"] is None and ended["outcome"] == "done"
     await speech.stop()
+
+
+def test_a_language_espeak_has_only_regionally_takes_its_first_regional_voice() -> None:
+    voices = frozenset({"fr-fr", "fr-be", "de"})
+    assert voice_for("fr", voices) == "fr-be"
+    assert voice_for("de-AT", voices) == "de"
+    assert voice_for("it", voices) is None
+
+
+async def test_german_the_demo_s_third_language_has_its_voice_and_a_slower_tour_speaks_slower(
+    helpers: Any,
+) -> None:
+    if shutil.which("espeak-ng") is None:
+        pytest.skip("espeak-ng not installed (make system-deps)")
+    bus = Bus()
+    speech = Speech(bus.endpoint("speech"), Clock(100.0))
+    await speech.start()
+    seen = helpers.Recorder(bus.endpoint("t"), "speech_*")
+    text = "Diese Mosaike stammen aus einer römischen Villa."  # sites/demo_museum.yaml
+    bus.endpoint("net").publish("say", {"text": text, "lang": "de"})
+    await seen.wait_for(lambda: seen.of("speech_ended"))
+    assert seen.of("speech_started")[0].payload == {"text": text, "lang": "de", "voice": "de"}
+    usual = await speech._duration(text, "de")
+    speech.dwell = 1.5  # a slower tour (robot_agent/visitor_needs.py)
+    slower = await speech._duration(text, "de")
+    print(f"espeak-ng de: {usual:.2f} s, slower {slower:.2f} s ({slower / usual:.2f} times)")
+    assert 1.3 <= slower / usual <= 1.7
+    await speech.stop()

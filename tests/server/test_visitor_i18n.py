@@ -11,7 +11,13 @@ import yaml
 from click.testing import CliRunner
 
 from backend.site.cli import site as site_cli
-from guidebot.site.i18n import missing_translations, poi_texts, site_languages, tour_texts
+from guidebot.site.i18n import (
+    fallbacks,
+    missing_translations,
+    poi_texts,
+    site_languages,
+    tour_texts,
+)
 from guidebot.site.schema import Site
 from guidebot.site.validate import SiteInvalid, validate_site
 from guidebot.site.yamlio import load_site_file
@@ -65,6 +71,16 @@ def test_a_missing_translation_falls_back_to_the_default_language_field_by_field
     assert tour_texts(site, site.tours[0], "es") == {"name": "Visita", "description": "Short."}
 
 
+def test_each_text_that_falls_back_is_named_with_the_language_it_is_shown_in() -> None:
+    site = Site.model_validate(DOC)
+    # What a page marks (``lang``) and tells the visitor (docs/visitor.md, "Languages").
+    assert fallbacks(site, site.pois[0], "es") == {}
+    assert fallbacks(site, site.pois[0], "fr") == {"name": "en", "text": "en"}
+    assert fallbacks(site, site.pois[0], "en") == {}
+    assert fallbacks(site, site.tours[0], "es") == {"description": "en"}
+    assert fallbacks(site, site.tours[0], "fr") == {"name": "en", "description": "en"}
+
+
 def test_texts_missing_in_a_declared_language_are_warnings_with_their_place() -> None:
     site = Site.model_validate(DOC)
     places = {issue.loc for issue in missing_translations(site)}
@@ -92,7 +108,7 @@ def test_site_check_prints_warnings_and_still_accepts(tmp_path: Path) -> None:
     assert "warning(s)" in result.output
 
 
-def test_the_demo_museum_has_english_and_spanish_complete() -> None:
+def test_the_demo_museum_has_english_spanish_and_german_complete() -> None:
     site = load_site_file(ROOT / "sites" / "demo_museum.yaml")
-    assert site_languages(site) == ["en", "es"]
+    assert site_languages(site) == ["en", "es", "de"]
     assert missing_translations(site) == []

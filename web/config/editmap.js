@@ -85,10 +85,10 @@ export class EditMap extends EventTarget {
       const b = nodes.get(edge.b);
       if (!a || !b || a.floor !== floorId || b.floor !== floorId) return;
       const line = L.polyline([[a.y, a.x], [b.y, b.x]], {
-        className: `map-edge${edge.one_way ? " one-way" : ""}${flagged("edges", i)}${isSel("edges", i)}`,
+        className: `map-edge${edge.one_way ? " one-way" : ""}${edge.steps ? " steps" : ""}${flagged("edges", i)}${isSel("edges", i)}`,
         weight: 6,
       });
-      line.bindTooltip(`edge ${edge.a} ${edge.one_way ? "→" : "↔"} ${edge.b}`, { sticky: true });
+      line.bindTooltip(`edge ${edge.a} ${edge.one_way ? "→" : "↔"} ${edge.b}${edge.steps ? " (steps: not step-free)" : ""}`, { sticky: true });
       line.on("click", (e) => {
         L.DomEvent.stop(e);
         this.#emit("select", { section: "edges", index: i });

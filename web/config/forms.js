@@ -8,8 +8,8 @@ const num = (v) => (v === "" || v === null || v === undefined ? null : Number(v)
 export const KINDS = {
   floors: { label: "Floors", one: "floor", fields: ["id", "name", ["level", "int"], "plan_image", ["scale_px_per_m", "num"], ["plan_origin", "pair"]] },
   nodes: { label: "Nodes", one: "node", fields: ["id", ["floor", "floor"], ["x", "num"], ["y", "num"], ["passing_place", "bool"]] },
-  edges: { label: "Edges", one: "edge", fields: [["a", "node"], ["b", "node"], ["one_way", "bool"], ["length_m", "optnum"]] },
-  pois: { label: "Points of interest", one: "point", fields: ["id", "name", ["node", "node"], ["text", "area"], "lang", ["media", "media"]] },
+  edges: { label: "Edges", one: "edge", fields: [["a", "node"], ["b", "node"], ["one_way", "bool"], ["steps", "bool"], ["length_m", "optnum"]] },
+  pois: { label: "Points of interest", one: "point", fields: ["id", "name", ["node", "node"], ["text", "area"], "lang", ["media", "media"], ["sign_video", "video"]] },
   tours: { label: "Tours", one: "tour", fields: ["id", "name", ["description", "area"], ["points", "points"]] },
   charging_stations: { label: "Charging stations", one: "station", fields: ["id", ["node", "node"]] },
   wait_points: { label: "Wait points", one: "wait point", fields: ["id", ["node", "node"]] },
@@ -127,6 +127,10 @@ export function elementForm(ctx) {
         return html`<div class="field"><span class="label">media</span>
           <ul class="plain">${(value ?? []).map((m, i) => html`<li>${m} <button type="button" class="secondary small" @click=${() => set(name, value.filter((_, j) => j !== i))}>Remove</button></li>`)}</ul>
           <label>Upload media <input type="file" accept="image/png,image/jpeg,image/svg+xml,audio/mpeg,video/mp4" @change=${(e) => ctx.upload("media", e.target, (path) => set(name, [...(value ?? []), path]))}></label>${note}</div>`;
+      case "video":
+        return html`<div class="field"><span class="label">${name.replace(/_/g, " ")}</span>
+          ${value ? html`<p>${value} <button type="button" class="secondary small" @click=${() => set(name, null)}>Remove</button></p>` : nothing}
+          <label>Upload a sign-language video <input type="file" accept="video/mp4" @change=${(e) => ctx.upload("media", e.target, (path) => set(name, path))}></label>${note}</div>`;
       case "token":
         return html`<div class="field"><span class="label">token</span>
           <span class="muted">${value && /^[0-9a-f]{64}$/.test(value) ? "set (only its digest is kept)" : "plain (hashed when published)"}</span>

@@ -1,6 +1,6 @@
 // Skipped tour stops (docs/protocol.md, "Skipped stops"): a tour skips the stops only closed
 // elements lead to; each skip's reason, as the server gives it ("gallery g2 closed: cleaning",
-// "door d1 out of order", several joined by "; "), is put in the visitor's language here. The
+// "door d1 out of order", several joined by "; "; "steps" on a step-free tour), is put in the visitor's language here. The
 // visitor panel and the robot's touch screen both show them with this.
 
 const PART = /^(gallery|door|elevator|nodes) (.+?) (?:closed: (.*)|out of order)$/s;
@@ -11,6 +11,7 @@ export function skipReason(t, reason) {
     .split("; ")
     .filter(Boolean)
     .map((part) => {
+      if (part === "steps") return t("skip_steps");
       const m = PART.exec(part);
       if (!m) return part;
       const [, word, id, words] = m;

@@ -2,7 +2,7 @@
 // in the visitor's language, a request, then live over the hub: which robot, place in line and
 // wait, on its way, arrived, progress, ended; cancel. During a fire alarm, the evacuation screen;
 // after it, the offer to go on with a request the alarm cut off. docs/visitor.md describes it.
-import { html, render } from "lit-html";
+import { html, nothing, render } from "lit-html";
 import { fragmentToken } from "/lib/auth.js";
 import { HubClient } from "/lib/hub.js";
 import { loadTexts, preferredLanguage } from "/lib/i18n.js";
@@ -55,6 +55,11 @@ const banner = document.getElementById("connection");
 const state = {
   texts: null,
   lang: options.get("lang") ?? null,
+  /** the visitor asked for a slower tour (docs/accessibility.md): the menu's lengths and the
+   * requests are at that pace */
+  slow: false,
+  /** the visitor asked for step-free tours: no steps on the way, stops only steps lead to skipped */
+  stepFree: false,
   menu: null,
   /** when the menu (and its waits) was read: its waits count down from then */
   menuAt: 0,
@@ -93,10 +98,12 @@ let menuAsked = 0;
 async function loadMenu() {
   const asked = ++menuAsked;
   let lang = state.lang;
-  let menu = await api.get(`/api/visitor${lang ? `?lang=${encodeURIComponent(lang)}` : ""}`);
+  const pace = state.slow ? "pace=slow" : "";
+  const query = (l) => `/api/visitor?${[l ? `lang=${encodeURIComponent(l)}` : "", pace].filter(Boolean).join("&")}`;
+  let menu = await api.get(query(lang));
   if (!lang) {
     lang = preferredLanguage(menu.languages, menu.default_language);
-    if (lang !== menu.lang) menu = await api.get(`/api/visitor?lang=${encodeURIComponent(lang)}`);
+    if (lang !== menu.lang) menu = await api.get(query(lang));
   }
   const texts = await loadTexts(menu.lang);
   if (asked !== menuAsked) return;
@@ -242,6 +249,8 @@ async function request(kind, item) {
   draw();
   const params = kind === "tour" ? { tour: item.id } : { poi: item.id };
   params.lang = state.menu.lang;
+  if (state.slow) params.pace = "slow";
+  if (state.stepFree && kind === "tour") params.step_free = true;
   try {
     const status = await api.post("/api/tasks", { kind: KIND[kind], params });
     state.requests.set(status.id, told(status));
@@ -293,6 +302,13 @@ async function answerOffer(id, goOn) {
   focusHeading();
 }
 
+/** A slower tour, or the usual pace again: the menu's lengths follow. */
+async function toggleSlow() {
+  state.slow = !state.slow;
+  showError("", "");
+  await reload();
+}
+
 async function chooseLanguage(lang) {
   state.lang = lang;
   showError("", "");
@@ -338,15 +354,20 @@ function card(kind, item) {
   const unavailable = estimate?.service === "unavailable";
   const facts = [];
   if (kind === "tour") facts.push(t("stops", { n: item.stops.length }));
-  if (estimate?.duration_s) facts.push(t("tour_length", { t: state.texts.duration(estimate.duration_s) }));
+  const length = state.menu.pace === "slow" ? "tour_length_slow" : "tour_length";
+  if (estimate?.duration_s) facts.push(t(length, { t: state.texts.duration(estimate.duration_s) }));
   const media = kind === "tour" ? item.stops.flatMap((s) => s.media) : item.media;
   const id = `${kind}-${item.id}`;
+  const fb = item.fallback ?? {};
   return html`<article class="card" aria-labelledby=${`${id}-name`}>
     ${picture(media, item.name)}
     <div class="card-body">
-      <h3 id=${`${id}-name`}>${item.name}</h3>
-      ${item.description ? html`<p>${item.description}</p>` : ""}
+      <h3 id=${`${id}-name`} lang=${fb.name ?? nothing}>${item.name}</h3>
+      ${item.description ? html`<p lang=${fb.description ?? nothing}>${item.description}</p>` : ""}
+      ${fallbackNote(fb)}
       <p class="muted">${facts.join(" · ")}</p>
+      ${kind === "tour" && state.stepFree && item.step_free_skips?.length
+        ? html`<p class="skips">${t("step_free_skips", { names: item.step_free_skips.map(poiName).join(", ") })}</p>` : ""}
       <p class=${`wait ${estimate?.service ?? ""}`} id=${`${id}-wait`}>${serviceLine(estimate)}</p>
       <button class="big" ?disabled=${unavailable || state.busy} aria-describedby=${`${id}-name ${id}-wait`}
         @click=${() => request(kind, item)}>${t(kind === "tour" ? "request_tour" : "request_point")}</button>
@@ -354,12 +375,41 @@ function card(kind, item) {
   </article>`;
 }
 
+/** A tick on a button that is on (a chosen language, a slower tour): not told by colour
+ * alone (aria-pressed tells screen readers). */
+const on = (value) => (value ? html`<span class="tick" aria-hidden="true">✓ </span>` : "");
+
+/** A text the site has not translated into the page's language is shown in the site's own
+ * language (marked with `lang` for screen readers), and the visitor is told so. */
+function fallbackNote(fallback) {
+  const langs = [...new Set(Object.values(fallback ?? {}))];
+  if (!langs.length) return "";
+  return html`<p class="fallback">${langs.map((lang) => t("text_fallback", { language: names.get(lang) ?? lang })).join(" ")}</p>`;
+}
+
 function languagePicker() {
   const langs = state.menu.languages;
   if (langs.length < 2) return "";
   return html`<div class="languages" role="group" aria-label=${t("choose_language")}>
     ${langs.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === state.menu.lang)}
-      @click=${() => chooseLanguage(lang)}>${names.get(lang) ?? lang}</button>`)}
+      @click=${() => chooseLanguage(lang)}>${on(lang === state.menu.lang)}${names.get(lang) ?? lang}</button>`)}
+  </div>`;
+}
+
+/** "Slower tour" and "Step-free only": toggles; on, the lengths shown and the requests made
+ * are at the slow pace, and tours keep off steps. */
+function paceToggle() {
+  const slow = state.menu.pace === "slow";
+  const stepFree = () => { state.stepFree = !state.stepFree; draw(); };
+  return html`<div class="pace-option">
+    <button class="secondary" aria-pressed=${String(slow)} aria-describedby="pace-help" ?disabled=${state.busy}
+      @click=${toggleSlow}>${on(slow)}${t("slower_tour")}</button>
+    <p class="muted" id="pace-help">${t("slower_tour_help")}</p>
+  </div>
+  <div class="pace-option">
+    <button class="secondary" aria-pressed=${String(state.stepFree)} aria-describedby="step-free-help"
+      @click=${stepFree}>${on(state.stepFree)}${t("step_free")}</button>
+    <p class="muted" id="step-free-help">${t("step_free_help")}</p>
   </div>`;
 }
 
@@ -374,6 +424,7 @@ function startView() {
       <h1 tabindex="-1">${menu.site}: ${t("title")}</h1>
       ${languagePicker()}
     </header>
+    ${paceToggle()}
     <p class=${`service ${menu.service}`} role="status">${serviceLine({ service: menu.service, eta_s: menu.tours[0]?.estimate?.eta_s ?? null })}</p>
     ${errorBox()}
     ${live.length ? html`<p>${live.map((r) => html`<button class="secondary" @click=${() => { state.current = r.id; state.view = "request"; draw(); focusHeading(); }}>${t("your_request")}: ${state.labels.get(r.id) ?? r.id}</button> `)}</p>` : ""}
@@ -443,6 +494,7 @@ function requestView() {
       <h2 tabindex="-1">${t("your_request")}: ${state.labels.get(r.id) ?? r.params.tour ?? r.params.poi}</h2>
       ${r.robot ? html`<p class="robot-name">${t("robot", { robot: r.robot })}</p>` : ""}
     </header>
+    ${paceLine(r)}
     ${errorBox()}
     <div class=${`request-state ${r.state}`}>
       ${statusLines(r).map((line) => html`<p>${line}</p>`)}
@@ -450,6 +502,7 @@ function requestView() {
     ${r.skipped?.length ? html`<section class="skipped" aria-labelledby="skipped-title"><h3 id="skipped-title">${t("skipped_title")}</h3>
       <ul>${skippedLines(t, r.skipped, placeOf).map((line) => html`<li>${line}</li>`)}</ul></section>` : ""}
     ${captionView(r)}
+    ${signVideo(r)}
     ${progress && progress.total ? html`<label class="progress">${t("progress_label")}
       <progress max=${progress.total} value=${progress.index}>${progress.index} / ${progress.total}</progress></label>` : ""}
     <div class="actions">
@@ -459,6 +512,27 @@ function requestView() {
         : html`<button class="big secondary" @click=${() => { state.confirming = true; draw(); }}>${t("cancel")}</button>`}
       <button class="big" @click=${backToStart}>${final ? t(r.kind === "go_to_poi" ? "new_request_point" : "new_request") : t("back")}</button>
     </div>`;
+}
+
+/** A slower tour says so, with how long it takes from the first stop (the server counts the
+ * slower pace in it). */
+function paceLine(r) {
+  const lines = [];
+  if (r.params?.pace === "slow") lines.push(r.duration_s ? t("state_slower", { t: about(r.duration_s) }) : t("state_slower_unknown"));
+  if (r.params?.step_free) lines.push(t("state_step_free"));
+  return lines.map((line) => html`<p class="pace">${line}</p>`);
+}
+
+/** The stop's text in sign language, where the site has a video of it: during the stop of a
+ * tour (the point its robot reported), until the tour moves on. */
+function signVideo(r) {
+  const poi = !FINAL.has(r.state) && r.progress?.index ? r.progress.poi : null;
+  const item = poi ? state.menu?.pois.find((x) => x.id === poi) : null;
+  if (!item?.sign_video) return "";
+  return html`<section class="sign-video" aria-labelledby="sign-title">
+    <h3 id="sign-title">${t("sign_video", { name: item.name })}</h3>
+    <video src=${item.sign_video} controls muted autoplay loop playsinline aria-labelledby="sign-title"></video>
+  </section>`;
 }
 
 /** Captions: what the visitor's robot is saying now, in the tour's language, while it says it
@@ -579,6 +653,8 @@ function kioskMode() {
       state.confirming = false;
       showError("", "");
       state.lang = state.menu?.default_language ?? state.lang;
+      state.slow = false;
+      state.stepFree = false;
       // The next visitor is another device: the last one's requests are no longer listed here
       // (and can no longer be cancelled from here); they stay with the server.
       device = deviceId(true);
