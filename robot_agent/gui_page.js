@@ -164,9 +164,16 @@ function captionView(s) {
   </section>`;
 }
 
+/** Before the first stop: the task the robot is starting, never the idle invitation. */
+function startingText(s) {
+  if (!s.task) return t("touch_idle");
+  const tour = s.task.tour ? s.tours.find((x) => x.id === s.task.tour) : null;
+  return tour ? t("touch_tour_starting", { tour: tour.name }) : t("touch_on_the_way");
+}
+
 function nowView(s) {
   const e = s.explanation;
-  if (!e) return html`<p>${t("touch_idle")}</p>${skippedView(s)}`;
+  if (!e) return html`<p>${startingText(s)}</p>${skippedView(s)}`;
   return html`<div class="touch-now">
     ${picture(e.media, e.name)}
     <div>

@@ -108,3 +108,33 @@ async def test_the_touch_screen_names_a_single_point_by_its_name_in_the_visitors
         finally:
             await open_page.close()
             await server.stop()
+
+
+async def test_on_the_way_to_the_first_stop_the_screen_says_which_tour_starts(
+    open_page: Any,
+) -> None:
+    """Between the tour's assignment and its first stop the screen said "Guiding a tour" over
+    "Touch a tour or a point to start." (seen on the busy demo): it now names the tour that
+    is starting, in the tour's language, and offers no menu."""
+    bus = Bus()
+    onboard = _screen(bus)
+    task = bus.endpoint("task")
+    async with onboard:
+        server = ScreenServer(onboard, port=0)
+        await server.start()
+        try:
+            page = (await open_page(server.url, viewport=(1024, 600))).page
+            now = page.get_by_role("region", name="Now")
+            await expect(now).to_contain_text("Touch a tour or a point to start.")
+            task.publish(
+                "task_assigned",
+                {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
+            )
+            await expect(now).to_contain_text(
+                "Ground floor tour is starting: come with me to the first stop."
+            )
+            await expect(now).not_to_contain_text("Touch a tour")
+            await expect(page.get_by_role("region", name="Tours")).to_have_count(0)
+        finally:
+            await open_page.close()
+            await server.stop()
