@@ -171,7 +171,7 @@ def test_waiting_is_killed_by_a_main_task_and_restarted_after() -> None:
     assert {r["net"] for r in rig.dispatch.running() if r["parent"] is None} == {"go_to_poi"}
     rig.clock.advance(60)
     assert rig.ended(task) == "done"
-    assert rig.published("show_point") == [{"poi": "p5", "text": "The fountain."}]
+    assert rig.published("show_point") == [{"poi": "p5", "text": "The fountain.", "lang": "en"}]
     assert rig.published("say")[-1]["text"] == "The fountain."
     again = [r for r in rig.dispatch.running() if r["net"] == "waiting"]
     assert len(again) == 1 and again[0]["instance_id"] != waiting[0]["instance_id"]
@@ -208,3 +208,17 @@ def test_give_tour_skips_a_point_only_closed_elements_lead_to_and_goes_on() -> N
     ]
     assert rig.published("show_point") == [] and rig.published("ask_continue") == []
     assert rig.fired(iid)[-1] == "skipped_last"
+
+
+def test_a_point_visit_speaks_and_shows_in_its_visitors_language() -> None:
+    """go_to_poi ran explain_point without ``lang``: a Spanish visitor's "take me there" was
+    said with the English voice. The language the server gives the visit reaches the speech
+    and the screen."""
+    rig = make_rig(replies=copy.deepcopy(DEFAULT_REPLIES))
+    text = "Esta espada tiene tres mil años."
+    params = {"node": "n1", "poi": "sword", "text": text, "lang": "es"}
+    iid = rig.dispatch.start("go_to_poi", params, main=True)
+    rig.run()
+    assert rig.ended(iid) == "done"
+    assert rig.published("say") == [{"text": text, "lang": "es"}]
+    assert [p["lang"] for p in rig.published("show_point")] == ["es"]
