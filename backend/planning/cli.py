@@ -301,13 +301,20 @@ def _run(
         from backend.planning.recorded import read_day, read_replay
 
         if src.replay is not None:
-            recording = read_replay(src.replay, site, stop_following=stop_following or 0.0, seed=seed or 1)
+            recording = read_replay(
+                src.replay, site, stop_following=stop_following or 0.0, seed=seed or 1
+            )
             source = {"replay": str(src.replay)}
         else:
             assert src.db_url is not None and src.date is not None
             recording = asyncio.run(
                 read_day(
-                    src.db_url, src.date, src.tz, site, stop_following=stop_following or 0.0, seed=seed or 1
+                    src.db_url,
+                    src.date,
+                    src.tz,
+                    site,
+                    stop_following=stop_following or 0.0,
+                    seed=seed or 1,
                 )
             )
             source = {"date": src.date, "tz": src.tz}

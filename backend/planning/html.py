@@ -39,12 +39,12 @@ def write_report(result: dict[str, Any], path: Path) -> None:
 
 
 def _minutes(seconds: Any) -> str:
-    return "–" if seconds is None else f"{seconds / 60:.1f} min"
+    return "&ndash;" if seconds is None else f"{seconds / 60:.1f} min"
 
 
 def _cell(key: str, value: Any) -> str:
     if value is None:
-        return "–"
+        return "&ndash;"
     if key in ("wait_p50_s", "wait_p95_s", "lock_wait_s", "elevator_wait_s", "charging_s"):
         return _minutes(value)
     if key in ("served_within_share", "utilisation"):
@@ -60,17 +60,23 @@ def _answer(rows: list[dict[str, Any]], within: float) -> str:
         fits = [
             r["robots"]
             for r in rows
-            if (r["mode"], r["policy"]) == (mode, policy) and (r["served_within_share"] or 0) >= 0.95
+            if (r["mode"], r["policy"]) == (mode, policy)
+            and (r["served_within_share"] or 0) >= 0.95
         ]
         what = f"{escape(mode)} ({escape(policy)})"
         if fits:
             lines.append(
-                f"<li>{what}: <strong>{min(fits)} robot{'s' if min(fits) > 1 else ''}</strong> "
-                f"serve 95 % of the requests within {within:g} min.</li>"
+                f"<li>{what}: <strong>{_robots(min(fits))}</strong> "
+                f"{'serve' if min(fits) > 1 else 'serves'} 95 % of the requests within "
+                f"{within:g} min.</li>"
             )
         else:
             lines.append(f"<li>{what}: no fleet tried serves 95 % within {within:g} min.</li>")
     return "<ul>" + "".join(lines) + "</ul>"
+
+
+def _robots(n: int) -> str:
+    return f"{n} robot{'s' if n != 1 else ''}"
 
 
 def _heat(rows: list[dict[str, Any]], key: str, title: str) -> str:
@@ -83,19 +89,19 @@ def _heat(rows: list[dict[str, Any]], key: str, title: str) -> str:
     if not places:
         return f"<h3>{escape(title)}</h3><p>No wait in the live runs.</p>"
     most = max((r[key][p]["total_s"] for r in live for p in r[key]), default=0.0) or 1.0
-    head = "".join(f'<th scope="col">{r["robots"]} robots</th>' for r in live)
+    head = "".join(f'<th scope="col">{_robots(r["robots"])}</th>' for r in live)
     body = []
     for place in places:
         cells = []
         for r in live:
             seen = (r.get(key) or {}).get(place)
             if seen is None:
-                cells.append('<td class="heat" style="--heat: 0">–</td>')
+                cells.append('<td class="heat" style="--heat: 0">&ndash;</td>')
                 continue
             share = seen["total_s"] / most
             cells.append(
                 f'<td class="heat" style="--heat: {share:.3f}">{_minutes(seen["total_s"])}'
-                f' <span class="n">({seen["count"]}×)</span></td>'
+                f' <span class="n">({seen["count"]}&times;)</span></td>'
             )
         body.append(f'<tr><th scope="row">{escape(place)}</th>{"".join(cells)}</tr>')
     return (
@@ -105,10 +111,14 @@ def _heat(rows: list[dict[str, Any]], key: str, title: str) -> str:
     )
 
 
+def _hours(h: float) -> str:
+    return f"{h:g} hour{'s' if h != 1 else ''}"
+
+
 def _source(result: dict[str, Any]) -> str:
     src = result.get("source") or {}
     if "profile" in src:
-        return f"profile “{escape(str(src['profile']))}”, {src.get('hours')} hours"
+        return f"profile “{escape(str(src['profile']))}”"
     if "replay" in src:
         return f"replay file {escape(Path(str(src['replay'])).name)}"
     return f"recorded day {escape(str(src.get('date')))} ({escape(str(src.get('tz')))})"
@@ -129,10 +139,16 @@ def render_report(result: dict[str, Any]) -> str:
     scale = next((r.get("time_scale") for r in rows if r["mode"] == "live"), None)
     note = (
         f"Live runs: the real server, Task Manager and Traffic Manager with simulated robots and "
-        f"building at {scale:g}× the wall clock."
+        f"building at {scale:g}&times; the wall clock."
         if live
         else "Model only: add --live to play the day on the real server (lock and elevator "
         "waits, doors, charging)."
+    )
+    waiting = (
+        _heat(rows, "lock_wait", "Waits for a restricted area")
+        + _heat(rows, "elevator_wait", "Waits for an elevator")
+        if live
+        else "<p>Run with --live to measure it.</p>"
     )
     data = json.dumps(result).replace("</", "<\\/")
     uplot = base64.b64encode(module).decode()
@@ -144,13 +160,16 @@ def render_report(result: dict[str, Any]) -> str:
 <title>GuideBot plan: {escape(str(result.get("site")))}</title>
 <style>{css}</style>
 <style>
-body {{ font: 15px/1.45 system-ui, sans-serif; color: #1f1f1f; margin: 1.5rem auto; max-width: 68rem; padding: 0 1rem; }}
+body {{ font: 15px/1.45 system-ui, sans-serif; color: #1f1f1f; margin: 1.5rem auto;
+  max-width: 68rem; padding: 0 1rem; }}
 h1 {{ font-size: 1.5rem; }} h2 {{ font-size: 1.2rem; margin-top: 2rem; }} h3 {{ font-size: 1rem; }}
 table {{ border-collapse: collapse; margin: .5rem 0 1rem; }}
-th, td {{ border: 1px solid #c4c7c5; padding: .25rem .5rem; text-align: right; }}
+th, td {{ border: 1px solid #c4c7c5; padding: .25rem .5rem; text-align: right;
+  white-space: nowrap; }}
 th[scope=row], td:first-child {{ text-align: left; }}
 thead th {{ background: #eef1f6; }}
-td.heat {{ background: rgb(255 calc(255 - 150 * var(--heat)) calc(255 - 230 * var(--heat))); }}
+td.heat {{ background: rgb(255 calc(255 - 110 * var(--heat)) calc(255 - 170 * var(--heat))); }}
+td.heat .n {{ color: inherit; }}
 .n {{ color: #444; font-size: .85em; }}
 figure {{ margin: 0; }} figcaption {{ font-size: .9rem; color: #444; }}
 .legend-note {{ color: #444; }}
@@ -159,21 +178,21 @@ figure {{ margin: 0; }} figcaption {{ font-size: .9rem; color: #444; }}
 <body>
 <main>
 <h1>How many robots for {escape(str(result.get("site")))}?</h1>
-<p>{result.get("requests")} tour requests over {result.get("day_h", 0):g} hours from the
+<p>{result.get("requests")} tour requests over {_hours(result.get("day_h", 0))} from the
 {_source(result)}. {escape(note)}</p>
 <h2>The answer</h2>
 {_answer(rows, within)}
 <h2>Wait against fleet size</h2>
 <figure>
-<div id="waits" role="img" aria-label="Wait p50 and p95 in minutes against the number of robots"></div>
+<div id="waits" role="img"
+  aria-label="Wait p50 and p95 in minutes against the number of robots"></div>
 <figcaption>The visitors' wait from the request to the robot at the tour's first point, in
 minutes (p50 and p95), for each fleet size tried.</figcaption>
 </figure>
 <h2>Every run</h2>
 <table id="rows"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>
 <h2>Time lost waiting (live runs)</h2>
-{_heat(rows, "lock_wait", "Waits for a restricted area") if live else "<p>Run with --live to measure it.</p>"}
-{_heat(rows, "elevator_wait", "Waits for an elevator") if live else ""}
+{waiting}
 </main>
 <script type="application/json" id="plan-data">{data}</script>
 <script type="module">
@@ -185,9 +204,11 @@ const colours = ["#0b57d0", "#b3261e", "#1b7a3a", "#8a4b00", "#6b3fa0", "#00639b
 const series = [{{ label: "robots" }}];
 const data = [sizes];
 runs.forEach((run, i) => {{
-  for (const [key, name, dash] of [["wait_p50_s", "p50", undefined], ["wait_p95_s", "p95", [6, 4]]]) {{
+  const lines = [["wait_p50_s", "p50", undefined], ["wait_p95_s", "p95", [6, 4]]];
+  for (const [key, name, dash] of lines) {{
     series.push({{ label: `${{run}} ${{name}}`, stroke: colours[i % colours.length], width: 2, dash,
-      points: {{ show: true }}, value: (u, v) => (v == null ? "–" : `${{v.toFixed(1)}} min`) }});
+      points: {{ show: true }},
+      value: (u, v) => (v == null ? "\u2013" : `${{v.toFixed(1)}} min`) }});
     data.push(sizes.map((n) => {{
       const row = result.fleets.find((r) => `${{r.mode}} ${{r.policy}}` === run && r.robots === n);
       return row && row[key] != null ? row[key] / 60 : null;

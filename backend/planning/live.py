@@ -306,7 +306,9 @@ class _Driver:
                     return
             if now > day_s + self.drain_s:
                 self.unfinished = sum(1 for s in self.state.values() if s not in FINAL)
-                self.log(f"{self.unfinished} tours still unfinished {self.drain_s:g} s after the day")
+                self.log(
+                    f"{self.unfinished} tours still unfinished {self.drain_s:g} s after the day"
+                )
                 return
             await asyncio.sleep(POLL_S)
 
@@ -319,7 +321,9 @@ class _Driver:
         body = {"kind": "tour", "params": {"tour": self.requests[i].tour}}
         r = await self.http.post(f"{self.url}/api/tasks", json=body, headers=self.panel)
         if r.status_code != 201:
-            raise PlanError(f"live run: the server refused a tour request: {r.status_code} {r.text[:200]}")
+            raise PlanError(
+                f"live run: the server refused a tour request: {r.status_code} {r.text[:200]}"
+            )
         task = str(r.json()["id"])
         self.task_of[task] = i
         self.state[task] = "queued"

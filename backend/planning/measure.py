@@ -22,7 +22,9 @@ Event = tuple[float, str, str, dict[str, Any]]
 """(at, kind, source, data) of one logged event."""
 
 
-async def read_events(db_url: str, start: float | None = None, end: float | None = None) -> list[Event]:
+async def read_events(
+    db_url: str, start: float | None = None, end: float | None = None
+) -> list[Event]:
     """The log's events (``start`` <= at < ``end``), in id order."""
     engine = make_engine(db_url)
     try:
@@ -35,7 +37,10 @@ async def read_events(db_url: str, start: float | None = None, end: float | None
             rows = (await session.execute(query.order_by(EventRow.id))).all()
     finally:
         await engine.dispose()
-    return [(at, kind, source, data if isinstance(data, dict) else {}) for at, kind, source, data in rows]
+    return [
+        (at, kind, source, data if isinstance(data, dict) else {})
+        for at, kind, source, data in rows
+    ]
 
 
 def tour_waits(events: Iterable[Event]) -> tuple[dict[str, float], dict[str, float], set[str]]:
@@ -60,7 +65,9 @@ def tour_waits(events: Iterable[Event]) -> tuple[dict[str, float], dict[str, flo
     return waits, created, robots
 
 
-def tallies(events: Iterable[Event], positions: Positions, end: float) -> dict[str, dict[str, list[float]]]:
+def tallies(
+    events: Iterable[Event], positions: Positions, end: float
+) -> dict[str, dict[str, list[float]]]:
     """The Reports view's fold of ``events`` up to ``end``, summed over the hours:
     metric -> key -> [count, total] (``lock_wait`` by area, ``elevator_wait`` by elevator,
     ``robot_time`` by ``robot|state``, ``area_granted``, ``door_opened``, ``faults``...)."""

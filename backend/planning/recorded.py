@@ -148,18 +148,19 @@ def read_replay(path: Path, site: Site, *, stop_following: float, seed: int) -> 
     except ValueError:
         raise PlanError(f"--replay {path}: not a replay file (not JSON)") from None
     if not isinstance(loaded, dict) or loaded.get("guidebot_replay") != 1:
-        raise PlanError(f"--replay {path}: not a replay file (no \"guidebot_replay\": 1)")
+        raise PlanError(f'--replay {path}: not a replay file (no "guidebot_replay": 1)')
     events = loaded.get("events")
     if not isinstance(events, list):
         raise PlanError(f"--replay {path}: not a replay file (no events)")
-    found = [
-        (float(e["at"]), str(e["kind"]), e.get("data") if isinstance(e.get("data"), dict) else {})
-        for e in events
-        if isinstance(e, dict)
-        and isinstance(e.get("at"), int | float)
-        and isinstance(e.get("kind"), str)
-        and (e["kind"] == "task_created" or e["kind"].startswith("task_point"))
-    ]
+    found: list[tuple[float, str, dict[str, Any]]] = []
+    for e in events:
+        if not isinstance(e, dict) or not isinstance(e.get("kind"), str):
+            continue
+        kind, at, data = e["kind"], e.get("at"), e.get("data")
+        if isinstance(at, int | float) and (
+            kind == "task_created" or kind.startswith("task_point")
+        ):
+            found.append((float(at), kind, data if isinstance(data, dict) else {}))
     if not any(kind == "task_created" for _, kind, _ in found):
         raise PlanError(
             f"--replay {path}: it holds no tour request (a file written before replays "
