@@ -12,6 +12,7 @@ const STATES = [
   ["idle", "Idle", "#9aa0a6"],
   ["faulted", "Faulted", "#b00020"],
   ["offline", "Offline", "#e2e4e8"],
+  ["down", "Server down", "#5f6368"],
 ];
 const TASK_SERIES = [
   ["requested", "Requested", "#0b57d0"],
