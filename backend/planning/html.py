@@ -139,7 +139,7 @@ def render_report(result: dict[str, Any]) -> str:
     scale = next((r.get("time_scale") for r in rows if r["mode"] == "live"), None)
     note = (
         f"Live runs: the real server, Task Manager and Traffic Manager with simulated robots and "
-        f"building at {scale:g}&times; the wall clock."
+        f"building at {scale:g}\u00d7 the wall clock."
         if live
         else "Model only: add --live to play the day on the real server (lock and elevator "
         "waits, doors, charging)."

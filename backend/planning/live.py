@@ -41,6 +41,9 @@ POLL_S = 0.1
 """Wall seconds between two looks at the robots' screens and the clock."""
 START_S = 120.0
 """Wall seconds each process may take to start (a loaded machine)."""
+LEAD_S = 60.0
+"""Simulated seconds the fleet runs before the first request (the time before is skipped: a
+recorded day's first request may come late in its first hour)."""
 FINAL = ("done", "failed", "cancelled")
 
 
@@ -193,7 +196,7 @@ async def run_live(
             await _until(
                 "every robot online", lambda: _online(http, url, admin, set(screens)), procs
             )
-            opts.log(f"{robots} robots online at {scale}x; playing {len(requests)} requests")
+            opts.log(f"a fleet of {robots} online at {scale}x; playing {len(requests)} requests")
             driver = _Driver(http, url, admin, panel, list(screens.values()), requests, opts)
             driver.patience_s, driver.queue_limit = patience_s, queue_limit
             t0 = time.time()
@@ -282,9 +285,12 @@ class _Driver:
         self._asked: dict[str, tuple[str, str, float]] = {}
         """screen -> (question id, task id, when to answer (monotonic))"""
         self._give_up: list[tuple[float, str]] = []
+        first = min((r.at for r in requests), default=0.0)
+        self.skipped_s = max(0.0, first - LEAD_S)
+        """Simulated seconds of the day skipped before the first request (LEAD_S before it)."""
 
     def _sim(self, t0: float) -> float:
-        return (time.monotonic() - t0) * self.scale
+        return (time.monotonic() - t0) * self.scale + self.skipped_s
 
     async def run(self, day_s: float, procs: _Processes) -> None:
         t0 = time.monotonic()
@@ -350,7 +356,10 @@ class _Driver:
         self._give_up = [(at, task) for at, task in self._give_up if at > now]
         for task in due:
             r = await self.http.get(f"{self.url}/api/tasks/{task}", headers=self.admin)
-            if r.status_code == 200 and r.json()["state"] == "queued":
+            seen = r.json() if r.status_code == 200 else {}
+            # Only a group no robot ever came for gives up (a tour requeued after its robot
+            # dropped out has its group already with it).
+            if seen.get("state") == "queued" and seen.get("started_at") is None:
                 c = await self.http.post(f"{self.url}/api/tasks/{task}/cancel", headers=self.admin)
                 if c.status_code == 200:
                     self.abandoned.append(self.task_of[task])
@@ -401,21 +410,25 @@ def _outcome(
     scale: float,
     wall_s: float,
 ) -> Outcome:
-    """The run's outcome in simulated seconds (wall seconds since ``t0`` times ``scale``)."""
+    """The run's outcome in simulated seconds (wall seconds since ``t0`` times ``scale``, plus
+    the skipped start of the day)."""
     waits, _, _ = tour_waits(events)
     out = Outcome(robots=robots, policy="nearest", requests=len(driver.requests), day_s=day_s)
     for task, i in driver.task_of.items():
         if task in waits:
             out.wait_of[i] = waits[task] * scale
     out.waits_s = [out.wait_of[i] for i in sorted(out.wait_of)]
-    out.refused, out.abandoned = len(driver.refused), len(driver.abandoned)
+    # A group that gave up just as its robot arrived (the cancel raced the assignment) was
+    # served: it counts once, as served.
+    out.refused = len(driver.refused)
+    out.abandoned = sum(1 for i in driver.abandoned if i not in out.wait_of)
     ends = [
         at
         for at, kind, _, d in events
         if kind in ("task_done", "task_failed", "task_cancelled")
         and str(d.get("task_id")) in driver.task_of
     ]
-    out.last_end_s = (max(ends) - t0) * scale if ends else 0.0
+    out.last_end_s = (max(ends) - t0) * scale + driver.skipped_s if ends else 0.0
     sums = tallies(events, node_positions(site), t_end)
     robot_time: dict[str, float] = {}
     for key, (_, total) in sums.get("robot_time", {}).items():

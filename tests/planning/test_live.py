@@ -5,14 +5,19 @@ then measured from the server's event log (docs/planning.md, "The live run")."""
 from __future__ import annotations
 
 import asyncio
+import datetime as dt
+import json
 from pathlib import Path
 
 import pytest
+from click.testing import CliRunner
 
 from backend.planning.live import LiveOptions, run_live
 from backend.planning.measure import read_events
 from backend.planning.profile import PlanError, Request
+from guidebot.cli import main
 from guidebot.site.yamlio import load_site_file
+from tests.planning.test_cli import write_live_day
 from tests.planning.test_sim import DEMO
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
@@ -79,3 +84,21 @@ def test_a_live_run_refuses_a_time_scale_of_zero(tmp_path: Path) -> None:
                 options=LiveOptions(scale=0.0, workdir=tmp_path),
             )
         )
+
+
+def test_the_check_plans_a_recording_on_the_live_fleet(tmp_path: Path) -> None:
+    """``guidebot bench plan-check --live``: the recorded requests played on the real fleet of
+    the recording's size, measured as the recording was."""
+    url = f"sqlite+aiosqlite:///{tmp_path / 'recorded.db'}"
+    noon = 1_780_000_000 // 86400 * 86400 + 12 * 3600
+    asyncio.run(write_live_day(url, noon))
+    date = dt.datetime.fromtimestamp(noon, dt.UTC).date().isoformat()
+    args = ["bench", "plan-check", "--site", str(DEMO), "--db", url, "--date", date]
+    args += ["--live", "--time-scale", "20", "--no-can", "--workdir", str(tmp_path), "--json"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    last = json.loads(result.output.strip().splitlines()[-1])
+    assert (last["mode"], last["time_scale"], last["robots"]) == ("live", 20.0, 1)
+    assert (last["requests"], last["compared"]) == (2, 2)
+    assert last["measured"] == {"p50_s": 30.0, "p95_s": 200.0}
+    assert last["planned"]["p50_s"] > 0 and last["planned"]["p95_s"] > last["planned"]["p50_s"]

@@ -83,5 +83,3 @@ async def test_the_plan_report_draws_the_waits_and_the_lock_wait_heat_map(
     assert await heat.locator("td.heat").first.get_attribute("style") == "--heat: 1.000"
     await page.add_script_tag(path=str(AXE))
     await web.axe_check(page)
-    await page.set_viewport_size({"width": 1100, "height": 900})
-    await web.screenshot(page, "plan-report")
