@@ -367,6 +367,7 @@ function replayMap(ui) {
   const element = document.getElementById("replay-map");
   if (!element) return null;
   if (r.replayMap?.element !== element) {
+    r.replayMap?.map.map.remove(); // a container the view drew before (it was left and came back)
     const map = new FloorMap(element, (url) => ui.api.get(url));
     map.describeRobot = (s) => (s.mode === "busy" ? "on a task" : "no task");
     r.replayMap = { element, map, ready: false, shown: new Map() };
