@@ -134,6 +134,9 @@ class ServerBrain(Service):
         logger = hub.endpoint("event_log")
         self.on_cleanup(logger.close)
         self.on_cleanup(self._mark_stopped)  # after the managers below have stopped
+        # The log's mark of a clean stop (the reports count the time to the next start as the
+        # server down), after the managers' last events and before the store's last write.
+        self.on_cleanup(lambda: store.record_event("server_stopped", "server", {}))
 
         def log_message(msg: Message) -> None:
             store.record_event(msg.type, msg.source, msg.payload)

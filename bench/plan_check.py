@@ -14,13 +14,11 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
-from typing import Any
 
 import click
-from sqlalchemy import or_, select
 
-from backend.db import make_engine, make_sessionmaker
-from backend.db.models import EventRow
+from backend.planning.live import LiveOptions, run_live
+from backend.planning.measure import read_events, tour_waits
 from backend.planning.recorded import read_day
 from backend.planning.sim import quantile, simulate
 from backend.reports.period import parse_period
@@ -34,36 +32,7 @@ __all__ = ["main"]
 async def measured(db_url: str, date: str, tz: str) -> tuple[dict[str, float], set[str]]:
     """Each tour's measured wait (task id -> seconds) and the robots that connected."""
     period = parse_period(day=date, tz=tz)
-    engine = make_engine(db_url)
-    try:
-        query = (
-            select(EventRow.at, EventRow.kind, EventRow.data)
-            .where(
-                EventRow.at >= period.start,
-                EventRow.at < period.end,
-                or_(
-                    EventRow.kind.in_(("task_created", "robot_connected")),
-                    EventRow.kind.like("task_point 1/% arrived"),
-                ),
-            )
-            .order_by(EventRow.at, EventRow.id)
-        )
-        async with make_sessionmaker(engine)() as session:
-            rows = (await session.execute(query)).all()
-    finally:
-        await engine.dispose()
-    created: dict[str, float] = {}
-    waits: dict[str, float] = {}
-    robots: set[str] = set()
-    for at, kind, data in rows:
-        d: dict[str, Any] = data if isinstance(data, dict) else {}
-        task = str(d.get("task_id"))
-        if kind == "robot_connected" and isinstance(d.get("robot"), str):
-            robots.add(d["robot"])
-        elif kind == "task_created" and d.get("kind") == "tour":
-            created[task] = at
-        elif task in created and task not in waits:
-            waits[task] = at - created[task]
+    waits, _, robots = tour_waits(await read_events(db_url, period.start, period.end))
     return waits, robots
 
 
@@ -81,37 +50,68 @@ def _stats(values: list[float]) -> dict[str, float | None]:
 @click.option("--db", "db_url", required=True, help="The live run's database URL.")
 @click.option("--date", required=True, help="The recorded day (YYYY-MM-DD).")
 @click.option("--tz", default="UTC", show_default=True)
+@click.option(
+    "--live",
+    is_flag=True,
+    help="Plan on the real server with simulated robots (guidebot plan --live), not the model.",
+)
+@click.option("--time-scale", default=5.0, show_default=True, type=click.FloatRange(min=0.1))
+@click.option("--no-can", is_flag=True, help="--live: bare simulated robots (as demo --no-can).")
+@click.option("--workdir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Last line: one JSON object.")
-def main(site_path: Path, db_url: str, date: str, tz: str, as_json: bool) -> None:
+def main(
+    site_path: Path,
+    db_url: str,
+    date: str,
+    tz: str,
+    live: bool,
+    time_scale: float,
+    no_can: bool,
+    workdir: Path | None,
+    as_json: bool,
+) -> None:
     """Compare a recorded period's waits with the plan of the same requests."""
     site = load_site_file(site_path)
     waits, robots = asyncio.run(measured(db_url, date, tz))
     day = asyncio.run(read_day(db_url, date, tz, site, stop_following=0.0, seed=1))
     size = max(1, len(robots))
-    outcome = simulate(
-        site, SiteGraph(site), day.requests, robots=size, day_s=day.day_s, pace=day.pace
-    )
+    if live:
+        options = LiveOptions(
+            scale=time_scale,
+            can=not no_can,
+            workdir=workdir,
+            log=lambda line: click.echo(f"plan-check: {line}", err=True),
+        )
+        outcome = asyncio.run(
+            run_live(site_path, site, day.requests, robots=size, day_s=day.day_s, options=options)
+        )
+    else:
+        outcome = simulate(
+            site, SiteGraph(site), day.requests, robots=size, day_s=day.day_s, pace=day.pace
+        )
     pairs = [
         (waits[req.ref], outcome.wait_of[i])
         for i, req in enumerate(day.requests)
         if req.ref in waits and i in outcome.wait_of
     ]
-    live, plan = _stats([m for m, _ in pairs]), _stats([p for _, p in pairs])
+    seen, plan = _stats([m for m, _ in pairs]), _stats([p for _, p in pairs])
     error = {
         key: None
-        if live[f"{key}_s"] in (None, 0) or plan[f"{key}_s"] is None
-        else round(plan[f"{key}_s"] / live[f"{key}_s"] - 1, 3)  # type: ignore[operator]
+        if seen[f"{key}_s"] in (None, 0) or plan[f"{key}_s"] is None
+        else round(plan[f"{key}_s"] / seen[f"{key}_s"] - 1, 3)  # type: ignore[operator]
         for key in ("p50", "p95")
     }
     result = {
         "requests": len(day.requests),
         "compared": len(pairs),
         "robots": size,
-        "measured": live,
+        "measured": seen,
         "planned": plan,
         "error": error,
         "pace": {"move": day.pace.move, "talk": day.pace.talk},
+        "mode": "live" if live else "model",
+        **({"time_scale": time_scale} if live else {}),
     }
     if not as_json:
-        click.echo(f"measured {live}, planned {plan}, error {error}")
+        click.echo(f"measured {seen}, planned {plan}, error {error}")
     print_result(result)

@@ -7,11 +7,13 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import click
 
+from backend.planning.live import LiveOptions, run_live
 from backend.planning.profile import Pace, PlanError, draw, load_profile
 from backend.planning.sim import POLICIES, simulate
 from guidebot.site.graph import SiteGraph
@@ -55,8 +57,11 @@ def plan(
     patience_s: float | None = None,
     queue_limit: int | None = None,
     pace: Pace = Pace(),
+    live: LiveOptions | None = None,
+    site_path: Path | None = None,
 ) -> list[dict[str, Any]]:
-    """One summary per fleet size and policy (the same requests for each)."""
+    """One summary per fleet size and policy (the same requests for each), from the model;
+    with ``live``, then one per fleet size from the real fleet (``backend.planning.live``)."""
     graph = SiteGraph(site)
     rows = []
     for policy in policies:
@@ -72,13 +77,30 @@ def plan(
                 queue_limit=queue_limit,
                 pace=pace,
             )
-            rows.append(outcome.summary(within_min))
+            rows.append({"mode": "model", **outcome.summary(within_min)})
+    if live is None:
+        return rows
+    assert site_path is not None
+    for size in sizes:
+        outcome = asyncio.run(
+            run_live(
+                site_path,
+                site,
+                requests,
+                robots=size,
+                day_s=day_s,
+                patience_s=patience_s,
+                queue_limit=queue_limit,
+                options=live,
+            )
+        )
+        rows.append({"mode": "live", **outcome.summary(within_min)})
     return rows
 
 
 def _table(rows: list[dict[str, Any]]) -> str:
     head = (
-        f"{'policy':<13}{'robots':>6}{'served':>8}{'refused':>8}{'left':>6}"
+        f"{'run':<6}{'policy':<13}{'robots':>6}{'served':>8}{'refused':>8}{'left':>6}"
         f"{'wait p50':>10}{'wait p95':>10}{'within':>8}{'busy':>7}"
     )
     lines = [head]
@@ -89,7 +111,7 @@ def _table(rows: list[dict[str, Any]]) -> str:
 
         share = r["served_within_share"]
         lines.append(
-            f"{r['policy']:<13}{r['robots']:>6}{r['served']:>8}{r['refused']:>8}"
+            f"{r['mode']:<6}{r['policy']:<13}{r['robots']:>6}{r['served']:>8}{r['refused']:>8}"
             f"{r['abandoned']:>6}{minutes(r['wait_p50_s']):>10}{minutes(r['wait_p95_s']):>10}"
             f"{'-' if share is None else f'{share:.0%}':>8}{r['utilisation']:>7.0%}"
         )
@@ -107,6 +129,12 @@ def _table(rows: list[dict[str, Any]]) -> str:
 @click.option("--day", "db_url", help="A server's database URL: replay a recorded day's requests.")
 @click.option("--date", help="With --day: the day (YYYY-MM-DD).")
 @click.option("--tz", default="UTC", show_default=True, help="With --day: the date's time zone.")
+@click.option(
+    "--replay",
+    "replay_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="A replay file (guidebot replay --out): its tour requests.",
+)
 @click.option(
     "--robots",
     "robots_text",
@@ -137,6 +165,35 @@ def _table(rows: list[dict[str, Any]]) -> str:
     help="Share answering no at each 'continue?' (default: the profile's, or 0).",
 )
 @click.option("--seed", default=None, type=int, help="Override the profile's seed.")
+@click.option(
+    "--live",
+    is_flag=True,
+    help="Also play the day on the real server, Task Manager and Traffic Manager with "
+    "simulated robots and building, per fleet size.",
+)
+@click.option(
+    "--time-scale",
+    default=10.0,
+    show_default=True,
+    type=click.FloatRange(min=0.1),
+    help="--live: robots and building run this many times faster than the wall clock.",
+)
+@click.option(
+    "--no-can",
+    is_flag=True,
+    help="--live: bare simulated robots (lighter; no battery, so no charging).",
+)
+@click.option(
+    "--workdir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="--live: keep each run's logs, site and database here.",
+)
+@click.option(
+    "--html",
+    "html_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write a report page with plots here.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Last line: one JSON object.")
 def plan_command(
     site_path: Path,
@@ -144,51 +201,80 @@ def plan_command(
     db_url: str | None,
     date: str | None,
     tz: str,
+    replay_path: Path | None,
     robots_text: str,
     policy_name: str,
     within_min: float,
     stop_following: float | None,
     seed: int | None,
+    live: bool,
+    time_scale: float,
+    no_can: bool,
+    workdir: Path | None,
+    html_path: Path | None,
     as_json: bool,
 ) -> None:
     """Simulate a day of visitors over fleets of several sizes: waits, refusals, utilisation."""
     started = time.perf_counter()
+    options = None
+    if live:
+        options = LiveOptions(
+            scale=time_scale,
+            can=not no_can,
+            workdir=workdir,
+            log=lambda line: click.echo(f"plan: {line}", err=True),
+        )
     try:
         result = _run(
             site_path,
-            profile_path,
-            db_url,
-            date,
-            tz,
+            _Source(profile_path, db_url, date, tz, replay_path),
             robots_text,
             policy_name,
             within_min,
             stop_following,
             seed,
+            options,
         )
     except PlanError as exc:
         raise click.UsageError(str(exc)) from None
     result["wall_s"] = round(time.perf_counter() - started, 3)
     click.echo(_table(result["fleets"]))
+    if html_path is not None:
+        from backend.planning.html import write_report
+
+        write_report(result, html_path)
+        click.echo(f"plan: report written to {html_path}", err=True)
     if as_json:
         click.echo(json.dumps(result))
 
 
+@dataclass(frozen=True)
+class _Source:
+    """Where the visitors come from: a profile, a recorded day, or a replay file."""
+
+    profile: Path | None
+    db_url: str | None
+    date: str | None
+    tz: str
+    replay: Path | None
+
+
 def _run(
     site_path: Path,
-    profile_path: Path | None,
-    db_url: str | None,
-    date: str | None,
-    tz: str,
+    src: _Source,
     robots_text: str,
     policy_name: str,
     within_min: float,
     stop_following: float | None,
     seed: int | None,
+    live: LiveOptions | None = None,
 ) -> dict[str, Any]:
-    if (profile_path is None) == (db_url is None):
-        raise PlanError("give one source of visitors: --visitors PROFILE or --day DB_URL --date D")
-    if db_url is not None and not date:
+    if sum(x is not None for x in (src.profile, src.db_url, src.replay)) != 1:
+        raise PlanError(
+            "give one source of visitors: --visitors PROFILE, --day DB_URL --date D "
+            "or --replay FILE"
+        )
+    if src.db_url is not None and not src.date:
         raise PlanError("--day needs --date YYYY-MM-DD")
     sizes = parse_robots(robots_text)
     try:
@@ -201,8 +287,8 @@ def _run(
     source: dict[str, Any]
     patience_s: float | None = None
     queue_limit: int | None = None
-    if profile_path is not None:
-        profile = load_profile(profile_path, site)
+    if src.profile is not None:
+        profile = load_profile(src.profile, site)
         if stop_following is not None or seed is not None:
             profile = _with(profile, stop_following, seed)
         requests = draw(profile, site)
@@ -212,14 +298,28 @@ def _run(
         pace = profile.pace
         source = {"profile": profile.name, "hours": len(profile.hours), "seed": profile.seed}
     else:
-        from backend.planning.recorded import read_day
+        from backend.planning.recorded import read_day, read_replay
 
-        assert db_url is not None and date is not None
-        recording = asyncio.run(
-            read_day(db_url, date, tz, site, stop_following=stop_following or 0.0, seed=seed or 1)
-        )
+        if src.replay is not None:
+            recording = read_replay(
+                src.replay, site, stop_following=stop_following or 0.0, seed=seed or 1
+            )
+            source = {"replay": str(src.replay)}
+        else:
+            assert src.db_url is not None and src.date is not None
+            recording = asyncio.run(
+                read_day(
+                    src.db_url,
+                    src.date,
+                    src.tz,
+                    site,
+                    stop_following=stop_following or 0.0,
+                    seed=seed or 1,
+                )
+            )
+            source = {"date": src.date, "tz": src.tz}
         requests, day_s, pace = recording.requests, recording.day_s, recording.pace
-        source = {"date": date, "tz": tz, "skipped": recording.skipped, "from": recording.start}
+        source.update({"skipped": recording.skipped, "from": recording.start})
     rows = plan(
         site,
         requests,
@@ -230,6 +330,8 @@ def _run(
         patience_s=patience_s,
         queue_limit=queue_limit,
         pace=pace,
+        live=live,
+        site_path=site_path,
     )
     source["pace"] = {"move": pace.move, "talk": pace.talk}
     return {

@@ -3,8 +3,10 @@ events), to replay them over other fleets (docs/planning.md, "A recorded day")."
 
 from __future__ import annotations
 
+import json
 import math
 import random
+from pathlib import Path
 from typing import Any
 
 from sqlalchemy import or_, select
@@ -17,7 +19,7 @@ from backend.reports.period import BadPeriod, parse_period
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 
-__all__ = ["Recording", "learn_pace", "read_day", "requests_of"]
+__all__ = ["Recording", "learn_pace", "read_day", "read_replay", "requests_of"]
 
 
 def learn_pace(rows: list[tuple[float, str, dict[str, Any]]], site: Site) -> Pace:
@@ -133,4 +135,35 @@ async def read_day(
     finally:
         await engine.dispose()
     found = [(at, kind, data if isinstance(data, dict) else {}) for at, kind, data in rows]
+    return requests_of(found, site, stop_following, seed)
+
+
+def read_replay(path: Path, site: Site, *, stop_following: float, seed: int) -> Recording:
+    """The tour requests of a replay file (``guidebot replay --out``, docs/reports.md): its
+    ``task_created`` and ``task_point`` events; PlanError saying why a file is not one."""
+    try:
+        loaded = json.loads(path.read_bytes())
+    except OSError as exc:
+        raise PlanError(f"--replay {path}: {exc.strerror or exc}") from None
+    except ValueError:
+        raise PlanError(f"--replay {path}: not a replay file (not JSON)") from None
+    if not isinstance(loaded, dict) or loaded.get("guidebot_replay") != 1:
+        raise PlanError(f'--replay {path}: not a replay file (no "guidebot_replay": 1)')
+    events = loaded.get("events")
+    if not isinstance(events, list):
+        raise PlanError(f"--replay {path}: not a replay file (no events)")
+    found: list[tuple[float, str, dict[str, Any]]] = []
+    for e in events:
+        if not isinstance(e, dict) or not isinstance(e.get("kind"), str):
+            continue
+        kind, at, data = e["kind"], e.get("at"), e.get("data")
+        if isinstance(at, int | float) and (
+            kind == "task_created" or kind.startswith("task_point")
+        ):
+            found.append((float(at), kind, data if isinstance(data, dict) else {}))
+    if not any(kind == "task_created" for _, kind, _ in found):
+        raise PlanError(
+            f"--replay {path}: it holds no tour request (a file written before replays "
+            "carried task_created: export it again)"
+        )
     return requests_of(found, site, stop_following, seed)

@@ -124,6 +124,8 @@ class Outcome:
     day_s: float = 0.0
     last_end_s: float = 0.0
     wall_s: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+    """What only a live run measures (``backend.planning.live``): lock and elevator waits..."""
 
     def summary(self, within_min: float) -> dict[str, Any]:
         waits = sorted(self.waits_s)
@@ -145,6 +147,7 @@ class Outcome:
             "utilisation": round(self.busy_s / (self.robots * span), 3) if span else 0.0,
             "last_tour_ends_h": round(self.last_end_s / 3600, 2),
             "wall_s": round(self.wall_s, 3),
+            **self.extra,
         }
 
 

@@ -18,7 +18,9 @@ HOUR = 3600
 BUCKET_STEP = 1.05
 """Histogram buckets (waits, tour lengths) grow by 5 %: a percentile read from them is at most
 5 % low."""
-ROBOT_STATES = ("touring", "errand", "charging", "idle", "faulted", "offline")
+ROBOT_STATES = ("touring", "errand", "charging", "idle", "faulted", "offline", "down")
+"""``down``: the server was not running (from its ``server_stopped``, or after a crash from the
+last event it logged, to its next ``server_started``): what the robots did is unknown."""
 VISITOR_KINDS = ("tour", "go_to_poi")
 """Tasks for visitors: a robot running one is touring."""
 OPEN_TASK_S = 7 * 86400.0
@@ -79,8 +81,9 @@ class Fold:
             self.state["robots"][name] = robot
         return robot
 
-    @staticmethod
-    def _shown(robot: Mapping[str, Any]) -> str:
+    def _shown(self, robot: Mapping[str, Any]) -> str:
+        if self.state.get("down"):
+            return "down"
         if not robot["online"]:
             return "offline"
         if robot["faults"]:
@@ -106,6 +109,10 @@ class Fold:
             self.add(at, kind, source, data if isinstance(data, dict) else {})
 
     def add(self, at: float, kind: str, source: str, data: dict[str, Any]) -> None:
+        if kind == "server_started":  # before ``last_at`` moves: a crash ends there
+            self._server_started(at, source, data)
+        if at > self.state.get("last_at", 0.0):
+            self.state["last_at"] = at
         if kind.startswith("task_"):
             self._task(at, kind[5:], data)
             return
@@ -217,7 +224,19 @@ class Fold:
         if isinstance(robot := data.get("robot"), str):
             self._change(robot, at, online=False)
 
+    def _server_stopped(self, at: float, source: str, data: dict[str, Any]) -> None:
+        """A clean stop: from here to the next start, the server is down."""
+        self.close(at)
+        self.state["down"] = True
+
     def _server_started(self, at: float, source: str, data: dict[str, Any]) -> None:
+        """A new server life. Without a ``server_stopped`` before it the last one crashed: it
+        was down from the last event it logged (the time since is unknown)."""
+        if not self.state.get("down") and self.state.get("last_at"):
+            self.close(min(at, self.state["last_at"]))
+            self.state["down"] = True
+        self.close(at)
+        self.state["down"] = False
         for name in list(self.state["robots"]):
             self._change(name, at, online=False)  # they connect again to the new life
 
@@ -300,7 +319,7 @@ def _activity(kind: str) -> str:
 _HANDLERS: dict[str, Any] = {
     "robot_connected": Fold._connected,
     "robot_disconnected": Fold._disconnected,
-    "server_started": Fold._server_started,
+    "server_stopped": Fold._server_stopped,
     "alert_raised": lambda f, at, s, d: f._alert(at, s, d, True),
     "alert_resolved": lambda f, at, s, d: f._alert(at, s, d, False),
     "robot_fault": Fold._fault,

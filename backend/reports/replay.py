@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import or_, select
 
 from backend.db.models import EventRow
 from backend.reports.period import BadPeriod, Period
@@ -28,6 +28,7 @@ REPLAYED = (
     "area_force_released",
     "robot_connected",
     "robot_disconnected",
+    "task_created",
     "task_started",
     "task_done",
     "task_failed",
@@ -47,7 +48,7 @@ async def replay(sessionmaker: Any, period: Period) -> dict[str, Any]:
         .where(
             EventRow.at >= period.start - LOOK_BACK_S,
             EventRow.at < period.end,
-            EventRow.kind.in_(REPLAYED),
+            or_(EventRow.kind.in_(REPLAYED), EventRow.kind.like("task_point %")),
         )
         .order_by(EventRow.at, EventRow.id)
         .limit(MAX_EVENTS + 1)

@@ -15,7 +15,7 @@ from backend.db import make_engine, make_sessionmaker, migrate
 from backend.db.models import EventRow
 from backend.planning.cli import parse_robots
 from backend.planning.profile import PlanError
-from backend.planning.recorded import read_day
+from backend.planning.recorded import read_day, read_replay
 from guidebot.cli import main
 from guidebot.site.yamlio import load_site_file
 from tests.planning.test_sim import DEMO, DEMO_PROFILE
@@ -179,3 +179,46 @@ def test_plan_replays_a_recorded_day_over_other_fleets(tmp_path: Path) -> None:
     assert [(r["robots"], r["served"]) for r in result["fleets"]] == [(1, 2), (2, 2)]
     code, output = plan("--day", url, "--date", "2026-13-01")
     assert code == 2 and "2026-13-01" in output
+
+
+def test_plan_takes_a_replay_file_as_its_visitors(tmp_path: Path) -> None:
+    """``guidebot replay --out`` carries the period's tour requests, and ``plan --replay`` plays
+    them as it plays a recorded day."""
+    url = f"sqlite+aiosqlite:///{tmp_path / 'live.db'}"
+    noon = 1_780_000_000 // 86400 * 86400 + 12 * 3600
+    asyncio.run(write_live_day(url, noon))
+    start = dt.datetime.fromtimestamp(noon - 3600, dt.UTC).isoformat()
+    end = dt.datetime.fromtimestamp(noon + 3600, dt.UTC).isoformat()
+    out = tmp_path / "hour.json"
+    exported = CliRunner().invoke(
+        main, ["replay", "--from", url, "--start", start, "--end", end, "--out", str(out)]
+    )
+    assert exported.exit_code == 0, exported.output
+    code, output = plan("--replay", str(out), "--robots", "1..2", "--json")
+    assert code == 0, output
+    result = json.loads(output.strip().splitlines()[-1])
+    assert result["requests"] == 2 and result["source"]["replay"] == str(out)
+    assert result["source"]["from"] == noon
+    assert [(r["robots"], r["served"]) for r in result["fleets"]] == [(1, 2), (2, 2)]
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ("not json", "not a replay file \\(not JSON\\)"),
+        ('{"events": []}', 'no "guidebot_replay": 1'),
+        ('{"guidebot_replay": 1, "events": []}', "holds no tour request"),
+    ],
+)
+def test_a_file_that_is_no_replay_is_refused(tmp_path: Path, content: str, message: str) -> None:
+    path = tmp_path / "x.json"
+    path.write_text(content)
+    with pytest.raises(PlanError, match=message):
+        read_replay(path, load_site_file(DEMO), stop_following=0.0, seed=1)
+    code, output = plan("--replay", str(path))
+    assert code == 2 and "--replay" in output
+
+
+def test_two_sources_of_visitors_are_refused(tmp_path: Path) -> None:
+    code, output = plan("--visitors", str(DEMO_PROFILE), "--replay", str(tmp_path / "x.json"))
+    assert code == 2 and "give one source of visitors" in output

@@ -19,7 +19,7 @@ import backend.tasks.model as model_module
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.reports.cli import replay_command
 from backend.reports.figures import Reports, percentile
-from backend.reports.fold import bucket
+from backend.reports.fold import ROBOT_STATES, bucket
 from backend.reports.period import BadPeriod, parse_period
 from backend.reports.replay import replay
 from backend.reports.rollup import Rollups
@@ -325,9 +325,15 @@ async def test_a_replay_has_the_periods_events_and_the_state_it_starts_from(
     # At 10:30 R1 stood at p2 (reached 10:08) and held the corridor (granted 10:06:30).
     assert played["start"]["robots"] == {"R1": "p2"}
     assert played["start"]["locks"] == {"corridor": "R1"}
+    # The tour's request and progress too: ``guidebot plan --replay`` plays its requests.
     assert [(e["at"], e["kind"]) for e in played["events"]] == [
+        (at(10, 30), "task_created"),
         (at(10, 30, 20), "task_started"),
+        (at(10, 31), "task_point 1/3 arrived"),
+        (at(10, 35), "task_point 1/3 explained"),
+        (at(10, 45), "task_point 2/3 explained"),
         (at(10, 51), "elevator_in_position"),
+        (at(10, 58), "task_point 3/3 explained"),
     ]
     assert played["truncated"] is False
     with pytest.raises(BadPeriod, match="at most 24 hours"):
@@ -349,3 +355,27 @@ def test_guidebot_replay_refuses_more_than_a_day(tmp_path: Path) -> None:
     result = CliRunner().invoke(replay_command, args)
     assert result.exit_code == 2 and "at most 24 hours" in result.output
     assert not (tmp_path / "r.json").exists()
+
+
+async def test_the_time_the_server_was_down_counts_as_down(
+    store: DbStore, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A clean stop logs ``server_stopped``: down until the next start. A crash logs nothing:
+    down from the last event it logged. Robots are offline from a start until they connect."""
+    day = VenueDay(store, monkeypatch)
+    day.when(9).log("server_started", {"site_version": 1}, "server")
+    day.log("robot_connected", {"robot": "R1"})
+    day.when(10).log("server_stopped", {}, "server")
+    day.when(11).log("server_started", {"site_version": 1}, "server")
+    day.when(11, 5).log("robot_connected", {"robot": "R1"})
+    day.when(12).log("node_reached", {"robot": "R1", "node": "p1"})  # then it crashed
+    day.when(14).log("server_started", {"site_version": 1}, "server")
+    day.when(14, 1).log("robot_connected", {"robot": "R1"})
+    day.when(15).log("robot_disconnected", {"robot": "R1"})
+    reports = Reports(Rollups(store.sessionmaker, POSITIONS), store.flush)
+    period = parse_period(start="2026-07-14T09:00", end="2026-07-14T15:00")
+    (r1,) = (await reports.robots(period))["rows"]
+    assert r1["down_s"] == 3600 + 2 * 3600
+    assert r1["offline_s"] == 5 * 60 + 60
+    assert r1["idle_s"] == (60 + 55 + 59) * 60
+    assert sum(r1[f"{s}_s"] for s in ROBOT_STATES) == 6 * 3600

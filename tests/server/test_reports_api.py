@@ -6,10 +6,14 @@ from __future__ import annotations
 import csv
 import datetime as dt
 import io
+from pathlib import Path
 
-from backend.testing import RunningServer
+from sqlalchemy import select
 
-from .conftest import OPERATOR_TOKEN, PANEL_TOKEN
+from backend.db.models import EventRow
+from backend.testing import RunningServer, running_server
+
+from .conftest import OPERATOR_TOKEN, PANEL_TOKEN, server_settings
 from .test_api import GROUND, Http, eventually, robot
 
 
@@ -92,3 +96,17 @@ async def test_bad_periods_are_422_with_the_reason_and_only_staff_read(http: Htt
     assert (await staff.get("/api/reports/tasks", params=csv_only)).status_code == 422
     assert (await panel.get("/api/reports", params={"day": "2026-07-14"})).status_code == 403
     assert (await http(None).get("/api/reports", params={"day": "2026-07-14"})).status_code == 401
+
+
+async def test_a_clean_stop_is_logged_between_two_server_lives(tmp_path: Path) -> None:
+    """A server stopped cleanly writes ``server_stopped`` last, so the reports count the time
+    until the next start as the server down (docs/reports.md, the ``robots`` figure)."""
+    settings = server_settings(tmp_path)
+    async with running_server(settings):
+        pass
+    async with running_server(settings) as srv:
+        store = srv.app.state.store
+        async with store.sessionmaker() as session:
+            rows = await session.execute(select(EventRow.kind).order_by(EventRow.id))
+            kinds = [k for (k,) in rows if k.startswith("server_")]
+    assert kinds == ["server_started", "server_stopped", "server_started"]

@@ -28,6 +28,7 @@ VIEWS = [
     ("RoboGraph monitor", "monitor"),
     ("Alerts", "alerts"),
     ("Event log", "events"),
+    ("Reports", "reports"),
 ]
 
 

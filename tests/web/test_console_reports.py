@@ -154,16 +154,21 @@ async def test_a_busy_days_summary_prints_on_one_page(
         assert _pages(pdf) == 1, "the daily summary prints on one page"
         await page.emulate_media(media="screen")
 
-        # The day played back: at noon the walkers are on the ground floor.
+        # The day played back on the console's Leaflet floor map: at noon the walkers are on
+        # the ground floor.
         await page.get_by_role("button", name="Replay this period").click()
         slider = page.get_by_label("Time", exact=True)
+        await expect(page.locator("#replay-on-floor")).to_contain_text("On this floor")
         await slider.fill(str(int(noon.timestamp()) + 1))
-        robot = page.locator('#replay-stage [data-floor="F0"] .replay-robot[data-robot="W0"]')
+        robot = page.locator('#replay-map .robot-marker[aria-label="robot W0"]')
         await expect(robot).to_have_count(1)
+        await expect(page.locator("#replay-on-floor")).to_contain_text("W0, W1")
         await page.get_by_role("button", name="Play", exact=True).click()
         await expect(page.get_by_role("button", name="Pause", exact=True)).to_be_visible()
         await page.get_by_role("button", name="Pause", exact=True).click()
         await web.axe_check(page)
+        await page.locator("#replay-map").scroll_into_view_if_needed()
+        await web.screenshot(page, "console-reports-replay")
         # Scrubbed end to end in 180 painted frames, ten robots walking all day: the frames a
         # second the page kept (reported; the display gives at most 60).
         frames = await page.evaluate(
@@ -181,7 +186,7 @@ async def test_a_busy_days_summary_prints_on_one_page(
                 requestAnimationFrame(step);
             })"""
         )
-        walkers = page.locator("#replay-stage .replay-robot")
+        walkers = page.locator("#replay-map .robot-marker")
         await expect(walkers).to_have_count(10)  # at 24:00 the ten walkers stand where they ended
         print(f"replay: a busy day scrubbed end to end at {frames:.0f} frames a second")
 

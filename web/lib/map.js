@@ -12,6 +12,7 @@ export const WAITING = new Set(["waiting_area", "waiting_door", "waiting_elevato
 const STATE_COLOURS = { free: "#1b7a3a", held: "#b35900", holder_offline: "#b00020", yielding: "#6a3d9a" };
 
 export function batteryClass(level) {
+  if (typeof level !== "number") return "battery-unknown"; // a replay knows no battery
   if (level >= 0.5) return "battery-ok";
   if (level >= 0.2) return "battery-low";
   return "battery-panic";
@@ -358,7 +359,8 @@ export class FloorMap extends EventTarget {
     }
     robot.parts.arrow.style.transform = `rotate(${(-s.theta * 180) / Math.PI}deg)`;
     const doing = this.describeRobot?.(s) ?? s.mode;
-    element.title = `${s.robot}: ${doing}, battery ${Math.round(s.battery * 100)} %`;
+    const battery = typeof s.battery === "number" ? `, battery ${Math.round(s.battery * 100)} %` : "";
+    element.title = `${s.robot}: ${doing}${battery}`;
   }
 
   /** Where to draw a robot: its pose, or its node's place while it has no floor yet (a robot

@@ -4,6 +4,7 @@
 import { html, render, svg } from "lit-html";
 import uPlot from "uplot";
 import { doorName, floorName, placeName } from "/admin/names.js";
+import { FloorMap } from "/lib/map.js";
 
 const STATES = [
   ["touring", "Touring", "#0b57d0"],
@@ -12,6 +13,7 @@ const STATES = [
   ["idle", "Idle", "#9aa0a6"],
   ["faulted", "Faulted", "#b00020"],
   ["offline", "Offline", "#e2e4e8"],
+  ["down", "Server down", "#5f6368"],
 ];
 const TASK_SERIES = [
   ["requested", "Requested", "#0b57d0"],
@@ -328,9 +330,10 @@ class Player {
     const here = nodes.get(path[lo][1]);
     const next = path[lo + 1] ? nodes.get(path[lo + 1][1]) : null;
     if (!here) return null;
-    if (!next || next.floor !== here.floor || path[lo + 1][0] - path[lo][0] > SMOOTH_S) return { ...here };
+    if (!next || next.floor !== here.floor || path[lo + 1][0] - path[lo][0] > SMOOTH_S) return { ...here, theta: 0 };
     const f = (this.t - path[lo][0]) / (path[lo + 1][0] - path[lo][0]);
-    return { floor: here.floor, x: here.x + (next.x - here.x) * f, y: here.y + (next.y - here.y) * f };
+    const theta = Math.atan2(next.y - here.y, next.x - here.x);
+    return { floor: here.floor, x: here.x + (next.x - here.x) * f, y: here.y + (next.y - here.y) * f, theta };
   }
 
   /** Show the floors at ``t`` (the slider and the browser test's scrub). */
@@ -357,36 +360,56 @@ class Player {
   }
 }
 
-function replayFloor(ui, player, floor, nodes) {
+/** The replay's map: the console's Leaflet floor map (web/lib/map.js, as the Map view draws
+ * the live fleet), made once per container; null until its floors are drawn. */
+function replayMap(ui) {
+  const r = state(ui);
+  const element = document.getElementById("replay-map");
+  if (!element) return null;
+  if (r.replayMap?.element !== element) {
+    r.replayMap?.map.map.remove(); // a container the view drew before (it was left and came back)
+    const map = new FloorMap(element, (url) => ui.api.get(url));
+    map.describeRobot = (s) => (s.mode === "busy" ? "on a task" : "no task");
+    r.replayMap = { element, map, ready: false, shown: new Map() };
+    const mine = r.replayMap;
+    map.addEventListener("floor", () => drawReplay(ui));
+    map.setSite(ui.store.site).then(() => {
+      mine.ready = true;
+      drawReplay(ui);
+    });
+  }
+  return r.replayMap.ready ? r.replayMap : null;
+}
+
+/** Apply the player's state at its time to the map: robots (blue ring with a task), doors,
+ * held areas, elevator cars. Only what changed since the last frame is set again. */
+function paintReplay(ui, player, replay) {
+  const { map, shown } = replay;
   const site = ui.store.site;
-  const mine = site.nodes.filter((n) => n.floor === floor.id);
-  if (!mine.length) return "";
-  const byId = new Map(mine.map((n) => [n.id, n]));
-  const minX = Math.min(...mine.map((n) => n.x)) - HEAT_PAD_M;
-  const maxX = Math.max(...mine.map((n) => n.x)) + HEAT_PAD_M;
-  const minY = Math.min(...mine.map((n) => n.y)) - HEAT_PAD_M;
-  const maxY = Math.max(...mine.map((n) => n.y)) + HEAT_PAD_M;
-  const Y = (y) => maxY + minY - y;
+  const nodes = map.nodes;
   const s = player.state;
-  const robots = [...player.paths.keys()].filter((r) => !s.gone.has(r)).map((r) => [r, player.where(r, nodes)]).filter(([, p]) => p && p.floor === floor.id);
-  const held = (site.areas ?? []).filter((a) => s.locks.has(a.id)).flatMap((a) => a.nodes.filter((n) => byId.has(n)).map((n) => [a, byId.get(n)]));
-  return html`<figure class="heat-floor replay-floor" data-floor=${floor.id}>
-    <figcaption>${floorName(site, floor.id)}</figcaption>
-    <svg viewBox=${`${minX} ${minY} ${maxX - minX} ${maxY - minY}`} style=${`width: ${Math.round((maxX - minX) * HEAT_PX_PER_M)}px`} role="img" aria-label=${`Floor ${floor.name || floor.id} at the replay's time: ${robots.map(([r]) => r).join(", ") || "no robot"}`}>
-      ${held.map(([a, n]) => svg`<circle cx=${n.x} cy=${Y(n.y)} r="1.6" fill="#f9ab00" opacity="0.45"><title>Area ${a.id} held by ${s.locks.get(a.id)}</title></circle>`)}
-      ${site.edges.filter((e) => byId.has(e.a) && byId.has(e.b)).map((e) => svg`<line x1=${byId.get(e.a).x} y1=${Y(byId.get(e.a).y)} x2=${byId.get(e.b).x} y2=${Y(byId.get(e.b).y)} stroke="#9aa0a6" stroke-width="0.2"></line>`)}
-      ${(site.doors ?? []).filter((d) => byId.has(d.node)).map((d) => {
-        const n = byId.get(d.node);
-        const open = s.doors.get(d.id);
-        return svg`<rect x=${n.x - 0.6} y=${Y(n.y) - 0.6} width="1.2" height="1.2" fill=${open ? "#a8dab5" : "#f4b6bf"} stroke=${open ? "#1b7a3a" : "#b00020"} stroke-width="0.15"><title>${doorName(site, d.id)}: ${open ? "open" : "closed"}</title></rect>`;
-      })}
-      ${(site.elevators ?? []).flatMap((e) => e.stops.filter((st) => byId.has(st.node) && s.lifts.get(e.id) === st.floor).map((st) => {
-        const n = byId.get(st.node);
-        return svg`<rect x=${n.x - 0.9} y=${Y(n.y) - 0.9} width="1.8" height="1.8" fill="#8ab4f8" stroke="#444" stroke-width="0.15"><title>${e.id}: the car is here</title></rect>`;
-      }))}
-      ${robots.map(([r, p]) => svg`<g class="replay-robot" data-robot=${r}><circle cx=${p.x} cy=${Y(p.y)} r="0.8" fill=${s.busy.has(r) ? "#0b57d0" : "#1b7a3a"} stroke="#1a1a1a" stroke-width="0.15"></circle>
-        <text x=${p.x} y=${Y(p.y) - 1.1} text-anchor="middle" font-size="1.1" font-weight="700">${r}</text></g>`)}
-    </svg></figure>`;
+  const same = (key, value) => shown.get(key) === value || (shown.set(key, value), false);
+  for (const robot of player.paths.keys()) {
+    const p = s.gone.has(robot) ? null : player.where(robot, nodes);
+    if (!p) {
+      if (!same(`robot:${robot}`, "gone")) map.robotOffline(robot);
+      continue;
+    }
+    const mode = s.busy.has(robot) ? "busy" : "idle";
+    if (same(`robot:${robot}`, `${p.floor}|${p.x}|${p.y}|${mode}`)) continue;
+    map.updateRobot({ payload: { robot, floor: p.floor, x: p.x, y: p.y, theta: p.theta ?? 0, mode }, timestamp: Date.now() / 1000 });
+  }
+  for (const door of site.doors ?? []) {
+    if (s.doors.has(door.id) && !same(`door:${door.id}`, s.doors.get(door.id))) map.setDoor(door.id, s.doors.get(door.id));
+  }
+  for (const area of site.areas ?? []) {
+    const holder = s.locks.get(area.id) ?? null;
+    if (!same(`area:${area.id}`, holder)) map.setAreaState({ area: area.id, state: holder ? "held" : "free", holder, waiting: [] });
+  }
+  for (const lift of site.elevators ?? []) {
+    const floor = s.lifts.get(lift.id);
+    if (floor && !same(`lift:${lift.id}`, floor)) map.setElevator(lift.id, floor, false);
+  }
 }
 
 function drawReplay(ui) {
@@ -394,7 +417,7 @@ function drawReplay(ui) {
   const player = state(ui).player;
   if (!stage || !player) return;
   const site = ui.store.site;
-  const nodes = new Map(site.nodes.map((n) => [n.id, n]));
+  const replay = replayMap(ui);
   const at = new Date(player.t * 1000);
   const toggle = () => {
     if (player.playing) player.playing = false;
@@ -404,6 +427,8 @@ function drawReplay(ui) {
     }
     drawReplay(ui);
   };
+  const s = player.state;
+  const onFloor = replay ? [...player.paths.keys()].filter((r) => !s.gone.has(r) && player.where(r, replay.map.nodes)?.floor === replay.map.floor) : [];
   render(
     html`<div class="replay-controls">
         <button type="button" @click=${toggle}>${player.playing ? "Pause" : "Play"}</button>
@@ -411,12 +436,15 @@ function drawReplay(ui) {
           ${SPEEDS.map((v) => html`<option value=${v} ?selected=${player.speed === v}>${v}×</option>`)}</select></label>
         <label class="replay-time">Time <input type="range" min=${player.start} max=${player.end} step="1" .value=${String(Math.round(player.t))}
           @input=${(e) => player.show(Number(e.target.value))}></label>
+        <label>Floor <select @change=${(e) => replay?.map.showFloor(e.target.value)}>
+          ${site.floors.map((f) => html`<option value=${f.id} ?selected=${replay?.map.floor === f.id}>${floorName(site, f.id)}</option>`)}</select></label>
         <output id="replay-clock">${at.toLocaleString()}</output>
         ${player.replay.truncated ? html`<span class="muted">(the first 200 000 events only)</span>` : ""}
       </div>
-      <div class="heat-floors">${site.floors.map((f) => replayFloor(ui, player, f, nodes))}</div>`,
+      <p class="muted" id="replay-on-floor">${replay ? `On this floor: ${onFloor.sort().join(", ") || "no robot"}; ${s.locks.size} area(s) held.` : "Drawing the map…"}</p>`,
     stage,
   );
+  if (replay) paintReplay(ui, player, replay);
 }
 
 async function loadReplay(ui) {
@@ -468,6 +496,7 @@ function replayPart(ui, r) {
     <label>Open a replay file <input type="file" accept=".json,application/json" @change=${(e) => openReplayFile(ui, e.target)}></label>
     ${r.player?.file ? html`<p class="muted">Playing ${r.player.file}: ${r.player.replay.period.start.slice(0, 16).replace("T", " ")} to ${r.player.replay.period.end.slice(0, 16).replace("T", " ")}.</p>` : ""}
     <div id="replay-stage"></div>
+    ${r.player ? html`<div id="replay-map" class="replay-map" role="region" aria-label="The replay on the floor map"></div>` : ""}
   </section>`;
 }
 
