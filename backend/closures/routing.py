@@ -7,8 +7,6 @@ finds the way around. A goal that is itself closed, or that only closed nodes le
 
 from __future__ import annotations
 
-import heapq
-import math
 from collections.abc import Mapping
 
 from backend.closures.model import Closure
@@ -76,36 +74,9 @@ def path_avoiding(
         raise RouteClosed(goal, [closed[goal]])
     if not any(n in closed for n in plain.nodes[1:]):
         return plain
-    found = _dijkstra(graph, start, goal, closed)
+    found = graph.search(start, goal, closed)
     if found is None:
         cut = list({id(c): c for n in plain.nodes[1:] if (c := closed.get(n))}.values())
         raise RouteClosed(goal, cut)
     nodes, length = found
     return PathResult(nodes, length, [graph.step(n) for n in nodes])
-
-
-def _dijkstra(
-    graph: SiteGraph, start: str, goal: str, closed: Mapping[str, Closure]
-) -> tuple[list[str], float] | None:
-    dist: dict[str, float] = {start: 0.0}
-    prev: dict[str, str] = {}
-    heap = [(0.0, start)]
-    while heap:
-        d, node = heapq.heappop(heap)
-        if node == goal:
-            path = [goal]
-            while path[-1] != start:
-                path.append(prev[path[-1]])
-            path.reverse()
-            return path, d
-        if d > dist.get(node, math.inf):
-            continue
-        for nxt, cost in graph.adj.get(node, ()):
-            if nxt in closed:
-                continue
-            nd = d + cost
-            if nd < dist.get(nxt, math.inf):
-                dist[nxt] = nd
-                prev[nxt] = node
-                heapq.heappush(heap, (nd, nxt))
-    return None

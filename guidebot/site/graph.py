@@ -212,6 +212,23 @@ class SiteGraph:
         ``closed`` (``start`` excepted); None when there is none. A plain search (Dijkstra): it
         is asked only for a step-free tour's legs whose shortest path has steps."""
         self.check(start, goal)
+        found = self.search(start, goal, closed, self.step_edges)
+        if found is None:
+            return None
+        nodes, length = found
+        return PathResult(nodes, length, [self.step(n) for n in nodes])
+
+    def search(
+        self,
+        start: str,
+        goal: str,
+        closed: Container[str] = frozenset(),
+        closed_edges: Container[tuple[str, str]] = frozenset(),
+    ) -> tuple[list[str], float] | None:
+        """The shortest (nodes, length) from ``start`` to ``goal`` over no node in ``closed``
+        (``start`` excepted) and no edge in ``closed_edges``; None when there is none. A plain
+        Dijkstra on node names: for the rare searches round something (closures, steps), not
+        the planner's fast path."""
         dist: dict[str, float] = {start: 0.0}
         prev: dict[str, str] = {}
         heap = [(0.0, start)]
@@ -222,11 +239,11 @@ class SiteGraph:
                 while nodes[-1] != start:
                     nodes.append(prev[nodes[-1]])
                 nodes.reverse()
-                return PathResult(nodes, d, [self.step(n) for n in nodes])
+                return nodes, d
             if d > dist.get(node, math.inf):
                 continue
             for nxt, cost in self.adj.get(node, ()):
-                if nxt in closed or (node, nxt) in self.step_edges:
+                if nxt in closed or (node, nxt) in closed_edges:
                     continue
                 if d + cost < dist.get(nxt, math.inf):
                     dist[nxt] = d + cost
