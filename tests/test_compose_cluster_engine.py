@@ -36,12 +36,10 @@ from compose_engine import (
     BASE_IMAGE,
     ROOT,
     assert_nothing_left,
-    base_image,
     down,
+    prepare,
     run,
-    standin_images,
     wait,
-    wheels,
 )
 from netports import free_ports
 
@@ -86,9 +84,7 @@ def _listed_ids(http: httpx.Client) -> set[str]:
 
 
 def test_cluster_profile_serves_through_the_proxy_and_fails_over(engine: dict[str, str]) -> None:
-    base_image(engine)
-    wheels(engine)
-    standin_images(engine)
+    prepare(engine, standins=True)
     (port,) = free_ports(1)
     project = f"guidebot-cluster-{uuid.uuid4().hex[:6]}"
     env = {

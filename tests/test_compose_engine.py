@@ -31,11 +31,10 @@ from compose_engine import (
     BASE_IMAGE,
     ROOT,
     assert_nothing_left,
-    base_image,
     down,
+    prepare,
     run,
     wait,
-    wheels,
 )
 from netports import free_ports
 
@@ -87,8 +86,7 @@ def test_postgres_profile_is_valid(engine: dict[str, str]) -> None:
 def test_compose_up_runs_a_tour_and_down_leaves_nothing(
     engine: dict[str, str], tmp_path: Path
 ) -> None:
-    base_image(engine)
-    wheels(engine)
+    prepare(engine)
     modules = len(yaml.safe_load((ROOT / "sites" / "demo_museum.yaml").read_text())["modules"])
     port, hub_port, control, gui1, gui2, gui3, *modbus = free_ports(6 + modules)
     override = tmp_path / "host-network.yml"
