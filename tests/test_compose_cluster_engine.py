@@ -33,7 +33,7 @@ from typing import Any
 import httpx
 import pytest
 from compose_engine import (
-    BASE_IMAGE,
+    OFFLINE_BUILD,
     ROOT,
     assert_nothing_left,
     down,
@@ -90,9 +90,7 @@ def test_cluster_profile_serves_through_the_proxy_and_fails_over(engine: dict[st
     env = {
         **engine,
         "COMPOSE_PROJECT_NAME": project,
-        "GUIDEBOT_BASE_IMAGE": BASE_IMAGE,
-        "GUIDEBOT_WHEELS": ".cache/wheels",
-        "GUIDEBOT_APT_PACKAGES": "",
+        **OFFLINE_BUILD,
         "GUIDEBOT_CLUSTER_PORT": str(port),
     }
     compose = ["docker", "compose", "-f", str(ROOT / "docker-compose.yml"), "--profile", "cluster"]

@@ -6,7 +6,8 @@ its own socket, data and exec roots, stopped after); the Compose v2 CLI from PyP
 --variant=minbase bookworm` (python3, python3-venv) and `docker import`, cached as a tarball in
 .cache/; the project's wheels built on the host into .cache/wheels (containers cannot reach
 PyPI here) and installed offline by the Dockerfile; all of it in tests/compose_engine.py, the
-engine one session fixture (tests/conftest.py) shared with tests/test_compose_cluster_engine.py.
+engine one session fixture (tests/conftest.py) shared with tests/test_compose_cluster_engine.py,
+the image built once for both (`prepare`).
 Every service is overridden onto the host's network, with the demo site mounted over the
 image's with its Modbus modules on free ports of the host (its own ports, 15020 and 15021, may
 be taken there: by another test or a building simulator). The fleet comes up, the server turns
@@ -28,7 +29,7 @@ import httpx
 import pytest
 import yaml
 from compose_engine import (
-    BASE_IMAGE,
+    OFFLINE_BUILD,
     ROOT,
     assert_nothing_left,
     down,
@@ -95,9 +96,7 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
     env = {
         **engine,
         "COMPOSE_PROJECT_NAME": project,
-        "GUIDEBOT_BASE_IMAGE": BASE_IMAGE,
-        "GUIDEBOT_WHEELS": ".cache/wheels",
-        "GUIDEBOT_APT_PACKAGES": "",
+        **OFFLINE_BUILD,
         "GUIDEBOT_PORT": str(port),
         "GUIDEBOT_HUB_WS_PORT": str(hub_port),
         "GUIDEBOT_SIM_CONTROL_PORT": str(control),
@@ -109,8 +108,7 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
     compose = ["docker", "compose", "-f", str(ROOT / "docker-compose.yml"), "-f", str(override)]
     url = f"http://127.0.0.1:{port}"
     try:
-        run([*compose, "build"], env, timeout=900)
-        run([*compose, "up", "-d"], env)
+        run([*compose, "up", "-d"], env)  # the image prepare() built
         with httpx.Client(base_url=url, headers=ADMIN, timeout=5) as http:
             wait(lambda: http.get("/api/health").status_code == 200, 120, "server healthy")
             wait(
