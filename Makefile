@@ -30,12 +30,12 @@ typecheck: $(STAMP)
 	$(BIN)/mypy guidebot backend robot_agent building_sim petri_nets bench
 
 # The suite waits far more than it computes (servers, browsers, robots at work): four pytest-xdist
-# workers share 2 CPUs, and lint and the type check (15 s of one CPU) run beside them; any of
-# the three failing fails `make test` once the others end. `--dist loadgroup` keeps the docker
-# tests in one worker; the tests marked `alone` (the demo's, on ports it picks) run after, by
-# themselves (tests/conftest.py).
+# workers share 2 CPUs, and lint and the type check (15 s of one CPU) run beside them (their few
+# lines come among pytest's first ones); any of the three failing fails `make test` once the
+# others end. `--dist loadgroup` keeps the docker tests in one worker; the tests marked `alone`
+# (the demo's, on ports it picks) run after, by themselves (tests/conftest.py).
 test: $(STAMP) system-deps
-	$(MAKE) --no-print-directory -j 3 --output-sync=line lint typecheck suite
+	$(MAKE) --no-print-directory -j 3 lint typecheck suite
 	$(BIN)/python -m pytest -m alone
 
 suite: $(STAMP)
