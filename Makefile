@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck system-deps bench clean screenshots vendor-web
+.PHONY: demo test suite lint typecheck system-deps bench clean screenshots vendor-web
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit("GuideBot needs Python 3.11 or newer, found " + sys.version.split()[0]) if sys.version_info < (3, 11) else None'
@@ -30,11 +30,16 @@ typecheck: $(STAMP)
 	$(BIN)/mypy guidebot backend robot_agent building_sim petri_nets bench
 
 # The suite waits far more than it computes (servers, browsers, robots at work): four pytest-xdist
-# workers share 2 CPUs. `--dist loadgroup` keeps the docker tests in one worker; the tests
-# marked `alone` (the demo's, on ports it picks) run after, by themselves (tests/conftest.py).
-test: $(STAMP) system-deps lint typecheck
-	$(BIN)/python -m pytest -n 4 --dist loadgroup -m "not alone"
+# workers share 2 CPUs, and lint and the type check (15 s of one CPU) run beside them (their few
+# lines come among pytest's first ones); any of the three failing fails `make test` once the
+# others end. `--dist loadgroup` keeps the docker tests in one worker; the tests marked `alone`
+# (the demo's, on ports it picks) run after, by themselves (tests/conftest.py).
+test: $(STAMP) system-deps
+	$(MAKE) --no-print-directory -j 3 lint typecheck suite
 	$(BIN)/python -m pytest -m alone
+
+suite: $(STAMP)
+	$(BIN)/python -m pytest -n 4 --dist loadgroup -m "not alone"
 
 # docs/screenshots/*.png from the browser tests' scenarios (needs /usr/bin/chromium).
 screenshots: $(STAMP) system-deps

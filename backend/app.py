@@ -52,6 +52,7 @@ from backend.health import ComponentState, HealthBoard
 from backend.hub import Hub
 from backend.hub import routes as hub_routes
 from backend.hub import websocket as hub_websocket
+from backend.hub.asgi_protocol import LingeringWebSocketProtocol
 from backend.hub.listener import hub_listener
 from backend.metrics import routes as metrics_routes
 from backend.metrics.component import metrics
@@ -226,7 +227,7 @@ def uvicorn_config(
         log_level=log_level,
         access_log=access_log,
         lifespan="on",
-        ws="websockets-sansio",
+        ws=LingeringWebSocketProtocol,  # websockets-sansio, failing without a reset
         ws_per_message_deflate=False,
         ws_max_size=16 * 1024 * 1024,
         timeout_graceful_shutdown=5,

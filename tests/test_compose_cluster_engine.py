@@ -33,15 +33,13 @@ from typing import Any
 import httpx
 import pytest
 from compose_engine import (
-    BASE_IMAGE,
+    OFFLINE_BUILD,
     ROOT,
     assert_nothing_left,
-    base_image,
     down,
+    prepare,
     run,
-    standin_images,
     wait,
-    wheels,
 )
 from netports import free_ports
 
@@ -86,17 +84,13 @@ def _listed_ids(http: httpx.Client) -> set[str]:
 
 
 def test_cluster_profile_serves_through_the_proxy_and_fails_over(engine: dict[str, str]) -> None:
-    base_image(engine)
-    wheels(engine)
-    standin_images(engine)
+    prepare(engine, standins=True)
     (port,) = free_ports(1)
     project = f"guidebot-cluster-{uuid.uuid4().hex[:6]}"
     env = {
         **engine,
         "COMPOSE_PROJECT_NAME": project,
-        "GUIDEBOT_BASE_IMAGE": BASE_IMAGE,
-        "GUIDEBOT_WHEELS": ".cache/wheels",
-        "GUIDEBOT_APT_PACKAGES": "",
+        **OFFLINE_BUILD,
         "GUIDEBOT_CLUSTER_PORT": str(port),
     }
     compose = ["docker", "compose", "-f", str(ROOT / "docker-compose.yml"), "--profile", "cluster"]

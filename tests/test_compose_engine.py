@@ -6,7 +6,8 @@ its own socket, data and exec roots, stopped after); the Compose v2 CLI from PyP
 --variant=minbase bookworm` (python3, python3-venv) and `docker import`, cached as a tarball in
 .cache/; the project's wheels built on the host into .cache/wheels (containers cannot reach
 PyPI here) and installed offline by the Dockerfile; all of it in tests/compose_engine.py, the
-engine one session fixture (tests/conftest.py) shared with tests/test_compose_cluster_engine.py.
+engine one session fixture (tests/conftest.py) shared with tests/test_compose_cluster_engine.py,
+the image built once for both (`prepare`).
 Every service is overridden onto the host's network, with the demo site mounted over the
 image's with its Modbus modules on free ports of the host (its own ports, 15020 and 15021, may
 be taken there: by another test or a building simulator). The fleet comes up, the server turns
@@ -28,14 +29,13 @@ import httpx
 import pytest
 import yaml
 from compose_engine import (
-    BASE_IMAGE,
+    OFFLINE_BUILD,
     ROOT,
     assert_nothing_left,
-    base_image,
     down,
+    prepare,
     run,
     wait,
-    wheels,
 )
 from netports import free_ports
 
@@ -87,8 +87,7 @@ def test_postgres_profile_is_valid(engine: dict[str, str]) -> None:
 def test_compose_up_runs_a_tour_and_down_leaves_nothing(
     engine: dict[str, str], tmp_path: Path
 ) -> None:
-    base_image(engine)
-    wheels(engine)
+    prepare(engine)
     modules = len(yaml.safe_load((ROOT / "sites" / "demo_museum.yaml").read_text())["modules"])
     port, hub_port, control, gui1, gui2, gui3, *modbus = free_ports(6 + modules)
     override = tmp_path / "host-network.yml"
@@ -97,9 +96,7 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
     env = {
         **engine,
         "COMPOSE_PROJECT_NAME": project,
-        "GUIDEBOT_BASE_IMAGE": BASE_IMAGE,
-        "GUIDEBOT_WHEELS": ".cache/wheels",
-        "GUIDEBOT_APT_PACKAGES": "",
+        **OFFLINE_BUILD,
         "GUIDEBOT_PORT": str(port),
         "GUIDEBOT_HUB_WS_PORT": str(hub_port),
         "GUIDEBOT_SIM_CONTROL_PORT": str(control),
@@ -111,8 +108,7 @@ def test_compose_up_runs_a_tour_and_down_leaves_nothing(
     compose = ["docker", "compose", "-f", str(ROOT / "docker-compose.yml"), "-f", str(override)]
     url = f"http://127.0.0.1:{port}"
     try:
-        run([*compose, "build"], env, timeout=900)
-        run([*compose, "up", "-d"], env)
+        run([*compose, "up", "-d"], env)  # the image prepare() built
         with httpx.Client(base_url=url, headers=ADMIN, timeout=5) as http:
             wait(lambda: http.get("/api/health").status_code == 200, 120, "server healthy")
             wait(

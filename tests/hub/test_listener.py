@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import socket
 
 import orjson
 import pytest
 import websockets
 from picows import WSFrame, WSListener, WSMsgType, WSTransport, ws_connect
+from websockets.client import ClientProtocol
 from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.frames import Frame, Opcode
+from websockets.uri import parse_uri
 
 from backend.testing import RunningServer, running_server
 
@@ -46,6 +50,50 @@ async def test_a_message_over_16_mib_closes_the_connection_with_1009(
         code, _ = await close_of(ws)
         assert code == 1009
     assert "R1" not in server.app.state.hub.clients
+
+
+async def test_a_client_still_sending_when_refused_reads_the_1009_and_is_never_reset(
+    server: RunningServer,
+) -> None:
+    """The server reads on (and drops) what follows a refused message until the client closes:
+    a socket closed with unread data answers with a TCP reset, and a client still writing then
+    loses the close frame that says why (seen as "no close frame received" on a loaded run)."""
+    loop = asyncio.get_running_loop()
+    client = ClientProtocol(parse_uri(server.hub_url), max_size=None)
+    request = client.connect()
+    request.headers["Authorization"] = f"Bearer {TOKENS['R1'].token}"
+    client.send_request(request)
+    with socket.create_connection((server.host, server.hub_port)) as sock:
+        sock.setblocking(False)
+
+        async def send_pending() -> None:
+            await loop.sock_sendall(sock, b"".join(client.data_to_send()))
+
+        async def received() -> list[Frame]:
+            """What the next read brings; a reset raises ConnectionResetError here."""
+            data = await asyncio.wait_for(loop.sock_recv(sock, 1 << 16), WAIT)
+            if data:
+                client.receive_data(data)
+            else:
+                client.receive_eof()
+            return [e for e in client.events_received() if isinstance(e, Frame)]
+
+        await send_pending()
+        while not any(frame.opcode is Opcode.TEXT for frame in await received()):
+            pass  # the handshake's answer, then the welcome
+        part = b" " * (4 * 1024 * 1024)
+        client.send_text(b"[", fin=False)
+        for _ in range(4):
+            client.send_continuation(part, fin=False)
+        client.send_continuation(b"]", fin=True)
+        await send_pending()  # 16 MiB and 2 bytes
+        await forgotten(server, "R1")  # refused: the hub let go of R1
+        client.send_text(b'{"type": "ping", "id": "too-late"}')
+        await send_pending()  # still sending after the refusal
+        while not client.reader.eof:  # the close frame, then the end of the stream
+            await received()
+        assert client.close_rcvd is not None
+        assert client.close_rcvd.code == 1009
 
 
 async def test_a_client_that_closes_is_forgotten(server: RunningServer) -> None:

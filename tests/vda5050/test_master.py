@@ -151,9 +151,12 @@ async def test_cancel_from_the_console_reaches_the_vehicle(
 ) -> None:
     async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
         await wait_until(lambda: f.robot("V1").online, 15)
-        sim.speed = 0.05  # slow: still on its way when the cancel comes
+        sim.speed = 0.05  # slow: still on its way when it is held
         task = await f.task("go_to", {"node": "b"})
         await wait_until(lambda: sim.driving, 10)
+        # Held on its way until the cancel comes, however long a loaded machine takes to send it
+        # (slow driving alone raced the cancel: the vehicle reached b 8 s after it set off).
+        sim.speed = 0.0
         answer = await f.http.post(f"/api/tasks/{task}/cancel", json={"reason": "test"})
         assert answer.status_code == 200, answer.text
         result = await until_done(f, task)

@@ -16,9 +16,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
+from urllib.parse import urlsplit
 
 import httpx
 import pytest
+import uvicorn
 import yaml
 
 from backend.settings import Settings, StaticToken
@@ -81,6 +83,10 @@ class PageWatch:
     def unexpected(self) -> list[str]:
         return [e for e in self.errors if not any(p.search(e) for p in self.expected)]
 
+    def expects_its_server_to_go(self) -> bool:
+        """The test declared the refused connections of a server going away (a restart)."""
+        return any(p.search("net::ERR_CONNECTION_REFUSED") for p in self.expected)
+
 
 class Pages:
     """The pages a test opened: ``await pages(url)`` opens one (a PageWatch, in its own
@@ -114,18 +120,45 @@ class Pages:
     async def close(self) -> None:
         """Close every page (before its server stops: a page whose server went away reports
         connection errors that are not the test's)."""
-        for watch in self.watches:
-            problems = watch.unexpected()
-            if problems:
-                self.problems += problems + [f"(HTTP {f})" for f in watch.failed]
-            await watch.page.context.close()
-        self.watches.clear()
+        for watch in list(self.watches):
+            await self._close(watch)
+
+    async def close_on(self, address: str) -> None:
+        """Close the pages showing the server at ``address`` (host:port), which is stopping,
+        except those that expect it to go."""
+        for watch in list(self.watches):
+            if watch.page.is_closed() or watch.expects_its_server_to_go():
+                continue
+            if urlsplit(watch.page.url).netloc == address:
+                await self._close(watch)
+
+    async def _close(self, watch: PageWatch) -> None:
+        problems = watch.unexpected()
+        if problems:
+            self.problems += problems + [f"(HTTP {f})" for f in watch.failed]
+        self.watches.remove(watch)
+        await watch.page.context.close()
 
 
 @pytest.fixture
-async def open_page(browser: Any) -> AsyncIterator[Pages]:
-    """``await open_page(url)`` -> PageWatch; any console error fails the test."""
+async def open_page(browser: Any, monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[Pages]:
+    """``await open_page(url)`` -> PageWatch; any console error fails the test.
+
+    A page closes before the server it shows stops, whichever uvicorn server of the test it is
+    (the server's, a robot's touch screen) and whenever it stops: left open, it would log
+    its reconnections to a server that is gone (ERR_CONNECTION_REFUSED). A page that expects
+    them (it watches its server restart) stays open."""
     pages = Pages(browser)
+    shutdown = uvicorn.Server.shutdown
+
+    async def pages_first(server: uvicorn.Server, sockets: Any = None) -> None:
+        for listener in server.servers:
+            for sock in listener.sockets:
+                host, port = sock.getsockname()[:2]
+                await pages.close_on(f"{host}:{port}")
+        await shutdown(server, sockets)
+
+    monkeypatch.setattr(uvicorn.Server, "shutdown", pages_first)
     yield pages
     await pages.close()
     assert not pages.problems, "JavaScript errors on the page:\n" + "\n".join(pages.problems)

@@ -65,16 +65,6 @@ def settings_for(tmp_path: Path) -> Settings:
 
 
 @contextlib.asynccontextmanager
-async def pages_closed_first(open_page: Any) -> AsyncIterator[None]:
-    """Close the test's pages before its server stops: a page left open would log its hub
-    reconnecting to a server that is gone (ERR_CONNECTION_REFUSED), as fleet_factory avoids."""
-    try:
-        yield
-    finally:
-        await open_page.close()
-
-
-@contextlib.asynccontextmanager
 async def robot(server: RunningServer, site_file: Path, scale: float) -> AsyncIterator[RobotAgent]:
     agent = light_robot(
         server.url,
@@ -126,7 +116,7 @@ async def test_the_panel_survives_a_server_restart_and_shows_the_true_state(
 async def test_kiosk_mode_goes_back_to_the_start_and_keeps_the_visitor_in(
     tmp_path: Path, open_page: Any, web: SimpleNamespace
 ) -> None:
-    async with running_server(settings_for(tmp_path)) as server, pages_closed_first(open_page):
+    async with running_server(settings_for(tmp_path)) as server:
         url = f"{server.url}/visitor/#token={PANEL}&kiosk=1&idle=4"
         page = (await open_page(url, viewport=(1280, 800))).page
         await page.get_by_role("button", name="Español").click()
@@ -152,7 +142,6 @@ async def test_a_refused_request_says_why_on_the_page(
     async with (
         running_server(settings) as server,
         robot(server, settings.site, scale=8.0),
-        pages_closed_first(open_page),
     ):
         watch = await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)
         page = watch.page
@@ -193,7 +182,7 @@ async def test_a_language_tap_wins_over_a_slower_reload_started_before_it(
 ) -> None:
     """A hub reconnect reloads the page's data in the language of that moment; a visitor who taps
     another language meanwhile must not be sent back when that older answer arrives last."""
-    async with running_server(settings_for(tmp_path)) as server, pages_closed_first(open_page):
+    async with running_server(settings_for(tmp_path)) as server:
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await expect(page.get_by_role("heading", name="Tours")).to_be_visible()
         # The page draws before its hub link is up.
@@ -224,7 +213,6 @@ async def test_a_visitor_asks_for_one_exhibit_and_a_robot_takes_them_there(
     async with (
         running_server(settings) as server,
         robot(server, settings.site, scale=8.0),
-        pages_closed_first(open_page),
     ):
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await expect(page.get_by_role("status").first).to_contain_text("A robot is free")
@@ -252,7 +240,6 @@ async def test_news_of_a_request_that_comes_before_its_answer_is_not_lost(
     async with (
         running_server(settings) as server,
         robot(server, settings.site, scale=0.5),
-        pages_closed_first(open_page),
     ):
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         frames: list[str] = []
@@ -285,7 +272,7 @@ async def test_a_refused_token_is_said_on_the_page_without_an_error(
     tmp_path: Path, open_page: Any, web: SimpleNamespace
 ) -> None:
     """A wrong or rotated panel token: the page says so instead of "Loading…" for ever."""
-    async with running_server(settings_for(tmp_path)) as server, pages_closed_first(open_page):
+    async with running_server(settings_for(tmp_path)) as server:
         watch = await open_page(f"{server.url}/visitor/#token=an-old-panel-token", viewport=PHONE)
         watch.expect_error(r"status of 401")
         page = watch.page
@@ -307,7 +294,6 @@ async def test_each_device_under_one_panel_token_sees_and_cancels_only_its_own(
     async with (
         running_server(settings) as server,
         robot(server, settings.site, scale=0.5),
-        pages_closed_first(open_page),
     ):
         async with httpx.AsyncClient(
             base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
@@ -383,7 +369,6 @@ async def test_a_kiosk_forgets_the_last_visitors_requests_when_it_goes_back_to_t
     async with (
         running_server(settings) as server,
         robot(server, settings.site, scale=0.5),
-        pages_closed_first(open_page),
     ):
         url = f"{server.url}/visitor/#token={PANEL}&kiosk=1&idle=3"
         page = (await open_page(url, viewport=(1280, 800))).page
@@ -412,7 +397,6 @@ async def test_a_visitor_in_line_sees_the_line_move(
     async with (
         running_server(settings) as server,
         robot(server, settings.site, scale=0.5),
-        pages_closed_first(open_page),
     ):
         manager = server.app.state.task_manager
         async with httpx.AsyncClient(
@@ -452,7 +436,6 @@ async def test_a_tour_cancelled_by_staff_is_said_to_its_visitor(
     async with (
         running_server(settings) as server,
         robot(server, settings.site, scale=0.5),
-        pages_closed_first(open_page),
     ):
         page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
         await (
