@@ -8,6 +8,7 @@ import asyncio
 import collections
 import contextlib
 import datetime as dt
+import itertools
 import json
 import random
 import re
@@ -49,6 +50,20 @@ async def test_reports_view_charts_csv_errors_and_print(
         await expect(page.get_by_role("table", name="Robots' time and distance")).to_contain_text(
             "R1"
         )
+        # The three "stopped following" tables sit side by side without overlapping (each
+        # table's "none" line used to take a grid cell of its own and push the next table
+        # over its neighbour's last column), and no tour ended yet: each says so.
+        boxes = []
+        for by in ("Tour", "Language", "Stop"):
+            block = page.locator(".report-table").filter(
+                has=page.get_by_role("table", name=f"Stopped following per {by}")
+            )
+            await expect(block).to_contain_text("No tour ended in this period.")
+            boxes.append(await block.bounding_box())
+        for left, right in itertools.pairwise(boxes):
+            assert left and right
+            side_by_side = abs(left["y"] - right["y"]) < 1
+            assert not side_by_side or left["x"] + left["width"] <= right["x"], boxes
         await web.axe_check(page)
 
         # A figure as CSV, with the operator's token (not a link anyone could open).

@@ -166,11 +166,12 @@ function robotsTable(ui, data) {
     ${rows.length ? "" : html`<p class="muted">No robot in this period.</p>`}</section>`;
 }
 
+/** A table and, when it has no row, why: one block (in .report-columns, one grid cell). */
 function table(label, head, rows, empty) {
-  return html`<table aria-label=${label}>
+  return html`<div class="report-table"><table aria-label=${label}>
       <thead><tr>${head.map((h) => html`<th scope="col">${h}</th>`)}</tr></thead>
       <tbody>${rows.map((cells) => html`<tr>${cells.map((c) => html`<td>${c}</td>`)}</tr>`)}</tbody>
-    </table>${rows.length ? "" : html`<p class="muted">${empty}</p>`}`;
+    </table>${rows.length ? "" : html`<p class="muted">${empty}</p>`}</div>`;
 }
 
 function parts(ui, data) {
@@ -178,8 +179,8 @@ function parts(ui, data) {
   const following = (kind, title) => table(
     `Stopped following per ${title}`,
     [title, "Tours", "Stopped", "Share"],
-    by(kind).map((row) => [row.name, row.tours, row.stopped, share(row.share)]),
-    "No tour ended in this period.",
+    by(kind).map((row) => [kind === "lang" && row.name === "default" ? "the site's default" : row.name, row.tours, row.stopped, share(row.share)]),
+    !data.following.tours ? "No tour ended in this period." : kind === "stop" ? "Nobody stopped following at any stop." : "—",
   );
   return html`
     <section class="report-part">
