@@ -33,7 +33,9 @@ async def test_the_fire_alarm_part_is_drawn_edited_checked_and_published(
         await expect(alarm.get_by_label("input", exact=True)).to_have_value("otb_ground/fire_alarm")
         await expect(alarm.get_by_label("zone", exact=True)).to_have_value("site")
         await expect(form.get_by_label("corridor")).to_be_checked()
-        await expect(page.locator("#alarm-zones")).to_contain_text("fire_main (whole site)")
+        await expect(page.locator("#alarm-zones")).to_have_text(
+            "Alarm inputs covering this floor (configuration, not a live alarm): fire_main (whole site)"
+        )
         # On the ground floor's plan: the corridor drawn as an escape route, its safe spots.
         await expect(page.locator("path.map-escape")).to_have_count(1)
         for spot in ("charge_b", "ga2"):

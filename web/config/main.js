@@ -376,7 +376,7 @@ async function start(me) {
             @change=${() => { ui.tool = t; ui.edgeFrom = null; draw(); }}> ${label}</label>`)}
         <label class="tool"><input type="checkbox" .checked=${ui.oneWay} @change=${(e) => { ui.oneWay = e.target.checked; }}> one-way</label>
       </fieldset>
-      ${zonesHere.length ? html`<span class="alarm-zone" id="alarm-zones">Fire alarm on this floor: ${zonesHere.map((a) => `${a.id} (${a.zone?.floors?.length ? "floor" : "whole site"})`).join(", ")}</span>` : nothing}
+      ${zonesHere.length ? html`<span class="alarm-zone" id="alarm-zones">Alarm inputs covering this floor (configuration, not a live alarm): ${zonesHere.map((a) => `${a.id} (${a.zone?.floors?.length ? "floor" : "whole site"})`).join(", ")}</span>` : nothing}
       ${ui.calibration ? html`<form class="calibrate" @submit=${applyCalibration} aria-label="Calibrate the plan">
         <span>Calibrate: click two points on the plan a known distance apart (${ui.calibration.points.length} of 2).</span>
         ${ui.calibration.points.length >= 2 ? html`
