@@ -11,8 +11,9 @@ of it lives here, apart from route following. For each path
   not report open (door_opened / door_closed follow the door's sensor); a door that fails to
   open stops it in front (state door_blocked, robot_fault kind door_blocked) and it asks again
   every ``door_retry_s`` until ``wait_timeout_s``;
-- elevators ahead are called (once the robot holds the lift's area: its turn); the robot waits for elevator_in_position on its floor, rides,
-  gets out; it never drives into a cabin that is not at its floor with the door open.
+- elevators ahead are called once the robot holds the lift's area (its turn); the robot
+  waits for elevator_in_position on its floor, rides, gets out; it never drives into a cabin
+  that is not at its floor with the door open.
 """
 
 from __future__ import annotations
