@@ -481,8 +481,7 @@ class TrafficManager(Service):
         A robot with no task stands still: out of an area is out. One on a task (``moving``)
         may be on the edge into an area next to it (whereabouts.py): that one goes only if
         the robot does not claim it (robot_state ``areas``: it asks before entering)."""
-        if robot in self._ending:
-            return
+        running_ended = robot in self._ending
         kept = self._kept.get(robot, set())
         near: set[str] | None = None
         grants: list[Grant] = []
@@ -490,7 +489,7 @@ class TrafficManager(Service):
             if area == here:
                 self.locks.mark_entered(robot, area)
                 continue
-            if not (self.locks.entered(area) or area in kept):
+            if running_ended or not (self.locks.entered(area) or area in kept):
                 continue
             if moving:
                 near = self._may_be_in(robot) if near is None else near
