@@ -147,6 +147,9 @@ class Settings(BaseSettings):
     oidc_redirect_uri: str | None = Field(default=None, pattern=r"^https?://\S+$")
     # Traffic Manager: release a lock whose holder went offline before entering its area.
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
+    # Trouble (docs/server.md, "Building modes and trouble"): how long a door that did not open
+    # or a lift that did not come stays closed unless seen working before.
+    trouble_hold_s: float = Field(default=120.0, gt=0)
     # After a restart: how long area requests wait for the robots that had tasks to resync.
     lock_resync_s: float = Field(default=10.0, ge=0, le=300)
     # Scale-out (docs/scaling.md): Redis between processes, leadership through PostgreSQL.

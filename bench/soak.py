@@ -42,6 +42,8 @@ __all__ = ["SoakOptions", "main", "run_soak"]
 T = TypeVar("T")
 ADMIN = "dev-admin-token"
 LOCK_GRACE_S = 30.0
+TROUBLE_HOLD_S = 120.0
+"""Robot seconds a failed door or lift stays closed (the server's default, docs/server.md)."""
 RESUME_WAIT_S = 180.0
 """Wall seconds the soak tries to resume service after a fire alarm is cleared."""
 
@@ -124,6 +126,10 @@ class Soak:
             env={
                 "GUIDEBOT_TOKENS": json.dumps(tokens),
                 "GUIDEBOT_LOCK_OFFLINE_GRACE_S": f"{LOCK_GRACE_S:g}",
+                # A failed door or lift is closed for 120 s of the robots' time, as in a real
+                # building: the server's clock is the wall's, the fleet's runs K times faster
+                # (unscaled, a 7 s jam closed a door for 20 robot minutes, issue 36).
+                "GUIDEBOT_TROUBLE_HOLD_S": f"{TROUBLE_HOLD_S / o.time_scale:g}",
                 # Two panels ask for the whole fleet's work: lift their per-panel limit.
                 "GUIDEBOT_TASK_REQUESTS_PER_MINUTE": "120",
                 "GUIDEBOT_TASK_REQUEST_BURST": "20",

@@ -11,8 +11,9 @@ of it lives here, apart from route following. For each path
   not report open (door_opened / door_closed follow the door's sensor); a door that fails to
   open stops it in front (state door_blocked, robot_fault kind door_blocked) and it asks again
   every ``door_retry_s`` until ``wait_timeout_s``;
-- elevators ahead are called; the robot waits for elevator_in_position on its floor, rides,
-  gets out; it never drives into a cabin that is not at its floor with the door open.
+- elevators ahead are called once the robot holds the lift's area (its turn); the robot
+  waits for elevator_in_position on its floor, rides, gets out; it never drives into a cabin
+  that is not at its floor with the door open.
 """
 
 from __future__ import annotations
@@ -288,7 +289,11 @@ class Passage:
                 and nxt.elevator == s.elevator
                 and nxt.floor != s.floor
                 and (s.elevator, s.floor) not in called
+                and not (s.area is not None and self.must_ask(s.area))
             ):
+                # Only the robot whose turn it is calls the cabin: one called by robots
+                # waiting for the lift's area came and went for nobody, and the robot whose
+                # turn came had its call spent (the soak: 70-90 s waits for a 20 s ride).
                 called.add((s.elevator, s.floor))
                 if self._elevators.get(s.elevator) != s.floor:
                     self.ep.publish(CallElevator(elevator=s.elevator, floor=s.floor))
@@ -400,8 +405,10 @@ class Passage:
         self.motion.state = NavState.MOVING
 
     async def wait_elevator(self, elevator: str, floor: str, called: Called) -> None:
-        """Stand still until ``elevator``'s cabin is at ``floor`` with its door open."""
-        if (elevator, floor) not in called and self._elevators.get(elevator) != floor:
+        """Stand still until ``elevator``'s cabin is at ``floor`` with its door open; called
+        now unless here (a call made ahead may have been served and the cabin gone since:
+        a second call costs nothing, a spent one a retry period)."""
+        if self._elevators.get(elevator) != floor:
             self.ep.publish(CallElevator(elevator=elevator, floor=floor))
         called.add((elevator, floor))
         if self._elevators.get(elevator) == floor:

@@ -24,6 +24,7 @@ async def closures(app: FastAPI) -> AsyncIterator[None]:
         lambda: app.state.sites.site,
         ClosureStore(store.sessionmaker),
         store,
+        trouble_hold_s=app.state.settings.trouble_hold_s,
     )
     await service.restore()
     traffic = app.state.traffic

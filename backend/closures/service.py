@@ -85,6 +85,7 @@ class ClosureService(Service):
         self.subscribe(self.endpoint, "command_failed", self._on_command_failed, tap=True)
         self.subscribe(self.endpoint, "door_opened", self._on_working, tap=True)
         self.subscribe(self.endpoint, "elevator_in_position", self._on_working, tap=True)
+        self.subscribe(self.endpoint, "building_module_health", self._on_module_health, tap=True)
         self.subscribe(self.endpoint, "robot_connected", self._on_robot_connected)
         self.spawn(self._tick(), name="closures-tick")
 
@@ -192,6 +193,23 @@ class ClosureService(Service):
         if trouble is not None:
             log.info("trouble over: %s works again", trouble.what())
             self._log("trouble_cleared", trouble, "building", why="seen working")
+            self.refresh(force=True)
+
+    def _on_module_health(self, message: Message) -> None:
+        """A module back online: the doors and lifts that failed only because it was offline
+        work again. Nobody would see them work (no robot asks a closed door to open), so
+        they stayed closed for the whole hold: a 7 s Modbus outage closed the lift and the
+        gallery door for 120 s in the fault soak (issue 36)."""
+        p = message.payload
+        if not p.get("online"):
+            return
+        offline = f"module {p.get('module')} is offline"
+        gone = [c for c in self.closures.values() if c.source == "trouble" and offline in c.reason]
+        for trouble in gone:
+            del self.closures[trouble.id]
+            log.info("trouble over: %s, its module is back online", trouble.what())
+            self._log("trouble_cleared", trouble, "building", why="its module is back online")
+        if gone:
             self.refresh(force=True)
 
     def _on_robot_connected(self, message: Message) -> None:

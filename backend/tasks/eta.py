@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
+from backend.tasks.cutoff import CutOff
 from backend.tasks.model import Task, TaskState
 from guidebot.pace import Pace, pace_of
 from guidebot.site.i18n import poi_texts
@@ -246,8 +247,10 @@ class EtaEstimator:
         self._mean_speed: tuple[int, float] | None = None
         """(number of robots, their mean speed): for tasks not yet on a robot."""
         self.closed: Callable[[], Mapping[str, object]] | None = None
-        """The nodes closed now (backend/closures): a queued tour's stops there are left out
-        of its estimates (it will skip them); set by the closures component."""
+        """The nodes closed now (backend/closures): a queued tour's stops there, or cut off
+        behind them (cutoff.py), are left out of its estimates (it will skip them); set by
+        the closures component."""
+        self._cut_off = CutOff()
 
     # --- hooks from the Task Manager -----------------------------------------------------------
     def changed(self, task: Task, event: str) -> None:
@@ -489,11 +492,12 @@ class EtaEstimator:
 
     def _points(self, task: Task) -> list[tuple[str, str | None]]:
         """(node, spoken text or None) of each place the task visits (a queued task: not
-        those closed now, which its tour will skip)."""
+        those closed now or cut off behind a closure, which its tour will skip)."""
         places = self._all_points(task)
         closed = self.closed() if self.closed is not None else None
         if closed and task.state is TaskState.QUEUED:
-            return [place for place in places if place[0] not in closed]
+            cut = self._cut_off.cut_off(self.tm.site, self.tm.graph, closed.keys())
+            return [place for place in places if place[0] not in closed and place[0] not in cut]
         return places
 
     def _all_points(self, task: Task) -> list[tuple[str, str | None]]:

@@ -19,6 +19,7 @@ from backend.closures.model import Closure
 from backend.closures.routing import RouteClosed, path_avoiding, step_free_path_of
 from backend.traffic.locks import AreaLocks, Cut, Grant, LockError, LockView, Yield
 from backend.traffic.restarts import BootIds, release_former_holds
+from backend.traffic.whereabouts import areas_near, claimed_areas
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
@@ -97,6 +98,14 @@ class TrafficManager(Service):
         them, and a goal only they lead to is refused with their reasons."""
         self.cycle_break_s = CYCLE_BREAK_S
         self._yields: dict[tuple[str, str], _YieldWatch] = {}
+        self._kept: dict[str, set[str]] = {}
+        """Areas kept at a task's end because the robot may be inside them (whereabouts.py):
+        released once the robot's own word shows it is not (``_on_robot_state``)."""
+        self._ending: dict[str, str] = {}
+        """robot -> a task the server ended (a cancel, a preemption) that the robot may still
+        be running: until it reports otherwise, it may drive on with every area it holds."""
+        self._reported_end: dict[str, str] = {}
+        """robot -> the last task whose end it reported itself (task_ended)."""
 
     # --- life cycle ----------------------------------------------------------------------
     async def on_start(self) -> None:
@@ -109,6 +118,7 @@ class TrafficManager(Service):
                 "robot_state": self._on_robot_state,
                 "task_ended": self._on_task_ended,
                 "task_event": self._on_task_event,
+                "node_reached": self._on_node_reached,
                 "robot_disconnected": self._on_robot_disconnected,
             },
         )
@@ -448,13 +458,49 @@ class TrafficManager(Service):
             return
         self._positions[robot] = node
         self._check_conflict(robot, here)
+        if self._ending.get(robot) not in (None, msg.payload.get("task_id")):
+            del self._ending[robot]  # it runs something else now: the ended task is over
+        moving = bool(msg.payload.get("task_id"))
+        self._release_left(robot, here, moving, claimed_areas(msg.payload.get("areas")))
+
+    def _on_node_reached(self, msg: Message) -> None:
+        """Each node the robot reaches (between its robot_state reports, a second apart): its
+        position, and an area it is now inside."""
+        robot, node = msg.payload.get("robot"), msg.payload.get("node")
+        if not isinstance(robot, str) or self._robot_of(msg, robot) is None:
+            return
+        if not isinstance(node, str) or node not in self.graph:
+            return
+        self._positions[robot] = node
+        if (here := self.graph.area_at.get(node)) is not None:
+            self.locks.mark_entered(robot, here)
+
+    def _release_left(
+        self, robot: str, here: str | None, moving: bool, claims: set[str] | None
+    ) -> None:
+        """A robot_state: the areas the robot has surely left go. Only an area it entered or
+        one kept at a task's end, and never while it may still run a task the server ended.
+        A robot with no task stands still: out of an area is out. One on a task (``moving``)
+        may be on the edge into an area next to it (whereabouts.py): that one goes only if
+        the robot does not claim it (robot_state ``areas``: it asks before entering)."""
+        running_ended = robot in self._ending
+        kept = self._kept.get(robot, set())
+        near: set[str] | None = None
         grants: list[Grant] = []
         for area in self.locks.held_by(robot):
             if area == here:
                 self.locks.mark_entered(robot, area)
-            elif self.locks.entered(area):
-                grants += self.locks.release(robot, area)
-                self._emit("area_released", {"robot": robot, "area": area, "left": True})
+                continue
+            if running_ended or not (self.locks.entered(area) or area in kept):
+                continue
+            if moving:
+                near = self._may_be_in(robot) if near is None else near
+                if area in near and (claims is None or area in claims):
+                    continue
+            kept.discard(area)
+            grants += self.locks.release(robot, area)
+            self.courier.withdraw((robot, area))
+            self._emit("area_released", {"robot": robot, "area": area, "left": True})
         self._send_grants(grants)
 
     def _on_task_ended(self, msg: Message) -> None:
@@ -462,12 +508,18 @@ class TrafficManager(Service):
             return  # a task it did not take: the one it runs keeps its areas
         robot = msg.payload.get("robot")
         if isinstance(robot, str) and self._robot_of(msg, robot) is not None:
+            self._reported_end[robot] = str(msg.payload.get("task_id"))
+            self._ending.pop(robot, None)
             self._task_over(robot)
 
     def _on_task_event(self, msg: Message) -> None:
-        robot = msg.payload.get("robot")
-        if msg.payload.get("state") in FINAL_TASK_STATES and isinstance(robot, str):
-            self._task_over(robot)
+        robot, task = msg.payload.get("robot"), str(msg.payload.get("task_id"))
+        if msg.payload.get("state") not in FINAL_TASK_STATES or not isinstance(robot, str):
+            return
+        if self._reported_end.get(robot) == task:
+            self._task_over(robot)  # the robot said so itself: it has stopped
+        else:
+            self._task_ending(robot, task)
 
     def _on_robot_disconnected(self, msg: Message) -> None:
         robot = msg.payload.get("robot") or msg.payload.get("name")
@@ -479,6 +531,8 @@ class TrafficManager(Service):
         """A new agent process under a known name (the old one is gone): its holds and queue
         place go at once, but for the area the robot reports being inside (restarts.py)."""
         done = release_former_holds(self.locks, robot, self.graph.area_at.get(node))
+        self._kept.pop(robot, None)  # the new process's word is its own (restarts.py)
+        self._ending.pop(robot, None)
         self._declared.discard(robot)  # its first word is a declaration, as after our restart
         why = f"{robot}'s agent restarted (the process that held it is gone) and reports {node}"
         for area in done.released + done.kept:
@@ -533,17 +587,38 @@ class TrafficManager(Service):
                 "area_conflict", robot, f"{robot} is no longer in an area another robot holds"
             )
 
+    def _may_be_in(self, robot: str) -> set[str]:
+        """The areas the robot may be inside: its last node's and its next node's."""
+        node = self._positions.get(robot)
+        return areas_near(self.graph, node, self._paths.get(robot))
+
     def _task_over(self, robot: str) -> None:
-        """Task over: its locks go, except the area it is standing in (released on leaving)."""
-        here = self.graph.area_at.get(self._positions.get(robot, ""))
+        """The robot ended its task (it has stopped): its locks go, but for the areas it may
+        be inside (its last node's, and its next node's: it may have stopped on the edge),
+        kept until its robot_state shows it out of them (``_release_left``)."""
+        keep = self._may_be_in(robot)
         held = self.locks.held_by(robot)
-        grants = self.locks.release_all(robot, keep={here} if here else None)
+        grants = self.locks.release_all(robot, keep=keep)
         self._paths.pop(robot, None)
+        kept = self._kept.setdefault(robot, set())
         for area in held:
-            if area != here:
+            if area in keep:
+                kept.add(area)
+            else:
+                kept.discard(area)
                 self.courier.withdraw((robot, area))
                 self._emit("area_released", {"robot": robot, "area": area, "task_ended": True})
         self._send_grants(grants)
+
+    def _task_ending(self, robot: str, task: str) -> None:
+        """The server ended a task (a cancel, a preemption, a robot lost) that the robot may
+        still be driving: until it stops (its task_ended) or shows it runs something else
+        (robot_state), it may drive on into any area it was granted, so every one is kept;
+        only its wait for more is dropped (the soak saw a robot drive on through a corridor
+        released at its preempted charge's end, granted meanwhile to another robot)."""
+        self._ending[robot] = task
+        self._kept.setdefault(robot, set()).update(self.locks.held_by(robot))
+        self._send_grants(self.locks.cancel_wait(robot))
 
     def _chain(self, robot: str, area: str) -> tuple[str, ...]:
         """The areas the robot's known path crosses back to back from ``area`` (prevention)."""
@@ -570,6 +645,7 @@ class TrafficManager(Service):
 
     def _send_grants(self, grants: list[Grant]) -> None:
         for g in grants:
+            self._kept.get(g.robot, set()).discard(g.area)  # its own again, for a new path
             granted = make_message(
                 AreaGranted(robot=g.robot, area=g.area),
                 source=self.endpoint.name,

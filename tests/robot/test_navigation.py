@@ -283,6 +283,24 @@ async def test_a_robot_waiting_at_the_lift_asks_again_for_the_lift_after_a_recon
         await traffic.stop()
 
 
+async def test_a_robot_waiting_its_turn_for_the_lift_calls_the_cabin_when_its_turn_comes(
+    rig: Rig,
+) -> None:
+    """Issue 36 (the soak without faults): robots waiting for the lift's area called its
+    cabin, which came and went for nobody, and the robot whose turn came had its call spent:
+    it waited for its retry (70-90 s for a 20 s ride), and tours were still queued for the
+    lift when the soak ended. Only the robot holding the lift calls it, as its turn comes."""
+    r2 = rig.bus.endpoint("R2")
+    r2.publish("request_area", {"robot": "R2", "area": "elevator"})
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gc1"})
+    await rig.seen.wait_for(lambda: rig.nav.state == "waiting_area" and rig.nav.node == "hall")
+    assert rig.building.calls == []
+    r2.publish("release_area", {"robot": "R2", "area": "elevator"})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert rig.nav.node == "gc1" and not rig.seen.of("navigation_failed")
+    assert rig.building.calls[0] == ("lift", "F0")
+
+
 async def test_a_goal_that_fails_at_an_areas_edge_gives_the_area_back(rig: Rig) -> None:
     """Granted the lift, waiting for its cabin, the robot's motor is lost and its goal fails.
     The next path must ask for the lift again: the server released it with the task (the

@@ -191,6 +191,36 @@ async def test_trouble_closes_a_door_or_a_lift_until_it_is_seen_working() -> Non
         await service.stop()
 
 
+async def test_a_door_and_a_lift_that_failed_only_for_their_modules_outage_reopen_with_it() -> None:
+    """Issue 36 (the fault soak): a 7 s outage of otb_ground closed the gallery door and the
+    lift for the whole trouble hold, as no robot asks a closed door to open and nobody saw
+    them work. Its module back online, they reopen; a jammed door does not."""
+    bus = Bus()
+    site = demo_site()
+    service = ClosureService(bus.endpoint("closures"), lambda: site, None, None)
+    await service.start()
+    gallery, upstairs = site.doors[0], site.doors[1]
+    lift = site.elevators[0]
+    outage = "module otb_ground is offline (cannot connect to 127.0.0.1:9)"
+    try:
+        building = bus.endpoint("building")
+        for command, target, reason in (
+            ("open_door", gallery.id, outage),
+            ("call_elevator", lift.id, outage),
+            ("open_door", upstairs.id, f"door {upstairs.id} not open within 7 s"),
+        ):
+            failed = {"command": command, "reason": reason, "target": target}
+            building.publish("command_failed", failed, destination="R1")
+        assert {gallery.node, upstairs.node, lift.stops[0].node} <= set(service.closed)
+        building.publish("building_module_health", {"module": "otb_first", "online": True})
+        building.publish("building_module_health", {"module": "otb_ground", "online": False})
+        assert {gallery.node, lift.stops[0].node} <= set(service.closed)
+        building.publish("building_module_health", {"module": "otb_ground", "online": True})
+        assert set(service.closed) == {upstairs.node}
+    finally:
+        await service.stop()
+
+
 async def test_a_robot_that_does_not_back_off_is_asked_again_then_another_backs_off() -> None:
     """A planted cycle: R2 is asked to yield east and never does (deaf or stuck). The guard
     asks it again, then has R1 back off from west instead, and R2 is granted west."""
