@@ -113,6 +113,7 @@ REST_ONLY = frozenset(
         "plan_path",
         "read_metrics",
         "read_reports",
+        "read_nets",
         "edit_nets",
         "read",
     }
