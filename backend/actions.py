@@ -39,11 +39,13 @@ RULES: dict[str, frozenset[Role]] = {
     # REST-only actions (their routes: docs/server.md, "REST API and roles")
     "administer": frozenset({Role.INSTALLER}),  # the site editor: site, drafts, versions, uploads
     "manage_accounts": frozenset(),  # people's accounts (backend/accounts)
-    "operate": _OPERATOR,  # the staff console: robots, locks, events, alerts, nets, building
+    "operate": _OPERATOR,  # the staff console's changes: tasks, robots, locks, alerts, building
+    "watch": _OPERATOR | {Role.VIEWER, Role.AUTHOR},  # its reads (authors: attach targets)
     "building_modes": _OPERATOR,  # close a gallery, nodes, a door or a lift (backend/closures)
     "follow_tasks": _REQUESTERS,  # tasks one may see and cancel (own only for panels, robots)
+    "read_tasks": _REQUESTERS | {Role.VIEWER},  # the same tasks, to read only
     "see_robot": _ROBOT_OR_OPERATOR,  # one robot's view (a robot: itself only)
-    "plan_path": _ROBOT_OR_OPERATOR,
+    "plan_path": _ROBOT_OR_OPERATOR | {Role.VIEWER},  # the console's map shows a robot's path
     "read_metrics": _OPERATOR,  # GET /metrics (or the metrics token)
     "read_reports": _OPERATOR | {Role.VIEWER},  # GET /api/reports (docs/reports.md)
     "read_nets": _OPERATOR | {Role.AUTHOR, Role.VIEWER},  # the net editor's reads (docs/nets.md)
@@ -103,12 +105,15 @@ REST_ONLY = frozenset(
         "administer",
         "manage_accounts",
         "operate",
+        "watch",
         "building_modes",
         "follow_tasks",
+        "read_tasks",
         "see_robot",
         "plan_path",
         "read_metrics",
         "read_reports",
+        "read_nets",
         "edit_nets",
         "read",
     }

@@ -21,15 +21,18 @@ __all__ = [
     "Admin",
     "Anyone",
     "NetKiller",
+    "NetReader",
     "PlanPath",
     "Requester",
     "SeeRobot",
     "Sites",
     "Staff",
     "Store",
+    "TaskReader",
     "TaskRequester",
     "Tasks",
     "Traffic",
+    "Watcher",
     "app_service",
     "error_response",
     "forbid",
@@ -46,6 +49,10 @@ __all__ = [
 Admin = Annotated[Principal, Depends(require_action("administer"))]
 Staff = Annotated[Principal, Depends(require_action("operate"))]
 """Operators (and admins): tasks, locks, robots, events."""
+Watcher = Annotated[Principal, Depends(require_action("watch"))]
+"""Who may read what the console shows (operators, viewers): its changes are ``Staff``'s."""
+TaskReader = Annotated[Principal, Depends(require_action("read_tasks"))]
+"""Who may read tasks (``Requester``'s own-only terms) without cancelling them: viewers too."""
 Requester = Annotated[Principal, Depends(require_action("follow_tasks"))]
 """Who may follow (and cancel) the tasks it requested: staff see them all."""
 TaskRequester = Annotated[Principal, Depends(require_action("task_request"))]
@@ -53,6 +60,8 @@ TaskRequester = Annotated[Principal, Depends(require_action("task_request"))]
 SeeRobot = Annotated[Principal, Depends(require_action("see_robot"))]
 PlanPath = Annotated[Principal, Depends(require_action("plan_path"))]
 NetKiller = Annotated[Principal, Depends(require_action("kill_petri_net"))]
+NetReader = Annotated[Principal, Depends(require_action("read_nets"))]
+"""Who may read the nets library and running nets: the console and the net editor's readers."""
 """Who may stop a running net: the same rule as the hub's ``kill_petri_net``."""
 Anyone = Annotated[Principal, Depends(require_action("read"))]
 """Any known token: reading tours and points of interest."""

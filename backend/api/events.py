@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Query
 
-from backend.api.deps import Staff, Store
+from backend.api.deps import Store, Watcher
 
 __all__ = ["router"]
 
@@ -15,7 +15,7 @@ router = APIRouter(prefix="/api/events", tags=["events"])
 
 @router.get("")
 async def list_events(
-    _: Staff,
+    _: Watcher,
     db: Store,
     after_id: Annotated[int, Query(ge=0, le=2**62)] = 0,
     before_id: Annotated[int | None, Query(ge=1, le=2**62)] = None,

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 
-from backend.api.deps import Staff, Traffic, forbid, not_found
+from backend.api.deps import Staff, Traffic, Watcher, forbid, not_found
 from backend.auth import Role
 
 __all__ = ["router"]
@@ -15,7 +15,7 @@ router = APIRouter(prefix="/api/locks", tags=["locks"])
 
 
 @router.get("")
-async def list_locks(_: Staff, traffic: Traffic) -> list[dict[str, Any]]:
+async def list_locks(_: Watcher, traffic: Traffic) -> list[dict[str, Any]]:
     """Every restricted area: free, held, holder_offline (kept: it may be inside) or yielding."""
     return [
         {

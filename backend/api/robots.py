@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 
-from backend.api.deps import SeeRobot, Staff, Tasks, Traffic, forbid, not_found
+from backend.api.deps import SeeRobot, Tasks, Traffic, Watcher, forbid, not_found
 from backend.auth import Role
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
@@ -30,7 +30,7 @@ def _view(
 
 @router.get("")
 async def list_robots(
-    request: Request, _: Staff, manager: Tasks, traffic: Traffic
+    request: Request, _: Watcher, manager: Tasks, traffic: Traffic
 ) -> list[dict[str, Any]]:
     """Every robot, with its last ``robocan_status`` (``robocan``, null if none came)."""
     return [_view(request, manager, traffic, name) for name in manager.robots]

@@ -17,14 +17,16 @@ from backend.api.deps import (
     Requester,
     Staff,
     Store,
+    TaskReader,
     TaskRequester,
     Tasks,
+    Watcher,
     forbid,
     not_found,
     rate_limited,
 )
 from backend.api.models import RequestBody
-from backend.api.visitor import Me, MeRequesting
+from backend.api.visitor import Me, MeReading, MeRequesting
 from backend.auth import Principal, Role
 from backend.db.store import DbStore
 from backend.ratelimit import RateLimited
@@ -191,8 +193,8 @@ async def create_task(
 
 @router.get("")
 async def list_tasks(
-    who: Requester,
-    me: Me,
+    who: TaskReader,
+    me: MeReading,
     manager: Tasks,
     db: Store,
     state: TaskState | None = None,
@@ -240,7 +242,7 @@ async def list_tasks(
 
 @router.get("/{task_id}")
 async def get_task(
-    who: Requester, me: Me, manager: Tasks, db: Store, task_id: TaskId
+    who: TaskReader, me: MeReading, manager: Tasks, db: Store, task_id: TaskId
 ) -> TaskStatus:
     """A task's state, its robot, its queue position and estimated wait."""
     return _status(manager, await _find(manager, db, who, task_id, me))
@@ -248,7 +250,7 @@ async def get_task(
 
 @router.get("/{task_id}/history")
 async def task_history(
-    who: Staff, manager: Tasks, db: Store, task_id: TaskId
+    who: Watcher, manager: Tasks, db: Store, task_id: TaskId
 ) -> list[dict[str, Any]]:
     await _find(manager, db, who, task_id)
     return await db.history(task_id)

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Header, Path, Query, Request
 from fastapi.responses import FileResponse
 
-from backend.api.deps import Anyone, Requester, Sites, TaskRequester, Tasks, not_found
+from backend.api.deps import Anyone, Requester, Sites, TaskReader, TaskRequester, Tasks, not_found
 from backend.auth import Principal, Role
 from guidebot.pace import PaceName
 from guidebot.site.access import step_free_skips
@@ -64,12 +64,18 @@ async def _me(who: Requester, device: Device = None) -> str:
     return _acting_as(who, device)
 
 
+async def _me_reading(who: TaskReader, device: Device = None) -> str:
+    return _acting_as(who, device)
+
+
 async def _me_requesting(who: TaskRequester, device: Device = None) -> str:
     return _acting_as(who, device)
 
 
 Me = Annotated[str, Depends(_me)]
 """The requester a call acts as (``me: Me``): its token's name, or a panel's device."""
+MeReading = Annotated[str, Depends(_me_reading)]
+"""The same for reading tasks (``read_tasks``): viewers read them, and may not cancel."""
 MeRequesting = Annotated[str, Depends(_me_requesting)]
 """The same for ``POST /api/tasks``, whose rule (``task_request``) lets modules in too."""
 

@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter, Request
 
-from backend.api.deps import Staff
+from backend.api.deps import Watcher
 
 __all__ = ["router"]
 
@@ -14,7 +14,7 @@ router = APIRouter(prefix="/api/building", tags=["building"])
 
 
 @router.get("")
-async def building_state(request: Request, _: Staff) -> dict[str, Any]:
+async def building_state(request: Request, _: Watcher) -> dict[str, Any]:
     """Each module's health (online, round-trip, errors, last error), every point's value and
     where each elevator car is.
 

@@ -1,4 +1,5 @@
-"""REST of the building modes: list, close, reopen (``building_modes``, backend/actions.py)."""
+"""REST of the building modes: list (``watch``), close, reopen (``building_modes``,
+backend/actions.py)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Request, status
 
 from backend.actions import require_action
+from backend.api.deps import Watcher
 from backend.auth import Principal
 from backend.closures.model import ClosureError, ClosureRequest
 from backend.closures.service import ClosureService
@@ -26,7 +28,7 @@ def _service(request: Request) -> ClosureService:
 
 
 @router.get("")
-async def list_closures(request: Request, _: Modes) -> dict[str, Any]:
+async def list_closures(request: Request, _: Watcher) -> dict[str, Any]:
     """Every closure (staff's, in force or planned, and trouble) and the nodes closed now."""
     return _service(request).view()
 

@@ -10,7 +10,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException, Path, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import Sites, Staff, Store, Tasks, not_found
+from backend.api.deps import Sites, Staff, Store, Tasks, Watcher, not_found
 from backend.console.feed import ConsoleFeed
 from backend.console.routes import Feed
 from backend.db.store import DbStore
@@ -52,7 +52,7 @@ def _fleet_view(request: Request, manager: TaskManager) -> dict[str, Any]:
 
 
 @router.get("/fleet")
-async def fleet_state(request: Request, _: Staff, manager: Tasks) -> dict[str, Any]:
+async def fleet_state(request: Request, _: Watcher, manager: Tasks) -> dict[str, Any]:
     """Whether the fleet is paused, since when, by whom and why."""
     return _fleet_view(request, manager)
 

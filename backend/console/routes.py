@@ -13,9 +13,11 @@ from pydantic import Field
 from backend.alerts import AlertNotFound, AlertStore
 from backend.api.deps import (
     NetKiller,
+    NetReader,
     Sites,
     Staff,
     Tasks,
+    Watcher,
     app_service,
     error_response,
     not_found,
@@ -70,7 +72,7 @@ Feed = Annotated[ConsoleFeed, Depends(_feed)]
 
 @router.get("/alerts")
 async def list_alerts(
-    _: Staff, alerts: Alerts, include_acked: bool = False
+    _: Watcher, alerts: Alerts, include_acked: bool = False
 ) -> list[dict[str, Any]]:
     """Open alerts (active, not acknowledged), last seen first (with ``include_acked``: every
     kept one, acknowledged and resolved ones too)."""
@@ -112,12 +114,12 @@ def _library(request: Request) -> Any:
 
 
 @router.get("/nets")
-async def list_nets(request: Request, _: Staff) -> list[str]:
+async def list_nets(request: Request, _: NetReader) -> list[str]:
     return list(_library(request).names())
 
 
 @router.get("/nets/{net}/structure")
-async def net_structure(request: Request, _: Staff, net: Name) -> dict[str, Any]:
+async def net_structure(request: Request, _: NetReader, net: Name) -> dict[str, Any]:
     """Places, transitions and arcs of a library net with positions: the PNML drawing where
     the file has one (``layout`` "pnml"), a layered one otherwise ("layered")."""
     try:
@@ -142,7 +144,7 @@ async def net_structure(request: Request, _: Staff, net: Name) -> dict[str, Any]
 
 @router.get("/nets/running")
 async def running_nets(
-    _: Staff, feed: Feed, target: Annotated[str, Query(min_length=1, max_length=64)]
+    _: NetReader, feed: Feed, target: Annotated[str, Query(min_length=1, max_length=64)]
 ) -> list[dict[str, Any]]:
     """The nets running on a robot (or on the server, target "rgm") with their marking."""
     return feed.running_nets(target)
@@ -167,7 +169,7 @@ async def kill_net(
 
 
 @router.get("/building/simulator")
-async def simulator_config(request: Request, _: Staff) -> dict[str, bool]:
+async def simulator_config(request: Request, _: Watcher) -> dict[str, bool]:
     """Whether a building simulator is configured (the console then offers its buttons)."""
     return {"configured": bool(request.app.state.settings.building_sim_url)}
 

@@ -15,11 +15,11 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/api/hub", tags=["hub"])
 
-Operator = Annotated[Principal, Depends(require_action("operate"))]
+Watcher = Annotated[Principal, Depends(require_action("watch"))]
 
 
 @router.get("/clients")
-async def list_clients(request: Request, _: Operator) -> dict[str, Any]:
+async def list_clients(request: Request, _: Watcher) -> dict[str, Any]:
     """Connected WebSocket clients and in-process endpoints, with queue statistics."""
     hub: Hub = request.app.state.hub
     remote = [client.stats() for client in hub.clients.values()]

@@ -25,7 +25,7 @@ import { reportsView } from "/admin/views/reports.js";
 import { robotsView } from "/admin/views/robots.js";
 import { tasksView } from "/admin/views/tasks.js";
 
-const STAFF_ROLES = new Set(["admin", "operator"]);
+const STAFF_ROLES = new Set(["admin", "operator", "viewer"]); // viewers watch: the rule `watch`
 const VIEWS = [
   ["map", "Map"],
   ["robots", "Robots"],
@@ -116,7 +116,7 @@ async function whoAmI() {
   try {
     const me = await api.get("/api/me");
     if (!STAFF_ROLES.has(me.role)) {
-      return new Error(`You are signed in as ${me.name} (role ${me.role}); the console is for operators and admins.`);
+      return new Error(`You are signed in as ${me.name} (role ${me.role}); the console is for operators, viewers and admins.`);
     }
     return me;
   } catch (err) {
@@ -169,6 +169,7 @@ async function start() {
     api,
     hub,
     admin: me.role === "admin",
+    operate: me.role !== "viewer", // a viewer sees every view and no button that changes anything
     view: sessionStorage.getItem("guidebot.view") ?? "map",
     selected: null,
     notice: null,
@@ -206,6 +207,7 @@ async function start() {
   render(
     html`<span id="server-status" role="status"></span>
       <span>${session?.display_name || me.name} <span class="badge">${me.role}</span></span>
+      ${ui.operate ? "" : html`<span id="read-only">Read only: a viewer watches, changes nothing.</span>`}
       <button type="button" @click=${() => leave(false)}>Sign out</button>
       ${session ? html`<button type="button" class="secondary" @click=${() => leave(true)}>Sign out everywhere</button>` : ""}
       ${session && passkeysAvailable()

@@ -4,6 +4,7 @@
 // step, resume and kill. Breakpoints are leased: the page renews them while attached and
 // clears them when it detaches or closes; a page that dies stops renewing and they go.
 import { html, nothing } from "lit-html";
+import { sessionHeaders } from "/lib/auth.js";
 import { HubClient } from "/lib/hub.js";
 
 const LEASE_S = 120; // in the dispatch's clock: a robot's runs faster in simulation
@@ -97,7 +98,8 @@ export class Attachment {
     if (!this.instance || !this.breakpoints.size || this.ended) return;
     this.breakpoints = new Set();
     const body = JSON.stringify(this.#body("break"));
-    const headers = { Authorization: `Bearer ${this.token}`, "Content-Type": "application/json" };
+    const auth = this.token ? { Authorization: `Bearer ${this.token}` } : sessionHeaders();
+    const headers = { ...auth, "Content-Type": "application/json" };
     if (leaving) fetch("/api/net-editor/debug", { method: "POST", body, headers, keepalive: true });
     else await this.api.post("/api/net-editor/debug", JSON.parse(body)).catch(() => {});
   }

@@ -2,7 +2,10 @@
 // it, checked by the engine's rules as you edit, export it as PNML, publish it to the fleet.
 // Who may publish (the server's edit_nets rule) edits; other staff read.
 import { html, nothing, render } from "lit-html";
-import { currentToken, forgetToken, saveToken } from "/lib/auth.js";
+import {
+  currentSession, currentToken, singleSignOn, forgetToken, saveToken, sessionHeaders, signInWithPasskey, signInWithPassword,
+} from "/lib/auth.js";
+import { signInForm } from "/lib/signin.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { NetCanvas } from "/nets/canvas.js";
 import { detailsForm } from "/nets/forms.js";
@@ -13,15 +16,15 @@ import { Run, defaultParams, parseReplies, simulationPanel } from "/nets/simulat
 
 const $ = (id) => document.getElementById(id);
 let token = currentToken();
-const api = new Api(() => token);
+const api = new Api(() => token, () => (token ? {} : sessionHeaders()));
 
-/** The token's name and role, and the editor's vocabulary (which says whether it may publish);
- * an Error when the token is unknown or not staff's. */
+/** The signed-in person's or token's name and role, and the editor's vocabulary (which says
+ * whether it may publish); an Error when unknown or not staff's (the read_nets rule). */
 async function whoAndWhat() {
   const me = await api.get("/api/me").catch((err) => err);
   if (me instanceof Error) return me;
   const vocabulary = await api.get("/api/net-editor/vocabulary").catch((err) => err);
-  if (vocabulary instanceof ApiError && vocabulary.status === 403) return new Error(`This token belongs to ${me.name} (role ${me.role}); the editor is for staff.`);
+  if (vocabulary instanceof ApiError && vocabulary.status === 403) return new Error(`You are signed in as ${me.name} (role ${me.role}); the net editor is for staff.`);
   if (vocabulary instanceof Error) return vocabulary;
   return { me, vocabulary };
 }
@@ -30,9 +33,8 @@ function showSignIn(message = "") {
   $("editor").hidden = true;
   const section = $("signin");
   section.hidden = false;
-  const submit = async (event) => {
-    event.preventDefault();
-    token = new FormData(event.target).get("token").trim();
+  const onToken = async (value) => {
+    token = value;
     const known = await whoAndWhat();
     if (known instanceof Error) {
       token = null;
@@ -41,15 +43,34 @@ function showSignIn(message = "") {
     saveToken(token);
     start(known);
   };
-  render(html`<h2>Sign in</h2><p>Those who may publish nets edit them; other staff read them.</p>
-    <form @submit=${submit}><label>Staff token <input name="token" type="password" autocomplete="current-password" required></label>
-    <button type="submit">Sign in</button></form>
-    ${message ? html`<p class="notice error" role="alert">${message}</p>` : ""}`, section);
+  const signedIn = async (how) => {
+    try {
+      await how();
+    } catch (err) {
+      return showSignIn(err.message);
+    }
+    token = null;
+    const known = await whoAndWhat();
+    if (known instanceof Error) return showSignIn(known.message);
+    start(known);
+  };
+  const onAccount = async (name, password) => {
+    if (!name || !password) return showSignIn("Enter your account name and password, or a staff token.");
+    await signedIn(() => signInWithPassword(name, password));
+  };
+  render(signInForm({
+    intro: "Those who may publish nets edit them; other staff read them.",
+    message,
+    onAccount,
+    onToken,
+    onPasskey: () => signedIn(signInWithPasskey),
+    sso: singleSignOn(),
+  }), section);
   section.querySelector("input").focus();
 }
 
 async function boot() {
-  if (!token) return showSignIn();
+  if (!token && !(await currentSession())) return showSignIn();
   const known = await whoAndWhat();
   if (known instanceof Error) {
     forgetToken();
@@ -63,7 +84,8 @@ async function boot() {
 async function sendFile(path, body) {
   let response;
   try {
-    response = await fetch(path, { method: "POST", body, headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/xml", Accept: "application/json" } });
+    const auth = token ? { Authorization: `Bearer ${token}` } : sessionHeaders();
+    response = await fetch(path, { method: "POST", body, headers: { ...auth, "Content-Type": "application/xml", Accept: "application/json" } });
   } catch {
     throw new ApiError(0, "The server cannot be reached: check the network.");
   }

@@ -31,8 +31,8 @@ export function alertBar(ui, open) {
   if (!open.length) return "";
   const latest = open[0];
   return html`<span>${open.length} open alert${open.length > 1 ? "s" : ""}: ${latest.message}${times(latest)}</span>
-    <button type="button" class="danger" @click=${() => ack(ui, latest)}>Acknowledge</button>
-    ${open.length > 1 ? html`<button type="button" class="danger" @click=${() => ackAll(ui)}>Acknowledge all</button>` : ""}
+    ${ui.operate ? html`<button type="button" class="danger" @click=${() => ack(ui, latest)}>Acknowledge</button>` : ""}
+    ${ui.operate && open.length > 1 ? html`<button type="button" class="danger" @click=${() => ackAll(ui)}>Acknowledge all</button>` : ""}
     <button type="button" class="secondary" @click=${() => ui.go("alerts")}>All alerts</button>`;
 }
 
@@ -41,7 +41,7 @@ export function alertsView(ui) {
   const open = all.filter((a) => rank(a) === 0).length;
   return html`<h2>Alerts</h2>
     <label><input type="checkbox" .checked=${ui.sound} @change=${(e) => { ui.sound = e.target.checked; }}> Sound on new alerts</label>
-    <button type="button" ?disabled=${!open} @click=${() => ackAll(ui)}>Acknowledge all${open ? ` (${open})` : ""}</button>
+    ${ui.operate ? html`<button type="button" ?disabled=${!open} @click=${() => ackAll(ui)}>Acknowledge all${open ? ` (${open})` : ""}</button>` : ""}
     <table>
       <thead><tr><th scope="col">Raised</th><th scope="col">Severity</th><th scope="col">What</th><th scope="col">State</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
       <tbody>
@@ -51,7 +51,7 @@ export function alertsView(ui) {
             <td><span class=${`badge ${a.severity === "error" ? "bad" : "warn"}`}>${a.severity}</span></td>
             <td>${a.message}${times(a)}</td>
             <td>${state(a)}</td>
-            <td>${rank(a) === 0 ? html`<button type="button" @click=${() => ack(ui, a)}>Acknowledge <span class="sr-only">${a.message}</span></button>` : ""}</td>
+            <td>${rank(a) === 0 && ui.operate ? html`<button type="button" @click=${() => ack(ui, a)}>Acknowledge <span class="sr-only">${a.message}</span></button>` : ""}</td>
           </tr>`,
         )}
       </tbody>

@@ -54,7 +54,7 @@ export function buildingView(ui) {
         return html`<tr><td>${e.id}</td><td>${e.stops.map((s) => s.floor).join(", ")}</td><td data-elevator=${e.id} data-floor=${car?.floor ?? ""} data-state=${car?.state ?? "unknown"}>${carText(car)}</td></tr>`;
       })}</tbody>
     </table>
-    ${ui.store.simulator
+    ${ui.store.simulator && ui.operate
       ? html`<h3>Building simulator</h3><div class="actions">${(site.buttons ?? []).map((b) => html`<button type="button" @click=${() => press(b.id)}>Press ${b.id}</button>`)}</div>`
       : ""}
     ${site.modules.map((m) => moduleSection(ui, m))}`;

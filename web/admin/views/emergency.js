@@ -57,7 +57,7 @@ async function resumeService(ui) {
 /** The header's button: the whole site, at once (the Building view offers a zone). */
 export function declareButton(ui) {
   const e = ui.store.emergency;
-  if (!e || e.state !== "normal") return "";
+  if (!e || e.state !== "normal" || !ui.operate) return "";
   return html`<button type="button" class="danger" @click=${() => declareEmergency(ui)}>Declare emergency</button>`;
 }
 
@@ -86,16 +86,16 @@ export function emergencyBanner(ui) {
     <p>Since ${clock(e.since)}, declared by ${whoText(e.declared_by)}${e.reason && !e.declared_by?.startsWith("input:") ? ` (${e.reason})` : ""}. No new task starts; queued tasks wait.</p>
     ${state}
     ${robotsLine(ui, e)}
-    <div class="actions">
+    ${ui.operate ? html`<div class="actions">
       <button type="button" @click=${() => resumeService(ui)}>Resume service</button>
-    </div>
+    </div>` : ""}
     ${ui.resumeRefusal?.state === e.state ? html`<p class="notice error" role="alert">Resume service refused: ${ui.resumeRefusal.text}</p>` : ""}`;
 }
 
 /** The simulator's alarm inputs (a demo or test installation): raise or clear each. */
 function simulatorAlarms(ui) {
   const alarms = ui.store.site.emergency?.alarms ?? [];
-  if (!ui.store.simulator || !alarms.length) return "";
+  if (!ui.store.simulator || !alarms.length || !ui.operate) return "";
   const set = (alarm, raised) =>
     ui.act(`${raised ? "Raise" : "Clear"} alarm input ${alarm.id}`, () => ui.api.post("/api/building/simulator/alarm", { alarm: alarm.id, raised }));
   return html`<h4>Building simulator</h4>
@@ -130,12 +130,12 @@ export function emergencySection(ui) {
     <p id="emergency-state" role="status">${!e ? "Not read yet."
       : e.state === "normal" ? html`<span class="badge ok">normal</span> No alarm holds the building.`
       : html`<span class="badge bad">${e.state === "alarm" ? "alarm" : "alarm input normal, not resumed"}</span> See the banner above.`}</p>
-    <div class="actions">
+    ${ui.operate ? html`<div class="actions">
       <label for="emergency-zone">Zone</label>
       <select id="emergency-zone">${choices.map(([k, label]) => html`<option value=${k}>${label}</option>`)}</select>
       <label>Reason <input id="emergency-reason" maxlength="300" placeholder="optional"></label>
       <button type="button" class="danger" @click=${declare}>Declare emergency for this zone</button>
-    </div>
+    </div>` : ""}
     ${simulatorAlarms(ui)}
   </section>`;
 }

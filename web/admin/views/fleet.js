@@ -37,13 +37,13 @@ function fleetControls(ui) {
     <p id="fleet-state" role="status">${fleet?.paused
       ? html`<span class="badge warn">paused</span> by ${fleet.by} at ${clock(fleet.since)}${fleet.reason ? ` (${fleet.reason})` : ""}: no robot starts a task; running tasks go on.`
       : html`<span class="badge ok">running</span> Robots take queued tasks as they become free.`}</p>
-    <div class="actions">
+    ${ui.operate ? html`<div class="actions">
       ${fleet?.paused
         ? html`<button type="button" @click=${resume}>Resume the fleet</button>`
         : html`<label>Reason <input id="pause-reason" maxlength="200" placeholder="optional"></label>
           <button type="button" class="danger" @click=${pause}>Pause the fleet</button>`}
       <button type="button" class="secondary" @click=${home}>Send every robot home</button>
-    </div>
+    </div>` : ""}
     ${ui.fleetNote ? html`<p class="muted">${ui.fleetNote}</p>` : ""}
   </section>`;
 }
@@ -65,15 +65,15 @@ function buildingControls(ui) {
     <table aria-label="Doors">
       <thead><tr><th scope="col">Door</th><th scope="col">Where</th><th scope="col">State</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
       <tbody>${(site.doors ?? []).map((d) => html`<tr data-door-row=${d.id}><td>${doorName(site, d.id)}</td><td>${floorName(site, site.nodes.find((n) => n.id === d.node)?.floor)}</td><td>${doorState(d.id)}</td>
-        <td class="actions"><button type="button" @click=${() => door(d.id, "open")}>Open ${doorName(site, d.id)}</button>
-          <button type="button" class="secondary" @click=${() => door(d.id, "close")}>Close ${doorName(site, d.id)}</button></td></tr>`)}</tbody>
+        <td class="actions">${ui.operate ? html`<button type="button" @click=${() => door(d.id, "open")}>Open ${doorName(site, d.id)}</button>
+          <button type="button" class="secondary" @click=${() => door(d.id, "close")}>Close ${doorName(site, d.id)}</button>` : ""}</td></tr>`)}</tbody>
     </table>
     <table aria-label="Elevators">
       <thead><tr><th scope="col">Elevator</th><th scope="col">Car</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
       <tbody>${(site.elevators ?? []).map((e) => html`<tr><td>${elevatorName(site, e.id)}</td><td>${car(e.id)}</td>
-        <td class="actions"><label for=${`call-${e.id}`} class="sr-only">Floor to call ${elevatorName(site, e.id)} to</label>
+        <td class="actions">${ui.operate ? html`<label for=${`call-${e.id}`} class="sr-only">Floor to call ${elevatorName(site, e.id)} to</label>
           <select id=${`call-${e.id}`}>${e.stops.map((s) => html`<option value=${s.floor}>${floorName(site, s.floor)}</option>`)}</select>
-          <button type="button" @click=${() => call(e)}>Call ${elevatorName(site, e.id)}</button></td></tr>`)}</tbody>
+          <button type="button" @click=${() => call(e)}>Call ${elevatorName(site, e.id)}</button>` : ""}</td></tr>`)}</tbody>
     </table>
   </section>`;
 }

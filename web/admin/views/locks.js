@@ -44,7 +44,7 @@ export function locksView(ui) {
             <td>${l.holder ?? "—"}</td>
             <td>${l.since ? duration(Date.now() / 1000 - l.since) : "—"}</td>
             <td>${l.waiting.length ? `${l.waiting.length}: ${l.waiting.join(", ")}` : "nobody"}</td>
-            <td>${l.holder && (ui.admin || l.state === "holder_offline")
+            <td>${ui.operate && l.holder && (ui.admin || l.state === "holder_offline")
               ? html`<button type="button" class="danger" @click=${() => confirmRelease(ui, l)}>Force release ${l.area}</button>`
               : ""}</td>
           </tr>`,

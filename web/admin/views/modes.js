@@ -125,9 +125,9 @@ export function modesView(ui) {
           <td>${when(c)}</td>
           <td>${c.source === "trouble" ? "trouble" : c.active ? "closed now" : "planned"}</td>
           <td>${c.by}</td>
-          <td><button type="button" class="secondary" @click=${() => reopen(c)}>Reopen ${c.what}</button></td>
+          <td>${ui.operate ? html`<button type="button" class="secondary" @click=${() => reopen(c)}>Reopen ${c.what}</button>` : ""}</td>
         </tr>`)}
       </tbody>
     </table>
-    ${closeForm(ui, modes)}`;
+    ${ui.operate ? closeForm(ui, modes) : ""}`;
 }

@@ -17,6 +17,7 @@ export function tourStep(ui, robot) {
 }
 
 function actions(ui, robot) {
+  if (!ui.operate) return "";
   const name = robot.name;
   const out = Boolean(robot.info?.out_of_service);
   const taskId = robot.state?.task_id ?? robot.info?.task_id;

@@ -50,6 +50,7 @@ function targets(ui, kind) {
 }
 
 function createForm(ui) {
+  if (!ui.operate) return "";
   const kind = ui.taskKind ?? "tour";
   const options = targets(ui, kind);
   return html`<form class="inline" @submit=${(e) => create(ui, e)} aria-label="New task">
@@ -70,6 +71,8 @@ function taskActions(ui, task) {
   const label = describe(ui, task);
   const reassignId = `reassign-${task.id}`;
   const priorityId = `priority-${task.id}`;
+  const history = html`<button type="button" class="secondary" @click=${() => showHistory(ui, task)}>History</button>`;
+  if (!ui.operate) return html`<div class="actions">${history}</div>`;
   return html`<div class="actions">
     <button type="button" class="danger" @click=${() => cancelTask(ui, task)}>Cancel <span class="sr-only">${label}</span></button>
     <label for=${priorityId} class="sr-only">Priority of ${label}</label>
@@ -79,7 +82,7 @@ function taskActions(ui, task) {
     <select id=${reassignId}><option value="">next free robot</option>
       ${[...ui.store.robots.keys()].sort().map((r) => html`<option value=${r}>${r}</option>`)}</select>
     <button type="button" class="secondary" @click=${() => ui.act(`Reassign ${label}`, () => ui.api.post(`/api/tasks/${id}/reassign`, { robot: document.getElementById(reassignId).value || null }))}>Reassign</button>
-    <button type="button" class="secondary" @click=${() => showHistory(ui, task)}>History</button>
+    ${history}
   </div>`;
 }
 
