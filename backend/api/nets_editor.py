@@ -32,7 +32,7 @@ from fastapi import (
 from pydantic import Field
 
 from backend.actions import allowed_roles
-from backend.api.deps import app_service, not_found, require_action
+from backend.api.deps import NetReader, app_service, not_found, require_action
 from backend.api.models import RequestBody
 from backend.auth import Principal
 from backend.console.feed import ConsoleFeed
@@ -70,8 +70,6 @@ MAX_VERSION = 2**31 - 1
 """A version number the database's integer column can hold (larger: 422, not a 500)."""
 
 Name = Annotated[str, Path(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.\-]+$")]
-NetReader = Annotated[Principal, Depends(require_action("read_nets"))]
-"""Who may open, check, analyse, simulate and export nets and read their versions."""
 NetAuthor = Annotated[Principal, Depends(require_action("edit_nets"))]
 """Who may publish nets to the fleet and restore old versions (docs/server.md)."""
 

@@ -34,7 +34,8 @@ async def test_the_fire_alarm_part_is_drawn_edited_checked_and_published(
         await expect(alarm.get_by_label("zone", exact=True)).to_have_value("site")
         await expect(form.get_by_label("corridor")).to_be_checked()
         await expect(page.locator("#alarm-zones")).to_have_text(
-            "Alarm inputs covering this floor (configuration, not a live alarm): fire_main (whole site)"
+            "Alarm inputs covering this floor (configuration, not a live alarm): "
+            "fire_main (whole site)"
         )
         # On the ground floor's plan: the corridor drawn as an escape route, its safe spots.
         await expect(page.locator("path.map-escape")).to_have_count(1)
