@@ -119,6 +119,13 @@ async def in_processes(fn: Callable[[A], T], args: Sequence[A], workers: int) ->
         futures = await asyncio.to_thread(submit)
         return list(await asyncio.gather(*(asyncio.wrap_future(f) for f in futures)))
     finally:
+        if getattr(pool, "_broken", False):
+            # A worker died. CPython 3.11 terminates the pool's workers then, but a worker
+            # started by a submit racing the breakage escapes it; it blocks sending its result
+            # back, the pool's feeder blocks sending it work, and shutdown waited for ever (a
+            # CI run hung 17 min in test_a_killed_worker_falls_back...). Kill them all first.
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.kill()
         # Waited for (in a thread): left to the executor's own thread, the workers' exit went on
         # after the call returned (0.4-0.5 s on an idle machine, 4-10 s on a loaded one, the
         # workers being niced), so a caller could not tell when its processes were gone.
