@@ -50,16 +50,17 @@ def espeak_voices(engine: str) -> frozenset[str]:
 
 
 def voice_for(lang: str, voices: frozenset[str]) -> str | None:
-    """The espeak-ng voice for ``lang``: itself, else its base language, else the first regional
-    voice of that language (espeak-ng has French only as ``fr-fr``), else None."""
+    """The espeak-ng voice for ``lang``: itself, else its base language when espeak-ng has it
+    or any regional voice of it (espeak-ng then takes the one it ranks first for the base:
+    British English for ``en``, where the first regional tag by name is Caribbean ``en-029``;
+    ``fr-fr`` for ``fr``), else None."""
     tag = lang.lower()
     if tag in voices:
         return tag
     base = tag.split("-")[0]
-    if base in voices:
+    if base in voices or any(v.startswith(f"{base}-") for v in voices):
         return base
-    regional = sorted(v for v in voices if v.startswith(f"{base}-"))
-    return regional[0] if regional else None
+    return None
 
 
 def simulated_duration(text: str) -> float:

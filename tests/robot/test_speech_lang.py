@@ -44,9 +44,13 @@ async def test_spanish_is_spoken_with_the_spanish_voice_and_unknown_languages_ar
     await speech.stop()
 
 
-def test_a_language_espeak_has_only_regionally_takes_its_first_regional_voice() -> None:
-    voices = frozenset({"fr-fr", "fr-be", "de"})
-    assert voice_for("fr", voices) == "fr-be"
+def test_a_language_espeak_has_only_regionally_is_asked_by_its_base_language() -> None:
+    """espeak-ng lists English only by region (en-029 first by name, Caribbean) and resolves
+    ``-v en`` to its own first choice (British): the base is asked for, never the first tag."""
+    voices = frozenset({"fr-fr", "fr-be", "de", "en-029", "en-gb", "en-us"})
+    assert voice_for("fr", voices) == "fr"
+    assert voice_for("en", voices) == "en"
+    assert voice_for("en-US", voices) == "en-us"
     assert voice_for("de-AT", voices) == "de"
     assert voice_for("it", voices) is None
 
