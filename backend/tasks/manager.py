@@ -47,7 +47,6 @@ from backend.tasks.reports import TaskReports
 from backend.tasks.requests import HubRequests
 from backend.tasks.robots import RobotInfo
 from backend.tasks.targets import net_params, target_node
-from backend.tasks.trouble import TroubleWaits
 from backend.tasks.watchdog import Watchdog
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
@@ -153,8 +152,6 @@ class TaskManager(Service):
         self.presence = Presence(self)
         self.battery = BatteryAlarms(self)
         self.watchdog = Watchdog(self)
-        self.trouble = TroubleWaits()
-        """Visitors' tasks cut off only by trouble, queued until it lifts (trouble.py)."""
         self.hold: TaskHold | None = None
         """The fire alarm's hold (backend.emergency): no task for the robots it holds, no
         new request while it lasts."""
@@ -453,10 +450,7 @@ class TaskManager(Service):
             return
         plan: list[tuple[Task, RobotInfo]] = []
         timed = self.assign_times_ms is not None
-        closed = self.estimator.closed() if self.estimator.closed is not None else {}
         for task in self.queue.head():
-            if self.trouble.held(task.id, closed):
-                continue  # its way is out of order for a while (trouble.py)
             t0 = time.perf_counter() if timed else 0.0
             try:
                 best = self._best_robot(task, free)
@@ -715,7 +709,6 @@ class TaskManager(Service):
         self.publish_event(task)
         if task.state in FINAL_STATES:
             self._avoid.pop(task.id, None)
-            self.trouble.forget(task.id)
             self.rather_not.pop(task.id, None)
             self._finished.append(task.id)
             if len(self._finished) > MAX_FINISHED_IN_MEMORY:
