@@ -161,9 +161,13 @@ async def test_cancel_from_the_console_reaches_the_vehicle(
         assert answer.status_code == 200, answer.text
         result = await until_done(f, task)
         assert result["state"] == "cancelled", result
-        await wait_until(lambda: bool(sim.instant_received), 10)
-        kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
-        assert "cancelOrder" in kinds
+
+        def kinds() -> list[str]:
+            return [a["actionType"] for m in sim.instant_received for a in m["actions"]]
+
+        # Other instant actions may come first (a stateRequest and a factsheetRequest when the
+        # vehicle's connection comes back, as it did on a loaded machine): wait for the cancel.
+        await wait_until(lambda: "cancelOrder" in kinds(), 10)
         all_valid(sim.instant_received, "instantActions")
         await wait_until(lambda: not sim.driving and not sim.order.nodes, 10)
 
@@ -300,9 +304,12 @@ async def test_a_low_battery_sends_the_vehicle_to_charge_until_it_is_full(
         assert charge.state == TaskState.RUNNING  # not over when charging starts
         sim.battery = 0.94  # nearly full: the rest at the simulated charger's pace
         await wait_until(lambda: charge.state in FINAL_STATES, 30)
-        assert charge.state == TaskState.DONE and sim.battery >= 0.95 and not sim.charging
+        assert charge.state == TaskState.DONE and sim.battery >= 0.95
+        # The task ends as stopCharging is sent; the vehicle acts on it a moment later.
+        await wait_until(lambda: not sim.charging, 10)
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
-        assert kinds[-2:] == ["startCharging", "stopCharging"], kinds
+        charging = [k for k in kinds if k in ("startCharging", "stopCharging")]
+        assert charging[-2:] == ["startCharging", "stopCharging"], kinds
 
 
 async def test_a_vehicle_process_killed_mid_order_loses_its_task_after_the_grace_period(
