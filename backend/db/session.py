@@ -57,8 +57,19 @@ def make_engine(url: str) -> AsyncEngine:
 
     JSON columns are written with orjson: SQLAlchemy serialises on the event loop, and the
     standard library takes about 50 ms for a 10 000-node site document, orjson about 5."""
+    connect_args: dict[str, object] = {}
+    if url.startswith("postgresql+asyncpg"):
+        # A server process frozen inside a transaction (SIGSTOP, a VM paused) keeps its row
+        # locks; the process that takes over the lead would wait on them for ever (the
+        # failover bench's pause mode: the new leader's start blocked on the old one's report
+        # rollup row). PostgreSQL ends such a session after 5 s idle in its transaction.
+        connect_args["server_settings"] = {"idle_in_transaction_session_timeout": "5000"}
     engine = create_async_engine(
-        url, pool_pre_ping=True, json_serializer=_json_text, json_deserializer=orjson.loads
+        url,
+        pool_pre_ping=True,
+        json_serializer=_json_text,
+        json_deserializer=orjson.loads,
+        connect_args=connect_args,
     )
     if engine.dialect.name == "sqlite":
 
