@@ -25,6 +25,7 @@ VIEWS = [
     ("Fleet", "fleet"),
     ("Locks", "locks"),
     ("Building", "building"),
+    ("Modes", "modes"),
     ("RoboGraph monitor", "monitor"),
     ("Alerts", "alerts"),
     ("Event log", "events"),

@@ -189,6 +189,9 @@ export class Monitor {
     this.structures = new Map(); // net -> structure (or a Promise while loading)
     this.drawings = new WeakMap(); // structure -> its drawing (labels placed once)
     this.views = new Map(); // instance_id -> the part of its drawing shown (zoom and pan)
+    // instance_id -> the pan under way: kept here, not in the drawing's closure, so a live
+    // redraw between pointer-down and pointer-move does not drop it.
+    this.drags = new Map();
     this.off = null;
     this.error = null;
   }
@@ -305,12 +308,12 @@ function drawNet(monitor, id, structure, inst) {
     const m = el.getScreenCTM();
     return m ? new DOMPoint(e.clientX, e.clientY).matrixTransform(m.inverse()) : { x: 0, y: 0 };
   };
-  let drag = null;
   const down = (e) => {
-    drag = { el: e.currentTarget, clientX: e.clientX, clientY: e.clientY, view: current() };
+    monitor.drags.set(id, { el: e.currentTarget, clientX: e.clientX, clientY: e.clientY, view: current() });
     e.currentTarget.setPointerCapture?.(e.pointerId);
   };
   const move = (e) => {
+    const drag = monitor.drags.get(id);
     if (!drag) return;
     // In the units of the view the drag began with: the view moves, the start point does not.
     const v = drag.view;
@@ -322,7 +325,7 @@ function drawNet(monitor, id, structure, inst) {
     set({ ...v, x: v.x - dx, y: v.y - dy }, drag.el);
   };
   const up = () => {
-    drag = null;
+    monitor.drags.delete(id);
   };
   const wheel = (e) => {
     if (!e.ctrlKey && !e.metaKey) return; // a plain wheel scrolls the page
