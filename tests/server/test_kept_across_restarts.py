@@ -4,6 +4,7 @@ robots out of service are kept, the event log is pruned after its retention (doc
 
 from __future__ import annotations
 
+import sqlite3
 import time
 from pathlib import Path
 
@@ -175,3 +176,29 @@ async def test_a_restored_task_its_robot_ended_unheard_is_not_given_out_again(
             assert task["id"] not in {m.payload["task_id"] for m in orders}
             history = [h["event"] for h in await srv.app.state.store.history(task["id"])]
             assert "requeued" not in history and history[-1] == "done"
+
+
+async def test_a_task_acknowledged_with_201_is_already_in_the_database(tmp_path: Path) -> None:
+    """A visitor told "201, you are number 3" must not lose the visit if the server is killed
+    right after: the task's row is written before the answer leaves, on one process as on
+    several (a SIGKILL would lose whatever was only in memory)."""
+    settings = server_settings(tmp_path)
+    staff = {"Authorization": f"Bearer {OPERATOR_TOKEN}"}
+    async with (
+        running_server(settings) as srv,
+        httpx.AsyncClient(base_url=srv.url, headers=staff) as http,
+    ):
+        for _ in range(5):
+            answer = await http.post(
+                "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "loom"}}
+            )
+            assert answer.status_code == 201
+            # Read the file itself, as the next process after a SIGKILL would.
+            database = sqlite3.connect(settings.db_url.split("///", 1)[1])
+            try:
+                rows = database.execute(
+                    "SELECT state FROM tasks WHERE id = ?", (answer.json()["id"],)
+                ).fetchall()
+            finally:
+                database.close()
+            assert rows == [("queued",)]
