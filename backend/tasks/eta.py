@@ -256,7 +256,10 @@ class EtaEstimator:
     def changed(self, task: Task, event: str) -> None:
         """A task changed: a request joining the queue is simulated into the schedule; any
         other change drops it (rebuilt when a wait is next asked)."""
-        if task.state is TaskState.ASSIGNED and task.robot is not None:
+        # A robot may start a task within its assignment (a VDA 5050 vehicle does), so the
+        # first change seen may already be "running": track it then.
+        started = task.state is TaskState.RUNNING and task.id not in self._running
+        if task.robot is not None and (task.state is TaskState.ASSIGNED or started):
             robot = self.tm.robots.get(task.robot)
             start = robot.node if robot is not None else None
             self._running[task.id] = self._track(task, start)

@@ -194,6 +194,22 @@ async def test_a_tour_stops_with_an_action_the_factsheet_offers(
             if m.payload["task_id"] == task
         ]
         assert progress == [(1, "arrived"), (1, "explained"), (2, "arrived"), (2, "explained")]
+        # From its start the tour says where it is, as a GuideBot robot's does: "on the way
+        # to stop 1 of 2" (the vehicle starts it within the assignment, before the server
+        # has recorded it as assigned).
+        started = next(
+            m.payload
+            for m in f.of("task_event")
+            if m.payload["task_id"] == task and m.payload["state"] == "running"
+        )
+        assert started["progress"] == {
+            "index": 0,
+            "total": 2,
+            "poi": None,
+            "name": None,
+            "stage": "assigned",
+            "skipped": [],
+        }
         # a horizon node comes again in each update, with its actions (same ids)
         stops = list(
             {
