@@ -30,9 +30,13 @@ async def test_the_elevator_car_shows_its_floor_and_follows_it_as_it_moves(
         page = watch.page
         await web.sign_in(watch, fleet.server.admin_token)
         await web.open_view(page, "Building")
+        # Floors by their names, as everywhere in the console.
+        await expect(page.get_by_role("table", name="Elevators")).to_contain_text(
+            "Ground floor, First floor"
+        )
         car = page.locator('[data-elevator="lift"]')
         if registers:  # the floor register says where the car stands from the start
-            await expect(car).to_have_text("at F0, door closed", timeout=20_000)
+            await expect(car).to_have_text("at Ground floor, door closed", timeout=20_000)
             async with fleet.http() as http:
                 (state,) = (await http.get("/api/building")).json()["elevators"]
             assert state == {
@@ -48,21 +52,21 @@ async def test_the_elevator_car_shows_its_floor_and_follows_it_as_it_moves(
         endpoint = fleet.server.app.state.hub.endpoint("test")
         endpoint.publish("call_elevator", {"elevator": "lift", "floor": "F1"})
         await expect(car).to_have_attribute("data-state", "moving", timeout=20_000)
-        await expect(car).to_contain_text("moving to F1")
-        await expect(car).to_have_text("at F1, door open", timeout=20_000)
-        await expect(car).to_have_text("at F1, door closed", timeout=20_000)
+        await expect(car).to_contain_text("moving to First floor")
+        await expect(car).to_have_text("at First floor, door open", timeout=20_000)
+        await expect(car).to_have_text("at First floor, door closed", timeout=20_000)
         assert building_floor(fleet) == "F1"
 
         endpoint.publish("call_elevator", {"elevator": "lift", "floor": "F0"})
-        await expect(car).to_have_text("moving to F0 (last at F1)", timeout=20_000)
-        await expect(car).to_have_text("at F0, door open", timeout=20_000)
+        await expect(car).to_have_text("moving to Ground floor (last at First floor)", timeout=20_000)
+        await expect(car).to_have_text("at Ground floor, door open", timeout=20_000)
         # The map's details say the same.
         await web.open_view(page, "Map")
         await page.evaluate(
             """() => guidebotConsole.map.dispatchEvent(
                 new CustomEvent("select", {detail: {kind: "elevator", id: "lift"}}))"""
         )
-        await expect(page.locator("#details")).to_contain_text("Car: at F0")
+        await expect(page.locator("#details")).to_contain_text("Car: at Ground floor")
         await web.open_view(page, "Building")
         await web.axe_check(page)
 

@@ -2,17 +2,20 @@
 // each car is, from the server's elevator_state); the building simulator's buttons when one is
 // configured; the fire alarm's section (views/emergency.js).
 import { html } from "lit-html";
+import { floorName } from "/admin/names.js";
 import { emergencySection } from "/admin/views/emergency.js";
 
 const BITS = new Set(["discrete_input", "coil"]);
 
-/** Where a car is (elevator_state): its floor and door, or where it is called to. */
-export function carText(car) {
+/** Where a car is (elevator_state): its floor and door, or where it is called to; floors by
+ * the names the rest of the console uses ("Ground floor", not "F0"). */
+export function carText(car, site) {
   if (!car || car.state === "unknown") return "not seen at a floor yet";
+  const named = (floors) => floors.map((f) => floorName(site, f)).join(", ");
   const to = car.calls.filter((f) => f !== car.floor);
-  if (car.state === "moving") return `moving to ${to.join(", ")}${car.floor ? ` (last at ${car.floor})` : ""}`;
-  const called = car.calls.length ? `, called to ${car.calls.join(", ")}` : "";
-  return `at ${car.floor}, door ${car.door_open ? "open" : "closed"}${called}`;
+  if (car.state === "moving") return `moving to ${named(to)}${car.floor ? ` (last at ${floorName(site, car.floor)})` : ""}`;
+  const called = car.calls.length ? `, called to ${named(car.calls)}` : "";
+  return `at ${floorName(site, car.floor)}, door ${car.door_open ? "open" : "closed"}${called}`;
 }
 
 function moduleSection(ui, module) {
@@ -40,10 +43,10 @@ export function buildingView(ui) {
     ${emergencySection(ui)}
     <h3>Doors</h3>
     <table aria-label="Doors">
-      <thead><tr><th scope="col">Door</th><th scope="col">Node</th><th scope="col">State</th></tr></thead>
+      <thead><tr><th scope="col">Door</th><th scope="col">Node</th><th scope="col">Floor</th><th scope="col">State</th></tr></thead>
       <tbody>${site.doors.map((d) => {
         const open = ui.store.doors.get(d.id);
-        return html`<tr><td>${d.id}</td><td>${d.node}</td><td data-door=${d.id}>${open === undefined ? "unknown" : open ? "open" : "closed"}</td></tr>`;
+        return html`<tr><td>${d.id}</td><td>${d.node}</td><td>${floorName(site, site.nodes.find((n) => n.id === d.node)?.floor)}</td><td data-door=${d.id}>${open === undefined ? "unknown" : open ? "open" : "closed"}</td></tr>`;
       })}</tbody>
     </table>
     <h3>Elevators</h3>
@@ -51,7 +54,7 @@ export function buildingView(ui) {
       <thead><tr><th scope="col">Elevator</th><th scope="col">Stops</th><th scope="col">Car</th></tr></thead>
       <tbody>${site.elevators.map((e) => {
         const car = ui.store.lifts.get(e.id);
-        return html`<tr><td>${e.id}</td><td>${e.stops.map((s) => s.floor).join(", ")}</td><td data-elevator=${e.id} data-floor=${car?.floor ?? ""} data-state=${car?.state ?? "unknown"}>${carText(car)}</td></tr>`;
+        return html`<tr><td>${e.id}</td><td>${e.stops.map((s) => floorName(site, s.floor)).join(", ")}</td><td data-elevator=${e.id} data-floor=${car?.floor ?? ""} data-state=${car?.state ?? "unknown"}>${carText(car, site)}</td></tr>`;
       })}</tbody>
     </table>
     ${ui.store.simulator && ui.operate

@@ -54,7 +54,7 @@ function plainDetails(ui, kind, id) {
     ${item?.node ? html`<p>At ${placeName(site, item.node)} (node ${item.node})</p>` : ""}
     ${kind === "node" ? html`<p>${floorName(site, item.floor)}, x ${item.x} m, y ${item.y} m${item.passing_place ? ", passing place" : ""}</p>` : ""}
     ${kind === "door" ? html`<p>State: ${ui.store.doors.has(id) ? (ui.store.doors.get(id) ? "open" : "closed") : "unknown"}</p>` : ""}
-    ${kind === "elevator" ? html`<p>Car: ${carText(ui.store.lifts.get(id))}</p>` : ""}
+    ${kind === "elevator" ? html`<p>Car: ${carText(ui.store.lifts.get(id), ui.store.site)}</p>` : ""}
     ${kind === "button" && item?.task ? html`<p>Requests: ${item.task.kind} ${Object.values(item.task.params ?? {}).join(" ")}</p>` : ""}
     ${lock
       ? html`<dl><dt>State</dt><dd class=${`state-${lock.state}`}>${lock.state.replace("_", " ")}</dd>
