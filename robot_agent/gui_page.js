@@ -255,7 +255,7 @@ function draw() {
     ${s.task?.step_free ? html`<p class="pace">${t("state_step_free")}</p>` : ""}
     ${s.task?.handover ? html`<p class="notice" role="status">${t("handover", { robot: s.robot, i: s.task.handover.stop })}</p>` : ""}
     ${questionView(s.question)}
-    <section aria-labelledby="now-title"><h2 id="now-title">${t("touch_now")}</h2>${nowView(s)}</section>
+    <section aria-labelledby="now-title"><h2 id="now-title">${t(s.going && s.explanation ? "touch_just_seen" : "touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}
     ${s.task ? "" : html`<section aria-labelledby="tours-title"><h2 id="tours-title">${t("tours")}</h2>
       <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} lang=${tour.fallback?.name ?? nothing} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>

@@ -4,6 +4,7 @@ back (an agent restart): it says so, raises no error, and reads the screen again
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -135,6 +136,39 @@ async def test_on_the_way_to_the_first_stop_the_screen_says_which_tour_starts(
             )
             await expect(now).not_to_contain_text("Touch a tour")
             await expect(page.get_by_role("region", name="Tours")).to_have_count(0)
+        finally:
+            await open_page.close()
+            await server.stop()
+
+
+async def test_on_the_way_to_the_next_stop_the_last_one_is_not_called_now(
+    open_page: Any, web: SimpleNamespace
+) -> None:
+    """Walking to stop 2, the screen kept stop 1 under "Now" beside "Going to the next stop…"
+    (seen on the busy demo): the stop the group just left is "Just seen" until the next one."""
+    bus = Bus()
+    onboard = _screen(bus)
+    task = bus.endpoint("task")
+    async with onboard:
+        server = ScreenServer(onboard, port=0)
+        await server.start()
+        try:
+            page = (await open_page(server.url, viewport=(1024, 600))).page
+            task.publish(
+                "task_assigned",
+                {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
+            )
+            point = {"index": 1, "total": 5, "name": "Welcome hall"}
+            task.publish("show_point", {"poi": "welcome", "point": point, "text": "Welcome."})
+            now = page.get_by_role("region", name="Now")
+            await expect(now).to_contain_text("Stop 1 of 5: Welcome hall")
+            task.publish("navigate_to", {"node": "ga1"})
+            just_seen = page.get_by_role("region", name="Just seen")
+            await expect(just_seen).to_contain_text("Stop 1 of 5: Welcome hall")
+            await expect(page.get_by_role("status")).to_contain_text("Going to the next stop")
+            task.publish("goal_reached", {"node": "ga1"})
+            await expect(now).to_contain_text("Stop 1 of 5: Welcome hall")
+            await web.axe_check(page)
         finally:
             await open_page.close()
             await server.stop()
