@@ -151,6 +151,12 @@ async def test_a_busy_days_summary_prints_on_one_page(
         await expect(headline).to_contain_text(str(tours))
         robots = page.get_by_role("table", name="Robots' time and distance")
         await expect(robots.locator("tbody tr")).to_have_count(18)  # the walkers: distance only
+        # Rows by the names staff know: the tour's name, the language's name.
+        per_tour = page.get_by_role("table", name="Stopped following per Tour")
+        await expect(per_tour).to_contain_text("Highlights")
+        await expect(per_tour).not_to_contain_text("highlights")
+        per_language = page.get_by_role("table", name="Stopped following per Language")
+        await expect(per_language).to_contain_text("Spanish")
         stops = page.get_by_role("table", name="Stops most listened to")
         await expect(stops.locator("tbody tr")).to_have_count(10)
         await expect(page.locator("#chart-tours canvas")).to_have_count(1)

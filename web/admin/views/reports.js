@@ -3,7 +3,7 @@
 // one-page daily summary for the printer (web/admin/reports.css, @media print).
 import { html, render, svg } from "lit-html";
 import uPlot from "uplot";
-import { doorName, floorName, placeName } from "/admin/names.js";
+import { doorName, floorName, placeName, tourName } from "/admin/names.js";
 import { FloorMap } from "/lib/map.js";
 
 const STATES = [
@@ -179,7 +179,7 @@ function parts(ui, data) {
   const following = (kind, title) => table(
     `Stopped following per ${title}`,
     [title, "Tours", "Stopped", "Share"],
-    by(kind).map((row) => [kind === "lang" && row.name === "default" ? "the site's default" : row.name, row.tours, row.stopped, share(row.share)]),
+    by(kind).map((row) => [followingLabel(ui, kind, row.name), row.tours, row.stopped, share(row.share)]),
     !data.following.tours ? "No tour ended in this period." : kind === "stop" ? "Nobody stopped following at any stop." : "—",
   );
   return html`
@@ -499,6 +499,24 @@ function replayPart(ui, r) {
     <div id="replay-stage"></div>
     ${r.player ? html`<div id="replay-map" class="replay-map" role="region" aria-label="The replay on the floor map"></div>` : ""}
   </section>`;
+}
+
+const LANGUAGES = new Intl.DisplayNames(["en"], { type: "language" });
+
+/** A "stopped following" row as staff name it: the tour's and the stop's names, the language's
+ * name ("Spanish"; "English (the site's default)" for a visitor who chose none). */
+function followingLabel(ui, kind, name) {
+  const site = ui.store.site;
+  if (kind === "tour") return site ? tourName(site, name) : name;
+  if (kind === "stop") return poiLabel(ui, name);
+  const tag = name === "default" ? site?.default_language : name;
+  let language = tag ?? "";
+  try {
+    language = tag ? LANGUAGES.of(tag) ?? tag : "";
+  } catch {
+    // not a language tag Intl knows: its own name
+  }
+  return name === "default" ? `${language ? `${language} ` : ""}(the site's default)`.trim() : language;
 }
 
 function poiLabel(ui, id) {
