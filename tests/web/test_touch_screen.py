@@ -3,6 +3,8 @@ back (an agent restart): it says so, raises no error, and reads the screen again
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import AsyncIterator
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -10,7 +12,7 @@ from typing import Any
 import pytest
 from playwright.async_api import expect
 
-from guidebot.bus import Bus
+from guidebot.bus import Bus, Endpoint
 from guidebot.site.yamlio import load_site_file
 from robot_agent.clock import Clock
 from robot_agent.gui import OnboardScreen, ScreenServer
@@ -30,6 +32,23 @@ def _screen(bus: Bus | None = None) -> OnboardScreen:
         site_file=SITE,
         link_up=lambda: True,
     )
+
+
+@contextlib.asynccontextmanager
+async def touch_screen(open_page: Any) -> AsyncIterator[tuple[Any, Endpoint]]:
+    """R1's touch screen in a 1024 x 600 browser page, and an endpoint that speaks to it as
+    the robot's tasks do."""
+    bus = Bus()
+    onboard = _screen(bus)
+    async with onboard:
+        server = ScreenServer(onboard, port=0)
+        await server.start()
+        try:
+            page = (await open_page(server.url, viewport=(1024, 600))).page
+            yield page, bus.endpoint("task")
+        finally:
+            await open_page.close()
+            await server.stop()
 
 
 async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -> None:
@@ -88,27 +107,17 @@ async def test_the_touch_screen_names_a_single_point_by_its_name_in_the_visitors
 ) -> None:
     """A go_to_poi's show_point carries only the point's id and text: the screen names it
     from the site in the task's language (with its picture), never by its id."""
-    bus = Bus()
-    onboard = _screen(bus)
-    task = bus.endpoint("task")
-    async with onboard:
-        server = ScreenServer(onboard, port=0)
-        await server.start()
-        try:
-            page = (await open_page(server.url, viewport=(1024, 600))).page
-            await expect(page.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
-            task.publish(
-                "task_assigned",
-                {"task_id": "t1", "net": "go_to_poi", "params": {"poi": "sword", "lang": "es"}},
-            )
-            task.publish("show_point", {"poi": "sword", "text": "Esta espada tiene tres mil años."})
-            now = page.get_by_role("region", name="Ahora")
-            name = "Espada de la Edad del Bronce"
-            await expect(now.get_by_role("heading", level=3)).to_have_text(name)
-            await expect(now.get_by_role("img", name=name)).to_be_visible()
-        finally:
-            await open_page.close()
-            await server.stop()
+    async with touch_screen(open_page) as (page, task):
+        await expect(page.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
+        task.publish(
+            "task_assigned",
+            {"task_id": "t1", "net": "go_to_poi", "params": {"poi": "sword", "lang": "es"}},
+        )
+        task.publish("show_point", {"poi": "sword", "text": "Esta espada tiene tres mil años."})
+        now = page.get_by_role("region", name="Ahora")
+        name = "Espada de la Edad del Bronce"
+        await expect(now.get_by_role("heading", level=3)).to_have_text(name)
+        await expect(now.get_by_role("img", name=name)).to_be_visible()
 
 
 async def test_on_the_way_to_the_first_stop_the_screen_says_which_tour_starts(
@@ -117,28 +126,18 @@ async def test_on_the_way_to_the_first_stop_the_screen_says_which_tour_starts(
     """Between the tour's assignment and its first stop the screen said "Guiding a tour" over
     "Touch a tour or a point to start." (seen on the busy demo): it now names the tour that
     is starting, in the tour's language, and offers no menu."""
-    bus = Bus()
-    onboard = _screen(bus)
-    task = bus.endpoint("task")
-    async with onboard:
-        server = ScreenServer(onboard, port=0)
-        await server.start()
-        try:
-            page = (await open_page(server.url, viewport=(1024, 600))).page
-            now = page.get_by_role("region", name="Now")
-            await expect(now).to_contain_text("Touch a tour or a point to start.")
-            task.publish(
-                "task_assigned",
-                {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
-            )
-            await expect(now).to_contain_text(
-                "Ground floor tour is starting: come with me to the first stop."
-            )
-            await expect(now).not_to_contain_text("Touch a tour")
-            await expect(page.get_by_role("region", name="Tours")).to_have_count(0)
-        finally:
-            await open_page.close()
-            await server.stop()
+    async with touch_screen(open_page) as (page, task):
+        now = page.get_by_role("region", name="Now")
+        await expect(now).to_contain_text("Touch a tour or a point to start.")
+        task.publish(
+            "task_assigned",
+            {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
+        )
+        await expect(now).to_contain_text(
+            "Ground floor tour is starting: come with me to the first stop."
+        )
+        await expect(now).not_to_contain_text("Touch a tour")
+        await expect(page.get_by_role("region", name="Tours")).to_have_count(0)
 
 
 async def test_on_the_way_to_the_next_stop_the_last_one_is_not_called_now(
@@ -146,29 +145,19 @@ async def test_on_the_way_to_the_next_stop_the_last_one_is_not_called_now(
 ) -> None:
     """Walking to stop 2, the screen kept stop 1 under "Now" beside "Going to the next stop…"
     (seen on the busy demo): the stop the group just left is "Just seen" until the next one."""
-    bus = Bus()
-    onboard = _screen(bus)
-    task = bus.endpoint("task")
-    async with onboard:
-        server = ScreenServer(onboard, port=0)
-        await server.start()
-        try:
-            page = (await open_page(server.url, viewport=(1024, 600))).page
-            task.publish(
-                "task_assigned",
-                {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
-            )
-            point = {"index": 1, "total": 5, "name": "Welcome hall"}
-            task.publish("show_point", {"poi": "welcome", "point": point, "text": "Welcome."})
-            now = page.get_by_role("region", name="Now")
-            await expect(now).to_contain_text("Stop 1 of 5: Welcome hall")
-            task.publish("navigate_to", {"node": "ga1"})
-            just_seen = page.get_by_role("region", name="Just seen")
-            await expect(just_seen).to_contain_text("Stop 1 of 5: Welcome hall")
-            await expect(page.get_by_role("status")).to_contain_text("Going to the next stop")
-            task.publish("goal_reached", {"node": "ga1"})
-            await expect(now).to_contain_text("Stop 1 of 5: Welcome hall")
-            await web.axe_check(page)
-        finally:
-            await open_page.close()
-            await server.stop()
+    async with touch_screen(open_page) as (page, task):
+        task.publish(
+            "task_assigned",
+            {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
+        )
+        point = {"index": 1, "total": 5, "name": "Welcome hall"}
+        task.publish("show_point", {"poi": "welcome", "point": point, "text": "Welcome."})
+        now = page.get_by_role("region", name="Now")
+        await expect(now).to_contain_text("Stop 1 of 5: Welcome hall")
+        task.publish("navigate_to", {"node": "ga1"})
+        just_seen = page.get_by_role("region", name="Just seen")
+        await expect(just_seen).to_contain_text("Stop 1 of 5: Welcome hall")
+        await expect(page.get_by_role("status")).to_contain_text("Going to the next stop")
+        task.publish("goal_reached", {"node": "ga1"})
+        await expect(now).to_contain_text("Stop 1 of 5: Welcome hall")
+        await web.axe_check(page)
