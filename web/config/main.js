@@ -13,6 +13,7 @@ import { EditMap } from "/config/editmap.js";
 import { KINDS, elementForm, newElement, round } from "/config/forms.js";
 import { DraftModel } from "/config/model.js";
 import { emergencyForm, toggleSafeSpot } from "/config/emergency.js";
+import { mountTranslations } from "/config/translations.js";
 
 const $ = (id) => document.getElementById(id);
 let token = currentToken();
@@ -416,6 +417,7 @@ async function start(me) {
   ui.floor = model.doc.floors[0].id;
   await loadVersions();
   draw();
+  mountTranslations({ model, api, sendFile, root: $("translations"), nav: $("views"), columns: $("columns") });
 }
 
 function rolloutText(r) {
