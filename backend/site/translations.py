@@ -19,6 +19,8 @@ from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
+from guidebot.site.validate import SiteIssue
+
 __all__ = [
     "POI_FIELDS",
     "TOUR_FIELDS",
@@ -31,6 +33,7 @@ __all__ = [
     "default_language",
     "offered_languages",
     "source_hash",
+    "stale_translations",
     "summary",
     "text_entries",
 ]
@@ -241,6 +244,16 @@ def summary(doc: dict[str, Any]) -> list[dict[str, Any]]:
             counts[entry.state] += 1
         out.append({"lang": lang, **counts, "total": sum(counts.values())})
     return out
+
+
+def stale_translations(doc: dict[str, Any]) -> list[SiteIssue]:
+    """Warnings (not errors) for ``site check``: each translation older than its source."""
+    return [
+        SiteIssue(f"{entry.key} in {lang!r}", "older than its source: the source text changed")
+        for lang in offered_languages(doc)[1:]
+        for entry in text_entries(doc, lang)
+        if entry.state == "stale"
+    ]
 
 
 def apply_translations(
