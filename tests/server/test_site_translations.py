@@ -10,8 +10,10 @@ from typing import Any
 import httpx
 import pytest
 import yaml
+from click.testing import CliRunner
 from translate.storage import pypo, xliff
 
+from backend.site.cli import site as site_cli
 from backend.site.translations import apply_translations, source_hash, summary, text_entries
 from backend.testing import RunningServer
 from guidebot.site.validate import validate_site
@@ -292,11 +294,26 @@ def test_a_draft_with_odd_shapes_is_read_without_errors_and_unknown_keys_are_rep
     assert "translations" not in cleared["pois"][3]
 
 
-def test_a_site_file_with_hashes_is_valid_and_a_bad_hash_is_refused() -> None:
+def test_a_site_file_with_hashes_is_valid_and_site_check_warns_of_a_stale_one(
+    tmp_path: Path,
+) -> None:
     doc = yaml.safe_load(DEMO.read_text())
     poi = doc["pois"][0]
     poi["translations"]["es"]["source_hash"] = {"text": source_hash(poi["text"])}
     validate_site(doc)
+    path = tmp_path / "site.yaml"
+    path.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    check = ["check", str(path), "--deadlock-robots", "0"]
+    result = CliRunner().invoke(site_cli, check)
+    assert result.exit_code == 0 and "older than its source" not in result.output
+    poi["translations"]["es"]["source_hash"] = {"text": source_hash("an older text")}
+    path.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    result = CliRunner().invoke(site_cli, check)
+    assert result.exit_code == 0, result.output
+    assert (
+        f"warning: pois/{poi['id']}/text in 'es': older than its source: the source text changed"
+        in result.output
+    )
     poi["translations"]["es"]["source_hash"] = {"text": "not-a-hash"}
     with pytest.raises(Exception, match="source_hash"):
         validate_site(doc)
