@@ -72,6 +72,12 @@ def write_translation_file(
     return bytes(store)
 
 
+def _same_language(found: str, lang: str) -> bool:
+    """``de``, ``de-DE`` and ``de_DE`` (gettext's spelling) are a file for ``de``."""
+    tag = found.replace("_", "-").lower()
+    return tag == lang.lower() or ("-" not in lang and tag.split("-")[0] == lang.lower())
+
+
 def read_translation_file(fmt: Format, raw: bytes, *, lang: str) -> list[FileUnit]:
     """The file's units; BadTranslationFile if it cannot be read, is for another language, or
     has units without a key or with the same key twice."""
@@ -89,7 +95,7 @@ def read_translation_file(fmt: Format, raw: bytes, *, lang: str) -> list[FileUni
             f"not a readable {name} file: {exc or type(exc).__name__}"
         ) from None
     found = store.gettargetlanguage()
-    if found and found.replace("_", "-") != lang:
+    if found and not _same_language(found, lang):
         raise BadTranslationFile(f"this {name} file is for the language {found!r}, not {lang!r}")
     units: list[FileUnit] = []
     seen: set[str] = set()

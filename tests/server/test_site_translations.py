@@ -232,6 +232,18 @@ async def test_a_malformed_file_is_refused_whole_and_nothing_is_lost(
     assert (after["revision"], after["draft"]) == (before["revision"], before["draft"])
 
 
+async def test_a_po_file_for_the_language_s_region_is_taken(
+    server: RunningServer, http: Http
+) -> None:
+    admin = http(server.admin_token)
+    po = pypo.pofile.parsestring((await admin.get(f"{BASE}/de/export")).content)
+    po.updateheader(Language="de_DE")
+    next(u for u in po.units if u.getcontext() == "pois/sword/name").target = "Das Schwert"
+    r = await _import(admin, "de", bytes(po))
+    assert r.status_code == 200, r.text
+    assert [c["after"] for c in r.json()["changed"]] == ["Das Schwert"]
+
+
 async def test_refusals_stale_revision_source_language_unknown_language_and_roles(
     server: RunningServer, http: Http
 ) -> None:

@@ -126,6 +126,18 @@ async def test_missing_and_stale_counts_side_by_side_edit_and_a_po_round_trip(
         )
         assert await page.evaluate("guidebotEditor.model.revision") == revision
         await web.axe_check(page)
+        # A new language: every text missing until translated.
+        await page.get_by_label("Add a language").fill("fr")
+        await page.get_by_role("button", name="Add language").click()
+        french = languages.locator("tr[data-lang=fr]")
+        await expect(french).to_contain_text("French (fr)")
+        total = await page.evaluate("guidebotTranslations.overview.languages[0].total")
+        await expect(french.locator("td").nth(0)).to_have_text(str(total))
+        await expect(
+            page.get_by_role("table", name="French (fr)").locator("tbody tr")
+        ).to_have_count(total)
+        async with fleet.http() as http:
+            assert (await http.get("/api/site/draft")).json()["draft"]["languages"][-1] == "fr"
         # Back to the plan.
         await page.get_by_role("button", name="Plan and elements").click()
         await expect(page.get_by_label("Floor plan editor")).to_be_visible()

@@ -84,6 +84,7 @@ export function mountTranslations({ model, api, sendFile, root, nav, columns }) 
     if (!LANG_TAG.test(lang)) return say(`${lang || "(empty)"} is not a language tag such as fr or pt-BR.`, true);
     if (lang === (doc.default_language || "en") || (doc.languages ?? []).includes(lang)) return say(`${lang} is already a language of the site.`, true);
     ui.lang = lang;
+    ui.report = null;
     model.edit(`add language ${lang}`, (d) => { d.languages = [...(d.languages ?? []), lang]; });
     input.value = "";
     say(`${languageName(lang)} (${lang}) added: its texts are all missing until translated.`);
