@@ -141,3 +141,12 @@ async def test_missing_and_stale_counts_side_by_side_edit_and_a_po_round_trip(
         # Back to the plan.
         await page.get_by_role("button", name="Plan and elements").click()
         await expect(page.get_by_label("Floor plan editor")).to_be_visible()
+        # Publishing with French untranslated warns, and is not refused.
+        await page.get_by_role("button", name="Publish", exact=True).click()
+        published = page.get_by_role("status").filter(has_text="Not yet translated")
+        await expect(published).to_contain_text(
+            f"Version 2 is live. Not yet translated: French {total} missing, 0 older than their "
+            "source; visitors get English for them (see Translations)."
+        )
+        async with fleet.http() as http:
+            assert (await http.get("/api/site")).json()["site"]["languages"][-1] == "fr"

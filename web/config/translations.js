@@ -24,6 +24,19 @@ function languageName(lang) {
 const LANG_TAG = /^[a-z]{2,3}(-[A-Za-z0-9]{2,8})?$/;
 
 /**
+ * What a publish of the draft leaves untranslated, as a sentence ("" when nothing): publishing
+ * is not blocked by it, but the installer is told.
+ */
+export async function translationWarning(api, model) {
+  await model.saving;
+  const o = await api.get(BASE).catch(() => null);
+  const gaps = (o?.languages ?? []).filter((l) => l.missing || l.stale);
+  if (!gaps.length) return "";
+  const each = gaps.map((l) => `${languageName(l.lang)} ${l.missing} missing, ${l.stale} older than their source`);
+  return ` Not yet translated: ${each.join("; ")}; visitors get ${languageName(o.source_language)} for them (see Translations).`;
+}
+
+/**
  * Mount the view: a switch between the plan and the translations in `nav`, the view in `root`,
  * `columns` (the plan editor) hidden while it shows.
  * @param {{model: any, api: any, sendFile: Function, root: HTMLElement, nav: HTMLElement, columns: HTMLElement}} ctx
