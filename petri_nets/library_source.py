@@ -8,6 +8,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from guidebot.pace import ANSWER_TIMEOUT_S, PATIENCE_S
 from petri_nets.builder import (
     NetBuilder,
     guard,
@@ -308,8 +309,8 @@ def give_tour() -> NetDoc:
         "is skipped: point_skipped says which and why, and the tour goes on.",
         params={
             "question": "Shall we continue the tour?",
-            "answer_timeout_s": 20.0,
-            "patience_s": 30.0,
+            "answer_timeout_s": ANSWER_TIMEOUT_S,  # a slower tour's are longer (guidebot/pace.py)
+            "patience_s": PATIENCE_S,
             "lang": "en",
         },
         required=("tour", "points"),

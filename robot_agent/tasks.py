@@ -19,6 +19,7 @@ from pydantic import ValidationError
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message, make_message
+from guidebot.pace import net_params, pace_of
 from guidebot.payloads.petri import KillPetriNet, RunPetriNet
 from guidebot.payloads.tasks import Outcome, TaskEnded, TaskStarted, TourProgress
 from guidebot.service import Service
@@ -174,8 +175,10 @@ class TaskRunner(Service):
                 TaskEnded(task_id=task_id, robot=self.robot, outcome="refused", reason=busy)
             )
             return
-        params = p.get("params") or {}
-        task = MainTask(task_id, net, dict(params), instance_id=f"{self.robot}-task-{task_id}")
+        given = p.get("params") or {}
+        # A slower tour gives the visitor longer to answer "continue?"; a task's own values win.
+        params = {**net_params(pace_of(given)), **given}
+        task = MainTask(task_id, net, params, instance_id=f"{self.robot}-task-{task_id}")
         self.current = task
         self._kill_waiting()
         if self.on_task_start is not None:

@@ -10,6 +10,7 @@ from backend.api import (
     site_editor,
     tasks,
     tours,
+    translations,
     visitor,
     web,
 )
@@ -25,6 +26,7 @@ ROUTERS = [
     web.router,
     visitor.router,
     nets_editor.router,
+    translations.router,
 ]
 
 __all__ = ["ROUTERS"]

@@ -9,7 +9,16 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Header, Path, Query, Request
 from fastapi.responses import FileResponse
 
-from backend.api.deps import Anyone, Requester, Sites, TaskReader, TaskRequester, Tasks, not_found
+from backend.api.deps import (
+    Anyone,
+    Requester,
+    Sites,
+    TaskReader,
+    TaskRequester,
+    Tasks,
+    Traffic,
+    not_found,
+)
 from backend.auth import Principal, Role
 from guidebot.pace import PaceName
 from guidebot.site.access import step_free_skips
@@ -90,18 +99,19 @@ def _pictures(names: list[str]) -> list[dict[str, Any]]:
     return [{"name": n, "url": media_url(n)} for n in names]
 
 
-_skips: dict[int, tuple[SiteGraph, dict[str, list[str]]]] = {}
-"""id(graph) -> (graph, tour id -> the stops a step-free tour skips): one look per site version."""
+_skips: dict[int, tuple[SiteGraph, frozenset[str], dict[str, list[str]]]] = {}
+"""id(graph) -> (graph, the nodes closed, tour id -> the stops a step-free tour skips): one look
+per site version and set of closures."""
 
 
-def _step_free_skips(site: Site, graph: SiteGraph, tour: Tour) -> list[str]:
+def _step_free_skips(site: Site, graph: SiteGraph, tour: Tour, closed: frozenset[str]) -> list[str]:
     found = _skips.get(id(graph))
-    if found is None or found[0] is not graph:
-        _skips.clear()  # the site changed: its graph is new
-        found = _skips[id(graph)] = (graph, {})
-    by_tour = found[1]
+    if found is None or found[0] is not graph or found[1] != closed:
+        _skips.clear()  # the site or the closures changed
+        found = _skips[id(graph)] = (graph, closed, {})
+    by_tour = found[2]
     if tour.id not in by_tour:
-        by_tour[tour.id] = step_free_skips(site, graph, tour)
+        by_tour[tour.id] = step_free_skips(site, graph, tour, closed)
     return by_tour[tour.id]
 
 
@@ -122,7 +132,12 @@ def _poi_view(site: Site, poi_id: str, lang: str) -> dict[str, Any] | None:
 
 @router.get("/api/visitor")
 async def visitor_menu(
-    _: Anyone, service: Sites, manager: Tasks, lang: Lang = None, pace: PaceQuery = "normal"
+    _: Anyone,
+    service: Sites,
+    manager: Tasks,
+    traffic: Traffic,
+    lang: Lang = None,
+    pace: PaceQuery = "normal",
 ) -> dict[str, Any]:
     """Tours and points in ``lang`` (the site's default when not offered), each with its
     length at ``pace`` and what a request would be told now: available, busy (with the
@@ -131,11 +146,12 @@ async def visitor_menu(
     estimator = manager.estimator
     chosen = resolve_language(site, lang)
     paced = {"pace": pace} if pace != "normal" else {}
+    closed = frozenset(traffic.closures()) if traffic.closures is not None else frozenset()
     tours = []
     for tour in site.tours:
         stops = [v for v in (_poi_view(site, p, chosen) for p in tour.points) if v is not None]
         told = estimator.preview("tour", {"tour": tour.id, "lang": chosen} | paced).as_dict()
-        skips = _step_free_skips(site, manager.graph, tour)
+        skips = _step_free_skips(site, manager.graph, tour, closed)
         tours.append(
             {
                 "id": tour.id,

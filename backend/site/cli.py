@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from backend.site.translations import stale_translations
 from guidebot.site.access import step_free_warnings
 from guidebot.site.i18n import missing_translations
 from guidebot.site.schema import Site
@@ -38,9 +39,10 @@ def site() -> None:
 )
 def check(path: Path, deadlock_robots: int | None, deadlock_states: int) -> None:
     """Validate PATH; exit 1 listing every problem with its line. Texts missing in a
-    declared language, and tour stops a step-free tour skips, are warnings (exit 0). Then
-    search the lock table for a deadlock of the robots (guidebot/site/deadlock.py): a cycle
-    found is a problem (exit 1), a search that gave up a warning."""
+    declared language or older than their source, and tour stops a step-free tour skips, are
+    warnings (exit 0). Then search the lock table for a deadlock of the robots
+    (guidebot/site/deadlock.py): a cycle found is a problem (exit 1), a search that gave up a
+    warning."""
     try:
         loaded = load_site_file(path)
     except SiteInvalid as exc:
@@ -48,7 +50,11 @@ def check(path: Path, deadlock_robots: int | None, deadlock_states: int) -> None
             click.echo(line, err=True)
         click.echo(f"{len(exc.issues)} problem(s): site refused", err=True)
         sys.exit(1)
-    warnings = missing_translations(loaded) + step_free_warnings(loaded)
+    warnings = (
+        missing_translations(loaded)
+        + stale_translations(loaded.model_dump(mode="json"))
+        + step_free_warnings(loaded)
+    )
     for issue in warnings:
         click.echo(f"{path}: warning: {issue.loc}: {issue.message}", err=True)
     click.echo(

@@ -8,6 +8,8 @@ stop before is skipped, and the tour goes on from where it is. The same rule is 
 
 from __future__ import annotations
 
+from collections.abc import Container
+
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site, Tour
 from guidebot.site.validate import SiteIssue
@@ -15,9 +17,14 @@ from guidebot.site.validate import SiteIssue
 __all__ = ["step_free_skips", "step_free_warnings"]
 
 
-def step_free_skips(site: Site, graph: SiteGraph, tour: Tour) -> list[str]:
+def step_free_skips(
+    site: Site, graph: SiteGraph, tour: Tour, closed: Container[str] = frozenset()
+) -> list[str]:
     """The points of ``tour`` a step-free tour skips (none when the site marks no steps). The
-    first stop is where the visitor meets the robot: it is never skipped here."""
+    first stop is where the visitor meets the robot: it is never skipped here. ``closed``: the
+    nodes closed now (building modes): a stop whose step-free ways all cross them is skipped
+    too; a stop closures cut off for every tour (only closed nodes lead there) is not the
+    steps' doing and is not listed, and the tour goes on from the stop before, as it will."""
     if not graph.step_edges:
         return []
     skipped: list[str] = []
@@ -26,8 +33,13 @@ def step_free_skips(site: Site, graph: SiteGraph, tour: Tour) -> list[str]:
         poi = site.poi(poi_id)
         if poi is None or poi.node not in graph:
             continue
-        if here is not None and here != poi.node and graph.step_free_path(here, poi.node) is None:
-            skipped.append(poi.id)
+        if (
+            here is not None
+            and here != poi.node
+            and graph.step_free_path(here, poi.node, closed) is None
+        ):
+            if not closed or graph.search(here, poi.node, closed) is not None:
+                skipped.append(poi.id)
             continue
         here = poi.node
     return skipped

@@ -30,6 +30,10 @@ __all__ = [
 
 Id = Annotated[str, Field(min_length=1, max_length=64, pattern=ID_PATTERN)]
 LANG = r"^[a-z]{2,3}(-[A-Za-z0-9]{2,8})?$"
+SourceHash = Annotated[str, Field(pattern=r"^[0-9a-f]{16}$")]
+"""The first 16 hex digits of the SHA-256 of a source text (UTF-8): what a translation was
+made from, so that an editor can tell it is older than its source (docs/config.md,
+"Translations")."""
 
 
 class _Strict(BaseModel):
@@ -80,6 +84,11 @@ class Emergency(_Strict):
     """Restricted-area ids robots must leave at once and not enter while an alarm lasts."""
     words: dict[Annotated[str, Field(pattern=LANG)], str] = Field(default_factory=dict)
     """What robots say and pages show, per language."""
+    words_source_hash: dict[Annotated[str, Field(pattern=LANG)], SourceHash] = Field(
+        default_factory=dict
+    )
+    """Per language but the default: the hash of the default language's words it was translated
+    from (none: taken as current)."""
 
     def words_in(self, lang: str | None, default: str = "en") -> str:
         """The words in ``lang``, else the site's default language, else any."""

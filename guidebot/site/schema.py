@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
 
 from guidebot.site.building import ID_PATTERN, BuildingModule, Button, Door, Elevator
-from guidebot.site.emergency import Emergency
+from guidebot.site.emergency import Emergency, SourceHash
 from guidebot.site.index import Indexed
 
 __all__ = [
@@ -98,6 +98,10 @@ class PoiText(StrictModel):
     media: list[str] | None = None
     sign_video: str | None = None
     """The text in this language's sign language (a video; see ``PointOfInterest``)."""
+    source_hash: dict[Literal["name", "description", "text"], SourceHash] = Field(
+        default_factory=dict
+    )
+    """Per field: the hash of the source text it was translated from (none: taken as current)."""
 
 
 class TourText(StrictModel):
@@ -105,6 +109,8 @@ class TourText(StrictModel):
 
     name: str | None = None
     description: str | None = None
+    source_hash: dict[Literal["name", "description"], SourceHash] = Field(default_factory=dict)
+    """Per field: the hash of the source text it was translated from (none: taken as current)."""
 
 
 class PointOfInterest(StrictModel):

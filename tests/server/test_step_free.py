@@ -4,19 +4,23 @@ check``'s warning for the stops a step-free tour skips."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 import yaml
 from click.testing import CliRunner
 
 from backend.closures.routing import StepsOnly, step_free_path_of
 from backend.site.cli import site as site_cli
+from backend.testing import RunningServer
 from guidebot.site.access import step_free_skips, step_free_warnings
 from guidebot.site.graph import SiteGraph
 from guidebot.site.validate import SiteInvalid, validate_site
 from guidebot.site.yamlio import load_site_file
+from tests.server.conftest import OPERATOR_TOKEN
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -88,3 +92,34 @@ def test_the_demo_marks_the_steps_to_the_loom() -> None:
             "a step-free tour of 'ground' skips 'loom': only steps lead there",
         )
     ]
+
+
+def test_the_stops_a_step_free_tour_skips_count_the_closures() -> None:
+    site = validate_site(DOC)
+    graph = SiteGraph(site)
+    tour = site.tour("all")
+    assert tour is not None
+    # d closed: the level way round to c is shut, only the ramp is left: c is skipped too.
+    assert step_free_skips(site, graph, tour, {"d"}) == ["pe", "pc"]
+    # c itself closed: every tour skips c and e (only c leads to e), not the steps' doing.
+    assert step_free_skips(site, graph, tour, {"c"}) == []
+
+
+async def test_the_menu_s_step_free_skips_follow_the_building_modes(
+    server: RunningServer, http: Callable[[str | None], httpx.AsyncClient]
+) -> None:
+    staff = http(OPERATOR_TOKEN)
+
+    async def skips() -> list[str]:
+        menu = (await staff.get("/api/visitor")).json()
+        return next(t["step_free_skips"] for t in menu["tours"] if t["id"] == "ground")  # type: ignore[no-any-return]
+
+    assert await skips() == ["loom"]
+    # The loom's gallery closed: every tour skips it now, for the closure, not for the steps.
+    r = await staff.post(
+        "/api/closures", json={"kind": "nodes", "nodes": ["gb2"], "reason": "cleaning"}
+    )
+    assert r.status_code == 201, r.text
+    assert await skips() == []
+    assert (await staff.delete(f"/api/closures/{r.json()['id']}")).status_code == 200
+    assert await skips() == ["loom"]

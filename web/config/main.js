@@ -13,6 +13,7 @@ import { EditMap } from "/config/editmap.js";
 import { KINDS, elementForm, newElement, round } from "/config/forms.js";
 import { DraftModel } from "/config/model.js";
 import { emergencyForm, toggleSafeSpot } from "/config/emergency.js";
+import { mountTranslations, translationWarning } from "/config/translations.js";
 
 const $ = (id) => document.getElementById(id);
 let token = currentToken();
@@ -220,10 +221,11 @@ async function start(me) {
   async function publish() {
     try {
       const note = $("publish-note")?.value ?? "";
+      const untranslated = await translationWarning(api, model);
       const version = await model.publish(note);
       ui.rollout = ui.rollout?.version === version ? ui.rollout : { version, expected: [], loaded_ms: {}, complete: false };
       await loadVersions();
-      say(`Version ${version} is live.`);
+      say(`Version ${version} is live.${untranslated}`);
     } catch (err) {
       if (err instanceof ApiError && err.status === 422) say(`Publish refused: ${err.detail.length} problem(s), see the list.`, true);
       else say(`Publish refused: ${err.detail?.msg ?? err.message}`, true);
@@ -416,6 +418,7 @@ async function start(me) {
   ui.floor = model.doc.floors[0].id;
   await loadVersions();
   draw();
+  mountTranslations({ model, api, sendFile, root: $("translations"), nav: $("views"), columns: $("columns") });
 }
 
 function rolloutText(r) {
