@@ -58,7 +58,9 @@ async def test_the_elevator_car_shows_its_floor_and_follows_it_as_it_moves(
         assert building_floor(fleet) == "F1"
 
         endpoint.publish("call_elevator", {"elevator": "lift", "floor": "F0"})
-        await expect(car).to_have_text("moving to Ground floor (last at First floor)", timeout=20_000)
+        await expect(car).to_have_text(
+            "moving to Ground floor (last at First floor)", timeout=20_000
+        )
         await expect(car).to_have_text("at Ground floor, door open", timeout=20_000)
         # The map's details say the same.
         await web.open_view(page, "Map")
