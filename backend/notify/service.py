@@ -130,6 +130,8 @@ class Notifier(Service):
         self._wake = asyncio.Event()
         self._retries: set[asyncio.Task[None]] = set()
         self._http: httpx.AsyncClient | None = None
+        self.listeners: list[Callable[[Delivery], None]] = []
+        """Called with a delivery whenever it ends (sent, failed, dropped) or is retried."""
 
     # --- life cycle -----------------------------------------------------------------------
     async def on_start(self) -> None:
@@ -319,6 +321,11 @@ class Notifier(Service):
             delivery.error = error
         if not job.first_done.done():
             job.first_done.set_result(None)
+        self._changed(delivery)
+
+    def _changed(self, delivery: Delivery) -> None:
+        for listener in list(self.listeners):
+            listener(delivery)
 
     async def _work(self) -> None:
         while True:
@@ -336,6 +343,10 @@ class Notifier(Service):
             return self._finish(job, "dropped", "the channel was deleted")
         if not self.may_send():
             return self._finish(job, "dropped", "this process no longer leads the fleet")
+        if delivery.attempts and delivery.reason != "test" and delivery.alert_id not in self.open:
+            return self._finish(
+                job, "dropped", "not retried: the alert was acknowledged or resolved"
+            )
         delivery.attempts += 1
         delivery.status, delivery.updated_at = "sending", self.clock()
         try:
@@ -366,6 +377,7 @@ class Notifier(Service):
             delivery.next_attempt_at = delivery.updated_at + delay
             if not job.first_done.done():
                 job.first_done.set_result(None)
+            self._changed(delivery)
             waiting = asyncio.get_running_loop().create_task(self._retry(job, delay))
             self._retries.add(waiting)
             waiting.add_done_callback(self._retries.discard)

@@ -58,11 +58,12 @@ def verify(post: Any, secret: str) -> dict[str, Any]:
 
 
 async def settled(notifier: Notifier, alert_id: str) -> dict[str, Any]:
-    """The delivery of this alert once it is sent or given up (waits on the notifier)."""
+    """The delivery of this alert once it is sent, given up or dropped (waits on the
+    notifier)."""
     done = asyncio.get_running_loop().create_future()
 
     def check(delivery: Delivery) -> None:
-        if delivery.alert_id == alert_id and delivery.status in ("sent", "failed"):
+        if delivery.alert_id == alert_id and delivery.status in ("sent", "failed", "dropped"):
             if not done.done():
                 done.set_result(delivery.view())
 
@@ -246,6 +247,21 @@ async def test_a_receiver_that_never_answers_costs_the_server_nothing(
     assert not pending.done()
     hooks.hang.set()
     assert (await pending).json()["status"] == "sent"
+
+
+async def test_a_failed_delivery_is_not_retried_once_the_alert_is_acknowledged(
+    server: RunningServer, admin: httpx.AsyncClient, hooks: Hooks
+) -> None:
+    hooks.hang, hooks.status["/hang"] = asyncio.Event(), 500
+    await add(admin, webhook_channel(f"{hooks.url}/hang"))
+    alert_id = raise_alert(server)
+    await hooks.hanging.wait()  # the first attempt is at the receiver
+    server.app.state.alerts.acknowledge(alert_id, "operator-1")
+    hooks.hang.set()  # it answers 500
+    delivery = await settled(server.app.state.notify, alert_id)
+    assert delivery["status"] == "dropped" and delivery["attempts"] == 1, delivery
+    assert delivery["error"] == "not retried: the alert was acknowledged or resolved"
+    assert len(hooks.at("/hang")) == 1
 
 
 @pytest.mark.parametrize(
