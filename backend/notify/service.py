@@ -1,6 +1,7 @@
 """The notifier: every staff alert that opens (``alert_raised`` on the hub, backend/alerts.py)
 is offered to each channel; a channel whose rules take it (severity, days, hours, quiet hours)
-gets a delivery on a bounded queue that a few workers send. A failed attempt is tried again
+gets a delivery on its own bounded queue, sent by its own worker (a silent receiver delays
+only its channel). A failed attempt is tried again
 after a growing delay (``RETRY_DELAYS_S``), then given up: the delivery log shows it and a
 ``notification_failed`` alert (warning) is raised for the channel, resolved by its next
 success. With ``repeat_minutes`` a channel is told again while the alert stays open (neither
@@ -39,10 +40,8 @@ __all__ = ["Delivery", "Notifier"]
 
 log = logging.getLogger(__name__)
 
-QUEUE_SIZE = 1000
-"""Deliveries waiting for a worker; beyond it a new one is dropped (and counted)."""
-WORKERS = 4
-"""Attempts made at once: a dead server holds a worker for its time-out, not the others."""
+QUEUE_SIZE = 200
+"""Deliveries waiting for a channel's worker; beyond it a new one is dropped (and counted)."""
 RETRY_DELAYS_S = (10.0, 60.0, 300.0, 900.0)
 """After the first failed attempt, wait 10 s, then 1, 5 and 15 minutes: 5 attempts in all."""
 ATTEMPT_LIMIT_S = 60.0
@@ -122,7 +121,9 @@ class Notifier(Service):
         """Seconds in a repeat minute (tests shorten it)."""
         self.log: deque[Delivery] = deque(maxlen=LOG_SIZE)
         self.open: dict[str, _Open] = {}
-        self.queue: asyncio.Queue[_Job] = asyncio.Queue(QUEUE_SIZE)
+        self.queues: dict[str, asyncio.Queue[_Job]] = {}
+        """Per channel: its deliveries waiting for its worker (one attempt at a time)."""
+        self._workers: dict[str, asyncio.Task[None]] = {}
         self.sent: Counter[str] = Counter()
         self.failed_attempts: Counter[str] = Counter()
         self.given_up: Counter[str] = Counter()
@@ -142,8 +143,7 @@ class Notifier(Service):
         self.subscribe(self.endpoint, "alert_raised", self._raised)
         self.subscribe(self.endpoint, "alert_acked", self._closed)
         self.subscribe(self.endpoint, "alert_resolved", self._closed)
-        for number in range(WORKERS):
-            self.spawn(self._work(), name=f"notify-worker-{number}")
+        self.on_cleanup(self._stop_workers)
         self.spawn(self._repeat(), name="notify-repeat")
         if self.alerts is not None:  # opened before this component started
             for alert in reversed(self.alerts.listing()):
@@ -187,6 +187,10 @@ class Notifier(Service):
         """KeyError: no such channel."""
         del self.channels[channel_id]
         await self.store.delete_channel(channel_id)
+        worker, queue = self._workers.pop(channel_id, None), self.queues.pop(channel_id, None)
+        await cancel_and_wait(worker)
+        while queue is not None and not queue.empty():
+            self._finish(queue.get_nowait(), "dropped", "the channel was deleted")
         if self.alerts is not None:
             self.alerts.resolve(FAILED_KIND, channel_id, "channel deleted")
 
@@ -301,11 +305,14 @@ class Notifier(Service):
         return job
 
     def _put(self, job: _Job) -> bool:
+        if job.delivery.channel not in self.channels:
+            self._finish(job, "dropped", "the channel was deleted")
+            return False
         try:
-            self.queue.put_nowait(job)
+            self._queue(job.delivery.channel).put_nowait(job)
         except asyncio.QueueFull:
             self.dropped += 1
-            self._finish(job, "dropped", f"the queue is full ({QUEUE_SIZE} waiting)")
+            self._finish(job, "dropped", f"the channel's queue is full ({QUEUE_SIZE} waiting)")
             log.warning(
                 "notify: %s to %s dropped: queue full",
                 job.delivery.reason,
@@ -327,11 +334,29 @@ class Notifier(Service):
         for listener in list(self.listeners):
             listener(delivery)
 
-    async def _work(self) -> None:
+    def _queue(self, channel_id: str) -> asyncio.Queue[_Job]:
+        """The channel's queue, its worker started with it."""
+        queue = self.queues.get(channel_id)
+        if queue is None:
+            self.queues[channel_id] = queue = asyncio.Queue(QUEUE_SIZE)
+            self._workers[channel_id] = asyncio.get_running_loop().create_task(
+                self._work(queue), name=f"notify-{channel_id}"
+            )
+        return queue
+
+    async def _stop_workers(self) -> None:
+        for worker in list(self._workers.values()):
+            await cancel_and_wait(worker)
+        self._workers.clear()
+
+    async def _work(self, queue: asyncio.Queue[_Job]) -> None:
         while True:
-            job = await self.queue.get()
+            job = await queue.get()
             try:
                 await self._attempt(job)
+            except asyncio.CancelledError:  # the channel deleted, the server stopping
+                self._finish(job, "dropped", "stopped while sending")
+                raise
             except Exception:  # a bug must not stop the worker
                 log.exception("notify: delivery %s", job.delivery.id)
                 self._finish(job, "failed", "internal error (see the server log)")
@@ -426,13 +451,13 @@ class Notifier(Service):
             yield family
         yield CounterMetricFamily(
             "guidebot_notifications_dropped",
-            "Notifications dropped: the queue was full",
+            "Notifications dropped: their channel's queue was full",
             value=self.dropped,
         )
         yield GaugeMetricFamily(
             "guidebot_notifications_queued",
             "Notifications waiting for a worker",
-            value=self.queue.qsize(),
+            value=sum(q.qsize() for q in self.queues.values()),
         )
 
 

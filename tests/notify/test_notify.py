@@ -234,16 +234,25 @@ async def test_a_receiver_that_is_down_is_retried_and_shown_while_the_server_ans
     await promtool_accepts(scrape)
 
 
-async def test_a_receiver_that_never_answers_costs_the_server_nothing(
+async def test_a_receiver_that_never_answers_costs_the_server_and_other_channels_nothing(
     server: RunningServer, admin: httpx.AsyncClient, hooks: Hooks
 ) -> None:
     hooks.hang = asyncio.Event()
-    channel = await add(admin, webhook_channel(f"{hooks.url}/hang"))
-    pending = asyncio.create_task(admin.post(f"/api/notifications/channels/{channel['id']}/test"))
-    await hooks.hanging.wait()  # the attempt is stuck in the receiver
+    silent = await add(admin, webhook_channel(f"{hooks.url}/hang"))
+    for robot in ("R1", "R2", "R3", "R4", "R5"):  # more deliveries than a few shared workers
+        raise_alert(server, robot)
+    await hooks.hanging.wait()  # the first attempt is stuck in the receiver
+    pending = asyncio.create_task(admin.post(f"/api/notifications/channels/{silent['id']}/test"))
     for _ in range(3):
         answer = await admin.get("/api/health")
         assert answer.status_code == 200
+    other = await add(admin, webhook_channel(f"{hooks.url}/chat"))
+    tested = await admin.post(f"/api/notifications/channels/{other['id']}/test")
+    assert tested.json()["status"] == "sent"  # not behind the silent channel's deliveries
+    log = server.app.state.notify.deliveries()
+    ours = [d for d in log if d["channel"] == silent["id"] and "robot_lost" in d["alert"]]
+    stuck = [d["status"] for d in ours]
+    assert stuck == ["queued"] * 4 + ["sending"]  # newest first: the first one still at it
     assert not pending.done()
     hooks.hang.set()
     assert (await pending).json()["status"] == "sent"
