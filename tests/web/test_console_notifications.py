@@ -79,3 +79,12 @@ async def test_an_admin_sets_a_channel_tests_it_and_sees_a_failure(
         says = "url: Value error, a webhook URL must use https://"
         await expect(page.get_by_role("alert")).to_contain_text(says)
         assert "the front desk's shared secret" not in await page.content()
+
+        # An operator reads the log, and sets nothing.
+        operator = await open_page(fleet.admin_url)
+        await web.sign_in(operator, web.operator_token)
+        await web.open_view(operator.page, "Notifications")
+        their_log = operator.page.get_by_role("table", name="Delivery log")
+        await expect(their_log.locator("tr[data-status=sent]")).to_have_count(1)
+        await expect(operator.page.get_by_role("button", name="Add a channel")).to_have_count(0)
+        await web.axe_check(operator.page)
