@@ -245,17 +245,19 @@ class Notifier(Service):
         alert = opened.alert
         if alert.get("kind") == FAILED_KIND and alert.get("subject") == channel.id:
             return  # the channel's own failure is not sent to it
-        now = self.clock()
-        repeat = channel.rules.repeat_minutes
-        if repeat is not None and channel.rules.enabled:
-            opened.next_at[channel.id] = now + repeat * self.minute_s
+        rules, now = channel.rules, self.clock()
+        if not rules.enabled or alert.get("severity") not in rules.severities:
+            opened.next_at.pop(channel.id, None)  # never this channel's (until it is changed)
+            return
+        if rules.repeat_minutes is not None:
+            opened.next_at[channel.id] = now + rules.repeat_minutes * self.minute_s
             self._wake.set()
         else:
             opened.next_at.pop(channel.id, None)
-        why_not = channel.rules.allows(str(alert.get("severity")), now)
+        why_not = rules.allows(str(alert.get("severity")), now)
         if why_not is None:
             self._enqueue(channel, alert, reason)
-        elif reason == "alert" and channel.rules.enabled and "severity" not in why_not:
+        elif reason == "alert":  # outside its days or hours, or in its quiet hours
             self._logged(channel, alert, reason, status="suppressed", error=why_not)
 
     async def _repeat(self) -> None:

@@ -164,17 +164,19 @@ async def test_quiet_hours_suppress(
         "start": (now - dt.timedelta(hours=1)).strftime("%H:%M"),
         "end": (now + dt.timedelta(hours=1)).strftime("%H:%M"),
     }
-    await add(admin, webhook_channel(f"{hooks.url}/quiet", quiet=quiet))
+    quiet_one = await add(admin, webhook_channel(f"{hooks.url}/quiet", quiet=quiet))
     await add(admin, webhook_channel(f"{hooks.url}/loud"))
-    raise_alert(server)
+    warnings = await add(admin, webhook_channel(f"{hooks.url}/warnings", severities=["warning"]))
+    alert_id = raise_alert(server)
     await hooks.wait_for("/loud", 1)
-    assert hooks.at("/quiet") == []
+    assert hooks.at("/quiet") == [] and hooks.at("/warnings") == []
     log = (await admin.get("/api/notifications/deliveries")).json()
-    suppressed = [d for d in log if d["status"] == "suppressed"]
-    assert len(suppressed) == 1 and suppressed[0]["error"].startswith("quiet hours"), log
-    assert not any(
-        d["status"] != "suppressed" and d["channel"] == suppressed[0]["channel"] for d in log
-    )
+    ours = [(d["channel"], d["status"]) for d in log if d["alert_id"] == alert_id]
+    assert (quiet_one["id"], "suppressed") in ours
+    muted = next(d for d in log if d["channel"] == quiet_one["id"])
+    assert muted["error"].startswith("quiet hours"), muted
+    assert not any(c == quiet_one["id"] and status != "suppressed" for c, status in ours)
+    assert not any(d["channel"] == warnings["id"] for d in log)  # not its severity: no noise
 
 
 async def test_a_repeat_is_sent_until_the_alert_is_acknowledged(
