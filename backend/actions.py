@@ -50,6 +50,8 @@ RULES: dict[str, frozenset[Role]] = {
     "read_reports": _OPERATOR | {Role.VIEWER},  # GET /api/reports (docs/reports.md)
     "read_nets": _OPERATOR | {Role.AUTHOR, Role.VIEWER},  # the net editor's reads (docs/nets.md)
     "edit_nets": frozenset({Role.AUTHOR}),  # publish nets, restore a version (docs/nets.md)
+    "manage_notifications": frozenset(),  # e-mail and webhook channels, SMTP (backend/notify)
+    "read_notifications": _OPERATOR | {Role.VIEWER},  # their delivery log
     "read": _READERS,  # tours, points of interest, the visitor menu, the map, /api/me
     # Actions that arrive over REST and the hub alike
     "task_request": _REQUESTERS | {Role.MODULE},  # POST /api/tasks
@@ -115,6 +117,8 @@ REST_ONLY = frozenset(
         "read_reports",
         "read_nets",
         "edit_nets",
+        "manage_notifications",
+        "read_notifications",
         "read",
     }
 )

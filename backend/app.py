@@ -57,6 +57,8 @@ from backend.hub.listener import hub_listener
 from backend.metrics import routes as metrics_routes
 from backend.metrics.component import metrics
 from backend.net_library.component import net_library
+from backend.notify import routes as notify_routes
+from backend.notify.component import notify
 from backend.ratelimit import RateLimiter
 from backend.reports import api as reports_routes
 from backend.rgm import rgm
@@ -85,6 +87,7 @@ COMPONENTS: list[Component] = [
     site_editor,
     console,
     vda5050,
+    notify,
 ]
 
 # REST/WebSocket routers of the server modules. One line each.
@@ -101,6 +104,7 @@ ROUTERS: list[APIRouter] = [
     reports_routes.router,
     vda5050_routes.router,
     accounts_routes.router,
+    notify_routes.router,
 ]
 
 

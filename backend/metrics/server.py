@@ -233,6 +233,9 @@ class _ScrapeCollector(Collector):
         master = getattr(state, "vda5050", None)  # the VDA 5050 master control, when it runs
         if master is not None:
             yield from master.metrics()
+        notifier = getattr(state, "notify", None)  # the notifier, when it runs (the leader)
+        if notifier is not None:
+            yield from notifier.metrics()
         steps = GaugeMetricFamily(
             "guidebot_reaction_steps_info",
             "Reaction steps and the paper's step they match",

@@ -21,6 +21,7 @@ import { locksView } from "/admin/views/locks.js";
 import { detailsView, toolbarView } from "/admin/views/map.js";
 import { Modes, modesView } from "/admin/views/modes.js";
 import { Monitor, monitorView } from "/admin/views/monitor.js";
+import { notificationsView } from "/admin/views/notifications.js";
 import { reportsView } from "/admin/views/reports.js";
 import { robotsView } from "/admin/views/robots.js";
 import { tasksView } from "/admin/views/tasks.js";
@@ -38,6 +39,7 @@ const VIEWS = [
   ["alerts", "Alerts"],
   ["events", "Event log"],
   ["reports", "Reports"],
+  ["notifications", "Notifications"],
   ["accounts", "Accounts", "admin"],
 ];
 const RENDER = {
@@ -52,6 +54,7 @@ const RENDER = {
   events: eventsView,
   reports: reportsView,
   accounts: accountsView,
+  notifications: notificationsView,
 };
 const $ = (id) => document.getElementById(id);
 
