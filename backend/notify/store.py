@@ -1,5 +1,5 @@
 """The notification settings in the database (table ``notifications``, migration
-0010_notifications): the SMTP server under the id ``smtp`` and one row per channel, each the
+0010): the SMTP server under the id ``smtp`` and one row per channel, each the
 whole document (secrets included: they are needed to send). Written at once (an admin's change
 is rare and its answer says it is kept), read back on start."""
 

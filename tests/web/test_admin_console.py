@@ -30,6 +30,7 @@ VIEWS = [
     ("Alerts", "alerts"),
     ("Event log", "events"),
     ("Reports", "reports"),
+    ("Notifications", "notifications"),
 ]
 
 

@@ -1,6 +1,6 @@
 """Notifications: the venue's SMTP server and the channels with their rules (backend/notify).
 
-Revision ID: 0010_notifications
+Revision ID: 0010
 Revises: 0009
 Create Date: 2026-11-28
 """
@@ -8,7 +8,7 @@ Create Date: 2026-11-28
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0010_notifications"
+revision = "0010"
 down_revision = "0009"
 branch_labels = None
 depends_on = None
