@@ -4,15 +4,18 @@ vendored schemas."""
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from backend.vda5050.order import build_order, instant_actions
 from backend.vda5050.vehicle import VdaRobot
+from backend.vda5050.zones import STEPS_SPEED_MPS, zone_sets
 from guidebot.bus import Bus
 from guidebot.messages import Message
 from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.site.yamlio import load_site_file
 from guidebot.testing import wait_until
 from guidebot.vda5050.schemas import SCHEMA_DIR, SchemaViolation, check, problems
 from guidebot.vda5050.sim import SimVehicle
@@ -232,3 +235,39 @@ async def test_a_stale_state_on_the_current_order_reports_no_node_again() -> Non
     assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["b"]
     assert robot.node == "e"
     await robot.close()
+
+
+def test_the_museums_zones_follow_the_3_0_0_schema() -> None:
+    """The demo museum as 3.0.0 zone sets, one per floor: its restricted areas RELEASE (a
+    vehicle that loses one stops), its doors and lift stops LINE_GUIDED, an edge with steps a
+    SPEED_LIMIT, closed nodes BLOCKED (a closed area's whole extent); only the types a
+    factsheet lists when it lists them. Each as a zoneSet message its schema accepts."""
+    site = load_site_file(Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml")
+    data = site.model_dump(mode="json")
+    data["edges"][0]["steps"] = True
+    site = validate_site(data)
+    area = site.areas[0]
+    loose = next(n.id for n in site.nodes if all(n.id not in a.nodes for a in site.areas))
+    sets = zone_sets(site, {"F0": "ground"}, closed=[area.nodes[0], loose])
+    v3 = Vehicle("Acme", "sn-1", version="3.0.0")
+    zones = {}
+    for n, zone_set in enumerate(sets.values()):
+        check("zoneSet", {**v3.header(n), "zoneSet": zone_set}, "3.0.0")
+        zones |= {z["zoneId"]: z for z in zone_set["zones"]}
+    assert sets["F0"]["mapId"] == "ground"
+    assert {z["zoneType"] for z in zones.values()} == {
+        "RELEASE",
+        "BLOCKED",
+        "SPEED_LIMIT",
+        "LINE_GUIDED",
+    }
+    assert zones[area.id]["releaseLossBehavior"] == "STOP"
+    assert zones[f"closed:{area.id}"]["vertices"] == zones[area.id]["vertices"]
+    assert zones[f"closed:{loose}"]["zoneType"] == "BLOCKED"
+    edge = site.edges[0]
+    assert zones[f"steps:{edge.a}:{edge.b}"]["maximumSpeed"] == STEPS_SPEED_MPS
+    assert all(f"door:{d.id}" in zones for d in site.doors)
+    only = zone_sets(site, {}, closed=[loose], supported=["RELEASE"])
+    assert {z["zoneType"] for s in only.values() for z in s["zones"]} == {"RELEASE"}
+    again = zone_sets(site, {"F0": "ground"})
+    assert again["F0"]["zoneSetId"] != sets["F0"]["zoneSetId"]  # closures change the id
