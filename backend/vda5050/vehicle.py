@@ -152,6 +152,8 @@ class VdaRobot:
         self.floor: str | None = self.nodes[self.node].floor if self.node in self.nodes else None
         self.state: dict[str, Any] | None = None
         self.online = False
+        self.hibernating = False
+        """3.0.0: the vehicle says HIBERNATING (connected, silent, not moving)."""
         self.task_id: str | None = None
         self.runner: asyncio.Task[None] | None = None
         self.cancelling: str | None = None
@@ -172,6 +174,9 @@ class VdaRobot:
         self.route: dict[int, str] = {}
         """The current order's nodes ahead by sequence id (``_reached``)."""
         self.route_seq = 0
+        self.placed: str | None = None
+        """The node an ``initPosition`` put the vehicle on (after a ride), until a state of
+        the vehicle names it: a state sent before it, read after, names the cabin left."""
         self.cabins: dict[str, tuple[str, bool]] = {}
         """Elevator -> (floor, door open), from the building's elevator_in_position."""
         self.recall_s = RECALL_S
@@ -252,7 +257,18 @@ class VdaRobot:
         state = message["connectionState"]
         was = self.online
         self.online = state == "ONLINE"
-        if self.online and not was:
+        sleeping = state == "HIBERNATING"
+        if sleeping != self.hibernating:
+            self.hibernating = sleeping
+            log.info("%s: %s", self.name, "hibernating" if sleeping else "no longer hibernating")
+        if sleeping:
+            # Connected, silent, its order cleared (6.2.3): offline to the fleet (never
+            # dispatched, its task back in the queue after the grace period) after a clean
+            # goodbye (no robot_lost alert), its navigation "hibernating" in the console.
+            self._publish_state()
+            if was:
+                self.announce.publish("robot_disconnected", RobotLink(robot=self.name))
+        elif self.online and not was:
             self._zones_sent.clear()
             self.announce.publish("robot_connected", RobotLink(robot=self.name))
             self._spawn(self.instant("stateRequest", "factsheetRequest"))
@@ -305,6 +321,8 @@ class VdaRobot:
         )
 
     def on_state(self, message: dict[str, Any]) -> None:
+        if self.hibernating:  # sent before it fell asleep: it speaks again after ONLINE
+            return
         if not self.online:
             self.on_connection({"connectionState": "ONLINE"})
         self._speak(str(message["version"]))
@@ -473,8 +491,14 @@ class VdaRobot:
             passed = [n for s, n in sorted(self.route.items()) if self.route_seq < s <= seq]
             if passed:
                 self.route_seq = seq
+            if message["lastNodeId"] == self.placed or passed:
+                self.placed = None
             return passed
         last = str(message["lastNodeId"])
+        if self.placed is not None:  # put on another floor: only its word on that node counts
+            if last != self.placed:
+                return []
+            self.placed = None
         return [last] if last in self.nodes else []
 
     def _battery(self, level: float) -> None:
@@ -547,11 +571,19 @@ class VdaRobot:
     def _navigation(self, state: Mapping[str, Any]) -> str:
         """``paused`` while the vehicle says it is (staff's pause, or its own pause button),
         else moving, else what it waits for."""
+        if self.hibernating:
+            return "hibernating"
         if state.get("paused"):
             return "paused"
         if state.get("driving"):
             return "moving"
         return self.waiting or "idle"
+
+    async def hibernate(self, asleep: bool) -> None:
+        """Staff send the vehicle to sleep (``startHibernation``: it clears its order, says
+        HIBERNATING and stops reporting) or wake it (``stopHibernation``: ONLINE again)."""
+        log.info("%s: %s", self.name, "sent to hibernate" if asleep else "woken up by staff")
+        await self.instant("startHibernation" if asleep else "stopHibernation")
 
     async def pause(self, paused: bool) -> None:
         """Staff pause the vehicle where it stands (``startPause``) or let it go on
@@ -649,6 +681,7 @@ class VdaRobot:
         self._release_all()
         self.order_id = None
         self.route = {}
+        self.placed = None
         self.waiting = None
         self.task_id = self.runner = self.cancelling = None
         self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
@@ -926,6 +959,7 @@ class VdaRobot:
         self.node, self.floor = str(exit_["node"]), floor
         self.ep.publish(NodeReached(robot=self.name, node=self.node, floor=floor))
         map_id = self.map_ids.get(floor, floor)
+        self.placed = self.node
         await self.instant("initPosition", parameters=init_position(exit_, map_id))
 
     async def _leg(

@@ -271,3 +271,31 @@ def test_the_museums_zones_follow_the_3_0_0_schema() -> None:
     assert {z["zoneType"] for s in only.values() for z in s["zones"]} == {"RELEASE"}
     again = zone_sets(site, {"F0": "ground"})
     assert again["F0"]["zoneSetId"] != sets["F0"]["zoneSetId"]  # closures change the id
+
+
+async def test_a_stale_state_of_the_leg_before_a_ride_reports_no_node_again() -> None:
+    """After a ride the master put V1 on the upstairs cabin node (initPosition) and started
+    the next leg's order; a state of the leg before (sent before the initPosition, read after
+    it) names the cabin below: no node_reached for it. A state naming the node it was put on
+    ends the wait; a later one on another node counts again."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.node, robot.placed = "e", "e"  # where the ride put it
+    robot.order_id, robot.route = "o2", {2: "d"}  # the next leg's order
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    stale = sim.state() | {"orderId": "o1", "lastNodeId": "c", "lastNodeSequenceId": 4}
+    robot.on_state(stale)
+    assert [m.payload["node"] for m in seen if m.type == "node_reached"] == []
+    robot.order_id, robot.route = None, {}
+    robot.on_state(stale | {"lastNodeId": "e", "lastNodeSequenceId": 0})
+    robot.on_state(stale | {"lastNodeId": "d", "lastNodeSequenceId": 0})
+    assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["d"]
+    await robot.close()
