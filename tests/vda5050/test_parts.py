@@ -299,3 +299,54 @@ async def test_a_stale_state_of_the_leg_before_a_ride_reports_no_node_again() ->
     robot.on_state(stale | {"lastNodeId": "d", "lastNodeSequenceId": 0})
     assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["d"]
     await robot.close()
+
+
+async def test_the_fire_alarm_revokes_a_granted_zone_and_rejects_a_new_request() -> None:
+    """The Traffic Manager's gate (the fire alarm holds the corridor, not on V1's way to
+    safety) takes back the grant of a 3.0.0 vehicle inside it (REVOKED) and refuses a new
+    request (REJECTED), each answer valid for the 3.0.0 responses schema."""
+    site = validate_site(site_dict({"vda_version": "3.0.0"}))
+    bus = Bus()
+    sent: list[tuple[str, dict[str, Any]]] = []
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        sent.append((topic, message))
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    alarm: dict[str, str] = {}
+    robot = VdaRobot(
+        config,
+        site,
+        bus.endpoint("V1"),
+        bus.endpoint("vda5050"),
+        send,
+        gate=lambda who, area: alarm.get(area),
+    )
+    zid = robot.zone_sets["F0"]["zoneSetId"]
+    v3 = Vehicle("Acme", "sn-0001", version="3.0.0")
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), v3, map_id="ground", node="c")
+
+    def asking(rid: str, status: str) -> dict[str, Any]:
+        request = {"requestId": rid, "requestType": "ACCESS", "zoneId": "corridor"}
+        return request | {"zoneSetId": zid, "requestStatus": status}
+
+    def answers() -> list[tuple[str, str]]:
+        return [
+            (r["requestId"], r["grantType"])
+            for topic, m in sent
+            if topic == "responses"
+            for r in m["responses"]
+        ]
+
+    robot.granted.add("corridor")
+    robot.on_state(sim.state() | {"zoneRequests": [asking("r1", "GRANTED")]})
+    alarm["corridor"] = "fire alarm: area corridor is closed to robots not on their way out"
+    robot.on_state(sim.state() | {"zoneRequests": [asking("r1", "GRANTED")]})
+    robot.on_state(sim.state() | {"zoneRequests": [asking("r2", "REQUESTED")]})
+    await wait_until(lambda: len(answers()) == 2, 5)
+    assert answers() == [("r1", "REVOKED"), ("r2", "REJECTED")]
+    for topic, message in sent:
+        if topic == "responses":
+            check("responses", message, "3.0.0")
+    await robot.close()
