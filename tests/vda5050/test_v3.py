@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from guidebot.processes import spawn_guidebot
 from guidebot.testing import wait_on, wait_until
 from guidebot.vda5050.schemas import problems
 from guidebot.vda5050.sim import SimVehicle
@@ -127,3 +128,27 @@ async def test_a_hibernating_vehicle_is_shown_not_dispatched_and_not_alerted(
         assert not sim.errors
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
         assert kinds.count("startHibernation") == 1 and kinds.count("stopHibernation") == 1
+
+
+async def test_the_simulator_process_speaks_its_site_entrys_3_0_0(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """`guidebot vda5050-sim --site --robot V1` (the command the demo runs) speaks the version
+    V1's site entry says: 3.0.0 topics, state and factsheet; a go-to through the corridor."""
+    async with fleet(tmp_path, broker.url, v1={"vda_version": "3.0.0"}) as f:
+        args = ["vda5050-sim", "--broker", broker.url, "--site", str(tmp_path / "site.yaml")]
+        args += ["--robot", "V1", "--time-scale", str(TIME_SCALE), "--state-period", "0.2"]
+        process = spawn_guidebot(args)
+        try:
+            await wait_until(lambda: f.robot("V1").online, 30)
+            robot = next(iter(f.master.robots.values()))
+            await wait_until(lambda: robot.factsheet is not None, 15)
+            assert robot.factsheet["version"] == "3.0.0" and robot.state["version"] == "3.0.0"
+            assert "mobileRobotPosition" in robot.state
+            task = await f.task("go_to", {"node": "e"})
+            result = await done(f, task)
+            assert result["state"] == "done", result
+            assert f.master.refused == 0
+        finally:
+            process.terminate()
+            process.wait(10)
