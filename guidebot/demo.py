@@ -321,6 +321,13 @@ def url_block(
     show_default=True,
     help="Simulated VDA 5050 vehicles (V1, ...) on a private Mosquitto (docs/vda5050.md).",
 )
+@click.option(
+    "--vda-version",
+    type=click.Choice(["2.1.0", "3.0.0"]),
+    default="2.1.0",
+    show_default=True,
+    help="The VDA 5050 version the simulated vehicles speak (3.0.0: zones, hibernation).",
+)
 @click.option("--time-scale", type=click.FloatRange(min=0.01), default=1.0, show_default=True)
 @click.option(
     "--site",
@@ -392,6 +399,7 @@ def url_block(
 def demo(
     robots: int,
     vda_robots: int,
+    vda_version: str,
     time_scale: float,
     site: Path,
     port: int,
@@ -467,7 +475,7 @@ def demo(
             broker, mqtt_url = start_broker(mosquitto, folder)
             fleet.children.append(Child("mosquitto", [], broker, time.monotonic()))
             taken = {r.start_node or "" for r in known[:robots]}
-            vda = add_vda_robots(served, vda_robots, taken)
+            vda = add_vda_robots(served, vda_robots, taken, vda_version)
         fleet.env = _server_env(panel_token, operator_token, control)
         # The robots connect to the hub's own listener (any free port; /api/health names it).
         server_args = ["--port", str(port), "--hub-ws-port", "0", "--site", str(served)]

@@ -53,9 +53,9 @@ def start_broker(binary: str, folder: Path) -> tuple[subprocess.Popen[bytes], st
     raise RuntimeError(f"mosquitto did not listen on port {port} within 20 s")
 
 
-def add_vda_robots(served: Path, count: int, taken: set[str]) -> list[str]:
-    """Add ``count`` VDA 5050 robots to the site file ``served`` (in place), each on a start
-    node not in ``taken``; returns their names."""
+def add_vda_robots(served: Path, count: int, taken: set[str], version: str = "2.1.0") -> list[str]:
+    """Add ``count`` VDA 5050 robots speaking ``version`` to the site file ``served`` (in
+    place), each on a start node not in ``taken``; returns their names."""
     data: dict[str, Any] = yaml.safe_load(served.read_text(encoding="utf-8"))
     nodes = {n["id"] for n in data["nodes"]}
     free = [n for n in START_NODES if n in nodes and n not in taken] or [data["nodes"][0]["id"]]
@@ -70,6 +70,7 @@ def add_vda_robots(served: Path, count: int, taken: set[str]) -> list[str]:
                 "interface": "vda5050",
                 "manufacturer": "GuideBotSim",
                 "serial_number": f"{name}-0001",
+                "vda_version": version,
             }
         )
         names.append(name)

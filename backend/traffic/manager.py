@@ -482,7 +482,10 @@ class TrafficManager(Service):
         one kept at a task's end, and never while it may still run a task the server ended.
         A robot with no task stands still: out of an area is out. One on a task (``moving``)
         may be on the edge into an area next to it (whereabouts.py): that one goes only if
-        the robot does not claim it (robot_state ``areas``: it asks before entering)."""
+        the robot does not claim it (robot_state ``areas``: it asks before entering). One
+        kept at a task's end goes while the robot stands only if it no longer claims it (a
+        VDA 5050 vehicle cancelled on an edge stands there, its last node behind it: the
+        master control claims the area until the vehicle's position shows it out)."""
         running_ended = robot in self._ending
         kept = self._kept.get(robot, set())
         near: set[str] | None = None
@@ -497,6 +500,8 @@ class TrafficManager(Service):
                 near = self._may_be_in(robot) if near is None else near
                 if area in near and (claims is None or area in claims):
                     continue
+            elif area in kept and claims is not None and area in claims:
+                continue  # stopped on the edge into it (a VDA 5050 vehicle): its word lets go
             kept.discard(area)
             grants += self.locks.release(robot, area)
             self.courier.withdraw((robot, area))

@@ -74,6 +74,17 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
             return None
         return task.net or NETS[task.kind], params
 
+    def holder(area: str) -> str | None:
+        traffic = getattr(app.state, "traffic", None)
+        if traffic is None or area not in traffic.locks.areas:
+            return None
+        return traffic.locks.holder(area)  # type: ignore[no-any-return]
+
+    def gate(robot: str, area: str) -> str | None:
+        traffic = getattr(app.state, "traffic", None)
+        check = getattr(traffic, "gate", None)
+        return check(robot, area) if check is not None else None  # type: ignore[no-any-return]
+
     def make(site: Site) -> MasterControl:
         return MasterControl(
             site,
@@ -83,6 +94,8 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
             alert=alert,
             resolve=resolve,
             task_of=task_of,
+            holder=holder,
+            gate=gate,
         )
 
     masters = _Masters(app, make)

@@ -12,7 +12,7 @@ from typing import Any
 
 from prometheus_client.core import CounterMetricFamily, Metric
 
-from backend.vda5050.vehicle import Send, VdaRobot, vehicle_of
+from backend.vda5050.vehicle import Gate, Holder, Send, VdaRobot, vehicle_of
 from guidebot.bus import BusEndpoint
 from guidebot.service import Service
 from guidebot.site.graph import SiteGraph
@@ -48,9 +48,14 @@ class MasterControl(Service):
         alert: Alert | None = None,
         resolve: Resolve | None = None,
         task_of: TaskLookup | None = None,
+        holder: Holder | None = None,
+        gate: Gate | None = None,
     ) -> None:
         super().__init__()
         self.task_of = task_of
+        self.holder = holder
+        """The lock table's holder of an area: a zone grant it took back is REVOKED."""
+        self.gate = gate
         self.site = site
         self.broker = broker
         self.endpoint = endpoint
@@ -90,6 +95,8 @@ class MasterControl(Service):
                 self._sender(vehicle.topic),
                 task_of=self._task_lookup(config.name),
                 step_of=lambda node: self._graph.step(node).as_dict(),
+                holder=self.holder,
+                gate=self.gate,
             )
             self.robots[(vehicle.interface, vehicle.manufacturer, vehicle.serial_number)] = robot
             self.on_cleanup(ep.close)  # type: ignore[attr-defined]

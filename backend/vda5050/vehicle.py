@@ -22,7 +22,7 @@ from backend.vda5050.order import (
     node_seq,
     step_of_seq,
 )
-from backend.vda5050.zones import responses, zone_sets
+from backend.vda5050.zones import area_boxes, inside, responses, zone_sets
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
 from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
@@ -53,6 +53,10 @@ TaskOf = Callable[[str], tuple[str, dict[str, Any]] | None]
 what a new master control (a new leader, a restarted server) resumes a vehicle's order with."""
 StepOf = Callable[[str], dict[str, Any]]
 """A site node as a path step ({node, floor, x, y, door, elevator, area})."""
+Holder = Callable[[str], str | None]
+"""The robot the lock table gives an area to now (None: nobody)."""
+Gate = Callable[[str, str], str | None]
+"""(robot, area) -> why the robot may not have the area now (the fire alarm), or None."""
 
 ACK_TIMEOUT_S = 3.0
 """An order the vehicle's state does not name this long after it was sent is sent again."""
@@ -110,8 +114,12 @@ class VdaRobot:
         *,
         task_of: TaskOf | None = None,
         step_of: StepOf | None = None,
+        holder: Holder | None = None,
+        gate: Gate | None = None,
     ) -> None:
         self.name = config.name
+        self.holder = holder
+        self.gate = gate
         self.task_of = task_of
         self.step_of = step_of
         self.vehicle = vehicle_of(config)
@@ -119,12 +127,20 @@ class VdaRobot:
         self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
         self.nodes = {n.id: n for n in site.nodes}
         self.area_nodes = {a.id: frozenset(a.nodes) for a in site.areas}
+        self.boxes = area_boxes(site)
         self.site = site
         self.v3 = False
         self.zone_sets: dict[str, dict[str, Any]] = {}
         """3.x: the restricted areas as RELEASE zones, one zone set per floor."""
         self.zone_area: dict[tuple[str, str], str] = {}
-        self._speak(self.vehicle.version)
+        """(zoneSetId, zoneId) of a RELEASE zone, of every set given -> its area."""
+        self.closed: frozenset[str] = frozenset()
+        """The nodes closed to robots now (closures_changed): BLOCKED zones."""
+        self.supported_zones: frozenset[str] | None = None
+        """The zone types the vehicle's factsheet says it understands (None: not said)."""
+        self._confirmed: set[str] = set()
+        """Areas the lock table was seen to give this robot: one it then gives to another or
+        to nobody while we still count it ours was taken back (a staff release)."""
         self.zone_requests: dict[str, str] = {}
         """The vehicle's open ACCESS zone requests: requestId -> area."""
         self._answered: dict[str, str] = {}
@@ -136,6 +152,8 @@ class VdaRobot:
         self.floor: str | None = self.nodes[self.node].floor if self.node in self.nodes else None
         self.state: dict[str, Any] | None = None
         self.online = False
+        self.hibernating = False
+        """3.0.0: the vehicle says HIBERNATING (connected, silent, not moving)."""
         self.task_id: str | None = None
         self.runner: asyncio.Task[None] | None = None
         self.cancelling: str | None = None
@@ -145,12 +163,20 @@ class VdaRobot:
         self.order_id: str | None = None
         self.granted: set[str] = set()
         self.requested: set[str] = set()
+        self.kept: dict[str, str | None] = {}
+        """Areas kept at a task's end because the vehicle may be inside them (its last node's
+        and its next node's: a cancelOrder stops it "as soon as possible", on an edge too),
+        with the node it was last at then; released once a state shows it out
+        (``_release_kept``)."""
         self.doors: set[str] = set()
         """Doors asked for (open_door sent) and not released."""
         self.open_doors: set[str] = set()
         self.route: dict[int, str] = {}
         """The current order's nodes ahead by sequence id (``_reached``)."""
         self.route_seq = 0
+        self.placed: str | None = None
+        """The node an ``initPosition`` put the vehicle on (after a ride), until a state of
+        the vehicle names it: a state sent before it, read after, names the cabin left."""
         self.cabins: dict[str, tuple[str, bool]] = {}
         """Elevator -> (floor, door open), from the building's elevator_in_position."""
         self.recall_s = RECALL_S
@@ -172,6 +198,7 @@ class VdaRobot:
         self.seq = 0
         self._headers: dict[str, int] = {}
         self._orders = 0
+        self._speak(self.vehicle.version)
         self._unsubscribe = [
             endpoint.subscribe("task_assigned", self._on_task_assigned),
             endpoint.subscribe("task_cancel", self._on_task_cancel),
@@ -179,6 +206,7 @@ class VdaRobot:
             endpoint.subscribe("door_opened", self._on_door),
             endpoint.subscribe("door_closed", self._on_door),
             endpoint.subscribe("elevator_in_position", self._on_cabin),
+            endpoint.subscribe("closures_changed", self._on_closures),
         ]
 
     def use_site(self, site: Site, config: RobotConfig) -> None:
@@ -189,10 +217,10 @@ class VdaRobot:
         self.floor_of_map = {config.map_ids.get(f.id, f.id): f.id for f in site.floors}
         self.nodes = {n.id: n for n in site.nodes}
         self.area_nodes = {a.id: frozenset(a.nodes) for a in site.areas}
+        self.boxes = area_boxes(site)
         self.battery_low, self.battery_panic = config.battery_low, config.battery_panic
         if self.v3:  # new zones have new ids: given to the vehicle with its next state
-            self.zone_sets = {}
-            self._speak(self.vehicle.version)
+            self._refresh_zones()
 
     async def close(self) -> None:
         self.closing = True
@@ -229,7 +257,18 @@ class VdaRobot:
         state = message["connectionState"]
         was = self.online
         self.online = state == "ONLINE"
-        if self.online and not was:
+        sleeping = state == "HIBERNATING"
+        if sleeping != self.hibernating:
+            self.hibernating = sleeping
+            log.info("%s: %s", self.name, "hibernating" if sleeping else "no longer hibernating")
+        if sleeping:
+            # Connected, silent, its order cleared (6.2.3): offline to the fleet (never
+            # dispatched, its task back in the queue after the grace period) after a clean
+            # goodbye (no robot_lost alert), its navigation "hibernating" in the console.
+            self._publish_state()
+            if was:
+                self.announce.publish("robot_disconnected", RobotLink(robot=self.name))
+        elif self.online and not was:
             self._zones_sent.clear()
             self.announce.publish("robot_connected", RobotLink(robot=self.name))
             self._spawn(self.instant("stateRequest", "factsheetRequest"))
@@ -259,12 +298,7 @@ class VdaRobot:
             self.vehicle = replace(self.vehicle, version=wanted)
         self.v3 = wanted.startswith("3.")
         if self.v3 and not self.zone_sets:
-            self.zone_sets = zone_sets(self.site, self.map_ids)
-            self.zone_area = {
-                (zs["zoneSetId"], z["zoneId"]): str(z["zoneId"])
-                for zs in self.zone_sets.values()
-                for z in zs["zones"]
-            }
+            self._refresh_zones()
 
     def on_factsheet(self, message: dict[str, Any]) -> None:
         """What the vehicle can do: whether a tour stop is a ``speak`` or a timed ``wait``."""
@@ -275,6 +309,10 @@ class VdaRobot:
         self.speaks = any(
             a["actionType"] == "speak" and "NODE" in a["actionScopes"] for a in actions
         )
+        supported = message["typeSpecification"].get("supportedZones")
+        if supported is not None and self.v3:
+            self.supported_zones = frozenset(supported)
+            self._refresh_zones()
         log.info(
             "%s: factsheet of %s: tour stops by %s",
             self.name,
@@ -283,6 +321,8 @@ class VdaRobot:
         )
 
     def on_state(self, message: dict[str, Any]) -> None:
+        if self.hibernating:  # sent before it fell asleep: it speaks again after ONLINE
+            return
         if not self.online:
             self.on_connection({"connectionState": "ONLINE"})
         self._speak(str(message["version"]))
@@ -300,6 +340,9 @@ class VdaRobot:
             self.node = node
             self.floor = self.nodes[node].floor
             self.ep.publish(NodeReached(robot=self.name, node=node, floor=self.floor, at=at))
+            if self.closed and self.v3:  # its own place is never BLOCKED to it
+                self._refresh_zones()
+        self._release_kept(message)
         self._report_errors(message["errors"])
         self._battery(_battery(message)[0] / 100)
         if self.v3:
@@ -308,6 +351,64 @@ class VdaRobot:
         self.changed.set()
 
     # -- 3.0.0 zones -----------------------------------------------------------------------
+    def _refresh_zones(self) -> None:
+        """The zone sets for the site, its closures and the vehicle's supported zone types.
+        The closed nodes where the vehicle is (its node, its area) are left out of BLOCKED:
+        a vehicle inside a BLOCKED zone must stop with a CRITICAL error, and it has to get
+        out; the zones are made again as it moves."""
+        here = {self.node} if self.node else set()
+        for members in self.area_nodes.values():
+            if self.node in members:
+                here |= members
+        before = {f: zs["zoneSetId"] for f, zs in self.zone_sets.items()}
+        self.zone_sets = zone_sets(
+            self.site, self.map_ids, closed=self.closed - here, supported=self.supported_zones
+        )
+        for floor, zs in self.zone_sets.items():
+            if before.get(floor) != zs["zoneSetId"]:  # enabled again if it was given before
+                self._zones_sent.discard(zs["zoneSetId"])
+        self.zone_area.update(
+            {
+                (zs["zoneSetId"], z["zoneId"]): str(z["zoneId"])
+                for zs in self.zone_sets.values()
+                for z in zs["zones"]
+                if z["zoneType"] == "RELEASE"
+            }
+        )
+
+    def _on_closures(self, msg: Message) -> None:
+        """Closed nodes changed: new zone sets (BLOCKED) given at once, and granted zone
+        requests for a closed area revoked."""
+        nodes = msg.payload.get("nodes") or []
+        closed = frozenset(n for n in nodes if isinstance(n, str))
+        if closed == self.closed:
+            return
+        self.closed = closed
+        if self.v3:
+            self._refresh_zones()
+            if self.online and self.state is not None:
+                self._zones(self.state)
+
+    def _zone_refusal(self, area: str) -> str | None:
+        """Why the vehicle may not be in ``area`` now: closed, the fire alarm's, or taken
+        back from it by the lock table (a staff release); None: it may."""
+        if self.closed & self.area_nodes.get(area, frozenset()):
+            return f"area {area} is closed to robots"
+        refusal = self.gate(self.name, area) if self.gate is not None else None
+        if refusal:
+            return refusal
+        if self.holder is None or area not in self.granted:
+            return None
+        holder = self.holder(area)
+        if holder == self.name:
+            self._confirmed.add(area)
+        elif area in self._confirmed:
+            self._confirmed.discard(area)
+            self.granted.discard(area)
+            self.requested.discard(area)
+            return f"the lock table gave area {area} to {holder or 'nobody'} (released by staff)"
+        return None
+
     def _zones(self, state: dict[str, Any]) -> None:
         """Give the vehicle the site's zone sets (``zoneSet``, then ``enableZoneSet``) unless
         it reports them enabled, and answer its zone requests through the lock table."""
@@ -339,15 +440,26 @@ class VdaRobot:
                 self._answer(rid, "REJECTED")
                 continue
             now[rid] = area
+            refusal = self._zone_refusal(area)
+            if request["requestStatus"] == "GRANTED" and refusal is not None:
+                if self._answered.get(rid) != "REVOKED":
+                    log.warning("%s: zone request %s revoked: %s", self.name, rid, refusal)
+                self._answer(rid, "REVOKED")
+                continue
             if request["requestStatus"] != "REQUESTED":
                 continue  # GRANTED: inside; REVOKED, EXPIRED: its own business
+            if refusal is not None and self._answered.get(rid) != "GRANTED":
+                self._answer(rid, "REJECTED")
+                continue
             if area in self.granted:
                 self._answer(rid, "GRANTED")
                 continue
+            self.zone_requests[rid] = area  # a grant may come inside the publish below
             if area not in self.requested:
                 self.requested.add(area)
                 self.ep.publish(RequestArea(robot=self.name, area=area))
-            self._answer(rid, "QUEUED")
+            if self._answered.get(rid) != "GRANTED":
+                self._answer(rid, "GRANTED" if area in self.granted else "QUEUED")
         for rid, area in self.zone_requests.items():
             if rid in now or area in now.values() or self.task_id is not None:
                 continue
@@ -379,8 +491,14 @@ class VdaRobot:
             passed = [n for s, n in sorted(self.route.items()) if self.route_seq < s <= seq]
             if passed:
                 self.route_seq = seq
+            if message["lastNodeId"] == self.placed or passed:
+                self.placed = None
             return passed
         last = str(message["lastNodeId"])
+        if self.placed is not None:  # put on another floor: only its word on that node counts
+            if last != self.placed:
+                return []
+            self.placed = None
         return [last] if last in self.nodes else []
 
     def _battery(self, level: float) -> None:
@@ -453,11 +571,19 @@ class VdaRobot:
     def _navigation(self, state: Mapping[str, Any]) -> str:
         """``paused`` while the vehicle says it is (staff's pause, or its own pause button),
         else moving, else what it waits for."""
+        if self.hibernating:
+            return "hibernating"
         if state.get("paused"):
             return "paused"
         if state.get("driving"):
             return "moving"
         return self.waiting or "idle"
+
+    async def hibernate(self, asleep: bool) -> None:
+        """Staff send the vehicle to sleep (``startHibernation``: it clears its order, says
+        HIBERNATING and stops reporting) or wake it (``stopHibernation``: ONLINE again)."""
+        log.info("%s: %s", self.name, "sent to hibernate" if asleep else "woken up by staff")
+        await self.instant("startHibernation" if asleep else "stopHibernation")
 
     async def pause(self, paused: bool) -> None:
         """Staff pause the vehicle where it stands (``startPause``) or let it go on
@@ -555,6 +681,7 @@ class VdaRobot:
         self._release_all()
         self.order_id = None
         self.route = {}
+        self.placed = None
         self.waiting = None
         self.task_id = self.runner = self.cancelling = None
         self.ended.appendleft(EndedTask(task_id=task_id, outcome=outcome, reason=reason))  # type: ignore[arg-type]
@@ -832,6 +959,7 @@ class VdaRobot:
         self.node, self.floor = str(exit_["node"]), floor
         self.ep.publish(NodeReached(robot=self.name, node=self.node, floor=floor))
         map_id = self.map_ids.get(floor, floor)
+        self.placed = self.node
         await self.instant("initPosition", parameters=init_position(exit_, map_id))
 
     async def _leg(
@@ -983,18 +1111,70 @@ class VdaRobot:
                 self._release_area(area)
 
     def _release_area(self, area: str) -> None:
+        self.kept.pop(area, None)
+        self._confirmed.discard(area)
         self.granted.discard(area)
         self.requested.discard(area)
         self.ep.publish(ReleaseArea(robot=self.name, area=area))
 
     def _release_all(self) -> None:
-        """At a task's end: every door, every area but the one the vehicle stands in."""
+        """At a task's end: every door, every area but those the vehicle may be inside (its
+        last node's and its next node's: cancelled on the edge, it may stand in the next
+        area, or drive on into it until it stops), kept until a state shows it out of them
+        (issue 36's rule for GuideBot robots: backend/traffic/whereabouts.py)."""
         for door in sorted(self.doors):
             self.ep.publish(ReleaseDoor(door=door))
         self.doors.clear()
+        near = self._may_be_in()
         for area in sorted(self.granted | self.requested):
-            if not self._stands_in(area, self.node):
+            if area in near:
+                self.kept[area] = self.node
+            else:
                 self._release_area(area)
+
+    def _may_be_in(self) -> set[str]:
+        """The areas the vehicle may be inside: its last node's and, on an order, the next
+        node's of its route."""
+        nodes = [self.node]
+        ahead = [s for s in self.route if s > self.route_seq]
+        if ahead:
+            nodes.append(self.route[min(ahead)])
+        return {a for a, members in self.area_nodes.items() if any(n in members for n in nodes)}
+
+    def _release_kept(self, state: Mapping[str, Any]) -> None:
+        """Areas kept at a task's end: one on the route of the task now running is its own
+        again; one the vehicle is seen out of goes (``_out_of``)."""
+        on_route = {
+            a
+            for a, members in self.area_nodes.items()
+            if self.task_id is not None and any(n in members for n in self.route.values())
+        }
+        for area, then in sorted(self.kept.items()):
+            if area in on_route:
+                del self.kept[area]
+            elif self._out_of(area, then, state):
+                del self.kept[area]
+                if area in self.granted | self.requested:
+                    log.info(
+                        "%s: out of area %s (kept at its task's end): released", self.name, area
+                    )
+                    self._release_area(area)
+
+    def _out_of(self, area: str, then: str | None, state: Mapping[str, Any]) -> bool:
+        """Whether ``state`` shows the vehicle out of ``area``: its last node not in it and
+        its position outside the area's extent (``area_boxes``), while it stands, or drives
+        an order of ours that does not go there. Without a position: once it has reached
+        another node outside the area."""
+        if self._stands_in(area, self.node):
+            return False
+        position = _position(state)
+        if position is None:
+            return self.node != then
+        if state.get("driving") and self.task_id is None:
+            return False  # still stopping after a cancel: it may drive on into the area
+        floor = self.floor_of_map.get(str(position["mapId"]))
+        box = self.boxes.get((area, floor)) if floor is not None else None
+        return box is None or not inside(box, float(position["x"]), float(position["y"]))
 
     def _stands_in(self, area: str, node: str | None) -> bool:
         return node is not None and node in self.area_nodes.get(area, ())
@@ -1009,8 +1189,12 @@ class VdaRobot:
         if area in self.requested:
             self.granted.add(area)
         for rid, asked in self.zone_requests.items():
-            if asked == area:
-                self._answer(rid, "REJECTED" if p.get("removed") else "GRANTED")
+            if asked != area:
+                continue
+            if not p.get("removed"):
+                self._answer(rid, "GRANTED")
+            else:  # the area is gone from the site: a grant is taken back, a wait refused
+                self._answer(rid, "REVOKED" if self._answered.get(rid) == "GRANTED" else "REJECTED")
         self.changed.set()
 
     def _on_cabin(self, msg: Message) -> None:

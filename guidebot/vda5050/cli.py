@@ -25,6 +25,12 @@ __all__ = ["vda5050_sim"]
 @click.option("--manufacturer", default=None, help="Without --site: the manufacturer.")
 @click.option("--serial-number", default=None, help="Without --site: the serial number.")
 @click.option("--interface", default="uagv", show_default=True, help="The topics' first level.")
+@click.option(
+    "--vda-version",
+    type=click.Choice(["2.1.0", "3.0.0"]),
+    default=None,
+    help="The version it speaks (default: its site entry's, else 2.1.0).",
+)
 @click.option("--x", type=float, default=0.0, help="Without --site: start x (m).")
 @click.option("--y", type=float, default=0.0, help="Without --site: start y (m).")
 @click.option("--map-id", default="map", help="Without --site: the start map.")
@@ -39,6 +45,7 @@ def vda5050_sim(
     manufacturer: str | None,
     serial_number: str | None,
     interface: str,
+    vda_version: str | None,
     x: float,
     y: float,
     map_id: str,
@@ -47,7 +54,8 @@ def vda5050_sim(
     time_scale: float,
     state_period: float,
 ) -> None:
-    """A simulated VDA 5050 2.1.0 vehicle: follows orders, reports state (docs/vda5050.md)."""
+    """A simulated VDA 5050 vehicle (2.1.0 or 3.0.0): follows orders, reports state
+    (docs/vda5050.md)."""
     from guidebot.vda5050.sim import SimVehicle
     from guidebot.vda5050.topics import Vehicle, parse_broker
 
@@ -64,13 +72,16 @@ def vda5050_sim(
             raise click.UsageError(f"{site}: no VDA 5050 robot named {robot!r} (--robot)")
         assert entry.manufacturer is not None and entry.serial_number is not None
         vehicle = Vehicle(
-            entry.manufacturer, entry.serial_number, entry.mqtt_interface, entry.vda_version
+            entry.manufacturer,
+            entry.serial_number,
+            entry.mqtt_interface,
+            vda_version or entry.vda_version,
         )
         start = next((n for n in loaded.nodes if n.id == entry.start_node), loaded.nodes[0])
         x, y, node = start.x, start.y, start.id
         map_id = entry.map_ids.get(start.floor, start.floor)
     elif manufacturer and serial_number:
-        vehicle = Vehicle(manufacturer, serial_number, interface)
+        vehicle = Vehicle(manufacturer, serial_number, interface, vda_version or "2.1.0")
     else:
         raise click.UsageError("give --site and --robot, or --manufacturer and --serial-number")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")

@@ -40,6 +40,7 @@ def vda_robot(name: str, vehicle: Vehicle, start_node: str) -> dict[str, Any]:
         "manufacturer": vehicle.manufacturer,
         "serial_number": vehicle.serial_number,
         "map_ids": MAPS,
+        "vda_version": vehicle.version,
     }
 
 

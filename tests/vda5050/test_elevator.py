@@ -29,11 +29,16 @@ def broker() -> Iterator[Mosquitto]:
         yield b
 
 
+@pytest.mark.parametrize("version", ["2.1.0", "3.0.0"])
 async def test_a_vda_robot_rides_the_elevator_and_goes_through_the_door_upstairs(
-    tmp_path: Path, broker: Mosquitto
+    tmp_path: Path, broker: Mosquitto, version: str
 ) -> None:
-    async with museum(tmp_path, broker.url, [vda_robot("V1", V1, "charge_a")]) as m:
-        async with m.vehicle(V1, "charge_a") as sim:
+    """3.0.0: the same ride with the museum's zone sets on both floors (the elevator area a
+    RELEASE zone on each, its stops LINE_GUIDED, the doors LINE_GUIDED, the steps a
+    SPEED_LIMIT): the vehicle asks for each RELEASE zone before it drives in."""
+    rider = Vehicle(V1.manufacturer, V1.serial_number, version=version)
+    async with museum(tmp_path, broker.url, [vda_robot("V1", rider, "charge_a")]) as m:
+        async with m.vehicle(rider, "charge_a") as sim:
             tm = m.server.app.state.task_manager
             await wait_until(lambda: tm.robots["V1"].online, 15)
             # the cabin waits upstairs: the vehicle must wait for it at the landing
@@ -77,6 +82,12 @@ async def test_a_vda_robot_rides_the_elevator_and_goes_through_the_door_upstairs
     assert {c["floor"] for c in calls} == {"F0", "F1"}
     releases = [msg.payload["area"] for msg in m.of("release_area") if msg.source == "V1"]
     assert releases == ["elevator"]
+    assert not sim.errors
+    if version == "3.0.0":
+        assert set(sim.enabled) == {"ground", "first"}
+        asked = [r["grantType"] for msg in sim.responses_received for r in msg["responses"]]
+        assert "GRANTED" in asked and "REJECTED" not in asked, asked
+        assert not sim.zone_requests
 
 
 async def test_a_vda_robot_and_a_guidebot_robot_share_corridor_doors_and_elevator(

@@ -4,15 +4,18 @@ vendored schemas."""
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from backend.vda5050.order import build_order, instant_actions
 from backend.vda5050.vehicle import VdaRobot
+from backend.vda5050.zones import STEPS_SPEED_MPS, zone_sets
 from guidebot.bus import Bus
 from guidebot.messages import Message
 from guidebot.site.validate import SiteInvalid, validate_site
+from guidebot.site.yamlio import load_site_file
 from guidebot.testing import wait_until
 from guidebot.vda5050.schemas import SCHEMA_DIR, SchemaViolation, check, problems
 from guidebot.vda5050.sim import SimVehicle
@@ -231,4 +234,119 @@ async def test_a_stale_state_on_the_current_order_reports_no_node_again() -> Non
     robot.on_state(state)  # the late one
     assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["b"]
     assert robot.node == "e"
+    await robot.close()
+
+
+def test_the_museums_zones_follow_the_3_0_0_schema() -> None:
+    """The demo museum as 3.0.0 zone sets, one per floor: its restricted areas RELEASE (a
+    vehicle that loses one stops), its doors and lift stops LINE_GUIDED, an edge with steps a
+    SPEED_LIMIT, closed nodes BLOCKED (a closed area's whole extent); only the types a
+    factsheet lists when it lists them. Each as a zoneSet message its schema accepts."""
+    site = load_site_file(Path(__file__).resolve().parents[2] / "sites" / "demo_museum.yaml")
+    data = site.model_dump(mode="json")
+    data["edges"][0]["steps"] = True
+    site = validate_site(data)
+    area = site.areas[0]
+    loose = next(n.id for n in site.nodes if all(n.id not in a.nodes for a in site.areas))
+    sets = zone_sets(site, {"F0": "ground"}, closed=[area.nodes[0], loose])
+    v3 = Vehicle("Acme", "sn-1", version="3.0.0")
+    zones = {}
+    for n, zone_set in enumerate(sets.values()):
+        check("zoneSet", {**v3.header(n), "zoneSet": zone_set}, "3.0.0")
+        zones |= {z["zoneId"]: z for z in zone_set["zones"]}
+    assert sets["F0"]["mapId"] == "ground"
+    assert {z["zoneType"] for z in zones.values()} == {
+        "RELEASE",
+        "BLOCKED",
+        "SPEED_LIMIT",
+        "LINE_GUIDED",
+    }
+    assert zones[area.id]["releaseLossBehavior"] == "STOP"
+    assert zones[f"closed:{area.id}"]["vertices"] == zones[area.id]["vertices"]
+    assert zones[f"closed:{loose}"]["zoneType"] == "BLOCKED"
+    edge = site.edges[0]
+    assert zones[f"steps:{edge.a}:{edge.b}"]["maximumSpeed"] == STEPS_SPEED_MPS
+    assert all(f"door:{d.id}" in zones for d in site.doors)
+    only = zone_sets(site, {}, closed=[loose], supported=["RELEASE"])
+    assert {z["zoneType"] for s in only.values() for z in s["zones"]} == {"RELEASE"}
+    again = zone_sets(site, {"F0": "ground"})
+    assert again["F0"]["zoneSetId"] != sets["F0"]["zoneSetId"]  # closures change the id
+
+
+async def test_a_stale_state_of_the_leg_before_a_ride_reports_no_node_again() -> None:
+    """After a ride the master put V1 on the upstairs cabin node (initPosition) and started
+    the next leg's order; a state of the leg before (sent before the initPosition, read after
+    it) names the cabin below: no node_reached for it. A state naming the node it was put on
+    ends the wait; a later one on another node counts again."""
+    site = validate_site(site_dict())
+    bus = Bus()
+    seen: list[Message] = []
+    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot.node, robot.placed = "e", "e"  # where the ride put it
+    robot.order_id, robot.route = "o2", {2: "d"}  # the next leg's order
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    stale = sim.state() | {"orderId": "o1", "lastNodeId": "c", "lastNodeSequenceId": 4}
+    robot.on_state(stale)
+    assert [m.payload["node"] for m in seen if m.type == "node_reached"] == []
+    robot.order_id, robot.route = None, {}
+    robot.on_state(stale | {"lastNodeId": "e", "lastNodeSequenceId": 0})
+    robot.on_state(stale | {"lastNodeId": "d", "lastNodeSequenceId": 0})
+    assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["d"]
+    await robot.close()
+
+
+async def test_the_fire_alarm_revokes_a_granted_zone_and_rejects_a_new_request() -> None:
+    """The Traffic Manager's gate (the fire alarm holds the corridor, not on V1's way to
+    safety) takes back the grant of a 3.0.0 vehicle inside it (REVOKED) and refuses a new
+    request (REJECTED), each answer valid for the 3.0.0 responses schema."""
+    site = validate_site(site_dict({"vda_version": "3.0.0"}))
+    bus = Bus()
+    sent: list[tuple[str, dict[str, Any]]] = []
+
+    async def send(topic: str, message: dict[str, Any]) -> bool:
+        sent.append((topic, message))
+        return True
+
+    config = next(r for r in site.robots if r.name == "V1")
+    alarm: dict[str, str] = {}
+    robot = VdaRobot(
+        config,
+        site,
+        bus.endpoint("V1"),
+        bus.endpoint("vda5050"),
+        send,
+        gate=lambda who, area: alarm.get(area),
+    )
+    zid = robot.zone_sets["F0"]["zoneSetId"]
+    v3 = Vehicle("Acme", "sn-0001", version="3.0.0")
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), v3, map_id="ground", node="c")
+
+    def asking(rid: str, status: str) -> dict[str, Any]:
+        request = {"requestId": rid, "requestType": "ACCESS", "zoneId": "corridor"}
+        return request | {"zoneSetId": zid, "requestStatus": status}
+
+    def answers() -> list[tuple[str, str]]:
+        return [
+            (r["requestId"], r["grantType"])
+            for topic, m in sent
+            if topic == "responses"
+            for r in m["responses"]
+        ]
+
+    robot.granted.add("corridor")
+    robot.on_state(sim.state() | {"zoneRequests": [asking("r1", "GRANTED")]})
+    alarm["corridor"] = "fire alarm: area corridor is closed to robots not on their way out"
+    robot.on_state(sim.state() | {"zoneRequests": [asking("r1", "GRANTED")]})
+    robot.on_state(sim.state() | {"zoneRequests": [asking("r2", "REQUESTED")]})
+    await wait_until(lambda: len(answers()) == 2, 5)
+    assert answers() == [("r1", "REVOKED"), ("r2", "REJECTED")]
+    for topic, message in sent:
+        if topic == "responses":
+            check("responses", message, "3.0.0")
     await robot.close()

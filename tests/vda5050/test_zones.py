@@ -188,3 +188,98 @@ async def robot_state(f: Fleet) -> dict[str, Any]:
 
     await wait_on(f.changed, seen, 15)
     return next(m.payload for m in reversed(f.of("robot_state")) if m.payload["robot"] == "V1")
+
+
+async def granted_inside(f: Fleet, v: Hand) -> tuple[str, list[dict[str, Any]]]:
+    """V1 (3.0.0) has the corridor's zone set enabled, asked for the corridor (r1), was
+    granted it, and reports itself inside (r1 GRANTED). Returns (zoneSetId, zoneSets)."""
+    await v.send("connection", {"connectionState": "ONLINE"})
+    await v.state()
+    await wait_on(v.changed, lambda: v.of("zoneSet"), 15)
+    zid = v.of("zoneSet")[-1]["zoneSet"]["zoneSetId"]
+    enabled_set = [{"zoneSetId": zid, "mapId": "ground", "zoneSetStatus": "ENABLED"}]
+    await v.state("b", zoneSets=enabled_set, zoneRequests=[request("r1", zid, "corridor")])
+    await wait_on(v.changed, lambda: "GRANTED" in v.answers("r1"), 15)
+    traffic = f.server.app.state.traffic
+    assert traffic.locks.holder("corridor") == "V1"
+    inside = [request("r1", zid, "corridor", "GRANTED")]
+    await v.state("c", zoneSets=enabled_set, zoneRequests=inside)
+    return zid, enabled_set
+
+
+async def test_a_grant_staff_take_back_is_revoked(tmp_path: Path, broker: Mosquitto) -> None:
+    """Staff release the corridor by hand while V1 is inside with its grant: the lock table
+    took it back, so the vehicle's request is answered REVOKED (and only once)."""
+    topics = Vehicle(V1.manufacturer, V1.serial_number, version="3.0.0")
+    async with (
+        fleet(tmp_path, broker.url, v1={"vda_version": "3.0.0"}) as f,
+        hand(broker, topics) as v,
+    ):
+        zid, enabled_set = await granted_inside(f, v)
+        answer = await f.http.post("/api/locks/corridor/release")
+        assert answer.status_code == 200, answer.text
+        assert answer.json()["released_from"] == "V1"
+        inside = [request("r1", zid, "corridor", "GRANTED")]
+        await v.state("c", zoneSets=enabled_set, zoneRequests=inside)
+        await wait_on(v.changed, lambda: v.answers("r1")[-1:] == ["REVOKED"], 15)
+        await v.state("c", zoneSets=enabled_set, zoneRequests=inside)  # not yet read
+        revoked = [request("r1", zid, "corridor", "REVOKED")]
+        await v.state("c", zoneSets=enabled_set, zoneRequests=revoked)
+        await robot_state(f)
+        assert v.answers("r1").count("REVOKED") == 1
+        assert f.server.app.state.traffic.locks.holder("corridor") is None
+
+
+async def test_a_closure_is_a_blocked_zone_and_revokes_the_grant(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """Staff close the corridor: V1 gets a new zone set with a BLOCKED zone over it (then
+    enableZoneSet), its granted request is REVOKED, a new request REJECTED; reopened, the
+    BLOCKED zone is gone again."""
+    topics = Vehicle(V1.manufacturer, V1.serial_number, version="3.0.0")
+    async with (
+        fleet(tmp_path, broker.url, v1={"vda_version": "3.0.0"}) as f,
+        hand(broker, topics) as v,
+    ):
+        zid, enabled_set = await granted_inside(f, v)
+        await v.state("b", zoneSets=enabled_set, zoneRequests=[])  # out again, at b
+        await wait_until(lambda: f.server.app.state.traffic.locks.holder("corridor") is None)
+        await v.state("b", zoneSets=enabled_set, zoneRequests=[request("r2", zid, "corridor")])
+        await wait_on(v.changed, lambda: "GRANTED" in v.answers("r2"), 15)
+        inside = [request("r2", zid, "corridor", "GRANTED")]
+        await v.state("b", zoneSets=enabled_set, zoneRequests=inside)
+        body = {"kind": "area", "target": "corridor", "reason": "a school group"}
+        answer = await f.http.post("/api/closures", json=body)
+        assert answer.status_code == 201, answer.text
+        await wait_on(v.changed, lambda: len(v.of("zoneSet")) == 2, 15)
+        blocked = v.of("zoneSet")[-1]["zoneSet"]
+        types = {z["zoneId"]: z["zoneType"] for z in blocked["zones"]}
+        assert types == {"corridor": "RELEASE", "closed:corridor": "BLOCKED"}
+        assert blocked["zoneSetId"] != zid
+        await wait_on(v.changed, lambda: blocked["zoneSetId"] in enabled_ids(v), 15)
+        both = [  # one zone set enabled per map: the new one
+            {**enabled_set[0], "zoneSetStatus": "DISABLED"},
+            {**enabled_set[0], "zoneSetId": blocked["zoneSetId"]},
+        ]
+        await v.state("b", zoneSets=both, zoneRequests=inside)
+        await wait_on(v.changed, lambda: v.answers("r2")[-1:] == ["REVOKED"], 15)
+        asking = [request("r3", blocked["zoneSetId"], "corridor")]
+        await v.state("b", zoneSets=both, zoneRequests=asking)
+        await wait_on(v.changed, lambda: v.answers("r3") == ["REJECTED"], 15)
+        await f.http.delete(f"/api/closures/{answer.json()['id']}")
+        # The set without the BLOCKED zone is the first one again: the vehicle has it (its
+        # state says so), so it is enabled again, not sent twice (DUPLICATE_ZONE_SET).
+        await v.state("b", zoneSets=both, zoneRequests=[])
+        await wait_on(v.changed, lambda: enabled_ids(v)[-1:] == [zid], 15)
+        assert len(v.of("zoneSet")) == 2
+
+
+def enabled_ids(v: Hand) -> list[str]:
+    """The zone sets the master enabled (enableZoneSet), in order."""
+    return [
+        p["value"]
+        for m in v.of("instantActions")
+        for a in m["actions"]
+        if a["actionType"] == "enableZoneSet"
+        for p in a["actionParameters"]
+    ]

@@ -84,3 +84,49 @@ async def test_a_vda_vehicle_on_the_map_and_in_the_robots_view_paused_and_let_go
             async with httpx.AsyncClient(base_url=fleet.server.url, headers=headers) as http:
                 reply = await http.get("/api/events", params={"kind": "robot_paused"})
             assert [e["data"] for e in reply.json()["events"]] == [{"robot": "V1", "by": "desk"}]
+
+
+async def test_a_hibernating_vehicle_is_shown_asleep_not_lost(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace, demo_site: Site
+) -> None:
+    """A VDA 5050 3.0.0 vehicle sent to sleep (``POST /api/robots/V1/hibernate``): its card
+    says hibernating (not lost), its mode offline, hibernating; woken, online again."""
+    entrance = next(n for n in demo_site.nodes if n.id == "entrance")
+    v3 = Vehicle(V1.manufacturer, V1.serial_number, version="3.0.0")
+
+    def with_v1_v3(data: dict[str, Any]) -> None:
+        with_v1(data)
+        data["robots"][-1]["vda_version"] = "3.0.0"
+
+    with mosquitto() as broker:
+        sim = SimVehicle(
+            parse_broker(broker.url),
+            v3,
+            x=entrance.x,
+            y=entrance.y,
+            map_id=entrance.floor,
+            node=entrance.id,
+            time_scale=5.0,
+            state_period_s=0.5,
+        )
+        async with fleet_factory(robots=1, edit=with_v1_v3, mqtt_url=broker.url) as fleet, sim:
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await web.open_view(page, "Robots")
+            card = page.get_by_role("region", name="V1")
+            heading = card.get_by_role("heading", name="V1")
+            await expect(heading).to_contain_text("online", timeout=20_000)
+            headers = {"Authorization": f"Bearer {fleet.server.admin_token}"}
+            async with httpx.AsyncClient(base_url=fleet.server.url, headers=headers) as http:
+                asleep = await http.post("/api/robots/V1/hibernate", json={"hibernating": True})
+                assert asleep.status_code == 200, asleep.text
+                await wait_until(lambda: sim.hibernating, 20)
+                await expect(heading).to_contain_text("hibernating")
+                await expect(heading).not_to_contain_text("lost")
+                await expect(card).to_contain_text("Modeoffline, hibernating")
+                await web.axe_check(page)
+                awake = await http.post("/api/robots/V1/hibernate", json={"hibernating": False})
+                assert awake.status_code == 200, awake.text
+            await expect(heading).to_contain_text("online", timeout=20_000)
+            await expect(heading).not_to_contain_text("hibernating")

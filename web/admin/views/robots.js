@@ -85,7 +85,9 @@ export function robotsView(ui) {
       const modules = Object.entries(s.modules ?? {});
       const seen = robot.online || robot.state || robot.info?.last_seen;
       // A lost robot's last robot_state still says what it was doing: the server says offline.
-      const link = robot.online ? ["ok", "online"] : seen ? ["bad", "lost"] : ["warn", "never connected"];
+      // A VDA 5050 3.x vehicle asleep (HIBERNATING) is offline to the fleet, not lost.
+      const asleep = !robot.online && s.navigation === "hibernating";
+      const link = robot.online ? ["ok", "online"] : asleep ? ["warn", "hibernating"] : seen ? ["bad", "lost"] : ["warn", "never connected"];
       const node = s.node ?? info.node;
       const floor = s.floor ?? info.floor ?? ui.store.site.nodes.find((n) => n.id === node)?.floor;
       return html`<section class="robot-card" aria-labelledby=${`robot-${robot.name}`}>
@@ -95,7 +97,7 @@ export function robotsView(ui) {
           ${robot.online && s.navigation === "paused" ? html`<span class="badge warn">paused</span>` : ""}</h3>
         <dl class="facts">
           ${evacuationText(ui.store, robot.name) ? html`<dt>Evacuation</dt><dd class="state-evacuation" data-evacuation=${robot.name}>${evacuationText(ui.store, robot.name).replace("evacuation: ", "")}</dd>` : ""}
-          <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : "offline"}</dd>
+          <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : asleep ? "offline, hibernating" : "offline"}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
           <dt>Pose</dt><dd>${node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
           <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? info.task_id)}${tourStep(ui, robot) ? `, at ${tourStep(ui, robot)}` : ""}</dd>
