@@ -375,3 +375,26 @@ async def test_a_passkey_answer_that_is_not_accepted_counts_as_a_failed_sign_in(
     assert refused.status_code == 409  # a token has no account to add a passkey to
     events = await server.app.state.store.events(kind="sign_in_failed", limit=100)
     assert {e["data"]["why"] for e in events} == {"passkey"}
+
+
+def test_an_unknown_role_in_the_oidc_roles_stops_the_start_naming_it(tmp_path: Path) -> None:
+    """GUIDEBOT_OIDC_ROLES with a role no person has: the start is refused (exit 2) by the
+    settings' validation, naming the variable, the group, the bad role and the roles there
+    are; no traceback."""
+    from backend.server_cli import server as server_command
+
+    result = CliRunner().invoke(
+        server_command,
+        ["--db", f"sqlite+aiosqlite:///{tmp_path}/x.db"],
+        env={
+            "GUIDEBOT_ENVIRONMENT": "development",
+            "GUIDEBOT_OIDC_ISSUER": "http://127.0.0.1:1/idp",
+            "GUIDEBOT_OIDC_ROLES": '{"front-desk": "operator", "guides": "guide"}',
+        },
+    )
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and result.exception is not None
+    assert (
+        "GUIDEBOT_OIDC_ROLES: unknown role (group 'guides' -> 'guide'): the roles are "
+        "admin, author, installer, operator, viewer" in " ".join(result.output.split())
+    )
