@@ -1,14 +1,13 @@
 // The staff console (/admin/): sign-in, then the live map and the fleet views.
 import { html, render } from "lit-html";
 import {
-  addPasskey, currentSession, currentToken, singleSignOn, forgetToken, passkeysAvailable, saveToken, sessionHeaders, signInWithPasskey,
-  signInWithPassword, signOut, signOutEverywhere,
+  addPasskey, currentSession, currentToken, forgetToken, passkeysAvailable, sessionHeaders, signOut, signOutEverywhere,
 } from "/lib/auth.js";
 import { connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
 import { FloorMap } from "/lib/map.js";
 import { Api, ApiError } from "/lib/rest.js";
-import { signInForm } from "/lib/signin.js";
+import { signInFlow } from "/lib/signin.js";
 import { accountsView } from "/admin/views/accounts.js";
 import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
@@ -68,47 +67,16 @@ function showSignIn(message = "") {
   $("emergency-banner").hidden = true;
   const section = $("signin");
   section.hidden = false;
-  const onToken = async (value) => {
-    token = value;
-    const me = await whoAmI();
-    if (me instanceof Error) {
-      token = null;
-      return showSignIn(me.message);
-    }
-    saveToken(value);
-    start();
-  };
-  const onAccount = async (name, password) => {
-    if (!name || !password) return showSignIn("Enter your account name and password, or a staff token.");
-    try {
-      session = await signInWithPassword(name, password);
-    } catch (err) {
-      return showSignIn(err.message);
-    }
-    token = null;
-    start();
-  };
-  const onPasskey = async () => {
-    try {
-      session = await signInWithPasskey();
-    } catch (err) {
-      return showSignIn(err.message);
-    }
-    token = null;
-    start();
-  };
-  render(
-    signInForm({
-      intro: "Staff sign in with their account; a shared screen or the demo with a staff token.",
-      message,
-      onAccount,
-      onToken,
-      onPasskey,
-      sso: singleSignOn(),
-    }),
+  signInFlow({
     section,
-  );
-  section.querySelector("input").focus();
+    intro: "Staff sign in with their account; a shared screen or the demo with a staff token.",
+    message,
+    missing: "Enter your account name and password, or a staff token.",
+    useToken: (value) => { token = value; },
+    check: whoAmI,
+    done: start,
+    again: showSignIn,
+  });
 }
 
 /** The signed-in user (or an Error that says why not). */
