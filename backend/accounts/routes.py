@@ -11,7 +11,7 @@ from typing import Annotated, Any
 
 import httpx
 import orjson
-from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, Response, status
 from fastapi.responses import RedirectResponse
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -369,10 +369,55 @@ async def add_passkey(
         raise _refused(exc) from None
 
 
+@router.delete("/api/session/passkeys/{passkey_id}", status_code=status.HTTP_204_NO_CONTENT)
+async def remove_own_passkey(
+    request: Request,
+    _: Reader,
+    passkey_id: Annotated[str, Path(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")],
+    keys: Passkeys,
+) -> Response:
+    """Remove one of this person's passkeys (``id`` as ``GET /api/session/passkeys`` lists
+    it): it signs nobody in from now on; sessions stay. 404 for none of theirs; 409 for a
+    token."""
+    name = _own_session(request).principal.name
+    try:
+        await keys.remove(name, passkey_id, by=name, address=client_address(request.client))
+    except AccountError as exc:
+        raise _refused(exc) from None
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
 @router.get("/api/accounts")
-async def list_accounts(_: Manager, service: Accounts) -> dict[str, Any]:
-    """Every account (never a password hash) with its last sign-in."""
-    return {"accounts": [a.public() for a in await service.store.all()]}
+async def list_accounts(_: Manager, service: Accounts, keys: Passkeys) -> dict[str, Any]:
+    """Every account (never a password hash) with its last sign-in and how many passkeys."""
+    counts = await keys.counts()
+    return {
+        "accounts": [
+            {**a.public(), "passkeys": counts.get(a.name, 0)} for a in await service.store.all()
+        ]
+    }
+
+
+@router.get("/api/accounts/{name}/passkeys")
+async def account_passkeys(_: Manager, name: str, keys: Passkeys) -> dict[str, Any]:
+    """A person's passkeys (the start of each id, label, added, last used)."""
+    if await keys.accounts.store.get(name) is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no account named {name!r}")
+    return {"passkeys": await keys.listed(name)}
+
+
+@router.delete("/api/accounts/{name}/passkeys")
+async def remove_account_passkeys(
+    request: Request, who: Manager, name: str, keys: Passkeys
+) -> dict[str, Any]:
+    """Remove every passkey of a person (a lost phone or laptop) and end their sessions: they
+    sign in with their password (or a new password an admin sets) and add a passkey again."""
+    address = client_address(request.client)
+    try:
+        removed = await keys.remove_all(name, by=who.name, address=address)
+    except AccountError as exc:
+        raise _refused(exc) from None
+    return {"removed": removed}
 
 
 @router.post("/api/accounts", status_code=status.HTTP_201_CREATED)

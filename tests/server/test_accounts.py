@@ -398,3 +398,46 @@ def test_an_unknown_role_in_the_oidc_roles_stops_the_start_naming_it(tmp_path: P
         "GUIDEBOT_OIDC_ROLES: unknown role (group 'guides' -> 'guide'): the roles are "
         "admin, author, installer, operator, viewer" in " ".join(result.output.split())
     )
+
+
+async def test_a_person_removes_only_their_own_passkeys_and_an_admin_any_person_s(
+    server: RunningServer,
+) -> None:
+    """A passkey id of another person's is 404 for a person (nothing removed); an admin's
+    removal of all of a person's passkeys ends that person's sessions; audit rows for both."""
+    from backend.db.models import PasskeyRow
+
+    await make(server, "ada", Role.OPERATOR)
+    await make(server, "bob", Role.VIEWER)
+    await make(server, "root", Role.ADMIN)
+    async with server.app.state.store.sessionmaker() as db, db.begin():
+        for owner, key in (("ada", "ada-phone-0123456789"), ("bob", "bob-laptop-0123456789")):
+            db.add(PasskeyRow(credential_id=key, account=owner, public_key="", created_at=1.0))
+    async with signed_in(server, "ada") as (ada, csrf), signed_in(server, "root") as (root, rcsrf):
+        mine = (await ada.get("/api/session/passkeys")).json()["passkeys"]
+        assert [(k["id"], k["last_used"]) for k in mine] == [("ada-phone-012345", None)]
+        theirs = await ada.delete(
+            "/api/session/passkeys/bob-laptop-012345", headers={CSRF_HEADER: csrf}
+        )
+        assert theirs.status_code == 404
+        listed = (await root.get("/api/accounts")).json()["accounts"]
+        assert {a["name"]: a["passkeys"] for a in listed} == {"ada": 1, "bob": 1, "root": 0}
+        own = await ada.delete(
+            "/api/session/passkeys/ada-phone-012345", headers={CSRF_HEADER: csrf}
+        )
+        assert own.status_code == 204
+        assert (await ada.get("/api/session")).json()["signed_in"]  # sessions stay
+        async with signed_in(server, "bob") as (bob, _):
+            lost = await root.delete("/api/accounts/bob/passkeys", headers={CSRF_HEADER: rcsrf})
+            assert lost.json() == {"removed": 1}
+            assert (await bob.get("/api/session")).json()["signed_in"] is False
+        assert (await root.get("/api/accounts/bob/passkeys")).json() == {"passkeys": []}
+        nobody = await root.delete("/api/accounts/nobody/passkeys", headers={CSRF_HEADER: rcsrf})
+        assert nobody.status_code == 404
+    events = await server.app.state.store.events(kind="account_changed", limit=100)
+    removed = [
+        (e["source"], e["data"]["target"], e["data"]["passkeys"])
+        for e in events
+        if e["data"]["change"] == "passkey_removed"
+    ]
+    assert removed == [("ada", "ada", 1), ("root", "bob", 1)]

@@ -8,7 +8,7 @@ import { HubClient } from "/lib/hub.js";
 import { FloorMap } from "/lib/map.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { signInFlow } from "/lib/signin.js";
-import { accountsView } from "/admin/views/accounts.js";
+import { accountsView, passkeysView } from "/admin/views/accounts.js";
 import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
@@ -51,6 +51,7 @@ const RENDER = {
   events: eventsView,
   reports: reportsView,
   accounts: accountsView,
+  passkeys: passkeysView, // from the header's "Your passkeys", not a tab
 };
 const $ = (id) => document.getElementById(id);
 
@@ -138,7 +139,7 @@ async function start() {
     hub,
     admin: me.role === "admin",
     operate: me.role !== "viewer", // a viewer sees every view and no button that changes anything
-    view: sessionStorage.getItem("guidebot.view") ?? "map",
+    view: (session || sessionStorage.getItem("guidebot.view") !== "passkeys") ? sessionStorage.getItem("guidebot.view") ?? "map" : "map",
     selected: null,
     notice: null,
     sound: false,
@@ -179,8 +180,12 @@ async function start() {
       <button type="button" @click=${() => leave(false)}>Sign out</button>
       ${session ? html`<button type="button" class="secondary" @click=${() => leave(true)}>Sign out everywhere</button>` : ""}
       ${session && passkeysAvailable()
-        ? html`<button type="button" class="secondary" @click=${() => ui.act("Add a passkey", () => addPasskey(navigator.platform || ""))}>Add a passkey</button>`
-        : ""}`,
+        ? html`<button type="button" class="secondary" @click=${() => ui.act("Add a passkey", async () => {
+          await addPasskey(navigator.platform || "");
+          ui.passkeys = undefined; // "Your passkeys" reads them again
+        })}>Add a passkey</button>`
+        : ""}
+      ${session ? html`<button type="button" class="secondary" @click=${() => ui.go("passkeys")}>Your passkeys</button>` : ""}`,
     $("who"),
   );
   const showServer = () => serverStatus(api).then((view) => render(view, $("server-status")));
