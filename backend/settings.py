@@ -113,6 +113,9 @@ class Settings(BaseSettings):
     # days are deleted in the background every event_prune_every_s; 0 keeps them all.
     event_retention_days: float = Field(default=30.0, ge=0)
     event_prune_every_s: float = Field(default=3600.0, gt=0)
+    # The audit trail's rows (people's sign-ins and actions, docs/security.md "Audit") are kept
+    # this many days instead; 0 keeps them all.
+    audit_retention_days: float = Field(default=365.0, ge=0)
     # How often the event log is folded into the reports' hourly rollups (docs/reports.md);
     # a report folds what is left first, so this only keeps that short.
     report_rollup_every_s: float = Field(default=60.0, gt=0)

@@ -441,3 +441,36 @@ async def test_a_person_removes_only_their_own_passkeys_and_an_admin_any_person_
         if e["data"]["change"] == "passkey_removed"
     ]
     assert removed == [("ada", "ada", 1), ("root", "bob", 1)]
+
+
+async def test_audit_rows_are_kept_their_own_days_not_the_event_log_s(tmp_path: Path) -> None:
+    """GUIDEBOT_AUDIT_RETENTION_DAYS (365) keeps people's sign-ins and actions past the event
+    log's 30 days; older than it, they go too; 0 keeps them for ever."""
+    from tests.server.test_api import eventually
+    from tests.server.test_kept_across_restarts import DAY, event_kinds, seed_events
+
+    settings = server_settings(tmp_path).model_copy(
+        update={"event_retention_days": 30.0, "event_prune_every_s": 0.05}
+    )
+    month, years = time.time() - 40 * DAY, time.time() - 400 * DAY
+    await seed_events(
+        settings.db_url,
+        [
+            (month, "node_reached", {"robot": "R1"}),
+            (month, "signed_in", {"account": "ada"}),
+            (month, "staff_action", {"account": "ada"}),
+            (years, "account_changed", {"account": "root"}),
+        ],
+    )
+    async with running_server(settings) as srv:
+        store = srv.app.state.store
+        assert store.audit_retention_s == 365 * DAY
+        await eventually(lambda: store.pruned == 2)  # the month-old node, the year-old change
+        kinds = [kind for kind, _ in await event_kinds(store)]
+        assert kinds[:2] == ["signed_in", "staff_action"]
+    kept = settings.model_copy(update={"audit_retention_days": 0.0})
+    async with running_server(kept) as srv:
+        assert srv.app.state.store.audit_retention_s is None
+        await srv.app.state.store.prune_events(time.time(), audit_older_than=None)
+        kinds = [kind for kind, _ in await event_kinds(srv.app.state.store)]
+        assert kinds[:2] == ["signed_in", "staff_action"]  # everything else went
