@@ -156,8 +156,8 @@ export function accountsView(ui) {
   const accounts = ui.accounts ?? [];
   const resetting = accounts.find((a) => a.name === ui.resetting);
   return html`<h2>Accounts</h2>
-    <p class="muted">People who sign in with their own name. Changing a role, disabling an account or
-      setting a new password signs the person out at once, on every page.</p>
+    <p class="muted">People who sign in with their own name. Changing a role, disabling an account,
+      setting a new password or removing the person's passkeys signs the person out at once, on every page.</p>
     ${ui.accounts === null ? html`<p role="status">Loading accounts…</p>` : ""}
     <table aria-label="Accounts">
       <thead><tr><th scope="col">Name</th><th scope="col">Display name</th><th scope="col">Role</th>
