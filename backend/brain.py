@@ -14,6 +14,7 @@ from typing import Any
 
 from fastapi import FastAPI
 
+from backend.accounts.audit import AUDIT_KINDS
 from backend.alerts import AlertStore
 from backend.api.component import (
     LOGGED_BROADCASTS,
@@ -74,6 +75,8 @@ class ServerBrain(Service):
             epoch=None if leadership is None else leadership.fencing_epoch,
             retention_s=settings.event_retention_days * 86400 or None,
             prune_every_s=settings.event_prune_every_s,
+            audit_kinds=AUDIT_KINDS,
+            audit_retention_s=settings.audit_retention_days * 86400 or None,
         )
         await self.enter(store)
         health.set("database", ComponentState.ok, engine.url.get_backend_name())

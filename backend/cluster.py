@@ -5,7 +5,8 @@ others through Redis. The components that decide or own state (``server_brain``:
 migrations, Task Manager, Traffic Manager; ``building_interface``; the site editor, console and
 RGM that use them) start only on the process that wins the PostgreSQL advisory lock, and are
 rebuilt from the database and the robots' resync when another process wins after a leader died.
-A follower accepts the site's robots (their token digests are read from the database at start).
+A follower accepts the site's robots (their token digests are read from the database at start)
+and people's pages signed in by their session cookie (read from the database).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import orjson
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
+from backend.accounts.component import follower_sessions
 from backend.api.component import _sync_robot_tokens, announce_links, hash_robot_tokens
 from backend.db import DbStore, make_engine, make_sessionmaker
 from backend.health import ComponentState
@@ -179,20 +181,22 @@ async def clustered(
 
     stop_links = _announce_links_while_following(hub, leadership)
     stop_tokens = tokens.watch(hub, leadership)
-    await leadership.start()
-    leader_task = asyncio.get_running_loop().create_task(lead(), name="cluster-leader")
-    try:
-        yield
-    finally:
-        stopping.set()
-        if not leadership.leading:
-            leader_task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await leader_task
-        stop_links()
-        stop_tokens()
-        await leadership.stop()
-        await bridge.stop()
+    # People's sessions from the shared database, until the accounts component leads.
+    async with follower_sessions(app):
+        await leadership.start()
+        leader_task = asyncio.get_running_loop().create_task(lead(), name="cluster-leader")
+        try:
+            yield
+        finally:
+            stopping.set()
+            if not leadership.leading:
+                leader_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await leader_task
+            stop_links()
+            stop_tokens()
+            await leadership.stop()
+            await bridge.stop()
 
 
 def cluster_report(app: FastAPI) -> dict[str, Any] | None:

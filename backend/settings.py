@@ -13,10 +13,10 @@ from functools import cache
 from pathlib import Path
 
 import yaml
-from pydantic import BaseModel, Field, ValidationError, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from backend.auth import Role
+from backend.auth import PERSON_ROLES, Role
 from guidebot.paths import SITES_DIR, WEB_DIR
 
 __all__ = [
@@ -113,6 +113,9 @@ class Settings(BaseSettings):
     # days are deleted in the background every event_prune_every_s; 0 keeps them all.
     event_retention_days: float = Field(default=30.0, ge=0)
     event_prune_every_s: float = Field(default=3600.0, gt=0)
+    # The audit trail's rows (people's sign-ins and actions, docs/security.md "Audit") are kept
+    # this many days instead; 0 keeps them all.
+    audit_retention_days: float = Field(default=365.0, ge=0)
     # How often the event log is folded into the reports' hourly rollups (docs/reports.md);
     # a report folds what is left first, so this only keeps that short.
     report_rollup_every_s: float = Field(default=60.0, gt=0)
@@ -145,6 +148,22 @@ class Settings(BaseSettings):
     oidc_roles: dict[str, str] = Field(default_factory=dict)
     """The provider's group -> GuideBot role (admin, operator, installer, author, viewer)."""
     oidc_redirect_uri: str | None = Field(default=None, pattern=r"^https?://\S+$")
+
+    @field_validator("oidc_roles")
+    @classmethod
+    def _known_person_roles(cls, roles: dict[str, str]) -> dict[str, str]:
+        """A group mapped to a role a person cannot have stops the start, naming it (a typo
+        would otherwise sign that group's people in as nobody, or crash the server later)."""
+        allowed = sorted(r.value for r in PERSON_ROLES)
+        bad = {group: role for group, role in roles.items() if role not in allowed}
+        if bad:
+            named = ", ".join(f"group {g!r} -> {r!r}" for g, r in sorted(bad.items()))
+            raise ValueError(
+                f"GUIDEBOT_OIDC_ROLES: unknown role ({named}): the roles are "
+                f'{", ".join(allowed)} (docs/security.md, "Single sign-on")'
+            )
+        return roles
+
     # Traffic Manager: release a lock whose holder went offline before entering its area.
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
     # Trouble (docs/server.md, "Building modes and trouble"): how long a door that did not open

@@ -11,7 +11,18 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from backend.accounts.cookies import SAFE_METHODS
 from backend.auth import PERSON_ROLES, Principal
 
-__all__ = ["SELF_AUDITED", "AuditTrail"]
+__all__ = ["AUDIT_KINDS", "SELF_AUDITED", "AuditTrail"]
+
+AUDIT_KINDS = (
+    "staff_action",
+    "signed_in",
+    "sign_in_failed",
+    "signed_out",
+    "signed_out_everywhere",
+    "account_changed",
+)
+"""The audit trail's event kinds: kept ``GUIDEBOT_AUDIT_RETENTION_DAYS``, not the event log's
+``GUIDEBOT_EVENT_RETENTION_DAYS`` (docs/security.md, "Audit")."""
 
 SELF_AUDITED = ("/api/session", "/api/accounts")
 """Paths whose routes record their own, more detailed events."""

@@ -1,7 +1,11 @@
 """The accounts component (backend.app.COMPONENTS, after the server brain: it needs the
 database): ``app.state.accounts`` (the service) and ``app.state.sessions`` (the cookie gate
 the token checks consult), and a sweeper ending expired sessions and the hub links of
-sessions ended by another server process."""
+sessions ended by another server process.
+
+With several server processes (docs/scaling.md) the component runs on the leader only; a
+follower reads people's sessions from the shared database through ``follower_sessions``, so a
+page signed in by its cookie opens its hub link on any process."""
 
 from __future__ import annotations
 
@@ -16,11 +20,12 @@ from fastapi import FastAPI
 from backend.accounts.cookies import CookieGate
 from backend.accounts.oidc import OidcConfig, SingleSignOn
 from backend.accounts.passkeys import PasskeyService
-from backend.accounts.service import AccountService
+from backend.accounts.service import AccountService, Audit
 from backend.accounts.store import AccountStore
+from backend.db import make_engine, make_sessionmaker
 from backend.ratelimit import RateLimiter
 
-__all__ = ["SWEEP_EVERY_S", "accounts"]
+__all__ = ["SWEEP_EVERY_S", "accounts", "follower_sessions"]
 
 log = logging.getLogger(__name__)
 
@@ -37,16 +42,10 @@ def reserved_names(app: FastAPI) -> set[str]:
     return names
 
 
-@contextlib.asynccontextmanager
-async def accounts(app: FastAPI) -> AsyncIterator[None]:
+def _service(app: FastAPI, sessionmaker: Any, audit: Audit) -> AccountService:
     settings = app.state.settings
-    store = app.state.store
-
-    def audit(kind: str, source: str, data: dict[str, Any]) -> None:
-        store.record_event(kind, source[:64], data)
-
-    service = AccountService(
-        AccountStore(store.sessionmaker),
+    return AccountService(
+        AccountStore(sessionmaker),
         failures=app.state.auth.failures,
         lockouts=RateLimiter(
             per_minute=settings.sign_in_failures_per_minute, burst=settings.sign_in_failure_burst
@@ -57,17 +56,18 @@ async def accounts(app: FastAPI) -> AsyncIterator[None]:
         min_length=settings.password_min_length,
         reserved=lambda: reserved_names(app),
     )
-    app.state.accounts = service
-    app.state.passkeys = PasskeyService(service)
-    sso = OidcConfig.from_settings(settings)
-    app.state.sso = SingleSignOn(sso, service) if sso is not None else None
-    app.state.sessions = CookieGate(service)
+
+
+@contextlib.asynccontextmanager
+async def _sweeping(service: AccountService, *, expire: bool) -> AsyncIterator[None]:
+    """Every ``SWEEP_EVERY_S``: end expired sessions (``expire``) and close the hub links of
+    sessions ended elsewhere."""
 
     async def sweep() -> None:
         while True:
             await asyncio.sleep(SWEEP_EVERY_S)
             try:
-                await service.sweep()
+                await service.sweep(expire=expire)
             except Exception:
                 log.exception("accounts: the session sweep failed; trying again")
 
@@ -78,7 +78,49 @@ async def accounts(app: FastAPI) -> AsyncIterator[None]:
         sweeper.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await sweeper
+
+
+@contextlib.asynccontextmanager
+async def accounts(app: FastAPI) -> AsyncIterator[None]:
+    store = app.state.store
+
+    def audit(kind: str, source: str, data: dict[str, Any]) -> None:
+        store.record_event(kind, source[:64], data)
+
+    service = _service(app, store.sessionmaker, audit)
+    app.state.accounts = service
+    app.state.passkeys = PasskeyService(service)
+    sso = OidcConfig.from_settings(app.state.settings)
+    app.state.sso = SingleSignOn(sso, service) if sso is not None else None
+    app.state.sessions = CookieGate(service)
+    try:
+        async with _sweeping(service, expire=True):
+            yield
+    finally:
         app.state.sessions = None
         app.state.passkeys = None
         app.state.sso = None
         app.state.accounts = None
+
+
+@contextlib.asynccontextmanager
+async def follower_sessions(app: FastAPI) -> AsyncIterator[None]:
+    """On every process of several (backend/cluster.py): people's sessions read from the
+    shared database, for the hub links of pages signed in by their cookie, until this process
+    leads and the accounts component's gate takes over. Links opened here stay this gate's:
+    its sweep closes them within ``SWEEP_EVERY_S`` of their session ending on any process.
+    Nothing is recorded here: signing in and out, and the audit rows, are the leader's REST."""
+
+    def audit(kind: str, _source: str, _data: dict[str, Any]) -> None:
+        log.warning("accounts: %r not recorded: the leader records people's actions", kind)
+
+    engine = make_engine(app.state.settings.db_url)
+    gate = CookieGate(_service(app, make_sessionmaker(engine), audit))
+    app.state.sessions = gate
+    try:
+        async with _sweeping(gate.service, expire=False):
+            yield
+    finally:
+        if app.state.sessions is gate:
+            app.state.sessions = None
+        await engine.dispose()

@@ -12,6 +12,7 @@ from starlette.requests import HTTPConnection
 
 from backend.accounts.service import AccountService, Session
 from backend.auth import Principal
+from backend.hub.core import RemoteClient
 
 __all__ = [
     "CSRF_HEADER",
@@ -64,6 +65,14 @@ class CookieGate:
 
     async def websocket_session(self, websocket: WebSocket) -> Session | None:
         return await self.session(websocket)
+
+    def link(self, session: Session, client: RemoteClient) -> None:
+        """A hub link opened under ``session``: closed when the session ends (this gate's
+        service keeps it, whichever gate serves later requests)."""
+        self.service.link(session, client)
+
+    def unlink(self, session: Session, client: RemoteClient) -> None:
+        self.service.unlink(session.digest, client)
 
 
 def set_cookie(response: Response, value: str, *, max_age: int, secure: bool) -> None:

@@ -25,9 +25,9 @@ from joserfc import jwt
 from joserfc.jwk import KeySet
 
 from backend.accounts.service import ACCOUNT_NAME, AccountService, Session
-from backend.auth import PERSON_ROLES, Role, SignInRefused
+from backend.auth import Role, SignInRefused
 
-__all__ = ["FLOW_TTL_S", "OidcConfig", "SingleSignOn"]
+__all__ = ["FLOW_TTL_S", "OidcConfig", "SingleSignOn", "SsoRefused"]
 
 FLOW_TTL_S = 600.0
 MAX_FLOWS = 10_000
@@ -48,16 +48,10 @@ class OidcConfig:
 
     @classmethod
     def from_settings(cls, settings: Any) -> OidcConfig | None:
-        """None when single sign-on is off; ValueError for a group mapped to a role that is
-        not a person's."""
+        """None when single sign-on is off (the settings checked every role is a person's)."""
         if not settings.oidc_issuer:
             return None
-        roles = {}
-        allowed = {r.value for r in PERSON_ROLES}
-        for group, role in settings.oidc_roles.items():
-            if role not in allowed:
-                raise ValueError(f"GUIDEBOT_OIDC_ROLES: group {group!r}: unknown role {role!r}")
-            roles[group] = Role(role)
+        roles = {group: Role(role) for group, role in settings.oidc_roles.items()}
         return cls(
             issuer=settings.oidc_issuer.rstrip("/"),
             client_id=settings.oidc_client_id,
@@ -66,6 +60,20 @@ class OidcConfig:
             groups_claim=settings.oidc_groups_claim,
             roles=roles,
         )
+
+
+class SsoRefused(SignInRefused):
+    """A refused single sign-on, for the sign-in page to say why: ``code`` (``refused``: a
+    wrong state, nonce or token, 401; ``provider``: the provider answered an error, 401;
+    ``no_role``, ``disabled``: 403; ``locked``: 429; ``unreachable``: 502) and ``then``, the
+    page the sign-in started from (the console's when the state is unknown)."""
+
+    def __init__(self, refused: SignInRefused, code: str, then: str) -> None:
+        super().__init__(refused.status_code, refused.reason, refused.retry_after)
+        self.code, self.then = code, then
+
+
+_CODES = {status.HTTP_401_UNAUTHORIZED: "refused", status.HTTP_429_TOO_MANY_REQUESTS: "locked"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,11 +127,29 @@ class SingleSignOn:
             )
         )
 
-    async def finish(self, state: str, code: str, address: str) -> tuple[str, Session, str]:
+    async def finish(
+        self, state: str, code: str, address: str, *, error: str = "", then: str = "/admin/"
+    ) -> tuple[str, Session, str]:
         """The provider sent the browser back: a session (cookie, session, the page to go
-        to), or SignInRefused (401 a wrong state, nonce or token; 403 no role or disabled)."""
-        self.accounts.refuse_if_locked(address)
+        to), or SsoRefused (401 a wrong state, nonce or token, or the provider's ``error``;
+        403 no role or disabled; 429 too many failures). ``then``: the page to go back to
+        when the state names no flow."""
         flow = self._flows.pop(state, None)
+        if flow is not None:
+            then = flow.then
+        try:
+            self.accounts.refuse_if_locked(address)
+            if error or not code:
+                why = "sso provider error" if error else "sso answer"
+                raise self.accounts.failed("", address, why, REFUSED)
+            return (*await self._finish(flow, code, address), then)
+        except SsoRefused:
+            raise
+        except SignInRefused as exc:
+            kind = "provider" if error and exc.status_code == 401 else None
+            raise SsoRefused(exc, kind or _CODES.get(exc.status_code, "refused"), then) from None
+
+    async def _finish(self, flow: _Flow | None, code: str, address: str) -> tuple[str, Session]:
         if flow is None or flow.expires < time.monotonic():
             raise self.accounts.failed("", address, "sso state", REFUSED)
         provider = await self._provider()
@@ -158,7 +184,7 @@ class SingleSignOn:
         except Exception as exc:  # any failure (JoseError, HTTP, a missing claim) signs nobody in
             name = type(exc).__name__
             raise self.accounts.failed("", address, f"sso token ({name})", REFUSED) from None
-        return (*await self._account_session(claims, address), flow.then)
+        return await self._account_session(claims, address, flow.then)
 
     def role_of(self, claims: dict[str, Any]) -> Role | None:
         groups = claims.get(self.config.groups_claim) or []
@@ -175,18 +201,21 @@ class SingleSignOn:
             return wanted
         return "sso-" + hashlib.sha256(str(claims["sub"]).encode()).hexdigest()[:12]
 
-    async def _account_session(self, claims: dict[str, Any], address: str) -> tuple[str, Session]:
+    async def _account_session(
+        self, claims: dict[str, Any], address: str, then: str
+    ) -> tuple[str, Session]:
         name = self.account_name(claims)
         role = self.role_of(claims)
         if role is None:
             self.accounts.audit(
                 "sign_in_failed", name, {"account": name, "address": address, "why": "sso no role"}
             )
-            raise SignInRefused(
+            refused = SignInRefused(
                 status.HTTP_403_FORBIDDEN,
                 f"{self.config.name}: none of your groups has a GuideBot role: "
                 "ask an administrator",
             )
+            raise SsoRefused(refused, "no_role", then)
         display = str(claims.get("name") or "")[:128]
         account = await self.accounts.store.get(name)
         if account is None:
@@ -221,5 +250,6 @@ class SingleSignOn:
             self.accounts.audit(
                 "sign_in_failed", name, {"account": name, "address": address, "why": "disabled"}
             )
-            raise SignInRefused(status.HTTP_403_FORBIDDEN, "this account is disabled")
+            refused = SignInRefused(status.HTTP_403_FORBIDDEN, "this account is disabled")
+            raise SsoRefused(refused, "disabled", then)
         return await self.accounts.open_session(account, address, "sso")

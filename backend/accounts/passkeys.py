@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import orjson
-from sqlalchemy import select, update
+from sqlalchemy import delete, func, select, update
 from webauthn import (
     base64url_to_bytes,
     generate_authentication_options,
@@ -40,6 +40,10 @@ __all__ = ["CHALLENGE_TTL_S", "PasskeyService", "RelyingParty"]
 CHALLENGE_TTL_S = 120.0
 MAX_CHALLENGES = 10_000
 RP_NAME = "GuideBot"
+
+
+NOT_ACCEPTED = "this passkey was not accepted (unknown here, removed, or a bad answer)"
+"""A refused passkey's 401 (the page says "This passkey was not accepted.")."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,6 +102,49 @@ class PasskeyService:
             }
             for row in await self._rows(account)
         ]
+
+    async def counts(self) -> dict[str, int]:
+        """How many passkeys each account has (accounts without one are left out)."""
+        async with self.accounts.store.sessionmaker() as db:
+            query = select(PasskeyRow.account, func.count()).group_by(PasskeyRow.account)
+            return {account: int(n) for account, n in await db.execute(query)}
+
+    # --- removing ---------------------------------------------------------------------------
+    async def remove(self, account: str, short_id: str, *, by: str, address: str) -> None:
+        """Remove one of ``account``'s passkeys, named by the start of its id as ``listed``
+        shows it (a person's own, or an admin's). 404 for none of the account's."""
+        rows = [r for r in await self._rows(account) if r.credential_id.startswith(short_id)]
+        if not short_id or len(rows) != 1:
+            raise AccountError(404, f"{account!r} has no passkey {short_id!r}")
+        await self._delete(account, [rows[0].credential_id])
+        self._removed(by, address, account, 1, rows[0].label)
+
+    async def remove_all(self, account: str, *, by: str, address: str) -> int:
+        """An admin removes every passkey of ``account`` (a lost phone or laptop) and ends its
+        sessions (the lost device may still hold one); how many there were. 404 for no such
+        account."""
+        if await self.accounts.store.get(account) is None:
+            raise AccountError(404, f"no account named {account!r}")
+        rows = await self._rows(account)
+        await self._delete(account, [r.credential_id for r in rows])
+        await self.accounts.end_all(account, "passkeys removed")
+        self._removed(by, address, account, len(rows), "")
+        return len(rows)
+
+    async def _delete(self, account: str, ids: list[str]) -> None:
+        async with self.accounts.store.sessionmaker() as db, db.begin():
+            await db.execute(
+                delete(PasskeyRow).where(
+                    PasskeyRow.account == account, PasskeyRow.credential_id.in_(ids)
+                )
+            )
+
+    def _removed(self, by: str, address: str, account: str, count: int, label: str) -> None:
+        data: dict[str, Any] = {"account": by, "address": address, "target": account}
+        data |= {"change": "passkey_removed", "passkeys": count}
+        if label:
+            data["label"] = label
+        self.accounts.audit("account_changed", by, data)
 
     # --- adding one -------------------------------------------------------------------------
     async def registration_options(self, session: Session, rp: RelyingParty) -> dict[str, Any]:
@@ -184,7 +231,8 @@ class PasskeyService:
                 row = await db.get(PasskeyRow, raw_id)
         account = await self.accounts.store.get(row.account) if row is not None else None
         if challenge is None or row is None or account is None:
-            raise self.accounts.failed(account.name if account else "", address, "passkey")
+            name = account.name if account else ""
+            raise self.accounts.failed(name, address, "passkey", NOT_ACCEPTED)
         self.accounts.refuse_if_locked(address, account.name)
         try:
             verified = verify_authentication_response(
@@ -198,7 +246,7 @@ class PasskeyService:
             )
         except (WebAuthnException, ValueError, KeyError, TypeError):
             # Whatever is wrong with the answer (its shape too), it signs nobody in.
-            raise self.accounts.failed(account.name, address, "passkey") from None
+            raise self.accounts.failed(account.name, address, "passkey", NOT_ACCEPTED) from None
         if account.disabled:
             self.accounts.audit(
                 "sign_in_failed",

@@ -11,17 +11,17 @@ from typing import Annotated, Any
 
 import httpx
 import orjson
-from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, Response, status
 from fastapi.responses import RedirectResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from backend.accounts.cookies import CookieGate, clear_cookie, set_cookie
-from backend.accounts.oidc import SingleSignOn
+from backend.accounts.oidc import SingleSignOn, SsoRefused
 from backend.accounts.passkeys import PasskeyService, RelyingParty
 from backend.accounts.passwords import verify_password
 from backend.accounts.service import AccountError, AccountService, Session
 from backend.actions import require_action
-from backend.api.deps import Store, error_response
+from backend.api.deps import Store, app_service, error_response
 from backend.api.query import OPEN_QUERY
 from backend.auth import Principal, SignInRefused, client_address
 
@@ -85,22 +85,14 @@ class OwnPassword(_Body):
 
 
 def accounts(request: Request) -> AccountService:
-    service = getattr(request.app.state, "accounts", None)
-    if not isinstance(service, AccountService):
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "accounts are not running")
-    return service
-
-
-Accounts = Annotated[AccountService, Depends(accounts)]
+    return app_service(request, "accounts", AccountService)
 
 
 def passkeys(request: Request) -> PasskeyService:
-    service = getattr(request.app.state, "passkeys", None)
-    if not isinstance(service, PasskeyService):
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "accounts are not running")
-    return service
+    return app_service(request, "passkeys", PasskeyService)
 
 
+Accounts = Annotated[AccountService, Depends(accounts)]
 Passkeys = Annotated[PasskeyService, Depends(passkeys)]
 
 
@@ -271,10 +263,12 @@ async def passkey_sign_in(request: Request, body: PasskeyAnswer, keys: Passkeys)
 
 
 _SSO_ANSWERS: dict[int | str, dict[str, Any]] = {
-    **_SIGN_IN_ERRORS,
-    302: {"description": "to the identity provider, or back to the page once signed in"},
+    302: {
+        "description": "to the identity provider; back to the page once signed in; or back to "
+        "its sign-in form with `#sso_refused=<why>` (refused, provider, no_role, disabled, "
+        "locked, unreachable; `&retry=<s>` when locked)"
+    },
     404: error_response("single sign-on is not set up (GUIDEBOT_OIDC_ISSUER)"),
-    502: error_response("the identity provider cannot be reached"),
 }
 _NEXT = r"^/[A-Za-z0-9/_.-]{0,64}$"
 """Where a sign-in may send the browser back to: a path of this server, never a URL."""
@@ -293,19 +287,25 @@ def _callback_url(request: Request) -> str:
     return configured or f"{request.url.scheme}://{host}/api/session/oidc/callback"
 
 
+def _back_refused(then: str, code: str, retry_after: int | None = None) -> RedirectResponse:
+    """Back to the page's sign-in form, which says why in words (the fragment carries a code,
+    never text: a crafted link cannot put its own words on the form)."""
+    retry = f"&retry={retry_after}" if retry_after is not None else ""
+    return RedirectResponse(f"{then}#sso_refused={code}{retry}", status.HTTP_302_FOUND)
+
+
 @router.get("/api/session/oidc/start", responses=_SSO_ANSWERS, openapi_extra=SIGN_IN)
 async def sso_start(
     request: Request, then: Annotated[str, Query(alias="next", pattern=_NEXT)] = "/admin/"
 ) -> RedirectResponse:
     """Single sign-on: to the venue's identity provider (authorization code with PKCE), and
-    back to ``next`` (a path of this server) once signed in."""
+    back to ``next`` (a path of this server) once signed in; back to ``next``'s sign-in form
+    with ``#sso_refused=unreachable`` when the provider cannot be reached."""
     sso = _sso(request)
     try:
         url = await sso.start(_callback_url(request), then)
     except httpx.HTTPError:
-        raise HTTPException(
-            status.HTTP_502_BAD_GATEWAY, "the identity provider cannot be reached"
-        ) from None
+        return _back_refused(then, "unreachable")
     return RedirectResponse(url, status_code=status.HTTP_302_FOUND)
 
 
@@ -318,18 +318,19 @@ async def sso_callback(
     request: Request,
     state: Annotated[str, Query(max_length=128)] = "",
     code: Annotated[str, Query(max_length=2048)] = "",
+    error: Annotated[str, Query(max_length=256)] = "",
 ) -> Response:
     """Where the identity provider sends the browser back: with the right state, a code for
     an ID token with the right nonce, and a group mapped to a role, the session cookie and
-    302 to the page; else 401 (a wrong state, nonce or token: a failed sign-in) or 403."""
+    302 to the page. Otherwise no cookie and 302 to the page's sign-in form with
+    ``#sso_refused=`` and why: ``refused`` (a wrong or used state, a wrong nonce or token:
+    a failed sign-in), ``provider`` (the provider's ``error``), ``no_role``, ``disabled``,
+    ``locked`` (``&retry=`` seconds)."""
     sso = _sso(request)
     try:
-        if not state or not code:
-            address = client_address(request.client)
-            raise sso.accounts.failed("", address, "sso answer", "single sign-on refused")
-        cookie, _, then = await sso.finish(state, code, client_address(request.client))
-    except SignInRefused as exc:
-        raise _refused(exc) from None
+        cookie, _, then = await sso.finish(state, code, client_address(request.client), error=error)
+    except SsoRefused as exc:
+        return _back_refused(exc.then, exc.code, exc.retry_after)
     response = RedirectResponse(then, status_code=status.HTTP_302_FOUND)
     set_cookie(response, cookie, max_age=int(sso.accounts.max_s), secure=_secure(request))
     return response
@@ -368,10 +369,55 @@ async def add_passkey(
         raise _refused(exc) from None
 
 
+@router.delete("/api/session/passkeys/{passkey_id}", status_code=status.HTTP_204_NO_CONTENT)
+async def remove_own_passkey(
+    request: Request,
+    _: Reader,
+    passkey_id: Annotated[str, Path(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")],
+    keys: Passkeys,
+) -> Response:
+    """Remove one of this person's passkeys (``id`` as ``GET /api/session/passkeys`` lists
+    it): it signs nobody in from now on; sessions stay. 404 for none of theirs; 409 for a
+    token."""
+    name = _own_session(request).principal.name
+    try:
+        await keys.remove(name, passkey_id, by=name, address=client_address(request.client))
+    except AccountError as exc:
+        raise _refused(exc) from None
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
 @router.get("/api/accounts")
-async def list_accounts(_: Manager, service: Accounts) -> dict[str, Any]:
-    """Every account (never a password hash) with its last sign-in."""
-    return {"accounts": [a.public() for a in await service.store.all()]}
+async def list_accounts(_: Manager, service: Accounts, keys: Passkeys) -> dict[str, Any]:
+    """Every account (never a password hash) with its last sign-in and how many passkeys."""
+    counts = await keys.counts()
+    return {
+        "accounts": [
+            {**a.public(), "passkeys": counts.get(a.name, 0)} for a in await service.store.all()
+        ]
+    }
+
+
+@router.get("/api/accounts/{name}/passkeys")
+async def account_passkeys(_: Manager, name: str, keys: Passkeys) -> dict[str, Any]:
+    """A person's passkeys (the start of each id, label, added, last used)."""
+    if await keys.accounts.store.get(name) is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no account named {name!r}")
+    return {"passkeys": await keys.listed(name)}
+
+
+@router.delete("/api/accounts/{name}/passkeys")
+async def remove_account_passkeys(
+    request: Request, who: Manager, name: str, keys: Passkeys
+) -> dict[str, Any]:
+    """Remove every passkey of a person (a lost phone or laptop) and end their sessions: they
+    sign in with their password (or a new password an admin sets) and add a passkey again."""
+    address = client_address(request.client)
+    try:
+        removed = await keys.remove_all(name, by=who.name, address=address)
+    except AccountError as exc:
+        raise _refused(exc) from None
+    return {"removed": removed}
 
 
 @router.post("/api/accounts", status_code=status.HTTP_201_CREATED)

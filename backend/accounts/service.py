@@ -31,6 +31,7 @@ __all__ = [
     "ACCOUNT_NAME",
     "AccountError",
     "AccountService",
+    "Audit",
     "Session",
     "account_name_problem",
     "csrf_token",
@@ -245,11 +246,15 @@ class AccountService:
             for client in list(self._links.get(digest, ())):
                 client.request_close(CLOSE_UNAUTHORIZED, f"session ended: {reason}")
 
-    async def sweep(self) -> None:
-        """End expired sessions; close the hub links of sessions that ended elsewhere."""
+    async def sweep(self, *, expire: bool = True) -> None:
+        """End expired sessions (``expire``: the leader's job); close the hub links of
+        sessions that ended elsewhere."""
         now = time.time()
-        await self.store.end_expired(now - self.idle_s, now - self.max_s)
+        if expire:
+            await self.store.end_expired(now - self.idle_s, now - self.max_s)
         linked = set(self._links)
+        if not linked:
+            return
         gone = linked - await self.store.live_digests(linked)
         self._close_links(gone, "expired or signed out")
 

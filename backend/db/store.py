@@ -99,18 +99,24 @@ class DbStore(Service):
         epoch: Callable[[], int | None] | None = None,
         retention_s: float | None = None,
         prune_every_s: float = 3600.0,
+        audit_kinds: tuple[str, ...] = (),
+        audit_retention_s: float | None = None,
     ) -> None:
         """``epoch``: with several server processes, the leader epoch this process won (None
         once it has lost it): each write checks it against the leader row in its transaction,
         so a paused old leader's late writes are refused (docs/scaling.md, "Fencing").
         ``retention_s``: event rows older than this are deleted, every ``prune_every_s`` (the
-        first time that long after the start); None keeps them all."""
+        first time that long after the start); None keeps them all. ``audit_kinds``: the
+        audit trail's rows (docs/security.md "Audit"), kept ``audit_retention_s`` instead
+        (None: for ever)."""
         super().__init__()
         self.sessionmaker = sessionmaker
         self.max_pending = max_pending
         self.epoch = epoch
         self.retention_s = retention_s
         self.prune_every_s = prune_every_s
+        self.audit_kinds = audit_kinds
+        self.audit_retention_s = audit_retention_s if audit_kinds else None
         self.pruned = 0
         """Event rows deleted by retention since the start."""
         self._service: dict[str, dict[str, Any]] = {}
@@ -187,14 +193,19 @@ class DbStore(Service):
     async def on_start(self) -> None:
         self.on_cleanup(self.flush)  # after the writer has stopped: write what is pending
         self.spawn(self._run(), name="db-writer")
-        if self.retention_s is not None:
-            self.spawn(self._prune_periodically(self.retention_s), name="db-retention")
+        if self.retention_s is not None or self.audit_retention_s is not None:
+            self.spawn(self._prune_periodically(), name="db-retention")
 
-    async def _prune_periodically(self, retention_s: float) -> None:
+    async def _prune_periodically(self) -> None:
+        def before(keep_s: float | None) -> float | None:
+            return None if keep_s is None else time.time() - keep_s
+
         while True:
             await asyncio.sleep(self.prune_every_s)
             try:
-                await self.prune_events(time.time() - retention_s)
+                await self.prune_events(
+                    before(self.retention_s), audit_older_than=before(self.audit_retention_s)
+                )
             except Exception:
                 log.exception(
                     "event log retention failed; trying again in %.0f s", self.prune_every_s
@@ -246,10 +257,20 @@ class DbStore(Service):
                 self._events.popleft()
             self.written += len(tasks) + len(history) + len(events) + len(service)
 
-    async def prune_events(self, older_than: float) -> int:
-        """Delete event rows recorded before ``older_than`` (seconds since the epoch), a chunk
-        per transaction, except what the next start replays (locks, alerts); returns how many.
-        A process that no longer leads deletes nothing."""
+    async def prune_events(
+        self, older_than: float | None, *, audit_older_than: float | None = None
+    ) -> int:
+        """Delete event rows recorded before ``older_than`` (seconds since the epoch), and the
+        audit trail's (``audit_kinds``) before ``audit_older_than`` instead (None: none of
+        them), a chunk per transaction, except what the next start replays (locks, alerts);
+        returns how many. A process that no longer leads deletes nothing."""
+        due = []
+        if older_than is not None:
+            due.append(and_(EventRow.kind.not_in(self.audit_kinds), EventRow.at < older_than))
+        if audit_older_than is not None and self.audit_kinds:
+            due.append(and_(EventRow.kind.in_(self.audit_kinds), EventRow.at < audit_older_than))
+        if not due:
+            return 0
         total = 0
         while True:
             async with self.sessionmaker() as session, session.begin():
@@ -272,7 +293,7 @@ class DbStore(Service):
                         await session.execute(
                             select(EventRow.id)
                             .where(
-                                EventRow.at < older_than,
+                                or_(*due),
                                 not_(replayed),
                                 not_(unfolded),  # the reports' rollups have not read it yet
                                 EventRow.kind.not_in(KEPT_KINDS),

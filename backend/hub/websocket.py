@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+from typing import Any
 
 from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect
@@ -34,7 +35,7 @@ async def hub_socket(websocket: WebSocket) -> None:
     auth: Authenticator = websocket.app.state.auth
     query = websocket.query_params
     token = bearer_token(websocket.headers.get("authorization"), query.get("token"))
-    sessions = getattr(websocket.app.state, "sessions", None)
+    sessions: Any = getattr(websocket.app.state, "sessions", None)  # backend/accounts CookieGate
     session = None
     if token is None and sessions is not None:
         session = await sessions.websocket_session(websocket)
@@ -52,7 +53,7 @@ async def hub_socket(websocket: WebSocket) -> None:
         await websocket.close(exc.code, exc.reason)
         return
     if session is not None:
-        websocket.app.state.accounts.link(session, client)
+        sessions.link(session, client)  # closed when the session ends
 
     async def send(frame: bytes) -> None:
         await websocket.send_text(frame.decode())
@@ -64,8 +65,8 @@ async def hub_socket(websocket: WebSocket) -> None:
                 with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
                     await websocket.close(client.close_code, client.close_reason)
     finally:
-        if session is not None and (accounts := getattr(websocket.app.state, "accounts", None)):
-            accounts.unlink(session.digest, client)
+        if session is not None:
+            sessions.unlink(session, client)
 
 
 async def _read(websocket: WebSocket, hub: Hub, client: RemoteClient) -> None:

@@ -15,8 +15,11 @@ from pathlib import Path
 import httpx
 import pytest
 
+from backend.accounts.cookies import CSRF_HEADER, SESSION_COOKIE
 from bench.cluster_clients import WsClient
 from bench.servers import ADMIN_TOKEN, GUI_TOKEN, ServerProcess, wait_until
+
+from .test_accounts_across import PASSWORD, closed_with, hub_link, signed_in
 
 CONF = Path(__file__).resolve().parents[2] / "deploy" / "cluster" / "nginx.conf"
 AUTH = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
@@ -117,11 +120,40 @@ async def test_rest_through_the_proxy_reaches_the_leader(
         assert sorted(t["id"] for t in after.json()["tasks"]) == sorted(ids)
 
 
+async def test_a_person_signed_in_by_cookie_uses_rest_and_the_hub_through_the_proxy(
+    pair: list[ServerProcess], proxy: str
+) -> None:
+    """As a browser on the proxy's address: it sends its page's Origin on every POST and
+    WebSocket, which the servers compare with the Host header nginx passes on (with its port:
+    ``$http_host``, else every cookie request but a GET was refused). REST lands on the
+    leader; hub links land on both servers in turn."""
+    alpha, _ = pair
+    await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+    await signed_in(alpha, "ada", "operator")
+    browser = {"Origin": proxy}
+    async with httpx.AsyncClient(base_url=proxy, timeout=30, headers=browser) as http:
+        answer = await http.post("/api/session", json={"name": "ada", "password": PASSWORD})
+        assert answer.status_code == 200, answer.text
+        cookie, csrf = answer.cookies[SESSION_COOKIE], answer.json()["csrf"]
+        mine = {"Cookie": f"{SESSION_COOKIE}={cookie}", CSRF_HEADER: csrf}
+        for _ in range(4):  # round robin: each request lands on the follower first once
+            assert (await http.get("/api/robots", headers=mine)).status_code == 200
+            created = await http.post(
+                "/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}, headers=mine
+            )
+            assert created.status_code == 201, created.text
+        links = [await hub_link(_Via(proxy), cookie) for _ in range(4)]  # type: ignore[arg-type]
+        ended = await http.post("/api/session/everywhere", headers=mine)
+        assert ended.json()["ended"] == 2  # signed_in's session and this one
+        assert [await closed_with(ws) for ws in links] == [4001] * 4
+
+
 class _Via:
     """Where WsClient connects: the proxy's port."""
 
     def __init__(self, url: str) -> None:
         self.port = int(url.rsplit(":", 1)[1])
+        self.url = url
 
 
 async def _true(value: object) -> object:

@@ -375,3 +375,102 @@ async def test_a_passkey_answer_that_is_not_accepted_counts_as_a_failed_sign_in(
     assert refused.status_code == 409  # a token has no account to add a passkey to
     events = await server.app.state.store.events(kind="sign_in_failed", limit=100)
     assert {e["data"]["why"] for e in events} == {"passkey"}
+
+
+def test_an_unknown_role_in_the_oidc_roles_stops_the_start_naming_it(tmp_path: Path) -> None:
+    """GUIDEBOT_OIDC_ROLES with a role no person has: the start is refused (exit 2) by the
+    settings' validation, naming the variable, the group, the bad role and the roles there
+    are; no traceback."""
+    from backend.server_cli import server as server_command
+
+    result = CliRunner().invoke(
+        server_command,
+        ["--db", f"sqlite+aiosqlite:///{tmp_path}/x.db"],
+        env={
+            "GUIDEBOT_ENVIRONMENT": "development",
+            "GUIDEBOT_OIDC_ISSUER": "http://127.0.0.1:1/idp",
+            "GUIDEBOT_OIDC_ROLES": '{"front-desk": "operator", "guides": "guide"}',
+        },
+    )
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and result.exception is not None
+    assert (
+        "GUIDEBOT_OIDC_ROLES: unknown role (group 'guides' -> 'guide'): the roles are "
+        "admin, author, installer, operator, viewer" in " ".join(result.output.split())
+    )
+
+
+async def test_a_person_removes_only_their_own_passkeys_and_an_admin_any_person_s(
+    server: RunningServer,
+) -> None:
+    """A passkey id of another person's is 404 for a person (nothing removed); an admin's
+    removal of all of a person's passkeys ends that person's sessions; audit rows for both."""
+    from backend.db.models import PasskeyRow
+
+    await make(server, "ada", Role.OPERATOR)
+    await make(server, "bob", Role.VIEWER)
+    await make(server, "root", Role.ADMIN)
+    async with server.app.state.store.sessionmaker() as db, db.begin():
+        for owner, key in (("ada", "ada-phone-0123456789"), ("bob", "bob-laptop-0123456789")):
+            db.add(PasskeyRow(credential_id=key, account=owner, public_key="", created_at=1.0))
+    async with signed_in(server, "ada") as (ada, csrf), signed_in(server, "root") as (root, rcsrf):
+        mine = (await ada.get("/api/session/passkeys")).json()["passkeys"]
+        assert [(k["id"], k["last_used"]) for k in mine] == [("ada-phone-012345", None)]
+        theirs = await ada.delete(
+            "/api/session/passkeys/bob-laptop-012345", headers={CSRF_HEADER: csrf}
+        )
+        assert theirs.status_code == 404
+        listed = (await root.get("/api/accounts")).json()["accounts"]
+        assert {a["name"]: a["passkeys"] for a in listed} == {"ada": 1, "bob": 1, "root": 0}
+        own = await ada.delete(
+            "/api/session/passkeys/ada-phone-012345", headers={CSRF_HEADER: csrf}
+        )
+        assert own.status_code == 204
+        assert (await ada.get("/api/session")).json()["signed_in"]  # sessions stay
+        async with signed_in(server, "bob") as (bob, _):
+            lost = await root.delete("/api/accounts/bob/passkeys", headers={CSRF_HEADER: rcsrf})
+            assert lost.json() == {"removed": 1}
+            assert (await bob.get("/api/session")).json()["signed_in"] is False
+        assert (await root.get("/api/accounts/bob/passkeys")).json() == {"passkeys": []}
+        nobody = await root.delete("/api/accounts/nobody/passkeys", headers={CSRF_HEADER: rcsrf})
+        assert nobody.status_code == 404
+    events = await server.app.state.store.events(kind="account_changed", limit=100)
+    removed = [
+        (e["source"], e["data"]["target"], e["data"]["passkeys"])
+        for e in events
+        if e["data"]["change"] == "passkey_removed"
+    ]
+    assert removed == [("ada", "ada", 1), ("root", "bob", 1)]
+
+
+async def test_audit_rows_are_kept_their_own_days_not_the_event_log_s(tmp_path: Path) -> None:
+    """GUIDEBOT_AUDIT_RETENTION_DAYS (365) keeps people's sign-ins and actions past the event
+    log's 30 days; older than it, they go too; 0 keeps them for ever."""
+    from tests.server.test_api import eventually
+    from tests.server.test_kept_across_restarts import DAY, event_kinds, seed_events
+
+    settings = server_settings(tmp_path).model_copy(
+        update={"event_retention_days": 30.0, "event_prune_every_s": 0.05}
+    )
+    month, years = time.time() - 40 * DAY, time.time() - 400 * DAY
+    await seed_events(
+        settings.db_url,
+        [
+            (month, "node_reached", {"robot": "R1"}),
+            (month, "signed_in", {"account": "ada"}),
+            (month, "staff_action", {"account": "ada"}),
+            (years, "account_changed", {"account": "root"}),
+        ],
+    )
+    async with running_server(settings) as srv:
+        store = srv.app.state.store
+        assert store.audit_retention_s == 365 * DAY
+        await eventually(lambda: store.pruned == 2)  # the month-old node, the year-old change
+        kinds = [kind for kind, _ in await event_kinds(store)]
+        assert kinds[:2] == ["signed_in", "staff_action"]
+    kept = settings.model_copy(update={"audit_retention_days": 0.0})
+    async with running_server(kept) as srv:
+        assert srv.app.state.store.audit_retention_s is None
+        await srv.app.state.store.prune_events(time.time(), audit_older_than=None)
+        kinds = [kind for kind, _ in await event_kinds(srv.app.state.store)]
+        assert kinds[:2] == ["signed_in", "staff_action"]  # everything else went

@@ -195,3 +195,88 @@ async def test_a_passkey_is_added_and_then_signs_in_without_a_password(
         assert signed_in == ["password", "passkey"]
         changes = [e["data"]["change"] for e in events if e["kind"] == "account_changed"]
         assert changes == ["passkey_added"]
+
+
+async def test_a_person_removes_a_passkey_and_an_admin_removes_a_lost_phone_s(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """ "Your passkeys" lists a person's passkeys (name, added, last used); one removed signs
+    nobody in any more. An admin removes all of a person's passkeys from the Accounts view (a
+    lost phone): the person's open console is signed out, and the passkey refused."""
+    async with fleet_factory(robots=0) as fleet:
+        await make(fleet, "ada", Role.OPERATOR, "Ada Lovelace")
+        await make(fleet, "root", Role.ADMIN)
+        watch = await open_page("")
+        page = watch.page
+        watch.expect_error(r"status of 401")  # the removed passkey, refused
+        await virtual_authenticator(page)
+        await page.goto(fleet.admin_url.replace("127.0.0.1", "localhost"))
+        await password_sign_in(watch, "ada")
+        await page.get_by_label("Floor", exact=True).wait_for()
+        await web.open_view(page, "Robots")  # where the page shows the outcome of an action
+        await page.get_by_role("button", name="Add a passkey").click()
+        await expect(page.get_by_text("Add a passkey: done.")).to_be_visible()
+        await page.get_by_role("button", name="Sign out", exact=True).click()
+        await page.get_by_role("button", name="Use a passkey").click()
+        await expect(page.locator("#who")).to_contain_text("Ada Lovelace")
+
+        await page.get_by_role("button", name="Your passkeys").click()
+        table = page.get_by_role("table", name="Your passkeys")
+        await expect(table.get_by_role("row")).to_have_count(2)
+        cells = table.get_by_role("row").nth(1).get_by_role("cell")
+        await expect(cells.nth(2)).not_to_have_text("never")  # last used: the sign-in above
+        await web.axe_check(page)
+        await web.screenshot(page, "passkeys")
+        await table.get_by_role("button", name="Remove").click()
+        await expect(table).to_contain_text("No passkey yet.")
+        await page.get_by_role("button", name="Sign out", exact=True).click()
+        await page.get_by_role("button", name="Use a passkey").click()
+        await expect(page.get_by_role("alert")).to_contain_text("This passkey was not accepted.")
+
+        # A passkey again, then the phone is lost: the admin removes it.
+        await password_sign_in(watch, "ada")
+        await expect(table).to_contain_text("No passkey yet.")  # back on the view it showed
+        await page.get_by_role("button", name="Add a passkey").click()
+        await expect(page.get_by_text("Add a passkey: done.")).to_be_visible()
+        await expect(table.get_by_role("row")).to_have_count(2)  # listed again at once
+        admin = await open_page(fleet.admin_url)
+        await password_sign_in(admin, "root")
+        await admin.page.get_by_label("Floor", exact=True).wait_for()
+        await web.open_view(admin.page, "Accounts")
+        accounts = admin.page.get_by_role("table", name="Accounts")
+        await expect(accounts.get_by_role("row", name="ada")).to_contain_text("1")
+        await admin.page.get_by_role("button", name="Remove passkeys of ada").click()
+        await admin.page.get_by_role("dialog").get_by_role("button", name="Remove passkeys").click()
+        await expect(admin.page.get_by_text("Remove passkeys of ada: done.")).to_be_visible()
+        await expect(admin.page.get_by_role("button", name="Remove passkeys of ada")).to_have_count(
+            0
+        )
+        await expect(page.get_by_role("heading", name="Sign in")).to_be_visible()  # thrown out
+        await page.get_by_role("button", name="Use a passkey").click()
+        await expect(page.get_by_role("alert")).to_contain_text("This passkey was not accepted.")
+
+        events = await fleet.server.app.state.store.events(kind="account_changed", limit=100)
+        removed = [
+            (e["source"], e["data"]["target"], e["data"]["passkeys"])
+            for e in events
+            if e["data"]["change"] == "passkey_removed"
+        ]
+        assert removed == [("ada", "ada", 1), ("root", "ada", 1)]
+
+
+async def test_the_accounts_view_says_so_when_there_is_no_account(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """Before the first account (the admin signed in with the admin token), the Accounts
+    table has a "none" row, as the other views' empty tables do."""
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await page.get_by_label("Staff token").fill(fleet.server.admin_token)
+        await page.get_by_role("button", name="Sign in").click()
+        await page.get_by_label("Floor", exact=True).wait_for()
+        await web.open_view(page, "Accounts")
+        table = page.get_by_role("table", name="Accounts")
+        await expect(table.get_by_role("row")).to_have_count(2)
+        await expect(table).to_contain_text("No account yet: create the first below.")
+        await web.axe_check(page)

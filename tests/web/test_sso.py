@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import re
 import shutil
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -116,22 +117,32 @@ async def test_a_person_signs_in_through_the_venue_s_provider(
         assert [(e["kind"], e["data"].get("with")) for e in events] == [("signed_in", "sso")]
 
 
+async def refused_on_the_form(page: Any, fleet: Any, words: str) -> None:
+    """Back on the console's sign-in form (not a JSON page), saying why in words, with the
+    fragment taken off the address."""
+    await expect(page.get_by_role("alert")).to_contain_text(words)
+    await expect(page.get_by_role("button", name="Use Museum login")).to_be_visible()
+    await expect(page.get_by_label("Account name")).to_be_visible()
+    assert page.url == fleet.admin_url.split("#")[0], page.url
+
+
 async def test_no_role_for_the_groups_and_a_wrong_nonce_or_state_sign_nobody_in(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with sso_fleet(fleet_factory) as fleet:
         sso: SingleSignOn = fleet.server.app.state.sso
         watch = await opened(open_page, fleet)
-        watch.expect_error(r"status of 40[13]")
         page = watch.page
         await through_the_provider(page, "gus")  # a visitor: no group of GuideBot's
-        await expect(page.locator("body")).to_contain_text("none of your groups")
+        await refused_on_the_form(
+            page, fleet, "Museum login: none of your groups has a GuideBot role"
+        )
         assert await fleet.server.app.state.accounts.store.get("gus") is None
+        await web.axe_check(page)
 
         # The flow's nonce changed after the browser left: the ID token's is not the one sent
         # (a new browser, not signed in at the provider).
         watch = await opened(open_page, fleet)
-        watch.expect_error(r"status of 401")
         page = watch.page
         await page.get_by_role("button", name="Use Museum login").click()
         await page.locator("input[name=login]").wait_for()
@@ -143,8 +154,25 @@ async def test_no_role_for_the_groups_and_a_wrong_nonce_or_state_sign_nobody_in(
         await page.locator("input[name=password]").fill("anything")
         await page.get_by_role("button", name="Sign-in").click()
         await page.get_by_role("button", name="Continue").click()
-        await expect(page.locator("body")).to_contain_text("single sign-on refused")
+        await refused_on_the_form(page, fleet, "Single sign-on refused")
         assert await fleet.server.app.state.accounts.store.get("olga") is None
+
+        # The person cancels at the provider: it sends the browser back with an error.
+        watch = await opened(open_page, fleet)
+        page = watch.page
+        await page.get_by_role("button", name="Use Museum login").click()
+        await page.locator("input[name=login]").wait_for()
+        ((state, _),) = list(sso._flows.items())
+        await page.goto(
+            f"{fleet.server.url}/api/session/oidc/callback?error=access_denied&state={state}"
+        )
+        await refused_on_the_form(page, fleet, "Museum login did not sign you in")
+        events = await fleet.server.app.state.store.events(kind="sign_in_failed", limit=10)
+        assert [e["data"]["why"] for e in events] == [
+            "sso no role",
+            "sso token (InvalidClaimError)",
+            "sso provider error",
+        ]
 
 
 async def test_a_callback_with_a_state_the_server_did_not_send_is_refused(
@@ -155,9 +183,47 @@ async def test_a_callback_with_a_state_the_server_did_not_send_is_refused(
             forged = await http.get(
                 "/api/session/oidc/callback", params={"state": "forged", "code": "stolen"}
             )
-            started = await http.get("/api/session/oidc/start")
-        assert forged.status_code == 401 and "set-cookie" not in forged.headers
+            started = await http.get("/api/session/oidc/start", params={"next": "/config/"})
+        assert forged.status_code == 302 and "set-cookie" not in forged.headers
+        assert forged.headers["location"] == "/admin/#sso_refused=refused"
         assert started.status_code == 302
         assert "code_challenge_method=S256" in started.headers["location"]
         events = await fleet.server.app.state.store.events(kind="sign_in_failed", limit=10)
         assert [e["data"]["why"] for e in events] == ["sso state"]
+
+
+async def test_sso_refusals_go_back_to_the_sign_in_form_saying_why(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """An unreachable provider, and an address over its failure budget (the answer says when
+    to try again), both end on the page's sign-in form; a code the page does not know says
+    "refused", never words from the address."""
+    async with fleet_factory(robots=0) as fleet:
+        app = fleet.server.app
+        config = OidcConfig(
+            "http://127.0.0.1:9/idp", "guidebot", None, "Museum login", "groups", {}
+        )
+        app.state.sso = SingleSignOn(config, app.state.accounts)
+        async with httpx.AsyncClient(base_url=fleet.server.url, timeout=10) as http:
+            away = await http.get("/api/session/oidc/start", params={"next": "/config/"})
+            assert away.status_code == 302
+            assert away.headers["location"] == "/config/#sso_refused=unreachable"
+            for _ in range(fleet.server.app.state.settings.sign_in_failure_burst):
+                await http.get("/api/session/oidc/callback", params={"state": "x", "code": "y"})
+            locked = await http.get("/api/session/oidc/callback", params={"state": "x"})
+        assert locked.status_code == 302
+        assert re.fullmatch(r"/admin/#sso_refused=locked&retry=\d+", locked.headers["location"])
+
+        watch = await open_page("")
+        page = watch.page
+        await page.goto(f"{fleet.server.url}/config/#sso_refused=unreachable")
+        await expect(page.get_by_role("alert")).to_contain_text(
+            "Museum login cannot be reached: try again later"
+        )
+        await page.goto(f"{fleet.server.url}{locked.headers['location']}")
+        await expect(page.get_by_role("alert")).to_contain_text(
+            "Too many failed sign-ins: try again in"
+        )
+        await page.goto(f"{fleet.server.url}/nets/#sso_refused=Call+0800+for+help")
+        await expect(page.get_by_role("alert")).to_contain_text("Single sign-on refused")
+        await expect(page.locator("body")).not_to_contain_text("0800")

@@ -1,15 +1,14 @@
 // The staff console (/admin/): sign-in, then the live map and the fleet views.
 import { html, render } from "lit-html";
 import {
-  addPasskey, currentSession, currentToken, singleSignOn, forgetToken, passkeysAvailable, saveToken, sessionHeaders, signInWithPasskey,
-  signInWithPassword, signOut, signOutEverywhere,
+  addPasskey, currentSession, currentToken, forgetToken, passkeysAvailable, sessionHeaders, signOut, signOutEverywhere,
 } from "/lib/auth.js";
 import { connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
 import { FloorMap } from "/lib/map.js";
 import { Api, ApiError } from "/lib/rest.js";
-import { signInForm } from "/lib/signin.js";
-import { accountsView } from "/admin/views/accounts.js";
+import { signInFlow } from "/lib/signin.js";
+import { accountsView, passkeysView } from "/admin/views/accounts.js";
 import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
@@ -55,6 +54,7 @@ const RENDER = {
   reports: reportsView,
   accounts: accountsView,
   notifications: notificationsView,
+  passkeys: passkeysView, // from the header's "Your passkeys", not a tab
 };
 const $ = (id) => document.getElementById(id);
 
@@ -71,47 +71,16 @@ function showSignIn(message = "") {
   $("emergency-banner").hidden = true;
   const section = $("signin");
   section.hidden = false;
-  const onToken = async (value) => {
-    token = value;
-    const me = await whoAmI();
-    if (me instanceof Error) {
-      token = null;
-      return showSignIn(me.message);
-    }
-    saveToken(value);
-    start();
-  };
-  const onAccount = async (name, password) => {
-    if (!name || !password) return showSignIn("Enter your account name and password, or a staff token.");
-    try {
-      session = await signInWithPassword(name, password);
-    } catch (err) {
-      return showSignIn(err.message);
-    }
-    token = null;
-    start();
-  };
-  const onPasskey = async () => {
-    try {
-      session = await signInWithPasskey();
-    } catch (err) {
-      return showSignIn(err.message);
-    }
-    token = null;
-    start();
-  };
-  render(
-    signInForm({
-      intro: "Staff sign in with their account; a shared screen or the demo with a staff token.",
-      message,
-      onAccount,
-      onToken,
-      onPasskey,
-      sso: singleSignOn(),
-    }),
+  signInFlow({
     section,
-  );
-  section.querySelector("input").focus();
+    intro: "Staff sign in with their account; a shared screen or the demo with a staff token.",
+    message,
+    missing: "Enter your account name and password, or a staff token.",
+    useToken: (value) => { token = value; },
+    check: whoAmI,
+    done: start,
+    again: showSignIn,
+  });
 }
 
 /** The signed-in user (or an Error that says why not). */
@@ -173,7 +142,7 @@ async function start() {
     hub,
     admin: me.role === "admin",
     operate: me.role !== "viewer", // a viewer sees every view and no button that changes anything
-    view: sessionStorage.getItem("guidebot.view") ?? "map",
+    view: (session || sessionStorage.getItem("guidebot.view") !== "passkeys") ? sessionStorage.getItem("guidebot.view") ?? "map" : "map",
     selected: null,
     notice: null,
     sound: false,
@@ -214,8 +183,12 @@ async function start() {
       <button type="button" @click=${() => leave(false)}>Sign out</button>
       ${session ? html`<button type="button" class="secondary" @click=${() => leave(true)}>Sign out everywhere</button>` : ""}
       ${session && passkeysAvailable()
-        ? html`<button type="button" class="secondary" @click=${() => ui.act("Add a passkey", () => addPasskey(navigator.platform || ""))}>Add a passkey</button>`
-        : ""}`,
+        ? html`<button type="button" class="secondary" @click=${() => ui.act("Add a passkey", async () => {
+          await addPasskey(navigator.platform || "");
+          ui.passkeys = undefined; // "Your passkeys" reads them again
+        })}>Add a passkey</button>`
+        : ""}
+      ${session ? html`<button type="button" class="secondary" @click=${() => ui.go("passkeys")}>Your passkeys</button>` : ""}`,
     $("who"),
   );
   const showServer = () => serverStatus(api).then((view) => render(view, $("server-status")));

@@ -1,10 +1,8 @@
 // The site editor (/config, installers and admins): edit the draft on the plan, publish it
 // live, history.
 import { html, nothing, render } from "lit-html";
-import {
-  currentSession, currentToken, singleSignOn, forgetToken, saveToken, sessionHeaders, signInWithPasskey, signInWithPassword,
-} from "/lib/auth.js";
-import { signInForm } from "/lib/signin.js";
+import { currentSession, currentToken, forgetToken, sessionHeaders } from "/lib/auth.js";
+import { signInFlow } from "/lib/signin.js";
 import { confirmAction } from "/lib/confirm.js";
 import { clock, connectionBanner } from "/lib/dom.js";
 import { HubClient } from "/lib/hub.js";
@@ -52,41 +50,17 @@ function showSignIn(message = "") {
   $("editor").hidden = true;
   const section = $("signin");
   section.hidden = false;
-  const onToken = async (value) => {
-    token = value;
-    const me = await editor();
-    if (me instanceof Error) {
-      token = null;
-      return showSignIn(me.message);
-    }
-    saveToken(token);
-    start(me);
-  };
-  const onAccount = async (name, password) => {
-    if (!name || !password) return showSignIn("Enter your account name and password, or an admin token.");
-    await signedIn(() => signInWithPassword(name, password));
-  };
-  const signedIn = async (how) => {
-    try {
-      await how();
-    } catch (err) {
-      return showSignIn(err.message);
-    }
-    token = null;
-    const me = await editor();
-    if (me instanceof Error) return showSignIn(me.message);
-    start(me);
-  };
-  render(signInForm({
+  signInFlow({
+    section,
     intro: "The site editor is for installers and administrators.",
     tokenLabel: "Admin token",
     message,
-    onAccount,
-    onToken,
-    onPasskey: () => signedIn(signInWithPasskey),
-    sso: singleSignOn(),
-  }), section);
-  section.querySelector("input").focus();
+    missing: "Enter your account name and password, or an admin token.",
+    useToken: (value) => { token = value; },
+    check: editor,
+    done: start,
+    again: showSignIn,
+  });
 }
 
 async function boot() {

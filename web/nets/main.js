@@ -2,10 +2,8 @@
 // it, checked by the engine's rules as you edit, export it as PNML, publish it to the fleet.
 // Who may publish (the server's edit_nets rule) edits; other staff read.
 import { html, nothing, render } from "lit-html";
-import {
-  currentSession, currentToken, singleSignOn, forgetToken, saveToken, sessionHeaders, signInWithPasskey, signInWithPassword,
-} from "/lib/auth.js";
-import { signInForm } from "/lib/signin.js";
+import { currentSession, currentToken, forgetToken, sessionHeaders } from "/lib/auth.js";
+import { signInFlow } from "/lib/signin.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { NetCanvas } from "/nets/canvas.js";
 import { detailsForm } from "/nets/forms.js";
@@ -33,40 +31,16 @@ function showSignIn(message = "") {
   $("editor").hidden = true;
   const section = $("signin");
   section.hidden = false;
-  const onToken = async (value) => {
-    token = value;
-    const known = await whoAndWhat();
-    if (known instanceof Error) {
-      token = null;
-      return showSignIn(known.message);
-    }
-    saveToken(token);
-    start(known);
-  };
-  const signedIn = async (how) => {
-    try {
-      await how();
-    } catch (err) {
-      return showSignIn(err.message);
-    }
-    token = null;
-    const known = await whoAndWhat();
-    if (known instanceof Error) return showSignIn(known.message);
-    start(known);
-  };
-  const onAccount = async (name, password) => {
-    if (!name || !password) return showSignIn("Enter your account name and password, or a staff token.");
-    await signedIn(() => signInWithPassword(name, password));
-  };
-  render(signInForm({
+  signInFlow({
+    section,
     intro: "Those who may publish nets edit them; other staff read them.",
     message,
-    onAccount,
-    onToken,
-    onPasskey: () => signedIn(signInWithPasskey),
-    sso: singleSignOn(),
-  }), section);
-  section.querySelector("input").focus();
+    missing: "Enter your account name and password, or a staff token.",
+    useToken: (value) => { token = value; },
+    check: whoAndWhat,
+    done: start,
+    again: showSignIn,
+  });
 }
 
 async function boot() {

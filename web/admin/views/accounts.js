@@ -1,7 +1,10 @@
-// Accounts (admins): people who sign in, their roles, last sign-in; create, change the role,
-// disable or enable, set a new password. Changing a role, disabling and a new password end the
-// person's sessions at once, on every page and hub link (docs/security.md "Accounts").
+// Accounts (admins): people who sign in, their roles, last sign-in, passkeys; create, change
+// the role, disable or enable, set a new password, remove a person's passkeys (a lost phone).
+// Changing a role, disabling, a new password and removing the passkeys end the person's
+// sessions at once, on every page and hub link (docs/security.md "Accounts").
+// Your passkeys (anyone signed in with an account): list them, remove one.
 import { html } from "lit-html";
+import { confirmAction } from "/lib/confirm.js";
 
 const ROLES = [
   ["admin", "admin: everything, accounts too"],
@@ -82,11 +85,63 @@ function row(ui, a) {
       <select @change=${setRole}>${ROLES.map(([r]) => html`<option value=${r} ?selected=${a.role === r}>${r}</option>`)}</select></label></td>
     <td class=${a.disabled ? "state-disabled" : ""}>${a.disabled ? "disabled" : "enabled"}</td>
     <td>${when(a.last_sign_in)}</td>
+    <td>${a.passkeys ?? 0}</td>
     <td>
       <button type="button" class=${a.disabled ? "secondary" : "danger"} @click=${toggle}>${a.disabled ? "Enable" : "Disable"} ${a.name}</button>
       <button type="button" class="secondary" @click=${() => { ui.resetting = a.name; ui.draw(); }}>New password for ${a.name}</button>
+      ${a.passkeys ? html`<button type="button" class="danger" @click=${() => removePasskeys(ui, a)}>Remove passkeys of ${a.name}</button>` : ""}
     </td>
   </tr>`;
+}
+
+async function removePasskeys(ui, account) {
+  const ok = await confirmAction({
+    title: `Remove the passkeys of ${account.name}?`,
+    text: `All ${account.passkeys} passkey(s) of ${account.name} stop working and ${account.name} is signed out everywhere (a lost phone or laptop). They sign in with their password and add a passkey again.`,
+    confirm: "Remove passkeys",
+    keep: "Keep them",
+  });
+  if (!ok) return;
+  change(ui, `Remove passkeys of ${account.name}`, () =>
+    ui.api.delete(`/api/accounts/${encodeURIComponent(account.name)}/passkeys`));
+}
+
+function passkeyName(key) {
+  return key.label || `passkey ${key.id.slice(0, 6)}`;
+}
+
+/** The signed-in person's passkeys: name, added, last used; remove one (a device given away). */
+export function passkeysView(ui) {
+  const load = () => ui.api.get("/api/session/passkeys").then(({ passkeys }) => {
+    ui.passkeys = passkeys;
+    ui.draw();
+  }).catch((err) => {
+    ui.passkeys = [];
+    ui.notice = { ok: false, text: `Your passkeys: ${err.message}` };
+    ui.draw();
+  });
+  if (ui.passkeys === undefined) {
+    ui.passkeys = null;
+    load();
+  }
+  const keys = ui.passkeys ?? [];
+  const remove = (key) => ui.act(`Remove ${passkeyName(key)}`, async () => {
+    await ui.api.delete(`/api/session/passkeys/${encodeURIComponent(key.id)}`);
+    await load();
+  });
+  return html`<h2>Your passkeys</h2>
+    <p class="muted">Each passkey signs you in from one device without a password. Remove the one of a
+      device you no longer use; your other passkeys and your password stay.</p>
+    ${ui.passkeys === null ? html`<p role="status">Loading passkeys…</p>` : ""}
+    <table aria-label="Your passkeys">
+      <thead><tr><th scope="col">Name</th><th scope="col">Added</th><th scope="col">Last used</th>
+        <th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
+      <tbody>${ui.passkeys !== null && !keys.length ? html`<tr><td colspan="4">No passkey yet.</td></tr>` : ""}
+        ${keys.map((key) => html`<tr>
+          <td>${passkeyName(key)}</td><td>${when(key.created_at)}</td><td>${when(key.last_used)}</td>
+          <td><button type="button" class="danger" @click=${() => remove(key)}>Remove ${passkeyName(key)}</button></td>
+        </tr>`)}</tbody>
+    </table>`;
 }
 
 export function accountsView(ui) {
@@ -101,13 +156,16 @@ export function accountsView(ui) {
   const accounts = ui.accounts ?? [];
   const resetting = accounts.find((a) => a.name === ui.resetting);
   return html`<h2>Accounts</h2>
-    <p class="muted">People who sign in with their own name. Changing a role, disabling an account or
-      setting a new password signs the person out at once, on every page.</p>
+    <p class="muted">People who sign in with their own name. Changing a role, disabling an account,
+      setting a new password or removing the person's passkeys signs the person out at once, on every page.</p>
     ${ui.accounts === null ? html`<p role="status">Loading accounts…</p>` : ""}
     <table aria-label="Accounts">
       <thead><tr><th scope="col">Name</th><th scope="col">Display name</th><th scope="col">Role</th>
-        <th scope="col">State</th><th scope="col">Last sign-in</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
-      <tbody>${accounts.map((a) => row(ui, a))}</tbody>
+        <th scope="col">State</th><th scope="col">Last sign-in</th><th scope="col">Passkeys</th>
+        <th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
+      <tbody>${ui.accounts !== null && !accounts.length
+        ? html`<tr><td colspan="7">No account yet: create the first below.</td></tr>`
+        : accounts.map((a) => row(ui, a))}</tbody>
     </table>
     ${resetting ? passwordForm(ui, resetting) : ""}
     ${createForm(ui)}`;
