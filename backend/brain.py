@@ -13,6 +13,7 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 from fastapi import FastAPI
+from pydantic import ValidationError
 
 from backend.accounts.audit import AUDIT_KINDS
 from backend.alerts import AlertStore
@@ -27,6 +28,7 @@ from backend.api.component import (
     weak_robot_tokens,
 )
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
+from backend.elevator_calls import CallNews
 from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
 from backend.reports.figures import Reports
@@ -39,6 +41,7 @@ from backend.tasks.lifts import lift_queue
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
 from guidebot.messages import Message
+from guidebot.payloads.building import ElevatorState
 from guidebot.service import Service
 from guidebot.site.schema import Site
 
@@ -141,9 +144,20 @@ class ServerBrain(Service):
         # server down), after the managers' last events and before the store's last write.
         self.on_cleanup(lambda: store.record_event("server_stopped", "server", {}))
 
+        calls = CallNews()
+
         def log_message(msg: Message) -> None:
+            if msg.type == "call_elevator" and not calls.is_news(
+                str(msg.payload.get("elevator")), str(msg.payload.get("floor"))
+            ):
+                return  # a press again (backend/elevator_calls.py)
             store.record_event(msg.type, msg.source, msg.payload)
 
+        def cabin(msg: Message) -> None:
+            with contextlib.suppress(ValidationError):
+                calls.cabin(msg.payload_as(ElevatorState))
+
+        logger.subscribe("elevator_state", cabin)
         for pattern in LOGGED_TYPES:
             logger.subscribe(pattern, log_message, tap=True)
         for pattern in LOGGED_BROADCASTS:

@@ -122,3 +122,26 @@ def test_the_building_part_names_the_floors_of_the_nodes_its_points_name() -> No
     assert part[1][named] == floors[named]
     assert _building_part(site, {**floors, other: "elsewhere"}) == part
     assert _building_part(site, {**floors, named: "elsewhere"}) != part
+
+
+async def test_a_call_pressed_again_is_logged_once(tmp_path: Path) -> None:
+    """Robots press a lift's call again while they wait and while they drive in or out (to
+    keep the door open): the event log keeps the call that is news, not a row per press (a
+    press where the cabin already stood open also started a bogus elevator wait in the
+    reports, ended only by the cabin's next arrival)."""
+    async with demo_building(tmp_path) as (_site, _sim, server):
+        hub = server.app.state.hub
+        recorder = Recorder(hub.endpoint("test"), "elevator_state", "elevator_in_position")
+        robot = hub.endpoint("R1")
+        building = server.app.state.building
+        await wait_until(lambda: all(p.health.polls > 0 for p in building.pollers.values()))
+        robot.publish("call_elevator", {"elevator": "lift", "floor": "F1"})
+        await recorder.wait("elevator_state", lambda m: "F1" in m.payload["calls"])
+        robot.publish("call_elevator", {"elevator": "lift", "floor": "F1"})  # waiting
+        await recorder.wait("elevator_in_position", floor="F1")
+        await recorder.wait("elevator_state", floor="F1", door_open=True)
+        robot.publish("call_elevator", {"elevator": "lift", "floor": "F1"})  # keep it open
+        robot.publish("call_elevator", {"elevator": "lift", "floor": "F0"})  # news: logged
+        await recorder.wait("elevator_state", lambda m: "F0" in m.payload["calls"])
+        calls = await server.app.state.store.events(kind="call_elevator")
+        assert [(e["source"], e["data"]["floor"]) for e in calls] == [("R1", "F1"), ("R1", "F0")]
