@@ -50,6 +50,8 @@ RULES: dict[str, frozenset[Role]] = {
     "read_reports": _OPERATOR | {Role.VIEWER},  # GET /api/reports (docs/reports.md)
     "read_nets": _OPERATOR | {Role.AUTHOR, Role.VIEWER},  # the net editor's reads (docs/nets.md)
     "edit_nets": frozenset({Role.AUTHOR}),  # publish nets, restore a version (docs/nets.md)
+    "book": _OPERATOR,  # bookings: create, move, cancel (backend/bookings)
+    "read_bookings": _OPERATOR | {Role.VIEWER},  # bookings: list, one, its history
     "read": _READERS,  # tours, points of interest, the visitor menu, the map, /api/me
     # Actions that arrive over REST and the hub alike
     "task_request": _REQUESTERS | {Role.MODULE},  # POST /api/tasks
@@ -115,6 +117,8 @@ REST_ONLY = frozenset(
         "read_reports",
         "read_nets",
         "edit_nets",
+        "book",
+        "read_bookings",
         "read",
     }
 )
