@@ -15,6 +15,7 @@ from backend.bookings.schedule import BookingScheduler
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
 from backend.closures.model import Closure
+from backend.fencing import deciding_endpoint
 from backend.tasks.manager import TaskManager
 
 __all__ = ["bookings", "venue_zone"]
@@ -75,6 +76,7 @@ async def bookings(app: FastAPI) -> AsyncIterator[None]:
         closures=closures,
         alarm=alarm,
         check_lead_s=settings.booking_check_lead_s,
+        endpoint=deciding_endpoint(app, "bookings"),
     )
     async with scheduler:
         app.state.bookings = service

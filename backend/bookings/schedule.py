@@ -22,9 +22,13 @@ from backend.alerts import AlertStore
 from backend.bookings.model import Booking
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
+from backend.bookings.words import coming
 from backend.closures.model import Closure, closed_nodes
 from backend.tasks.model import Task, TaskError
 from backend.tasks.robots import RobotInfo
+from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.bookings import NextTour, NextTours
 from guidebot.service import Service
 from guidebot.site.schema import Site
 
@@ -81,8 +85,12 @@ class BookingScheduler(Service):
         check_lead_s: float = 900.0,
         tick_s: float | None = 1.0,
         clock: Callable[[], float] = time.time,
+        endpoint: BusEndpoint | None = None,
     ) -> None:
         super().__init__()
+        self.endpoint = endpoint
+        """Where ``next_tours`` goes (None: not told)."""
+        self._told: list[NextTour] | None = None
         self.service = service
         self.store = store
         self.fleet = fleet
@@ -100,6 +108,9 @@ class BookingScheduler(Service):
 
     async def on_start(self) -> None:
         await self.restore()
+        if self.endpoint is not None:
+            self.subscribe(self.endpoint, "robot_connected", self._on_robot_connected)
+            self.service.on_change.append(lambda _: self.tell(self.clock()))
         if self.tick_s is not None:
             self.spawn(self._run(self.tick_s), name="booking-scheduler")
 
@@ -123,6 +134,7 @@ class BookingScheduler(Service):
             await asyncio.sleep(tick_s)
 
     async def step(self, now: float) -> None:
+        self.tell(now)
         async with self._lock:
             for at, booking in self.service.between(now - LATE_S, now + self.check_lead_s):
                 key = (booking.id, at)
@@ -132,6 +144,22 @@ class BookingScheduler(Service):
                     await self._start(booking, at)
                 else:
                     await self._check(booking, at)
+
+    # -- telling visitors ---------------------------------------------------------------------
+
+    def tell(self, now: float) -> None:
+        """Broadcast ``next_tours`` when today's coming public tours changed."""
+        tours = coming(self.service, now)
+        if self.endpoint is None or tours == self._told:
+            return
+        self._told = tours
+        self.endpoint.publish("next_tours", NextTours(tz=self.service.tz.key, tours=tours))
+
+    def _on_robot_connected(self, message: Message) -> None:
+        robot = message.payload.get("robot")
+        if isinstance(robot, str) and self.endpoint is not None and self._told:
+            news = NextTours(tz=self.service.tz.key, tours=self._told)
+            self.endpoint.publish("next_tours", news, destination=robot)
 
     # -- starting ----------------------------------------------------------------------------
 
