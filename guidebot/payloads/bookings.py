@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, Field
+from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 
 __all__ = ["NextTour", "NextTours"]
 
 
-class NextTour(BaseModel):
+class NextTour(PayloadModel):
     """One coming public occurrence; names are looked up in the site by the reader, in its
     visitor's language (guidebot/next_tours.py)."""
 
@@ -21,7 +21,7 @@ class NextTour(BaseModel):
     """The tour's id, or the visited point's."""
     at: float
     """Unix seconds."""
-    time: str = Field(pattern=r"^\d{2}:\d{2}$")
+    time: str
     """Its local time in the venue's time zone (``HH:MM``)."""
     lang: str = Field(max_length=16)
     """The language the tour is given in."""
