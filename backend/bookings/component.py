@@ -11,6 +11,7 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from fastapi import FastAPI
 
+from backend.bookings.reserve import Reservations
 from backend.bookings.schedule import BookingScheduler
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
@@ -68,6 +69,7 @@ async def bookings(app: FastAPI) -> AsyncIterator[None]:
         hold = getattr(emergency, "refusal", None)
         return hold(None) if hold is not None else None
 
+    reservations = Reservations(tasks)
     scheduler = BookingScheduler(
         service,
         store,
@@ -77,12 +79,18 @@ async def bookings(app: FastAPI) -> AsyncIterator[None]:
         alarm=alarm,
         check_lead_s=settings.booking_check_lead_s,
         endpoint=deciding_endpoint(app, "bookings"),
+        reservations=reservations,
     )
+    tasks.reservations = reservations
+    service.reserved = lambda key: r.robot if (r := reservations.by_key.get(key)) else None
+    tasks.estimator.back_after = reservations.back_after
     async with scheduler:
         app.state.bookings = service
         app.state.booking_scheduler = scheduler
         try:
             yield
         finally:
+            tasks.reservations = None
+            tasks.estimator.back_after = None
             app.state.bookings = None
             app.state.booking_scheduler = None

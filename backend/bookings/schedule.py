@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 from backend.alerts import AlertStore
 from backend.bookings.model import Booking
+from backend.bookings.reserve import Reservations
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
 from backend.bookings.words import coming
@@ -86,8 +87,11 @@ class BookingScheduler(Service):
         tick_s: float | None = 1.0,
         clock: Callable[[], float] = time.time,
         endpoint: BusEndpoint | None = None,
+        reservations: Reservations | None = None,
     ) -> None:
         super().__init__()
+        self.reservations = reservations
+        """Robots reserved ahead (None: the booked task goes to whichever robot is free)."""
         self.endpoint = endpoint
         """Where ``next_tours`` goes (None: not told)."""
         self._told: list[NextTour] | None = None
@@ -136,6 +140,7 @@ class BookingScheduler(Service):
     async def step(self, now: float) -> None:
         self.tell(now)
         async with self._lock:
+            coming: set[tuple[str, float]] = set()
             for at, booking in self.service.between(now - LATE_S, now + self.check_lead_s):
                 key = (booking.id, at)
                 if key in self.done:
@@ -143,7 +148,22 @@ class BookingScheduler(Service):
                 if at <= now:
                     await self._start(booking, at)
                 else:
+                    coming.add(key)
+                    self._reserve(booking, at)
                     await self._check(booking, at)
+            if self.reservations is not None:
+                self.reservations.forget_except(coming)
+                self.reservations.send(now)
+
+    def _reserve(self, booking: Booking, at: float) -> None:
+        if self.reservations is None:
+            return
+        poi = self.fleet.site.poi(booking.meeting_point)
+        if poi is not None:
+            duration = self.service.duration_s(booking)
+            self.reservations.reserve(
+                (booking.id, at), requester_of(booking, at), poi.node, duration
+            )
 
     # -- telling visitors ---------------------------------------------------------------------
 
@@ -181,9 +201,14 @@ class BookingScheduler(Service):
         if why is not None:
             await self._missed(booking, at, why, claimed=True)
             return
+        robot = self.reservations.pinned(key) if self.reservations is not None else None
         try:
             task = self.fleet.request(
-                booking.kind, booking.params, priority=BOOKING_PRIORITY, requester=requester
+                booking.kind,
+                booking.params,
+                priority=BOOKING_PRIORITY,
+                requester=requester,
+                robot=robot,
             )
         except TaskError as exc:
             await self._missed(booking, at, str(exc), claimed=True)

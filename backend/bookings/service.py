@@ -62,6 +62,8 @@ class BookingService:
         self.on_change: list[Callable[[Booking], None]] = []
         self.flags: dict[tuple[str, float], str] = {}
         """(booking, occurrence) -> why it cannot be served (the scheduler's check ahead)."""
+        self.reserved: Callable[[tuple[str, float]], str | None] = lambda key: None
+        """(booking, occurrence) -> the robot reserved for it (backend/bookings/reserve.py)."""
         self.outcomes: dict[tuple[str, float], dict[str, Any]] = {}
         """(booking, occurrence) -> its start row (started with its task, or missed)."""
 
@@ -106,6 +108,7 @@ class BookingService:
             data["at"] = at
             data["local"] = _local(at, self.tz)
             data["flag"] = self.flags.get((booking.id, at))
+            data["robot"] = self.reserved((booking.id, at))
             outcome = self.outcomes.get((booking.id, at))
             data["outcome"] = outcome["outcome"] if outcome else None
             data["task_id"] = outcome.get("task_id") if outcome else None

@@ -13,6 +13,7 @@ import pytest
 
 from backend.alerts import AlertStore
 from backend.bookings.model import BookingRequest
+from backend.bookings.reserve import Reservations
 from backend.bookings.schedule import BookingScheduler
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
@@ -20,6 +21,8 @@ from backend.closures.model import Closure
 from backend.db import make_engine, make_sessionmaker, migrate
 from backend.tasks import TaskManager
 from guidebot.bus import Bus
+
+from .helpers import RobotStub
 
 MADRID = ZoneInfo("Europe/Madrid")
 DAY = dt.date(2031, 3, 4)  # a Tuesday
@@ -181,3 +184,63 @@ async def test_a_booking_that_cannot_start_is_flagged_ahead_then_missed_with_the
         "flagged",
         "missed",
     ]
+
+
+async def test_a_robot_is_reserved_ahead_sent_to_the_meeting_point_and_kept_for_the_booking(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """One robot online: reserved 15 minutes ahead, a walk-up that would make it late waits
+    (its ETA counts the booked tour), the robot goes to the meeting point in time and the
+    booked tour is given to it at its time, ahead of the walk-up."""
+    r3 = RobotStub(bus, "R3", "entrance")
+    r3.state()
+    clock = Clock(local("10:00"))
+    service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
+    reservations = Reservations(manager, clock=clock)
+    manager.reservations = reservations
+    manager.estimator.back_after = reservations.back_after
+    scheduler = BookingScheduler(
+        service, store, manager, None, tick_s=None, clock=clock, reservations=reservations
+    )
+    booking = await service.create(
+        BookingRequest(
+            tour="highlights",
+            start=f"{DAY}T10:30",
+            lang="es",
+            group_size=20,
+            meeting_point="welcome",
+        ),
+        by="desk",
+    )
+    key = (booking.id, local("10:30"))
+    await scheduler.step(local("10:10"))
+    assert key not in reservations.by_key  # not yet: 15 minutes ahead
+    clock.now = local("10:16")
+    await scheduler.step(clock.now)
+    reserved = reservations.by_key[key]
+    assert reserved.robot == "R3" and reserved.node == "hall"
+    assert local("10:28") < reserved.leave_at < local("10:29")
+
+    # A walk-up at 10:27 would keep R3 past the booked time: it waits, and is told so.
+    clock.now = local("10:27")
+    walk_up = manager.request("tour", {"tour": "ground"}, requester="panel-1")
+    assert walk_up.robot is None
+    estimate = manager.estimator.estimate(walk_up)
+    assert estimate.wait_s is not None and estimate.wait_s > 3 * 60  # after the booked tour
+
+    clock.now = reserved.leave_at + 1
+    await scheduler.step(clock.now)
+    meet = manager.tasks[reserved.sent]  # type: ignore[index]
+    assert meet.kind == "go_to" and meet.params == {"node": "hall"} and meet.robot == "R3"
+    r3.start(meet.id)
+    r3.node = "hall"
+    r3.end(meet.id)
+    r3.state()
+    assert walk_up.robot is None  # R3 waits at the meeting point, not sent to a station
+    assert not any(t.internal and t.robot == "R3" and not t.final for t in manager.tasks.values())
+
+    await scheduler.step(local("10:30"))
+    tour = next(t for t in manager.tasks.values() if t.kind == "tour" and t.priority == 50)
+    assert tour.robot == "R3" and tour.pinned_robot == "R3"
+    assert walk_up.robot is None
+    assert reservations.by_key == {}

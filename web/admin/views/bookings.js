@@ -52,7 +52,7 @@ function stateOf(o) {
   if (o.status === "cancelled") return "cancelled";
   if (o.outcome === "started") return `started (task ${o.task_id})`;
   if (o.outcome === "missed") return `missed: ${o.missed_reason}`;
-  return "booked";
+  return o.robot ? `booked, ${o.robot} reserved` : "booked";
 }
 
 function bookForm(ui, b) {
@@ -173,7 +173,7 @@ export function bookingsView(ui) {
     ui.draw();
   };
   return html`<h2>Bookings</h2>
-    <p class="muted">Booked tours start at their time at priority 50, ahead of walk-ups; times are the venue's (${b.data?.tz ?? "…"}).</p>
+    <p class="muted">A robot is reserved 15 minutes ahead and sent to the meeting point; the tour starts at its time, ahead of walk-ups. Times are the venue's (${b.data?.tz ?? "…"}).</p>
     ${b.error ? html`<p class="notice error" role="alert">Bookings could not be read: ${b.error}</p>` : ""}
     ${flags.length
       ? html`<div class="notice error" role="alert"><strong>Cannot be served as things stand:</strong>
