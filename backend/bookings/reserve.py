@@ -178,7 +178,9 @@ class Reservations:
                 except TaskError:
                     pass
         robot = self.tasks.robots.get(r.robot)
-        return r.robot if robot is not None and self._fits(robot) else None
+        if robot is None or not self._fits(robot) or not self._idle(robot):
+            return None  # lost, charging or still busy: the first robot free takes it
+        return r.robot
 
     def release(self, key: tuple[str, float]) -> None:
         r = self.by_key.pop(key, None)
@@ -198,7 +200,14 @@ class Reservations:
     # -- helpers -----------------------------------------------------------------------------
 
     def _fits(self, robot: RobotInfo) -> bool:
-        return robot.online and not robot.out_of_service and not robot.fault
+        """In service, online, sound and not due to charge."""
+        return (
+            robot.online
+            and not robot.out_of_service
+            and not robot.fault
+            and not robot.needs_charge
+            and robot.battery > robot.config.battery_low
+        )
 
     def _idle(self, robot: RobotInfo) -> bool:
         current = self.tasks.tasks.get(robot.current) if robot.current else None

@@ -244,3 +244,28 @@ async def test_a_robot_is_reserved_ahead_sent_to_the_meeting_point_and_kept_for_
     assert tour.robot == "R3" and tour.pinned_robot == "R3"
     assert walk_up.robot is None
     assert reservations.by_key == {}
+
+
+async def test_a_reserved_robot_that_must_charge_is_replaced_by_another(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    for name, node in (("R3", "entrance"), ("R1", "charge_a")):
+        RobotStub(bus, name, node).state()
+    clock = Clock(local("10:16"))
+    service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
+    reservations = Reservations(manager, clock=clock)
+    scheduler = BookingScheduler(
+        service, store, manager, None, tick_s=None, clock=clock, reservations=reservations
+    )
+    booking = await service.create(
+        BookingRequest(tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3),
+        by="desk",
+    )
+    await scheduler.step(clock.now)
+    key = (booking.id, local("10:30"))
+    assert reservations.by_key[key].robot == "R3"  # idle and nearest the first stop
+    manager.robots["R3"].needs_charge = True  # battery low: it goes to charge
+    clock.now = reservations.by_key[key].leave_at + 1
+    await scheduler.step(clock.now)  # given up ...
+    await scheduler.step(clock.now + 1)  # ... and another chosen
+    assert reservations.by_key[key].robot == "R1"
