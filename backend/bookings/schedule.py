@@ -41,6 +41,9 @@ BOOKING_PRIORITY = 50
 """A booked occurrence's task priority: ahead of walk-ups (5) and panels (at most 5)."""
 LATE_S = 600.0
 """An occurrence not started this long after its time (the server was down) is missed."""
+RECONNECT_GRACE_S = 30.0
+"""After a start (a restart, a new leader) robots reconnect: "no robot online" is not told to
+staff before this many seconds."""
 MISSED_LOOKBACK_S = 86400.0
 """At start: occurrences of the last day never started are told to staff as missed."""
 
@@ -109,8 +112,11 @@ class BookingScheduler(Service):
         """Occurrences taken (this life or an earlier one) -> their start row."""
         self.flags: dict[tuple[str, float], str] = service.flags
         self._lock = asyncio.Lock()
+        self._started: float | None = None
+        """time.monotonic() of the start (None: driven by a test, no grace)."""
 
     async def on_start(self) -> None:
+        self._started = time.monotonic()
         await self.restore()
         if self.endpoint is not None:
             self.subscribe(self.endpoint, "robot_connected", self._on_robot_connected)
@@ -252,7 +258,10 @@ class BookingScheduler(Service):
         if not robots:
             return "no robot in service"
         if not any(r.online for r in robots):
-            return "no robot in service is online"
+            reconnecting = (
+                self._started is not None and time.monotonic() - self._started < RECONNECT_GRACE_S
+            )
+            return None if reconnecting else "no robot in service is online"
         site = self.fleet.site
         closed = closed_nodes(site, self.closures(), at)
         if closed:

@@ -201,9 +201,10 @@ async def test_an_occurrence_is_started_once_across_restarts_just_before_and_aft
         assert [t.id for t in _tasks_of(srv, booking)] == [task.id]
         async with client(srv, OPERATOR_TOKEN) as http:
             history = (await http.get(f"/api/bookings/{booking['id']}/history")).json()
-        # Checked a minute ahead: no robot was connected (flagged to staff), then started.
-        assert [h["action"] for h in history] == ["created", "flagged", "started"]
-        assert history[1]["detail"]["reason"] == "no robot in service is online"
+        # No robot connected, but the server had just started: robots reconnect within
+        # 30 s, so staff were not told "no robot online" (tests/server/test_booking_schedule.py
+        # shows the flag of a scheduler running longer).
+        assert [h["action"] for h in history] == ["created", "started"]
 
 
 async def test_an_occurrence_claimed_just_before_a_crash_is_started_by_the_next_life(
