@@ -52,6 +52,8 @@ RULES: dict[str, frozenset[Role]] = {
     "edit_nets": frozenset({Role.AUTHOR}),  # publish nets, restore a version (docs/nets.md)
     "manage_notifications": frozenset(),  # e-mail and webhook channels, SMTP (backend/notify)
     "read_notifications": _OPERATOR | {Role.VIEWER},  # their delivery log
+    "book": _OPERATOR,  # bookings: create, move, cancel (backend/bookings)
+    "read_bookings": _OPERATOR | {Role.VIEWER},  # bookings: list, one, its history
     "read": _READERS,  # tours, points of interest, the visitor menu, the map, /api/me
     # Actions that arrive over REST and the hub alike
     "task_request": _REQUESTERS | {Role.MODULE},  # POST /api/tasks
@@ -119,6 +121,8 @@ REST_ONLY = frozenset(
         "edit_nets",
         "manage_notifications",
         "read_notifications",
+        "book",
+        "read_bookings",
         "read",
     }
 )

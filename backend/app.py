@@ -37,6 +37,8 @@ from backend.api.openapi import install_contract_openapi
 from backend.api.query import known_query
 from backend.api.warmup import warm_routes
 from backend.auth import Authenticator, Role, TokenStore
+from backend.bookings import routes as bookings_routes
+from backend.bookings.component import bookings
 from backend.brain import server_brain
 from backend.building import routes as building_routes
 from backend.building.component import building_interface
@@ -82,6 +84,7 @@ COMPONENTS: list[Component] = [
     building_interface,
     emergency,
     closures,
+    bookings,
     rgm,
     net_library,
     site_editor,
@@ -105,6 +108,7 @@ ROUTERS: list[APIRouter] = [
     vda5050_routes.router,
     accounts_routes.router,
     notify_routes.router,
+    bookings_routes.router,
 ]
 
 

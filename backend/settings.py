@@ -169,6 +169,10 @@ class Settings(BaseSettings):
     # Trouble (docs/server.md, "Building modes and trouble"): how long a door that did not open
     # or a lift that did not come stays closed unless seen working before.
     trouble_hold_s: float = Field(default=120.0, gt=0)
+    # Bookings (docs/server.md, "Bookings"): the venue's time zone (an IANA name) booked times
+    # are read in; how long before its time a booking is checked (and flagged to staff).
+    timezone: str = Field(default="UTC", min_length=1, max_length=64)
+    booking_check_lead_s: float = Field(default=900.0, gt=0, le=86400)
     # After a restart: how long area requests wait for the robots that had tasks to resync.
     lock_resync_s: float = Field(default=10.0, ge=0, le=300)
     # Scale-out (docs/scaling.md): Redis between processes, leadership through PostgreSQL.

@@ -30,6 +30,7 @@ import click
 import httpx
 import yaml
 
+from bench.soak_bookings import SoakBookings
 from bench.soak_faults import KINDS, Fault, schedule
 from bench.soak_fleet import Child, LinkRelay, free_port, healthy, wait_for
 from bench.soak_site import PANELS, robot_token, soak_site, with_ports
@@ -61,6 +62,8 @@ class SoakOptions:
     """Deal the ``fire_alarm`` fault too (bench/soak_faults.py)."""
     request_every_s: float = 2.0
     drain_s: float = 180.0
+    bookings: int = 0
+    """Booked tours spread over the run (bench/soak_bookings.py)."""
     workdir: Path | None = None
     """Keep logs, site and database here (default: a temporary folder, removed)."""
 
@@ -366,9 +369,12 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
     duration = opts.minutes * 60.0
     stuck: dict[str, Any] = {}
     measured: dict[str, Any] = {}
+    booked: dict[str, Any] = {}
     try:
         await soak.start()
         assert soak.watch is not None
+        bookings = SoakBookings(soak.url, ADMIN, opts.bookings, soak.site)
+        await bookings.book(duration)
         names = list(soak.robots)
         plan = (
             schedule(
@@ -405,6 +411,9 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         measured = watch.measures.result(
             watch.tasks, list(soak.robots), time.monotonic() - soak.t0, ended
         )
+        if opts.bookings:
+            with contextlib.suppress(httpx.HTTPError):
+                booked = await bookings.measure()
         open_now = watch.open_tasks()
         stuck = {i: t for i, t in open_now.items() if t.state != "queued"}
         for task_id, t in stuck.items():
@@ -453,6 +462,7 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         "skipped_stops": measured.get("skipped_stops"),
         "utilisation": measured.get("utilisation"),
         "touring_spread": measured.get("touring_spread"),
+        **booked,
     }
 
 
@@ -498,6 +508,13 @@ async def _until_signal(run: Awaitable[T]) -> T:
     help="Wall seconds the fleet gets to finish its tasks after the last minute.",
 )
 @click.option(
+    "--bookings",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Booked tours spread over the run: bookings_on_time_share, bookings_missed.",
+)
+@click.option(
     "--workdir",
     type=click.Path(file_okay=False, path_type=Path),
     default=None,
@@ -514,6 +531,7 @@ def main(
     fault_every: float,
     fire_alarm: bool,
     drain: float,
+    bookings: int,
     workdir: Path | None,
     as_json: bool,
 ) -> None:
@@ -528,6 +546,7 @@ def main(
         fault_every_s=fault_every,
         fire_alarm=fire_alarm,
         drain_s=drain,
+        bookings=bookings,
         workdir=workdir,
     )
     result = asyncio.run(_until_signal(run_soak(opts)))

@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "replay": "backend.reports.cli:replay_command",
     "plan": "backend.planning.cli:plan_command",
     "users": "backend.accounts.cli:users",
+    "bookings": "backend.bookings.cli:bookings",
 }
 
 BENCHMARKS: dict[str, str] = {

@@ -33,8 +33,10 @@ from pydantic import BaseModel, Field
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
+from guidebot.next_tours import in_language
 from guidebot.pace import PaceName, pace_of
 from guidebot.paths import WEB_DIR
+from guidebot.payloads.bookings import NextTour, NextTours
 from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
@@ -137,6 +139,8 @@ class OnboardScreen(Service):
         self.question: dict[str, Any] | None = None
         self.answers: list[str] = []
         self._question_timer: asyncio.TimerHandle | None = None
+        self.next_tours: list[NextTour] = []
+        """Today's coming public booked tours (the server's ``next_tours``)."""
         self.alarm: dict[str, Any] | None = None
         """While a fire alarm holds the service: {words: {lang: text}, evacuation: this
         robot's own state (stopped, moving, safe, stuck) or None}; None otherwise."""
@@ -159,6 +163,7 @@ class OnboardScreen(Service):
                 "emergency_changed": self._on_emergency,
                 "evacuate": self._on_evacuate,
                 "evacuation_state": self._on_evacuation_state,
+                "next_tours": self._on_next_tours,
             },
         )
 
@@ -179,6 +184,7 @@ class OnboardScreen(Service):
             "languages": site_languages(site) if site else [chosen],
             "tours": self._tours(chosen),
             "pois": self._pois(chosen),
+            "next_tours": in_language(site, self.next_tours, chosen) if site else [],
             "task": self.task,
             "going": self.going,
             "explanation": self.explanation,
@@ -237,6 +243,14 @@ class OnboardScreen(Service):
                 }
             )
         return out
+
+    def _on_next_tours(self, message: Message) -> None:
+        try:
+            self.next_tours = NextTours.model_validate(message.payload).tours
+        except ValueError:
+            log.warning("next_tours not understood: %r", message.payload)
+            return
+        self._push("next_tours", None)
 
     def _push(self, kind: str, data: Any) -> None:
         self.ep.publish(SCREEN_EVENT, {"kind": kind, "data": data})

@@ -4,6 +4,7 @@
 // alarm: the evacuation screen, the site's words in the screen's language (docs/emergency.md).
 import { html, nothing, render } from "/vendor/lit-html/lit-html.js";
 import { loadTexts } from "/lib/i18n.js";
+import { nextTourLines } from "/lib/nexttours.js";
 import { skippedLines } from "/lib/skipped.js";
 
 const app = document.getElementById("app");
@@ -257,6 +258,8 @@ function draw() {
     ${questionView(s.question)}
     <section aria-labelledby="now-title"><h2 id="now-title">${t(s.going && s.explanation ? "touch_just_seen" : "touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}
+    ${s.task || !s.next_tours?.length ? "" : html`<section class="next-tours" aria-labelledby="next-title"><h2 id="next-title">${t("next_tours")}</h2>
+      <ul>${nextTourLines(t, s.next_tours.slice(0, 3)).map((l) => html`<li><strong>${l.name}</strong>: ${l.line}</li>`)}</ul></section>`}
     ${s.task ? "" : html`<section aria-labelledby="tours-title"><h2 id="tours-title">${t("tours")}</h2>
       <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} lang=${tour.fallback?.name ?? nothing} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
     </section>

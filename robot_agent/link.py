@@ -97,6 +97,7 @@ DOWN_TYPES: tuple[str, ...] = (
     "evacuate",
     "emergency_changed",
     "closures_changed",
+    "next_tours",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
 

@@ -250,6 +250,10 @@ class EtaEstimator:
         """The nodes closed now (backend/closures): a queued tour's stops there, or cut off
         behind them (cutoff.py), are left out of its estimates (it will skip them); set by
         the closures component."""
+        self.back_after: Callable[[str, float, Task], float | None] | None = None
+        """Robots reserved for booked tours (backend/bookings/reserve.py): None if the robot
+        may take the task when free in so many seconds, else when it is free after its booked
+        tour; set by the bookings component."""
         self._cut_off = CutOff()
 
     # --- hooks from the Task Manager -----------------------------------------------------------
@@ -656,6 +660,30 @@ class EtaEstimator:
             free_at += self.charge_s
         return free_at, node
 
+    def _first_free(
+        self, heap: list[tuple[float, int, str, str | None]], task: Task
+    ) -> tuple[float, int, str, str | None]:
+        """The robot free first; with robots reserved for booked tours (``back_after``,
+        backend/bookings/reserve.py), the first whose booking leaves time for ``task``: a
+        reserved one counts from when its booked tour ends."""
+        entry = heapq.heappop(heap)
+        back_after = self.back_after
+        if back_after is None:
+            return entry
+        later = []
+        while (back := back_after(entry[2], entry[0], task)) is not None:
+            later.append((back, *entry[1:]))
+            if not heap:
+                break
+            entry = heapq.heappop(heap)
+        else:
+            for e in later:
+                heapq.heappush(heap, e)
+            return entry
+        for e in later:  # every robot is reserved: the one back first
+            heapq.heappush(heap, e)
+        return heapq.heappop(heap)
+
     def _place(
         self, heap: list[tuple[float, int, str, str | None]], task: Task
     ) -> tuple[float, float, str | None]:
@@ -670,7 +698,7 @@ class EtaEstimator:
             heap.remove(entry)
             heapq.heapify(heap)
         else:
-            entry = heapq.heappop(heap)
+            entry = self._first_free(heap, task)
         free_at, tie, name, node = entry
         points = self._points(task)
         if not points:

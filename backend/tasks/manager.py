@@ -79,6 +79,13 @@ class TaskHold(Protocol):
     def holds(self, robot: RobotInfo) -> bool: ...
 
 
+class TaskReservations(Protocol):
+    """Robots reserved for booked tours (backend.bookings.reserve.Reservations)."""
+
+    def keeps(self, robot: RobotInfo, task: Task) -> bool: ...
+    def parks(self, robot: RobotInfo) -> bool: ...
+
+
 class TaskManager(Service):
     """One per server. ``graph`` is shared with the Traffic Manager (same site version)."""
 
@@ -155,6 +162,9 @@ class TaskManager(Service):
         self.hold: TaskHold | None = None
         """The fire alarm's hold (backend.emergency): no task for the robots it holds, no
         new request while it lasts."""
+        self.reservations: TaskReservations | None = None
+        """Booked tours' robots (backend/bookings/reserve.py): a reserved robot takes no task
+        that would make it late, and waits at its meeting point."""
         self.load_site(site, self.graph)
 
     # --- life cycle ----------------------------------------------------------------------
@@ -470,6 +480,8 @@ class TaskManager(Service):
     def _best_robot(self, task: Task, free: dict[str, RobotInfo]) -> RobotInfo | None:
         target = self.target_of(task.kind, task.params)
         first = self.estimator.first_node(task) or target  # a handed-over tour: the visitor
+        if self.reservations is not None:
+            free = {n: r for n, r in free.items() if not self.reservations.keeps(r, task)}
         return choose_robot(
             task,
             free,
@@ -556,6 +568,8 @@ class TaskManager(Service):
         ]
         if self.hold is not None:
             idle = [r for r in idle if not self.hold.holds(r)]
+        if self.reservations is not None:
+            idle = [r for r in idle if not self.reservations.parks(r)]
         if not idle:
             return  # the usual case: nothing below needs the whole fleet (offline robots
             # have no errands: idle_errands skips them too)

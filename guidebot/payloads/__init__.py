@@ -5,6 +5,7 @@ Importing this package registers every known type (see guidebot.messages.registe
 
 from guidebot.payloads import (  # noqa: F401
     alerts,
+    bookings,
     building,
     console,
     emergency,

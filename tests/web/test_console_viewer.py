@@ -53,7 +53,7 @@ async def test_a_viewer_watches_the_console_and_changes_nothing(
         await expect(page.get_by_role("button", name=re.compile("^Cancel"))).to_have_count(0)
         await web.open_view(page, "Robots")
         await expect(page.locator("#view")).to_contain_text("R1")
-        for view in ("Robots", "Fleet", "Locks", "Building", "Modes", "Alerts"):
+        for view in ("Robots", "Fleet", "Locks", "Building", "Modes", "Bookings", "Alerts"):
             await web.open_view(page, view)
             await expect(page.locator("#view h2").first).to_be_visible()
             await expect(page.locator("#view").get_by_role("button", name=CHANGES)).to_have_count(0)

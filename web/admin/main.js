@@ -12,6 +12,7 @@ import { accountsView, passkeysView } from "/admin/views/accounts.js";
 import { robotDoing } from "/admin/names.js";
 import { Store } from "/admin/store.js";
 import { alertBar, alertsView } from "/admin/views/alerts.js";
+import { bookingsView } from "/admin/views/bookings.js";
 import { buildingView } from "/admin/views/building.js";
 import { declareButton, emergencyBanner } from "/admin/views/emergency.js";
 import { eventsView } from "/admin/views/events.js";
@@ -34,6 +35,7 @@ const VIEWS = [
   ["locks", "Locks"],
   ["building", "Building"],
   ["modes", "Modes"],
+  ["bookings", "Bookings"],
   ["monitor", "RoboGraph monitor"],
   ["alerts", "Alerts"],
   ["events", "Event log"],
@@ -48,6 +50,7 @@ const RENDER = {
   locks: locksView,
   building: buildingView,
   modes: modesView,
+  bookings: bookingsView,
   monitor: monitorView,
   alerts: alertsView,
   events: eventsView,

@@ -7,6 +7,7 @@ import { fragmentToken } from "/lib/auth.js";
 import { HubClient } from "/lib/hub.js";
 import { loadTexts, preferredLanguage } from "/lib/i18n.js";
 import { Api, ApiError } from "/lib/rest.js";
+import { nextTourLines } from "/lib/nexttours.js";
 import { skippedLines } from "/lib/skipped.js";
 
 const options = new URLSearchParams(location.hash.slice(1));
@@ -77,6 +78,8 @@ const state = {
   brokenPictures: new Set(),
   /** the server's emergency state (GET /api/emergency, then emergency_changed) */
   emergency: null,
+  /** today's coming public booked tours (GET /api/bookings/next, then next_tours) */
+  nextTours: [],
   /** this device's requests a fire alarm cut off, not yet answered after it (the offer) */
   cutOff: new Set(),
   /** robot -> what it is saying now {text, lang, started_at (Unix s), shown_at (Unix ms)} */
@@ -189,6 +192,21 @@ function placeOf(progress) {
   return progress.name ?? poiName(progress.poi);
 }
 
+/** Today's coming public booked tours, names in the page's language (docs/visitor.md). */
+async function loadNextTours() {
+  const lang = state.menu?.lang;
+  state.nextTours = (await api.get(`/api/bookings/next?limit=3${lang ? `&lang=${encodeURIComponent(lang)}` : ""}`)).tours;
+}
+
+function nextToursView() {
+  const lines = nextTourLines(t, state.nextTours);
+  if (!lines.length) return "";
+  return html`<section class="next-tours" aria-labelledby="next-title">
+    <h2 id="next-title">${t("next_tours")}</h2>
+    <ul>${lines.map((l) => html`<li><strong>${l.name}</strong>: ${l.line}</li>`)}</ul>
+  </section>`;
+}
+
 async function reload() {
   try {
     await loadMenu();
@@ -197,6 +215,7 @@ async function reload() {
     await refreshRequests([...state.requests.keys()]);
     for (const status of state.requests.values()) state.labels.set(status.id, labelOf(status));
     await loadEmergency();
+    await loadNextTours();
     if (state.errorFrom !== "action") showError("", "");
   } catch (err) {
     // Before any texts (a refused token at the first load): say it in the page's language.
@@ -427,6 +446,7 @@ function startView() {
     ${paceToggle()}
     <p class=${`service ${menu.service}`} role="status">${serviceLine({ service: menu.service, eta_s: menu.tours[0]?.estimate?.eta_s ?? null })}</p>
     ${errorBox()}
+    ${nextToursView()}
     ${live.length ? html`<p>${live.map((r) => html`<button class="secondary" @click=${() => { state.current = r.id; state.view = "request"; draw(); focusHeading(); }}>${t("your_request")}: ${state.labels.get(r.id) ?? r.id}</button> `)}</p>` : ""}
     <section aria-labelledby="tours-title">
       <h2 id="tours-title">${t("tours")}</h2>
@@ -700,7 +720,16 @@ async function live() {
   for (const lang of state.menu.languages) names.set(lang, (await loadTexts(lang)).name);
   draw();
   const hub = new HubClient({ token }).start();
-  hub.subscribe("task_event", "visitor_service", "emergency_changed", "speech_started", "speech_ended");
+  hub.subscribe("task_event", "visitor_service", "emergency_changed", "speech_started", "speech_ended", "next_tours");
+  // The booked tours of today changed (booked, moved, cancelled, one started): read them again.
+  hub.on("next_tours", async () => {
+    try {
+      await loadNextTours();
+    } catch {
+      /* the reconnect's reload reads them again */
+    }
+    draw();
+  });
   // What each robot is saying: the request's robot's words are its captions.
   hub.on("speech_started", (message) => {
     const p = message.payload;
