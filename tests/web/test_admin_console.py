@@ -31,6 +31,7 @@ VIEWS = [
     ("Event log", "events"),
     ("Reports", "reports"),
     ("Notifications", "notifications"),
+    ("Bookings", "bookings"),
 ]
 
 
