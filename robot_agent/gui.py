@@ -37,7 +37,7 @@ from guidebot.pace import PaceName, pace_of
 from guidebot.paths import WEB_DIR
 from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
-from guidebot.site.access import graph_of, steps_only_nodes
+from guidebot.site.access import graph_of, step_free_skips, steps_only_nodes
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, SERVED_TYPES, media_file, video_url
 from guidebot.site.schema import Site
@@ -210,12 +210,15 @@ class OnboardScreen(Service):
         site = self.site
         if site is None:
             return self.tours
+        graph = graph_of(site)
         return [
             {
                 "id": t.id,
                 "points": t.points,
                 **tour_texts(site, t, lang),
                 "fallback": fallbacks(site, t, lang),
+                # what a step-free tour skips (the building as built: guidebot/site/access.py)
+                "step_free_skips": step_free_skips(site, graph, t),
             }
             for t in site.tours
         ]

@@ -164,11 +164,21 @@ function captionView(s) {
   </section>`;
 }
 
+/** A tour's button; with "Step-free only" on, the stops a step-free tour skips are said on it. */
+function tourButton(s, tour, refused) {
+  const skips = state.stepFree ? tour.step_free_skips ?? [] : [];
+  const names = skips.map((id) => s.pois.find((p) => p.id === id)?.name ?? id).join(", ");
+  return html`<button class="big" ?disabled=${refused} @click=${() => ask("tour", tour)}><span
+    lang=${tour.fallback?.name ?? nothing}>${tour.name}</span>${skips.length ? html`<span class="steps-only">${t("step_free_skips", { names })}</span>` : ""}</button>`;
+}
+
 /** A point's "take me there": with "Step-free only" on, a point only steps lead to is refused
- * and says why on the button itself (read with its name). */
+ * and says why on the button itself (read with its name; `aria-disabled`, not `disabled`, so
+ * the reason keeps its full contrast). */
 function pointButton(poi, refused) {
-  const stepsOnly = state.stepFree && poi.steps_only;
-  return html`<button class="big secondary" ?disabled=${refused || stepsOnly} @click=${() => ask("go_to_poi", poi)}><span
+  const stepsOnly = Boolean(state.stepFree && poi.steps_only);
+  const go = () => { if (!stepsOnly) ask("go_to_poi", poi); };
+  return html`<button class="big secondary" ?disabled=${refused} aria-disabled=${String(stepsOnly)} @click=${go}><span
     lang=${poi.fallback?.name ?? nothing}>${poi.name}</span>${stepsOnly ? html`<span class="steps-only">${t("steps_only")}</span>` : ""}</button>`;
 }
 
@@ -266,7 +276,7 @@ function draw() {
     <section aria-labelledby="now-title"><h2 id="now-title">${t(s.going && s.explanation ? "touch_just_seen" : "touch_now")}</h2>${nowView(s)}</section>
     ${state.message ? html`<p class="notice ok" role="status">${state.message}</p>` : ""}
     ${s.task ? "" : html`<section aria-labelledby="tours-title"><h2 id="tours-title">${t("tours")}</h2>
-      <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} lang=${tour.fallback?.name ?? nothing} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
+      <div class="actions">${s.tours.map((tour) => tourButton(s, tour, refused))}</div>
     </section>
     <section aria-labelledby="points-title"><h2 id="points-title">${t("points")}</h2>
       <div class="actions">${s.pois.map((poi) => pointButton(poi, refused))}</div>

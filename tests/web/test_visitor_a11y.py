@@ -5,6 +5,7 @@ screen reader hears every change of a request on the phone (Chromium's accessibi
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 from typing import Any
 
@@ -469,6 +470,8 @@ async def test_a_step_free_tour_whose_first_stop_only_steps_lead_to_starts_at_th
             page.get_by_role("article", name="Roman mosaics").get_by_role("button")
         ).to_be_enabled()
         await web.axe_check(page)
+        await loom.scroll_into_view_if_needed()
+        await web.screenshot(page, "visitor-phone-steps-only")
         await request_from(page, "Weaving and bronze")
         state = page.locator(".request-state")
         await expect(state).to_contain_text("The tour has ended", timeout=LONG)
@@ -499,14 +502,18 @@ async def test_the_touch_screen_takes_a_step_free_visitor_to_a_point_without_ste
         asked: list[Message] = []
         agent.bus.endpoint("test-paths").subscribe("get_path", asked.append, tap=True)
         screen = (await open_page(vf.screen_url(), viewport=(1024, 600))).page
-        loom = screen.get_by_role("button", name="Loom")
+        loom = screen.get_by_role("button", name=re.compile("^Loom"))
         await expect(loom).to_be_enabled()
         step_free = screen.get_by_role("button", name="Step-free only")
         await step_free.click()
         await expect(step_free).to_have_attribute("aria-pressed", "true")
         await expect(loom).to_be_disabled()
         await expect(loom).to_contain_text("Only steps or a steep slope lead there")
+        weaving = screen.get_by_role("button", name="Weaving and bronze")
+        await expect(weaving).to_contain_text("Step-free, it skips: Loom")
         await web.axe_check(screen)
+        await loom.scroll_into_view_if_needed()
+        await web.screenshot(screen, "touch-screen-steps-only")
         await screen.get_by_role("button", name="Roman mosaics").click()
         tasks = vf.fleet.server.app.state.task_manager.tasks
         await wait_until(lambda: len(tasks) == 1, 30)
@@ -519,7 +526,7 @@ async def test_the_touch_screen_takes_a_step_free_visitor_to_a_point_without_ste
         # A step-free tour from the screen that starts at the loom: skipped, and said.
         await expect(step_free).to_have_attribute("aria-pressed", "false", timeout=LONG)
         await step_free.click()
-        await screen.get_by_role("button", name="Weaving and bronze").click()
+        await weaving.click()
         skipped = screen.get_by_role("region", name="Stops skipped")
         await expect(skipped).to_contain_text(
             "Stop 1, Loom: only steps or a steep slope lead there", timeout=LONG

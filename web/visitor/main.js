@@ -377,7 +377,7 @@ function card(kind, item) {
       ${kind === "tour" && state.stepFree && item.step_free_skips?.length
         ? html`<p class="skips">${t("step_free_skips", { names: item.step_free_skips.map(poiName).join(", ") })}</p>` : ""}
       ${stepsOnly ? html`<p class="skips steps-only" id=${`${id}-steps`}>${t("steps_only")}</p>` : ""}
-      <p class=${`wait ${estimate?.service ?? ""}`} id=${`${id}-wait`}>${serviceLine(estimate)}</p>
+      ${stepsOnly ? "" : html`<p class=${`wait ${estimate?.service ?? ""}`} id=${`${id}-wait`}>${serviceLine(estimate)}</p>`}
       <button class="big" ?disabled=${unavailable || stepsOnly || state.busy}
         aria-describedby=${`${id}-name ${stepsOnly ? `${id}-steps` : `${id}-wait`}`}
         @click=${() => request(kind, item)}>${t(kind === "tour" ? "request_tour" : "request_point")}</button>
