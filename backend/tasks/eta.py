@@ -237,8 +237,8 @@ class EtaEstimator:
         self._running: dict[str, _Progress] = {}
         self._schedule: _Schedule | None = None
         self._places: dict[tuple[str, str, str | None, bool], list[tuple[str, str | None]]] = {}
-        """(kind, tour or point, language) -> the places of a queued task (never changed by
-        callers); for ``_places_of``, the site they were read from."""
+        """(kind, tour or point, language, step-free) -> the places of a queued task (never
+        changed by callers); for ``_places_of``, the site they were read from."""
         self._places_of: Site | None = None
         self._sent: dict[int, tuple[list[Any], list[tuple[str, str | None]]]] = {}
         """id of the points list a task's net was given -> (that list, its places)."""

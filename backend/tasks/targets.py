@@ -65,13 +65,12 @@ def net_params(site: Site, task: Task) -> dict[str, Any]:
             for i, q in enumerate(pois, start=1)
         ]
         if needs.get("step_free"):  # its first stops only steps lead to: the visitor is told
-            cut = {q.id for q in first_stops_skipped(site, graph_of(site), tour)}
-            skipped = [p for p in points if p["poi"] in cut]
+            lead = len(first_stops_skipped(site, graph_of(site), tour))
             needs["skipped"] = [
                 {"index": q["index"], "poi": q["poi"], "name": q["name"], "reason": STEPS_REASON}
-                for q in skipped
+                for q in points[:lead]
             ]
-            points = points[len(skipped) :]
+            points = points[lead:]
         return {"tour": tour.id, "points": points, "lang": lang} | needs
     if task.kind == "go_to_poi":
         poi = site.poi(p["poi"])
