@@ -14,7 +14,7 @@ from collections.abc import Callable, Container, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, Any, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError
 
 from guidebot.pace import PaceName
 
@@ -56,7 +56,7 @@ class TourParams(_Params):
     """The language the tour is explained in; None: the site's default language."""
     pace: PaceName | None = None
     """``slow``: a slower tour (guidebot/pace.py); None: the normal pace."""
-    step_free: bool | None = None
+    step_free: StrictBool | None = None
     """True: over no edge with steps; a stop only steps lead to is skipped (docs/visitor.md,
     "A step-free tour")."""
 
@@ -65,6 +65,9 @@ class PoiParams(_Params):
     poi: Ref
     lang: Lang | None = None
     pace: PaceName | None = None
+    step_free: StrictBool | None = None
+    """True: a step-free visit, refused for a point only steps lead to (docs/visitor.md, "A
+    step-free visit to one point")."""
 
 
 class ChargeParams(_Params):

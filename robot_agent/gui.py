@@ -29,7 +29,7 @@ import uvicorn
 from fastapi import FastAPI, HTTPException, Query, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, StrictBool
 
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
@@ -39,6 +39,7 @@ from guidebot.paths import WEB_DIR
 from guidebot.payloads.bookings import NextTour, NextTours
 from guidebot.payloads.petri import ContinueAnswer
 from guidebot.service import Service
+from guidebot.site.access import graph_of, step_free_skips, steps_only_nodes
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, SERVED_TYPES, media_file, video_url
 from guidebot.site.schema import Site
@@ -84,8 +85,8 @@ class TourRequest(BaseModel):
     lang: str | None = Field(default=None, max_length=16)
     pace: PaceName | None = None
     """``slow``: a slower tour (guidebot/pace.py)."""
-    step_free: bool | None = None
-    """A tour over no steps (docs/visitor.md, "A step-free tour")."""
+    step_free: StrictBool | None = None
+    """A tour or a visit over no steps (docs/visitor.md, "A step-free tour")."""
 
 
 class Answer(BaseModel):
@@ -215,12 +216,15 @@ class OnboardScreen(Service):
         site = self.site
         if site is None:
             return self.tours
+        graph = graph_of(site)
         return [
             {
                 "id": t.id,
                 "points": t.points,
                 **tour_texts(site, t, lang),
                 "fallback": fallbacks(site, t, lang),
+                # what a step-free tour skips (the building as built: guidebot/site/access.py)
+                "step_free_skips": step_free_skips(site, graph, t),
             }
             for t in site.tours
         ]
@@ -230,6 +234,7 @@ class OnboardScreen(Service):
         if site is None:
             return self.pois
         out = []
+        cut = steps_only_nodes(graph_of(site))
         for p in site.pois:
             texts = poi_texts(site, p, lang)
             out.append(
@@ -240,6 +245,7 @@ class OnboardScreen(Service):
                     "description": texts["description"],
                     "media": [media_link(m) for m in texts["media"]],
                     "fallback": fallbacks(site, p, lang),
+                    "steps_only": p.node in cut,  # a step-free visit is refused
                 }
             )
         return out
@@ -275,7 +281,7 @@ class OnboardScreen(Service):
             "step_free": params.get("step_free") is True,
             "handover": message.payload.get("handover"),  # taken up from another robot
         }
-        self.skipped = []
+        self.skipped = list(params.get("skipped") or [])  # first stops only steps lead to
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
 
     # -- the fire alarm ---------------------------------------------------------------------
@@ -348,6 +354,14 @@ class OnboardScreen(Service):
         }
         self.skipped.append(skip)
         self._push("point_skipped", skip)
+
+    def _check_step_free(self, req: TourRequest) -> None:
+        """A step-free visit to a point only steps lead to is refused here, as the server
+        would (guidebot/site/access.py)."""
+        site = self.site
+        poi = site.poi(req.poi) if site is not None and req.step_free and req.poi else None
+        if site is not None and poi is not None and poi.node in steps_only_nodes(graph_of(site)):
+            raise ValueError(f"only steps lead to point {poi.id!r}: no step-free visit")
 
     def _poi_texts(self, poi: object) -> dict[str, Any] | None:
         """A point's texts from the site in the running task's language (None: unknown)."""
@@ -448,11 +462,12 @@ class OnboardScreen(Service):
             if not req.poi or (known and req.poi not in known):
                 raise ValueError(f"unknown point of interest {req.poi!r}; known: {sorted(known)}")
             params = {"poi": req.poi}
+            self._check_step_free(req)
         if req.lang:
             params["lang"] = req.lang
         if req.pace and req.pace != "normal":
             params["pace"] = req.pace
-        if req.step_free and req.kind == "tour":
+        if req.step_free:
             params["step_free"] = True
         return self.ep.publish(
             "task_request",

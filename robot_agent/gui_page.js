@@ -88,7 +88,7 @@ async function ask(kind, item) {
   const body = kind === "tour" ? { kind, tour: item.id } : { kind, poi: item.id };
   body.lang = state.screen.lang;
   if (state.slow) body.pace = "slow";
-  if (state.stepFree && kind === "tour") body.step_free = true;
+  if (state.stepFree) body.step_free = true;
   const r = await post("/api/request", body);
   if (r.ok) state.message = r.data.queued_offline ? t("request_queued_offline") : t("requested");
   else if (r.status === 0) state.message = t("error_network");
@@ -163,6 +163,24 @@ function captionView(s) {
     <p class="caption" lang=${said.lang ?? s.lang} data-started-at=${Math.round(said.started_at * 1000)}
       data-shown-at=${state.caption.shown_at}>${said.text}</p>
   </section>`;
+}
+
+/** A tour's button; with "Step-free only" on, the stops a step-free tour skips are said on it. */
+function tourButton(s, tour, refused) {
+  const skips = state.stepFree ? tour.step_free_skips ?? [] : [];
+  const names = skips.map((id) => s.pois.find((p) => p.id === id)?.name ?? id).join(", ");
+  return html`<button class="big" ?disabled=${refused} @click=${() => ask("tour", tour)}><span
+    lang=${tour.fallback?.name ?? nothing}>${tour.name}</span>${skips.length ? html`<span class="steps-only">${t("step_free_skips", { names })}</span>` : ""}</button>`;
+}
+
+/** A point's "take me there": with "Step-free only" on, a point only steps lead to is refused
+ * and says why on the button itself (read with its name; `aria-disabled`, not `disabled`, so
+ * the reason keeps its full contrast). */
+function pointButton(poi, refused) {
+  const stepsOnly = Boolean(state.stepFree && poi.steps_only);
+  const go = () => { if (!stepsOnly) ask("go_to_poi", poi); };
+  return html`<button class="big secondary" ?disabled=${refused} aria-disabled=${String(stepsOnly)} @click=${go}><span
+    lang=${poi.fallback?.name ?? nothing}>${poi.name}</span>${stepsOnly ? html`<span class="steps-only">${t("steps_only")}</span>` : ""}</button>`;
 }
 
 /** Before the first stop: the task the robot is starting, never the idle invitation. */
@@ -253,7 +271,7 @@ function draw() {
     ${stateView(s)}
     ${captionView(s)}
     ${s.task?.pace === "slow" ? html`<p class="pace">${t("state_slower_unknown")}</p>` : ""}
-    ${s.task?.step_free ? html`<p class="pace">${t("state_step_free")}</p>` : ""}
+    ${s.task?.step_free ? html`<p class="pace">${t(s.task.tour ? "state_step_free" : "state_step_free_visit")}</p>` : ""}
     ${s.task?.handover ? html`<p class="notice" role="status">${t("handover", { robot: s.robot, i: s.task.handover.stop })}</p>` : ""}
     ${questionView(s.question)}
     <section aria-labelledby="now-title"><h2 id="now-title">${t(s.going && s.explanation ? "touch_just_seen" : "touch_now")}</h2>${nowView(s)}</section>
@@ -261,10 +279,10 @@ function draw() {
     ${s.task || !s.next_tours?.length ? "" : html`<section class="next-tours" aria-labelledby="next-title"><h2 id="next-title">${t("next_tours")}</h2>
       <ul>${nextTourLines(t, s.next_tours.slice(0, 3)).map((l) => html`<li><strong>${l.name}</strong>: ${l.line}</li>`)}</ul></section>`}
     ${s.task ? "" : html`<section aria-labelledby="tours-title"><h2 id="tours-title">${t("tours")}</h2>
-      <div class="actions">${s.tours.map((tour) => html`<button class="big" ?disabled=${refused} lang=${tour.fallback?.name ?? nothing} @click=${() => ask("tour", tour)}>${tour.name}</button>`)}</div>
+      <div class="actions">${s.tours.map((tour) => tourButton(s, tour, refused))}</div>
     </section>
     <section aria-labelledby="points-title"><h2 id="points-title">${t("points")}</h2>
-      <div class="actions">${s.pois.map((poi) => html`<button class="big secondary" ?disabled=${refused} lang=${poi.fallback?.name ?? nothing} @click=${() => ask("go_to_poi", poi)}>${poi.name}</button>`)}</div>
+      <div class="actions">${s.pois.map((poi) => pointButton(poi, refused))}</div>
     </section>`}`, app);
 }
 

@@ -3,7 +3,9 @@ first stop of the task until it ends: a slower tour (``pace: slow``, guidebot/pa
 a fraction of the top speed and speaks more slowly; a step-free tour (``step_free``) plans its
 legs over no edge with steps (robot_agent/navigation.py), and a stop that only steps lead to is
 skipped (the server's path answer says ``steps``). Before the first stop nobody walks with the
-robot, so it goes there as usual (the server's estimates count the same way)."""
+robot, so it goes there as usual (the server's estimates count the same way). A step-free visit
+to one point (``go_to_poi``) is step-free from its start: its visitor may walk with the robot
+from its touch screen."""
 
 from __future__ import annotations
 
@@ -47,11 +49,29 @@ class VisitorNeeds(Service):
         self.step_free = False
         self._task: str | None = None
         """The task whose needs are applied (None: none)."""
+        self._early: object = None
+        """A point visit whose step-free planning was applied at its assignment."""
 
     async def on_start(self) -> None:
         self.subscribe_all(
-            self.ep, {"show_point": self._on_first_stop, "task_ended": self._on_ended}
+            self.ep,
+            {
+                "task_assigned": self._on_assigned,
+                "show_point": self._on_first_stop,
+                "task_ended": self._on_ended,
+            },
         )
+
+    def _on_assigned(self, message: Message) -> None:
+        """A step-free point visit plans step-free from its first leg (its pace still from
+        the point on, as a tour's)."""
+        params = message.payload.get("params") or {}
+        task_id, current = message.payload.get("task_id"), self.tasks.current
+        if current is not None and current.task_id != task_id:
+            return  # the robot keeps to the task it runs
+        if params.get("step_free") is True and "poi" in params and "tour" not in params:
+            self._early = task_id
+            self.step_free = self.drive.step_free = True
 
     def _on_first_stop(self, message: Message) -> None:
         task = self.tasks.current
@@ -60,7 +80,9 @@ class VisitorNeeds(Service):
         self._apply(pace_of(task.params), task.params.get("step_free") is True, task.task_id)
 
     def _on_ended(self, message: Message) -> None:
-        if self._task is not None and message.payload.get("task_id") == self._task:
+        ended = message.payload.get("task_id")
+        if ended is not None and ended in (self._task, self._early):
+            self._early = None
             self._apply(PACES["normal"], False, None)
 
     def _apply(self, pace: Pace, step_free: bool, task: str | None) -> None:

@@ -21,7 +21,7 @@ from backend.api.deps import (
 )
 from backend.auth import Principal, Role
 from guidebot.pace import PaceName
-from guidebot.site.access import step_free_skips
+from guidebot.site.access import step_free_skips, steps_only_nodes
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
 from guidebot.site.media import MEDIA_HEADERS, MEDIA_TYPES, SERVED_TYPES, media_in, video_url
@@ -35,6 +35,11 @@ Lang = Annotated[str | None, Query(max_length=16)]
 PaceQuery = Annotated[
     PaceName,
     Query(description="The pace the estimates are for: `slow`, a slower tour (guidebot/pace.py)"),
+]
+
+StepFreeQuery = Annotated[
+    bool,
+    Query(description="True: the tours' estimates are a step-free tour's (docs/visitor.md)"),
 ]
 
 DEVICE_HEADER = "X-Guidebot-Device"
@@ -138,20 +143,26 @@ async def visitor_menu(
     traffic: Traffic,
     lang: Lang = None,
     pace: PaceQuery = "normal",
+    step_free: StepFreeQuery = False,
 ) -> dict[str, Any]:
     """Tours and points in ``lang`` (the site's default when not offered), each with its
-    length at ``pace`` and what a request would be told now: available, busy (with the
-    wait), or unavailable (no robot in service)."""
+    length at ``pace`` (and step-free) and what a request would be told now: available,
+    busy (with the wait), or unavailable (no robot in service); the points only steps lead
+    to are marked (``steps_only``)."""
     site = service.site
     estimator = manager.estimator
     chosen = resolve_language(site, lang)
     paced = {"pace": pace} if pace != "normal" else {}
+    cut = steps_only_nodes(manager.graph)
     closed = frozenset(traffic.closures()) if traffic.closures is not None else frozenset()
     tours = []
     for tour in site.tours:
         stops = [v for v in (_poi_view(site, p, chosen) for p in tour.points) if v is not None]
-        told = estimator.preview("tour", {"tour": tour.id, "lang": chosen} | paced).as_dict()
         skips = _step_free_skips(site, manager.graph, tour, closed)
+        freed = {"step_free": True} if step_free and len(skips) < len(tour.points) else {}
+        told = estimator.preview(
+            "tour", {"tour": tour.id, "lang": chosen} | paced | freed
+        ).as_dict()
         tours.append(
             {
                 "id": tour.id,
@@ -167,13 +178,14 @@ async def visitor_menu(
         view = _poi_view(site, poi.id, chosen)
         assert view is not None
         told = estimator.preview("go_to_poi", {"poi": poi.id, "lang": chosen} | paced).as_dict()
-        pois.append({**view, "estimate": told})
+        pois.append({**view, "estimate": told, "steps_only": poi.node in cut})
     return {
         "site": site.name,
         "languages": site_languages(site),
         "default_language": site.default_language,
         "lang": chosen,
         "pace": pace,
+        "step_free": step_free,
         "service": estimator.service(),
         "tours": tours,
         "pois": pois,

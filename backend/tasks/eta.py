@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 from backend.tasks.cutoff import CutOff
 from backend.tasks.model import Task, TaskState
 from guidebot.pace import Pace, pace_of
+from guidebot.site.access import first_stops_skipped
 from guidebot.site.i18n import poi_texts
 
 if TYPE_CHECKING:
@@ -235,9 +236,9 @@ class EtaEstimator:
         self.charge_s = CHARGE_S
         self._running: dict[str, _Progress] = {}
         self._schedule: _Schedule | None = None
-        self._places: dict[tuple[str, str, str | None], list[tuple[str, str | None]]] = {}
-        """(kind, tour or point, language) -> the places of a queued task (never changed by
-        callers); for ``_places_of``, the site they were read from."""
+        self._places: dict[tuple[str, str, str | None, bool], list[tuple[str, str | None]]] = {}
+        """(kind, tour or point, language, step-free) -> the places of a queued task (never
+        changed by callers); for ``_places_of``, the site they were read from."""
         self._places_of: Site | None = None
         self._sent: dict[int, tuple[list[Any], list[tuple[str, str | None]]]] = {}
         """id of the points list a task's net was given -> (that list, its places)."""
@@ -454,7 +455,9 @@ class EtaEstimator:
         if isinstance(sent, list) and sent and isinstance(sent[0], dict):
             first = int(sent[0].get("index") or 1)
             total = int(sent[0].get("total") or total)
-        return _Progress(segments, self.tm.clock(), total=total, first=first)
+        run = _Progress(segments, self.tm.clock(), total=total, first=first)
+        run.skipped = list(task.assigned_params.get("skipped") or [])  # first stops, steps only
+        return run
 
     def _segments(
         self, points: list[tuple[str, str | None]], start: str | None, speed: float, pace: Pace
@@ -524,10 +527,14 @@ class EtaEstimator:
             if self._places_of is not site:
                 self._places.clear()
                 self._places_of = site
-            key = (task.kind, str(p.get("tour" if task.kind == "tour" else "poi")), lang)
+            ref = str(p.get("tour" if task.kind == "tour" else "poi"))
+            key = (task.kind, ref, lang, p.get("step_free") is True)
             found = self._places.get(key)
             if found is None:
-                found = self._places[key] = self._site_points(site, *key)
+                found = self._places[key] = self._site_points(site, *key[:3])
+                if key[3] and task.kind == "tour" and (tour := site.tour(ref)) is not None:
+                    # a step-free tour starts at its first stop without steps (access.py)
+                    del found[: len(first_stops_skipped(site, self.tm.graph, tour))]
             return found
         try:
             return [(self.tm.target_of(task.kind, p), None)]

@@ -78,3 +78,34 @@ async def test_texts_in_the_chosen_language_and_the_site_pictures() -> None:
     finally:
         await server.stop()
         await onboard.stop()
+
+
+async def test_the_screen_refuses_a_step_free_visit_to_a_point_only_steps_lead_to() -> None:
+    """The loom is down three steps: marked on the screen, refused step-free (422, saying
+    why), sent as a step-free visit for a level point, and ``step_free`` is a yes or no."""
+    onboard, server = await screen_for([True], "queue")
+    sent: list[Any] = []
+    onboard.ep.subscribe("task_request", sent.append)
+    try:
+        async with httpx.AsyncClient(base_url=server.url) as http:
+            pois = (await http.get("/api/screen")).json()["pois"]
+            assert {p["id"] for p in pois if p["steps_only"]} == {"loom"}
+            r = await http.post(
+                "/api/request", json={"kind": "go_to_poi", "poi": "loom", "step_free": True}
+            )
+            assert r.status_code == 422
+            assert r.json()["detail"] == "only steps lead to point 'loom': no step-free visit"
+            r = await http.post(
+                "/api/request", json={"kind": "go_to_poi", "poi": "loom", "step_free": "yes"}
+            )
+            assert r.status_code == 422
+            r = await http.post(
+                "/api/request", json={"kind": "go_to_poi", "poi": "mosaics", "step_free": True}
+            )
+            assert r.status_code == 202 and r.json()["step_free"] is True
+            r = await http.post("/api/request", json={"kind": "go_to_poi", "poi": "loom"})
+            assert r.status_code == 202  # without steps asked for: the usual visit
+        assert [m.payload["params"].get("step_free") for m in sent] == [True, None]
+    finally:
+        await server.stop()
+        await onboard.stop()

@@ -66,9 +66,16 @@ def visitor_fleet(
 
     @contextlib.asynccontextmanager
     async def make(
-        robots: int = 1, visitor: str | None = "yes", time_scale: float = TIME_SCALE
+        robots: int = 1,
+        visitor: str | None = "yes",
+        time_scale: float = TIME_SCALE,
+        edit: Callable[[dict[str, Any]], None] | None = None,
     ) -> AsyncIterator[VisitorFleet]:
-        async with fleet_factory(robots=0) as fleet, contextlib.AsyncExitStack() as stack:
+        """``edit``: changes the demo site's data before the server reads it."""
+        async with (
+            fleet_factory(robots=0, edit=edit) as fleet,
+            contextlib.AsyncExitStack() as stack,
+        ):
             tokens = fleet.server.app.state.tokens
             tokens.add(PANEL_A, "panel-entrance", "panel")
             tokens.add(PANEL_B, "panel-shop", "panel")

@@ -5,6 +5,7 @@ screen reader hears every change of a request on the phone (Chromium's accessibi
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 from typing import Any
 
@@ -437,3 +438,98 @@ async def test_a_stop_s_sign_language_video_shows_on_the_phone_and_the_touch_scr
         await expect(page.locator(".request-state")).to_contain_text("Stop 2 of 3", timeout=LONG)
         await expect(on_phone).to_have_count(0)
         await expect(screen.locator("video")).to_have_count(0, timeout=LONG)
+
+
+def _weaving_first(data: dict[str, Any]) -> None:
+    """A tour that starts at the loom, down three steps from the rest of the demo museum."""
+    data["tours"].append(
+        {"id": "weaving", "name": "Weaving and bronze", "points": ["loom", "sword"]}
+    )
+
+
+async def test_a_step_free_tour_whose_first_stop_only_steps_lead_to_starts_at_the_next(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The loom, down three steps, is the tour's first stop: a step-free visitor is told
+    beforehand that it is skipped, meets the robot at the next stop, and is told why after;
+    the loom as a single point is marked and cannot be asked for step-free."""
+    async with visitor_fleet(edit=_weaving_first) as vf:
+        agent = vf.agents["R1"]
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        loom = page.get_by_role("article", name="Loom")
+        await expect(loom.get_by_role("button", name="Take me there")).to_be_enabled()
+        await expect(loom).not_to_contain_text("Only steps")
+        await page.get_by_role("button", name="Step-free only").click()
+        card = page.get_by_role("article", name="Weaving and bronze")
+        await expect(card).to_contain_text("Step-free, it skips: Loom")
+        await expect(loom).to_contain_text(
+            "Only steps or a steep slope lead there: no step-free visit."
+        )
+        await expect(loom.get_by_role("button", name="Take me there")).to_be_disabled()
+        await expect(
+            page.get_by_role("article", name="Roman mosaics").get_by_role("button")
+        ).to_be_enabled()
+        await web.axe_check(page)
+        await loom.scroll_into_view_if_needed()
+        await web.screenshot(page, "visitor-phone-steps-only")
+        await request_from(page, "Weaving and bronze")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("The tour has ended", timeout=LONG)
+        skipped = page.get_by_role("region", name="Stops skipped")
+        await expect(skipped).to_contain_text(
+            "Stop 1, Loom: only steps or a steep slope lead there"
+        )
+        await web.axe_check(page)
+        task = next(iter(vf.fleet.server.app.state.task_manager.tasks.values()))
+        assert task.params["step_free"] is True
+        # The robot went to the sword (the visitor's first stop), never down to the loom.
+        said = [m.payload.get("text", "") for m in vf.speech]
+        site = load_site_file(DEMO_SITE)
+        loom_text, sword_text = site.poi("loom").text, site.poi("sword").text  # type: ignore[union-attr]
+        assert sword_text in said and loom_text not in said, said
+        assert agent.navigator is not None and agent.navigator.node != "gb2"
+
+
+async def test_the_touch_screen_takes_a_step_free_visitor_to_a_point_without_steps(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """On the touch screen with "Step-free only" on, the loom says only steps lead there and
+    cannot be asked for; another point is a step-free visit (the robot asks the Traffic
+    Manager for step-free paths from its first leg); a step-free tour that starts at the loom
+    says on the screen that it skipped it."""
+    async with visitor_fleet(edit=_weaving_first) as vf:
+        agent = vf.agents["R1"]
+        asked: list[Message] = []
+        agent.bus.endpoint("test-paths").subscribe("get_path", asked.append, tap=True)
+        screen = (await open_page(vf.screen_url(), viewport=(1024, 600))).page
+        loom = screen.get_by_role("button", name=re.compile("^Loom"))
+        await expect(loom).to_be_enabled()
+        step_free = screen.get_by_role("button", name="Step-free only")
+        await step_free.click()
+        await expect(step_free).to_have_attribute("aria-pressed", "true")
+        await expect(loom).to_be_disabled()
+        await expect(loom).to_contain_text("Only steps or a steep slope lead there")
+        weaving = screen.get_by_role("button", name="Weaving and bronze")
+        await expect(weaving).to_contain_text("Step-free, it skips: Loom")
+        await web.axe_check(screen)
+        await loom.scroll_into_view_if_needed()
+        await web.screenshot(screen, "touch-screen-steps-only")
+        await screen.get_by_role("button", name="Roman mosaics").click()
+        tasks = vf.fleet.server.app.state.task_manager.tasks
+        await wait_until(lambda: len(tasks) == 1, 30)
+        visit = next(iter(tasks.values()))
+        assert (visit.kind, visit.params.get("step_free")) == ("go_to_poi", True)
+        await wait_until(lambda: vf.task(visit.id).state.value == "done", 60)
+        legs = [m.payload for m in asked if m.payload.get("to_node") == "ga1"]
+        assert legs and all(leg.get("step_free") is True for leg in legs), legs
+        assert agent.navigator is not None and not agent.navigator.step_free  # ended
+        # A step-free tour from the screen that starts at the loom: skipped, and said.
+        await expect(step_free).to_have_attribute("aria-pressed", "false", timeout=LONG)
+        await step_free.click()
+        await weaving.click()
+        skipped = screen.get_by_role("region", name="Stops skipped")
+        await expect(skipped).to_contain_text(
+            "Stop 1, Loom: only steps or a steep slope lead there", timeout=LONG
+        )
+        await expect(screen.locator(".pace")).to_contain_text("A step-free tour")
+        await web.axe_check(screen)

@@ -102,7 +102,8 @@ async function loadMenu() {
   const asked = ++menuAsked;
   let lang = state.lang;
   const pace = state.slow ? "pace=slow" : "";
-  const query = (l) => `/api/visitor?${[l ? `lang=${encodeURIComponent(l)}` : "", pace].filter(Boolean).join("&")}`;
+  const stepFree = state.stepFree ? "step_free=true" : ""; // the lengths of step-free tours
+  const query = (l) => `/api/visitor?${[l ? `lang=${encodeURIComponent(l)}` : "", pace, stepFree].filter(Boolean).join("&")}`;
   let menu = await api.get(query(lang));
   if (!lang) {
     lang = preferredLanguage(menu.languages, menu.default_language);
@@ -269,7 +270,7 @@ async function request(kind, item) {
   const params = kind === "tour" ? { tour: item.id } : { poi: item.id };
   params.lang = state.menu.lang;
   if (state.slow) params.pace = "slow";
-  if (state.stepFree && kind === "tour") params.step_free = true;
+  if (state.stepFree) params.step_free = true;
   try {
     const status = await api.post("/api/tasks", { kind: KIND[kind], params });
     state.requests.set(status.id, told(status));
@@ -328,6 +329,12 @@ async function toggleSlow() {
   await reload();
 }
 
+async function toggleStepFree() {
+  state.stepFree = !state.stepFree;
+  showError("", "");
+  await reload();
+}
+
 async function chooseLanguage(lang) {
   state.lang = lang;
   showError("", "");
@@ -371,6 +378,7 @@ function serviceLine(estimate) {
 function card(kind, item) {
   const estimate = item.estimate;
   const unavailable = estimate?.service === "unavailable";
+  const stepsOnly = kind === "poi" && state.stepFree && item.steps_only; // refused: said why
   const facts = [];
   if (kind === "tour") facts.push(t("stops", { n: item.stops.length }));
   const length = state.menu.pace === "slow" ? "tour_length_slow" : "tour_length";
@@ -387,8 +395,10 @@ function card(kind, item) {
       <p class="muted">${facts.join(" · ")}</p>
       ${kind === "tour" && state.stepFree && item.step_free_skips?.length
         ? html`<p class="skips">${t("step_free_skips", { names: item.step_free_skips.map(poiName).join(", ") })}</p>` : ""}
-      <p class=${`wait ${estimate?.service ?? ""}`} id=${`${id}-wait`}>${serviceLine(estimate)}</p>
-      <button class="big" ?disabled=${unavailable || state.busy} aria-describedby=${`${id}-name ${id}-wait`}
+      ${stepsOnly ? html`<p class="skips steps-only" id=${`${id}-steps`}>${t("steps_only")}</p>` : ""}
+      ${stepsOnly ? "" : html`<p class=${`wait ${estimate?.service ?? ""}`} id=${`${id}-wait`}>${serviceLine(estimate)}</p>`}
+      <button class="big" ?disabled=${unavailable || stepsOnly || state.busy}
+        aria-describedby=${`${id}-name ${stepsOnly ? `${id}-steps` : `${id}-wait`}`}
         @click=${() => request(kind, item)}>${t(kind === "tour" ? "request_tour" : "request_point")}</button>
     </div>
   </article>`;
@@ -419,7 +429,6 @@ function languagePicker() {
  * are at the slow pace, and tours keep off steps. */
 function paceToggle() {
   const slow = state.menu.pace === "slow";
-  const stepFree = () => { state.stepFree = !state.stepFree; draw(); };
   return html`<div class="pace-option">
     <button class="secondary" aria-pressed=${String(slow)} aria-describedby="pace-help" ?disabled=${state.busy}
       @click=${toggleSlow}>${on(slow)}${t("slower_tour")}</button>
@@ -427,7 +436,7 @@ function paceToggle() {
   </div>
   <div class="pace-option">
     <button class="secondary" aria-pressed=${String(state.stepFree)} aria-describedby="step-free-help"
-      @click=${stepFree}>${on(state.stepFree)}${t("step_free")}</button>
+      ?disabled=${state.busy} @click=${toggleStepFree}>${on(state.stepFree)}${t("step_free")}</button>
     <p class="muted" id="step-free-help">${t("step_free_help")}</p>
   </div>`;
 }
@@ -539,7 +548,7 @@ function requestView() {
 function paceLine(r) {
   const lines = [];
   if (r.params?.pace === "slow") lines.push(r.duration_s ? t("state_slower", { t: about(r.duration_s) }) : t("state_slower_unknown"));
-  if (r.params?.step_free) lines.push(t("state_step_free"));
+  if (r.params?.step_free) lines.push(t(r.params.tour ? "state_step_free" : "state_step_free_visit"));
   return lines.map((line) => html`<p class="pace">${line}</p>`);
 }
 
