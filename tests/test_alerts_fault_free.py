@@ -60,8 +60,9 @@ async def stop(process: asyncio.subprocess.Process) -> None:
 
 async def test_a_fault_free_demo_raises_no_alert_and_its_stop_leaves_none(tmp_path: Path) -> None:
     (port,) = free_ports(1)
+    gui = free_block(3)  # robot i's touch screen takes gui + i
     url = f"http://127.0.0.1:{port}"
-    process = await start_demo(tmp_path, port, free_block(3))  # robot i's touch screen: gui + i
+    process = await start_demo(tmp_path, port, gui)
     try:
         await asyncio.wait_for(healthy(url, process), 90)
         seen: list[Message] = []
