@@ -115,6 +115,8 @@ async def in_processes(fn: Callable[[A], T], args: Sequence[A], workers: int) ->
     ``shutdown`` waited for ever (a CI run hung 17 min in the killed-worker test); killing them
     took the pool's private ``_broken`` and ``_processes``. Here every process is ours to kill,
     with ``Process.kill``."""
+    if not args:
+        return []
     context = multiprocessing.get_context("spawn")
     count = max(1, min(workers, len(args)))
     chunks = [list(args[i::count]) for i in range(count)]
