@@ -1,63 +1,32 @@
-"""Suite-wide checks (no test may leave threads behind), the order tests start in, and the
-private Docker engine that the `docker compose` tests share (tests/compose_engine.py)."""
+"""Suite-wide checks (no test may leave threads behind) and the private Docker engine that the
+`docker compose` tests share (tests/compose_engine.py)."""
 
 from __future__ import annotations
 
 import threading
 import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
-ROOT = Path(__file__).resolve().parent.parent
-LONGEST = frozenset(
-    {
-        "tests/building/test_bench_emergency.py",
-        "tests/scale/test_acks_across.py",
-        "tests/scale/test_areas_across.py",
-        "tests/scale/test_benches.py",
-        "tests/scale/test_broker_faults.py",
-        "tests/scale/test_follower_site.py",
-        "tests/scale/test_tour_across.py",
-        "tests/server/test_bench_hub.py",
-        "tests/test_alerts_fault_free.py",
-        "tests/test_demo.py",
-        "tests/test_soak.py",
-        "tests/web/test_busy_truth.py",
-        "tests/web/test_console_busy.py",
-        "tests/web/test_console_cluster.py",
-        "tests/web/test_console_truth.py",
-        "tests/web/test_console_twice.py",
-        "tests/web/test_visitor_a11y.py",
-    }
-)
-"""Files with a test of a minute or more on a loaded machine (`--durations`, 28 Nov 2026): a
-fleet, a cluster or a browser at work. They start first, after the docker tests."""
-
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The longest tests first, so that the run ends on short ones: the docker tests, in one
-    pytest-xdist worker (`--dist loadgroup`, the Makefile), as they share the session's private
-    engine (`engine` below) and its image cache; then the tests of the files in `LONGEST` and
-    those marked `slow`.
+    """The docker tests first, in one pytest-xdist worker (`--dist loadgroup`, the Makefile):
+    they share the session's private engine (`engine` below) and its image cache, and are the
+    longest stretch of the suite, which then runs beside the rest instead of after it.
 
-    pytest-xdist hands out tests in collection order, a few at a time to each worker as it
-    frees up: a 100 s test that comes last keeps one worker busy 100 s after the others ended,
-    and one that comes first runs beside the rest."""
+    The others keep their order. pytest-xdist hands them out a few at a time to each worker
+    as it frees up, so the workers end within seconds of each other (7 s apart in a run of
+    four). Starting the other long ones first (the cluster tests, the demos, the busy
+    browser tests) was tried: five workers starting pairs of servers at once on a loaded
+    machine timed out in set-up (28 Nov 2026)."""
     for item in items:
         if item.get_closest_marker("docker") is not None:
             item.add_marker(pytest.mark.xdist_group("docker"))
 
-    def rank(item: pytest.Item) -> int:
-        if item.get_closest_marker("docker") is not None:
-            return 0
-        slow = item.get_closest_marker("slow") is not None
-        return 1 if slow or item.path.relative_to(ROOT).as_posix() in LONGEST else 2
-
-    items.sort(key=rank)  # stable: collection order within each rank
+    items.sort(key=lambda item: item.get_closest_marker("docker") is None)  # stable
 
 
 @pytest.hookimpl(trylast=True)  # after pytest-xdist's own, which names the groups

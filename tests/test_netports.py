@@ -1,14 +1,9 @@
-"""The suite's own order (tests/conftest.py): the files it starts first exist, and the free
-ports it gives out (tests/netports.py) are ports the kernel never picks by itself."""
+"""The free ports tests give programs that take a port number (tests/netports.py) are ports
+the kernel never picks by itself, and never the same twice."""
 
 from __future__ import annotations
 
-from conftest import LONGEST, ROOT
 from netports import EPHEMERAL, PORTS, free_block, free_ports
-
-
-def test_every_file_named_to_start_first_exists() -> None:
-    assert sorted(path for path in LONGEST if not (ROOT / path).is_file()) == []
 
 
 def test_free_ports_lie_outside_the_kernels_ephemeral_range_and_are_distinct() -> None:
