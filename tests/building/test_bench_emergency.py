@@ -31,7 +31,8 @@ async def test_a_short_run_prints_the_keys_and_breaks_no_rule() -> None:
     process = await asyncio.create_subprocess_exec(
         *COMMAND,
         # At the time scale docs/emergency.md measures at: the robots walk ten times faster,
-        # which asks more of the stops and the routes, not less (104 s at 1, 40 s at 10).
+        # which asks more of the stops and the routes, not less (interleaved on a loaded
+        # machine: 122 s and 158 s at time scale 1, 53 s and 90 s at 10).
         *("--robots", "2", "--runs", "2", "--time-scale", "10", "--json"),
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,
