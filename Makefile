@@ -29,17 +29,17 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy guidebot backend robot_agent building_sim petri_nets bench
 
-# The suite waits far more than it computes (servers, browsers, robots at work): four pytest-xdist
-# workers share 2 CPUs, and lint and the type check (15 s of one CPU) run beside them (their few
-# lines come among pytest's first ones); any of the three failing fails `make test` once the
-# others end. `--dist loadgroup` keeps the docker tests in one worker; the tests marked `alone`
-# (the demo's, on ports it picks) run after, by themselves (tests/conftest.py).
+# The suite waits far more than it computes (servers, browsers, robots at work): six
+# pytest-xdist workers (WORKERS) share 2 CPUs, and lint and the type check (15 s of one CPU) run beside them
+# (their few lines come among pytest's first ones); any of the three failing fails `make test`
+# once the others end. `--dist loadgroup` keeps the docker tests in one worker; they and the
+# other longest tests start first (tests/conftest.py).
+WORKERS ?= 6
 test: $(STAMP) system-deps
 	$(MAKE) --no-print-directory -j 3 lint typecheck suite
-	$(BIN)/python -m pytest -m alone
 
 suite: $(STAMP)
-	$(BIN)/python -m pytest -n 4 --dist loadgroup -m "not alone"
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup
 
 # docs/screenshots/*.png from the browser tests' scenarios (needs /usr/bin/chromium).
 screenshots: $(STAMP) system-deps

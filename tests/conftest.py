@@ -10,28 +10,23 @@ from collections.abc import Iterator
 import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
-ALONE = frozenset({"test_demo.py"})
-"""Test files marked ``alone``: the Makefile runs them after the rest, with nothing beside
-them. The demo's test starts it on free ports it picked, which a neighbour's connection could
-take before the demo bound them. (The robots on simulated RoboCAN hardware ran alone too until
-their base paired its wheels' frames by time: beside four busy workers they were taken for
-"stuck", and the safety rig waited for door states published before it listened.)"""
-
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Under pytest-xdist (`--dist loadgroup`, the Makefile), run the docker tests in one
-    worker: they share the session's private engine (`engine` below) and its image cache.
-    They come first: the
-    longest stretch of the suite (images built, fleets started), it then runs beside the rest
-    instead of after it."""
+    """The docker tests first, in one pytest-xdist worker (`--dist loadgroup`, the Makefile):
+    they share the session's private engine (`engine` below) and its image cache, and are the
+    longest stretch of the suite, which then runs beside the rest instead of after it.
+
+    The others keep their order. pytest-xdist hands them out a few at a time to each worker
+    as it frees up, so the workers end within seconds of each other (7 s apart in a run of
+    four). Starting the other long ones first (the cluster tests, the demos, the busy
+    browser tests) was tried: five workers starting pairs of servers at once on a loaded
+    machine timed out in set-up (28 Nov 2026)."""
     for item in items:
-        if item.path.name in ALONE:
-            item.add_marker(pytest.mark.alone)
-    docker = [item for item in items if item.get_closest_marker("docker") is not None]
-    for item in docker:
-        item.add_marker(pytest.mark.xdist_group("docker"))
-    items[:] = docker + [item for item in items if item not in docker]
+        if item.get_closest_marker("docker") is not None:
+            item.add_marker(pytest.mark.xdist_group("docker"))
+
+    items.sort(key=lambda item: item.get_closest_marker("docker") is None)  # stable
 
 
 @pytest.hookimpl(trylast=True)  # after pytest-xdist's own, which names the groups

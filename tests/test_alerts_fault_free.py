@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from netports import free_ports
+from netports import free_block, free_ports
 
 from guidebot.client import HubClient
 from guidebot.messages import Message
@@ -59,7 +59,8 @@ async def stop(process: asyncio.subprocess.Process) -> None:
 
 
 async def test_a_fault_free_demo_raises_no_alert_and_its_stop_leaves_none(tmp_path: Path) -> None:
-    port, gui = free_ports(2)
+    (port,) = free_ports(1)
+    gui = free_block(3)  # robot i's touch screen takes gui + i
     url = f"http://127.0.0.1:{port}"
     process = await start_demo(tmp_path, port, gui)
     try:

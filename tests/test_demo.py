@@ -18,7 +18,7 @@ from pathlib import Path
 import httpx
 import psutil
 import yaml
-from netports import free_ports
+from netports import free_block, free_ports
 
 from guidebot.demo_site import mismatched_modules, site_with_ports
 
@@ -66,7 +66,8 @@ async def demo(
 ) -> AsyncIterator[Demo]:
     """``guidebot demo ARGS`` on free ports, on a database in ``tmp_path`` (``own_db``: the
     demo's default, as ``make demo`` runs it) in the folder ``cwd``."""
-    port, gui = free_ports(2)
+    (port,) = free_ports(1)
+    gui = free_block(2)  # robot i's touch screen takes gui + i (two robots at most here)
     command = [sys.executable, "-m", "guidebot.cli", "demo", "--no-can", "--time-scale", "5"]
     command += ["--port", str(port), "--gui-port", str(gui), "--sim-control-port", "0"]
     if not own_db:

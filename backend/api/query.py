@@ -45,7 +45,8 @@ def _query_aliases(dependant: Dependant) -> set[str]:
 
 async def known_query(request: HTTPConnection) -> None:
     """Router dependency: 422 for a query parameter the matched route does not declare (a
-    WebSocket route, which is no APIRoute, is left alone)."""
+    WebSocket route, which is no APIRoute, is left alone: the hub's /ws ignores what it does
+    not take, docs/protocol.md "Connecting")."""
     route = request.scope.get("route")
     if not request.query_params or not isinstance(route, APIRoute):
         return

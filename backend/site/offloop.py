@@ -28,7 +28,9 @@ import multiprocessing
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from multiprocessing.connection import Connection, wait
+from multiprocessing.process import BaseProcess
 from typing import Any, ParamSpec, TypeVar
 
 from guidebot.site.dispose import dispose
@@ -101,32 +103,101 @@ async def in_processes(fn: Callable[[A], T], args: Sequence[A], workers: int) ->
 
     They are spawned, not forked (the server's threads are not copied), and import ``fn``'s
     module and the main module again: a program that embeds the server must guard its main
-    module with ``if __name__ == "__main__":``. Starting them and handing them ``args`` is
-    done in a thread too (a few milliseconds of forking and pickling). A worker that dies
-    raises ``BrokenProcessPool``; one that cannot start, ``OSError``. They run at a lower
-    priority than the server (``WORKER_NICE``). The call returns once they have exited: no
-    process or thread of the pool outlives it."""
-    pool = ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=_lower_priority,
-    )
+    module with ``if __name__ == "__main__":``. Worker ``i`` computes ``args[i::workers]``,
+    given and answered through a pipe of its own. Starting them and waiting for them is
+    done in a thread (a few milliseconds of forking and pickling; the wait). A worker that dies
+    raises ``BrokenProcessPool``; one that cannot start, ``OSError``; ``fn``'s own exception is
+    raised as it is. They run at a lower priority than the server (``WORKER_NICE``). The call
+    returns once every worker has exited: none outlives it.
 
-    def submit() -> list[Future[T]]:
-        return [pool.submit(fn, a) for a in args]
+    Our own processes, not a ``ProcessPoolExecutor``: when one of its workers died, CPython
+    3.11 left a worker started by a racing submit running, blocked sending its answer, and
+    ``shutdown`` waited for ever (a CI run hung 17 min in the killed-worker test); killing them
+    took the pool's private ``_broken`` and ``_processes``. Here every process is ours to kill,
+    with ``Process.kill``."""
+    if not args:
+        return []
+    context = multiprocessing.get_context("spawn")
+    count = max(1, min(workers, len(args)))
+    chunks = [list(args[i::count]) for i in range(count)]
+    processes: list[BaseProcess] = []
+    pipes: list[Connection] = []
+
+    def start() -> None:
+        for _ in chunks:
+            pipe, theirs = context.Pipe()
+            process = context.Process(target=_work, args=(theirs,), daemon=True)
+            processes.append(process)
+            pipes.append(pipe)
+            process.start()
+            theirs.close()  # EOF here once the worker is gone
+        # The work goes through the pipe once every worker runs, not as the process's
+        # arguments: those are written to the new process while this one still holds the
+        # other end of that pipe, so a worker killed before it read them left the write
+        # blocked for ever (a large chunk is more than the pipe holds).
+        for index, (pipe, chunk) in enumerate(zip(pipes, chunks, strict=True)):
+            try:
+                pipe.send((fn, chunk))
+            except OSError:
+                raise _broken(processes[index]) from None
 
     try:
-        futures = await asyncio.to_thread(submit)
-        return list(await asyncio.gather(*(asyncio.wrap_future(f) for f in futures)))
+        await asyncio.to_thread(start)
+        answers = await asyncio.to_thread(_collect, pipes, processes)
     finally:
-        if getattr(pool, "_broken", False):
-            # A worker died. CPython 3.11 terminates the pool's workers then, but a worker
-            # started by a submit racing the breakage escapes it; it blocks sending its result
-            # back, the pool's feeder blocks sending it work, and shutdown waited for ever (a
-            # CI run hung 17 min in test_a_killed_worker_falls_back...). Kill them all first.
-            for process in list((getattr(pool, "_processes", None) or {}).values()):
-                process.kill()
-        # Waited for (in a thread): left to the executor's own thread, the workers' exit went on
-        # after the call returned (0.4-0.5 s on an idle machine, 4-10 s on a loaded one, the
-        # workers being niced), so a caller could not tell when its processes were gone.
-        await asyncio.to_thread(pool.shutdown, wait=True, cancel_futures=True)
+        # Waited for (in a thread): a worker still exiting (seconds on a loaded machine, being
+        # niced) must not outlive the call.
+        await asyncio.to_thread(_end, processes, pipes)
+    results: list[T] = [None] * len(args)  # type: ignore[list-item]
+    for i, answer in enumerate(answers):
+        results[i::count] = answer
+    return results
+
+
+def _work(pipe: Connection) -> None:
+    """A worker: reads ``fn`` and its arguments from ``pipe`` and sends back the answers, or
+    the exception ``fn`` raised."""
+    _lower_priority()
+    fn, chunk = pipe.recv()
+    try:
+        answer: tuple[bool, object] = (True, [fn(a) for a in chunk])
+    except BaseException as exc:  # sent back to the caller, raised there
+        answer = (False, exc)
+    pipe.send(answer)
+    pipe.close()
+
+
+def _broken(process: BaseProcess) -> BrokenProcessPool:
+    process.join()
+    return BrokenProcessPool(f"a worker process died (exit code {process.exitcode})")
+
+
+def _collect(pipes: list[Connection], processes: list[BaseProcess]) -> list[list[Any]]:
+    """Every worker's answers, in order; ``BrokenProcessPool`` once one dies without them."""
+    answers: dict[int, list[Any]] = {}
+    index_of = {id(pipe): i for i, pipe in enumerate(pipes)}
+    waiting = list(pipes)
+    while waiting:
+        for ready in wait(waiting):
+            index = index_of[id(ready)]
+            waiting.remove(pipes[index])
+            try:
+                received: Any = pipes[index].recv()
+            except (EOFError, OSError):
+                raise _broken(processes[index]) from None
+            ok, answer = received
+            if not ok:
+                raise answer
+            answers[index] = answer
+    return [answers[i] for i in range(len(pipes))]
+
+
+def _end(processes: list[BaseProcess], pipes: list[Connection]) -> None:
+    """Kill what still runs (the others answered or died), then reap every worker."""
+    for pipe in pipes:
+        pipe.close()
+    for process in processes:
+        if process.is_alive():
+            process.kill()
+    for process in processes:
+        process.join()

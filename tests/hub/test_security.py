@@ -107,6 +107,24 @@ async def test_token_in_query_string_is_accepted(server: RunningServer) -> None:
     assert welcome["payload"] == {"name": "gui", "role": "gui"}
 
 
+async def test_a_query_parameter_the_hub_does_not_take_is_ignored_as_docs_say(
+    server: RunningServer,
+) -> None:
+    """/ws takes ``token`` and ``name``; others are ignored, not refused (docs/protocol.md,
+    "Connecting"; the REST routes refuse them, backend/api/query.py): a misspelt ``name``
+    shows in the welcome."""
+    token = server.admin_token
+    async with raw_socket(f"{server.hub_url}?token={token}&nmae=rgm&lang=de") as ws:
+        welcome = await receive(ws)
+    assert welcome["payload"] == {"name": "admin", "role": "admin"}
+    async with raw_socket(f"{server.hub_url}?token={token}&name=rgm&lang=de") as ws:
+        welcome = await receive(ws)
+    assert welcome["payload"] == {"name": "rgm", "role": "admin"}
+    documented = " ".join((ROOT / "docs" / "protocol.md").read_text().split())
+    assert "`/ws` takes two query parameters, `token` and `name`, on both listeners" in documented
+    assert "any other is ignored" in documented
+
+
 async def test_gui_token_cannot_connect_as_a_robot(server: RunningServer) -> None:
     client = HubClient(server.hub_url, TOKENS["gui"].token, name="R1")
     with pytest.raises(HubRefused) as refused:

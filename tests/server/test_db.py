@@ -5,10 +5,15 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-from sqlalchemy import inspect
+import asyncpg
+import pytest
+from sqlalchemy import inspect, text
+from sqlalchemy.exc import DBAPIError
 
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.tasks.model import Task, TaskState
+
+from .postgres import PostgresServer
 
 
 async def test_migrations_build_the_schema_and_the_store_round_trips(db_url: str) -> None:
@@ -96,4 +101,30 @@ async def test_a_read_while_another_writer_holds_the_database_answers_what_is_wr
         assert sorted(t.id for t in tasks) == ["t1", "t2"]
         await store.stop()
     finally:
+        await engine.dispose()
+
+
+async def test_a_server_frozen_inside_a_transaction_does_not_hold_its_row_locks_for_ever(
+    postgres: PostgresServer,
+) -> None:
+    """A server process stopped mid-transaction (SIGSTOP, a paused VM) held its row locks, and
+    the one taking over the lead waited on them for ever (the failover bench's pause mode).
+    PostgreSQL ends a session of ours idle in its transaction (session.py): the lock comes free
+    and the frozen session's next statement fails (it was ended). The second connection is a
+    plain one, with no limit of its own: without the fix it waits until the test's time-out."""
+    url = postgres.database()
+    engine = make_engine(url)
+    other = await asyncpg.connect(url.replace("postgresql+asyncpg://", "postgresql://"))
+    try:
+        await migrate(engine)
+        store = DbStore(make_sessionmaker(engine))
+        assert await store.save_site({"name": "x"}) == 1
+        async with engine.connect() as frozen:
+            await frozen.execute(text("SELECT version FROM site FOR UPDATE"))  # then stops
+            async with other.transaction():
+                assert await other.fetchval("SELECT version FROM site FOR UPDATE") == 1
+            with pytest.raises(DBAPIError):  # the frozen session was ended
+                await frozen.execute(text("SELECT 1"))
+    finally:
+        await other.close()
         await engine.dispose()

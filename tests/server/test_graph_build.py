@@ -72,3 +72,11 @@ def test_worker_processes_and_their_pools_thread_are_gone_when_the_call_returns(
     assert asyncio.run(in_processes(abs, [-1, -2], 2)) == [1, 2]
     assert spawned_workers() == set()
     assert [t.name for t in threading.enumerate() if t not in before and t.is_alive()] == []
+
+
+def test_worker_processes_answer_in_the_order_asked_and_raise_what_the_work_raised() -> None:
+    assert asyncio.run(in_processes(abs, [-1, -2, -3, -4, -5], 2)) == [1, 2, 3, 4, 5]
+    assert asyncio.run(in_processes(abs, [], 2)) == []
+    with pytest.raises(ValueError, match="invalid literal"):
+        asyncio.run(in_processes(int, ["1", "x"], 2))
+    assert spawned_workers() == set()

@@ -116,9 +116,9 @@ def test_topic_names() -> None:
     )
 
 
-async def test_nodes_passed_between_two_states_are_each_reached_in_order() -> None:
-    """A state is a sample: a vehicle that passed c and d between two reports still reaches
-    them on the hub, and the corridor is released before the node after it."""
+def robot_on_a_bus() -> tuple[VdaRobot, Bus, list[Message], list[tuple[str, dict[str, Any]]]]:
+    """V1 of the test site on a bus of its own, with no vehicle: every message on the bus
+    (``seen``) and every send to the vehicle (``sent``: topic and message; each succeeds)."""
     site = validate_site(site_dict())
     bus = Bus()
     seen: list[Message] = []
@@ -131,6 +131,13 @@ async def test_nodes_passed_between_two_states_are_each_reached_in_order() -> No
 
     config = next(r for r in site.robots if r.name == "V1")
     robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    return robot, bus, seen, sent
+
+
+async def test_nodes_passed_between_two_states_are_each_reached_in_order() -> None:
+    """A state is a sample: a vehicle that passed c and d between two reports still reaches
+    them on the hub, and the corridor is released before the node after it."""
+    robot, _, seen, _ = robot_on_a_bus()
     robot.order_id = "o1"
     robot.route = {2: "b", 4: "c", 6: "d", 8: "e"}
     robot.granted = {"corridor"}
@@ -157,18 +164,7 @@ async def test_nodes_passed_between_two_states_are_each_reached_in_order() -> No
 async def test_a_server_that_stops_leaves_the_task_to_the_next_one() -> None:
     """Stopping the master (the server stops) is no cancel: no task_ended, no lock released,
     no cancelOrder; the next server life finds the task as it was (as for a robot)."""
-    site = validate_site(site_dict())
-    bus = Bus()
-    seen: list[Message] = []
-    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
-    sent: list[str] = []
-
-    async def send(topic: str, message: dict[str, Any]) -> bool:
-        sent.append(topic)
-        return True
-
-    config = next(r for r in site.robots if r.name == "V1")
-    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot, bus, seen, sent = robot_on_a_bus()
     robot.granted = {"corridor"}
     manager = bus.endpoint("task_manager")
     manager.publish(
@@ -180,22 +176,13 @@ async def test_a_server_that_stops_leaves_the_task_to_the_next_one() -> None:
     await asyncio.sleep(0)  # the task asks for its path (nobody answers here)
     await robot.close()
     assert not [m for m in seen if m.type in ("task_ended", "release_area", "release_door")]
-    assert "instantActions" not in sent
+    assert "instantActions" not in [topic for topic, _ in sent]
 
 
 async def test_a_task_cancelled_before_its_first_step_ends_and_the_next_one_starts() -> None:
     """The Task Manager preempts at once: assign T1, cancel it, assign T2 in one go. T1 ends
     cancelled (once: its runner never ran a step), then T2 starts; nothing is refused."""
-    site = validate_site(site_dict())
-    bus = Bus()
-    seen: list[Message] = []
-    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
-
-    async def send(topic: str, message: dict[str, Any]) -> bool:
-        return True
-
-    config = next(r for r in site.robots if r.name == "V1")
-    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot, bus, seen, _ = robot_on_a_bus()
     manager = bus.endpoint("task_manager")
     for kind, task in (("task_assigned", "T1"), ("task_cancel", "T1"), ("task_assigned", "T2")):
         payload = {"task_id": task, "robot": "V1", "net": "navigate_to_point"}
@@ -215,16 +202,7 @@ async def test_a_stale_state_on_the_current_order_reports_no_node_again() -> Non
     """After an elevator ride the master has put V1 on the exit node; a state the vehicle sent
     before its initPosition (its order unchanged, the cabin below as lastNodeId) comes late:
     no node_reached for the cabin left behind."""
-    site = validate_site(site_dict())
-    bus = Bus()
-    seen: list[Message] = []
-    bus.endpoint("monitor").subscribe("*", seen.append, tap=True)
-
-    async def send(topic: str, message: dict[str, Any]) -> bool:
-        return True
-
-    config = next(r for r in site.robots if r.name == "V1")
-    robot = VdaRobot(config, site, bus.endpoint("V1"), bus.endpoint("vda5050"), send)
+    robot, _, seen, _ = robot_on_a_bus()
     robot.order_id = "o1"
     robot.route = {2: "b"}
     sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")

@@ -34,13 +34,20 @@ async def open_editor(open_page: Any, fleet: Any, token: str) -> Any:
     return watch
 
 
+async def open_library_net(open_page: Any, fleet: Any, net: str, token: str = "") -> Any:
+    """The editor's page signed in (the admin's token unless ``token``), ``net`` of the
+    library opened."""
+    page = (await open_editor(open_page, fleet, token or fleet.server.admin_token)).page
+    await page.get_by_label("Library net").select_option(net)
+    await page.get_by_role("button", name="Open", exact=True).click()
+    return page
+
+
 async def test_edit_a_library_net_see_a_problem_come_and_go_and_export_it(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
-        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
-        await page.get_by_label("Library net").select_option("explain_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
+        page = await open_library_net(open_page, fleet, "explain_point")
         await expect(page.locator("#problem-count")).to_have_text("No problems")
         canvas = page.locator("#canvas svg")
         await expect(canvas.locator("g.net-node")).to_have_count(10)
@@ -106,9 +113,7 @@ async def test_an_operator_reads_a_net_without_editing_tools(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
-        page = (await open_editor(open_page, fleet, web.operator_token)).page
-        await page.get_by_label("Library net").select_option("give_tour")
-        await page.get_by_role("button", name="Open", exact=True).click()
+        page = await open_library_net(open_page, fleet, "give_tour", web.operator_token)
         await expect(page.locator("#canvas g.net-node").first).to_be_visible()
         await expect(page.get_by_text("Read only: your role may not publish nets.")).to_be_visible()
         await expect(page.get_by_label("Add place")).to_have_count(0)
@@ -128,9 +133,7 @@ async def test_simulate_a_net_step_by_step_to_its_end(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace, tmp_path: Path
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
-        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
-        await page.get_by_label("Library net").select_option("explain_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
+        page = await open_library_net(open_page, fleet, "explain_point")
         await expect(page.locator("#problem-count")).to_have_text("No problems")
         await page.get_by_label("Parameters (JSON object)").fill('{"text": "Hello"}')
         await page.get_by_role("button", name="Run simulation").click()
@@ -294,9 +297,7 @@ async def test_select_several_copy_paste_move_and_delete_them_together(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
-        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
-        await page.get_by_label("Library net").select_option("navigate_to_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
+        page = await open_library_net(open_page, fleet, "navigate_to_point")
         canvas = page.locator("#canvas svg")
         await expect(canvas.locator("g.net-node")).to_have_count(5)
         await canvas.locator('g[data-id="navigate"]').click()
@@ -340,9 +341,7 @@ async def test_a_rubber_band_selects_the_nodes_inside_it(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
-        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
-        await page.get_by_label("Library net").select_option("navigate_to_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
+        page = await open_library_net(open_page, fleet, "navigate_to_point")
         canvas = page.locator("#canvas svg")
         await expect(canvas.locator("g.net-node")).to_have_count(5)
         doc = await page.evaluate("guidebotNets.model.doc")
@@ -375,9 +374,7 @@ async def test_choose_each_reply_while_simulating(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
-        page = (await open_editor(open_page, fleet, fleet.server.admin_token)).page
-        await page.get_by_label("Library net").select_option("explain_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
+        page = await open_library_net(open_page, fleet, "explain_point")
         await page.get_by_label("Parameters (JSON object)").fill('{"text": "Hello"}')
         await page.get_by_label("Choose each reply myself").check()
         await page.get_by_role("button", name="Run simulation").click()
