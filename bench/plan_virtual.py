@@ -185,7 +185,10 @@ async def _serve(
                     await agent.__aenter__()
                 import httpx
 
-                async with httpx.AsyncClient(timeout=30.0) as http:
+                # Idle connections are dropped well before the servers' keep-alive (5 s) ends: in
+                # virtual time a request can come at the very instant the server closes one.
+                limits = httpx.Limits(keepalive_expiry=1.0)
+                async with httpx.AsyncClient(timeout=30.0, limits=limits) as http:
                     await _online(http, server.url, server.admin_token, robots)
                     screens = [_screen(agent) for agent in agents]
                     opts.log(f"a fleet of {robots} online (virtual time)")
