@@ -129,6 +129,7 @@ def main(
         "mode": "virtual" if virtual else "live" if live else "model",
         **({"time_scale": time_scale} if live and not virtual else {}),
         **({"wall_s": round(outcome.wall_s, 1)} if live or virtual else {}),
+        **({"cpu_s": outcome.extra.get("cpu_s")} if virtual else {}),
     }
     if not as_json:
         click.echo(f"measured {seen}, planned {plan}, error {error}")
