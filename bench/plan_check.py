@@ -21,6 +21,7 @@ from backend.planning.live import LiveOptions, run_live
 from backend.planning.measure import read_events, tour_waits
 from backend.planning.recorded import read_day
 from backend.planning.sim import quantile, simulate
+from backend.planning.virtual import run_virtual
 from backend.reports.period import parse_period
 from guidebot.benchutil import print_result
 from guidebot.site.graph import SiteGraph
@@ -55,6 +56,11 @@ def _stats(values: list[float]) -> dict[str, float | None]:
     is_flag=True,
     help="Plan on the real server with simulated robots (guidebot plan --live), not the model.",
 )
+@click.option(
+    "--virtual",
+    is_flag=True,
+    help="--live in one process on virtual time (guidebot plan --live --virtual).",
+)
 @click.option("--time-scale", default=5.0, show_default=True, type=click.FloatRange(min=0.1))
 @click.option("--no-can", is_flag=True, help="--live: bare simulated robots (as demo --no-can).")
 @click.option("--workdir", type=click.Path(file_okay=False, path_type=Path))
@@ -65,6 +71,7 @@ def main(
     date: str,
     tz: str,
     live: bool,
+    virtual: bool,
     time_scale: float,
     no_can: bool,
     workdir: Path | None,
@@ -75,7 +82,17 @@ def main(
     waits, robots = asyncio.run(measured(db_url, date, tz))
     day = asyncio.run(read_day(db_url, date, tz, site, stop_following=0.0, seed=1))
     size = max(1, len(robots))
-    if live:
+    if virtual:
+        options = LiveOptions(
+            virtual=True,
+            can=False,
+            workdir=workdir,
+            log=lambda line: click.echo(f"plan-check: {line}", err=True),
+        )
+        outcome = run_virtual(
+            site_path, site, day.requests, robots=size, day_s=day.day_s, options=options
+        )
+    elif live:
         options = LiveOptions(
             scale=time_scale,
             can=not no_can,
@@ -109,8 +126,10 @@ def main(
         "planned": plan,
         "error": error,
         "pace": {"move": day.pace.move, "talk": day.pace.talk},
-        "mode": "live" if live else "model",
-        **({"time_scale": time_scale} if live else {}),
+        "mode": "virtual" if virtual else "live" if live else "model",
+        **({"time_scale": time_scale} if live and not virtual else {}),
+        **({"wall_s": round(outcome.wall_s, 1)} if live or virtual else {}),
+        **({"cpu_s": outcome.extra.get("cpu_s")} if virtual else {}),
     }
     if not as_json:
         click.echo(f"measured {seen}, planned {plan}, error {error}")

@@ -16,6 +16,7 @@ import click
 from backend.planning.live import LiveOptions, run_live
 from backend.planning.profile import Pace, PlanError, draw, load_profile
 from backend.planning.sim import POLICIES, simulate
+from backend.planning.virtual import run_virtual
 from guidebot.site.graph import SiteGraph
 from guidebot.site.schema import Site
 from guidebot.site.yamlio import load_site_file
@@ -82,8 +83,8 @@ def plan(
         return rows
     assert site_path is not None
     for size in sizes:
-        outcome = asyncio.run(
-            run_live(
+        if live.virtual:
+            outcome = run_virtual(
                 site_path,
                 site,
                 requests,
@@ -93,7 +94,19 @@ def plan(
                 queue_limit=queue_limit,
                 options=live,
             )
-        )
+        else:
+            outcome = asyncio.run(
+                run_live(
+                    site_path,
+                    site,
+                    requests,
+                    robots=size,
+                    day_s=day_s,
+                    patience_s=patience_s,
+                    queue_limit=queue_limit,
+                    options=live,
+                )
+            )
         rows.append({"mode": "live", **outcome.summary(within_min)})
     return rows
 
@@ -179,6 +192,12 @@ def _table(rows: list[dict[str, Any]]) -> str:
     help="--live: robots and building run this many times faster than the wall clock.",
 )
 @click.option(
+    "--virtual",
+    is_flag=True,
+    help="--live in one process on virtual time: exact simulated seconds, as fast as the CPU "
+    "allows; bare simulated robots (no battery).",
+)
+@click.option(
     "--no-can",
     is_flag=True,
     help="--live: bare simulated robots (lighter; no battery, so no charging).",
@@ -209,6 +228,7 @@ def plan_command(
     seed: int | None,
     live: bool,
     time_scale: float,
+    virtual: bool,
     no_can: bool,
     workdir: Path | None,
     html_path: Path | None,
@@ -217,10 +237,11 @@ def plan_command(
     """Simulate a day of visitors over fleets of several sizes: waits, refusals, utilisation."""
     started = time.perf_counter()
     options = None
-    if live:
+    if live or virtual:
         options = LiveOptions(
             scale=time_scale,
-            can=not no_can,
+            can=not no_can and not virtual,
+            virtual=virtual,
             workdir=workdir,
             log=lambda line: click.echo(f"plan: {line}", err=True),
         )

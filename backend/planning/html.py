@@ -82,7 +82,7 @@ def _robots(n: int) -> str:
 def _heat(rows: list[dict[str, Any]], key: str, title: str) -> str:
     """Places (rows) by fleet size (columns), each cell the minutes lost waiting there, its
     background darker the longer."""
-    live = [r for r in rows if r["mode"] == "live"]
+    live = [r for r in rows if r["mode"] in ("live", "virtual")]
     places = sorted({p for r in live for p in (r.get(key) or {})})
     if not live:
         return ""
@@ -135,7 +135,7 @@ def render_report(result: dict[str, Any]) -> str:
         "<tr>" + "".join(f"<td>{_cell(k, r.get(k))}</td>" for k, _ in COLUMNS) + "</tr>"
         for r in rows
     )
-    live = any(r["mode"] == "live" for r in rows)
+    live = any(r["mode"] in ("live", "virtual") for r in rows)
     scale = next((r.get("time_scale") for r in rows if r["mode"] == "live"), None)
     note = (
         f"Live runs: the real server, Task Manager and Traffic Manager with simulated robots and "

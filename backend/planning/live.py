@@ -58,6 +58,9 @@ class LiveOptions:
     """Simulated seconds after the day for the last tours to end."""
     workdir: Path | None = None
     """Keep each run's logs, site and database here (default: a temporary folder)."""
+    virtual: bool = False
+    """Run in one process on virtual time (``backend.planning.virtual``) instead of scaled wall
+    time: exact simulated seconds, bare robots (``scale`` and ``can`` do not apply)."""
     log: Callable[[str], None] = field(default=lambda _: None)
 
 
@@ -275,6 +278,10 @@ class _Driver:
         self.scale, self.drain_s, self.log = opts.scale, opts.drain_s, opts.log
         self.patience_s: float | None = None
         self.queue_limit: int | None = None
+        self.poll_s = POLL_S
+        """Wall seconds between two looks at the screens and the clock."""
+        self.states_s = 0.5
+        """Wall seconds between two reads of the tours' states."""
         self.task_of: dict[str, int] = {}
         """Task id -> the request's index."""
         self.state: dict[str, str] = {}
@@ -305,7 +312,7 @@ class _Driver:
                 nxt += 1
             await self._screens()
             await self._patience()
-            if time.monotonic() - last_states >= 0.5:
+            if time.monotonic() - last_states >= self.states_s:
                 last_states = time.monotonic()
                 await self._states()
                 if nxt == len(order) and all(s in FINAL for s in self.state.values()):
@@ -316,7 +323,7 @@ class _Driver:
                     f"{self.unfinished} tours still unfinished {self.drain_s:g} s after the day"
                 )
                 return
-            await asyncio.sleep(POLL_S)
+            await asyncio.sleep(self.poll_s)
 
     async def _ask(self, i: int, t0: float) -> None:
         if self.queue_limit is not None:
@@ -366,6 +373,8 @@ class _Driver:
                     self.state[task] = "cancelled"
 
     async def _screens(self) -> None:
+        if not any(s in ("assigned", "running") for s in self.state.values()):
+            return  # no tour under way: no screen asks anything
         now = time.monotonic()
         replies = await asyncio.gather(
             *(self.http.get(f"{s}/api/screen") for s in self.screens), return_exceptions=True

@@ -1,0 +1,286 @@
+"""``guidebot plan --live --virtual``, its child process: the live run on virtual time. The
+building simulator, the server (``create_app``: Task Manager, Traffic Manager,
+BuildingInterface, hub, event log) and bare simulated robot agents run on one event loop whose
+clock jumps to the next timer whenever every task waits (``backend.planning.vtime``), all at
+time scale 1, talking over loopback sockets as in service. The visitors are the live run's
+``_Driver``. Nothing waits on the wall clock, so the outcome is in exact simulated seconds and
+the wall time is only the CPU the fleet needs. docs/planning.md, "The virtual run".
+
+It runs as a process of its own (``backend.planning.virtual`` starts it): the server and the
+robot agent meet only over the bus, never in one import, and ``time.time`` is patched only here.
+
+    python -m bench.plan_virtual JOB.json OUTCOME.json
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import json
+import logging
+import os
+import secrets
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from backend.auth import Role
+from backend.planning.live import LiveOptions, _Driver, _fleet_entries, _outcome
+from backend.planning.measure import read_events
+from backend.planning.profile import PlanError, Request
+from backend.planning.sim import Outcome
+from backend.planning.vtime import virtual_time
+from backend.settings import Settings, StaticToken
+from backend.testing import running_server
+from building_sim.simulator import BuildingSimulator
+from guidebot.site.building_config import BuildingConfig
+from guidebot.site.schema import Site
+from guidebot.site.yamlio import load_site_file
+from robot_agent.agent import AgentConfig, RobotAgent
+
+__all__ = ["EPOCH", "main", "play"]
+
+EPOCH = 1_800_000_000.0
+"""The virtual clock's epoch seconds at the start of every run (the same for each: a run is
+repeatable)."""
+STATE_PERIOD_S = 0.5
+"""The robots' robot_state period, as the live run's (``--state-period 0.5``)."""
+POLL_S = 0.5
+"""Simulated seconds between the visitors' looks at the screens and the clock: an answer comes
+2.5 to 3 s after its question (the live run at 10x: 2.5 to 3.5 s)."""
+STATES_S = 2.0
+"""Simulated seconds between two reads of the tours' states (a tour's first question comes
+tens of seconds after it starts)."""
+ONLINE_S = 60.0
+"""Simulated seconds the robots may take to come online."""
+
+
+class _NoProcesses:
+    """The driver's view of the run's processes: there are none to die."""
+
+    def dead(self) -> str | None:
+        return None
+
+
+def play(
+    site_path: Path,
+    site: Site,
+    requests: Sequence[Request],
+    *,
+    robots: int,
+    day_s: float,
+    patience_s: float | None = None,
+    queue_limit: int | None = None,
+    options: LiveOptions | None = None,
+) -> Outcome:
+    """Play ``requests`` on a fleet of ``robots`` in virtual time (call with no running loop)."""
+    opts = options or LiveOptions()
+    started, cpu = time.perf_counter(), time.process_time()
+    outcome = virtual_time(
+        _play(site_path, site, requests, robots, day_s, patience_s, queue_limit, opts),
+        epoch=EPOCH,
+    )
+    outcome.wall_s = time.perf_counter() - started
+    # The CPU the run took (this process, its threads included): the wall time on a machine
+    # nobody else uses.
+    outcome.extra["cpu_s"] = round(time.process_time() - cpu, 1)
+    return outcome
+
+
+async def _play(
+    site_path: Path,
+    site: Site,
+    requests: Sequence[Request],
+    robots: int,
+    day_s: float,
+    patience_s: float | None,
+    queue_limit: int | None,
+    opts: LiveOptions,
+) -> Outcome:
+    base = opts.workdir or Path(tempfile.mkdtemp(prefix="guidebot-plan-"))
+    folder = base / f"virtual-{robots}"
+    folder.mkdir(parents=True, exist_ok=True)
+    # The components' warnings go to the run's log, as each process's do in the live run.
+    handler = logging.FileHandler(folder / "run.log", encoding="utf-8")
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(logging.Formatter("%(created).3f %(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.addHandler(handler)
+    try:
+        with tempfile.TemporaryDirectory(prefix="guidebot-plan-", dir=_fast_dir()) as scratch:
+            db_file = Path(scratch) / "plan.db"
+            outcome = await _serve(
+                site_path,
+                site,
+                requests,
+                robots,
+                day_s,
+                patience_s,
+                queue_limit,
+                opts,
+                folder,
+                db_file,
+            )
+            shutil.copyfile(db_file, folder / "plan.db")
+    finally:
+        root.removeHandler(handler)
+        handler.close()
+    return outcome
+
+
+def _fast_dir() -> str | None:
+    """A folder in memory for the database (/dev/shm), else the system's temporary folder: the
+    loop waits for each commit's fsync in real time, and on a disk those add up."""
+    shm = Path("/dev/shm")
+    return str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
+
+
+async def _serve(
+    site_path: Path,
+    site: Site,
+    requests: Sequence[Request],
+    robots: int,
+    day_s: float,
+    patience_s: float | None,
+    queue_limit: int | None,
+    opts: LiveOptions,
+    folder: Path,
+    db_file: Path,
+) -> Outcome:
+    db = f"sqlite+aiosqlite:///{db_file}"
+    panel = secrets.token_hex(16)
+    config = BuildingConfig(
+        modules=site.modules, doors=site.doors, elevators=site.elevators, buttons=site.buttons
+    )
+    async with BuildingSimulator(config, time_scale=1.0, port_zero=True) as building:
+        data: dict[str, Any] = site.model_dump(mode="json")
+        for module in data["modules"]:
+            module["port"] = building.ports[module["id"]]
+        data["robots"] = _fleet_entries(site, robots)
+        served = folder / "site.yaml"
+        served.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+        settings = Settings(
+            db_url=db,
+            site=served,
+            site_dir=site_path.parent,
+            hub_ws_port=0,
+            access_log=False,
+            log_level="warning",
+            tokens=[StaticToken(token=panel, name="plan-panel", role=Role.PANEL)],
+            # One panel asks for a whole day's tours.
+            task_requests_per_minute=100000,
+            task_request_burst=10000,
+            site_workers=0,
+        )
+        async with running_server(settings) as server:
+            agents = [_agent(server.hub_url, entry, served) for entry in data["robots"]]
+            try:
+                for agent in agents:
+                    await agent.__aenter__()
+                import httpx
+
+                # Idle connections are dropped well before the servers' keep-alive (5 s) ends: in
+                # virtual time a request can come at the very instant the server closes one.
+                limits = httpx.Limits(keepalive_expiry=1.0)
+                async with httpx.AsyncClient(timeout=30.0, limits=limits) as http:
+                    await _online(http, server.url, server.admin_token, robots)
+                    screens = [_screen(agent) for agent in agents]
+                    opts.log(f"a fleet of {robots} online (virtual time)")
+                    driver = _Driver(
+                        http, server.url, server.admin_token, panel, screens, requests, opts
+                    )
+                    driver.scale, driver.poll_s, driver.states_s = 1.0, POLL_S, STATES_S
+                    driver.patience_s, driver.queue_limit = patience_s, queue_limit
+                    t0 = time.time()
+                    await driver.run(day_s, _NoProcesses())  # type: ignore[arg-type]
+                    t_end = time.time()
+            finally:
+                for agent in reversed(agents):
+                    await agent.__aexit__(None, None, None)
+    events = await read_events(db)
+    outcome = _outcome(
+        events, site, driver, robots=robots, day_s=day_s, t0=t0, t_end=t_end, scale=1.0, wall_s=0.0
+    )
+    outcome.extra["mode"] = "virtual"
+    outcome.extra.pop("time_scale", None)
+    return outcome
+
+
+def _agent(hub_url: str, entry: dict[str, Any], site_file: Path) -> RobotAgent:
+    """A bare simulated robot (no RoboCAN: its reader threads would not follow virtual time)."""
+    return RobotAgent(
+        AgentConfig(
+            name=entry["name"],
+            server=hub_url,
+            token=entry["token"],
+            can=None,
+            time_scale=1.0,
+            start_node=entry["start_node"],
+            max_speed=entry["max_speed_mps"],
+            battery_low=entry["battery_low"],
+            battery_panic=entry["battery_panic"],
+            speech_engine=None,
+            state_period_s=STATE_PERIOD_S,
+            site=site_file,
+            gui_port=0,
+        )
+    )
+
+
+def _screen(agent: RobotAgent) -> str:
+    if agent.screen_server is None:
+        raise PlanError(f"virtual run: robot {agent.config.name} has no touch screen")
+    return str(agent.screen_server.url)
+
+
+async def _online(http: Any, url: str, admin: str, robots: int) -> None:
+    headers = {"Authorization": f"Bearer {admin}"}
+    deadline = time.monotonic() + ONLINE_S
+    while time.monotonic() < deadline:
+        r = await http.get(f"{url}/api/robots", headers=headers)
+        if r.status_code == 200 and sum(1 for x in r.json() if x.get("online")) >= robots:
+            return
+        await asyncio.sleep(0.5)
+    raise PlanError(f"virtual run: the robots were not online within {ONLINE_S:g} s")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Read the job (``backend.planning.virtual.job``), play it, write the outcome."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if len(args) != 2:
+        print("usage: python -m bench.plan_virtual JOB.json OUTCOME.json", file=sys.stderr)
+        return 2
+    job = json.loads(Path(args[0]).read_text(encoding="utf-8"))
+    site_path = Path(job["site"])
+    options = LiveOptions(
+        virtual=True,
+        can=False,
+        workdir=Path(job["workdir"]),
+        log=lambda line: print(f"plan: {line}", file=sys.stderr, flush=True),
+    )
+    try:
+        outcome = play(
+            site_path,
+            load_site_file(site_path),
+            [Request(**r) for r in job["requests"]],
+            robots=int(job["robots"]),
+            day_s=float(job["day_s"]),
+            patience_s=job["patience_s"],
+            queue_limit=job["queue_limit"],
+            options=options,
+        )
+    except PlanError as exc:
+        Path(args[1]).write_text(json.dumps({"error": str(exc)}), encoding="utf-8")
+        return 1
+    Path(args[1]).write_text(json.dumps(dataclasses.asdict(outcome)), encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
