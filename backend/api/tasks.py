@@ -114,6 +114,9 @@ class TaskStatus(BaseModel):
     """Cancelled tasks: "staff", "requester" or "" (the system; not kept across a restart)."""
     handover: dict[str, Any] | None = None
     """A tour taken up from another robot mid-way (docs/protocol.md, "Handover")."""
+    trouble: dict[str, Any] | None = None
+    """Queued, waiting for trouble on its way to lift: {why, wait, waits} (docs/visitor.md,
+    "Waiting for trouble")."""
 
 
 class TaskPage(BaseModel):

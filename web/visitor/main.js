@@ -7,7 +7,7 @@ import { fragmentToken } from "/lib/auth.js";
 import { HubClient } from "/lib/hub.js";
 import { loadTexts, preferredLanguage } from "/lib/i18n.js";
 import { Api, ApiError } from "/lib/rest.js";
-import { skippedLines } from "/lib/skipped.js";
+import { skipReason, skippedLines } from "/lib/skipped.js";
 
 const options = new URLSearchParams(location.hash.slice(1));
 const query = new URLSearchParams(location.search);
@@ -468,7 +468,11 @@ function statusLines(r) {
       : t("handover", { robot, i: handover.stop }));
     return lines;
   }
-  if (r.state === "queued") {
+  if (r.state === "queued" && r.trouble) {
+    // Its way is out of order for a while (a jammed door, a stuck lift): no time promised.
+    lines.push(t("state_trouble_wait", { why: skipReason(t, r.trouble.why) }));
+    if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
+  } else if (r.state === "queued") {
     if (r.service === "unavailable") lines.push(t("state_unavailable"));
     else {
       if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
@@ -648,7 +652,7 @@ let announced = "";
 function announce() {
   const r = state.view === "request" && !alarm() && !offered() ? state.requests.get(state.current) : null;
   const p = r?.progress;
-  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by]) : "";
+  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by, r.trouble?.why]) : "";
   if (key === announced) return;
   announced = key;
   announcer.textContent = r ? statusLines(r).join(" ") : "";
