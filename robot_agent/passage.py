@@ -76,6 +76,10 @@ class Passage:
         """Areas acquired for the path ahead (entered or about to be)."""
         self.inside: str | None = None
         """The restricted area of the node the robot stands on (None: outside every area)."""
+        self.edge_areas: set[str] = set()
+        """Areas of the nodes the robot drove toward since it last reached a node: stopped on
+        the edge (a fault, a cancel), it may be inside them, as the Traffic Manager counts
+        (backend/traffic/whereabouts.py), so they are kept until it reaches a node."""
         self._doors_open: set[str] = set()
         self._held_doors: set[str] = set()
         # id of our last open_door request -> door; the reason when the building refused it.
@@ -172,7 +176,7 @@ class Passage:
         cabin when this kept the grant of a robot waiting for the lift)."""
         self._link_down = False
         self._forget_building()  # whatever was missed meanwhile is asked again below
-        if stale := (self._granted | self.held_areas) - {self.inside}:
+        if stale := (self._granted | self.held_areas) - {self.inside} - self.edge_areas:
             log.info("%s: granted areas %s not entered: asked again", self.robot, sorted(stale))
             self._granted -= stale
             self.held_areas -= stale
@@ -254,8 +258,10 @@ class Passage:
         them back. Kept, the next path would drive in on them, though the server may have
         released them with the task meanwhile (the soak saw a robot enter a lift granted to
         another). Grants never used are dropped too: reporting them in robot_state would claim
-        areas the robot no longer needs."""
-        for area in sorted(self.held_areas - {self.inside}):
+        areas the robot no longer needs. An area of the edge the robot stopped on is kept
+        (``edge_areas``): it may be inside it, and released, another robot could be granted it
+        while this one still stands in its way."""
+        for area in sorted(self.held_areas - {self.inside} - self.edge_areas):
             self.held_areas.discard(area)
             log.info("%s: area %s not entered, released", self.robot, area)
             self.ep.publish(ReleaseArea(robot=self.robot, area=area))

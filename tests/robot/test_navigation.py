@@ -316,6 +316,23 @@ async def test_a_goal_that_fails_at_an_areas_edge_gives_the_area_back(rig: Rig) 
     assert rig.traffic.locks.holder("elevator") is None
 
 
+async def test_a_goal_that_fails_mid_edge_keeps_the_area_the_robot_drove_into(rig: Rig) -> None:
+    """Granted the corridor, the robot leaves ga1 for corridor_w and its motor is lost on
+    the way: it may be inside the corridor (the Traffic Manager counts so too), so it keeps
+    it. Released as "not entered", another robot was granted the corridor the stopped robot
+    stood in."""
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(
+        lambda: rig.nav.node == "ga1" and rig.nav.x > 16.0 and rig.nav.areas_held() == ["corridor"]
+    )
+    rig.bus.endpoint("base").publish("base_fault", {"reason": "motor module lost"})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("navigation_failed")))
+    assert rig.nav.node == "ga1" and rig.nav.x < 20.0  # on the edge, short of corridor_w
+    assert rig.nav.areas_held() == ["corridor"]
+    assert not [m for m in rig.seen.of("release_area") if m.payload["area"] == "corridor"]
+    assert rig.traffic.locks.holder("corridor") == "R1"
+
+
 async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
     rig: Rig, demo_site: Site
 ) -> None:
