@@ -72,6 +72,9 @@ class TrafficManager(Service):
         self.on_event = on_event
         self.alerts = alerts if alerts is not None else AlertStore(endpoint.publish)
         self._positions: dict[str, str] = {}
+        self._position_at: dict[str, float] = {}
+        """Robot -> the robot's time (Unix s) of the report its position came from: a
+        ``node_reached`` sent again after a drop (must-arrive) never moves it back."""
         self._paths: dict[str, PathResult] = {}
         self.site = site
         self.graph = graph or SiteGraph(site)
@@ -457,6 +460,7 @@ class TrafficManager(Service):
         if not isinstance(node, str) or not known:
             return
         self._positions[robot] = node
+        self._position_at[robot] = max(msg.timestamp, self._position_at.get(robot, 0.0))
         self._check_conflict(robot, here)
         if self._ending.get(robot) not in (None, msg.payload.get("task_id")):
             del self._ending[robot]  # it runs something else now: the ended task is over
@@ -471,7 +475,12 @@ class TrafficManager(Service):
             return
         if not isinstance(node, str) or node not in self.graph:
             return
-        self._positions[robot] = node
+        at = msg.payload.get("at")
+        at = float(at) if isinstance(at, int | float) else msg.timestamp
+        if at >= self._position_at.get(robot, 0.0):
+            # An older one (sent again after a drop) is history: the robot is further on.
+            self._positions[robot] = node
+            self._position_at[robot] = at
         if (here := self.graph.area_at.get(node)) is not None:
             self.locks.mark_entered(robot, here)
 

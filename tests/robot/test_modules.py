@@ -427,6 +427,27 @@ async def test_link_resends_reports_that_may_have_died_in_flight() -> None:
     await link.stop()
 
 
+async def test_link_resends_a_node_reached_that_may_have_died_in_flight() -> None:
+    """node_reached is must-arrive: one sent as the server died was lost, and the soak's
+    checker then kept the robot in the lift cabin it had left (issue 36)."""
+    bus = Bus()
+    up = _FakeUpstream()
+    up.connected.set()
+    link = Link(bus.endpoint("link"), up, "R1")
+    await link.start()
+    reached = {"robot": "R1", "node": "landing", "floor": "F1", "at": 1.0}
+    bus.endpoint("navigation").publish("node_reached", reached)
+    await asyncio.sleep(0.15)  # the link's watcher is running
+    up.connected.clear()  # the server dies
+    await asyncio.sleep(0.3)  # the link notices within its 0.1 s poll
+    up.connected.set()
+    for callback in up.on_connect_callbacks:
+        callback()
+    sent = [m for m in up.sent if m.type == "node_reached"]
+    assert len(sent) == 2 and sent[0].id == sent[1].id  # same id: receivers deduplicate
+    await link.stop()
+
+
 class _FakeUpstreamWithDisconnect(_FakeUpstream):
     """Like the hub client: says when an established connection is lost."""
 
