@@ -4,6 +4,7 @@ robots out of service are kept, the event log is pruned after its retention (doc
 
 from __future__ import annotations
 
+import asyncio
 import time
 from pathlib import Path
 
@@ -175,3 +176,37 @@ async def test_a_restored_task_its_robot_ended_unheard_is_not_given_out_again(
             assert task["id"] not in {m.payload["task_id"] for m in orders}
             history = [h["event"] for h in await srv.app.state.store.history(task["id"])]
             assert "requeued" not in history and history[-1] == "done"
+
+
+async def test_a_task_is_in_the_database_before_its_201(tmp_path: Path) -> None:
+    """A lone server killed right after answering 201 lost the task (the fault soak: "task
+    vanished, 404 after it was acknowledged"): the answer waits for the write. The writes
+    are held here until the request itself waits for one."""
+    settings = server_settings(tmp_path)
+    staff = {"Authorization": f"Bearer {OPERATOR_TOKEN}"}
+    async with (
+        running_server(settings) as srv,
+        httpx.AsyncClient(base_url=srv.url, headers=staff) as http,
+    ):
+        store = srv.app.state.store
+        real_flush = store.flush
+        gate, asked = asyncio.Event(), asyncio.Event()
+
+        async def held_flush() -> None:
+            task = asyncio.current_task()
+            if task is not None and task.get_name() != "db-writer":
+                asked.set()  # the request waits for the write
+            await gate.wait()
+            await real_flush()
+
+        store.flush = held_flush
+        body = {"kind": "go_to_poi", "params": {"poi": "sword"}}
+        post = asyncio.create_task(http.post("/api/tasks", json=body))
+        waits = asyncio.create_task(asked.wait())
+        done, _ = await asyncio.wait({post, waits}, return_when=asyncio.FIRST_COMPLETED)
+        assert post not in done, "answered 201 before the task was written"
+        gate.set()
+        reply = await post
+        assert reply.status_code == 201, reply.text
+        stored = await store.task(reply.json()["id"])
+        assert stored is not None and stored.params["poi"] == "sword"
