@@ -112,7 +112,11 @@ class TaskReports:
 
     def _waits_for_trouble(self, robot: RobotInfo, task: Task, reason: str) -> bool:
         """A visitor's task that failed because only trouble (a jammed door, a stuck lift)
-        cuts its way off goes back to the queue until the trouble lifts (trouble.py)."""
+        cuts its way off goes back to the queue until the trouble lifts (trouble.py). Its
+        robot's reason must name trouble (RouteClosed's "<door|elevator> <id> out of order"):
+        a failure of another cause stands, whatever is closed meanwhile."""
+        if "out of order" not in reason:
+            return False
         tm = self.tm
         closed = tm.closed_now()
         try:

@@ -100,3 +100,18 @@ async def test_a_visit_cut_off_by_a_closure_of_staff_fails_at_once(
     await closures.add(ClosureRequest(kind="elevator", target="lift", reason="service"), by="ann")
     r1.end(visit.id, "failed", "navigation to gc1 failed: elevator lift closed: service")
     assert visit.state is TaskState.FAILED
+
+
+async def test_a_visit_that_failed_for_another_cause_fails_even_while_trouble_cuts_its_way(
+    bus: Bus, manager: TaskManager, closures: ClosureService
+) -> None:
+    """The robot's reason decides: a motor fault during a lift jam is not the jam's doing."""
+    r1 = RobotStub(bus, "R1", "hall")
+    r1.state()
+    visit = manager.request("go_to_poi", {"poi": "tapestries"})
+    await r1.wait_for("task_assigned")
+    r1.start(visit.id)
+    lift_fails(bus, "R1")
+    assert "lift0" in closures.closed
+    r1.end(visit.id, "failed", "navigation to gc1 failed: bumper pressed for too long")
+    assert visit.state is TaskState.FAILED
