@@ -333,6 +333,23 @@ async def test_a_goal_that_fails_mid_edge_keeps_the_area_the_robot_drove_into(ri
     assert rig.traffic.locks.holder("corridor") == "R1"
 
 
+async def test_a_grant_that_comes_between_paths_is_given_back_and_asked_for_again(
+    rig: Rig,
+) -> None:
+    """A path gave up waiting for the corridor (closed ahead, a cancel): its request was
+    granted after the path ended. The server may release such a grant at the robot's next
+    robot_state between tasks and grant it to another, so the next path gives it back and
+    asks again at the corridor's edge; driving in on it, two robots rode the lift together in
+    the fault soak."""
+    rig.nav.ep.publish("request_area", {"robot": "R1", "area": "corridor"})
+    await rig.seen.wait_for(lambda: rig.nav.areas_held() == ["corridor"])  # granted, idle
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("goal_reached")), timeout=30)
+    corridor = [m.type for m in rig.seen.messages if m.payload.get("area") == "corridor"]
+    assert corridor.count("request_area") == 2  # the stale grant given back, asked again
+    assert "request_area" in corridor[corridor.index("release_area") :]
+
+
 async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
     rig: Rig, demo_site: Site
 ) -> None:
