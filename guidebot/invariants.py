@@ -146,6 +146,11 @@ class InvariantChecker:
     """door -> the last time a person asked for it to open (console)."""
     _now: float = 0.0
     """The latest event time seen; events fed without a time come just after it."""
+    _area_claims: list[tuple[float, str, str, tuple[str, ...], Violation]] = field(
+        default_factory=list
+    )
+    """Area violations as (time, area, robot, the robots it was with, the violation): a
+    report that comes late may show that those had left by then (``_recheck_area``)."""
 
     @classmethod
     def from_site(cls, site: Any) -> InvariantChecker:
@@ -250,6 +255,8 @@ class InvariantChecker:
         if area is not None:
             self.counts["area"] += 1
             self._check_area(robot, node, area, at)
+        if self._area_claims:
+            self._recheck_area(robot, at)
 
     def _area_of(self, robot: str, at: float) -> str | None:
         node = self.positions[robot].at(at)
@@ -268,10 +275,33 @@ class InvariantChecker:
                 continue
             for when, there in line.changes(at, until):
                 if there is not None and self.area_at.get(there) == area:
-                    self._fail("area", other, f"in area {area} at {there} with {robot}", when)
+                    self._area_fail(other, area, (robot,), f"at {there}", when)
                     break
         if others:
-            self._fail("area", robot, f"in area {area} at {node} with {', '.join(others)}", at)
+            self._area_fail(robot, area, tuple(others), f"at {node}", at)
+
+    def _area_fail(
+        self, robot: str, area: str, others: tuple[str, ...], where: str, at: float
+    ) -> None:
+        self._fail("area", robot, f"in area {area} {where} with {', '.join(others)}", at)
+        self._area_claims.append((at, area, robot, others, self.violations[-1]))
+
+    def _recheck_area(self, robot: str, since: float) -> None:
+        """``robot``'s report of ``since`` came after area violations of later times that
+        name it: those its new place disproves go (a robot's node_reached sent again after a
+        server restart showed it had left the corridor before another entered)."""
+        kept = []
+        for claim in self._area_claims:
+            at, area, subject, others, violation = claim
+            if at >= since and robot in (subject, *others):
+                together = self._area_of(subject, at) == area and any(
+                    self._area_of(o, at) == area for o in others
+                )
+                if not together:
+                    self.violations.remove(violation)
+                    continue
+            kept.append(claim)
+        self._area_claims = kept
 
     def _on_area_granted(self, p: Mapping[str, Any], at: float) -> None:
         robot, area = str(p.get("robot")), str(p.get("area"))

@@ -460,6 +460,7 @@ class Navigator(MotionControl):
                 self.node = step.node
                 self.floor = step.floor
                 passage.inside = step.area
+                passage.edge_areas.clear()
                 self.ep.publish(
                     NodeReached(robot=self.robot, node=step.node, floor=step.floor, at=time.time())
                 )
@@ -493,6 +494,8 @@ class Navigator(MotionControl):
                 await passage.wait_elevator(step.elevator, step.floor, called)
             if step.area is not None and passage.must_ask(step.area):
                 continue  # the grant was forgotten while we waited (the link dropped): ask again
+            if step.area is not None:
+                passage.edge_areas.add(step.area)  # from here on it may be inside
             if await self.drive_to(
                 step.x, step.y, stop=i == len(steps) - 1, clear=passage.passable(step, cabin)
             ):

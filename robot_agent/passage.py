@@ -76,6 +76,10 @@ class Passage:
         """Areas acquired for the path ahead (entered or about to be)."""
         self.inside: str | None = None
         """The restricted area of the node the robot stands on (None: outside every area)."""
+        self.edge_areas: set[str] = set()
+        """Areas of the nodes the robot drove toward since it last reached a node: stopped on
+        the edge (a fault, a cancel), it may be inside them, as the Traffic Manager counts
+        (backend/traffic/whereabouts.py), so they are kept until it reaches a node."""
         self._doors_open: set[str] = set()
         self._held_doors: set[str] = set()
         # id of our last open_door request -> door; the reason when the building refused it.
@@ -172,7 +176,7 @@ class Passage:
         cabin when this kept the grant of a robot waiting for the lift)."""
         self._link_down = False
         self._forget_building()  # whatever was missed meanwhile is asked again below
-        if stale := (self._granted | self.held_areas) - {self.inside}:
+        if stale := (self._granted | self.held_areas) - {self.inside} - self.edge_areas:
             log.info("%s: granted areas %s not entered: asked again", self.robot, sorted(stale))
             self._granted -= stale
             self.held_areas -= stale
@@ -200,8 +204,14 @@ class Passage:
 
     def new_path(self) -> None:
         """A path starts: it was planned on the site as it is, so areas gone from an earlier
-        one are asked for again if it names them (a later publish may have brought them back)."""
+        one are asked for again if it names them (a later publish may have brought them back).
+        A grant held for no path (it came after the last path ended: the answer to a request
+        of a wait that path gave up) is given back: the server may release it at the robot's
+        next robot_state between tasks and grant it to another robot, and a path that drove
+        in on it shared the lift with that robot (the fault soak). It is asked for again at
+        the area's edge."""
         self._gone.clear()
+        self._give_back(self._granted - self.held_areas - self.edge_areas - {self.inside})
 
     async def acquire_area(self, area: str) -> None:
         """Hold ``area`` before entering it: granted ahead, or asked for and waited for."""
@@ -253,13 +263,20 @@ class Passage:
         """A path ended early (a fault, a cancel) leaves areas acquired but not entered: give
         them back. Kept, the next path would drive in on them, though the server may have
         released them with the task meanwhile (the soak saw a robot enter a lift granted to
-        another). Grants never used are dropped too: reporting them in robot_state would claim
-        areas the robot no longer needs."""
-        for area in sorted(self.held_areas - {self.inside}):
+        another). Grants never used are given back too (dropped silently, they stayed the
+        robot's on the server). An area of the edge the robot stopped on is kept
+        (``edge_areas``): it may be inside it, and released, another robot could be granted it
+        while this one still stands in its way."""
+        self._give_back((self.held_areas | self._granted) - {self.inside} - self.edge_areas)
+
+    def _give_back(self, areas: set[str]) -> None:
+        """Release ``areas``, held or only granted (dropped silently, a grant stayed the
+        robot's on the server)."""
+        for area in sorted(areas):
             self.held_areas.discard(area)
+            self._granted.discard(area)
             log.info("%s: area %s not entered, released", self.robot, area)
             self.ep.publish(ReleaseArea(robot=self.robot, area=area))
-        self._granted &= self.held_areas
 
     def give_up(self, area: str) -> None:
         """Yielding ``area`` (the Traffic Manager's deadlock rule): released if held or granted."""

@@ -199,6 +199,12 @@ class TaskRunner(Service):
     def _on_cancel(self, message: Message) -> None:
         task = self.current
         task_id = message.payload.get("task_id")
+        ended = next((t for t in self.finished if t.task_id == task_id), None)
+        if ended is not None and (task is None or task.task_id != task_id):
+            # The server heard its end and took the task back (a visit waiting in line for a
+            # jammed door to work again): giving it to us again is a new run, not a resend.
+            self.finished.remove(ended)
+            return
         if task is None or task.task_id != task_id or task.phase is not TaskPhase.RUNNING:
             return
         self._cancel(task, str(message.payload.get("reason") or "cancelled"))

@@ -19,7 +19,7 @@ from __future__ import annotations
 import itertools
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 from backend.tasks.battery import BatteryAlarms
@@ -47,6 +47,7 @@ from backend.tasks.reports import TaskReports
 from backend.tasks.requests import HubRequests
 from backend.tasks.robots import RobotInfo
 from backend.tasks.targets import net_params, target_node
+from backend.tasks.trouble import TroubleWaits
 from backend.tasks.watchdog import Watchdog
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
@@ -159,6 +160,8 @@ class TaskManager(Service):
         self.presence = Presence(self)
         self.battery = BatteryAlarms(self)
         self.watchdog = Watchdog(self)
+        self.trouble = TroubleWaits()
+        """Visitors' tasks cut off only by trouble, queued until it lifts (trouble.py)."""
         self.hold: TaskHold | None = None
         """The fire alarm's hold (backend.emergency): no task for the robots it holds, no
         new request while it lasts."""
@@ -180,6 +183,7 @@ class TaskManager(Service):
                 "robot_disconnected": self.presence.on_robot_disconnected,
                 "battery_low": self.battery.on_battery_low,
                 "battery_panic": self.battery.on_battery_panic,
+                "closures_changed": self._on_closures_changed,
             },
         )
         for unsubscribe in listen(self.endpoint, self.courier):
@@ -187,6 +191,15 @@ class TaskManager(Service):
         self.on_cleanup(self._finish)
         if self.tick_s is not None:  # None: whoever drives the clock calls check_timeouts
             self.spawn(self.watchdog.run(self.tick_s), name="task-manager-watchdog")
+
+    def _on_closures_changed(self, _msg: Message) -> None:
+        """Trouble raised or lifted: the visitors waiting for it are told (task_event with
+        ``trouble``), and those whose way is open again are given out at once (trouble.py)."""
+        for task_id in self.trouble.waiting():
+            task = self.tasks.get(task_id)
+            if task is not None and task.state is TaskState.QUEUED:
+                self.publish_event(task)
+        self.dispatch()
 
     async def _finish(self) -> None:
         """Stop: retries end, and task writes in flight get 5 s to reach the database."""
@@ -411,7 +424,18 @@ class TaskManager(Service):
             "queue_position": self.queue_position(task),
             **self.estimator.estimate(task).as_dict(),
             "progress": self.estimator.progress_view(task),
+            "trouble": self.trouble_view(task),
         }
+
+    def trouble_view(self, task: Task) -> dict[str, Any] | None:
+        """A queued task waiting for trouble on its way to lift: what its visitor is told."""
+        if task.state is not TaskState.QUEUED:
+            return None
+        return self.trouble.view(task.id, self.closed_now())
+
+    def closed_now(self) -> Mapping[str, object]:
+        """Node -> the closure that takes it out now (backend/closures); empty without it."""
+        return self.estimator.closed() if self.estimator.closed is not None else {}
 
     # --- assignment ----------------------------------------------------------------------
     def set_paused(self, paused: bool) -> None:
@@ -460,7 +484,10 @@ class TaskManager(Service):
             return
         plan: list[tuple[Task, RobotInfo]] = []
         timed = self.assign_times_ms is not None
+        closed = self.closed_now()
         for task in self.queue.head():
+            if self.trouble.held(task.id, closed):
+                continue  # its way is out of order for a while (trouble.py)
             t0 = time.perf_counter() if timed else 0.0
             try:
                 best = self._best_robot(task, free)
@@ -707,6 +734,7 @@ class TaskManager(Service):
             reason=task.reason,
             cancelled_by=task.cancelled_by,
             handover=task.handover_view(),
+            trouble=self.trouble_view(task),
         )
 
     def publish_event(self, task: Task) -> None:
@@ -723,6 +751,7 @@ class TaskManager(Service):
         self.publish_event(task)
         if task.state in FINAL_STATES:
             self._avoid.pop(task.id, None)
+            self.trouble.forget(task.id)
             self.rather_not.pop(task.id, None)
             self._finished.append(task.id)
             if len(self._finished) > MAX_FINISHED_IN_MEMORY:

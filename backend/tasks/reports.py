@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from pydantic import ValidationError
 
 from backend.tasks.handover import arrived
-from backend.tasks.model import Task, TaskState
+from backend.tasks.model import Task, TaskError, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
 from guidebot.payloads.robot import ENDED_REPORTED
@@ -87,6 +87,12 @@ class TaskReports:
             tm.requeue(task, f"{robot.name} broke down: {reason}")
             tm.dispatch()
             return
+        if (
+            state is TaskState.FAILED
+            and not task.internal
+            and self._waits_for_trouble(robot, task, reason)
+        ):
+            return
         task.move(state, reason=reason)
         tm.count_touring(task)
         if robot.current == task.id:
@@ -103,6 +109,28 @@ class TaskReports:
             tm.estimator.ended(task, time.time() - task.started_at)
         tm.changed(task, state.value)
         tm.dispatch()
+
+    def _waits_for_trouble(self, robot: RobotInfo, task: Task, reason: str) -> bool:
+        """A visitor's task that failed because only trouble (a jammed door, a stuck lift)
+        cuts its way off goes back to the queue until the trouble lifts (trouble.py). Its
+        robot's reason must name trouble (RouteClosed's "<door|elevator> <id> out of order"):
+        a failure of another cause stands, whatever is closed meanwhile."""
+        if "out of order" not in reason:
+            return False
+        tm = self.tm
+        closed = tm.closed_now()
+        try:
+            goal = tm.target_of(task.kind, task.params)
+        except TaskError:
+            return False
+        cut = tm.trouble.cut_by_trouble(tm.graph, robot.node, goal, closed)
+        if cut is None or not tm.trouble.wait(task.id, cut):
+            return False
+        what = "; ".join(c.what() for c in cut.closures)
+        log.info("%s: task %s waits for %s to work again: %s", robot.name, task.id, what, reason)
+        tm.requeue(task, f"waiting for {what} to work again ({reason})")
+        tm.dispatch()
+        return True
 
     def ended_in_state(self, robot: RobotInfo, ended: object) -> None:
         """The tasks a robot_state says ended: one still the robot's here ends as if its

@@ -72,6 +72,10 @@ class TrafficManager(Service):
         self.on_event = on_event
         self.alerts = alerts if alerts is not None else AlertStore(endpoint.publish)
         self._positions: dict[str, str] = {}
+        self._position_at: dict[str, float] = {}
+        """Robot -> the time (Unix s) of the report that last moved its position (a
+        node_reached's ``at``, a robot_state's ``timestamp``): a ``node_reached`` sent again
+        after a drop (must-arrive) never moves it back."""
         self._paths: dict[str, PathResult] = {}
         self.site = site
         self.graph = graph or SiteGraph(site)
@@ -456,7 +460,12 @@ class TrafficManager(Service):
                 self._end_resync()
         if not isinstance(node, str) or not known:
             return
-        self._positions[robot] = node
+        if self._positions.get(robot) != node:
+            # Further on than its node_reached said (one lost): a copy of that one sent again
+            # later is older. A state naming the node it already has moves nothing: the time
+            # stays that of the node_reached (a VDA vehicle's is its own clock, not ours).
+            self._positions[robot] = node
+            self._position_at[robot] = max(msg.timestamp, self._position_at.get(robot, 0.0))
         self._check_conflict(robot, here)
         if self._ending.get(robot) not in (None, msg.payload.get("task_id")):
             del self._ending[robot]  # it runs something else now: the ended task is over
@@ -471,7 +480,12 @@ class TrafficManager(Service):
             return
         if not isinstance(node, str) or node not in self.graph:
             return
-        self._positions[robot] = node
+        at = msg.payload.get("at")
+        at = float(at) if isinstance(at, int | float) else msg.timestamp
+        if at >= self._position_at.get(robot, 0.0):
+            # An older one (sent again after a drop) is history: the robot is further on.
+            self._positions[robot] = node
+            self._position_at[robot] = at
         if (here := self.graph.area_at.get(node)) is not None:
             self.locks.mark_entered(robot, here)
 

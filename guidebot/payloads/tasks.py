@@ -128,6 +128,10 @@ class TaskEvent(PayloadModel):
     handover: dict[str, Any] | None = None
     """A tour handed over mid-way (docs/protocol.md, "Handover"): {from_robot, robot, stop,
     total, poi, name, reason, arrived_after_s}; ``arrival_s`` is when ``robot`` is at ``stop``."""
+    trouble: dict[str, Any] | None = None
+    """Queued, waiting for trouble on its way to lift (a jammed door, a stuck lift): {why
+    ("door D0 out of order", the form of docs/protocol.md "Skipped stops"), wait (1-based),
+    waits (the most before it fails)}; docs/visitor.md, "Waiting for trouble"."""
 
 
 @register_payload("visitor_service")

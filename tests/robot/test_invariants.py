@@ -148,3 +148,22 @@ def test_a_late_report_is_judged_at_the_time_the_robot_gives() -> None:
     feed("node_reached", {"robot": "R4", "node": "la0", "at": 999.0}, 140.0)
     assert "while lift_a was closed or moving" in str(checker.violations[-1])
     assert checker.violations[-1].at == 140.0
+
+
+def test_a_late_report_that_the_other_robot_had_left_clears_the_area_violation() -> None:
+    """The server died before R1's node_reached for east (out of corr_b) was handled; its copy
+    came after the restart, behind R2's entry into corr_b. R1 had left by then: no
+    violation (the 30-minute fault soak counted 4 such)."""
+    from guidebot.site.validate import validate_site
+
+    checker = InvariantChecker.from_site(validate_site(safety_site()))
+    feed = checker.feed
+    feed("node_reached", {"robot": "R1", "node": "cb2", "at": 100.0}, 100.0)
+    feed("node_reached", {"robot": "R2", "node": "cb1", "at": 130.0}, 130.0)
+    assert [(v.invariant, v.robot) for v in checker.violations] == [("area", "R2")]
+    feed("node_reached", {"robot": "R1", "node": "east", "at": 120.0}, 140.0)  # sent again
+    assert checker.violations == []
+    # One that does not take the other out leaves the violation standing.
+    feed("node_reached", {"robot": "R3", "node": "cb1", "at": 150.0}, 150.0)
+    feed("node_reached", {"robot": "R2", "node": "cb2", "at": 145.0}, 160.0)
+    assert {(v.robot, v.at) for v in checker.violations} == {("R3", 150.0)}

@@ -252,6 +252,33 @@ async def test_an_assignment_resent_for_a_task_that_ended_is_answered_not_run(
     assert runner.current is not None and runner.current.task_id == "t2"
 
 
+async def test_a_task_the_server_took_back_after_its_end_runs_again_when_given_again(
+    helpers: Any,
+) -> None:
+    """A visit that failed only because a door was jammed goes back to the queue (the server
+    cancels it on the robot after its task_ended) and may come back to the same robot once
+    the door works: that is a new run, not a resend answered with the old failure (which
+    failed the visit with a reason no longer true), and the robot's state no longer names
+    it as ended."""
+    bus = Bus()
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
+    seen = helpers.Recorder(bus.endpoint("t"), "task_ended", "run_petri_net")
+    await runner.start()
+    tm, dispatch = bus.endpoint("tm"), bus.endpoint("dispatch")
+    assign = {"task_id": "t1", "robot": "R1", "net": "go_to_poi"}
+    tm.publish("task_assigned", assign)
+    instance = seen.of("run_petri_net")[-1].payload["instance_id"]
+    dispatch.publish(
+        "petri_net_ended", {"net": "go_to_poi", "instance_id": instance, "outcome": "failed"}
+    )
+    tm.publish("task_cancel", {"task_id": "t1", "reason": "waiting for door D0 to work again"})
+    assert not [t for t in runner.finished if t.task_id == "t1"]
+    tm.publish("task_assigned", assign)  # given again
+    assert len(seen.of("run_petri_net")) == 2
+    assert runner.current is not None and runner.current.task_id == "t1"
+    assert [m.payload["outcome"] for m in seen.of("task_ended")] == ["failed"]
+
+
 async def test_tour_points_become_tour_progress_and_points_out_of_range_do_not(
     helpers: Any,
 ) -> None:
@@ -397,6 +424,27 @@ async def test_link_resends_reports_that_may_have_died_in_flight() -> None:
     ended = [m for m in up.sent if m.type == "task_ended"]
     assert len(ended) == 2 and ended[0].id == ended[1].id  # same id: receivers deduplicate
     assert states == [1]  # resynchronised (robot_state at once)
+    await link.stop()
+
+
+async def test_link_resends_a_node_reached_that_may_have_died_in_flight() -> None:
+    """node_reached is must-arrive: one sent as the server died was lost, and the soak's
+    checker then kept the robot in the lift cabin it had left (issue 36)."""
+    bus = Bus()
+    up = _FakeUpstream()
+    up.connected.set()
+    link = Link(bus.endpoint("link"), up, "R1")
+    await link.start()
+    reached = {"robot": "R1", "node": "landing", "floor": "F1", "at": 1.0}
+    bus.endpoint("navigation").publish("node_reached", reached)
+    await asyncio.sleep(0.15)  # the link's watcher is running
+    up.connected.clear()  # the server dies
+    await asyncio.sleep(0.3)  # the link notices within its 0.1 s poll
+    up.connected.set()
+    for callback in up.on_connect_callbacks:
+        callback()
+    sent = [m for m in up.sent if m.type == "node_reached"]
+    assert len(sent) == 2 and sent[0].id == sent[1].id  # same id: receivers deduplicate
     await link.stop()
 
 

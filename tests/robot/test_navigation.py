@@ -316,6 +316,40 @@ async def test_a_goal_that_fails_at_an_areas_edge_gives_the_area_back(rig: Rig) 
     assert rig.traffic.locks.holder("elevator") is None
 
 
+async def test_a_goal_that_fails_mid_edge_keeps_the_area_the_robot_drove_into(rig: Rig) -> None:
+    """Granted the corridor, the robot leaves ga1 for corridor_w and its motor is lost on
+    the way: it may be inside the corridor (the Traffic Manager counts so too), so it keeps
+    it. Released as "not entered", another robot was granted the corridor the stopped robot
+    stood in."""
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(
+        lambda: rig.nav.node == "ga1" and rig.nav.x > 16.0 and rig.nav.areas_held() == ["corridor"]
+    )
+    rig.bus.endpoint("base").publish("base_fault", {"reason": "motor module lost"})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("navigation_failed")))
+    assert rig.nav.node == "ga1" and rig.nav.x < 20.0  # on the edge, short of corridor_w
+    assert rig.nav.areas_held() == ["corridor"]
+    assert not [m for m in rig.seen.of("release_area") if m.payload["area"] == "corridor"]
+    assert rig.traffic.locks.holder("corridor") == "R1"
+
+
+async def test_a_grant_that_comes_between_paths_is_given_back_and_asked_for_again(
+    rig: Rig,
+) -> None:
+    """A path gave up waiting for the corridor (closed ahead, a cancel): its request was
+    granted after the path ended. The server may release such a grant at the robot's next
+    robot_state between tasks and grant it to another, so the next path gives it back and
+    asks again at the corridor's edge; driving in on it, two robots rode the lift together in
+    the fault soak."""
+    rig.nav.ep.publish("request_area", {"robot": "R1", "area": "corridor"})
+    await rig.seen.wait_for(lambda: rig.nav.areas_held() == ["corridor"])  # granted, idle
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})
+    await rig.seen.wait_for(lambda: bool(rig.seen.of("goal_reached")), timeout=30)
+    corridor = [m.type for m in rig.seen.messages if m.payload.get("area") == "corridor"]
+    assert corridor.count("request_area") == 2  # the stale grant given back, asked again
+    assert "request_area" in corridor[corridor.index("release_area") :]
+
+
 async def test_a_robot_on_the_live_site_plans_on_board_and_declares_its_path(
     rig: Rig, demo_site: Site
 ) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import pytest
@@ -128,6 +129,23 @@ async def test_get_path_is_answered_over_the_bus(bus: Bus) -> None:
     assert reply.payload["steps"][-1]["node"] == "gc3"
     bad = await robot.request("get_path", {"robot": "R1", "from_node": "entrance", "to_node": "x"})
     assert bad.payload.get("error") and not bad.payload.get("nodes")
+
+
+async def test_a_node_reached_sent_again_late_never_moves_the_robot_back(bus: Bus) -> None:
+    """node_reached is must-arrive: one the server died before handling comes again after
+    the restart, behind newer reports. The robot is where its latest report (by the robot's
+    time) says, not where the late copy does: paths start there."""
+    await start_traffic(bus, demo_site())
+    r1 = RobotStub(bus, "R1", "gb1")
+    r1.state("busy")  # now, at gb1
+    then = time.time() - 5.0
+    r1.endpoint.publish("node_reached", {"robot": "R1", "node": "ga1", "floor": "F0", "at": then})
+    ask = {"robot": "R1", "to_node": "hall"}
+    reply = await r1.endpoint.request("get_path", ask)
+    assert reply.payload["nodes"][0] == "gb1"
+    r1.endpoint.publish("node_reached", {"robot": "R1", "node": "corridor_e", "at": time.time()})
+    reply = await r1.endpoint.request("get_path", ask)
+    assert reply.payload["nodes"][0] == "corridor_e"  # a newer one moves it on
 
 
 async def test_waiting_robots_are_served_in_order(bus: Bus) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import re
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -266,6 +267,63 @@ async def test_news_of_a_request_that_comes_before_its_answer_is_not_lost(
         coins = page.get_by_role("article", name="Coins")
         await coins.get_by_role("button", name="Take me there").click()
         await expect(page.locator(".request-state")).to_have_class(re.compile(r"\brunning\b"))
+
+
+def task_events(payload: str | bytes) -> list[dict[str, Any]]:
+    """The task_event payloads of one hub frame (one message or a batch)."""
+    data = json.loads(payload)
+    messages = data if isinstance(data, list) else [data]
+    return [m["payload"] for m in messages if m.get("type") == "task_event"]
+
+
+async def test_a_request_back_in_line_before_its_answer_comes_shows_in_line(
+    tmp_path: Path, open_page: Any
+) -> None:
+    """The answer to a request was read when a robot had it (assigned or running); the task
+    went back to the queue (a visit waiting for trouble to lift, staff taking it off the
+    robot) and the hub told the page before that answer came. The page shows it in line, not
+    "assigned" for ever: newest news wins, backwards too (test_busy_truth saw a phone stay
+    "assigned to R1" for 15 reads while the API said "queued, number 3")."""
+    settings = settings_for(tmp_path)
+    assert settings.site is not None
+    async with (
+        running_server(settings) as server,
+        robot(server, settings.site, scale=0.5),
+        httpx.AsyncClient(
+            base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
+        ) as staff,
+    ):
+        page = (await open_page(f"{server.url}/visitor/#token={PANEL}", viewport=PHONE)).page
+        queued: dict[str, asyncio.Event] = {}
+
+        def on_socket(socket: Any) -> None:
+            def on_frame(payload: str | bytes) -> None:
+                for event in task_events(payload):
+                    if event["state"] == "queued" and event.get("robot") is None:
+                        queued.setdefault(event["task_id"], asyncio.Event()).set()
+
+            socket.on("framereceived", on_frame)
+
+        page.on("websocket", on_socket)
+        await expect(page.get_by_role("status").first).to_contain_text("A robot is free")
+
+        async def answer_after_the_requeue(route: Any) -> None:
+            response = await route.fetch()
+            answer = await response.json()
+            assert answer["state"] in ("assigned", "running") and answer["robot"] == "R1", answer
+            back = await staff.post(f"/api/tasks/{answer['id']}/reassign", json={})
+            assert back.status_code == 200, back.text
+            told = queued.setdefault(answer["id"], asyncio.Event())
+            await asyncio.wait_for(told.wait(), LONG / 1000)
+            await route.fulfill(response=response)
+
+        await page.route("**/api/tasks", answer_after_the_requeue)
+        coins = page.get_by_role("article", name="Coins")
+        await coins.get_by_role("button", name="Take me there").click()
+        state = page.locator(".request-state")
+        await expect(state).to_have_class(re.compile(r"\bqueued\b"))
+        await expect(state).to_contain_text("You are number 1 in line")
+        await expect(page.locator(".robot-name")).to_have_count(0)
 
 
 async def test_a_refused_token_is_said_on_the_page_without_an_error(

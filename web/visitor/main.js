@@ -8,7 +8,7 @@ import { HubClient } from "/lib/hub.js";
 import { loadTexts, preferredLanguage } from "/lib/i18n.js";
 import { Api, ApiError } from "/lib/rest.js";
 import { nextTourLines } from "/lib/nexttours.js";
-import { skippedLines } from "/lib/skipped.js";
+import { skipReason, skippedLines } from "/lib/skipped.js";
 
 const options = new URLSearchParams(location.hash.slice(1));
 const query = new URLSearchParams(location.search);
@@ -18,10 +18,9 @@ const idleS = Number(options.get("idle") ?? query.get("idle") ?? 90);
 const STORE = "guidebot.visitor.requests";
 const DEVICE = "guidebot.visitor.device";
 const FINAL = new Set(["done", "failed", "cancelled"]);
-/** How far along a state is: a task goes forward (a robot lost puts it back in line, rarely). */
-const RANK = { queued: 0, assigned: 1, running: 2, done: 3, failed: 3, cancelled: 3 };
-/** task_event of tasks this page has not been told of yet: its own request's answer may come
- * after the hub's first news of it (a point visit assigned and started at once). Bounded. */
+/** task_event of tasks this page has not been told of yet, with their server time: its own
+ * request's answer may come after the hub's first news of it (a point visit assigned and
+ * started at once, or even back in line already). Bounded. */
 const early = new Map();
 const EARLY_MAX = 64;
 /** The kinds the panel asks for, by card (docs/visitor.md). */
@@ -146,14 +145,32 @@ function markCutOff(ids) {
   if (more) remember();
 }
 
-/** A task's status as told by the server now: its waits count down from `toldAt`. */
-function told(status, before = undefined) {
-  const merged = { ...before, ...status, toldAt: performance.now() };
+/** A task's status as told by the server now: its waits count down from `toldAt`. `at` is
+ * the server time (Unix s) of that news: a task_event's message time, a REST status's last
+ * change (`updated_at`); see `stale`. */
+function told(status, before = undefined, at = status.updated_at) {
+  const merged = { ...before, ...status, toldAt: performance.now(), newsAt: at ?? 0 };
   // Who cancelled it is kept once known (a restarted server no longer knows it).
   if (before?.cancelled_by && !status.cancelled_by) merged.cancelled_by = before.cancelled_by;
   // Skipped stops stay shown after the tour ends (its last news has no progress any more).
   if (status.progress?.skipped?.length) merged.skipped = status.progress.skipped;
   return merged;
+}
+
+/** Whether news of a task (told at server time `at`) is older than what the page holds: it
+ * gives another state than a change the server made later. A task can go back (in line again
+ * after a robot had it: the way out of order for a while, staff taking it off a robot), so the
+ * order of states says nothing; time does. A REST answer read before a task_event that came
+ * first (or the reverse) must not undo it: a phone stayed "assigned to R1" while the task was
+ * back in line (tests/web/test_busy_truth.py). */
+function stale(before, status, at) {
+  return Boolean(before && before.state !== status.state && (at ?? 0) < (before.newsAt ?? 0));
+}
+
+/** `status` (told at server time `at`) over what the page holds of it, unless it is stale. */
+function update(status, at = status.updated_at) {
+  const before = state.requests.get(status.id);
+  if (!stale(before, status, at)) state.requests.set(status.id, told(status, before, at));
 }
 
 /** A told wait (seconds) minus the time since it was told: what the server estimates now,
@@ -168,7 +185,7 @@ function countdown(seconds, at) {
 async function refreshRequests(ids) {
   for (const id of ids) {
     try {
-      state.requests.set(id, told(await api.get(`/api/tasks/${encodeURIComponent(id)}`), state.requests.get(id)));
+      update(await api.get(`/api/tasks/${encodeURIComponent(id)}`));
     } catch (err) {
       if (err instanceof ApiError && err.status === 404) state.requests.delete(id);
       else throw err;
@@ -212,7 +229,7 @@ async function reload() {
   try {
     await loadMenu();
     // This device's live requests (after a reload or a server restart), then the ones we follow.
-    for (const status of await api.get("/api/visitor/requests")) state.requests.set(status.id, told(status, state.requests.get(status.id)));
+    for (const status of await api.get("/api/visitor/requests")) update(status);
     await refreshRequests([...state.requests.keys()]);
     for (const status of state.requests.values()) state.labels.set(status.id, labelOf(status));
     await loadEmergency();
@@ -274,12 +291,11 @@ async function request(kind, item) {
   try {
     const status = await api.post("/api/tasks", { kind: KIND[kind], params });
     state.requests.set(status.id, told(status));
-    // News of it that came before this answer is newer when the task is further along.
+    // News of it that came before this answer: newer when the server sent it after the task's
+    // last change in the answer (further along, or back in line).
     const first = early.get(status.id);
     early.delete(status.id);
-    if (first && (RANK[first.state] ?? 0) > (RANK[status.state] ?? 0)) {
-      state.requests.set(status.id, told({ ...first, id: status.id }, state.requests.get(status.id)));
-    }
+    if (first && first.payload.state !== status.state) update({ ...first.payload, id: status.id }, first.at);
     state.labels.set(status.id, item.name);
     state.current = status.id;
     state.view = "request";
@@ -481,7 +497,11 @@ function statusLines(r) {
       : t("handover", { robot, i: handover.stop }));
     return lines;
   }
-  if (r.state === "queued") {
+  if (r.state === "queued" && r.trouble) {
+    // Its way is out of order for a while (a jammed door, a stuck lift): no time promised.
+    lines.push(t("state_trouble_wait", { why: skipReason(t, r.trouble.why) }));
+    if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
+  } else if (r.state === "queued") {
     if (r.service === "unavailable") lines.push(t("state_unavailable"));
     else {
       if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
@@ -661,7 +681,7 @@ let announced = "";
 function announce() {
   const r = state.view === "request" && !alarm() && !offered() ? state.requests.get(state.current) : null;
   const p = r?.progress;
-  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by]) : "";
+  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by, r.trouble?.why]) : "";
   if (key === announced) return;
   announced = key;
   announcer.textContent = r ? statusLines(r).join(" ") : "";
@@ -757,11 +777,11 @@ async function live() {
     if (!known) {
       // Not ours (the server tells a device's REST calls only its own), or ours before our
       // request's answer: kept a while for request() to look at.
-      early.set(p.task_id, p);
+      early.set(p.task_id, { payload: p, at: message.timestamp });
       if (early.size > EARLY_MAX) early.delete(early.keys().next().value);
       return;
     }
-    state.requests.set(p.task_id, told({ ...p, id: p.task_id }, known));
+    update({ ...p, id: p.task_id }, message.timestamp);
     if (p.state === "queued" && p.reason === CUT_OFF) markCutOff([p.task_id]);
     if (FINAL.has(p.state)) remember();
     draw();
