@@ -96,6 +96,11 @@ class ServerProcess:
         health = await self.health()
         return bool(health and health["cluster"]["broker"]["connected"])
 
+    async def leads(self) -> bool:
+        """It leads and its components are up (``cluster.serving``)."""
+        health = await self.health()
+        return bool(health and health["cluster"]["serving"])
+
     def pause(self) -> None:
         """SIGSTOP: the process keeps its sockets but runs nothing (a frozen leader)."""
         self.process.send_signal(signal.SIGSTOP)
@@ -137,8 +142,12 @@ async def start_servers(
         for name in names:
             log = logs / f"{name}.log"
             servers.append(ServerProcess(name, db_url, broker_url, log, tokens, site=site, env=env))
-            # The first one migrates the database; start the others once it leads.
+            # The first one migrates the database; start the others once it leads (its broker
+            # link up is not enough: under load a second process started then could take the
+            # lease while the first was still starting, and tests expect the first to lead).
             await wait_until(servers[-1].ready, 60, f"server {name} to answer /api/health")
+            if len(servers) == 1:
+                await wait_until(servers[0].leads, 60, f"server {name} to lead")
         yield servers
     finally:
         for server in servers:

@@ -22,11 +22,6 @@ AUTH = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
 _ids = itertools.count()
 
 
-async def _leads(server: ServerProcess) -> bool:
-    health = await server.health()
-    return bool(health and health["cluster"]["serving"])
-
-
 def _acks(robot: AreaRobot, message_id: str) -> list[dict[str, Any]]:
     return [m for m in robot.client.of_type("ack") if m["payload"].get("message_id") == message_id]
 
@@ -41,7 +36,7 @@ async def test_a_robot_on_a_follower_is_acknowledged_by_the_leader_once_per_copy
     pair: list[ServerProcess],
 ) -> None:
     alpha, beta = pair
-    await wait_until(lambda: _leads(alpha), 60, "alpha to lead")
+    await wait_until(alpha.leads, 60, "alpha to lead")
     r1 = await AreaRobot.connect(beta, "R1")
     try:
         asked = f"ask-{next(_ids)}"
@@ -66,7 +61,7 @@ async def test_nothing_is_acknowledged_while_no_process_decides(
     pair: list[ServerProcess],
 ) -> None:
     alpha, beta = pair
-    await wait_until(lambda: _leads(alpha), 60, "alpha to lead")
+    await wait_until(alpha.leads, 60, "alpha to lead")
     r1 = await AreaRobot.connect(beta, "R1")
     try:
         alpha.pause()  # the leader decides nothing now; beta leads after alpha's lease
@@ -74,9 +69,9 @@ async def test_nothing_is_acknowledged_while_no_process_decides(
             asked = f"ask-{next(_ids)}"
             await _send(r1, "request_area", asked)
             await asyncio.sleep(0.5)
-            assert not await _leads(beta), "beta led too soon for this test"
+            assert not await beta.leads(), "beta led too soon for this test"
             assert _acks(r1, asked) == [], "a follower acknowledged what nobody handled"
-            await wait_until(lambda: _leads(beta), 30, "beta to lead after alpha's lease")
+            await wait_until(beta.leads, 30, "beta to lead after alpha's lease")
             # R1's link has no ack: it sends the same message again, and the new leader
             # grants the corridor.
             await _send(r1, "request_area", asked)
@@ -102,7 +97,7 @@ async def test_a_task_ended_during_a_fail_over_is_not_run_again(
     its back-off, and its robot_state, which no longer names the task, may reach the new
     leader first: the task must end done, not go back to the queue and to R1 a second time."""
     alpha, beta = pair
-    await wait_until(lambda: _leads(alpha), 60, "alpha to lead")
+    await wait_until(alpha.leads, 60, "alpha to lead")
     r1 = await WsClient.connect(beta, ROBOT_TOKENS["R1"])
     try:
         await _state(r1, None)
@@ -123,7 +118,7 @@ async def test_a_task_ended_during_a_fail_over_is_not_run_again(
         try:
             ended = f"e-{task_id}"
             await r1.send("task_ended", {"task_id": task_id, "robot": "R1"}, id=ended)
-            await wait_until(lambda: _leads(beta), 30, "beta to lead after alpha's lease")
+            await wait_until(beta.leads, 30, "beta to lead after alpha's lease")
             await _state(r1, None)  # its state, at its steady rate, comes first
             await r1.send("task_ended", {"task_id": task_id, "robot": "R1"}, id=ended)
             await wait_until(lambda: _task_state(beta, task_id, "done"), 20, "the task done")
