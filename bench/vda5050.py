@@ -57,6 +57,7 @@ from guidebot.client import HubClient
 from guidebot.demo_vda import mosquitto_binary, start_broker
 from guidebot.messages import Message
 from guidebot.payloads.robot import RobotMode, RobotState
+from guidebot.vda5050.mqtt import NO_DELAY
 
 NODES = [f"n{i}" for i in range(10)]
 
@@ -218,7 +219,9 @@ async def _measure(
         await asyncio.sleep(0.1)
     address = url.removeprefix("mqtt://").split(":")
     async with (
-        aiomqtt.Client(address[0], int(address[1]), identifier="bench-orders") as orders,
+        aiomqtt.Client(
+            address[0], int(address[1]), identifier="bench-orders", socket_options=NO_DELAY
+        ) as orders,
         httpx.AsyncClient(
             base_url=server.url, headers={"Authorization": f"Bearer {server.admin_token}"}
         ) as http,

@@ -13,6 +13,7 @@ import sys
 import aiomqtt
 import click
 
+from guidebot.vda5050.mqtt import NO_DELAY
 from guidebot.vda5050.sim import SimVehicle
 from guidebot.vda5050.topics import Vehicle, parse_broker
 
@@ -53,7 +54,9 @@ async def _run(broker: str, robots: int, movers: int, rate: float, time_scale: f
     ]
     for driver in drivers:
         await driver.start()
-    async with aiomqtt.Client(address.host, address.port, identifier="bench-load") as client:
+    async with aiomqtt.Client(
+        address.host, address.port, identifier="bench-load", socket_options=NO_DELAY
+    ) as client:
         for sim in reporters:
             online = {**sim.vehicle.header(0), "connectionState": "ONLINE"}
             await client.publish(sim.vehicle.topic("connection"), json.dumps(online), qos=1)

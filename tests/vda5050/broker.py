@@ -69,7 +69,8 @@ def mosquitto(*, started: bool = True) -> Iterator[Mosquitto]:
     with tempfile.TemporaryDirectory(prefix="guidebot-mosquitto-") as root:
         config = Path(root) / "mosquitto.conf"
         config.write_text(
-            f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nlog_dest none\n",
+            f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nlog_dest none\n"
+            "set_tcp_nodelay true\n",
             encoding="utf-8",
         )
         broker = Mosquitto(binary, port, config)
