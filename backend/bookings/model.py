@@ -125,32 +125,45 @@ class Booking(BaseModel):
         return {key: self.target, "lang": self.lang}
 
 
+YEARS = range(1970, 9999)
+"""Dates a booking or a listing may name: a period's end plus some days must stay a date."""
+
+
+def _in_range(day: dt.date, text: str, what: str) -> None:
+    if day.year not in YEARS:
+        raise BookingError(f"{what}={text!r} is out of range (years 1970 to 9998)")
+
+
 def local_time(text: str, tz: ZoneInfo) -> dt.datetime:
     """``text`` (venue local, no offset) as an aware datetime; BookingError if it is no time."""
     try:
         moment = dt.datetime.fromisoformat(text)
     except ValueError:
         raise BookingError(f"start={text!r} is not a date and time (YYYY-MM-DDTHH:MM)") from None
+    _in_range(moment.date(), text, "start")
     if moment.tzinfo is not None:
         return moment.astimezone(tz)
     return moment.replace(tzinfo=tz)
 
 
-def _date(text: str, what: str) -> dt.date:
+def local_date(text: str, what: str) -> dt.date:
+    """``text`` as a date; BookingError naming ``what`` if it is none or out of range."""
     try:
-        return dt.date.fromisoformat(text)
+        day = dt.date.fromisoformat(text)
     except ValueError:
         raise BookingError(f"{what}={text!r} is not a date (YYYY-MM-DD)") from None
+    _in_range(day, text, what)
+    return day
 
 
 def check_recurrence(recurrence: Recurrence, first: dt.date) -> None:
     """BookingError for a recurrence that makes no sense from ``first``."""
-    if recurrence.until is not None and _date(recurrence.until, "until") < first:
+    if recurrence.until is not None and local_date(recurrence.until, "until") < first:
         raise BookingError(f"until={recurrence.until} is before the first date {first}")
     if recurrence.days and recurrence.every != "weekly":
         raise BookingError("days are for a weekly recurrence (every=weekly)")
     for text in recurrence.except_dates:
-        _date(text, "except_dates")
+        local_date(text, "except_dates")
 
 
 def occurrences(booking: Booking, tz: ZoneInfo, start: float, end: float) -> Iterator[float]:
@@ -163,8 +176,8 @@ def occurrences(booking: Booking, tz: ZoneInfo, start: float, end: float) -> Ite
         if start <= at < end:
             yield at
         return
-    skip = {_date(d, "except_dates") for d in rec.except_dates}
-    until = _date(rec.until, "until") if rec.until else None
+    skip = {local_date(d, "except_dates") for d in rec.except_dates}
+    until = local_date(rec.until, "until") if rec.until else None
     days = {DAYS.index(d) for d in rec.days} or {first.weekday()}
     day = max(first.date(), dt.datetime.fromtimestamp(start, tz).date() - dt.timedelta(days=1))
     last = dt.datetime.fromtimestamp(end, tz).date()

@@ -12,7 +12,13 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, sta
 from backend.actions import require_action
 from backend.api.deps import Anyone
 from backend.auth import Principal
-from backend.bookings.model import BookingError, BookingRequest, CancelRequest, MoveRequest
+from backend.bookings.model import (
+    BookingError,
+    BookingRequest,
+    CancelRequest,
+    MoveRequest,
+    local_date,
+)
 from backend.bookings.service import BookingService
 from backend.bookings.words import next_tours
 
@@ -36,6 +42,14 @@ def _service(request: Request) -> BookingService:
     return service
 
 
+def _day(name: str, value: str) -> dt.date:
+    """A query's local date, or 422 naming it (the pattern lets 2026-02-30 through)."""
+    try:
+        return local_date(value, name)
+    except BookingError as exc:
+        raise _refused(exc) from None
+
+
 def _refused(exc: BookingError) -> HTTPException:
     return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc))
 
@@ -56,8 +70,8 @@ async def list_bookings(
     ``start``), at most 62 days, in time order; ``cancelled``: cancelled bookings' too."""
     service = _service(request)
     today = dt.datetime.fromtimestamp(service.clock(), service.tz).date()
-    first = dt.date.fromisoformat(start) if start else today
-    last = dt.date.fromisoformat(end) if end else first
+    first = _day("start", start) if start else today
+    last = _day("end", end) if end else first
     if last < first:
         raise _refused(BookingError(f"end={last} is before start={first}"))
     if (last - first).days >= MAX_LIST_DAYS:

@@ -100,6 +100,15 @@ async def test_bad_bookings_are_refused_with_the_reason(server: RunningServer) -
         ):
             answer = await http.post("/api/bookings", json=body)
             assert answer.status_code == 422, body
+        # A listing's dates: one that looks like a date but is none, one past the calendar.
+        for query, words in (
+            ("start=7797-05-00", "start='7797-05-00' is not a date"),
+            ("start=2026-11-01&end=9999-12-31", "end='9999-12-31' is out of range"),
+        ):
+            answer = await http.get(f"/api/bookings?{query}")
+            assert answer.status_code == 422 and words in answer.json()["detail"], answer.text
+        far = await http.post("/api/bookings", json=spanish("9999-12-31T14:00"))
+        assert far.status_code == 422 and "out of range" in far.json()["detail"], far.text
         # The demo fleet has three robots: a fourth booking at once is refused.
         for _ in range(3):
             assert (await http.post("/api/bookings", json=spanish(tomorrow()))).status_code == 201
