@@ -152,7 +152,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             stack.callback(app.state.hub.close)
             stack.callback(health_board.set, "hub", ComponentState.stopped)
             if settings.broker_url:  # several processes: components run on the leader only
-                await stack.enter_async_context(clustered(app, COMPONENTS))
+                # A server inside another program (the tests) stops itself, not that program.
+                on_lost = getattr(app.state, "on_lost_leadership", None)
+                await stack.enter_async_context(clustered(app, COMPONENTS, on_lost=on_lost))
             else:
                 for component in COMPONENTS:
                     await stack.enter_async_context(component(app))

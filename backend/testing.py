@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 from collections.abc import AsyncIterator, Generator
 from dataclasses import dataclass
 
@@ -34,6 +35,8 @@ from backend.app import create_app, uvicorn_config
 from backend.settings import Settings
 
 __all__ = ["RunningServer", "running_server"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,11 @@ class _Server(uvicorn.Server):
         yield
 
 
+def _lost_leadership(server: uvicorn.Server) -> None:
+    log.error("this in-process server lost its leadership: it stops (a real one exits)")
+    server.should_exit = True
+
+
 async def _serve(server: uvicorn.Server) -> None:
     """uvicorn exits (SystemExit) when its start fails: a SystemExit in a task ends the whole
     event loop, the test's and the servers' cleanup with it; make it a plain error."""
@@ -95,6 +103,9 @@ async def running_server(
     settings = settings if settings is not None else Settings()
     app = app if app is not None else create_app(settings)
     server = _Server(uvicorn_config(app, "127.0.0.1", port))
+    # A leader that loses its lease exits its process at once (backend/cluster.py): here that
+    # process is the test runner's, which died with it ("node down"); this server stops instead.
+    app.state.on_lost_leadership = lambda: _lost_leadership(server)
     task = asyncio.create_task(_serve(server), name="uvicorn")
     loop = asyncio.get_running_loop()
     deadline = loop.time() + start_timeout
