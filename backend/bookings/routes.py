@@ -4,7 +4,9 @@ and robots' screens)."""
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
+from collections.abc import Iterator
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, status
@@ -56,6 +58,17 @@ def _refused(exc: BookingError) -> HTTPException:
 
 def _missing(booking_id: str) -> HTTPException:
     return HTTPException(status.HTTP_404_NOT_FOUND, f"booking {booking_id!r} not found")
+
+
+@contextlib.contextmanager
+def _answers(booking_id: str) -> Iterator[None]:
+    """An unknown booking is 404; a change the booking's rules refuse is 422."""
+    try:
+        yield
+    except KeyError:
+        raise _missing(booking_id) from None
+    except BookingError as exc:
+        raise _refused(exc) from None
 
 
 @router.get("")
@@ -116,19 +129,15 @@ async def create(request: Request, who: Booker, body: BookingRequest) -> dict[st
 @router.get("/{booking_id}")
 async def get_booking(request: Request, _: Reader, booking_id: BookingId) -> dict[str, Any]:
     service = _service(request)
-    try:
+    with _answers(booking_id):
         return service.view(service.get(booking_id))
-    except KeyError:
-        raise _missing(booking_id) from None
 
 
 @router.get("/{booking_id}/history")
 async def history(request: Request, _: Reader, booking_id: BookingId) -> list[dict[str, Any]]:
     """Created, moved, cancelled (by whom), started, missed, flagged: oldest first."""
-    try:
+    with _answers(booking_id):
         return await _service(request).history(booking_id)
-    except KeyError:
-        raise _missing(booking_id) from None
 
 
 @router.post("/{booking_id}/move")
@@ -137,12 +146,8 @@ async def move(
 ) -> dict[str, Any]:
     """A new start (a series: all its coming occurrences), meeting point, group size or note."""
     service = _service(request)
-    try:
+    with _answers(booking_id):
         return service.view(await service.move(booking_id, body, by=who.name))
-    except KeyError:
-        raise _missing(booking_id) from None
-    except BookingError as exc:
-        raise _refused(exc) from None
 
 
 @router.post("/{booking_id}/cancel")
@@ -151,9 +156,5 @@ async def cancel(
 ) -> dict[str, Any]:
     """Cancel the booking, or one ``occurrence`` (a local date) of a series."""
     service = _service(request)
-    try:
+    with _answers(booking_id):
         return service.view(await service.cancel(booking_id, body, by=who.name))
-    except KeyError:
-        raise _missing(booking_id) from None
-    except BookingError as exc:
-        raise _refused(exc) from None
