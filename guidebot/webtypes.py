@@ -51,11 +51,11 @@ export type Message<T extends MessageType = MessageType> = {
   [K in T]: Omit<Envelope, "type" | "payload"> & { type: K; payload: Payloads[K] };
 }[T];
 
-/** A subscription pattern (`*` and `?` are wildcards): a known type, or a wildcard one. */
-export type Pattern = MessageType | `${string}*${string}` | `${string}?${string}`;
+/** A subscription pattern with a wildcard (`*`: any characters, `?`: one). */
+export type Wildcard = `${string}*${string}` | `${string}?${string}`;
 
-/** What a handler of `pattern` receives: that type's message; any message for a wildcard. */
-export type MessageFor<P extends string> = P extends MessageType ? Message<P> : Message;
+/** What a page subscribes to: a known message type, or a wildcard pattern. */
+export type Pattern = MessageType | Wildcard;
 """
 
 

@@ -80,10 +80,22 @@ export class HubClient extends EventTarget {
   }
 
   /**
+   * @template {MessageType} T
+   * @overload
+   * @param {T} pattern one message type: the handler gets its payload's type
+   * @param {(message: Message<T>) => void} handler
+   * @returns {() => void}
+   */
+  /**
+   * @overload
+   * @param {import("/lib/messages.js").Wildcard} pattern
+   * @param {(message: Message) => void} handler
+   * @returns {() => void}
+   */
+  /**
    * Receive messages whose type matches `pattern`; returns the function that stops it.
-   * @template {Pattern} P
-   * @param {P} pattern
-   * @param {(message: import("/lib/messages.js").MessageFor<P>) => void} handler
+   * @param {Pattern} pattern
+   * @param {(message: Message) => void} handler
    * @returns {() => void}
    */
   on(pattern, handler) {
