@@ -69,7 +69,7 @@ def render(catalogue: Mapping[str, type[BaseModel]] | None = None) -> str:
     if catalogue is None:
         catalogue = {type_: payload_model(type_) for type_ in known_types()}
     named: dict[str, str] = {}
-    _declare(Message, named, rename="Envelope")
+    _add(named, "Envelope", _envelope())
     payloads: dict[str, str] = {}
     for type_ in sorted(catalogue):
         payloads[type_] = _declare(catalogue[type_], named)
@@ -84,14 +84,25 @@ def render(catalogue: Mapping[str, type[BaseModel]] | None = None) -> str:
     return "\n".join(lines)
 
 
-def _declare(model: type[BaseModel], named: dict[str, str], rename: str | None = None) -> str:
-    """Adds the model and the schemas it refers to; returns its TypeScript name."""
+def _declare(model: type[BaseModel], named: dict[str, str]) -> str:
+    """Adds the model and the schemas it refers to; returns its TypeScript name. A field with
+    a default is optional: the hub passes a payload on as its sender wrote it."""
     schema = model.model_json_schema(mode="validation", ref_template="{model}")
     for name, definition in schema.get("$defs", {}).items():
         _add(named, name, _declaration(name, definition))
-    name = rename or schema.get("title") or model.__name__
+    name = schema.get("title") or model.__name__
     _add(named, name, _declaration(name, schema))
     return name
+
+
+def _envelope() -> str:
+    """The envelope as a page receives it: every field is there (the hub writes them all,
+    guidebot.wire); ``type`` and ``payload`` are narrowed by ``Message<T>``."""
+    schema = Message.model_json_schema(mode="validation")
+    schema = {**schema, "required": list(schema["properties"])}
+    received = "As a page receives it: with every field (guidebot/wire.py writes them all)."
+    schema["description"] = f"{schema['description']}\n\n{received}"
+    return _declaration("Envelope", schema)
 
 
 def _add(named: dict[str, str], name: str, declaration: str) -> None:

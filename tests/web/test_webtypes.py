@@ -35,6 +35,23 @@ def test_every_message_type_has_its_payload_type() -> None:
         assert re.search(rf"^export (interface|type) {name}\b", text, re.MULTILINE), name
 
 
+def test_the_envelope_has_every_field_a_page_receives() -> None:
+    """The hub writes every envelope field (guidebot/wire.py): none is optional to a page."""
+    text = render({})
+    block = text.split("export interface Envelope {\n", 1)[1].split("\n}", 1)[0]
+    fields = dict(re.findall(r"^  (\w+\??): (.+);$", block, re.MULTILINE))
+    assert fields == {
+        "type": "string",
+        "id": "string",
+        "timestamp": "number",
+        "source": "string",
+        "destination": "string | null",
+        "correlation_id": "string | null",
+        "version": "number",
+        "payload": "{ [key: string]: any }",
+    }
+
+
 class Mood(StrEnum):
     CALM = "calm"
     BUSY = "busy"

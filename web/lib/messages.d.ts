@@ -162,16 +162,18 @@ export interface EndedTask {
 /**
  * The envelope. ``payload`` is plain JSON; its schema is given by ``type``. Strict as the
  * payloads are (``"version": true`` is not 1).
+ *
+ * As a page receives it: with every field (guidebot/wire.py writes them all).
  */
 export interface Envelope {
   type: string;
-  id?: string;
-  timestamp?: number;
-  source?: string;
-  destination?: string | null;
-  correlation_id?: string | null;
-  version?: number;
-  payload?: { [key: string]: any };
+  id: string;
+  timestamp: number;
+  source: string;
+  destination: string | null;
+  correlation_id: string | null;
+  version: number;
+  payload: { [key: string]: any };
 }
 
 /** Sent to a client whose message was refused; the connection stays up. */
