@@ -4,6 +4,7 @@ TypeScript form (what ``tsc --checkJs`` in ``make lint`` checks the pages agains
 
 from __future__ import annotations
 
+import json
 import re
 from enum import StrEnum
 from pathlib import Path
@@ -14,6 +15,7 @@ from click.testing import CliRunner
 from pydantic import BaseModel, Field
 
 from guidebot.messages import PayloadModel, WireEnum, known_types
+from guidebot.paths import ROOT
 from guidebot.webtypes import OUTPUT, SchemaError, render, webtypes
 
 
@@ -141,3 +143,14 @@ def test_check_says_stale_and_writing_makes_it_current(tmp_path: Path) -> None:
     current = runner.invoke(webtypes, ["--check", "--output", str(target)])
     assert current.exit_code == 0
     assert "is up to date" in current.output
+
+
+def test_the_checker_types_the_vendored_library_versions() -> None:
+    """tools/typecheck installs the libraries' types: the versions web/vendor/ holds."""
+    vendored = json.loads((ROOT / "package.json").read_text(encoding="utf-8"))["dependencies"]
+    checker = json.loads((ROOT / "tools" / "typecheck" / "package.json").read_text())
+    tools = checker["devDependencies"]
+    assert tools["lit-html"] == vendored["lit-html"]
+    assert tools["uplot"] == vendored["uplot"]
+    assert tools["@types/leaflet"].split(".")[:2] == vendored["leaflet"].split(".")[:2]
+    assert re.fullmatch(r"\d+\.\d+\.\d+", tools["typescript"]), "pin TypeScript exactly"

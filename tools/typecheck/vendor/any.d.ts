@@ -1,4 +1,0 @@
-// A vendored library (web/vendor/) seen by the checker as untyped: its default export and
-// namespace are `any`.
-declare const library: any;
-export = library;
