@@ -21,10 +21,19 @@ demo: $(STAMP)
 	@bash scripts/system-deps.sh mosquitto
 	$(BIN)/guidebot demo
 
-lint: $(STAMP)
+# The web pages' JavaScript against web/lib/messages.d.ts (`guidebot webtypes`): the TypeScript
+# checker pinned in tools/typecheck/ (a development tool; the pages need no Node.js).
+TSC_STAMP := tools/typecheck/node_modules/.installed
+$(TSC_STAMP): tools/typecheck/package-lock.json
+	@bash scripts/system-deps.sh nodejs npm
+	npm ci --prefix tools/typecheck --no-audit --no-fund --ignore-scripts
+	touch $@
+
+lint: $(STAMP) $(TSC_STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/lint-imports
+	tools/typecheck/node_modules/.bin/tsc -p tools/typecheck
 
 typecheck: $(STAMP)
 	$(BIN)/mypy guidebot backend robot_agent building_sim petri_nets bench

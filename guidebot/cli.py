@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "plan": "backend.planning.cli:plan_command",
     "users": "backend.accounts.cli:users",
     "bookings": "backend.bookings.cli:bookings",
+    "webtypes": "guidebot.webtypes:webtypes",
 }
 
 BENCHMARKS: dict[str, str] = {

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Copies the pinned front-end libraries (package.json + package-lock.json) into web/vendor/ with
 # their licence files. Run it after changing a version; commit web/vendor/. Needs npm; running
-# GuideBot does not (the pages import web/vendor/ through each page's import map).
+# GuideBot does not (the pages import web/vendor/ through each page's import map). Pin the same
+# versions in tools/typecheck/package.json: the type check reads their types there (a test says so).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 npm ci --no-audit --no-fund --ignore-scripts

@@ -8,7 +8,17 @@ const TASK_REFRESH_MS = 5000;
 
 const isOpen = (alert) => !alert.acked_at && !alert.resolved_at;
 
+/** @typedef {import("/lib/messages.js").MessageType} MessageType */
+/**
+ * @template {MessageType} T
+ * @typedef {import("/lib/messages.js").Message<T>} Message
+ */
+
 export class Store extends EventTarget {
+  /**
+   * @param {import("/lib/rest.js").Api} api
+   * @param {import("/lib/hub.js").HubClient} hub
+   */
   constructor(api, hub) {
     super();
     this.api = api;
@@ -71,6 +81,12 @@ export class Store extends EventTarget {
 
   /** Subscribe and load the site; then call reload() (the hub's connect events do too). */
   async start() {
+    /**
+     * A message type's handler, then the views' redraw.
+     * @template {MessageType} T
+     * @param {T} type
+     * @param {(message: Message<T>) => void} fn
+     */
     const on = (type, fn) => this.hub.on(type, (m) => {
       fn(m);
       this.changed();
@@ -113,7 +129,7 @@ export class Store extends EventTarget {
       this.emit("lock", m.payload);
     });
     on("task_event", () => this.refreshTasks());
-    for (const type of ["alert_raised", "alert_acked", "alert_resolved"]) on(type, (m) => this.#alert(m.payload));
+    for (const type of /** @type {const} */ (["alert_raised", "alert_acked", "alert_resolved"])) on(type, (m) => this.#alert(m.payload));
     on("event_logged", (m) => {
       this.#addEvents([m.payload]);
       if (this.reloading) this.inFlight.push(m.payload);

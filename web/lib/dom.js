@@ -18,6 +18,22 @@ export function percent(level) {
   return level === null || level === undefined ? "—" : `${Math.round(level * 100)} %`;
 }
 
+/** The value of the form control with this id (an input, a select or a textarea). */
+export function inputValue(id) {
+  return /** @type {HTMLInputElement} */ (document.getElementById(id)).value;
+}
+
+/**
+ * A text field of a submitted form (FormData types an entry as text or a file; these forms
+ * have no file inputs); null when the form has no such field.
+ * @param {FormData} form
+ * @param {string} name
+ * @returns {string}
+ */
+export function formText(form, name) {
+  return /** @type {string} */ (form.get(name));
+}
+
 const STATUS_TEXT = {
   connecting: "Connecting to the server…",
   open: "Connected",

@@ -1,6 +1,15 @@
 // Browser client of the hub (docs/protocol.md): one WebSocket, the same envelope as every
 // other client, reconnect with exponential back-off and jitter, subscriptions sent again after
 // each reconnect, heartbeats, request/reply. Status changes are events a page shows.
+// Messages are typed by web/lib/messages.d.ts (generated from guidebot/payloads).
+
+/** @typedef {import("/lib/messages.js").MessageType} MessageType */
+/** @typedef {import("/lib/messages.js").Pattern} Pattern */
+/** @typedef {import("/lib/messages.js").Payloads} Payloads */
+/**
+ * @template {MessageType} [T=MessageType]
+ * @typedef {import("/lib/messages.js").Message<T>} Message
+ */
 
 const FINAL_CODES = new Map([
   [4000, "replaced by a newer connection with the same name"],
@@ -70,7 +79,25 @@ export class HubClient extends EventTarget {
     this.#setStatus("stopped", "");
   }
 
-  /** Receive messages whose type matches `pattern`; returns the function that stops it. */
+  /**
+   * @template {MessageType} T
+   * @overload
+   * @param {T} pattern one message type: the handler gets its payload's type
+   * @param {(message: Message<T>) => void} handler
+   * @returns {() => void}
+   */
+  /**
+   * @overload
+   * @param {import("/lib/messages.js").Wildcard} pattern
+   * @param {(message: Message) => void} handler
+   * @returns {() => void}
+   */
+  /**
+   * Receive messages whose type matches `pattern`; returns the function that stops it.
+   * @param {Pattern} pattern
+   * @param {(message: Message) => void} handler
+   * @returns {() => void}
+   */
   on(pattern, handler) {
     const entry = { pattern, handler };
     this.handlers.push(entry);
@@ -79,28 +106,47 @@ export class HubClient extends EventTarget {
     };
   }
 
-  /** Ask the hub for these message types (kept and sent again after every reconnect). */
+  /**
+   * Ask the hub for these message types (kept and sent again after every reconnect).
+   * @param {...Pattern} patterns
+   */
   subscribe(...patterns) {
     const fresh = patterns.filter((p) => !this.patterns.has(p));
     fresh.forEach((p) => this.patterns.add(p));
     if (fresh.length) this.#sendNow({ type: "subscribe", payload: { patterns: fresh } });
   }
 
+  /** @param {...Pattern} patterns */
   unsubscribe(...patterns) {
     const known = patterns.filter((p) => this.patterns.delete(p));
     if (known.length) this.#sendNow({ type: "unsubscribe", payload: { patterns: known } });
   }
 
-  /** Publish (or send, with a destination); returns the message id. Dropped while offline. */
-  publish(type, payload = {}, destination = null) {
+  /**
+   * Publish (or send, with a destination); returns the message id. Dropped while offline.
+   * @template {MessageType} T
+   * @param {T} type
+   * @param {Payloads[T]} payload
+   * @param {string | null} [destination]
+   * @returns {string}
+   */
+  publish(type, payload, destination = null) {
     const message = { type, id: newId(), timestamp: Date.now() / 1000, payload };
     if (destination) message.destination = destination;
     this.#sendNow(message);
     return message.id;
   }
 
-  /** Request/reply: resolves with the reply message, rejects on error or time-out. */
-  request(type, payload = {}, destination = null, timeoutS = 5) {
+  /**
+   * Request/reply: resolves with the reply message, rejects on error or time-out.
+   * @template {MessageType} T
+   * @param {T} type
+   * @param {Payloads[T]} payload
+   * @param {string | null} [destination]
+   * @param {number} [timeoutS]
+   * @returns {Promise<Message>}
+   */
+  request(type, payload, destination = null, timeoutS = 5) {
     return new Promise((resolve, reject) => {
       if (this.status !== "open") {
         reject(new Error("not connected to the hub"));
@@ -186,6 +232,7 @@ export class HubClient extends EventTarget {
     this.#sendNow({ type: "ping", id: newId(), destination: "hub", payload: {} });
   }
 
+  /** @param {Message} message */
   #dispatch(message) {
     if (message.type === "welcome") {
       this.name = message.payload.name;

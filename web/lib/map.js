@@ -58,6 +58,13 @@ export class FloorMap extends EventTarget {
     this.nodes = new Map();
     /** Optional: (robot_state payload) -> text saying what the robot does or waits for. */
     this.describeRobot = null;
+    /**
+     * Optional: robot name -> its evacuation's state during a fire alarm (the ring's colour).
+     * @type {((robot: string) => string | null) | null}
+     */
+    this.evacuationOf = null;
+    /** @type {Map<string, any> | null} floor id -> the bounds of its plan image, once drawn */
+    this.planBounds = null;
     this.map.on("zoomend", () => this.#spread());
   }
 
@@ -303,7 +310,10 @@ export class FloorMap extends EventTarget {
     }
   }
 
-  /** A robot_state message: drawn on the next animation frame (several states, one frame). */
+  /**
+   * A robot_state message: drawn on the next animation frame (several states, one frame).
+   * @param {import("/lib/messages.js").Message<"robot_state">} message
+   */
   updateRobot(message) {
     this.pending.set(message.payload.robot, message);
     if (!this.frame) this.frame = requestAnimationFrame(() => this.#drawPending());

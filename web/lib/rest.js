@@ -38,6 +38,7 @@ export class Api extends EventTarget {
   }
 
   async request(method, path, body = undefined) {
+    /** @type {Record<string, string>} */
     const headers = { Accept: "application/json", ...this.getHeaders() };
     const token = this.getToken();
     if (token) headers.Authorization = `Bearer ${token}`;

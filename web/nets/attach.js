@@ -24,6 +24,7 @@ export class Attachment {
     this.last = [];
     this.breakpoints = new Set();
     this.ended = null;
+    /** @type {HubClient | null} */
     this.hub = null;
     this.off = null;
     this.renew = null;
@@ -67,6 +68,7 @@ export class Attachment {
     this.last = [];
   }
 
+  /** @param {import("/lib/messages.js").Message<"petri_net_event">} m */
   #event(m) {
     const inst = this.instance;
     const p = m.payload;

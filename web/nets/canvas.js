@@ -10,6 +10,17 @@ export const GRID = 10; // positions snap to this grid
 
 const snap = (v) => Math.round(v / GRID) * GRID;
 
+/**
+ * @typedef {object} CanvasHandlers
+ * @property {(kind: "place" | "transition" | "arc", id: string) => void} select
+ * @property {(kind: "place" | "transition", id: string) => void} toggle add to or drop from the group
+ * @property {(ids: string[]) => void} selectMany the nodes inside a rubber band
+ * @property {(tool: string, x: number, y: number) => void} add a node where the tool clicked
+ * @property {(ids: string[], dx: number, dy: number) => void} move nodes by an offset
+ * @property {(arcId: string, fn: (points: number[][]) => void) => void} bend edit an arc's bend points
+ * @property {(source: string, target: string) => void} connect an arc between two nodes
+ */
+
 /** Distance from point p to the segment a-b. */
 function distToSegment(p, a, b) {
   const dx = b.x - a.x;
@@ -30,7 +41,10 @@ function border(node, toward, isPlace) {
 }
 
 export class NetCanvas {
-  /** @param {HTMLElement} host @param {object} handlers select(kind,id), add(kind,x,y), move(id,x,y), connect(a,b) */
+  /**
+   * @param {HTMLElement} host
+   * @param {CanvasHandlers} handlers what the page does with the person's gestures
+   */
   constructor(host, handlers) {
     this.host = host;
     this.handlers = handlers;

@@ -11,7 +11,13 @@ function issuesOf(ctx, key) {
   return list.length ? html`<ul class="field-issue" aria-label="Problems of this element">${list.map((m) => html`<li>${m}</li>`)}</ul>` : nothing;
 }
 
-/** A labelled control; `id` makes the label point at it (Playwright and screen readers). */
+/**
+ * A labelled control; `id` makes the label point at it (Playwright and screen readers).
+ * @param {string} label
+ * @param {unknown} value
+ * @param {(value: any) => void} onChange
+ * @param {{id?: string, type?: string, multiline?: boolean}} [how]
+ */
 function text(label, value, onChange, { id, type = "text", multiline = false } = {}) {
   const fid = id ?? `f-${label.replace(/\W+/g, "-").toLowerCase()}`;
   return html`<div class="field"><label for=${fid}>${label}</label>${multiline
@@ -19,6 +25,14 @@ function text(label, value, onChange, { id, type = "text", multiline = false } =
     : html`<input id=${fid} type=${type} .value=${value ?? ""} @change=${(e) => onChange(type === "number" ? Number(e.target.value) : e.target.value)}>`}</div>`;
 }
 
+/**
+ * A labelled list of choices; a value not among them is offered as "(unknown)".
+ * @param {string} label
+ * @param {string | null | undefined} value
+ * @param {string[]} options
+ * @param {(value: string) => void} onChange
+ * @param {{id?: string, empty?: string | null}} [how] its id; the empty choice's text (null: none)
+ */
 function choice(label, value, options, onChange, { id, empty = "(none)" } = {}) {
   const fid = id ?? `f-${label.replace(/\W+/g, "-").toLowerCase()}`;
   const known = options.includes(value) || !value;

@@ -82,7 +82,7 @@ async function start({ me, vocabulary }) {
     versions: null, diff: null, mayDebug: vocabulary.may_publish, stepwise: null };
   window.guidebotNets = ui; // for the browser tests
   ui.draw = () => draw();
-  api.addEventListener("denied", (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
+  api.addEventListener("denied", /** @param {CustomEvent} e */ (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
   const select = (kind, id) => {
     ui.selected = kind ? { kind, id } : null;
@@ -422,7 +422,7 @@ async function start({ me, vocabulary }) {
   }
 
   document.addEventListener("keydown", (e) => {
-    if (e.target.closest?.("input, textarea, select")) return;
+    if (/** @type {Element} */ (e.target).closest?.("input, textarea, select")) return;
     if ((e.ctrlKey || e.metaKey) && e.key === "z" && !readOnly) { e.preventDefault(); model.undo(); }
     if ((e.ctrlKey || e.metaKey) && (e.key === "y" || (e.shiftKey && e.key === "Z")) && !readOnly) { e.preventDefault(); model.redo(); }
     if ((e.key === "Delete" || e.key === "Backspace") && ui.selected && !readOnly) { e.preventDefault(); remove(ui.selected.kind, ui.selected.id); }

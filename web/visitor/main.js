@@ -365,7 +365,7 @@ function backToStart() {
 }
 
 function focusHeading() {
-  requestAnimationFrame(() => app.querySelector("h1, h2")?.focus());
+  requestAnimationFrame(() => /** @type {HTMLElement | null} */ (app.querySelector("h1, h2"))?.focus());
 }
 
 // --- views --------------------------------------------------------------------------------------

@@ -2,6 +2,7 @@
 // zone, once or recurring, move and cancel it, and read its history; occurrences that cannot be
 // served are flagged with the reason (docs/console.md, "Bookings"; docs/server.md, "Bookings").
 import { html } from "lit-html";
+import { formText } from "/lib/dom.js";
 
 const DAYS = [["mon", "Mon"], ["tue", "Tue"], ["wed", "Wed"], ["thu", "Thu"], ["fri", "Fri"], ["sat", "Sat"], ["sun", "Sun"]];
 const EVERY = { once: "once", daily: "every day", weekly: "every week" };
@@ -60,19 +61,19 @@ function bookForm(ui, b) {
   const submit = (event) => {
     event.preventDefault();
     const form = new FormData(event.target);
-    const [kind, target] = form.get("what").split(":");
+    const [kind, target] = formText(form, "what").split(":");
     const recurrence = { every: form.get("every") };
     if (recurrence.every === "weekly") recurrence.days = form.getAll("days");
     if (recurrence.every !== "once") {
       if (form.get("until")) recurrence.until = form.get("until");
-      recurrence.except_dates = form.get("except").split(/[\s,]+/).filter(Boolean);
+      recurrence.except_dates = formText(form, "except").split(/[\s,]+/).filter(Boolean);
     }
     const body = {
       [kind]: target,
       start: form.get("start"),
       lang: form.get("lang"),
       group_size: Number(form.get("group_size")),
-      note: form.get("note").trim(),
+      note: formText(form, "note").trim(),
       public: form.get("public") === "on",
       recurrence,
     };

@@ -4,7 +4,7 @@
 // Building view's section: declare for a zone, raise and clear the simulator's alarm input.
 import { html } from "lit-html";
 import { confirmAction } from "/lib/confirm.js";
-import { clock } from "/lib/dom.js";
+import { clock, inputValue } from "/lib/dom.js";
 import { evacuationText, floorName } from "/admin/names.js";
 
 /** "the whole site", "floor Ground floor", "areas corridor, gallery". */
@@ -121,9 +121,9 @@ export function emergencySection(ui) {
     ...(site.areas ?? []).map((a) => [`area:${a.id}`, `Area ${a.id}`, { areas: [a.id] }]),
   ];
   const declare = () => {
-    const key = document.getElementById("emergency-zone").value;
+    const key = inputValue("emergency-zone");
     const zone = choices.find(([k]) => k === key)?.[2] ?? {};
-    return declareEmergency(ui, zone, document.getElementById("emergency-reason").value);
+    return declareEmergency(ui, zone, inputValue("emergency-reason"));
   };
   return html`<section aria-labelledby="fire-alarm-title">
     <h3 id="fire-alarm-title">Fire alarm</h3>

@@ -2,7 +2,7 @@
 // a door or call an elevator by hand) and every floor at once, each robot where it is.
 import { html, svg } from "lit-html";
 import { confirmAction } from "/lib/confirm.js";
-import { clock } from "/lib/dom.js";
+import { clock, inputValue } from "/lib/dom.js";
 import { WAITING } from "/lib/map.js";
 import { doorName, elevatorName, floorName, placeName, robotDoing } from "/admin/names.js";
 
@@ -13,7 +13,7 @@ const PX_PER_M = 16; // every floor at one scale
 function fleetControls(ui) {
   const fleet = ui.store.fleet;
   const pause = () => ui.act("Pause the fleet", async () => {
-    ui.store.fleet = await ui.api.post("/api/fleet/pause", { reason: document.getElementById("pause-reason").value });
+    ui.store.fleet = await ui.api.post("/api/fleet/pause", { reason: inputValue("pause-reason") });
   });
   const resume = () => ui.act("Resume the fleet", async () => {
     ui.store.fleet = await ui.api.post("/api/fleet/resume");
@@ -52,7 +52,7 @@ function buildingControls(ui) {
   const site = ui.store.site;
   const door = (id, action) => ui.act(`${action === "open" ? "Open" : "Close"} ${doorName(site, id)}`, () => ui.api.post(`/api/building/doors/${encodeURIComponent(id)}/${action}`));
   const call = (lift) => {
-    const floor = document.getElementById(`call-${lift.id}`).value;
+    const floor = inputValue(`call-${lift.id}`);
     return ui.act(`Call ${elevatorName(site, lift.id)} to ${floorName(site, floor)}`, () => ui.api.post(`/api/building/elevators/${encodeURIComponent(lift.id)}/call`, { floor }));
   };
   const doorState = (id) => (ui.store.doors.has(id) ? (ui.store.doors.get(id) ? "open" : "closed") : "not read yet");

@@ -3,7 +3,7 @@ import { html } from "lit-html";
 import { duration } from "/lib/dom.js";
 
 function confirmRelease(ui, lock) {
-  const dialog = document.getElementById("confirm-release");
+  const dialog = /** @type {HTMLDialogElement} */ (document.getElementById("confirm-release"));
   ui.releasing = lock;
   ui.draw();
   dialog.showModal();
@@ -11,7 +11,7 @@ function confirmRelease(ui, lock) {
 
 function releaseDialog(ui) {
   const lock = ui.releasing;
-  const close = () => document.getElementById("confirm-release").close();
+  const close = () => /** @type {HTMLDialogElement} */ (document.getElementById("confirm-release")).close();
   const release = () => {
     close();
     ui.act(`Release area ${lock.area}`, () => ui.api.post(`/api/locks/${encodeURIComponent(lock.area)}/release`));

@@ -4,7 +4,7 @@
 // lift that did not come) shows here too, and can be reopened once checked. The closed nodes
 // are drawn on the map.
 import { html } from "lit-html";
-import { clock } from "/lib/dom.js";
+import { clock, formText } from "/lib/dom.js";
 
 const KINDS = [
   ["area", "Gallery (restricted area)"],
@@ -23,7 +23,7 @@ export class Modes {
   }
 
   async start() {
-    this.ui.hub.on("closures_changed", (m) => this.#take(m.payload.closures, m.payload.nodes));
+    this.ui.hub.on("closures_changed", (/** @type {import("/lib/messages.js").Message<"closures_changed">} */ m) => this.#take(m.payload.closures, m.payload.nodes));
     this.ui.hub.subscribe("closures_changed");
     this.ui.hub.addEventListener("connect", () => this.load());
     await this.load();
@@ -72,11 +72,11 @@ function closeForm(ui, modes) {
     const kind = form.get("kind");
     const body = {
       kind,
-      reason: form.get("reason").trim(),
+      reason: formText(form, "reason").trim(),
       start: seconds(form.get("start")),
       end: seconds(form.get("end")),
     };
-    if (kind === "nodes") body.nodes = form.get("nodes").split(/[\s,]+/).filter(Boolean);
+    if (kind === "nodes") body.nodes = formText(form, "nodes").split(/[\s,]+/).filter(Boolean);
     else body.target = form.get("target");
     ui.act("Close", async () => {
       await ui.api.post("/api/closures", body);

@@ -252,6 +252,7 @@ export class Monitor {
     this.ui.draw();
   }
 
+  /** @param {import("/lib/messages.js").Message<"petri_net_event">} m */
   #event(m) {
     if ((m.source || "rgm") !== this.target) return;
     const p = m.payload;

@@ -2,7 +2,7 @@
 // actions: charge, send to a node, out of service and back, pause a VDA 5050 vehicle and let it
 // go on, cancel the task.
 import { html } from "lit-html";
-import { clock, percent } from "/lib/dom.js";
+import { clock, inputValue, percent } from "/lib/dom.js";
 import { evacuationText, floorName, placeName, poiName, taskLabel, waitingFor } from "/admin/names.js";
 import { cancelTask } from "/admin/views/tasks.js";
 
@@ -32,7 +32,7 @@ function actions(ui, robot) {
     <select id=${nodeSelect}>
       ${ui.store.site.nodes.map((n) => html`<option value=${n.id}>${placeName(ui.store.site, n.id)} · ${n.id}</option>`)}
     </select>
-    <button type="button" @click=${() => send("go_to", { node: document.getElementById(nodeSelect).value })}>Send ${name} to node</button>
+    <button type="button" @click=${() => send("go_to", { node: inputValue(nodeSelect) })}>Send ${name} to node</button>
     <button type="button" class=${out ? "" : "secondary"}
       @click=${() => ui.act(out ? `Put ${name} back in service` : `Take ${name} out of service`, () => ui.api.post(`/api/robots/${encodeURIComponent(name)}/service`, { out_of_service: !out }))}>
       ${out ? `Put ${name} back in service` : `Take ${name} out of service`}</button>

@@ -3,7 +3,7 @@
 import { html } from "lit-html";
 import { repeat } from "lit-html/directives/repeat.js";
 import { confirmAction } from "/lib/confirm.js";
-import { clock, duration } from "/lib/dom.js";
+import { clock, duration, inputValue } from "/lib/dom.js";
 import { placeName, poiName, taskName } from "/admin/names.js";
 
 const FINAL = new Set(["done", "failed", "cancelled"]);
@@ -77,11 +77,11 @@ function taskActions(ui, task) {
     <button type="button" class="danger" @click=${() => cancelTask(ui, task)}>Cancel <span class="sr-only">${label}</span></button>
     <label for=${priorityId} class="sr-only">Priority of ${label}</label>
     <input id=${priorityId} type="number" min="0" max="100" size="3" .value=${String(task.priority)}>
-    <button type="button" class="secondary" @click=${() => ui.act(`Priority of ${label}`, () => ui.api.post(`/api/tasks/${id}/priority`, { priority: Number(document.getElementById(priorityId).value) }))}>Set priority</button>
+    <button type="button" class="secondary" @click=${() => ui.act(`Priority of ${label}`, () => ui.api.post(`/api/tasks/${id}/priority`, { priority: Number(inputValue(priorityId)) }))}>Set priority</button>
     <label for=${reassignId} class="sr-only">Reassign ${label} to</label>
     <select id=${reassignId}><option value="">next free robot</option>
       ${[...ui.store.robots.keys()].sort().map((r) => html`<option value=${r}>${r}</option>`)}</select>
-    <button type="button" class="secondary" @click=${() => ui.act(`Reassign ${label}`, () => ui.api.post(`/api/tasks/${id}/reassign`, { robot: document.getElementById(reassignId).value || null }))}>Reassign</button>
+    <button type="button" class="secondary" @click=${() => ui.act(`Reassign ${label}`, () => ui.api.post(`/api/tasks/${id}/reassign`, { robot: inputValue(reassignId) || null }))}>Reassign</button>
     ${history}
   </div>`;
 }
