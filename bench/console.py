@@ -204,21 +204,21 @@ async def run(robots: int, rate: float, seconds: float, folder: Path) -> dict[st
                 "sessionStorage.setItem('guidebot.view', 'map');"
             )
             await page.goto(f"{url}/admin/")
-            await page.wait_for_function("() => window.guidebotConsole && guidebotConsole.map")
+            await page.wait_for_function("() => window.guidebotProbe")
             cdp = await page.context.new_cdp_session(page)
             stop = asyncio.Event()
             publisher = asyncio.create_task(
                 _publish(url.replace("http", "ws") + "/ws", fleet, rate, stop)
             )
             await asyncio.sleep(WARMUP_S)
-            await page.evaluate("guidebotConsole.map.takeLatencies()")
+            await page.evaluate("guidebotProbe.takeLatencies()")
             heap_start = await _heap_mb(cdp)
             await page.evaluate(FRAME_MONITOR)
             latencies: list[float] = []
             end = time.monotonic() + seconds
             while time.monotonic() < end:
                 await asyncio.sleep(1.0)
-                latencies += await page.evaluate("guidebotConsole.map.takeLatencies()")
+                latencies += await page.evaluate("guidebotProbe.takeLatencies()")
             frames = await page.evaluate("window.__frames")
             stop.set()
             sent = await publisher

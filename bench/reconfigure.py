@@ -53,7 +53,7 @@ class Actions:
 
     async def click_map(self, x: float, y: float) -> None:
         """Click the plan at site coordinates (metres)."""
-        point = await self.page.evaluate(f"guidebotEditor.map.pointFor({x}, {y})")
+        point = await self.page.evaluate(f"guidebotProbe.pointFor({x}, {y})")
         self.count += 1
         await self.page.mouse.click(point["x"], point["y"])
 
@@ -69,7 +69,7 @@ class Actions:
 
 async def wait_saved(page: Any) -> None:
     """Every edit saved on the server (the page's save queue empty)."""
-    await page.evaluate("guidebotEditor.model.saving")
+    await page.evaluate("guidebotProbe.saved()")
 
 
 async def sign_in(actions: Actions, token: str) -> None:
@@ -114,7 +114,8 @@ async def publish(actions: Actions) -> int:
     page = actions.page
     await actions.click(page.get_by_role("button", name="Publish", exact=True))
     await expect(page.locator("#rollout")).to_contain_text("reached all", timeout=20_000)
-    return int(await page.evaluate("guidebotEditor.model.liveVersion"))
+    status = await page.locator("#draft-status").inner_text()  # "Draft revision R · live version V"
+    return int(status.rsplit(" ", 1)[-1])
 
 
 @dataclass

@@ -33,7 +33,7 @@ async def test_sign_in_shows_the_plan_and_live_robots(
         await expect(page.locator("#details")).to_contain_text("online")
         await web.axe_check(page)
         await web.screenshot(page, "map")
-        drawn = await page.evaluate("guidebotConsole.map.takeLatencies().length")
+        drawn = await page.evaluate("guidebotProbe.takeLatencies().length")
         assert drawn > 0
 
 

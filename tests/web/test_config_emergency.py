@@ -69,7 +69,7 @@ async def test_the_fire_alarm_part_is_drawn_edited_checked_and_published(
         words = form.get_by_label("es", exact=True)
         await words.fill("Alarma de incendio. Salgan por las salidas verdes.")
         await words.press("Tab")
-        await page.evaluate("guidebotEditor.model.saving")
+        await page.evaluate("guidebotProbe.saved()")
         await expect(page.locator("#problem-count")).to_have_text("No problems")
         em = (await _draft(fleet))["emergency"]
         assert "hall" in em["safe_spots"] and "corridor_w" not in em["safe_spots"]

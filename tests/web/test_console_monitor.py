@@ -110,7 +110,7 @@ async def test_a_tour_net_is_drawn_from_its_pnml_file_with_no_label_over_another
             await page.mouse.move(box["x"] + 100, box["y"] + 100)
             await page.mouse.down()
             # A live update redraws the view mid-drag: the drag must survive it.
-            await page.evaluate("() => window.guidebotConsole.draw()")
+            await page.evaluate("() => window.guidebotProbe.redraw()")
             await page.mouse.move(box["x"] + 60, box["y"] + 40)
             await page.mouse.up()
             dragged = await drawing.get_attribute("viewBox")

@@ -190,16 +190,18 @@ async def test_a_busy_days_summary_prints_on_one_page(
         await web.axe_check(page)
         await page.locator("#replay-map").scroll_into_view_if_needed()
         await web.screenshot(page, "console-reports-replay")
-        # Scrubbed end to end in 180 painted frames, ten robots walking all day: the frames a
-        # second the page kept (reported; the display gives at most 60).
-        frames = await page.evaluate(
-            """() => new Promise((done) => {
-                const p = window.guidebotConsole.player;
+        # Scrubbed end to end in 180 painted frames, ten robots walking all day, the slider
+        # moved a step a frame as a hand would move it: the frames a second the page kept
+        # (reported; the display gives at most 60).
+        frames = await slider.evaluate(
+            """(slider) => new Promise((done) => {
+                const [start, end] = [Number(slider.min), Number(slider.max)];
                 let i = 0;
                 let t0 = null;
                 const step = (now) => {
                     t0 ??= now;
-                    p.show(p.start + ((p.end - p.start) * i) / 180);
+                    slider.value = String(Math.round(start + ((end - start) * i) / 180));
+                    slider.dispatchEvent(new Event("input", { bubbles: true }));
                     i += 1;
                     if (i <= 180) requestAnimationFrame(step);
                     else done(180 / ((now - t0) / 1000));

@@ -44,6 +44,56 @@ async def wait_queue_equals(page: Any, expected: list[list[str]]) -> None:
     )
 
 
+EVENT_PAGE = 1000
+"""Rows of the event log the console loads at once (web/admin/store.js)."""
+EVENTS = re.compile(r"/api/events\?")
+A_PAGE_LOADED = re.compile(r"^1\d{3} events loaded")
+"""The event count once the console loaded a page: 1000, or a few more logged live since."""
+
+
+async def logged(http: httpx.AsyncClient) -> int:
+    """How many rows the event log holds (GET /api/events, a page at a time)."""
+    count, after = 0, 0
+    while True:
+        page = (await http.get("/api/events", params={"after_id": after, "limit": 1000})).json()
+        count += len(page["events"])
+        if not page["events"]:
+            return count
+        after = page["next_after_id"]
+
+
+class LiveConnection:
+    """The page's live connection (the hub's WebSocket), passed through Playwright so that a
+    test can drop it as a network would: the page reconnects and reloads its snapshot."""
+
+    def __init__(self) -> None:
+        self.page: Any = None
+        self.sockets: list[Any] = []
+        self.opened = asyncio.Event()
+
+    @classmethod
+    async def route(cls, page: Any) -> LiveConnection:
+        """Route the page's /ws (before it opens it)."""
+        live = cls()
+
+        def through(ws: Any) -> None:
+            ws.connect_to_server()
+            live.sockets.append(ws)
+            live.opened.set()
+
+        await page.route_web_socket(re.compile(r"/ws(\?|$)"), through)
+        live.page = page
+        return live
+
+    async def drop(self) -> None:
+        """Close the connection as a restarting server would; return once the page is
+        connected again (its banner says so), so its reload has begun."""
+        self.opened.clear()
+        await self.sockets[-1].close(code=1012, reason="server restarting")
+        await self.opened.wait()
+        await expect(self.page.locator("#connection")).to_have_text("Connected")
+
+
 async def request_tours(http: httpx.AsyncClient, tours: list[str]) -> list[str]:
     ids = []
     for tour in tours:
@@ -84,50 +134,60 @@ async def test_event_log_has_the_history_and_concurrent_reloads_agree(
 ) -> None:
     async with fleet_factory(robots=0) as fleet:
         async with fleet.http() as http:
+            # A busy day: more rows than the console loads at once.
+            store = fleet.server.app.state.store
+            for i in range(EVENT_PAGE):
+                store.record_event("test_note", "test", {"n": i})
+            await store.flush()
             await request_tours(http, ["ground", "upstairs"])
             before = await http.get("/api/events", params={"latest": "true", "limit": 1000})
-            logged = len(before.json()["events"])
-            assert logged >= 3
-            watch = await open_page(fleet.admin_url)
+            assert len(before.json()["events"]) == EVENT_PAGE
+            assert EVENT_PAGE + 3 <= await logged(http) <= 2 * EVENT_PAGE
+            watch = await open_page("")
             page = watch.page
+            hub = await LiveConnection.route(page)
+            await page.goto(fleet.admin_url)
             await web.sign_in(watch, web.operator_token)
             await web.open_view(page, "Event log")
             count = page.locator("#event-count")
-            await page.wait_for_function(
-                f"() => guidebotConsole.store.events.length >= {logged}", timeout=20_000
-            )
-            now = (await http.get("/api/events", params={"latest": "true", "limit": 1000})).json()
-            await expect(count).to_contain_text(f"{len(now['events'])} events")
-            # Two reloads at once (the hub's reconnect and the start, say) both complete.
-            await page.evaluate(
-                "() => { const s = guidebotConsole.store;"
-                " return Promise.all([s.reload(), s.reload()]); }"
-            )
-            now = (await http.get("/api/events", params={"latest": "true", "limit": 1000})).json()
-            await expect(count).to_contain_text(f"{len(now['events'])} events")
-            await expect(page.get_by_text("That is the whole event log.")).to_be_visible()
+            # A page of the log (and what was logged live since: the building's alerts...).
+            await expect(count).to_contain_text(A_PAGE_LOADED, timeout=20_000)
+            older = page.get_by_role("button", name="Load older events")
+            await expect(older).to_be_visible()
             # Ids are named: the task's tour.
             await expect(page.get_by_role("table", name="Events")).to_contain_text(
                 "task=Tour: First floor tour ("
             )
-            # Paged back from the REST log, a page at a time (3 rows here, 1000 in use).
-            await page.evaluate(
-                "() => { guidebotConsole.store.eventPage = 3;"
-                " return guidebotConsole.store.reload(); }"
-            )
-            await expect(count).to_contain_text("3 events loaded")
-            await page.get_by_role("button", name="Load older events").click()
-            await expect(count).to_contain_text("6 events loaded")
-            shown = await page.evaluate("guidebotConsole.store.events.map(e => e.id)")
-            latest = await http.get("/api/events", params={"latest": "true", "limit": 6})
-            assert shown == [e["id"] for e in latest.json()["events"]]
+            # Two reloads at once: the live connection drops twice while the first reload's
+            # snapshot is still on its way; both complete and the page agrees with the server.
+            held, release = asyncio.Event(), asyncio.Event()
+
+            async def slow_events(route: Any) -> None:
+                held.set()
+                await release.wait()
+                await route.continue_()
+
+            await page.route(EVENTS, slow_events)
+            await hub.drop()
+            await held.wait()
+            await hub.drop()
+            release.set()
+            await expect(page.locator("#connection")).to_have_text("Connected")
+            await expect(count).to_contain_text(A_PAGE_LOADED)
+            await expect(older).to_be_visible()
+            await expect(page.locator("#page-error")).to_have_text("")
+            await page.unroute(EVENTS)
+            # Paged back from the REST log, a page at a time: then the page holds all of it.
+            await older.click()
+            await expect(page.get_by_text("That is the whole event log.")).to_be_visible()
+            await expect(count).to_contain_text(f"{await logged(http)} events loaded")
             # A refresh that fails says so on the page.
             watch.expect_error(r"status of 500")
             await page.route("**/api/locks", lambda route: route.fulfill(status=500, body="{}"))
-            await page.evaluate("guidebotConsole.hub.dispatchEvent(new Event('connect'))")
+            await hub.drop()
             await expect(page.locator("#page-error")).to_contain_text("could not refresh")
             await page.unroute("**/api/locks")
-            await page.evaluate("guidebotConsole.hub.dispatchEvent(new Event('connect'))")
+            await hub.drop()
             await expect(page.locator("#page-error")).to_have_text("")
             # The REST log pages back from the oldest row shown.
             ids = [e["id"] for e in before.json()["events"]]
@@ -199,29 +259,34 @@ async def test_a_snapshot_taken_before_a_robot_was_lost_does_not_bring_it_back(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with fleet_factory(robots=1) as fleet:
-        watch = await open_page(fleet.admin_url)
+        watch = await open_page("")
         page = watch.page
+        hub = await LiveConnection.route(page)
+        await page.goto(fleet.admin_url)
         await web.sign_in(watch, web.operator_token)
         await expect(page.get_by_role("button", name="robot R1")).to_be_visible(timeout=20_000)
         fetched, release = asyncio.Event(), asyncio.Event()
 
         async def late_answer(route: Any) -> None:
             response = await route.fetch()  # R1 online, as the server says now
+            robots = await response.json()
+            for robot in robots:  # a mark the page can only have from this snapshot
+                robot["out_of_service"] = True
             fetched.set()
             await release.wait()
-            await route.fulfill(response=response)
+            await route.fulfill(response=response, json=robots)
 
         await page.route("**/api/robots", late_answer)
-        reload = asyncio.ensure_future(page.evaluate("guidebotConsole.store.reload()"))
+        await hub.drop()  # the page reconnects and reloads its snapshot
         await fetched.wait()
         await fleet.kill("R1")
         await web.open_view(page, "Robots")
         heading = page.get_by_role("heading", name="R1")
         await expect(heading).to_contain_text("lost", timeout=20_000)
         release.set()
-        await reload
+        # The late snapshot is drawn (its mark: R1 out of service), and R1 stays lost.
+        await expect(heading).to_contain_text("out of service")
         await expect(heading).to_contain_text("lost")
-        assert await page.evaluate("guidebotConsole.store.robots.get('R1').online") is False
 
 
 async def test_event_log_names_places_and_shows_times_as_times(

@@ -46,7 +46,6 @@ export function mountTranslations({ model, api, sendFile, root, nav, columns }) 
     open: false, overview: null, lang: null, texts: null, filter: "todo", notice: null,
     report: null, busy: Promise.resolve(),
   };
-  window.guidebotTranslations = ui; // for the browser tests
 
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
 

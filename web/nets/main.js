@@ -2,9 +2,8 @@
 // it, checked by the engine's rules as you edit, export it as PNML, publish it to the fleet.
 // Who may publish (the server's edit_nets rule) edits; other staff read.
 import { html, nothing, render } from "lit-html";
-import { currentSession, currentToken, forgetToken, sessionHeaders } from "/lib/auth.js";
-import { signInFlow } from "/lib/signin.js";
-import { Api, ApiError } from "/lib/rest.js";
+import { ApiError } from "/lib/rest.js";
+import { StaffSession } from "/lib/session.js";
 import { NetCanvas } from "/nets/canvas.js";
 import { detailsForm } from "/nets/forms.js";
 import { Attachment, attachPanel } from "/nets/attach.js";
@@ -13,12 +12,10 @@ import { NetModel, emptyNet } from "/nets/model.js";
 import { Run, defaultParams, parseReplies, simulationPanel } from "/nets/simulation.js";
 
 const $ = (id) => document.getElementById(id);
-let token = currentToken();
-const api = new Api(() => token, () => (token ? {} : sessionHeaders()));
 
 /** The signed-in person's or token's name and role, and the editor's vocabulary (which says
  * whether it may publish); an Error when unknown or not staff's (the read_nets rule). */
-async function whoAndWhat() {
+async function whoAndWhat(api) {
   const me = await api.get("/api/me").catch((err) => err);
   if (me instanceof Error) return me;
   const vocabulary = await api.get("/api/net-editor/vocabulary").catch((err) => err);
@@ -27,53 +24,19 @@ async function whoAndWhat() {
   return { me, vocabulary };
 }
 
-function showSignIn(message = "") {
-  $("editor").hidden = true;
-  const section = $("signin");
-  section.hidden = false;
-  signInFlow({
-    section,
-    intro: "Those who may publish nets edit them; other staff read them.",
-    message,
-    missing: "Enter your account name and password, or a staff token.",
-    useToken: (value) => { token = value; },
-    check: whoAndWhat,
-    done: start,
-    again: showSignIn,
-  });
-}
-
-async function boot() {
-  if (!token && !(await currentSession())) return showSignIn();
-  const known = await whoAndWhat();
-  if (known instanceof Error) {
-    forgetToken();
-    token = null;
-    return showSignIn(known.message);
-  }
-  start(known);
-}
-
-/** A request whose body is a file: rest.js sends JSON only. */
-async function sendFile(path, body) {
-  let response;
-  try {
-    const auth = token ? { Authorization: `Bearer ${token}` } : sessionHeaders();
-    response = await fetch(path, { method: "POST", body, headers: { ...auth, "Content-Type": "application/xml", Accept: "application/json" } });
-  } catch {
-    throw new ApiError(0, "The server cannot be reached: check the network.");
-  }
-  const data = await response.json().catch(() => ({}));
-  if (!response.ok) {
-    const detail = data.detail ?? null;
-    const text = Array.isArray(detail) ? detail.map((d) => (typeof d === "string" ? d : d.msg)).join("; ") : detail ?? `the server answered ${response.status}`;
-    throw new ApiError(response.status, text, detail);
-  }
-  return data;
-}
+const session = new StaffSession({
+  section: $("signin"),
+  intro: "Those who may publish nets edit them; other staff read them.",
+  missing: "Enter your account name and password, or a staff token.",
+  check: whoAndWhat,
+  hide: () => { $("editor").hidden = true; },
+  start,
+});
+const { api } = session;
+/** A PNML file to the server: the REST client sends JSON only. */
+const sendFile = (path, body) => session.sendFile("POST", path, body, "application/xml");
 
 async function start({ me, vocabulary }) {
-  $("signin").hidden = true;
   $("editor").hidden = false;
   const readOnly = !vocabulary.may_publish;
   const model = new NetModel(api);
@@ -82,7 +45,6 @@ async function start({ me, vocabulary }) {
     versions: null, diff: null, mayDebug: vocabulary.may_publish, stepwise: null };
   window.guidebotNets = ui; // for the browser tests
   ui.draw = () => draw();
-  api.addEventListener("denied", /** @param {CustomEvent} e */ (e) => { if (e.detail.status === 401) { forgetToken(); showSignIn(e.detail.message); } });
   const say = (text, error = false) => { ui.notice = { text, error }; draw(); };
   const select = (kind, id) => {
     ui.selected = kind ? { kind, id } : null;
@@ -303,7 +265,7 @@ async function start({ me, vocabulary }) {
     draw();
   }
 
-  const attachment = new Attachment(api, token, () => draw());
+  const attachment = new Attachment(api, session.token, () => draw());
   ui.attachment = attachment;
   const attaching = {
     async list() {
@@ -546,4 +508,4 @@ async function start({ me, vocabulary }) {
   draw();
 }
 
-boot();
+session.boot();

@@ -453,7 +453,6 @@ async function loadReplay(ui) {
   await ui.act("Load the replay", async () => {
     const replay = await ui.api.get(`/api/reports/replay?${query(r)}`);
     r.player = new Player(ui, replay);
-    ui.player = r.player; // for the browser test
   });
   requestAnimationFrame(() => drawReplay(ui));
 }
@@ -476,7 +475,6 @@ async function openReplayFile(ui, input) {
     if (r.player) r.player.playing = false;
     r.player = new Player(ui, replay);
     r.player.file = file.name;
-    ui.player = r.player;
   });
   requestAnimationFrame(() => drawReplay(ui));
 }

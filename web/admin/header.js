@@ -1,0 +1,52 @@
+// The console's header: who is signed in (role, read only for a viewer), sign out, passkeys,
+// and which server process serves the page.
+import { html, render } from "lit-html";
+import { addPasskey, passkeysAvailable } from "/lib/auth.js";
+
+const SERVER_REFRESH_MS = 15000;
+
+/**
+ * Draw the header into `who` once, and keep its server line fresh (at every reconnect and
+ * every 15 s).
+ * @param {any} ui  the console state (web/admin/console.js)
+ * @param {import("/lib/session.js").StaffSession<any>} session
+ * @param {HTMLElement} who
+ */
+export function mountHeader(ui, session, who) {
+  const account = session.account;
+  render(
+    html`<span id="server-status" role="status"></span>
+      <span>${account?.display_name || ui.me.name} <span class="badge">${ui.me.role}</span></span>
+      ${ui.operate ? "" : html`<span id="read-only">Read only: a viewer watches, changes nothing.</span>`}
+      <button type="button" @click=${() => session.signOut(false)}>Sign out</button>
+      ${account ? html`<button type="button" class="secondary" @click=${() => session.signOut(true)}>Sign out everywhere</button>` : ""}
+      ${account && passkeysAvailable()
+        ? html`<button type="button" class="secondary" @click=${() => ui.act("Add a passkey", async () => {
+          await addPasskey(navigator.platform || "");
+          ui.passkeys = undefined; // "Your passkeys" reads them again
+        })}>Add a passkey</button>`
+        : ""}
+      ${account ? html`<button type="button" class="secondary" @click=${() => ui.go("passkeys")}>Your passkeys</button>` : ""}`,
+    who,
+  );
+  const status = /** @type {HTMLElement} */ (who.querySelector("#server-status"));
+  const showServer = () => serverStatus(ui.api).then((view) => render(view, status));
+  showServer();
+  ui.hub.addEventListener("connect", showServer);
+  setInterval(showServer, SERVER_REFRESH_MS);
+}
+
+/**
+ * The header's server line from /api/health: with several server processes, which one serves
+ * this page and which one leads (decides tasks, areas and the building).
+ * @param {import("/lib/rest.js").Api} api
+ */
+async function serverStatus(api) {
+  const health = await api.get("/api/health").catch(() => null);
+  if (!health) return html`<span class="badge bad">server unreachable</span>`;
+  const c = health.cluster;
+  const state = html`<span class=${`badge ${health.status === "ok" ? "ok" : "warn"}`}>${health.status}</span>`;
+  if (!c) return html`Server ${state}`;
+  const leader = c.leader ? `leader ${c.leader} (epoch ${c.epoch})` : "no leader yet";
+  return html`Process ${c.process} <span class="badge">${c.leading ? "leads" : "follows"}</span> · ${leader} ${state}`;
+}
