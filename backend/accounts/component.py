@@ -22,7 +22,7 @@ from backend.accounts.oidc import OidcConfig, SingleSignOn
 from backend.accounts.passkeys import PasskeyService
 from backend.accounts.service import AccountService, Audit
 from backend.accounts.store import AccountStore
-from backend.db import database_busy, make_engine, make_sessionmaker
+from backend.db import log_failure, make_engine, make_sessionmaker
 from backend.ratelimit import RateLimiter
 
 __all__ = ["SWEEP_EVERY_S", "accounts", "follower_sessions", "sweep_once"]
@@ -67,14 +67,9 @@ async def sweep_once(service: AccountService, *, expire: bool) -> bool:
     try:
         await service.sweep(expire=expire)
     except Exception as exc:
-        if database_busy(exc):
-            log.warning(
-                "accounts: the database is busy (%s); the session sweep tries again in %.0f s",
-                getattr(exc, "orig", exc),
-                SWEEP_EVERY_S,
-            )
-        else:
-            log.exception("accounts: the session sweep failed; trying again")
+        log_failure(
+            log, exc, "accounts: the session sweep failed; trying again in %.0f s", SWEEP_EVERY_S
+        )
         return False
     return True
 

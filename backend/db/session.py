@@ -6,6 +6,7 @@ async engine, so a fresh file and an old one both end at the current schema.
 
 from __future__ import annotations
 
+import logging
 import sqlite3
 from pathlib import Path
 
@@ -22,6 +23,7 @@ __all__ = [
     "UnstorableJson",
     "alembic_config",
     "database_busy",
+    "log_failure",
     "make_engine",
     "make_sessionmaker",
     "migrate",
@@ -96,6 +98,16 @@ def database_busy(exc: BaseException) -> bool:
     orig = exc.orig if isinstance(exc, OperationalError) else exc
     code = getattr(orig, "sqlite_errorcode", None) if isinstance(orig, sqlite3.Error) else None
     return code is not None and code & 0xFF in (sqlite3.SQLITE_BUSY, sqlite3.SQLITE_LOCKED)
+
+
+def log_failure(logger: logging.Logger, exc: BaseException, message: str, *args: object) -> None:
+    """A periodic job's failure, the job trying again later: a busy database
+    (``database_busy``) in one warning line, anything else with its traceback."""
+    if database_busy(exc):
+        orig = getattr(exc, "orig", exc)
+        logger.warning(message + " (the database is busy: %s)", *args, orig)
+    else:
+        logger.error(message, *args, exc_info=exc)
 
 
 def make_sessionmaker(engine: AsyncEngine) -> async_sessionmaker:  # type: ignore[type-arg]

@@ -478,6 +478,13 @@ async def test_audit_rows_are_kept_their_own_days_not_the_event_log_s(tmp_path: 
         assert kinds[:2] == ["signed_in", "staff_action"]  # everything else went
 
 
+def holder(tmp_path: Path) -> sqlite3.Connection:
+    """A second real connection to the server's SQLite file. Its statements that wait for the
+    lock run in a thread: on the event loop they would stop the server's writer from finishing
+    the transaction they wait for."""
+    return sqlite3.connect(tmp_path / "guidebot.db", isolation_level=None, check_same_thread=False)
+
+
 async def test_the_session_sweep_waits_its_turn_while_another_writer_holds_sqlite(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
@@ -496,8 +503,8 @@ async def test_the_session_sweep_waits_its_turn_while_another_writer_holds_sqlit
             assert kept is not None and ending is not None
             await service.store.change_session(ending.digest, seen_at=-service.idle_s - 1)
             both = {kept.digest, ending.digest}
-            other = sqlite3.connect(tmp_path / "guidebot.db", isolation_level=None)
-            other.execute("BEGIN IMMEDIATE")  # the lock held, as through a burst of writes
+            other = holder(tmp_path)
+            await asyncio.to_thread(other.execute, "BEGIN IMMEDIATE")  # as a burst holds it
             try:
                 with caplog.at_level(logging.WARNING, logger=component.__name__):
                     assert await component.sweep_once(service, expire=True) is False
@@ -520,13 +527,13 @@ async def test_a_sweep_failing_for_another_reason_still_logs_its_traceback(
     keeps its traceback in the log."""
     monkeypatch.setattr(component, "SWEEP_EVERY_S", 3600.0)
     async with running_server(server_settings(tmp_path)) as server:
-        other = sqlite3.connect(tmp_path / "guidebot.db", isolation_level=None)
-        other.execute("ALTER TABLE account_sessions RENAME TO gone")
+        other = holder(tmp_path)
+        await asyncio.to_thread(other.execute, "ALTER TABLE account_sessions RENAME TO gone")
         try:
             with caplog.at_level(logging.WARNING, logger=component.__name__):
                 assert await component.sweep_once(server.app.state.accounts, expire=True) is False
         finally:
-            other.execute("ALTER TABLE gone RENAME TO account_sessions")
+            await asyncio.to_thread(other.execute, "ALTER TABLE gone RENAME TO account_sessions")
             other.close()
         said = [r for r in caplog.records if r.name == component.__name__]
         assert [r.levelno for r in said] == [logging.ERROR] and said[0].exc_info is not None
