@@ -6,6 +6,8 @@ async engine, so a fresh file and an old one both end at the current schema.
 
 from __future__ import annotations
 
+import logging
+import sqlite3
 from pathlib import Path
 
 import orjson
@@ -13,12 +15,15 @@ from alembic import command
 from alembic.config import Config
 from sqlalchemy import event
 from sqlalchemy.engine import Connection
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.ext.asyncio import AsyncEngine, async_sessionmaker, create_async_engine
 
 __all__ = [
     "JsonText",
     "UnstorableJson",
     "alembic_config",
+    "database_busy",
+    "log_failure",
     "make_engine",
     "make_sessionmaker",
     "migrate",
@@ -82,6 +87,27 @@ def make_engine(url: str) -> AsyncEngine:
             cursor.close()
 
     return engine
+
+
+def database_busy(exc: BaseException) -> bool:
+    """Whether ``exc`` is SQLite's "database is locked": another connection held the write lock
+    past the busy time-out (``make_engine``). Under a burst of writes (the event log's writer
+    taking the lock back again and again) a waiting writer can lose for that long; nothing of
+    its transaction was written, so a periodic job logs it in one line and tries again at its
+    next run instead of logging a traceback."""
+    orig = exc.orig if isinstance(exc, OperationalError) else exc
+    code = getattr(orig, "sqlite_errorcode", None) if isinstance(orig, sqlite3.Error) else None
+    return code is not None and code & 0xFF in (sqlite3.SQLITE_BUSY, sqlite3.SQLITE_LOCKED)
+
+
+def log_failure(logger: logging.Logger, exc: BaseException, message: str, *args: object) -> None:
+    """A periodic job's failure, the job trying again later: a busy database
+    (``database_busy``) in one warning line, anything else with its traceback."""
+    if database_busy(exc):
+        orig = getattr(exc, "orig", exc)
+        logger.warning(message + " (the database is busy: %s)", *args, orig)
+    else:
+        logger.error(message, *args, exc_info=exc)
 
 
 def make_sessionmaker(engine: AsyncEngine) -> async_sessionmaker:  # type: ignore[type-arg]

@@ -49,7 +49,7 @@ from backend.db.models import (
     TaskHistoryRow,
     TaskRow,
 )
-from backend.db.session import JsonText, UnstorableJson, unstorable
+from backend.db.session import JsonText, UnstorableJson, log_failure, unstorable
 from backend.site.offloop import off_loop
 from backend.tasks.model import FINAL_STATES, Task, TaskState
 from guidebot.service import Service
@@ -206,9 +206,12 @@ class DbStore(Service):
                 await self.prune_events(
                     before(self.retention_s), audit_older_than=before(self.audit_retention_s)
                 )
-            except Exception:
-                log.exception(
-                    "event log retention failed; trying again in %.0f s", self.prune_every_s
+            except Exception as exc:
+                log_failure(
+                    log,
+                    exc,
+                    "event log retention failed; trying again in %.0f s",
+                    self.prune_every_s,
                 )
 
     async def _run(self) -> None:
@@ -217,8 +220,8 @@ class DbStore(Service):
             self._wake.clear()
             try:
                 await self.flush()
-            except Exception:
-                log.exception("database write failed; retrying in 1 s")
+            except Exception as exc:  # the rows stay queued
+                log_failure(log, exc, "database write failed; retrying in 1 s")
                 await asyncio.sleep(1.0)
                 self._wake.set()
 

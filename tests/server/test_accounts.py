@@ -9,6 +9,7 @@ import contextlib
 import csv
 import io
 import logging
+import sqlite3
 import time
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -20,6 +21,7 @@ import websockets
 from click.testing import CliRunner
 from websockets.exceptions import ConnectionClosed
 
+from backend.accounts import component
 from backend.accounts.cli import users
 from backend.accounts.cookies import CSRF_HEADER, SESSION_COOKIE
 from backend.accounts.store import AccountStore
@@ -474,3 +476,65 @@ async def test_audit_rows_are_kept_their_own_days_not_the_event_log_s(tmp_path: 
         await srv.app.state.store.prune_events(time.time(), audit_older_than=None)
         kinds = [kind for kind, _ in await event_kinds(srv.app.state.store)]
         assert kinds[:2] == ["signed_in", "staff_action"]  # everything else went
+
+
+def holder(tmp_path: Path) -> sqlite3.Connection:
+    """A second real connection to the server's SQLite file. Its statements that wait for the
+    lock run in a thread: on the event loop they would stop the server's writer from finishing
+    the transaction they wait for."""
+    return sqlite3.connect(tmp_path / "guidebot.db", isolation_level=None, check_same_thread=False)
+
+
+async def test_the_session_sweep_waits_its_turn_while_another_writer_holds_sqlite(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A 30-minute soak on SQLite logged the sweep's "database is locked" as a traceback: the
+    event log's writer, in a burst of 1500 rows a second, held the write lock past the busy
+    time-out. A second real connection holds it here (BEGIN IMMEDIATE): the sweep says so in
+    one warning line, ends nothing, and the next one, the lock free, ends the expired session
+    and keeps the live one. (The server's own sweeper is held off: the test runs the sweeps.)"""
+    monkeypatch.setattr(component, "SWEEP_EVERY_S", 3600.0)
+    async with running_server(server_settings(tmp_path)) as server:
+        await make(server, "ada", Role.OPERATOR)
+        service = server.app.state.accounts
+        async with signed_in(server, "ada") as (live, _), signed_in(server, "ada") as (old, _):
+            kept = await service.session(live.cookies[SESSION_COOKIE])
+            ending = await service.session(old.cookies[SESSION_COOKIE])
+            assert kept is not None and ending is not None
+            await service.store.change_session(ending.digest, seen_at=-service.idle_s - 1)
+            both = {kept.digest, ending.digest}
+            other = holder(tmp_path)
+            await asyncio.to_thread(other.execute, "BEGIN IMMEDIATE")  # as a burst holds it
+            try:
+                with caplog.at_level(logging.WARNING, logger=component.__name__):
+                    assert await component.sweep_once(service, expire=True) is False
+            finally:
+                other.execute("ROLLBACK")
+                other.close()
+            said = [r for r in caplog.records if r.name == component.__name__]
+            assert [r.levelno for r in said] == [logging.WARNING]
+            assert said[0].exc_info is None and "database is busy" in said[0].getMessage()
+            assert await service.store.live_digests(both) == both
+            assert await component.sweep_once(service, expire=True) is True
+            assert await service.store.live_digests(both) == {kept.digest}
+            assert (await live.get("/api/session")).json()["signed_in"] is True
+
+
+async def test_a_sweep_failing_for_another_reason_still_logs_its_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Only a busy database is a one-line warning: a real fault (here the sessions' table gone)
+    keeps its traceback in the log."""
+    monkeypatch.setattr(component, "SWEEP_EVERY_S", 3600.0)
+    async with running_server(server_settings(tmp_path)) as server:
+        other = holder(tmp_path)
+        await asyncio.to_thread(other.execute, "ALTER TABLE account_sessions RENAME TO gone")
+        try:
+            with caplog.at_level(logging.WARNING, logger=component.__name__):
+                assert await component.sweep_once(server.app.state.accounts, expire=True) is False
+        finally:
+            await asyncio.to_thread(other.execute, "ALTER TABLE gone RENAME TO account_sessions")
+            other.close()
+        said = [r for r in caplog.records if r.name == component.__name__]
+        assert [r.levelno for r in said] == [logging.ERROR] and said[0].exc_info is not None
+        assert await component.sweep_once(server.app.state.accounts, expire=True) is True
