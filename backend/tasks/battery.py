@@ -8,6 +8,7 @@ from backend.tasks.desk import Desk
 from backend.tasks.model import Task, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
+from guidebot.payloads.robot import BatteryAlarm
 
 __all__ = ["BatteryAlarms"]
 
@@ -18,8 +19,8 @@ class BatteryAlarms:
     def __init__(self, manager: Desk) -> None:
         self.tm = manager
 
-    def on_battery_low(self, msg: Message) -> None:
-        robot = self.tm.robot_of(msg)
+    def on_battery_low(self, msg: Message, alarm: BatteryAlarm) -> None:
+        robot = self.tm.robot_of(msg, alarm.robot)
         if robot is None:
             return
         robot.needs_charge = True
@@ -28,8 +29,8 @@ class BatteryAlarms:
             self._stop(robot, current, "battery low")
         self.tm.dispatch()
 
-    def on_battery_panic(self, msg: Message) -> None:
-        robot = self.tm.robot_of(msg)
+    def on_battery_panic(self, msg: Message, alarm: BatteryAlarm) -> None:
+        robot = self.tm.robot_of(msg, alarm.robot)
         if robot is None:
             return
         robot.needs_charge = True

@@ -28,7 +28,8 @@ MAX_FINISHED_IN_MEMORY = 5000
 
 
 class TaskBook:
-    """The Task Manager's state; every change of a robot's task goes through here."""
+    """The Task Manager's state; every change of a robot's task goes through here.
+    ``tasks``, ``robots`` and ``queue`` are never replaced (the manager reads them as its own)."""
 
     def __init__(self, max_queued: int = 100_000, *, wall: Callable[[], float] = time.time) -> None:
         self.tasks: dict[str, Task] = {}

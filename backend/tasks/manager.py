@@ -54,7 +54,17 @@ from backend.tasks.watchdog import Watchdog
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
-from guidebot.payloads.tasks import RobotService, TaskAssigned, TaskCancel, TaskEvent
+from guidebot.payloads.robot import BatteryAlarm, RobotState
+from guidebot.payloads.tasks import (
+    RobotLink,
+    RobotService,
+    TaskAssigned,
+    TaskCancel,
+    TaskEnded,
+    TaskEvent,
+    TaskStarted,
+    TourProgress,
+)
 from guidebot.service import Service
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import site_languages
@@ -122,6 +132,10 @@ class TaskManager(Service):
         self.clock = clock
         self.book = TaskBook(max_queued)
         """Tasks, robots, the queue and the marks between them (backend/tasks/book.py)."""
+        # The book's own collections, to read (plain attributes: read in every estimate).
+        self.tasks: Mapping[str, Task] = self.book.tasks
+        self.robots: Mapping[str, RobotInfo] = self.book.robots
+        self.queue: TaskQueue = self.book.queue
         self._seq = itertools.count(1)
         self._dispatching = False
         self.paused = False
@@ -156,37 +170,20 @@ class TaskManager(Service):
         that would make it late, and waits at its meeting point."""
         self.load_site(site, self.graph)
 
-    @property
-    def tasks(self) -> Mapping[str, Task]:
-        """Tasks in memory by id (the book's: read only here)."""
-        return self.book.tasks
-
-    @property
-    def robots(self) -> Mapping[str, RobotInfo]:
-        """The site's robots by name (the book's)."""
-        return self.book.robots
-
-    @property
-    def queue(self) -> TaskQueue:
-        """The waiting tasks (the book's)."""
-        return self.book.queue
-
     # --- life cycle ----------------------------------------------------------------------
     async def on_start(self) -> None:
-        self.subscribe_all(
-            self.endpoint,
-            {
-                "task_request": self.hub_requests.on_task_request,
-                "task_started": self.reports.on_task_started,
-                "task_ended": self.reports.on_task_ended,
-                "tour_progress": self.reports.on_tour_progress,
-                "robot_state": self.presence.on_robot_state,
-                "robot_disconnected": self.presence.on_robot_disconnected,
-                "battery_low": self.battery.on_battery_low,
-                "battery_panic": self.battery.on_battery_panic,
-                "closures_changed": self._on_closures_changed,
-            },
-        )
+        ep = self.endpoint
+        # A task_request that is not one is answered (an error and the ack): the handler reads
+        # the payload model itself (message.typed) instead of having it dropped.
+        self.subscribe(ep, "task_request", self.hub_requests.on_task_request)
+        self.on(ep, TaskStarted, self.reports.on_task_started)
+        self.on(ep, TaskEnded, self.reports.on_task_ended)
+        self.on(ep, TourProgress, self.reports.on_tour_progress)
+        self.on(ep, RobotState, self.presence.on_robot_state)
+        self.on(ep, RobotLink, self.presence.on_robot_disconnected, types=["robot_disconnected"])
+        self.on(ep, BatteryAlarm, self.battery.on_battery_low, types=["battery_low"])
+        self.on(ep, BatteryAlarm, self.battery.on_battery_panic, types=["battery_panic"])
+        self.subscribe(ep, "closures_changed", self._on_closures_changed)  # news, no payload
         for unsubscribe in listen(self.endpoint, self.courier):
             self.on_cleanup(unsubscribe)
         self.on_cleanup(self._finish)
@@ -629,11 +626,10 @@ class TaskManager(Service):
         self.watchdog.check()
 
     # --- what the parts share --------------------------------------------------------------
-    def robot_of(self, msg: Message) -> RobotInfo | None:
-        """The robot a message is about (its payload's ``robot``); None if unknown, or if a
-        robot speaks for another one."""
-        name = msg.payload.get("robot")
-        if not isinstance(name, str) or name not in self.robots:
+    def robot_of(self, msg: Message, name: str) -> RobotInfo | None:
+        """The robot ``name`` a message (its payload's ``robot``) is about; None if unknown, or
+        if a robot speaks for another one."""
+        if name not in self.robots:
             return None
         if msg.source in self.robots and msg.source != name:
             return None  # a robot speaks only for itself

@@ -12,6 +12,8 @@ from backend.tasks.desk import Desk
 from backend.tasks.model import Task, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
+from guidebot.payloads.robot import RobotMode, RobotState
+from guidebot.payloads.tasks import RobotLink
 from guidebot.site.graph import SiteGraph
 
 if TYPE_CHECKING:
@@ -48,35 +50,33 @@ class Presence:
         self.tm = manager
         self.reports = reports
 
-    def on_robot_state(self, msg: Message) -> None:
+    def on_robot_state(self, msg: Message, p: RobotState) -> None:
         tm = self.tm
-        robot = tm.robot_of(msg)
+        robot = tm.robot_of(msg, p.robot)
         if robot is None:
             return
-        p = msg.payload
-        if p.get("mode") == "offline":
+        if p.mode is RobotMode.OFFLINE:
             self.lost(robot)
             return
         came_back = returned = not robot.online
         robot.online = True
         robot.offline_since = None
         robot.last_seen = tm.clock()
-        robot.mode = str(p.get("mode", "idle"))
+        robot.mode = p.mode.value
         moved = False
-        if isinstance(p.get("node"), str) and p["node"] in tm.graph:
-            moved = robot.node != p["node"]
-            robot.node = p["node"]
-        self.held_up(robot, p.get("navigation"))
+        if p.node is not None and p.node in tm.graph:
+            moved = robot.node != p.node
+            robot.node = p.node
+        self.held_up(robot, p.navigation)
         # A robot that does not know its floor yet (no site on board) is on its node's floor.
-        robot.floor = p.get("floor") or tm.graph.floor_of.get(robot.node or "") or robot.floor
-        battery = p.get("battery")
-        if isinstance(battery, int | float) and 0 <= battery <= 1:
-            robot.battery = float(battery)
+        robot.floor = p.floor or tm.graph.floor_of.get(robot.node or "") or robot.floor
+        if "battery" in p.model_fields_set:  # a state without it says nothing of the battery
+            robot.battery = p.battery
             learn_drain(robot, robot.battery, robot.mode, tm.clock())
             if robot.needs_charge and robot.battery >= 0.95:
                 robot.needs_charge = False
                 came_back = True  # available again: worth a dispatch
-        reported = p.get("task_id") or None
+        reported = p.task_id or None
         robot.reported_task = reported
         unrefused = robot.refused and reported in (None, robot.current)
         if unrefused:
@@ -84,12 +84,12 @@ class Presence:
         before = robot.current
         was_fault = robot.fault
         robot.fault = robot.mode == "fault"
-        self.reports.ended_in_state(robot, p.get("ended"))  # before a restored one is requeued
+        self.reports.ended_in_state(robot, p.ended)  # before a restored one is requeued
         self.reconcile(robot, reported)
         current = tm.book.current_of(robot)
-        if current is not None and current.kind == "tour" and isinstance(p.get("poi"), str):
+        if current is not None and current.kind == "tour" and p.poi is not None:
             if current.state is TaskState.RUNNING and reported == current.id:
-                tm.estimator.seen_at(current, p["poi"])  # its stop, after our restart
+                tm.estimator.seen_at(current, p.poi)  # its stop, after our restart
         if returned and current is not None and current.state is TaskState.ASSIGNED:
             if reported != current.id:
                 # Its link went before it acknowledged task_assigned (retries stop when a
@@ -149,11 +149,10 @@ class Presence:
             # for ever on a robot back in seconds (found by the soak).
             tm.requeue(ours, "the robot no longer runs it (its agent restarted)")
 
-    def on_robot_disconnected(self, msg: Message) -> None:
-        name = msg.payload.get("robot") or msg.payload.get("name")
-        robots = self.tm.book.robots
-        if isinstance(name, str) and name in robots:
-            self.lost(robots[name])
+    def on_robot_disconnected(self, msg: Message, link: RobotLink) -> None:
+        robot = self.tm.book.robots.get(link.robot)
+        if robot is not None:
+            self.lost(robot)
 
     def lost(self, robot: RobotInfo) -> None:
         """Off the network: it may still be running its task; after ``lost_grace_s`` the task

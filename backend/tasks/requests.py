@@ -66,7 +66,7 @@ class HubRequests:
             self._answer_when_written(msg, tm.event(known))
             return
         try:
-            req: TaskRequest = msg.payload_as(TaskRequest)
+            req = msg.typed(TaskRequest)  # validated once, at the hub (docs/messages.md)
             robot = msg.source if msg.source in tm.robots else None
             # A robot requests as itself; in-process modules (buttons, RGM) may name a requester.
             requester = msg.source if robot is not None else (req.requester or msg.source)
