@@ -8,18 +8,25 @@ Delivery rules (docs/protocol.md):
 
 Handlers are plain callables run inline by ``publish``: they must not block. A handler that
 raises is logged and skipped; it never breaks delivery to the others.
+
+Two ways to subscribe: by payload model, ``ep.on(RequestArea, handler)``, the handler getting
+``(message, payload)`` with ``payload`` a ``RequestArea`` (the one the message carries, typed
+once: guidebot/messages.py); or by type pattern, ``ep.subscribe("building_*", handler)``, the
+handler getting the message and reading ``message.payload`` as JSON (taps, wildcards, relays).
+A payload that is not its model never reaches a typed handler: it is logged and dropped.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
 
-from guidebot.messages import Message, Payload, make_message
+from guidebot.messages import Message, Payload, make_message, type_names
 from guidebot.queues import KeyedQueue
 from guidebot.routing import (
     Handler,
@@ -38,11 +45,40 @@ __all__ = [
     "Handler",
     "RequestTimeout",
     "Subscription",
+    "TypedHandler",
     "is_wildcard",
     "pattern_matches",
+    "typed_handler",
 ]
 
 log = logging.getLogger(__name__)
+
+M = TypeVar("M", bound=BaseModel)
+
+TypedHandler = Callable[[Message, M], object]
+"""A handler subscribed by payload model: the message and its payload as that model."""
+
+
+def typed_handler(model: type[M], handler: TypedHandler[M], where: str = "") -> Handler:
+    """The plain handler that gives ``handler`` the message's payload as ``model``; a payload
+    that is not one is logged (by ``where``, the subscriber) and never reaches ``handler``."""
+
+    def deliver(message: Message) -> None:
+        try:
+            payload = message.typed(model)
+        except ValidationError as exc:
+            log.warning(
+                "%s: dropped %r from %r: its payload is not a %s: %s",
+                where or handler,
+                message.type,
+                message.source,
+                model.__name__,
+                exc.errors()[:3],
+            )
+            return
+        handler(message, payload)
+
+    return deliver
 
 
 @contextlib.asynccontextmanager
@@ -83,6 +119,35 @@ class BusEndpoint:
     def subscribe(self, pattern: str, handler: Handler) -> Callable[[], None]:
         raise NotImplementedError
 
+    def on(
+        self,
+        model: type[M],
+        handler: TypedHandler[M],
+        *,
+        types: Iterable[str] | None = None,
+        **options: Any,
+    ) -> Callable[[], None]:
+        """Call ``handler(message, payload)`` for every message whose payload is ``model``;
+        returns the function that unsubscribes. Every type the model is registered for, or
+        the ``types`` given (``RobotLink``: only "robot_disconnected"). ``options`` go to
+        ``subscribe`` (``tap=True`` on the in-process bus)."""
+        names = type_names(model)
+        if types is not None:
+            wanted = tuple(types)
+            if not wanted or not set(wanted) <= set(names):
+                raise ValueError(f"{model.__name__} is the payload of {names}, not of {wanted}")
+            names = wanted
+        deliver = typed_handler(model, handler, self.name)
+        stops = [self.subscribe(name, deliver, **options) for name in names]
+        if len(stops) == 1:
+            return stops[0]
+
+        def unsubscribe() -> None:
+            for stop in stops:
+                stop()
+
+        return unsubscribe
+
     def publish(
         self,
         type: str | BaseModel,
@@ -104,7 +169,10 @@ class BusEndpoint:
     def send(self, message: Message) -> None:
         """Publish a ready-made message, stamped with this endpoint as its source."""
         if message.source != self.name:
+            typed = message.typed_or_none()
             message = message.model_copy(update={"source": self.name})
+            if typed is not None:
+                message.keep_typed(typed)
         self._transmit(message)
 
     def reply(self, request: Message, type: str | BaseModel, payload: Payload = None) -> Message:

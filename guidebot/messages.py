@@ -3,6 +3,12 @@
 Every message carries routing fields (type, source, destination, correlation id) and a free
 JSON payload. Payload models live in ``guidebot.payloads`` and are registered by type name so
 the hub can refuse unknown types and validate known ones.
+
+Typed once: a message carries its payload model next to the JSON dict, filled where the message
+enters (the hub validates a client's payload into its model, ``make_message`` keeps the model a
+component published) or, failing that, on the first ``typed()``. Handlers subscribed by model
+(``endpoint.on(Model, handler)``, guidebot/bus.py) get that one object; nobody validates twice.
+The model is shared by every handler of the message: read it, never change it.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ __all__ = [
     "payload_model",
     "register_payload",
     "type_name",
+    "type_names",
 ]
 
 ENVELOPE_VERSION = 1
@@ -45,6 +52,11 @@ class Message(BaseModel):
     """The envelope. ``payload`` is plain JSON; its schema is given by ``type``. Strict as the
     payloads are (``"version": true`` is not 1)."""
 
+    __slots__ = ("_typed",)
+    """The payload model, once known (``typed``): a slot, not a field or a pydantic private
+    attribute, so it costs nothing to build a message, is not encoded, is not compared by
+    ``==``, and a copy (``model_copy``) starts without it."""
+
     model_config = ConfigDict(extra="forbid", strict=True)
 
     type: str = Field(min_length=1, max_length=64, pattern=r"^[a-z][a-z0-9_.]*$")
@@ -56,15 +68,48 @@ class Message(BaseModel):
     version: int = ENVELOPE_VERSION
     payload: dict[str, Any] = Field(default_factory=dict)
 
-    def payload_as(self, model: builtins.type[M]) -> M:
-        """Validate the payload against a payload model."""
-        return model.model_validate(self.payload)
+    def typed(self, model: builtins.type[M]) -> M:
+        """The payload as ``model``: the one the message came with, else validated once and
+        kept (raises pydantic's ValidationError for a payload that is not a ``model``)."""
+        cached = _cached(self)
+        if type(cached) is model:
+            return cached  # type: ignore[return-value]  # checked by the line above
+        value = model.model_validate(self.payload)
+        _keep(self, value)
+        return value
+
+    payload_as = typed
+    """The older name of ``typed``."""
+
+    def typed_or_none(self) -> BaseModel | None:
+        """The payload model the message carries, if it is known yet."""
+        cached = _cached(self)
+        return cached if isinstance(cached, BaseModel) else None
+
+    def keep_typed(self, payload: BaseModel) -> None:
+        """Attach the model this message's payload was validated into (the hub, at the edge)."""
+        _keep(self, payload)
 
     def reply(self, type: str | BaseModel, payload: Payload = None, *, source: str = "") -> Message:
         """Build the reply to this message: addressed to its source, correlated by its id."""
         return make_message(
             type, payload, source=source, destination=self.source or None, correlation_id=self.id
         )
+
+
+_TYPED_SLOT = Message.__dict__["_typed"]
+"""The slot's own descriptor: an empty slot raises at once, without pydantic's __getattr__."""
+
+
+def _cached(message: Message) -> object:
+    try:
+        return _TYPED_SLOT.__get__(message)
+    except AttributeError:
+        return None
+
+
+def _keep(message: Message, payload: BaseModel) -> None:
+    _TYPED_SLOT.__set__(message, payload)
 
 
 class PayloadModel(BaseModel):
@@ -123,6 +168,15 @@ def known_types() -> frozenset[str]:
     return frozenset(_REGISTRY)
 
 
+def type_names(model: builtins.type[BaseModel]) -> tuple[str, ...]:
+    """Every message type a payload model is registered for (one, but BatteryAlarm has two)."""
+    _load_catalogue()
+    names = _TYPE_NAMES.get(model)
+    if not names:
+        raise TypeError(f"{model.__name__} is not a registered payload model")
+    return tuple(names)
+
+
 def _load_catalogue() -> None:
     # Imported lazily: the catalogue imports this module.
     import guidebot.payloads  # noqa: F401
@@ -158,20 +212,26 @@ def make_message(
     """The envelope for ``publish(RequestArea(...))`` or ``publish("request_area", {...})``.
 
     A payload model is validated where it is built, so a sender's mistake raises at the
-    sender; it travels as its JSON dict, as a dict payload would.
+    sender; it travels as its JSON dict, as a dict payload would, and as itself: in-process
+    handlers subscribed by model receive that very object (``Message.typed``).
     """
+    model: BaseModel | None = None
     if type(type_or_payload) is str and (payload is None or type(payload) is dict):
         # The common case, without pydantic's (ABC) isinstance checks.
         type_, body = type_or_payload, payload
     else:
         type_, body = _typed(type_or_payload, payload)
-    return Message(
+        model = type_or_payload if payload is None else payload  # type: ignore[assignment]
+    message = Message(
         type=type_,
         source=source,
         destination=destination,
         correlation_id=correlation_id,
         payload=body or {},
     )
+    if isinstance(model, BaseModel):
+        _keep(message, model)
+    return message
 
 
 def _typed(type_or_payload: str | BaseModel, payload: Payload) -> tuple[str, dict[str, Any]]:

@@ -22,6 +22,7 @@ __all__ = ["Service", "Startable", "cancel_and_wait"]
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
+M = TypeVar("M")
 
 
 class Startable(Protocol):
@@ -106,6 +107,13 @@ class Service:
     def subscribe(self, endpoint: Any, pattern: str, handler: Any, **options: Any) -> None:
         """``endpoint.subscribe(pattern, handler)``, unsubscribed on stop."""
         self._cleanup.callback(endpoint.subscribe(pattern, handler, **options))
+
+    def on(
+        self, endpoint: Any, model: type[M], handler: Callable[[Any, M], object], **options: Any
+    ) -> None:
+        """``endpoint.on(model, handler)``: ``handler(message, payload)`` gets the payload as
+        ``model`` (guidebot/bus.py); unsubscribed on stop."""
+        self._cleanup.callback(endpoint.on(model, handler, **options))
 
     def subscribe_all(self, endpoint: Any, handlers: Mapping[str, Any], **options: Any) -> None:
         """``subscribe`` for each pattern -> handler, in order."""

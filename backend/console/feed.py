@@ -20,6 +20,8 @@ from typing import Any, Protocol
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
 from guidebot.payloads.console import EventLogged, LockChanged
+from guidebot.payloads.petri import PetriNetEvent
+from guidebot.payloads.tasks import RobotLink
 from guidebot.service import Service
 
 __all__ = ["ConsoleFeed", "RunningNet"]
@@ -92,26 +94,14 @@ class ConsoleFeed(Service):
 
     async def on_start(self) -> None:
         self.lock_views = {v.area: lock_dict(v) for v in self.locks.lock_views()}
-        handlers: dict[str, Callable[[Message], None]] = {
-            "robot_disconnected": self._on_robot_disconnected,
-            "petri_net_event": self._on_net_event,
-        }
-        for pattern in {*LOCK_TRIGGERS, *handlers}:
-            handler = handlers.get(pattern)
-            self.subscribe(self.endpoint, pattern, self._make_handler(pattern, handler), tap=True)
+        ep = self.endpoint
+        self.on(ep, RobotLink, self._on_robot_disconnected, types=["robot_disconnected"], tap=True)
+        self.on(ep, PetriNetEvent, self._on_net_event, tap=True)
+        for pattern in LOCK_TRIGGERS:
+            self.subscribe(ep, pattern, self._on_lock_trigger, tap=True)
 
-    def _make_handler(
-        self, pattern: str, handler: Callable[[Message], None] | None
-    ) -> Callable[[Message], None]:
-        trigger = pattern in LOCK_TRIGGERS
-
-        def on_message(message: Message) -> None:
-            if handler is not None:
-                handler(message)
-            if trigger:
-                self.schedule_lock_diff()
-
-        return on_message
+    def _on_lock_trigger(self, message: Message) -> None:
+        self.schedule_lock_diff()
 
     # --- locks ------------------------------------------------------------------------
     def schedule_lock_diff(self) -> None:
@@ -131,28 +121,26 @@ class ConsoleFeed(Service):
             self.endpoint.publish(LockChanged(**now))
 
     # --- robots -----------------------------------------------------------------------
-    def _on_robot_disconnected(self, message: Message) -> None:
-        robot = str(message.payload.get("robot") or message.source)
+    def _on_robot_disconnected(self, message: Message, link: RobotLink) -> None:
+        robot = link.robot or message.source
         for key in [k for k in self.nets if k[0] == robot]:
             del self.nets[key]
 
     # --- Petri nets -----------------------------------------------------------------------
-    def _on_net_event(self, message: Message) -> None:
-        p = message.payload
+    def _on_net_event(self, message: Message, event: PetriNetEvent) -> None:
         target = message.source or "rgm"
-        key = (target, str(p.get("instance_id")))
-        kind = p.get("kind")
-        if kind == "ended":
+        key = (target, event.instance_id)
+        if event.kind == "ended":
             self.nets.pop(key, None)
             return
         net = self.nets.get(key)
         if net is None:
-            net = RunningNet(target, key[1], str(p.get("net")), time.time())
+            net = RunningNet(target, key[1], event.net, time.time())
             self.nets[key] = net
-        net.marking.update({str(k): int(v) for k, v in (p.get("marking") or {}).items()})
-        if kind == "fired" and p.get("transition"):
-            net.firings.append((str(p["transition"]), float(p.get("time") or 0.0)))
-        net.paused_at = str(p["transition"]) if kind == "paused" else None
+        net.marking.update(event.marking)
+        if event.kind == "fired" and event.transition:
+            net.firings.append((event.transition, event.time))
+        net.paused_at = event.transition if event.kind == "paused" else None
 
     def running_nets(self, target: str) -> list[dict[str, Any]]:
         return [n.as_dict() for (t, _), n in self.nets.items() if t == target]

@@ -474,10 +474,11 @@ class Hub:
         if model is None:
             model = self._models[type_] = payload_model(type_)
         try:
-            model.model_validate(message.payload)
+            payload = model.model_validate(message.payload)
         except ValidationError as exc:
             client.error("invalid_payload", _short(exc, "payload"), message.id)
             return
+        message.keep_typed(payload)  # typed once, here: handlers on(model) get this object
         refusal = publish_refusal(client.role, client.name, type_, message.payload)
         if refusal is not None:
             client.error(*refusal, message.id)

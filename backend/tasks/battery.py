@@ -4,14 +4,11 @@ for another robot first). An internal task (going home) just stops, a charge tas
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
+from backend.tasks.desk import Desk
 from backend.tasks.model import Task, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
-
-if TYPE_CHECKING:
-    from backend.tasks.manager import TaskManager
+from guidebot.payloads.robot import BatteryAlarm
 
 __all__ = ["BatteryAlarms"]
 
@@ -19,30 +16,30 @@ __all__ = ["BatteryAlarms"]
 class BatteryAlarms:
     """The Task Manager's handlers of battery_low and battery_panic."""
 
-    def __init__(self, manager: TaskManager) -> None:
+    def __init__(self, manager: Desk) -> None:
         self.tm = manager
 
-    def on_battery_low(self, msg: Message) -> None:
-        robot = self.tm.robot_of(msg)
+    def on_battery_low(self, msg: Message, alarm: BatteryAlarm) -> None:
+        robot = self.tm.robot_of(msg, alarm.robot)
         if robot is None:
             return
         robot.needs_charge = True
-        current = self.tm.current_of(robot)
+        current = self.tm.book.current_of(robot)
         if current is not None and current.internal and current.kind != "charge":
             self._stop(robot, current, "battery low")
         self.tm.dispatch()
 
-    def on_battery_panic(self, msg: Message) -> None:
-        robot = self.tm.robot_of(msg)
+    def on_battery_panic(self, msg: Message, alarm: BatteryAlarm) -> None:
+        robot = self.tm.robot_of(msg, alarm.robot)
         if robot is None:
             return
         robot.needs_charge = True
-        current = self.tm.current_of(robot)
+        current = self.tm.book.current_of(robot)
         if current is not None and current.kind != "charge":
             if current.internal:
                 self._stop(robot, current, "battery panic")
             else:
-                self.tm.rather_not.setdefault(current.id, set()).add(robot.name)
+                self.tm.book.rather_not(current.id, robot.name)
                 self.tm.requeue(current, "battery panic")
         self.tm.dispatch()
 
@@ -50,5 +47,5 @@ class BatteryAlarms:
         """An internal task ends here: cancelled on the robot and in the queue's books."""
         self.tm.send_cancel(robot.name, task.id, reason)
         task.move(TaskState.CANCELLED, reason=reason)
-        self.tm.set_current(robot, None)
+        self.tm.book.withdraw(task)
         self.tm.changed(task, "cancelled")

@@ -13,7 +13,8 @@ from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError, TaskState
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
-from guidebot.payloads.building import SetOutput
+from guidebot.payloads.building import BuildingInputChanged, SetOutput
+from guidebot.payloads.tasks import TaskEvent
 from guidebot.service import Service
 from guidebot.site.building import Button
 from guidebot.site.schema import Site
@@ -43,17 +44,16 @@ class ButtonWatcher(Service):
         self._by_id = {b.id: b for b in site.buttons}
 
     async def on_start(self) -> None:
-        self.subscribe(self.endpoint, "building_input_changed", self._on_input)
-        self.subscribe(self.endpoint, "task_event", self._on_task_event)
+        self.on(self.endpoint, BuildingInputChanged, self._on_input)
+        self.on(self.endpoint, TaskEvent, self._on_task_event)
         for task in self.tasks.tasks.values():  # live requests restored after a restart
             button = self._by_id.get(task.requester.removeprefix(REQUESTER_PREFIX))
             if task.requester.startswith(REQUESTER_PREFIX) and button and not task.final:
                 self._track(button, task.id)
 
-    def _on_input(self, msg: Message) -> None:
-        key = (str(msg.payload.get("module")), str(msg.payload.get("point")))
-        button = self._buttons.get(key)
-        if button is None or not msg.payload.get("value"):
+    def _on_input(self, _msg: Message, change: BuildingInputChanged) -> None:
+        button = self._buttons.get((change.module, change.point))
+        if button is None or not change.value:
             return
         waiting = self._waiting.get(button.id)
         if waiting is not None:
@@ -79,12 +79,11 @@ class ButtonWatcher(Service):
         self._lit[task_id] = button
         self._set_led(button, True)
 
-    def _on_task_event(self, msg: Message) -> None:
-        task_id = str(msg.payload.get("task_id"))
-        button = self._lit.get(task_id)
-        if button is None or msg.payload.get("state") not in FINAL:
+    def _on_task_event(self, _msg: Message, event: TaskEvent) -> None:
+        button = self._lit.get(event.task_id)
+        if button is None or event.state not in FINAL:
             return
-        del self._lit[task_id]
+        del self._lit[event.task_id]
         self._waiting.pop(button.id, None)
         self._set_led(button, False)
 

@@ -7,6 +7,8 @@ here; its parts each handle one kind of news and call back into it:
 - backend/tasks/presence.py: ``robot_state``, link loss, reconciliation after a restart;
 - backend/tasks/battery.py: ``battery_low`` and ``battery_panic``;
 - backend/tasks/watchdog.py: silent robots, lost robots' tasks, tasks nobody started;
+- backend/tasks/book.py: the state they share (tasks, robots, queue, the marks between them),
+  changed only through its operations;
 - backend/tasks/choice.py and targets.py: pure functions (which robot, where idle robots go,
   where a task starts, what its net is given).
 
@@ -23,13 +25,13 @@ from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 from backend.tasks.battery import BatteryAlarms
+from backend.tasks.book import TaskBook
 from backend.tasks.charging import can_finish, station_for
 from backend.tasks.choice import available, choose_robot, idle_errands
 from backend.tasks.eta import EtaEstimator
 from backend.tasks.handover import note_break, resumed_points
 from backend.tasks.lifts import LiftWait
 from backend.tasks.model import (
-    FINAL_STATES,
     Held,
     InvalidTask,
     QueueFull,
@@ -52,7 +54,17 @@ from backend.tasks.watchdog import Watchdog
 from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
-from guidebot.payloads.tasks import RobotService, TaskAssigned, TaskCancel, TaskEvent
+from guidebot.payloads.robot import BatteryAlarm, RobotState
+from guidebot.payloads.tasks import (
+    RobotLink,
+    RobotService,
+    TaskAssigned,
+    TaskCancel,
+    TaskEnded,
+    TaskEvent,
+    TaskStarted,
+    TourProgress,
+)
 from guidebot.service import Service
 from guidebot.site.graph import SiteGraph
 from guidebot.site.i18n import site_languages
@@ -62,7 +74,6 @@ from guidebot.task_kinds import KINDS, VISITOR_KINDS
 __all__ = ["TaskManager", "TaskStore"]
 
 NETS = {kind: spec.net for kind, spec in KINDS.items()}
-MAX_FINISHED_IN_MEMORY = 5000
 
 
 class TaskStore(Protocol):
@@ -119,31 +130,20 @@ class TaskManager(Service):
         reconnect to a restarted server and send what was not acknowledged before their state."""
         self.tick_s = tick_s
         self.clock = clock
-        self.tasks: dict[str, Task] = {}
-        self.queue = TaskQueue(max_queued)
-        self.robots: dict[str, RobotInfo] = {}
+        self.book = TaskBook(max_queued)
+        """Tasks, robots, the queue and the marks between them (backend/tasks/book.py)."""
+        # The book's own collections, to read (plain attributes: read in every estimate).
+        self.tasks: Mapping[str, Task] = self.book.tasks
+        self.robots: Mapping[str, RobotInfo] = self.book.robots
+        self.queue: TaskQueue = self.book.queue
         self._seq = itertools.count(1)
-        self._finished: list[str] = []
-        self.assigned_at: dict[str, float] = {}
-        """Task -> when it was assigned, until its robot starts it (watchdog)."""
-        self.unconfirmed: dict[str, float | None] = {}
-        """Tasks restored after a restart whose robot has not said it still runs them -> when
-        the robot first reported without it (None: not yet)."""
-        self._avoid: dict[str, set[str]] = {}
-        """Task -> robots it must not go to (staff reassigned it away from them)."""
-        self.rather_not: dict[str, set[str]] = {}
-        """Task -> robots it was taken from (lost, battery panic): used only if no other is free."""
         self._dispatching = False
         self.paused = False
         """Staff paused the fleet (set_paused): nothing is dispatched until they resume."""
         self._dispatch_again = False
-        self._idle: set[str] = set()
-        """Robots free for a main task as far as tasks go: nothing, or an internal task."""
         self.assign_times_ms: list[float] | None = None
         self._net_params: dict[tuple[str, tuple[tuple[str, Any], ...]], dict[str, Any]] = {}
         """(kind, params) -> what its net is given on this site (shared, never changed)."""
-        self.on_robot_since: dict[str, float] = {}
-        """Visitor task -> when (Unix seconds) its robot was given it: its touring time."""
         self.lifts = LiftWait()
         """The lifts' queue (set ``lifts.queue`` to read the Traffic Manager's) and turns."""
         self._lift_queued: tuple[float, int] | None = None
@@ -157,9 +157,9 @@ class TaskManager(Service):
         """task_assigned and task_cancel: sent again until the robot acknowledges them."""
         self.hub_requests = HubRequests(self)
         self.reports = TaskReports(self)
-        self.presence = Presence(self)
+        self.presence = Presence(self, self.reports)
         self.battery = BatteryAlarms(self)
-        self.watchdog = Watchdog(self)
+        self.watchdog = Watchdog(self, self.presence)
         self.trouble = TroubleWaits()
         """Visitors' tasks cut off only by trouble, queued until it lifts (trouble.py)."""
         self.hold: TaskHold | None = None
@@ -172,20 +172,18 @@ class TaskManager(Service):
 
     # --- life cycle ----------------------------------------------------------------------
     async def on_start(self) -> None:
-        self.subscribe_all(
-            self.endpoint,
-            {
-                "task_request": self.hub_requests.on_task_request,
-                "task_started": self.reports.on_task_started,
-                "task_ended": self.reports.on_task_ended,
-                "tour_progress": self.reports.on_tour_progress,
-                "robot_state": self.presence.on_robot_state,
-                "robot_disconnected": self.presence.on_robot_disconnected,
-                "battery_low": self.battery.on_battery_low,
-                "battery_panic": self.battery.on_battery_panic,
-                "closures_changed": self._on_closures_changed,
-            },
-        )
+        ep = self.endpoint
+        # A task_request that is not one is answered (an error and the ack): the handler reads
+        # the payload model itself (message.typed) instead of having it dropped.
+        self.subscribe(ep, "task_request", self.hub_requests.on_task_request)
+        self.on(ep, TaskStarted, self.reports.on_task_started)
+        self.on(ep, TaskEnded, self.reports.on_task_ended)
+        self.on(ep, TourProgress, self.reports.on_tour_progress)
+        self.on(ep, RobotState, self.presence.on_robot_state)
+        self.on(ep, RobotLink, self.presence.on_robot_disconnected, types=["robot_disconnected"])
+        self.on(ep, BatteryAlarm, self.battery.on_battery_low, types=["battery_low"])
+        self.on(ep, BatteryAlarm, self.battery.on_battery_panic, types=["battery_panic"])
+        self.subscribe(ep, "closures_changed", self._on_closures_changed)  # news, no payload
         for unsubscribe in listen(self.endpoint, self.courier):
             self.on_cleanup(unsubscribe)
         self.on_cleanup(self._finish)
@@ -216,8 +214,7 @@ class TaskManager(Service):
         for cfg in site.robots:
             info = self.robots.get(cfg.name)
             if info is None:
-                self.robots[cfg.name] = RobotInfo(cfg.name, cfg, node=cfg.start_node)
-                self._idle.add(cfg.name)
+                self.book.add_robot(RobotInfo(cfg.name, cfg, node=cfg.start_node))
             else:
                 info.config = cfg
         on_site = {cfg.name for cfg in site.robots}
@@ -225,13 +222,12 @@ class TaskManager(Service):
             info = self.robots[name]
             if info.current is not None:
                 self.requeue(self.tasks[info.current], "robot removed from the site")
-            del self.robots[name]
-            self._idle.discard(name)
+            self.book.remove_robot(name)
         for task in [t for t in self.queue.ordered()]:
             try:
                 self.target_of(task.kind, task.params)
             except TaskError as exc:
-                self.queue.remove(task.id)
+                self.book.withdraw(task)
                 task.move(TaskState.CANCELLED, reason=f"the site changed: {exc}")
                 self.changed(task, "cancelled")
         self.dispatch()
@@ -239,17 +235,14 @@ class TaskManager(Service):
     def restore(self, tasks: list[Task]) -> None:
         """After a restart: queued tasks queue again; running ones await their robot's word."""
         for task in sorted(tasks, key=lambda t: t.seq):
-            self.tasks[task.id] = task
             if task.state is TaskState.QUEUED:
-                self.queue.push(task)
-            elif task.robot in self.robots:
-                self.set_current(self.robots[task.robot], task.id)
-                self.unconfirmed[task.id] = None
-                self.assigned_at[task.id] = self.clock()
+                self.book.enqueue(task)
+                continue
+            self.book.add(task)
+            if (robot := self.robots.get(task.robot or "")) is not None:
+                self.book.restored(task, robot, self.clock())
             elif not task.final:
-                task.move(TaskState.QUEUED, reason="robot unknown after restart")
-                task.robot = None
-                self.queue.push(task)
+                self.book.requeue(task, "robot unknown after restart")
                 self.changed(task, "requeued")
         last = max((t.seq for t in tasks), default=0)
         self._seq = itertools.count(last + 1)
@@ -296,8 +289,7 @@ class TaskManager(Service):
             pinned_robot=robot,
             internal=internal,
         )
-        self.tasks[task.id] = task
-        self.queue.push(task)
+        self.book.enqueue(task)
         self.changed(task, "created")
         self.dispatch()
         return task
@@ -317,7 +309,6 @@ class TaskManager(Service):
         if task.final:
             raise TaskFinished(f"task {task_id} is already {task.state.value}")
         self._leave_robot(task, f"{reason} by {by}".strip())
-        self.queue.remove(task.id)
         task.cancelled_by = by_role
         task.move(TaskState.CANCELLED, reason=f"{reason} ({by})" if by else reason)
         self.changed(task, "cancelled")
@@ -331,7 +322,7 @@ class TaskManager(Service):
         task.priority = priority
         task.version += 1
         if task.state is TaskState.QUEUED:
-            self.queue.push(task)
+            self.book.enqueue(task)
         self.changed(task, "reprioritised")
         self.dispatch()
         return task
@@ -346,22 +337,18 @@ class TaskManager(Service):
             raise InvalidTask(f"unknown robot {robot!r}")
         old = task.robot
         if old is not None:
-            self._avoid.setdefault(task.id, set()).add(old)
+            self.book.avoid(task.id, old)
         task.pinned_robot = robot
         if robot is not None:
-            self._avoid.get(task.id, set()).discard(robot)
+            self.book.allow(task.id, robot)
         if task.state is TaskState.QUEUED:
             task.version += 1
-            self.queue.push(task)
+            self.book.enqueue(task)
             self.changed(task, "reassigned")
         else:
             self.requeue(task, f"reassigned by {by}".strip())
         self.dispatch()
         return task
-
-    def avoid(self, task_id: str, robot: str) -> None:
-        """``task_id`` never goes back to ``robot`` (unless staff name it)."""
-        self._avoid.setdefault(task_id, set()).add(robot)
 
     def set_out_of_service(self, name: str, out: bool, *, by: str = "") -> RobotInfo:
         """Take a robot out of service (its task goes back to the queue for another robot)
@@ -473,13 +460,14 @@ class TaskManager(Service):
         visitors' "available" service, backend/tasks/eta.py)."""
         robots = self.robots
         return any(
-            (r := robots.get(n)) is not None and r.online and self._available(r) for n in self._idle
+            (r := robots.get(n)) is not None and r.online and self._available(r)
+            for n in self.book.idle
         )
 
     def _assign_queued(self) -> None:
         robots = self.robots
         # ``online`` first: before its robots report, a fleet is idle but not available.
-        free = {n: r for n in self._idle if (r := robots[n]).online and self._available(r)}
+        free = {n: r for n in self.book.idle if (r := robots[n]).online and self._available(r)}
         if not free or not len(self.queue):
             return
         plan: list[tuple[Task, RobotInfo]] = []
@@ -513,8 +501,8 @@ class TaskManager(Service):
             task,
             free,
             lambda: self.graph.distances_to(first),
-            avoid=self._avoid.get(task.id, ()),
-            rather_not=self.rather_not.get(task.id, ()),
+            avoid=self.book.avoided(task.id),
+            rather_not=self.book.rather_not_robots(task.id),
             extra_cost=lambda robot: self.lift_wait_s(robot.node, first),
             fits=(
                 (lambda robot: can_finish(robot, self.estimator.task_s(task, robot.node)))
@@ -539,16 +527,10 @@ class TaskManager(Service):
                 self.send_cancel(robot.name, previous.id, "preempted by a main task")
                 previous.move(TaskState.CANCELLED, reason="preempted by a main task")
                 self.changed(previous, "cancelled")
-        self.queue.remove(task.id)
-        task.robot = robot.name
         task.net = NETS[task.kind]
         task.assigned_params = self._params_for_net(task)
         task.move(TaskState.ASSIGNED, reason="")
-        self.set_current(robot, task.id)
-        if not task.internal:
-            self.on_robot_since[task.id] = time.time()
-        self.assigned_at[task.id] = self.clock()
-        self.unconfirmed.pop(task.id, None)
+        self.book.give(task, robot, self.clock())
         self.send_assigned(task, robot)
         self.changed(task, "assigned")
 
@@ -591,7 +573,9 @@ class TaskManager(Service):
         # an errand now would be refused too, and a robot that refuses at once (in-process,
         # a VDA 5050 vehicle) would make dispatch loop for ever.
         idle = [
-            r for n in self._idle if (r := robots.get(n)) is not None and r.online and not r.refused
+            r
+            for n in self.book.idle
+            if (r := robots.get(n)) is not None and r.online and not r.refused
         ]
         if self.hold is not None:
             idle = [r for r in idle if not self.hold.holds(r)]
@@ -633,7 +617,7 @@ class TaskManager(Service):
             pinned_robot=robot.name,
             internal=True,
         )
-        self.tasks[task.id] = task
+        self.book.add(task)
         self.changed(task, "created")
         self._assign(task, robot)
 
@@ -642,11 +626,10 @@ class TaskManager(Service):
         self.watchdog.check()
 
     # --- what the parts share --------------------------------------------------------------
-    def robot_of(self, msg: Message) -> RobotInfo | None:
-        """The robot a message is about (its payload's ``robot``); None if unknown, or if a
-        robot speaks for another one."""
-        name = msg.payload.get("robot")
-        if not isinstance(name, str) or name not in self.robots:
+    def robot_of(self, msg: Message, name: str) -> RobotInfo | None:
+        """The robot ``name`` a message (its payload's ``robot``) is about; None if unknown, or
+        if a robot speaks for another one."""
+        if name not in self.robots:
             return None
         if msg.source in self.robots and msg.source != name:
             return None  # a robot speaks only for itself
@@ -654,10 +637,11 @@ class TaskManager(Service):
 
     def current_of(self, robot: RobotInfo) -> Task | None:
         """The task the robot holds (None: none, or one no longer in memory)."""
-        return self.tasks.get(robot.current) if robot.current else None
+        return self.book.current_of(robot)
 
     def requeue(self, task: Task, reason: str) -> None:
-        """Back to the queue in its old place (same priority and arrival order)."""
+        """Back to the queue in its old place (same priority and arrival order), its robot told
+        to stop it; an internal task, or one the site no longer has room for, is cancelled."""
         if task.internal:
             self._leave_robot(task, reason)
             task.move(TaskState.CANCELLED, reason=reason)
@@ -667,45 +651,25 @@ class TaskManager(Service):
             note_break(task, self.estimator, reason)  # a tour goes on from the visitor's stop
             if task.resume_from:  # its wait is foretold from there too (eta.py)
                 task.assigned_params = resumed_points(task.assigned_params, task.resume_from)
-        self._leave_robot(task, reason)
         try:
             self.target_of(task.kind, task.params)
         except TaskError as exc:  # the site changed under it: nothing to go back to
+            self._leave_robot(task, reason)
             task.move(TaskState.CANCELLED, reason=f"{reason}; the site changed: {exc}")
             self.changed(task, "cancelled")
             return
-        task.robot = None
-        task.move(TaskState.QUEUED, reason=reason)
-        self.queue.push(task)
+        self._tell_robot_to_stop(task, reason)
+        self.book.requeue(task, reason)
         self.changed(task, "requeued")
 
-    def count_touring(self, task: Task) -> None:
-        """``task`` leaves its robot (ended, taken away): its time there counts for the robot's
-        turn (backend/tasks/choice.py) and its utilisation."""
-        since = self.on_robot_since.pop(task.id, None)
-        robot = self.robots.get(task.robot or "")
-        if since is not None and robot is not None:
-            robot.touring_s += max(0.0, time.time() - since)
-
     def _leave_robot(self, task: Task, reason: str) -> None:
-        if task.robot is None:
-            return
-        self.count_touring(task)
-        robot = self.robots.get(task.robot)
-        if task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
-            self.send_cancel(task.robot, task.id, reason)
-        if robot is not None and robot.current == task.id:
-            self.set_current(robot, None)
-        self.assigned_at.pop(task.id, None)
-        self.unconfirmed.pop(task.id, None)
+        """Its robot is told to stop it; the book takes it off the robot and the queue."""
+        self._tell_robot_to_stop(task, reason)
+        self.book.withdraw(task)
 
-    def set_current(self, robot: RobotInfo, task_id: str | None) -> None:
-        robot.current = task_id
-        task = self.tasks.get(task_id) if task_id is not None else None
-        if task is None or task.internal:
-            self._idle.add(robot.name)
-        else:
-            self._idle.discard(robot.name)
+    def _tell_robot_to_stop(self, task: Task, reason: str) -> None:
+        if task.robot is not None and task.state in (TaskState.ASSIGNED, TaskState.RUNNING):
+            self.send_cancel(task.robot, task.id, reason)
 
     def send_cancel(self, robot: str, task_id: str, reason: str) -> None:
         # Replaces an unacknowledged task_assigned of this task (same key): the robot gets the
@@ -749,12 +713,6 @@ class TaskManager(Service):
         if self.store is not None:
             self.store.record(task, event)
         self.publish_event(task)
-        if task.state in FINAL_STATES:
-            self._avoid.pop(task.id, None)
+        if task.final:
             self.trouble.forget(task.id)
-            self.rather_not.pop(task.id, None)
-            self._finished.append(task.id)
-            if len(self._finished) > MAX_FINISHED_IN_MEMORY:
-                old = self._finished.pop(0)
-                if old in self.tasks and self.tasks[old].final:
-                    del self.tasks[old]
+        self.book.changed(task)

@@ -18,14 +18,17 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
+from backend.tasks.book import TaskBook
 from backend.tasks.model import Task, TaskState
+from guidebot.bus import BusEndpoint
 from guidebot.payloads.tasks import TaskEvent, VisitorService
 
 if TYPE_CHECKING:
-    from backend.tasks.manager import TaskManager
+    from backend.tasks.eta import EtaEstimator
 
 __all__ = ["DRIFT_MIN_S", "DRIFT_SHARE", "LIVE_QUEUE", "QueueNews"]
 
@@ -61,11 +64,23 @@ def _drifted(told: float | None, told_at: float, now_value: float | None, now: f
     return abs(now_value - countdown) > max(DRIFT_MIN_S, DRIFT_SHARE * now_value)
 
 
+class Newsroom(Protocol):
+    """What the news reads of the Task Manager (it writes nothing there)."""
+
+    book: TaskBook
+    clock: Callable[[], float]
+    endpoint: BusEndpoint
+    estimator: EtaEstimator
+
+    def event(self, task: Task) -> TaskEvent: ...
+    def queue_position(self, task: Task) -> int | None: ...
+
+
 class QueueNews:
     """Owned by the Task Manager: ``told`` after every task_event it publishes, ``changed``
     on news that may move waits, ``check`` on its clock."""
 
-    def __init__(self, manager: TaskManager) -> None:
+    def __init__(self, manager: Newsroom) -> None:
         self.tm = manager
         self._told: dict[str, _Told] = {}
         self._overall: _Told | None = None
@@ -108,7 +123,7 @@ class QueueNews:
         self._service(now)
         sent = 0
         for task in itertools.chain(
-            itertools.islice(tm.queue.head(), LIVE_QUEUE), self._on_robots()
+            itertools.islice(tm.book.queue.head(), LIVE_QUEUE), self._on_robots()
         ):
             if task.internal:
                 continue
@@ -118,7 +133,7 @@ class QueueNews:
                 self.told(event)
                 self._dirty = False
                 sent += 1
-        tasks = tm.tasks
+        tasks = tm.book.tasks
         for gone in [i for i in self._told if (t := tasks.get(i)) is None or t.final]:
             del self._told[gone]
         return sent
@@ -126,7 +141,8 @@ class QueueNews:
     def _on_robots(self) -> list[Task]:
         """Tasks on a robot that has not reached their first stop (arrival still counts)."""
         tm = self.tm
-        on = (tm.tasks.get(r.current) for r in tm.robots.values() if r.current is not None)
+        book = tm.book
+        on = (book.tasks.get(r.current) for r in book.robots.values() if r.current is not None)
         return [
             t
             for t in on

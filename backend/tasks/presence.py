@@ -5,15 +5,21 @@ its reported task with the one we gave it after a reconnect or a restart (docs/s
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from backend.tasks.charging import learn_drain
-from backend.tasks.model import TaskState
+from backend.tasks.desk import Desk
+from backend.tasks.model import Task, TaskState
 from backend.tasks.robots import RobotInfo
 from guidebot.messages import Message
+from guidebot.payloads.robot import RobotMode, RobotState
+from guidebot.payloads.tasks import RobotLink
+from guidebot.site.graph import SiteGraph
 
 if TYPE_CHECKING:
-    from backend.tasks.manager import TaskManager
+    from backend.tasks.eta import EtaEstimator
+    from backend.tasks.news import QueueNews
+    from backend.tasks.reports import TaskReports
 
 __all__ = ["Presence"]
 
@@ -26,41 +32,51 @@ WAITING = frozenset({"waiting_door", "waiting_area"})
 HELD_UP_AFTER_S = 20.0
 
 
+class PresenceDesk(Desk, Protocol):
+    """What presence needs of the manager beyond ``Desk``."""
+
+    graph: SiteGraph
+    estimator: EtaEstimator
+    news: QueueNews
+    report_grace_s: float
+
+    def send_assigned(self, task: Task, robot: RobotInfo) -> None: ...
+
+
 class Presence:
     """The Task Manager's handlers of robot_state and robot_disconnected."""
 
-    def __init__(self, manager: TaskManager) -> None:
+    def __init__(self, manager: PresenceDesk, reports: TaskReports) -> None:
         self.tm = manager
+        self.reports = reports
 
-    def on_robot_state(self, msg: Message) -> None:
+    def on_robot_state(self, msg: Message, p: RobotState) -> None:
         tm = self.tm
-        robot = tm.robot_of(msg)
+        robot = tm.robot_of(msg, p.robot)
         if robot is None:
             return
-        p = msg.payload
-        if p.get("mode") == "offline":
+        if p.mode is RobotMode.OFFLINE:
             self.lost(robot)
             return
         came_back = returned = not robot.online
         robot.online = True
         robot.offline_since = None
         robot.last_seen = tm.clock()
-        robot.mode = str(p.get("mode", "idle"))
+        robot.mode = p.mode.value
         moved = False
-        if isinstance(p.get("node"), str) and p["node"] in tm.graph:
-            moved = robot.node != p["node"]
-            robot.node = p["node"]
-        self.held_up(robot, p.get("navigation"))
+        if p.node is not None and p.node in tm.graph:
+            moved = robot.node != p.node
+            robot.node = p.node
+        self.held_up(robot, p.navigation)
         # A robot that does not know its floor yet (no site on board) is on its node's floor.
-        robot.floor = p.get("floor") or tm.graph.floor_of.get(robot.node or "") or robot.floor
-        battery = p.get("battery")
-        if isinstance(battery, int | float) and 0 <= battery <= 1:
-            robot.battery = float(battery)
+        robot.floor = p.floor or tm.graph.floor_of.get(robot.node or "") or robot.floor
+        if "battery" in p.model_fields_set:  # a state without it says nothing of the battery
+            robot.battery = p.battery
             learn_drain(robot, robot.battery, robot.mode, tm.clock())
             if robot.needs_charge and robot.battery >= 0.95:
                 robot.needs_charge = False
                 came_back = True  # available again: worth a dispatch
-        reported = p.get("task_id") or None
+        reported = p.task_id or None
         robot.reported_task = reported
         unrefused = robot.refused and reported in (None, robot.current)
         if unrefused:
@@ -68,12 +84,12 @@ class Presence:
         before = robot.current
         was_fault = robot.fault
         robot.fault = robot.mode == "fault"
-        tm.reports.ended_in_state(robot, p.get("ended"))  # before a restored task is requeued
+        self.reports.ended_in_state(robot, p.ended)  # before a restored one is requeued
         self.reconcile(robot, reported)
-        current = tm.current_of(robot)
-        if current is not None and current.kind == "tour" and isinstance(p.get("poi"), str):
+        current = tm.book.current_of(robot)
+        if current is not None and current.kind == "tour" and p.poi is not None:
             if current.state is TaskState.RUNNING and reported == current.id:
-                tm.estimator.seen_at(current, p["poi"])  # its stop, after our restart
+                tm.estimator.seen_at(current, p.poi)  # its stop, after our restart
         if returned and current is not None and current.state is TaskState.ASSIGNED:
             if reported != current.id:
                 # Its link went before it acknowledged task_assigned (retries stop when a
@@ -81,7 +97,7 @@ class Presence:
                 log.info("%s is back without task %s: sent again", robot.name, current.id)
                 tm.send_assigned(current, robot)
         if robot.fault and not was_fault and robot.current is not None:
-            tm.requeue(tm.tasks[robot.current], "robot fault")
+            tm.requeue(tm.book.tasks[robot.current], "robot fault")
         # robot_state comes at a steady rate from every robot: re-plan only on news.
         released = robot.current is None and before is not None
         news = came_back or was_fault != robot.fault or released or unrefused
@@ -108,9 +124,10 @@ class Presence:
     def reconcile(self, robot: RobotInfo, reported: str | None) -> None:
         """Match what the robot says it runs with what we gave it."""
         tm = self.tm
-        ours = tm.current_of(robot)
+        book = tm.book
+        ours = book.current_of(robot)
         if reported is not None and (ours is None or ours.id != reported):
-            task = tm.tasks.get(reported)
+            task = book.tasks.get(reported)
             if task is None or task.robot != robot.name or task.final:
                 tm.send_cancel(robot.name, reported, "not assigned to you")
         if ours is None or ours.final:
@@ -119,17 +136,12 @@ class Presence:
             if ours.state is TaskState.ASSIGNED:
                 ours.move(TaskState.RUNNING, reason="reported by the robot")
                 tm.changed(ours, "started")
-            tm.unconfirmed.pop(ours.id, None)
-        elif ours.id in tm.unconfirmed:
+            book.started(ours.id)
+        elif (waited := book.unconfirmed_for(ours.id, tm.clock())) is not None:
             # Restarted server or new leader: the robot no longer runs it, or it ended it and
             # its task_ended, sent while no server decided, comes again on the link's back-off,
             # after this robot_state. Requeued once that has had time to come.
-            now = tm.clock()
-            since = tm.unconfirmed[ours.id]
-            if since is None:
-                tm.unconfirmed[ours.id] = since = now
-            if now - since >= tm.report_grace_s:
-                tm.unconfirmed.pop(ours.id, None)
+            if waited >= tm.report_grace_s:
                 tm.requeue(ours, "the robot no longer runs it")
         elif ours.state is TaskState.RUNNING:
             # It started it (task_started came first on the same link) and now runs something
@@ -137,10 +149,10 @@ class Presence:
             # for ever on a robot back in seconds (found by the soak).
             tm.requeue(ours, "the robot no longer runs it (its agent restarted)")
 
-    def on_robot_disconnected(self, msg: Message) -> None:
-        name = msg.payload.get("robot") or msg.payload.get("name")
-        if isinstance(name, str) and name in self.tm.robots:
-            self.lost(self.tm.robots[name])
+    def on_robot_disconnected(self, msg: Message, link: RobotLink) -> None:
+        robot = self.tm.book.robots.get(link.robot)
+        if robot is not None:
+            self.lost(robot)
 
     def lost(self, robot: RobotInfo) -> None:
         """Off the network: it may still be running its task; after ``lost_grace_s`` the task

@@ -9,40 +9,58 @@ from __future__ import annotations
 import logging
 import re
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Protocol
 
-from pydantic import ValidationError
-
+from backend.tasks.desk import Desk
 from backend.tasks.handover import arrived
 from backend.tasks.model import Task, TaskError, TaskState
 from backend.tasks.robots import RobotInfo
+from backend.tasks.trouble import TroubleWaits
+from guidebot.delivery import Courier
 from guidebot.messages import Message
-from guidebot.payloads.robot import ENDED_REPORTED
-from guidebot.payloads.tasks import TourProgress
+from guidebot.payloads.robot import ENDED_REPORTED, EndedTask
+from guidebot.payloads.tasks import TaskEnded, TaskStarted, TourProgress
+from guidebot.site.graph import SiteGraph
 
 if TYPE_CHECKING:
-    from backend.tasks.manager import TaskManager
+    from backend.tasks.eta import EtaEstimator
+    from backend.tasks.manager import TaskStore
 
 __all__ = ["TaskReports"]
 
 log = logging.getLogger(__name__)
 
 _ENDED = {"done": TaskState.DONE, "failed": TaskState.FAILED}
+"""A task_ended outcome -> the task's final state (anything else: cancelled)."""
 BROKE = re.compile(r"\bbase fault\b")
 """A failure reason that says the robot broke, not the task: its task goes to another robot."""
-"""A task_ended outcome -> the task's final state (anything else: cancelled)."""
+
+
+class ReportsDesk(Desk, Protocol):
+    """What the report handlers need of the manager beyond ``Desk``."""
+
+    graph: SiteGraph
+    estimator: EtaEstimator
+    courier: Courier
+    store: TaskStore | None
+    trouble: TroubleWaits
+
+    def closed_now(self) -> Mapping[str, object]: ...
+    def target_of(self, kind: str, params: dict[str, Any]) -> str: ...
+    def publish_event(self, task: Task) -> None: ...
 
 
 class TaskReports:
     """The Task Manager's handlers of what robots say about their tasks."""
 
-    def __init__(self, manager: TaskManager) -> None:
+    def __init__(self, manager: ReportsDesk) -> None:
         self.tm = manager
 
-    def on_task_started(self, msg: Message) -> None:
+    def on_task_started(self, msg: Message, started: TaskStarted) -> None:
         tm = self.tm
-        robot = tm.robot_of(msg)
-        task = tm.tasks.get(str(msg.payload.get("task_id")))
+        robot = tm.robot_of(msg, started.robot)
+        task = tm.book.tasks.get(started.task_id)
         if robot is None or task is None:
             return
         if task.robot != robot.name or task.final:
@@ -53,29 +71,29 @@ class TaskReports:
         tm.courier.withdraw(("task", task.id, robot.name))
         if task.state is TaskState.ASSIGNED:
             task.move(TaskState.RUNNING)
-            tm.unconfirmed.pop(task.id, None)
+            tm.book.started(task.id)
             tm.changed(task, "started")
 
-    def on_task_ended(self, msg: Message) -> None:
+    def on_task_ended(self, msg: Message, ended: TaskEnded) -> None:
         tm = self.tm
-        robot = tm.robot_of(msg)
-        task = tm.tasks.get(str(msg.payload.get("task_id")))
+        robot = tm.robot_of(msg, ended.robot)
+        task = tm.book.tasks.get(ended.task_id)
         if robot is None or task is None or task.robot != robot.name:
             return
         tm.courier.withdraw(("task", task.id, robot.name))
         if task.final:
             return
-        if msg.payload.get("outcome") == "refused":
-            self._refused(robot, task, str(msg.payload.get("reason") or "busy"))
+        if ended.outcome == "refused":
+            self._refused(robot, task, ended.reason or "busy")
             return
-        self.end(robot, task, msg.payload.get("outcome", "done"), msg.payload.get("reason"))
+        self.end(robot, task, ended.outcome, ended.reason)
 
-    def end(self, robot: RobotInfo, task: Task, outcome: object, reason: object) -> None:
+    def end(self, robot: RobotInfo, task: Task, outcome: str, reason: str) -> None:
         """``robot`` ended ``task`` (not final, its own) with ``outcome``: from its task_ended,
         or from the ``ended`` list of its robot_state when that task_ended was lost."""
         tm = self.tm
-        state = _ENDED.get(str(outcome), TaskState.CANCELLED)
-        reason = str(reason or "").strip()
+        state = _ENDED.get(outcome, TaskState.CANCELLED)
+        reason = reason.strip()
         if state is TaskState.FAILED and not reason:
             reason = f"{robot.name} reported the task failed without saying why"
         if state is TaskState.FAILED and not task.internal and BROKE.search(reason):
@@ -83,7 +101,7 @@ class TaskReports:
             # takes it up, a tour from the visitor's stop (backend/tasks/handover.py).
             # Never back to it: its own report of this failure (robot_state ``ended``) would
             # end the task again each time (the soak saw 58 000 requeues in a loop).
-            tm.avoid(task.id, robot.name)
+            tm.book.avoid(task.id, robot.name)
             tm.requeue(task, f"{robot.name} broke down: {reason}")
             tm.dispatch()
             return
@@ -94,9 +112,7 @@ class TaskReports:
         ):
             return
         task.move(state, reason=reason)
-        tm.count_touring(task)
-        if robot.current == task.id:
-            tm.set_current(robot, None)
+        tm.book.withdraw(task)
         if task.kind == "charge" and state is TaskState.DONE:
             robot.needs_charge = False
         if task.kind == "go_to" and state is TaskState.DONE:
@@ -132,42 +148,34 @@ class TaskReports:
         tm.dispatch()
         return True
 
-    def ended_in_state(self, robot: RobotInfo, ended: object) -> None:
+    def ended_in_state(self, robot: RobotInfo, ended: Sequence[EndedTask]) -> None:
         """The tasks a robot_state says ended: one still the robot's here ends as if its
         task_ended had come (docs/server.md, "After a restart")."""
-        if not isinstance(ended, list):
-            return
         tm = self.tm
         for item in ended[:ENDED_REPORTED]:
-            if not isinstance(item, dict):
-                continue
-            task = tm.tasks.get(str(item.get("task_id")))
+            task = tm.book.tasks.get(item.task_id)
             if task is None or task.final or task.robot != robot.name:
                 continue
             log.info("%s: task %s ended by the robot's own state", robot.name, task.id)
             tm.courier.withdraw(("task", task.id, robot.name))
-            self.end(robot, task, item.get("outcome"), item.get("reason"))
+            self.end(robot, task, item.outcome, item.reason)
 
     def _refused(self, robot: RobotInfo, task: Task, reason: str) -> None:
         """Back to the queue, another robot preferred; this one waits for its next robot_state
         (which reconciles what it runs) before it gets a task again."""
         tm = self.tm
         robot.refused = True
-        tm.rather_not.setdefault(task.id, set()).add(robot.name)
+        tm.book.rather_not(task.id, robot.name)
         tm.requeue(task, f"{robot.name} refused it: {reason}")
         tm.dispatch()
 
-    def on_tour_progress(self, msg: Message) -> None:
+    def on_tour_progress(self, msg: Message, p: TourProgress) -> None:
         """A point reached, explained or skipped: into the task's history, refined estimate to
         all (a skipped point's reason goes to the visitor in the task's progress)."""
         tm = self.tm
-        robot = tm.robot_of(msg)
-        task = tm.tasks.get(str(msg.payload.get("task_id")))
+        robot = tm.robot_of(msg, p.robot)
+        task = tm.book.tasks.get(p.task_id)
         if robot is None or task is None or task.robot != robot.name or task.final:
-            return
-        try:
-            p = msg.payload_as(TourProgress)
-        except ValidationError:
             return
         tm.estimator.progress(task, p.index, p.stage, p.poi, p.reason)
         if tm.store is not None:

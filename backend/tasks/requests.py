@@ -8,19 +8,21 @@ import asyncio
 import contextlib
 import logging
 from collections import OrderedDict
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any, Protocol
 
 from pydantic import ValidationError
 
-from backend.tasks.model import TaskError
+from backend.tasks.model import Task, TaskError
+from backend.tasks.robots import RobotInfo
+from guidebot.bus import BusEndpoint
 from guidebot.delivery import ack_for
 from guidebot.messages import Message
 from guidebot.payloads.hub import Error
 from guidebot.payloads.tasks import TaskEvent, TaskRequest
 
 if TYPE_CHECKING:
-    from backend.tasks.manager import TaskManager
+    from backend.tasks.manager import TaskStore
 
 __all__ = ["MAX_REMEMBERED_REQUESTS", "HubRequests"]
 
@@ -29,10 +31,26 @@ log = logging.getLogger(__name__)
 MAX_REMEMBERED_REQUESTS = 4096
 
 
+class RequestDesk(Protocol):
+    """What the ``task_request`` handler needs of the manager: it writes no state itself."""
+
+    endpoint: BusEndpoint
+    store: TaskStore | None
+
+    @property
+    def tasks(self) -> Mapping[str, Task]: ...
+    @property
+    def robots(self) -> Mapping[str, RobotInfo]: ...
+    def event(self, task: Task) -> TaskEvent: ...
+    def request(
+        self, kind: str, params: dict[str, Any], *, priority: int, requester: str, robot: str | None
+    ) -> Task: ...
+
+
 class HubRequests:
     """The Task Manager's ``task_request`` handler and the answers still waiting for a write."""
 
-    def __init__(self, manager: TaskManager) -> None:
+    def __init__(self, manager: RequestDesk) -> None:
         self.tm = manager
         self._requests: OrderedDict[tuple[str, str], str] = OrderedDict()
         """(requester, message id) of hub task_requests -> their task: a repeat is not new."""
@@ -48,7 +66,7 @@ class HubRequests:
             self._answer_when_written(msg, tm.event(known))
             return
         try:
-            req: TaskRequest = msg.payload_as(TaskRequest)
+            req = msg.typed(TaskRequest)  # validated once, at the hub (docs/messages.md)
             robot = msg.source if msg.source in tm.robots else None
             # A robot requests as itself; in-process modules (buttons, RGM) may name a requester.
             requester = msg.source if robot is not None else (req.requester or msg.source)

@@ -6,23 +6,35 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
+from backend.tasks.desk import Desk
 from backend.tasks.model import TaskState
 
 if TYPE_CHECKING:
-    from backend.tasks.manager import TaskManager
+    from backend.tasks.news import QueueNews
+    from backend.tasks.presence import Presence
 
 __all__ = ["Watchdog"]
 
 log = logging.getLogger(__name__)
 
 
+class WatchedDesk(Desk, Protocol):
+    """What the watchdog needs of the manager beyond ``Desk``: its time-outs and news."""
+
+    robot_timeout_s: float
+    lost_grace_s: float
+    start_timeout_s: float
+    news: QueueNews
+
+
 class Watchdog:
     """``check`` runs every ``tick_s`` (``run``), or whenever a test driving the clock says."""
 
-    def __init__(self, manager: TaskManager) -> None:
+    def __init__(self, manager: WatchedDesk, presence: Presence) -> None:
         self.tm = manager
+        self.presence = presence
 
     async def run(self, tick_s: float) -> None:
         while True:
@@ -34,29 +46,28 @@ class Watchdog:
 
     def check(self) -> None:
         tm = self.tm
+        book = tm.book
         now = tm.clock()
-        for robot in tm.robots.values():
+        for robot in book.robots.values():
             if robot.online and robot.last_seen is not None:
                 if now - robot.last_seen > tm.robot_timeout_s:
-                    tm.presence.lost(robot)
+                    self.presence.lost(robot)
             if not robot.online and robot.current is not None:
                 since = robot.offline_since if robot.offline_since is not None else now
                 if robot.offline_since is None:
                     robot.offline_since = now
                 if now - since > tm.lost_grace_s:
-                    lost = tm.tasks[robot.current]
-                    tm.rather_not.setdefault(lost.id, set()).add(robot.name)
+                    lost = book.tasks[robot.current]
+                    book.rather_not(lost.id, robot.name)
                     tm.requeue(lost, "robot lost")
-        for task_id, at in list(tm.assigned_at.items()):
-            task = tm.tasks.get(task_id)
-            if task is None or task.state is not TaskState.ASSIGNED:
-                tm.assigned_at.pop(task_id, None)
-                continue
-            holder = tm.robots.get(task.robot or "")
+        for task, at in book.unstarted():
+            if task.state is not TaskState.ASSIGNED:
+                continue  # moved on since the snapshot
+            holder = book.robots.get(task.robot or "")
             if holder is not None and holder.online and now - at > tm.start_timeout_s:
                 if task.internal:
                     task.move(TaskState.FAILED, reason="the robot did not start it")
-                    tm.set_current(holder, None)
+                    book.withdraw(task)
                     tm.changed(task, "failed")
                 else:
                     tm.requeue(task, "the robot did not start it")
