@@ -118,6 +118,7 @@ class ServerBrain(Service):
             graph=graph,
             store=store,
             report_grace_s=REPORT_GRACE_S if settings.broker_url else 0.0,
+            alerts=alerts,
         )
         # Elevator-aware dispatch: the lifts' queue as the Traffic Manager's locks hold it.
         tasks.lifts.queue = lift_queue(traffic.lock_views, lambda: traffic.graph)

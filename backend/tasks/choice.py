@@ -134,12 +134,15 @@ def idle_errands(
     site: Site,
     distances_to: Callable[[str], Distances],
     has_work: Callable[[RobotInfo], bool],
+    barred: Callable[[RobotInfo, str], bool] | None = None,
 ) -> list[Errand]:
     """Where the ``idle`` robots (free as far as tasks go) go: charge if they must, else a
     free charging station, else the nearest wait point; nowhere if already at one, or if
     ``has_work`` (a queued task it can take). ``charging_at``: stations a charge task holds.
     Stations go to the emptiest robots first (those that must charge, then by battery), and a
-    robot at a wait point below ``OPPORTUNISTIC_BELOW`` goes to a station that is free."""
+    robot at a wait point below ``OPPORTUNISTIC_BELOW`` goes to a station that is free.
+    ``barred(robot, node)``: an errand of that robot to that node failed and nothing changed
+    since (backend/tasks/blocked.py): it is not sent there."""
     candidates = sorted(
         (
             r
@@ -155,25 +158,26 @@ def idle_errands(
     taken |= {at[r.node] for r in fleet if r.node in at}
     wait_nodes = {w.node for w in site.wait_points}
     free_stations = [s for s in site.charging_stations if s.id not in taken]
+    bar = barred or (lambda _robot, _node: False)
     errands: list[Errand] = []
     for robot in candidates:
         if has_work(robot):
             continue
         if robot.node in at:
-            if robot.needs_charge and robot.mode != "charging":
+            if robot.needs_charge and robot.mode != "charging" and not bar(robot, robot.node):
                 errands.append((robot, "charge", {"station": at[robot.node]}))
             continue
+        open_stations = [s for s in free_stations if s.id not in taken and not bar(robot, s.node)]
         if robot.node in wait_nodes and not robot.needs_charge:
-            if robot.battery >= OPPORTUNISTIC_BELOW or not any(
-                s.id not in taken for s in free_stations
-            ):
+            if robot.battery >= OPPORTUNISTIC_BELOW or not open_stations:
                 continue
-        station = nearest(robot.node, [s for s in free_stations if s.id not in taken], distances_to)
+        station = nearest(robot.node, open_stations, distances_to)
         if station is not None:
             taken.add(station.id)
             errands.append((robot, "charge", {"station": station.id}))
         elif not robot.needs_charge:
-            wait = nearest(robot.node, site.wait_points, distances_to)
-            if wait is not None:
+            waits = [w for w in site.wait_points if not bar(robot, w.node)]
+            wait = nearest(robot.node, waits, distances_to)
+            if wait is not None and wait.node != robot.node:
                 errands.append((robot, "go_to", {"node": wait.node}))
     return errands

@@ -24,7 +24,9 @@ import uuid
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+from backend.alerts import AlertStore
 from backend.tasks.battery import BatteryAlarms
+from backend.tasks.blocked import BlockedErrands
 from backend.tasks.book import TaskBook
 from backend.tasks.charging import can_finish, station_for
 from backend.tasks.choice import available, choose_robot, idle_errands
@@ -74,6 +76,8 @@ from guidebot.task_kinds import KINDS, VISITOR_KINDS
 __all__ = ["TaskManager", "TaskStore"]
 
 NETS = {kind: spec.net for kind, spec in KINDS.items()}
+CHARGE_UNREACHABLE = "charge_unreachable"
+"""The alert kind (subject: the robot) of a robot whose way to a charger is blocked."""
 
 
 class TaskStore(Protocol):
@@ -115,6 +119,7 @@ class TaskManager(Service):
         tick_s: float | None = 0.5,
         max_queued: int = 100_000,
         clock: Callable[[], float] = time.monotonic,
+        alerts: AlertStore | None = None,
     ) -> None:
         super().__init__()
         self.endpoint = endpoint
@@ -162,6 +167,11 @@ class TaskManager(Service):
         self.watchdog = Watchdog(self, self.presence)
         self.trouble = TroubleWaits()
         """Visitors' tasks cut off only by trouble, queued until it lifts (trouble.py)."""
+        self.blocked = BlockedErrands()
+        """Idle robots' errands that failed, not made again until something changes
+        (blocked.py)."""
+        self.alerts = alerts
+        """Staff alerts (backend/alerts.py): a robot that cannot reach a charger."""
         self.hold: TaskHold | None = None
         """The fire alarm's hold (backend.emergency): no task for the robots it holds, no
         new request while it lasts."""
@@ -589,6 +599,8 @@ class TaskManager(Service):
             for r in self.robots.values()
             if (t := self.current_of(r)) is not None and t.kind == "charge"
         ]
+        closed = self.closed_now()
+        now = self.clock()
         errands = idle_errands(
             idle,
             self.robots.values(),
@@ -596,9 +608,71 @@ class TaskManager(Service):
             self.site,
             self.graph.distances_to,
             lambda robot: self._available(robot) and self._has_work_for(robot),
+            lambda robot, node: (
+                self.blocked.barred(robot.name, robot.node, node, closed, now) is not None
+            ),
         )
         for robot, kind, params in errands:
             self._internal(robot, kind, params)
+
+    def errand_failed(self, robot: RobotInfo, task: Task, reason: str) -> None:
+        """An idle robot's errand (``task``: internal, charge or go_to) failed: its target is
+        not given to it again until something changes (blocked.py); a charge so barred raises
+        one alert for staff (``charge_unreachable``, the robot), resolved when it charges."""
+        try:
+            goal = self.target_of(task.kind, task.params)
+        except TaskError:
+            return
+        targets = [s.node for s in self.site.charging_stations]
+        targets += [w.node for w in self.site.wait_points]
+        bar = self.blocked.failed(
+            robot.name,
+            robot.node,
+            goal,
+            targets,
+            self.graph,
+            self.closed_now(),
+            reason,
+            self.clock(),
+        )
+        if bar is None or task.kind != "charge" or not robot.needs_charge:
+            return
+        if self.alerts is None or self.alerts.is_active(CHARGE_UNREACHABLE, robot.name):
+            return
+        closed, now = self.closed_now(), self.clock()
+        if any(
+            self.blocked.barred(robot.name, robot.node, s.node, closed, now) is None
+            for s in self.site.charging_stations
+        ):
+            return  # another station is open to it: it goes there
+        then = (
+            "it goes when that works again"
+            if bar.closures
+            else f"it tries again in {bar.until - now:.0f} s"
+        )
+        self.alerts.raise_(
+            CHARGE_UNREACHABLE,
+            robot.name,
+            f"{robot.name} needs to charge and cannot reach a charging station: {bar.why}; {then}",
+            "warning",
+        )
+
+    def errand_done(self, robot: RobotInfo, where: str) -> None:
+        """An idle robot reached its errand's target (a charge done, its wait point, a
+        station): its failed errands are forgotten, its alert resolved."""
+        if not self.blocked.any_bars(robot.name):
+            return
+        self.blocked.clear(robot.name)
+        if self.alerts is not None:
+            self.alerts.resolve(CHARGE_UNREACHABLE, robot.name, f"{robot.name} reached {where}")
+
+    def moved_to(self, robot: RobotInfo) -> None:
+        """A robot_state places ``robot`` on a new node: at a charging station, the errands it
+        failed are forgotten (it got there after all)."""
+        if self.blocked.any_bars(robot.name) and any(
+            s.node == robot.node for s in self.site.charging_stations
+        ):
+            self.errand_done(robot, f"charging station at {robot.node}")
 
     def _has_work_for(self, robot: RobotInfo) -> bool:
         for task in self.queue.head():

@@ -41,6 +41,7 @@ class PresenceDesk(Desk, Protocol):
     report_grace_s: float
 
     def send_assigned(self, task: Task, robot: RobotInfo) -> None: ...
+    def moved_to(self, robot: RobotInfo) -> None: ...
 
 
 class Presence:
@@ -67,6 +68,8 @@ class Presence:
         if p.node is not None and p.node in tm.graph:
             moved = robot.node != p.node
             robot.node = p.node
+            if moved:
+                tm.moved_to(robot)
         self.held_up(robot, p.navigation)
         # A robot that does not know its floor yet (no site on board) is on its node's floor.
         robot.floor = p.floor or tm.graph.floor_of.get(robot.node or "") or robot.floor

@@ -33,6 +33,8 @@ log = logging.getLogger(__name__)
 
 _ENDED = {"done": TaskState.DONE, "failed": TaskState.FAILED}
 """A task_ended outcome -> the task's final state (anything else: cancelled)."""
+ERRANDS = frozenset({"charge", "go_to"})
+"""The kinds of an idle robot's errands (backend/tasks/choice.py, ``idle_errands``)."""
 BROKE = re.compile(r"\bbase fault\b")
 """A failure reason that says the robot broke, not the task: its task goes to another robot."""
 
@@ -49,6 +51,8 @@ class ReportsDesk(Desk, Protocol):
     def closed_now(self) -> Mapping[str, object]: ...
     def target_of(self, kind: str, params: dict[str, Any]) -> str: ...
     def publish_event(self, task: Task) -> None: ...
+    def errand_failed(self, robot: RobotInfo, task: Task, reason: str) -> None: ...
+    def errand_done(self, robot: RobotInfo, where: str) -> None: ...
 
 
 class TaskReports:
@@ -113,6 +117,11 @@ class TaskReports:
             return
         task.move(state, reason=reason)
         tm.book.withdraw(task)
+        if task.internal and task.kind in ERRANDS:
+            if state is TaskState.FAILED:
+                tm.errand_failed(robot, task, reason)  # not made again at once (blocked.py)
+            elif state is TaskState.DONE:
+                tm.errand_done(robot, f"{task.kind} {task.id}")
         if task.kind == "charge" and state is TaskState.DONE:
             robot.needs_charge = False
         if task.kind == "go_to" and state is TaskState.DONE:

@@ -19,8 +19,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.closures.model import Closure
-from backend.closures.routing import RouteClosed, path_avoiding
-from guidebot.site.graph import NoPath, SiteGraph, UnknownNode
+from backend.closures.routing import RouteClosed
+from backend.tasks.blocked import cut_off_by
+from guidebot.site.graph import SiteGraph
 
 __all__ = ["MAX_WAITS", "TroubleWaits"]
 
@@ -48,17 +49,9 @@ class TroubleWaits:
     ) -> RouteClosed | None:
         """What cuts ``goal`` off from ``start`` when it is trouble alone, or None (open, or
         cut by staff too: then the failure stands)."""
-        closures = {n: c for n, c in closed.items() if isinstance(c, Closure)}
-        if not closures or start is None:
-            return None
-        try:
-            path_avoiding(graph, start, goal, closures)
-        except RouteClosed as exc:
-            if exc.closures and all(c.source == "trouble" for c in exc.closures):
-                return exc
-            return None
-        except (NoPath, UnknownNode):
-            return None
+        cut = cut_off_by(graph, start, goal, closed) if start is not None else None
+        if cut is not None and all(c.source == "trouble" for c in cut.closures):
+            return cut
         return None
 
     def wait(self, task_id: str, cut: RouteClosed) -> bool:

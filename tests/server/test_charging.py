@@ -5,7 +5,9 @@ queue."""
 
 from __future__ import annotations
 
+from backend.alerts import AlertStore
 from backend.tasks import Task, TaskManager, TaskState
+from backend.tasks.blocked import FIRST_BACKOFF_S
 from guidebot.bus import Bus
 from guidebot.messages import Message
 
@@ -98,3 +100,41 @@ async def test_a_wait_across_floors_counts_the_lift_queue(
     assert queued.arrival_s >= alone.arrival_s + 4 * manager.lifts.turn_s - 1
     assert manager.lift_wait_s(upstairs, "hall") == 4 * manager.lifts.turn_s
     assert manager.lift_wait_s("entrance", "hall") == 0.0
+
+
+async def test_a_charge_that_fails_at_once_is_not_made_again_before_a_back_off(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """A robot whose way to every station fails for a reason the server does not see (no
+    closure explains it) tries each station once, then again after a back-off of seconds,
+    not at once (the fault soak's loop: backend/tasks/blocked.py); staff get one alert."""
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    manager.alerts = alerts
+    manager.robots["R2"].node = "entrance"  # (offline) off station_b, where the site starts it
+    r1 = RobotStub(bus, "R1", "hall", battery=0.25)
+    r1.state()
+    r1.endpoint.publish("battery_low", {"robot": "R1", "level": 0.25})
+    stations = []
+    for n in (1, 2):
+        order = (await r1.wait_for("task_assigned", n)).payload
+        assert order["net"] == "battery_charge"
+        stations.append(manager.tasks[order["task_id"]].params["station"])
+        r1.start(order["task_id"])
+        r1.end(order["task_id"], "failed", "navigation failed: the base refused the path")
+    assert sorted(stations) == ["station_a", "station_b"]  # each once
+    for _ in range(3):
+        r1.state()
+        manager.check_timeouts()
+    assert len(r1.of_type("task_assigned")) == 2
+    [alert] = alerts.active()
+    assert alert.kind == "charge_unreachable" and alert.subject == "R1"
+    assert "cannot reach a charging station: navigation failed" in alert.message
+    clock.now += FIRST_BACKOFF_S
+    r1.state()
+    manager.check_timeouts()
+    again = (await r1.wait_for("task_assigned", 3)).payload
+    assert manager.tasks[again["task_id"]].params["station"] == stations[0]
+    r1.start(again["task_id"])
+    r1.node = "charge_a" if stations[0] == "station_a" else "charge_b"
+    r1.state("busy")  # it got there: the alert is resolved
+    assert not alerts.active()
