@@ -63,7 +63,8 @@ class InboundChecks:
 
     def __init__(self) -> None:
         self._checks: list[Check] = []
-        self._plans: dict[str, Plan] = {}
+        self.plans: dict[str, Plan] = {}
+        """``plan(type)`` worked out, by type (read it first: the hub does, per message)."""
 
     def add(
         self,
@@ -78,20 +79,20 @@ class InboundChecks:
             raise ValueError(f"an inbound check named {name!r} is already registered")
         entry = Check(name, stage, check, None if types is None else frozenset(types))
         self._checks.append(entry)
-        self._plans.clear()
+        self.plans.clear()
 
         def remove() -> None:
             if entry in self._checks:
                 self._checks.remove(entry)
-                self._plans.clear()
+                self.plans.clear()
 
         return remove
 
     def plan(self, type_: str) -> Plan:
         """The checks a message of ``type_`` passes, per stage, in order."""
-        plan = self._plans.get(type_)
+        plan = self.plans.get(type_)
         if plan is None:
-            plan = self._plans[type_] = tuple(
+            plan = self.plans[type_] = tuple(
                 tuple(c.check for c in self._for(type_) if c.stage is stage) for stage in Stage
             )
         return plan

@@ -25,7 +25,7 @@ from pydantic import BaseModel, ValidationError
 
 from backend.auth import Role
 from guidebot.bus import Bus, Endpoint
-from guidebot.messages import Message, known_types, payload_model
+from guidebot.messages import Message, keep_typed, known_types, payload_model
 from guidebot.routing import PatternTable, Route
 from guidebot.wire import encode
 
@@ -451,7 +451,8 @@ class Hub:
             if type_ not in self._known:
                 client.error("unknown_type", f"unknown message type {type_!r}", message_id)
                 return
-        on_type, on_envelope, on_payload, on_routed = self.checks.plan(type_)
+        plan = self.checks.plans.get(type_) or self.checks.plan(type_)
+        on_type, on_envelope, on_payload, on_routed = plan
         for check in on_type:
             if (refusal := check(client, type_, None)) is not None:
                 client.error(*refusal, message_id)
@@ -473,7 +474,7 @@ class Hub:
         except ValidationError as exc:
             client.error("invalid_payload", _short(exc, "payload"), message.id)
             return
-        message.keep_typed(payload)  # typed once, here: handlers on(model) get this object
+        keep_typed(message, payload)  # typed once, here: handlers on(model) get this object
         for check in on_payload:
             if (refusal := check(client, type_, message)) is not None:
                 client.error(*refusal, message.id)
