@@ -66,6 +66,7 @@ from backend.reports import api as reports_routes
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
+from backend.tasks.inbound import limit_task_requests
 from backend.vda5050 import routes as vda5050_routes
 from backend.vda5050.component import vda5050
 from backend.webpages import WebFiles, page
@@ -145,8 +146,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             batch_max=settings.hub_batch_max,
             linger=settings.hub_linger_ms / 1000,
             max_message_bytes=settings.hub_max_message_bytes,
-            task_requests=app.state.task_limits,
         )
+        limit_task_requests(app.state.hub.checks, app.state.task_limits)
         health_board.set("hub", ComponentState.ok)
         async with contextlib.AsyncExitStack() as stack:
             stack.callback(app.state.hub.close)

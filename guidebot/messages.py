@@ -17,6 +17,7 @@ import builtins
 import itertools
 import os
 import time
+from collections.abc import Callable
 from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, Strict
@@ -28,6 +29,7 @@ __all__ = [
     "PayloadModel",
     "UnknownMessageType",
     "WireEnum",
+    "keep_typed",
     "known_types",
     "make_message",
     "new_message_id",
@@ -100,16 +102,20 @@ class Message(BaseModel):
 _TYPED_SLOT = Message.__dict__["_typed"]
 """The slot's own descriptor: an empty slot raises at once, without pydantic's __getattr__."""
 
+_get_typed = _TYPED_SLOT.__get__
+
+keep_typed: Callable[[Message, BaseModel], None] = _TYPED_SLOT.__set__
+"""``keep_typed(message, payload)``: ``message.keep_typed(payload)`` without a Python call (the
+hub does it for every message it receives)."""
+
+_keep = keep_typed
+
 
 def _cached(message: Message) -> object:
     try:
-        return _TYPED_SLOT.__get__(message)
+        return _get_typed(message)
     except AttributeError:
         return None
-
-
-def _keep(message: Message, payload: BaseModel) -> None:
-    _TYPED_SLOT.__set__(message, payload)
 
 
 class PayloadModel(BaseModel):

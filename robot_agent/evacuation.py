@@ -16,9 +16,10 @@ from typing import Any
 
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
-from guidebot.payloads.emergency import EvacuationState, EvacuationStateName
+from guidebot.payloads.emergency import EmergencyChanged, EvacuationState, EvacuationStateName
 from guidebot.payloads.petri import Say
 from guidebot.payloads.robot import NodeReached
+from guidebot.payloads.tasks import TaskAssigned
 from guidebot.service import Service
 from guidebot.site.steps import PathStep
 from robot_agent.motion import NavigationError
@@ -51,17 +52,14 @@ class Evacuation(Service):
         """The language of the last visitor this robot served (its task's ``lang``)."""
 
     async def on_start(self) -> None:
-        self.subscribe_all(
-            self.ep,
-            {
-                "evacuate": self._on_evacuate,
-                "emergency_changed": self._on_changed,
-                "task_assigned": self._on_assigned,
-            },
-        )
+        # evacuate is read as JSON: the robot stops on any order to leave, even one whose
+        # path it cannot read (then it reports itself stuck), never drops it.
+        self.subscribe(self.ep, "evacuate", self._on_evacuate)
+        self.on(self.ep, EmergencyChanged, self._on_changed)
+        self.on(self.ep, TaskAssigned, self._on_assigned)
 
-    def _on_assigned(self, message: Message) -> None:
-        lang = (message.payload.get("params") or {}).get("lang")
+    def _on_assigned(self, message: Message, assigned: TaskAssigned) -> None:
+        lang = assigned.params.get("lang")
         if isinstance(lang, str):
             self.lang = lang
 
@@ -188,8 +186,8 @@ class Evacuation(Service):
         here = self.navigator.node
         return steps[nodes.index(here) :] if here in nodes else steps
 
-    def _on_changed(self, message: Message) -> None:
-        if message.payload.get("state") == "normal" and self.navigator.evacuating:
+    def _on_changed(self, message: Message, changed: EmergencyChanged) -> None:
+        if changed.state == "normal" and self.navigator.evacuating:
             log.info("%s: the fire alarm is over: back in service", self.robot)
             self.navigator.evacuating = False
             self.state = None

@@ -37,7 +37,9 @@ from guidebot.next_tours import in_language
 from guidebot.pace import PaceName, pace_of
 from guidebot.paths import WEB_DIR
 from guidebot.payloads.bookings import NextTour, NextTours
+from guidebot.payloads.emergency import EmergencyChanged, Evacuate, EvacuationState
 from guidebot.payloads.petri import ContinueAnswer
+from guidebot.payloads.tasks import TaskAssigned
 from guidebot.service import Service
 from guidebot.site.access import graph_of, step_free_skips, steps_only_nodes
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
@@ -156,17 +158,17 @@ class OnboardScreen(Service):
                 "speech_started": self._on_speech,
                 "speech_ended": self._on_speech,
                 "task_ended": self._on_task_ended,
-                "task_assigned": self._on_task_assigned,
                 "navigate_to": self._on_going,
                 "goal_reached": self._on_going,
                 "navigation_failed": self._on_going,
                 "robot_state": self._on_robot_state,
-                "emergency_changed": self._on_emergency,
-                "evacuate": self._on_evacuate,
-                "evacuation_state": self._on_evacuation_state,
-                "next_tours": self._on_next_tours,
             },
         )
+        self.on(self.ep, TaskAssigned, self._on_task_assigned)
+        self.on(self.ep, EmergencyChanged, self._on_emergency)
+        self.on(self.ep, Evacuate, self._on_evacuate)
+        self.on(self.ep, EvacuationState, self._on_evacuation_state)
+        self.subscribe(self.ep, "next_tours", self._on_next_tours)
 
     async def on_stop(self) -> None:
         if self._question_timer is not None:
@@ -252,7 +254,7 @@ class OnboardScreen(Service):
 
     def _on_next_tours(self, message: Message) -> None:
         try:
-            self.next_tours = NextTours.model_validate(message.payload).tours
+            self.next_tours = message.typed(NextTours).tours
         except ValueError:
             log.warning("next_tours not understood: %r", message.payload)
             return
@@ -266,48 +268,48 @@ class OnboardScreen(Service):
         so bounded; a slow screen loses its oldest events."""
         return self.ep.subscription(SCREEN_EVENT, maxsize=WATCHER_QUEUE)
 
-    def _on_task_assigned(self, message: Message) -> None:
-        if message.payload.get("net") not in VISITOR_NETS:
+    def _on_task_assigned(self, message: Message, assigned: TaskAssigned) -> None:
+        if assigned.net not in VISITOR_NETS:
             return  # charging, going to a wait point: the menu stays
-        if self.task is not None and self.task["id"] != message.payload.get("task_id"):
+        if self.task is not None and self.task["id"] != assigned.task_id:
             return  # one task at a time: the robot refuses this one, the running tour stays
-        params = message.payload.get("params") or {}
+        params = assigned.params
         lang = params.get("lang")
         self.lang = lang if isinstance(lang, str) else None
         self.task = {
-            "id": message.payload.get("task_id"),
+            "id": assigned.task_id,
             "tour": params.get("tour"),
             "pace": pace_of(params).name,  # a slower tour: the screen says so
             "step_free": params.get("step_free") is True,
-            "handover": message.payload.get("handover"),  # taken up from another robot
+            "handover": assigned.handover,  # taken up from another robot
         }
         self.skipped = list(params.get("skipped") or [])  # first stops only steps lead to
         self._push("task_assigned", {"task": self.task, "lang": self.lang})
 
     # -- the fire alarm ---------------------------------------------------------------------
 
-    def _on_emergency(self, message: Message) -> None:
+    def _on_emergency(self, message: Message, changed: EmergencyChanged) -> None:
         """The server's state: an alarm anywhere holds new requests (docs/emergency.md)."""
-        if message.payload.get("state") == "normal":
+        if changed.state == "normal":
             self.alarm = None
         else:
-            words = message.payload.get("words") or {}
+            words = changed.words
             evacuation = (self.alarm or {}).get("evacuation")
             self.alarm = {"words": dict(words), "evacuation": evacuation}
         self._push("emergency", {"alarm": self.alarm})
 
-    def _on_evacuate(self, message: Message) -> None:
+    def _on_evacuate(self, message: Message, order: Evacuate) -> None:
         """This robot's order to leave (it may come without emergency_changed: a robot that
         connected during the alarm)."""
         if message.destination not in (None, self.robot):
             return
-        words = message.payload.get("words") or (self.alarm or {}).get("words") or {}
+        words = order.words or (self.alarm or {}).get("words") or {}
         self.alarm = {"words": dict(words), "evacuation": (self.alarm or {}).get("evacuation")}
         self._push("emergency", {"alarm": self.alarm})
 
-    def _on_evacuation_state(self, message: Message) -> None:
+    def _on_evacuation_state(self, message: Message, report: EvacuationState) -> None:
         if self.alarm is not None:
-            self.alarm["evacuation"] = message.payload.get("state")
+            self.alarm["evacuation"] = report.state
             self._push("emergency", {"alarm": self.alarm})
 
     def _on_robot_state(self, message: Message) -> None:

@@ -28,11 +28,11 @@ from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from typing import Any, Protocol
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from guidebot.bus import Endpoint, Handler
 from guidebot.delivery import ACK, MUST_ARRIVE_DOWN, MUST_ARRIVE_UP, Courier, Seen, ack_for
-from guidebot.messages import Message
+from guidebot.messages import Message, UnknownMessageType, payload_model
 from guidebot.payloads.robot import RobocanStatus
 from guidebot.service import Service
 
@@ -110,6 +110,19 @@ SEEN_IDS = 1024
 """Must-arrive ids remembered for de-duplication (a repeat comes within seconds)."""
 
 
+def _typed_at_the_edge(message: Message) -> BaseModel | None:
+    """A message from the server, as its payload model: validated once, here, so that the
+    on-board handlers subscribed by model get it without validating again. One that is not its
+    model still goes on board as JSON (its typed handlers never see it: guidebot/bus.py)."""
+    try:
+        return message.typed(payload_model(message.type))
+    except UnknownMessageType:
+        return None
+    except ValidationError as exc:
+        log.warning("%r from the hub is not its model: %s", message.type, exc.errors()[:3])
+        return None
+
+
 class StatusThrottle:
     """Lets ``robocan_status`` through at most every ``every_s``, but at once when a module's
     state changed (a module lost is news; a frame counter is not)."""
@@ -123,7 +136,7 @@ class StatusThrottle:
 
     def allow(self, message: Message, now: float) -> bool:
         try:
-            states = message.payload_as(RobocanStatus).module_states()
+            states = message.typed(RobocanStatus).module_states()
         except ValidationError as exc:
             log.warning("robocan_status not sent: %s", exc.errors()[0]["msg"])
             return False
@@ -282,6 +295,7 @@ class Link(Service):
             if not self.seen.first(message.id):
                 return
         requester = self._requesters.get(message.correlation_id or "")
+        typed = _typed_at_the_edge(message)
         local = Message(
             type=message.type,
             id=message.id,
@@ -291,6 +305,8 @@ class Link(Service):
             correlation_id=message.correlation_id,
             payload=dict(message.payload or {}),
         )
+        if typed is not None:
+            local.keep_typed(typed)
         self.sent_down += 1
         if self.on_message_down is not None:
             self.on_message_down(local)

@@ -32,7 +32,7 @@ from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
 from guidebot.payloads.petri import Docked, GoalReached, NavigationFailed, PeopleFaced
 from guidebot.payloads.robot import NodeReached, RobotFault
-from guidebot.payloads.traffic import GetPath
+from guidebot.payloads.traffic import AreaYield, ClosuresChanged, GetPath
 from guidebot.site.steps import PathStep
 from robot_agent.clock import Clock
 from robot_agent.motion import MotionControl, NavigationError, NavState, wrap_angle
@@ -178,10 +178,10 @@ class Navigator(MotionControl):
                 "base_fault": self._on_base_fault,
                 "module_status": self._on_module_status,
                 **self.passage.handlers(),
-                "area_yield": self._on_area_yield,
-                "closures_changed": self._on_closures,
             },
         )
+        self.on(self.ep, AreaYield, self._on_area_yield)
+        self.on(self.ep, ClosuresChanged, self._on_closures)
 
     async def on_stop(self) -> None:
         await self.cancel()
@@ -276,21 +276,19 @@ class Navigator(MotionControl):
             self.state = NavState.IDLE
             self._news.set()
 
-    def _on_area_yield(self, message: Message) -> None:
-        p = message.payload
-        if p.get("robot") not in (None, self.robot) or self._goal_task is None:
+    def _on_area_yield(self, message: Message, ask: AreaYield) -> None:
+        if ask.robot != self.robot or self._goal_task is None:
             return
-        if p.get("area") == self._backing_off:
+        if ask.area == self._backing_off:
             return  # asked again (the server repeats a yield not acted on): already on it
-        self._yield = YieldRequested(str(p.get("area")), str(p.get("go_to_node") or ""))
+        self._yield = YieldRequested(ask.area, ask.go_to_node)
         self._news.set()
         self._odom_event.set()
 
-    def _on_closures(self, message: Message) -> None:
-        nodes = message.payload.get("nodes")
-        if not isinstance(nodes, list):
-            return
-        self.closed = frozenset(n for n in nodes if isinstance(n, str))
+    def _on_closures(self, message: Message, changed: ClosuresChanged) -> None:
+        if "nodes" not in message.payload:
+            return  # says nothing of the nodes (the model's default is none closed)
+        self.closed = frozenset(changed.nodes)
         cut = [n for n in self._ahead if n in self.closed]
         if cut and self._goal_task is not None and not self.evacuating:
             log.info("%s: closed ahead (%s): planning again", self.robot, ", ".join(cut))

@@ -21,7 +21,14 @@ from guidebot.bus import BusEndpoint
 from guidebot.messages import Message, make_message
 from guidebot.pace import net_params, pace_of
 from guidebot.payloads.petri import KillPetriNet, RunPetriNet
-from guidebot.payloads.tasks import Outcome, TaskEnded, TaskStarted, TourProgress
+from guidebot.payloads.tasks import (
+    Outcome,
+    TaskAssigned,
+    TaskCancel,
+    TaskEnded,
+    TaskStarted,
+    TourProgress,
+)
 from guidebot.service import Service
 
 __all__ = ["IllegalTransition", "MainTask", "TaskPhase", "TaskRunner"]
@@ -112,8 +119,6 @@ class TaskRunner(Service):
         self.subscribe_all(
             self.ep,
             {
-                "task_assigned": self._on_assigned,
-                "task_cancel": self._on_cancel,
                 "petri_net_ended": self._on_net_ended,
                 "petri_net_event": self._on_net_event,
                 "show_point": self._on_point,
@@ -124,6 +129,8 @@ class TaskRunner(Service):
                 "error": self._on_refused,
             },
         )
+        self.on(self.ep, TaskAssigned, self._on_assigned)
+        self.on(self.ep, TaskCancel, self._on_cancel)
         self._start_waiting()
 
     @property
@@ -149,13 +156,12 @@ class TaskRunner(Service):
 
     # -- main tasks ---------------------------------------------------------------------------
 
-    def _on_assigned(self, message: Message) -> None:
-        p = message.payload
-        if p.get("robot") not in (None, self.robot):
+    def _on_assigned(self, message: Message, assigned: TaskAssigned) -> None:
+        if assigned.robot != self.robot:
             return
-        task_id, net = str(p.get("task_id") or ""), str(p.get("net") or "")
+        task_id, net = assigned.task_id, assigned.net
         if not task_id or not net:
-            log.warning("%s: task_assigned without task_id or net: %s", self.robot, p)
+            log.warning("%s: task_assigned without task_id or net: %s", self.robot, assigned)
             return
         ended = next((t for t in self.finished if t.task_id == task_id), None)
         if ended is not None:
@@ -175,7 +181,7 @@ class TaskRunner(Service):
                 TaskEnded(task_id=task_id, robot=self.robot, outcome="refused", reason=busy)
             )
             return
-        given = p.get("params") or {}
+        given = assigned.params
         # A slower tour gives the visitor longer to answer "continue?"; a task's own values win.
         params = {**net_params(pace_of(given)), **given}
         task = MainTask(task_id, net, params, instance_id=f"{self.robot}-task-{task_id}")
@@ -196,9 +202,9 @@ class TaskRunner(Service):
         log.info("%s: task %s started (%s)", self.robot, task_id, net)
         self.ep.publish(TaskStarted(task_id=task_id, robot=self.robot))
 
-    def _on_cancel(self, message: Message) -> None:
+    def _on_cancel(self, message: Message, cancel: TaskCancel) -> None:
         task = self.current
-        task_id = message.payload.get("task_id")
+        task_id = cancel.task_id
         ended = next((t for t in self.finished if t.task_id == task_id), None)
         if ended is not None and (task is None or task.task_id != task_id):
             # The server heard its end and took the task back (a visit waiting in line for a
@@ -207,7 +213,7 @@ class TaskRunner(Service):
             return
         if task is None or task.task_id != task_id or task.phase is not TaskPhase.RUNNING:
             return
-        self._cancel(task, str(message.payload.get("reason") or "cancelled"))
+        self._cancel(task, cancel.reason or "cancelled")
 
     def abort(self, reason: str) -> MainTask | None:
         """Kill the running main task's net now (the fire alarm, robot_agent/evacuation.py);

@@ -45,6 +45,7 @@ from guidebot.payloads.building import (
     ReleaseDoor,
     SetOutput,
 )
+from guidebot.payloads.robot import RobotState
 from guidebot.service import Service, cancel_and_wait
 from guidebot.site.building import Door, Elevator, ElevatorStop, IOPoint, IORef, PointKind
 from guidebot.site.building_config import BuildingConfig
@@ -177,7 +178,7 @@ class BuildingInterface(Service):
             self.subscribe(
                 self.endpoint, type_name, functools.partial(self._spawn, handler=handler)
             )
-        self.subscribe(self.endpoint, "robot_state", self._on_robot_state)
+        self.on(self.endpoint, RobotState, self._on_robot_state)
 
     async def _cancel_commands(self) -> None:
         for task in list(self._commands):
@@ -440,7 +441,7 @@ class BuildingInterface(Service):
 
     async def _open_door(self, message: Message) -> dict[str, Any]:
         """Hold the door open for the requester until it sends release_door."""
-        open_door: OpenDoor = message.payload_as(OpenDoor)
+        open_door: OpenDoor = message.typed(OpenDoor)
         door = self._door(open_door.door)
         self._check_gate(door.node)
         keeper = self.doors[door.id]
@@ -468,7 +469,7 @@ class BuildingInterface(Service):
         return payload
 
     async def _release_door(self, message: Message) -> dict[str, Any]:
-        release: ReleaseDoor = message.payload_as(ReleaseDoor)
+        release: ReleaseDoor = message.typed(ReleaseDoor)
         door = self._door(release.door)
         keeper = self.doors[door.id]
         if keeper.release(message.source or "anonymous"):
@@ -485,13 +486,13 @@ class BuildingInterface(Service):
         )
         self._let_go(keeper, holder)
 
-    def _on_robot_state(self, message: Message) -> None:
+    def _on_robot_state(self, message: Message, state: RobotState) -> None:
         """A robot whose agent restarted (a new ``boot_id``, backend/traffic/restarts.py): the
         doors its old process held open are let go at once, but the one it stands in."""
-        robot, node = message.payload.get("robot"), message.payload.get("node")
-        if robot != message.source or not isinstance(robot, str) or not isinstance(node, str):
+        robot, node = state.robot, state.node
+        if robot != message.source or node is None:
             return
-        if self.boots.restarted(robot, message.payload.get("boot_id")) is None:
+        if self.boots.restarted(robot, state.boot_id) is None:
             return
         for keeper in self.doors.values():
             if robot in keeper.holders and keeper.door.node != node:
@@ -544,7 +545,7 @@ class BuildingInterface(Service):
 
     async def _close_door(self, message: Message) -> dict[str, Any]:
         """Close now, whoever holds the door (staff)."""
-        close_door: CloseDoor = message.payload_as(CloseDoor)
+        close_door: CloseDoor = message.typed(CloseDoor)
         door = self._door(close_door.door)
         keeper = self.doors[door.id]
         keeper.release_all()
@@ -557,7 +558,7 @@ class BuildingInterface(Service):
         return payload
 
     async def _call_elevator(self, message: Message) -> dict[str, Any]:
-        call: CallElevator = message.payload_as(CallElevator)
+        call: CallElevator = message.typed(CallElevator)
         elevator = next((e for e in self.config.elevators if e.id == call.elevator), None)
         if elevator is None:
             known = ", ".join(e.id for e in self.config.elevators) or "none"
@@ -576,7 +577,7 @@ class BuildingInterface(Service):
 
     async def _set_output(self, message: Message) -> dict[str, Any]:
         """Write an output; the new value shows in building_input_changed once read back."""
-        command: SetOutput = message.payload_as(SetOutput)
+        command: SetOutput = message.typed(SetOutput)
         ref = IORef(module=command.module, point=command.point)
         try:
             _, point = self.config.resolve(ref)

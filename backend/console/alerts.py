@@ -24,12 +24,21 @@ lock_released_offline) in the same store.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 from backend.alerts import AlertStore
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
+from guidebot.payloads.building import (
+    BuildingModuleHealth,
+    CommandFailed,
+    DoorClosed,
+    DoorOpened,
+)
+from guidebot.payloads.console import LockChanged
+from guidebot.payloads.emergency import EvacuationState
+from guidebot.payloads.robot import BatteryAlarm, RobotFault, RobotMode, RobotState
+from guidebot.payloads.tasks import RobotLink, TaskEvent
 from guidebot.service import Service
 
 __all__ = ["AlertWatcher"]
@@ -53,57 +62,57 @@ class AlertWatcher(Service):
         self._panic: dict[str, float] = {}
 
     async def on_start(self) -> None:
-        handlers: dict[str, Callable[[Message], None]] = {
-            "robot_state": self._on_robot_state,
-            "robot_connected": self._on_robot_connected,
-            "robot_disconnected": self._on_robot_disconnected,
-            "battery_panic": self._on_battery_panic,
-            "robot_fault": self._on_robot_fault,
-            "command_failed": self._on_command_failed,
-            "door_opened": self._on_door,
-            "door_closed": self._on_door,
-            "elevator_in_position": self._on_elevator,
-            "building_input_changed": self._on_input,
-            "building_module_health": self._on_module_health,
-            "task_event": self._on_task_event,
-            "lock_changed": self._on_lock_changed,
-            "emergency_changed": self._on_emergency,
-            "evacuation_state": self._on_evacuation,
-        }
-        for pattern, handler in handlers.items():
-            self.subscribe(self.endpoint, pattern, handler, tap=True)
+        ep = self.endpoint
+        self.on(ep, RobotState, self._on_robot_state, tap=True)
+        self.on(ep, RobotLink, self._on_robot_connected, types=["robot_connected"], tap=True)
+        self.on(ep, RobotLink, self._on_robot_disconnected, types=["robot_disconnected"], tap=True)
+        self.on(ep, BatteryAlarm, self._on_battery_panic, types=["battery_panic"], tap=True)
+        self.on(ep, RobotFault, self._on_robot_fault, tap=True)
+        self.on(ep, CommandFailed, self._on_command_failed, tap=True)
+        self.on(ep, DoorOpened, self._on_door, tap=True)
+        self.on(ep, DoorClosed, self._on_door, tap=True)
+        self.on(ep, BuildingModuleHealth, self._on_module_health, tap=True)
+        self.on(ep, TaskEvent, self._on_task_event, tap=True)
+        self.on(ep, LockChanged, self._on_lock_changed, tap=True)
+        self.on(ep, EvacuationState, self._on_evacuation, tap=True)
+        # Read as JSON: a missing door_open is not "open" here (the model's default is),
+        # the emergency state is the dict emergency_now() gets too, and a button's input
+        # needs only its module and point.
+        self.subscribe(ep, "elevator_in_position", self._on_elevator, tap=True)
+        self.subscribe(ep, "building_input_changed", self._on_input, tap=True)
+        self.subscribe(ep, "emergency_changed", self._on_emergency, tap=True)
 
     @staticmethod
-    def _robot(message: Message) -> str:
-        return str(message.payload.get("robot") or message.source)
+    def _robot(message: Message, robot: str) -> str:
+        return robot or message.source
 
     # --- robots -------------------------------------------------------------------------
-    def _on_robot_state(self, message: Message) -> None:
-        p = message.payload
-        robot = self._robot(message)
-        if p.get("mode") == "offline":
+    def _on_robot_state(self, message: Message, state: RobotState) -> None:
+        robot = self._robot(message, state.robot)
+        if state.mode == RobotMode.OFFLINE:
             self._leaving.add(robot)  # its last word before a clean exit
             return
         self._leaving.discard(robot)
         self.alerts.resolve("robot_lost", robot, f"robot {robot} is back online")
-        for name, state in (p.get("modules") or {}).items():
+        for name, module in state.modules.items():
             subject = f"{robot}/{name}"
-            if state == "lost":
+            if module == "lost":
                 if not self.alerts.is_active("can_module_lost", subject):
                     self.alerts.raise_(
                         "can_module_lost", subject, f"{robot}: CAN module {name} lost"
                     )
             else:
                 self.alerts.resolve("can_module_lost", subject, f"{robot}: CAN module {name} ok")
-        battery = p.get("battery")
+        # A state that leaves battery out says nothing of it (the model's default is full).
+        battery = state.battery if "battery" in message.payload else None
         panic = self._panic.get(robot)
-        if panic is not None and isinstance(battery, int | float):
+        if panic is not None and battery is not None:
             if battery >= panic + BATTERY_HYSTERESIS:
                 del self._panic[robot]
                 self.alerts.resolve(
                     "battery_panic", robot, f"{robot}: battery back at {battery:.0%}"
                 )
-        navigation, mode = p.get("navigation"), p.get("mode")
+        navigation, mode = state.navigation, state.mode
 
         def over(subject: str) -> bool:
             if not subject.startswith(f"{robot}/"):
@@ -111,48 +120,46 @@ class AlertWatcher(Service):
             state = FAULT_NAVIGATION.get(subject[len(robot) + 1 :])
             if state is not None:
                 return navigation != state
-            return mode != "fault" and navigation != "fault"
+            return mode != RobotMode.FAULT and navigation != "fault"
 
         self.alerts.resolve_where("robot_fault", over, f"robot {robot} is no longer in fault")
 
-    def _on_robot_connected(self, message: Message) -> None:
-        robot = self._robot(message)
+    def _on_robot_connected(self, message: Message, link: RobotLink) -> None:
+        robot = self._robot(message, link.robot)
         self._leaving.discard(robot)
         self.alerts.resolve("robot_lost", robot, f"robot {robot} is back online")
 
-    def _on_robot_disconnected(self, message: Message) -> None:
-        robot = self._robot(message)
+    def _on_robot_disconnected(self, message: Message, link: RobotLink) -> None:
+        robot = self._robot(message, link.robot)
         if robot in self._leaving:
             self._leaving.discard(robot)
             return  # it said goodbye: a clean exit is not an alert
         self.alerts.raise_("robot_lost", robot, f"robot {robot} lost its connection")
 
-    def _on_battery_panic(self, message: Message) -> None:
-        robot = self._robot(message)
-        level = float(message.payload.get("level", 0.0))
+    def _on_battery_panic(self, message: Message, alarm: BatteryAlarm) -> None:
+        robot = self._robot(message, alarm.robot)
+        level = float(alarm.level)
         self._panic[robot] = level
         self.alerts.raise_("battery_panic", robot, f"{robot}: battery at {level:.0%}")
 
-    def _on_robot_fault(self, message: Message) -> None:
-        robot = self._robot(message)
-        kind = message.payload.get("kind", "fault")
-        detail = message.payload.get("detail", "")
+    def _on_robot_fault(self, message: Message, fault: RobotFault) -> None:
+        robot = self._robot(message, fault.robot)
+        kind, detail = fault.kind, fault.detail
         self.alerts.raise_("robot_fault", f"{robot}/{kind}", f"{robot}: {kind} {detail}".strip())
 
     # --- building -----------------------------------------------------------------------
-    def _on_command_failed(self, message: Message) -> None:
-        command = str(message.payload.get("command", "command"))
-        reason = str(message.payload.get("reason", ""))
-        target = message.payload.get("target") or reason[:40]
+    def _on_command_failed(self, message: Message, failed: CommandFailed) -> None:
+        command, reason = failed.command, failed.reason
+        target = failed.target or reason[:40]
         self.alerts.raise_(
             "building_command_failed", f"{command}:{target}", f"{command} failed: {reason}"
         )
 
-    def _on_door(self, message: Message) -> None:
-        door = str(message.payload.get("door"))
-        if message.type == "door_opened":
+    def _on_door(self, message: Message, answer: DoorOpened | DoorClosed) -> None:
+        door = answer.door
+        if isinstance(answer, DoorOpened):
             self.alerts.resolve("building_command_failed", f"open_door:{door}", f"{door} open")
-        elif message.payload.get("sensed", True):
+        elif answer.sensed:
             self.alerts.resolve("building_command_failed", f"close_door:{door}", f"{door} closed")
 
     def _on_elevator(self, message: Message) -> None:
@@ -169,40 +176,36 @@ class AlertWatcher(Service):
         point = f"{message.payload.get('module')}/{message.payload.get('point')}"
         self.alerts.resolve("building_command_failed", f"set_output:{point}", f"{point} written")
 
-    def _on_module_health(self, message: Message) -> None:
-        module = str(message.payload.get("module"))
-        online = message.payload.get("online")
-        if online is False:
+    def _on_module_health(self, message: Message, health: BuildingModuleHealth) -> None:
+        module = health.module
+        if not health.online:
             if not self.alerts.is_active("module_offline", module):
-                error = message.payload.get("last_error") or "no answer"
+                error = health.last_error or "no answer"
                 self.alerts.raise_("module_offline", module, f"Modbus module {module}: {error}")
-        elif online is True:
+        else:
             self.alerts.resolve("module_offline", module, f"Modbus module {module} is online")
 
     # --- tasks and locks ----------------------------------------------------------------
-    def _on_task_event(self, message: Message) -> None:
-        if message.payload.get("state") == "failed":
-            task = str(message.payload.get("task_id"))
-            robot = message.payload.get("robot") or "no robot"
-            reason = message.payload.get("reason")
+    def _on_task_event(self, message: Message, event: TaskEvent) -> None:
+        if event.state == "failed":
+            task = event.task_id
+            robot = event.robot or "no robot"
+            reason = event.reason
             text = f"task {task} failed ({robot})" + (f": {reason}" if reason else "")
             self.alerts.raise_("task_failed", task, text, "warning", lasting=False)
 
-    def _on_lock_changed(self, message: Message) -> None:
-        p = message.payload
-        area = str(p.get("area"))
-        if p.get("state") == "holder_offline":
+    def _on_lock_changed(self, message: Message, lock: LockChanged) -> None:
+        area = lock.area
+        if lock.state == "holder_offline":
             if not self.alerts.is_active("lock_holder_offline", area):
                 self.alerts.raise_(
                     "lock_holder_offline",
                     area,
-                    f"area {area} is held by {p.get('holder')}, which is offline: "
+                    f"area {area} is held by {lock.holder}, which is offline: "
                     "release it by hand once the robot is out of the area",
                 )
         else:
-            why = f"area {area} is {p.get('state')}" + (
-                f" ({p.get('holder')})" if p.get("holder") else ""
-            )
+            why = f"area {area} is {lock.state}" + (f" ({lock.holder})" if lock.holder else "")
             self.alerts.resolve("lock_holder_offline", area, why)
 
     # --- the fire alarm (docs/emergency.md) ----------------------------------------------
@@ -230,19 +233,18 @@ class AlertWatcher(Service):
         if alert is None or not alert.active or alert.message != text:
             self.alerts.raise_("fire_alarm", "site", text)
 
-    def _on_evacuation(self, message: Message) -> None:
+    def _on_evacuation(self, message: Message, report: EvacuationState) -> None:
         robot = message.source
-        p = message.payload
-        if p.get("state") == "stuck":
-            where = p.get("node") or "an unknown place"
-            why = p.get("why") or "no reason given"
+        if report.state == "stuck":
+            where = report.node or "an unknown place"
+            why = report.why or "no reason given"
             self.alerts.raise_(
                 "evacuation_stuck",
                 robot,
                 f"{robot} is stuck on its way to safety at {where}: {why}",
             )
         else:
-            self.alerts.resolve("evacuation_stuck", robot, f"{robot}: evacuation {p.get('state')}")
+            self.alerts.resolve("evacuation_stuck", robot, f"{robot}: evacuation {report.state}")
 
 
 def _zone_text(zone: dict[str, Any]) -> str:

@@ -35,7 +35,7 @@ class RobocanBook(Service):
 
     def _on_status(self, message: Message) -> None:
         try:
-            status = message.payload_as(RobocanStatus)
+            status = message.typed(RobocanStatus)
         except ValidationError as exc:
             self.refused += 1
             log.warning("robocan_status from %s refused: %s", message.source, exc.errors()[0])

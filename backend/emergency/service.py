@@ -28,12 +28,15 @@ from backend.tasks.manager import TaskManager
 from backend.tasks.robots import RobotInfo
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
+from guidebot.payloads.building import BuildingInputChanged
 from guidebot.payloads.emergency import (
     EmergencyChanged,
     Evacuate,
     EvacuationState,
     LandingWay,
 )
+from guidebot.payloads.robot import RobotState
+from guidebot.payloads.tasks import RobotLink
 from guidebot.service import Service
 from guidebot.site.building import Elevator
 from guidebot.site.emergency import (
@@ -128,10 +131,11 @@ class EmergencyService(Service):
         log.warning("fire alarm restored from the event log: %s", self.reason)
 
     async def on_start(self) -> None:
-        self.subscribe(self.endpoint, "building_input_changed", self._on_input)
-        self.subscribe(self.endpoint, "evacuation_state", self._on_evacuation_state)
-        self.subscribe(self.endpoint, "robot_state", self._on_robot_state)
-        self.subscribe(self.endpoint, "robot_disconnected", self._on_robot_gone)
+        ep = self.endpoint
+        self.on(ep, BuildingInputChanged, self._on_input)
+        self.on(ep, EvacuationState, self._on_evacuation_state)
+        self.on(ep, RobotState, self._on_robot_state)
+        self.on(ep, RobotLink, self._on_robot_gone, types=["robot_disconnected"])
         for unsubscribe in listen(self.endpoint, self.courier):
             self.on_cleanup(unsubscribe)
         self.on_cleanup(self.courier.close)
@@ -398,12 +402,12 @@ class EmergencyService(Service):
 
     # -- messages --------------------------------------------------------------------------
 
-    def _on_input(self, msg: Message) -> None:
-        module, point = msg.payload.get("module"), msg.payload.get("point")
+    def _on_input(self, msg: Message, changed: BuildingInputChanged) -> None:
+        module, point = changed.module, changed.point
         for alarm in self._alarms():
             if (alarm.input.module, alarm.input.point) != (module, point):
                 continue
-            if int(msg.payload.get("value", 0)) == alarm.active_when:
+            if int(changed.value) == alarm.active_when:
                 self.declare(alarm.zone, reason=f"alarm input {alarm.id}", by=f"input:{alarm.id}")
             else:
                 self._maybe_input_clear()
@@ -418,11 +422,11 @@ class EmergencyService(Service):
         self.store.record_event("emergency_input_clear", "emergency", {"zones": self._zone_dicts()})
         self._publish()
 
-    def _on_robot_state(self, msg: Message) -> None:
+    def _on_robot_state(self, msg: Message, state: RobotState) -> None:
         """A robot connecting, or driving into the zone, while the alarm lasts is held too."""
         if self.state is EmergencyState.normal:
             return
-        self._tell_new_process(msg.source, msg.payload.get("boot_id"))
+        self._tell_new_process(msg.source, state.boot_id)
         if msg.source in self.evacuation:
             return
         robot = self.tasks.robots.get(msg.source)
@@ -445,15 +449,13 @@ class EmergencyService(Service):
             log.warning("%s restarted during the fire alarm: ordered to safety again", robot)
             del self.evacuation[robot]
 
-    def _on_robot_gone(self, msg: Message) -> None:
+    def _on_robot_gone(self, msg: Message, link: RobotLink) -> None:
         """Gone before it acted on its order (the courier forgets it): ordered again when it
         reports from the zone."""
-        robot = msg.payload.get("robot") or msg.payload.get("name")
-        if isinstance(robot, str) and self.evacuation.get(robot, {}).get("state") == "ordered":
-            del self.evacuation[robot]
+        if self.evacuation.get(link.robot, {}).get("state") == "ordered":
+            del self.evacuation[link.robot]
 
-    def _on_evacuation_state(self, msg: Message) -> None:
-        report = msg.payload_as(EvacuationState)
+    def _on_evacuation_state(self, msg: Message, report: EvacuationState) -> None:
         entry = self.evacuation.setdefault(msg.source, {"safe_spot": None, "path": []})
         entry.update(state=report.state, node=report.node, why=report.why, at=time.time())
         for way in _landing_paths(entry):

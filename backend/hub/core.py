@@ -23,18 +23,17 @@ from typing import Any
 import orjson
 from pydantic import BaseModel, ValidationError
 
-from backend.actions import TASK_RATE_LIMITED
 from backend.auth import Role
-from backend.ratelimit import RateLimited, RateLimiter
 from guidebot.bus import Bus, Endpoint
-from guidebot.messages import Message, known_types, payload_model
+from guidebot.messages import Message, keep_typed, known_types, payload_model
 from guidebot.routing import PatternTable, Route
 from guidebot.wire import encode
 
+from . import permissions
 from .acks import InboundAcks
+from .checks import InboundChecks
 from .memory import GcFreezer
 from .outbox import Outbox, OutboxOverflow
-from .permissions import may_publish, publish_refusal
 
 __all__ = [
     "CLOSE_NAME_IN_USE",
@@ -240,7 +239,6 @@ class Hub:
         linger: float = 0.0,
         max_message_bytes: int = 1 << 20,
         gc_freeze: bool = True,
-        task_requests: RateLimiter | None = None,
     ) -> None:
         self.bus = HubBus()
         self.memory = GcFreezer(enabled=gc_freeze)
@@ -257,8 +255,11 @@ class Hub:
         ``LARGE_FRAME_BYTES`` or more (backend/hub/session.py): one per turn of the loop."""
         self.refused = 0
         self.overflow_disconnects = 0
-        self.task_requests = task_requests
-        """Rate limit on task_request per client name (shared with REST task creation)."""
+        self.checks = InboundChecks()
+        """What a client's message must pass besides being well formed (backend/hub/checks.py):
+        the hub's publish permissions, and what the server's parts register (the task_request
+        rate limit: backend/tasks/inbound.py)."""
+        permissions.install(self.checks)
         self.forwards_unknown = False
         """With a broker (backend/hub/broker.py) a destination may live on another process."""
         self.acks = InboundAcks(source=HUB_NAME)
@@ -450,26 +451,21 @@ class Hub:
             if type_ not in self._known:
                 client.error("unknown_type", f"unknown message type {type_!r}", message_id)
                 return
-        if not may_publish(client.role, type_):
-            client.error(
-                "forbidden_type",
-                f"a {client.role.value} may not publish {type_!r} (docs/protocol.md, "
-                "'Publish permissions')",
-                message_id,
-            )
-            return
+        plan = self.checks.plans.get(type_) or self.checks.plan(type_)
+        on_type, on_envelope, on_payload, on_routed = plan
+        for check in on_type:
+            if (refusal := check(client, type_, None)) is not None:
+                client.error(*refusal, message_id)
+                return
         try:
             message = Message.model_validate(data)
         except ValidationError as exc:
             client.error("invalid_envelope", _short(exc), message_id)
             return
-        if message.source and message.source != client.name:
-            client.error(
-                "impersonation",
-                f"you are {client.name!r}; you may not publish as {message.source!r}",
-                message.id,
-            )
-            return
+        for check in on_envelope:
+            if (refusal := check(client, type_, message)) is not None:
+                client.error(*refusal, message.id)
+                return
         model = self._models.get(type_)
         if model is None:
             model = self._models[type_] = payload_model(type_)
@@ -478,11 +474,11 @@ class Hub:
         except ValidationError as exc:
             client.error("invalid_payload", _short(exc, "payload"), message.id)
             return
-        message.keep_typed(payload)  # typed once, here: handlers on(model) get this object
-        refusal = publish_refusal(client.role, client.name, type_, message.payload)
-        if refusal is not None:
-            client.error(*refusal, message.id)
-            return
+        keep_typed(message, payload)  # typed once, here: handlers on(model) get this object
+        for check in on_payload:
+            if (refusal := check(client, type_, message)) is not None:
+                client.error(*refusal, message.id)
+                return
         message.source = client.name
         if type_ in CONTROL_TYPES and message.destination in (None, HUB_NAME):
             self._control(client, message)
@@ -494,18 +490,10 @@ class Hub:
         ):
             client.error("unknown_destination", f"no client named {destination!r}", message.id)
             return
-        if (
-            type_ == "task_request"
-            and self.task_requests is not None
-            and client.role in TASK_RATE_LIMITED
-            and not self.acks.is_repeat_request(client.name, message)
-        ):
-            try:
-                self.task_requests.spend(client.name, "too many task requests")
-            except RateLimited as exc:
-                client.error("rate_limited", str(exc), message.id)
+        for check in on_routed:
+            if (refusal := check(client, type_, message)) is not None:
+                client.error(*refusal, message.id)
                 return
-            self.acks.charge(client.name, message)  # its copies sent again are not charged
         if not self.acks.wanted(message):
             self.bus.publish(message)
             return

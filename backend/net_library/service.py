@@ -52,7 +52,7 @@ class NetPublisher(Service):
             problems = self.library.install({n: v.pnml for n, v in self.live.items()})
             for problem in problems:  # a stored net the engine no longer takes: say so
                 log.error("published nets not installed: %s", problem)
-        self.subscribe(self.ep, "nets_loaded", self._on_loaded)
+        self.on(self.ep, NetsLoaded, self._on_loaded)
 
     async def publish(self, net: str, pnml: str, *, by: str, note: str = "") -> NetVersion:
         """Check, store and send ``pnml`` as ``net``'s next version; NetRefused when the
@@ -75,8 +75,7 @@ class NetPublisher(Service):
             nets={name: v.pnml for name, v in self.live.items()},
         )
 
-    def _on_loaded(self, message: Message) -> None:
-        loaded = message.payload_as(NetsLoaded)
+    def _on_loaded(self, message: Message, loaded: NetsLoaded) -> None:
         robot = message.source
         if loaded.problems:
             log.error("%s refused nets version %d: %s", robot, loaded.version, loaded.problems)

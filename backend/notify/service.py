@@ -34,6 +34,7 @@ from backend.notify.model import Channel, EmailChannel, Smtp, WebhookChannel
 from backend.notify.senders import SendFailed, send_email, send_webhook
 from backend.notify.store import NotifyStore
 from guidebot.messages import Message
+from guidebot.payloads.alerts import AlertPayload
 from guidebot.service import Service, cancel_and_wait
 
 __all__ = ["Delivery", "Notifier"]
@@ -141,8 +142,7 @@ class Notifier(Service):
         self.on_cleanup(self._http.aclose)
         self.on_cleanup(self._cancel_retries)
         self.subscribe(self.endpoint, "alert_raised", self._raised)
-        self.subscribe(self.endpoint, "alert_acked", self._closed)
-        self.subscribe(self.endpoint, "alert_resolved", self._closed)
+        self.on(self.endpoint, AlertPayload, self._closed, types=["alert_acked", "alert_resolved"])
         self.on_cleanup(self._stop_workers)
         self.spawn(self._repeat(), name="notify-repeat")
         if self.alerts is not None:  # opened before this component started
@@ -224,8 +224,8 @@ class Notifier(Service):
     def _raised(self, message: Message) -> None:
         self.alert_opened(message.payload)
 
-    def _closed(self, message: Message) -> None:
-        self.open.pop(str(message.payload.get("id")), None)
+    def _closed(self, message: Message, alert: AlertPayload) -> None:
+        self.open.pop(alert.id, None)
 
     def alert_opened(self, alert: dict[str, Any]) -> None:
         """An alert raised: new or opened again, every channel is offered it; raised again

@@ -24,6 +24,8 @@ from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
 from guidebot.payloads.hub import Error
+from guidebot.payloads.robot import NodeReached, RobotMode, RobotState
+from guidebot.payloads.tasks import RobotLink, TaskEnded, TaskEvent
 from guidebot.payloads.traffic import AreaGranted, AreaYield, GetPath, ReleaseArea, RequestArea
 from guidebot.service import Service
 from guidebot.site.graph import NoPath, PathResult, SiteGraph, UnknownNode
@@ -113,19 +115,22 @@ class TrafficManager(Service):
 
     # --- life cycle ----------------------------------------------------------------------
     async def on_start(self) -> None:
+        ep = self.endpoint
+        # Requests answer a payload that is not their model (an in-process sender's mistake)
+        # with an error reply, so they read it themselves (``msg.typed``: validated once).
         self.subscribe_all(
-            self.endpoint,
+            ep,
             {
                 "get_path": self._on_get_path,
                 "request_area": self._on_request_area,
                 "release_area": self._on_release_area,
-                "robot_state": self._on_robot_state,
-                "task_ended": self._on_task_ended,
-                "task_event": self._on_task_event,
-                "node_reached": self._on_node_reached,
-                "robot_disconnected": self._on_robot_disconnected,
             },
         )
+        self.on(ep, RobotState, self._on_robot_state)
+        self.on(ep, TaskEnded, self._on_task_ended)
+        self.on(ep, TaskEvent, self._on_task_event)
+        self.on(ep, NodeReached, self._on_node_reached)
+        self.on(ep, RobotLink, self._on_robot_disconnected, types=["robot_disconnected"])
         for unsubscribe in listen(self.endpoint, self.courier):
             self.on_cleanup(unsubscribe)
         self.spawn(self._watch_cycles(), name="traffic-wait-cycles")
@@ -339,7 +344,7 @@ class TrafficManager(Service):
     # --- handlers ------------------------------------------------------------------------
     def _on_get_path(self, msg: Message) -> None:
         try:
-            req: GetPath = msg.payload_as(GetPath)
+            req: GetPath = msg.typed(GetPath)
         except ValidationError as exc:
             self._reply(msg, "path", {"error": f"bad get_path: {exc.errors()[0]['msg']}"})
             return
@@ -370,7 +375,7 @@ class TrafficManager(Service):
 
     def _on_request_area(self, msg: Message) -> None:
         try:
-            req: RequestArea = msg.payload_as(RequestArea)
+            req: RequestArea = msg.typed(RequestArea)
         except ValidationError:
             return self._refuse(msg, "bad request_area payload")
         robot = self._robot_of(msg, req.robot)
@@ -422,7 +427,7 @@ class TrafficManager(Service):
 
     def _on_release_area(self, msg: Message) -> None:
         try:
-            req: ReleaseArea = msg.payload_as(ReleaseArea)
+            req: ReleaseArea = msg.typed(ReleaseArea)
         except ValidationError:
             return self._refuse(msg, "bad release_area payload")
         robot = self._robot_of(msg, req.robot)
@@ -436,29 +441,30 @@ class TrafficManager(Service):
         self._emit("area_released", {"robot": robot, "area": req.area})
         self._send_grants(grants)
 
-    def _on_robot_state(self, msg: Message) -> None:
-        robot = msg.payload.get("robot")
-        node = msg.payload.get("node")
-        if not isinstance(robot, str) or self._robot_of(msg, robot) is None:
+    def _on_robot_state(self, msg: Message, state: RobotState) -> None:
+        robot, node = state.robot, state.node
+        if self._robot_of(msg, robot) is None:
             return
-        known = isinstance(node, str) and node in self.graph
-        if known and (previous := self.boots.restarted(robot, msg.payload.get("boot_id"))):
+        known = node is not None and node in self.graph
+        if known and (previous := self.boots.restarted(robot, state.boot_id)):
             self._restarted(robot, str(node), previous)
-        mode = msg.payload.get("mode")
-        online = mode != "offline"
+        online = state.mode != RobotMode.OFFLINE
         if online and not self.locks.is_online(robot):
             for area in self.locks.held_by(robot):
                 self.alerts.resolve(
                     "lock_holder_offline", area, f"{robot} is back online; it holds {area}"
                 )
         self.locks.set_online(robot, online)
-        here = self.graph.area_at.get(node) if isinstance(node, str) and known else None
-        self._adopt(robot, here, msg.payload.get("areas"))
+        here = self.graph.area_at.get(node) if node is not None and known else None
+        # ``areas`` left out (an older agent, an in-process vehicle) is not ``[]``: it says
+        # nothing (whereabouts.py), so it is read from the JSON, where absence shows.
+        reported = state.areas if "areas" in msg.payload else None
+        self._adopt(robot, here, reported)
         if robot in self._awaiting:
             self._awaiting.discard(robot)
             if not self._awaiting:
                 self._end_resync()
-        if not isinstance(node, str) or not known:
+        if node is None or not known:
             return
         if self._positions.get(robot) != node:
             # Further on than its node_reached said (one lost): a copy of that one sent again
@@ -467,21 +473,18 @@ class TrafficManager(Service):
             self._positions[robot] = node
             self._position_at[robot] = max(msg.timestamp, self._position_at.get(robot, 0.0))
         self._check_conflict(robot, here)
-        if self._ending.get(robot) not in (None, msg.payload.get("task_id")):
+        if self._ending.get(robot) not in (None, state.task_id):
             del self._ending[robot]  # it runs something else now: the ended task is over
-        moving = bool(msg.payload.get("task_id"))
-        self._release_left(robot, here, moving, claimed_areas(msg.payload.get("areas")))
+        moving = bool(state.task_id)
+        self._release_left(robot, here, moving, claimed_areas(reported))
 
-    def _on_node_reached(self, msg: Message) -> None:
+    def _on_node_reached(self, msg: Message, reached: NodeReached) -> None:
         """Each node the robot reaches (between its robot_state reports, a second apart): its
         position, and an area it is now inside."""
-        robot, node = msg.payload.get("robot"), msg.payload.get("node")
-        if not isinstance(robot, str) or self._robot_of(msg, robot) is None:
+        robot, node = reached.robot, reached.node
+        if self._robot_of(msg, robot) is None or node not in self.graph:
             return
-        if not isinstance(node, str) or node not in self.graph:
-            return
-        at = msg.payload.get("at")
-        at = float(at) if isinstance(at, int | float) else msg.timestamp
+        at = float(reached.at) if reached.at is not None else msg.timestamp
         if at >= self._position_at.get(robot, 0.0):
             # An older one (sent again after a drop) is history: the robot is further on.
             self._positions[robot] = node
@@ -522,28 +525,26 @@ class TrafficManager(Service):
             self._emit("area_released", {"robot": robot, "area": area, "left": True})
         self._send_grants(grants)
 
-    def _on_task_ended(self, msg: Message) -> None:
-        if msg.payload.get("outcome") == "refused":
+    def _on_task_ended(self, msg: Message, ended: TaskEnded) -> None:
+        if ended.outcome == "refused":
             return  # a task it did not take: the one it runs keeps its areas
-        robot = msg.payload.get("robot")
-        if isinstance(robot, str) and self._robot_of(msg, robot) is not None:
-            self._reported_end[robot] = str(msg.payload.get("task_id"))
+        robot = ended.robot
+        if self._robot_of(msg, robot) is not None:
+            self._reported_end[robot] = ended.task_id
             self._ending.pop(robot, None)
             self._task_over(robot)
 
-    def _on_task_event(self, msg: Message) -> None:
-        robot, task = msg.payload.get("robot"), str(msg.payload.get("task_id"))
-        if msg.payload.get("state") not in FINAL_TASK_STATES or not isinstance(robot, str):
+    def _on_task_event(self, msg: Message, event: TaskEvent) -> None:
+        robot, task = event.robot, event.task_id
+        if event.state not in FINAL_TASK_STATES or robot is None:
             return
         if self._reported_end.get(robot) == task:
             self._task_over(robot)  # the robot said so itself: it has stopped
         else:
             self._task_ending(robot, task)
 
-    def _on_robot_disconnected(self, msg: Message) -> None:
-        robot = msg.payload.get("robot") or msg.payload.get("name")
-        if isinstance(robot, str):
-            self.locks.set_online(robot, False)
+    def _on_robot_disconnected(self, msg: Message, link: RobotLink) -> None:
+        self.locks.set_online(link.robot, False)
 
     # --- helpers -------------------------------------------------------------------------
     def _restarted(self, robot: str, node: str, previous: str) -> None:

@@ -25,7 +25,14 @@ from backend.vda5050.order import (
 from backend.vda5050.zones import area_boxes, inside, responses, zone_sets
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
-from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
+from guidebot.payloads.building import (
+    CallElevator,
+    DoorClosed,
+    DoorOpened,
+    ElevatorInPosition,
+    OpenDoor,
+    ReleaseDoor,
+)
 from guidebot.payloads.robot import (
     ENDED_REPORTED,
     BatteryAlarm,
@@ -35,8 +42,20 @@ from guidebot.payloads.robot import (
     RobotMode,
     RobotState,
 )
-from guidebot.payloads.tasks import RobotLink, TaskEnded, TaskStarted, TourProgress
-from guidebot.payloads.traffic import GetPath, ReleaseArea, RequestArea
+from guidebot.payloads.tasks import (
+    RobotLink,
+    TaskAssigned,
+    TaskEnded,
+    TaskStarted,
+    TourProgress,
+)
+from guidebot.payloads.traffic import (
+    AreaGranted,
+    ClosuresChanged,
+    GetPath,
+    ReleaseArea,
+    RequestArea,
+)
 from guidebot.site.schema import RobotConfig, Site
 from guidebot.vda5050.schemas import version_of
 from guidebot.vda5050.sim import speak_seconds
@@ -200,13 +219,14 @@ class VdaRobot:
         self._orders = 0
         self._speak(self.vehicle.version)
         self._unsubscribe = [
-            endpoint.subscribe("task_assigned", self._on_task_assigned),
+            endpoint.on(TaskAssigned, self._on_task_assigned),
+            # Read as JSON: a cancel is obeyed whatever else its payload carries.
             endpoint.subscribe("task_cancel", self._on_task_cancel),
-            endpoint.subscribe("area_granted", self._on_area_granted),
-            endpoint.subscribe("door_opened", self._on_door),
-            endpoint.subscribe("door_closed", self._on_door),
-            endpoint.subscribe("elevator_in_position", self._on_cabin),
-            endpoint.subscribe("closures_changed", self._on_closures),
+            endpoint.on(AreaGranted, self._on_area_granted),
+            endpoint.on(DoorOpened, self._on_door),
+            endpoint.on(DoorClosed, self._on_door),
+            endpoint.on(ElevatorInPosition, self._on_cabin),
+            endpoint.on(ClosuresChanged, self._on_closures),
         ]
 
     def use_site(self, site: Site, config: RobotConfig) -> None:
@@ -376,11 +396,10 @@ class VdaRobot:
             }
         )
 
-    def _on_closures(self, msg: Message) -> None:
+    def _on_closures(self, msg: Message, changed: ClosuresChanged) -> None:
         """Closed nodes changed: new zone sets (BLOCKED) given at once, and granted zone
         requests for a closed area revoked."""
-        nodes = msg.payload.get("nodes") or []
-        closed = frozenset(n for n in nodes if isinstance(n, str))
+        closed = frozenset(changed.nodes)
         if closed == self.closed:
             return
         self.closed = closed
@@ -592,11 +611,10 @@ class VdaRobot:
         await self.instant("startPause" if paused else "stopPause")
 
     # -- tasks -----------------------------------------------------------------------------
-    def _on_task_assigned(self, msg: Message) -> None:
-        p = msg.payload
-        if p.get("robot") != self.name:
+    def _on_task_assigned(self, msg: Message, assigned: TaskAssigned) -> None:
+        if assigned.robot != self.name:
             return
-        task_id = str(p["task_id"])
+        task_id = assigned.task_id
         if task_id == self.task_id:
             return  # the same task again
         if self.task_id is not None and self.task_id == self.cancelling:
@@ -616,7 +634,7 @@ class VdaRobot:
             return
         self.task_id = task_id
         self.ep.publish(TaskStarted(task_id=task_id, robot=self.name))
-        self._start(task_id, self._run(task_id, str(p.get("net", "")), dict(p.get("params") or {})))
+        self._start(task_id, self._run(task_id, assigned.net, dict(assigned.params)))
 
     def _start(self, task_id: str, run: Coroutine[Any, Any, None]) -> None:
         """Run ``task_id``; a runner cancelled before its first step (or again while it
@@ -631,7 +649,7 @@ class VdaRobot:
 
     def _on_task_cancel(self, msg: Message) -> None:
         task_id = msg.payload.get("task_id")
-        if self.held is not None and self.held.payload.get("task_id") == task_id:
+        if self.held is not None and self.held.typed(TaskAssigned).task_id == task_id:
             self.held = None  # cancelled before it started: never started
             return
         if task_id != self.task_id or self.runner is None or task_id == self.cancelling:
@@ -689,7 +707,7 @@ class VdaRobot:
         self._publish_state()
         held, self.held = self.held, None
         if held is not None:
-            self._on_task_assigned(held)
+            self._on_task_assigned(held, held.typed(TaskAssigned))
 
     async def _charge(self) -> None:
         """At the station: ``startCharging``, and the task goes on until the battery is full
@@ -1179,27 +1197,25 @@ class VdaRobot:
     def _stands_in(self, area: str, node: str | None) -> bool:
         return node is not None and node in self.area_nodes.get(area, ())
 
-    def _on_area_granted(self, msg: Message) -> None:
-        p = msg.payload
-        if p.get("robot") != self.name:
+    def _on_area_granted(self, msg: Message, granted: AreaGranted) -> None:
+        if granted.robot != self.name:
             return
-        area = str(p.get("area"))
-        if p.get("removed"):
-            log.info("%s: area %s removed: %s", self.name, area, p.get("reason"))
+        area = granted.area
+        if granted.removed:
+            log.info("%s: area %s removed: %s", self.name, area, granted.reason)
         if area in self.requested:
             self.granted.add(area)
         for rid, asked in self.zone_requests.items():
             if asked != area:
                 continue
-            if not p.get("removed"):
+            if not granted.removed:
                 self._answer(rid, "GRANTED")
             else:  # the area is gone from the site: a grant is taken back, a wait refused
                 self._answer(rid, "REVOKED" if self._answered.get(rid) == "GRANTED" else "REJECTED")
         self.changed.set()
 
-    def _on_cabin(self, msg: Message) -> None:
-        p = msg.payload
-        self.cabins[str(p.get("elevator"))] = (str(p.get("floor")), bool(p.get("door_open")))
+    def _on_cabin(self, msg: Message, cabin: ElevatorInPosition) -> None:
+        self.cabins[cabin.elevator] = (cabin.floor, cabin.door_open)
         self.changed.set()
 
     def _call(self, elevator: str, floor: str) -> None:
@@ -1209,8 +1225,8 @@ class VdaRobot:
             self._called[(elevator, floor)] = now
             self.ep.publish(CallElevator(elevator=elevator, floor=floor))
 
-    def _on_door(self, msg: Message) -> None:
-        door = str(msg.payload.get("door"))
+    def _on_door(self, msg: Message, answer: DoorOpened | DoorClosed) -> None:
+        door = answer.door
         if msg.type == "door_opened":
             self.open_doors.add(door)
         else:
