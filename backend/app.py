@@ -29,12 +29,10 @@ from backend.accounts import routes as accounts_routes
 from backend.accounts.audit import AuditTrail
 from backend.accounts.component import accounts
 from backend.api import ROUTERS as api_routers
-from backend.api.deps import ERRORS
 from backend.api.errors import install_error_handlers
 from backend.api.limits import BodyLimit
 from backend.api.methods import install_method_answers
 from backend.api.openapi import install_contract_openapi
-from backend.api.query import known_query
 from backend.api.warmup import warm_routes
 from backend.auth import Authenticator, Role, TokenStore
 from backend.bookings import routes as bookings_routes
@@ -63,6 +61,8 @@ from backend.notify import routes as notify_routes
 from backend.notify.component import notify
 from backend.ratelimit import RateLimiter
 from backend.reports import api as reports_routes
+from backend.rest.deps import ERRORS
+from backend.rest.query import known_query
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
@@ -175,7 +175,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
         docs_url=None,
         redoc_url=None,
-        dependencies=[Depends(known_query)],  # unknown query parameters: 422 (api/query.py)
+        dependencies=[Depends(known_query)],  # unknown query parameters: 422 (rest/query.py)
     )
     app.state.settings = settings
 

@@ -24,11 +24,12 @@ from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.accounts.component import follower_sessions
-from backend.api.component import _sync_robot_tokens, announce_links, hash_robot_tokens
 from backend.db import DbStore, make_engine, make_sessionmaker
 from backend.health import ComponentState
 from backend.hub.broker import BrokerBridge, process_id
 from backend.leadership import Leadership
+from backend.robot_links import announce_links
+from backend.site.tokens import hash_robot_tokens, sync_robot_tokens
 from guidebot.site.validate import validate_site
 
 __all__ = ["DECIDING", "LOST_LEADERSHIP_EXIT", "FollowerRest", "cluster_report", "clustered"]
@@ -92,7 +93,7 @@ class _FollowerTokens:
         if stored is None:
             return False
         site = hash_robot_tokens(validate_site(stored[1]))
-        _sync_robot_tokens(self.app.state.tokens, site, self.known)
+        sync_robot_tokens(self.app.state.tokens, site, self.known)
         self.loaded = True
         return True
 

@@ -21,9 +21,9 @@ from backend.accounts.passkeys import PasskeyService, RelyingParty
 from backend.accounts.passwords import verify_password
 from backend.accounts.service import AccountError, AccountService, Session
 from backend.actions import require_action
-from backend.api.deps import Store, app_service, error_response
-from backend.api.query import OPEN_QUERY
 from backend.auth import Principal, SignInRefused, client_address
+from backend.rest.deps import Store, app_service, error_response
+from backend.rest.query import OPEN_QUERY
 
 __all__ = ["SIGN_IN", "router"]
 

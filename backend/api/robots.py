@@ -6,8 +6,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 
-from backend.api.deps import SeeRobot, Tasks, Traffic, Watcher, forbid, not_found
 from backend.auth import Role
+from backend.rest.deps import SeeRobot, Tasks, Traffic, Watcher, forbid, not_found
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
 

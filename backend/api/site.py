@@ -7,9 +7,9 @@ from typing import Annotated, Any
 import orjson
 from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 
-from backend.api.component import hash_robot_tokens, weak_robot_tokens
-from backend.api.deps import Admin, PlanPath, Sites, Staff, Traffic
+from backend.rest.deps import Admin, PlanPath, Sites, Staff, Traffic
 from backend.site.offloop import off_loop, release
+from backend.site.tokens import hash_robot_tokens, weak_robot_tokens
 from backend.site.yaml_import import read_site_yaml
 from guidebot.site import jsonio
 from guidebot.site.graph import NoPath, UnknownNode

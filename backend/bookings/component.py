@@ -15,7 +15,7 @@ from backend.bookings.reserve import Reservations
 from backend.bookings.schedule import BookingScheduler
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
-from backend.closures.model import Closure
+from backend.closure import Closure
 from backend.fencing import deciding_endpoint
 from backend.tasks.manager import TaskManager
 

@@ -12,7 +12,6 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, status
 
 from backend.actions import require_action
-from backend.api.deps import Anyone
 from backend.auth import Principal
 from backend.bookings.model import (
     BookingError,
@@ -23,6 +22,7 @@ from backend.bookings.model import (
 )
 from backend.bookings.service import BookingService
 from backend.bookings.words import next_tours
+from backend.rest.deps import Anyone
 
 __all__ = ["router"]
 

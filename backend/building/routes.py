@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter, Request
 
-from backend.api.deps import Watcher
+from backend.rest.deps import Watcher
 
 __all__ = ["router"]
 

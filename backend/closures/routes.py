@@ -8,10 +8,10 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Request, status
 
 from backend.actions import require_action
-from backend.api.deps import Watcher
 from backend.auth import Principal
-from backend.closures.model import ClosureError, ClosureRequest
+from backend.closure import ClosureError, ClosureRequest
 from backend.closures.service import ClosureService
+from backend.rest.deps import Watcher
 
 __all__ = ["router"]
 

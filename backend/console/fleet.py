@@ -10,10 +10,10 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException, Path, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import Sites, Staff, Store, Tasks, Watcher, not_found
 from backend.console.feed import ConsoleFeed
 from backend.console.routes import Feed
 from backend.db.store import DbStore
+from backend.rest.deps import Sites, Staff, Store, Tasks, Watcher, not_found
 from backend.site.service import SiteService
 from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError

@@ -7,9 +7,9 @@ from typing import Any
 from fastapi import APIRouter, HTTPException, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import Anyone, Staff
 from backend.emergency.service import EmergencyService
 from backend.emergency.state import EmergencyError, IllegalMove, ResumeRefused
+from backend.rest.deps import Anyone, Staff
 from guidebot.site.emergency import AlarmZone
 
 __all__ = ["router"]

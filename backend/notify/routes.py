@@ -9,10 +9,10 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
 
 from backend.actions import require_action
-from backend.api.deps import not_found
 from backend.auth import Principal
 from backend.notify.model import DAYS, SEVERITIES, ChannelIn, Smtp
 from backend.notify.service import LOG_SIZE, Notifier
+from backend.rest.deps import not_found
 
 __all__ = ["router"]
 

@@ -18,8 +18,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from backend.closures.model import Closure
-from backend.closures.routing import RouteClosed, path_avoiding
+from backend.closure import Closure
+from backend.detours import RouteClosed, path_avoiding
 from guidebot.site.graph import NoPath, SiteGraph, UnknownNode
 
 __all__ = ["MAX_WAITS", "TroubleWaits"]

@@ -8,8 +8,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Path, Request, status
 
-from backend.api.deps import Sites, Staff, Store, not_found
-from backend.api.models import RequestBody
+from backend.rest.deps import Sites, Staff, Store, not_found
+from backend.rest.models import RequestBody
 
 __all__ = ["router"]
 
