@@ -66,6 +66,7 @@ from backend.rest.query import known_query
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
+from backend.state import AppState, app_state
 from backend.vda5050 import routes as vda5050_routes
 from backend.vda5050.component import vda5050
 from backend.webpages import WebFiles, page
@@ -153,7 +154,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             stack.callback(health_board.set, "hub", ComponentState.stopped)
             if settings.broker_url:  # several processes: components run on the leader only
                 # A server inside another program (the tests) stops itself, not that program.
-                on_lost = getattr(app.state, "on_lost_leadership", None)
+                on_lost = app_state(app).on_lost_leadership
                 await stack.enter_async_context(clustered(app, COMPONENTS, on_lost=on_lost))
             else:
                 for component in COMPONENTS:
@@ -177,6 +178,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         redoc_url=None,
         dependencies=[Depends(known_query)],  # unknown query parameters: 422 (rest/query.py)
     )
+    app.state = AppState()  # the same State, typed (backend/state.py)
     app.state.settings = settings
 
     @app.get("/api/health", tags=["server"])
@@ -185,7 +187,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         load balancers, tests and the admin page; ``hub_ws_port`` is the hub's own listener's
         port (null: off). Always 200: read ``status``."""
         hub: Hub = app.state.hub
-        building = getattr(app.state, "building", None)
+        building = app_state(app).building
         if building is not None:
             app.state.health.set("building_interface", *building.component_state())
         return {
@@ -194,7 +196,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "clients": len(hub.clients),
             "endpoints": len(hub.bus.endpoint_names),
             "published": hub.bus.published,
-            "hub_ws_port": getattr(app.state, "hub_ws_port", None),
+            "hub_ws_port": app_state(app).hub_ws_port,
             **({"cluster": cluster} if (cluster := cluster_report(app)) else {}),
         }
 

@@ -35,6 +35,7 @@ from backend.site.tokens import (
     sync_robot_tokens,
     weak_robot_tokens,
 )
+from backend.state import app_state
 from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.lifts import lift_queue
 from backend.tasks.manager import TaskManager
@@ -88,7 +89,7 @@ class ServerBrain(Service):
         except Exception as exc:
             health.set("database", ComponentState.failed, f"{type(exc).__name__}: {exc}")
             raise
-        leadership = getattr(app.state, "leadership", None)  # several server processes
+        leadership = app_state(app).leadership  # several server processes
         store = DbStore(
             make_sessionmaker(engine),
             epoch=None if leadership is None else leadership.fencing_epoch,
