@@ -6,8 +6,15 @@ from __future__ import annotations
 from backend.auth import Role, TokenStore, is_digest, token_digest
 from backend.settings import published_tokens, weak_secret
 from guidebot.site.schema import Site
+from guidebot.site.validate import SiteInvalid, SiteIssue
 
-__all__ = ["InsecureSite", "hash_robot_tokens", "sync_robot_tokens", "weak_robot_tokens"]
+__all__ = [
+    "InsecureSite",
+    "hash_robot_tokens",
+    "secure_robot_tokens",
+    "sync_robot_tokens",
+    "weak_robot_tokens",
+]
 
 
 class InsecureSite(RuntimeError):
@@ -36,6 +43,15 @@ def weak_robot_tokens(site: Site) -> list[str]:
         elif why := weak_secret(robot.token):
             problems.append(f"robot {robot.name!r}: its token {why}")
     return problems
+
+
+def secure_robot_tokens(site: Site, *, development: bool) -> Site:
+    """A site about to be stored (an upload, a publish): robot tokens hashed; outside
+    development, weak ones refused (SiteInvalid). Run it off the loop: with a thousand robots,
+    hashing and copying them takes 10-15 ms."""
+    if not development and (problems := weak_robot_tokens(site)):
+        raise SiteInvalid([SiteIssue("robots", p) for p in problems])
+    return hash_robot_tokens(site)
 
 
 def sync_robot_tokens(tokens: TokenStore, site: Site, known: dict[str, str]) -> None:
