@@ -1,6 +1,6 @@
 """Who may do what: one rule per action, whichever way the action arrives (REST or the hub).
 
-REST routes take their role check from ``RULES`` (``backend/api/deps.py``, ``require_action``)
+REST routes take their role check from ``RULES`` (``backend/rest/deps.py``, ``require_action``)
 and the hub its publish check (``backend/hub/permissions.py``), so a role allowed an action over
 one is allowed it over the other: ``kill_petri_net`` is the hub message and ``POST
 /api/nets/kill`` alike, ``task_request`` the hub message and ``POST /api/tasks`` alike

@@ -29,12 +29,10 @@ from backend.accounts import routes as accounts_routes
 from backend.accounts.audit import AuditTrail
 from backend.accounts.component import accounts
 from backend.api import ROUTERS as api_routers
-from backend.api.deps import ERRORS
 from backend.api.errors import install_error_handlers
 from backend.api.limits import BodyLimit
 from backend.api.methods import install_method_answers
 from backend.api.openapi import install_contract_openapi
-from backend.api.query import known_query
 from backend.api.warmup import warm_routes
 from backend.auth import Authenticator, Role, TokenStore
 from backend.bookings import routes as bookings_routes
@@ -63,9 +61,12 @@ from backend.notify import routes as notify_routes
 from backend.notify.component import notify
 from backend.ratelimit import RateLimiter
 from backend.reports import api as reports_routes
+from backend.rest.deps import ERRORS
+from backend.rest.query import known_query
 from backend.rgm import rgm
 from backend.settings import Settings
 from backend.site.component import site_editor
+from backend.state import AppState, app_state
 from backend.tasks.inbound import limit_task_requests
 from backend.vda5050 import routes as vda5050_routes
 from backend.vda5050.component import vda5050
@@ -154,7 +155,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             stack.callback(health_board.set, "hub", ComponentState.stopped)
             if settings.broker_url:  # several processes: components run on the leader only
                 # A server inside another program (the tests) stops itself, not that program.
-                on_lost = getattr(app.state, "on_lost_leadership", None)
+                on_lost = app_state(app).on_lost_leadership
                 await stack.enter_async_context(clustered(app, COMPONENTS, on_lost=on_lost))
             else:
                 for component in COMPONENTS:
@@ -176,8 +177,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
         docs_url=None,
         redoc_url=None,
-        dependencies=[Depends(known_query)],  # unknown query parameters: 422 (api/query.py)
+        dependencies=[Depends(known_query)],  # unknown query parameters: 422 (rest/query.py)
     )
+    app.state = AppState()  # the same State, typed (backend/state.py)
     app.state.settings = settings
 
     @app.get("/api/health", tags=["server"])
@@ -186,7 +188,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         load balancers, tests and the admin page; ``hub_ws_port`` is the hub's own listener's
         port (null: off). Always 200: read ``status``."""
         hub: Hub = app.state.hub
-        building = getattr(app.state, "building", None)
+        building = app_state(app).building
         if building is not None:
             app.state.health.set("building_interface", *building.component_state())
         return {
@@ -195,7 +197,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "clients": len(hub.clients),
             "endpoints": len(hub.bus.endpoint_names),
             "published": hub.bus.published,
-            "hub_ws_port": getattr(app.state, "hub_ws_port", None),
+            "hub_ws_port": app_state(app).hub_ws_port,
             **({"cluster": cluster} if (cluster := cluster_report(app)) else {}),
         }
 

@@ -23,6 +23,7 @@ from typing import Protocol, cast
 from fastapi import HTTPException, Request, status
 
 from backend.ratelimit import RateLimited, RateLimiter
+from backend.state import app_state
 
 __all__ = [
     "PERSON_ROLES",
@@ -198,7 +199,7 @@ def require_roles(*roles: Role, action: str | None = None) -> RoleCheck:
         auth: Authenticator = request.app.state.auth
         headers, query = request.headers, request.query_params
         token = bearer_token(headers.get("authorization"), query.get("token"))
-        sessions: SessionGate | None = getattr(request.app.state, "sessions", None)
+        sessions: SessionGate | None = app_state(request.app).sessions
         principal = await sessions(request) if token is None and sessions is not None else None
         try:
             if principal is None:

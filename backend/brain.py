@@ -2,54 +2,71 @@
 buttons, event log, robot links and the offline-lock watcher (listed in backend.app.COMPONENTS).
 
 One flat exit stack, like the robot agent's (robot_agent/agent.py): each part is given back,
-newest first, when the server stops or when a later part fails to start. The helpers it uses
-(site import, robot tokens, what the event log keeps) are in backend/api/component.py.
+newest first, when the server stops or when a later part fails to start. Its parts' subjects
+have their own modules: the robots' tokens (backend/site/tokens.py), what the event log keeps
+(backend/event_log.py), robot links (backend/robot_links.py), the offline-lock watcher
+(backend/traffic/offline.py).
 """
 
 from __future__ import annotations
 
 import contextlib
 from collections.abc import AsyncIterator
+from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI
-from pydantic import ValidationError
 
 from backend.accounts.audit import AUDIT_KINDS
 from backend.alerts import AlertStore
-from backend.api.component import (
-    LOGGED_BROADCASTS,
-    LOGGED_TYPES,
-    InsecureSite,
-    _initial_site,
-    _sync_robot_tokens,
-    announce_robot_links,
-    watch_offline_locks,
-    weak_robot_tokens,
-)
 from backend.db import DbStore, make_engine, make_sessionmaker, migrate
-from backend.elevator_calls import CallNews
+from backend.event_log import keep_in_log
 from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
 from backend.reports.figures import Reports
 from backend.reports.rollup import Rollups, node_positions
+from backend.robot_links import announce_robot_links
 from backend.site.graph_build import build_site_graph
 from backend.site.offloop import release
-from backend.site.service import SiteService
+from backend.site.service import EMPTY_SITE, SiteService
+from backend.site.tokens import (
+    InsecureSite,
+    hash_robot_tokens,
+    sync_robot_tokens,
+    weak_robot_tokens,
+)
+from backend.state import app_state
 from backend.tasks.buttons import ButtonWatcher
 from backend.tasks.lifts import lift_queue
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
-from guidebot.messages import Message
-from guidebot.payloads.building import ElevatorState
+from backend.traffic.offline import watch_offline_locks
 from guidebot.service import Service
 from guidebot.site.schema import Site
+from guidebot.site.validate import validate_site
+from guidebot.site.yamlio import load_site_file
 
 __all__ = ["ServerBrain", "server_brain"]
 
 REPORT_GRACE_S = 15.0
 """With several processes: how long a restored task its robot no longer names waits for the
 robot's task_ended (TaskManager.report_grace_s)."""
+
+
+async def _initial_site(store: DbStore, path: Path | None) -> tuple[Site, int]:
+    """The database wins; the site file ``path`` is imported only into an empty database."""
+    stored = await store.load_site()
+    if stored is not None:
+        version, data = stored
+        site = validate_site(data)
+        hashed = hash_robot_tokens(site)
+        if hashed is not site:  # stored before tokens were hashed: store the digests now
+            version = await store.save_site(hashed.model_dump(mode="json"))
+        return hashed, version
+    site = load_site_file(path) if path else validate_site(EMPTY_SITE)
+    site = hash_robot_tokens(site)
+    version = await store.save_site(site.model_dump(mode="json"))
+    return site, version
 
 
 class ServerBrain(Service):
@@ -72,7 +89,7 @@ class ServerBrain(Service):
         except Exception as exc:
             health.set("database", ComponentState.failed, f"{type(exc).__name__}: {exc}")
             raise
-        leadership = getattr(app.state, "leadership", None)  # several server processes
+        leadership = app_state(app).leadership  # several server processes
         store = DbStore(
             make_sessionmaker(engine),
             epoch=None if leadership is None else leadership.fencing_epoch,
@@ -84,7 +101,7 @@ class ServerBrain(Service):
         await self.enter(store)
         health.set("database", ComponentState.ok, engine.url.get_backend_name())
 
-        site, version = await _initial_site(app, store)
+        site, version = await _initial_site(store, settings.site)
         if not settings.development and (problems := weak_robot_tokens(site)):
             raise InsecureSite(
                 f"refusing to start with environment={settings.environment!r}: "
@@ -124,7 +141,7 @@ class ServerBrain(Service):
         tasks.lifts.queue = lift_queue(traffic.lock_views, lambda: traffic.graph)
         buttons = ButtonWatcher(deciding_endpoint(app, "buttons"), tasks, site)
         known_tokens: dict[str, str] = {}
-        _sync_robot_tokens(app.state.tokens, site, known_tokens)
+        sync_robot_tokens(app.state.tokens, site, known_tokens)
 
         async def on_site(new: Site) -> None:
             new_graph = await build_site_graph(new, workers)
@@ -133,7 +150,7 @@ class ServerBrain(Service):
             traffic.load_site(new, new_graph)
             tasks.load_site(new, new_graph)
             buttons.load_site(new)
-            _sync_robot_tokens(app.state.tokens, new, known_tokens)
+            sync_robot_tokens(app.state.tokens, new, known_tokens)
             rollups.positions = node_positions(new)
             await release(retired)
 
@@ -144,25 +161,7 @@ class ServerBrain(Service):
         # The log's mark of a clean stop (the reports count the time to the next start as the
         # server down), after the managers' last events and before the store's last write.
         self.on_cleanup(lambda: store.record_event("server_stopped", "server", {}))
-
-        calls = CallNews()
-
-        def log_message(msg: Message) -> None:
-            if msg.type == "call_elevator" and not calls.is_news(
-                str(msg.payload.get("elevator")), str(msg.payload.get("floor"))
-            ):
-                return  # a press again (backend/elevator_calls.py)
-            store.record_event(msg.type, msg.source, msg.payload)
-
-        def cabin(msg: Message) -> None:
-            with contextlib.suppress(ValidationError):
-                calls.cabin(msg.payload_as(ElevatorState))
-
-        logger.subscribe("elevator_state", cabin)
-        for pattern in LOGGED_TYPES:
-            logger.subscribe(pattern, log_message, tap=True)
-        for pattern in LOGGED_BROADCASTS:
-            logger.subscribe(pattern, log_message)
+        keep_in_log(logger, store.record_event)
         # The log's mark of a new server life. The locks of the last one are read first and
         # held again (logged as grants with ``restored``) until their robots report.
         held = await store.lock_holders()

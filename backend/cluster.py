@@ -24,11 +24,13 @@ from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from backend.accounts.component import follower_sessions
-from backend.api.component import _sync_robot_tokens, announce_links, hash_robot_tokens
 from backend.db import DbStore, make_engine, make_sessionmaker
 from backend.health import ComponentState
 from backend.hub.broker import BrokerBridge, process_id
 from backend.leadership import Leadership
+from backend.robot_links import announce_links
+from backend.site.tokens import hash_robot_tokens, sync_robot_tokens
+from backend.state import app_state
 from guidebot.site.validate import validate_site
 
 __all__ = ["DECIDING", "LOST_LEADERSHIP_EXIT", "FollowerRest", "cluster_report", "clustered"]
@@ -92,7 +94,7 @@ class _FollowerTokens:
         if stored is None:
             return False
         site = hash_robot_tokens(validate_site(stored[1]))
-        _sync_robot_tokens(self.app.state.tokens, site, self.known)
+        sync_robot_tokens(self.app.state.tokens, site, self.known)
         self.loaded = True
         return True
 
@@ -201,11 +203,11 @@ async def clustered(
 
 def cluster_report(app: FastAPI) -> dict[str, Any] | None:
     """/api/health's "cluster" section: this process, the leader, the epoch, the broker."""
-    leadership: Leadership | None = getattr(app.state, "leadership", None)
-    bridge: BrokerBridge | None = getattr(app.state, "broker", None)
+    leadership: Leadership | None = app_state(app).leadership
+    bridge: BrokerBridge | None = app_state(app).broker
     if leadership is None or bridge is None:
         return None
-    fenced = sum(e.dropped for e in getattr(app.state, "fenced_endpoints", []))
+    fenced = sum(e.dropped for e in app_state(app).fenced_endpoints)
     return {**leadership.report(), "fenced": fenced, "broker": bridge.stats()}
 
 
@@ -220,7 +222,7 @@ class FollowerRest:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         path = scope.get("path", "")
         if scope["type"] == "http" and path.startswith("/api/") and path != "/api/health":
-            leadership: Leadership | None = getattr(scope["app"].state, "leadership", None)
+            leadership: Leadership | None = app_state(scope["app"]).leadership
             if leadership is not None and not leadership.serving:
                 body = orjson.dumps(
                     {

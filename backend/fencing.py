@@ -17,6 +17,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from backend.state import app_state
 from guidebot.bus import BusEndpoint, Endpoint, Handler
 from guidebot.messages import Message, Payload, type_name
 
@@ -78,9 +79,9 @@ class FencedEndpoint(BusEndpoint):
 def deciding_endpoint(app: Any, name: str) -> Endpoint | FencedEndpoint:
     """The hub endpoint ``name`` for a deciding component: fenced on a clustered server."""
     endpoint: Endpoint = app.state.hub.endpoint(name)
-    leadership = getattr(app.state, "leadership", None)
+    leadership = app_state(app).leadership
     if leadership is None:
         return endpoint
     fenced = FencedEndpoint(endpoint, leadership.may_decide)
-    app.state.fenced_endpoints = [*getattr(app.state, "fenced_endpoints", []), fenced]
+    app.state.fenced_endpoints = [*app_state(app).fenced_endpoints, fenced]
     return fenced

@@ -33,6 +33,7 @@ from fastapi import FastAPI
 
 from backend.app import create_app, uvicorn_config
 from backend.settings import Settings
+from backend.state import app_state
 
 __all__ = ["RunningServer", "running_server"]
 
@@ -59,7 +60,7 @@ class RunningServer:
     def hub_port(self) -> int:
         """The port hub clients use: the hub's own listener's with ``hub_ws_port`` set, else
         the HTTP port (the /ws route)."""
-        listener: int | None = getattr(self.app.state, "hub_ws_port", None)
+        listener: int | None = app_state(self.app).hub_ws_port
         return self.port if listener is None else listener
 
     @property

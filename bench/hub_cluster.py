@@ -32,7 +32,8 @@ import orjson
 
 from guidebot.benchutil import percentiles, print_result
 
-from .hub import GUI_TOKEN, WARMUP_S, _expect, _open_gui, _spawn, _tell, robot_name, robot_token
+from .hub import GUI_TOKEN, _expect, _open_gui, _spawn, _tell, robot_name, robot_token
+from .hub_workers import WARMUP_S
 from .servers import start_servers
 
 __all__ = ["cluster_command", "run_cluster"]

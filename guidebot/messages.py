@@ -120,7 +120,7 @@ def _cached(message: Message) -> object:
 
 class PayloadModel(BaseModel):
     """Base class for payloads: a closed object of strict values, as the REST bodies are
-    (backend/api/models.py): unknown fields are refused so typos surface at once, and nothing
+    (backend/rest/models.py): unknown fields are refused so typos surface at once, and nothing
     is coerced (``true`` is not 1, ``"2"`` not 2, 1 is a number, ``1`` not ``true``).
 
     JSON says an enum's member by its value: an enum field is annotated ``WireEnum`` (lax for

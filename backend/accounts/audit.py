@@ -10,6 +10,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from backend.accounts.cookies import SAFE_METHODS
 from backend.auth import PERSON_ROLES, Principal
+from backend.state import app_state
 
 __all__ = ["AUDIT_KINDS", "SELF_AUDITED", "AuditTrail"]
 
@@ -59,7 +60,7 @@ class AuditTrail:
             return
         if path.startswith(SELF_AUDITED):
             return
-        store = getattr(scope["app"].state, "store", None)
+        store = app_state(scope["app"]).store
         if store is None:
             return
         client = scope.get("client")

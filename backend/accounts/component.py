@@ -24,6 +24,7 @@ from backend.accounts.service import AccountService, Audit
 from backend.accounts.store import AccountStore
 from backend.db import log_failure, make_engine, make_sessionmaker
 from backend.ratelimit import RateLimiter
+from backend.state import app_state
 
 __all__ = ["SWEEP_EVERY_S", "accounts", "follower_sessions", "sweep_once"]
 
@@ -36,7 +37,7 @@ def reserved_names(app: FastAPI) -> set[str]:
     """Names an account may not take: the tokens' and the site's robots' (hub names)."""
     settings = app.state.settings
     names = {"admin", "hub", "console"} | {t.name for t in settings.tokens}
-    sites = getattr(app.state, "sites", None)
+    sites = app_state(app).sites
     if sites is not None:
         names |= {robot.name for robot in sites.site.robots}
     return names

@@ -21,9 +21,10 @@ from backend.accounts.passkeys import PasskeyService, RelyingParty
 from backend.accounts.passwords import verify_password
 from backend.accounts.service import AccountError, AccountService, Session
 from backend.actions import require_action
-from backend.api.deps import Store, app_service, error_response
-from backend.api.query import OPEN_QUERY
 from backend.auth import Principal, SignInRefused, client_address
+from backend.rest.deps import Store, app_service, error_response
+from backend.rest.query import OPEN_QUERY
+from backend.state import app_state
 
 __all__ = ["SIGN_IN", "router"]
 
@@ -148,7 +149,7 @@ async def current_session(request: Request, service: Accounts) -> dict[str, Any]
     name, display name, role, the CSRF token and when it expires; else ``signed_in`` false
     (never 401: a page asks before it knows; tokens ask ``GET /api/me``)."""
     session = await CookieGate(service).session(request)
-    sso = getattr(request.app.state, "sso", None)
+    sso = app_state(request.app).sso
     if session is None:
         return {
             "signed_in": False,
@@ -275,7 +276,7 @@ _NEXT = r"^/[A-Za-z0-9/_.-]{0,64}$"
 
 
 def _sso(request: Request) -> SingleSignOn:
-    sso = getattr(request.app.state, "sso", None)
+    sso = app_state(request.app).sso
     if not isinstance(sso, SingleSignOn):
         raise HTTPException(status.HTTP_404_NOT_FOUND, "single sign-on is not set up")
     return sso

@@ -23,8 +23,7 @@ from fastapi import status
 from backend.accounts import passwords
 from backend.accounts.store import Account, AccountStore, StoredSession
 from backend.auth import PERSON_ROLES, Principal, Role, SignInRefused, token_digest
-from backend.hub.core import RemoteClient
-from backend.hub.session import CLOSE_UNAUTHORIZED
+from backend.hub.core import CLOSE_UNAUTHORIZED, RemoteClient
 from backend.ratelimit import RateLimited, RateLimiter
 
 __all__ = [

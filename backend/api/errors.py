@@ -16,8 +16,8 @@ from fastapi.responses import JSONResponse, Response
 from fastapi.routing import APIRoute
 from starlette.exceptions import HTTPException
 
-from backend.api.deps import role_check
 from backend.db.session import UnstorableJson
+from backend.rest.deps import role_check
 from backend.tasks.model import (
     Held,
     IllegalTransition,

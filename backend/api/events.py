@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Query
 
-from backend.api.deps import Store, Watcher
+from backend.rest.deps import Store, Watcher
 
 __all__ = ["router"]
 

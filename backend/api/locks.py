@@ -6,8 +6,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 
-from backend.api.deps import Staff, Traffic, Watcher, forbid, not_found
 from backend.auth import Role
+from backend.rest.deps import Staff, Traffic, Watcher, forbid, not_found
 
 __all__ = ["router"]
 

@@ -32,11 +32,11 @@ from fastapi import (
 from pydantic import Field
 
 from backend.actions import allowed_roles
-from backend.api.deps import NetReader, app_service, not_found, require_action
-from backend.api.models import RequestBody
 from backend.auth import Principal
 from backend.console.feed import ConsoleFeed
 from backend.net_library.service import NetPublisher, NetRefused
+from backend.rest.deps import NetReader, app_service, not_found, require_action
+from backend.rest.models import RequestBody
 from guidebot.messages import known_types, payload_model
 from guidebot.payloads.petri import PetriNetDebug
 from petri_nets.library import NetLibrary, UnknownNet

@@ -13,7 +13,7 @@ from typing import Any
 from fastapi import FastAPI
 from fastapi.routing import APIRoute, iter_route_contexts
 
-from backend.api.deps import role_check
+from backend.rest.deps import role_check
 
 __all__ = ["TOKEN_STATUSES", "install_contract_openapi"]
 

@@ -6,8 +6,9 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Request
 
-from backend.api.deps import SeeRobot, Tasks, Traffic, Watcher, forbid, not_found
 from backend.auth import Role
+from backend.rest.deps import SeeRobot, Tasks, Traffic, Watcher, forbid, not_found
+from backend.state import app_state
 from backend.tasks.manager import TaskManager
 from backend.traffic.manager import TrafficManager
 
@@ -20,7 +21,7 @@ def _view(
     request: Request, manager: TaskManager, traffic: TrafficManager, name: str
 ) -> dict[str, Any]:
     info = manager.robots[name]
-    robocan = getattr(request.app.state, "robocan", None)
+    robocan = app_state(request.app).robocan
     return {
         **info.as_dict(),
         "areas": traffic.locks.held_by(name),

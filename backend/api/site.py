@@ -7,14 +7,13 @@ from typing import Annotated, Any
 import orjson
 from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 
-from backend.api.component import hash_robot_tokens, weak_robot_tokens
-from backend.api.deps import Admin, PlanPath, Sites, Staff, Traffic
+from backend.rest.deps import Admin, PlanPath, Sites, Staff, Traffic
 from backend.site.offloop import off_loop, release
+from backend.site.tokens import secure_robot_tokens
 from backend.site.yaml_import import read_site_yaml
 from guidebot.site import jsonio
 from guidebot.site.graph import NoPath, UnknownNode
-from guidebot.site.schema import Site
-from guidebot.site.validate import SiteInvalid, SiteIssue
+from guidebot.site.validate import SiteInvalid
 from guidebot.site.yamlio import MAX_SITE_BYTES, dump_site
 
 __all__ = ["router"]
@@ -26,14 +25,6 @@ def invalid(exc: SiteInvalid) -> HTTPException:
     return HTTPException(
         status.HTTP_422_UNPROCESSABLE_CONTENT, [issue.as_dict() for issue in exc.issues]
     )
-
-
-def _secured(request: Request, site: Site) -> Site:
-    """Robot tokens hashed before the site is stored; outside development, weak ones refused.
-    Run it off the loop: with a thousand robots, hashing and copying them takes 10-15 ms."""
-    if not request.app.state.settings.development and (problems := weak_robot_tokens(site)):
-        raise SiteInvalid([SiteIssue("robots", p) for p in problems])
-    return hash_robot_tokens(site)
 
 
 @router.get("/site")
@@ -71,7 +62,11 @@ async def put_site(request: Request, _: Admin, service: Sites) -> dict[str, Any]
             site = await service.validate(box[0])
         finally:
             await release(box)
-        await service.replace(await off_loop(_secured, request, site))
+        await service.replace(
+            await off_loop(
+                secure_robot_tokens, site, development=request.app.state.settings.development
+            )
+        )
     except SiteInvalid as exc:
         raise invalid(exc) from None
     return {"version": service.version}
@@ -106,7 +101,11 @@ async def import_site(request: Request, _: Admin, service: Sites) -> dict[str, A
     try:
         text = raw.decode("utf-8", errors="replace")
         site = await read_site_yaml(text, request.app.state.settings.site_workers)
-        await service.replace(await off_loop(_secured, request, site))
+        await service.replace(
+            await off_loop(
+                secure_robot_tokens, site, development=request.app.state.settings.development
+            )
+        )
     except SiteInvalid as exc:
         raise invalid(exc) from None
     return {"version": service.version}

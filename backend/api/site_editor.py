@@ -17,17 +17,17 @@ from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Reques
 from fastapi.responses import FileResponse
 from pydantic import Field
 
-from backend.api.component import hash_robot_tokens
-from backend.api.deps import Admin, Sites, Store, app_service, error_response, not_found
-from backend.api.models import RequestBody
-from backend.api.site import _secured, invalid, yaml_download
+from backend.api.site import invalid, yaml_download
 from backend.auth import token_digest
 from backend.db.store import DbStore
+from backend.rest.deps import Admin, Sites, Store, app_service, error_response, not_found
+from backend.rest.models import RequestBody
 from backend.site.diff import site_diff
 from backend.site.draft import SiteDrafts, StaleDraft, check_document
 from backend.site.offloop import off_loop
 from backend.site.rollout import RolloutTracker
 from backend.site.service import SiteService
+from backend.site.tokens import hash_robot_tokens, secure_robot_tokens
 from backend.site.yaml_import import read_site_yaml
 from guidebot.payloads.site import SiteRollout
 from guidebot.site.bulk import dump_site_doc
@@ -187,7 +187,7 @@ async def publish(
     BuildingInterface and every connected robot get it (``site_changed``)."""
 
     def secure(site: Site) -> Site:
-        return _secured(request, site)
+        return secure_robot_tokens(site, development=request.app.state.settings.development)
 
     try:
         version = await d.publish(
@@ -247,7 +247,7 @@ async def rollback(
     data = await _version_data(db, version)
 
     def secure(site: Site) -> Site:
-        return _secured(request, site)
+        return secure_robot_tokens(site, development=request.app.state.settings.development)
 
     try:
         new = await d.rollback(data, version=version, by=who.name, secure=secure)

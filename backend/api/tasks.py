@@ -14,7 +14,11 @@ from fastapi import APIRouter, Body, Path, Query, Request, status
 from pydantic import BaseModel, Field, model_validator
 
 from backend.actions import TASK_RATE_LIMITED, task_request_refusal
-from backend.api.deps import (
+from backend.api.visitor import Me, MeReading, MeRequesting
+from backend.auth import Principal, Role
+from backend.db.store import DbStore
+from backend.ratelimit import RateLimited
+from backend.rest.deps import (
     Requester,
     Staff,
     Store,
@@ -26,11 +30,7 @@ from backend.api.deps import (
     not_found,
     rate_limited,
 )
-from backend.api.models import RequestBody
-from backend.api.visitor import Me, MeReading, MeRequesting
-from backend.auth import Principal, Role
-from backend.db.store import DbStore
-from backend.ratelimit import RateLimited
+from backend.rest.models import RequestBody
 from backend.tasks.manager import TaskManager
 from backend.tasks.model import (
     FINAL_STATES,

@@ -6,8 +6,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Path, status
 
-from backend.api.deps import Admin, Anyone, Sites, not_found
 from backend.api.site import invalid
+from backend.rest.deps import Admin, Anyone, Sites, not_found
 from backend.site.service import SiteService
 from guidebot.site.schema import PointOfInterest, Tour
 from guidebot.site.validate import SiteInvalid

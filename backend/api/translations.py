@@ -14,9 +14,9 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response, status
 from pydantic import BaseModel, Field
 
-from backend.api.deps import Admin
-from backend.api.models import RequestBody
 from backend.api.site_editor import Drafts, stale
+from backend.rest.deps import Admin
+from backend.rest.models import RequestBody
 from backend.site.draft import SiteDrafts, StaleDraft
 from backend.site.offloop import off_loop
 from backend.site.translation_files import (

@@ -9,7 +9,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Header, Path, Query, Request
 from fastapi.responses import FileResponse
 
-from backend.api.deps import (
+from backend.auth import Principal, Role
+from backend.rest.deps import (
     Anyone,
     Requester,
     Sites,
@@ -19,7 +20,6 @@ from backend.api.deps import (
     Traffic,
     not_found,
 )
-from backend.auth import Principal, Role
 from guidebot.pace import PaceName
 from guidebot.site.access import step_free_skips, steps_only_nodes
 from guidebot.site.graph import SiteGraph

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Request
 from fastapi.responses import FileResponse
 
-from backend.api.deps import Anyone, Sites, not_found
+from backend.rest.deps import Anyone, Sites, not_found
 
 __all__ = ["router"]
 

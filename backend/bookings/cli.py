@@ -93,7 +93,7 @@ def bookings(ctx: click.Context, server: str, token: str) -> None:
 @click.option("--until", help="last date of a series (YYYY-MM-DD)")
 @click.option("--except", "except_dates", multiple=True, help="a date to skip (repeatable)")
 @click.pass_obj
-def add(api: Api, **o: Any) -> None:
+def add(api: Api, /, **o: Any) -> None:
     """Book a tour or a visit."""
     days = [d for d in o["days"].split(",") if d]
     if bad := [d for d in days if d not in DAYS]:
@@ -138,7 +138,7 @@ def list_(api: Api, day: str | None, end: str | None, as_json: bool) -> None:
 @click.option("--group", "group_size", type=int)
 @click.option("--note")
 @click.pass_obj
-def move(api: Api, booking: str, **o: Any) -> None:
+def move(api: Api, /, booking: str, **o: Any) -> None:
     """Move a booking (a series: every coming occurrence)."""
     body = {k: v for k, v in o.items() if v is not None}
     click.echo(_line(api.call("POST", f"/api/bookings/{booking}/move", body)))

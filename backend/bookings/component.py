@@ -15,8 +15,9 @@ from backend.bookings.reserve import Reservations
 from backend.bookings.schedule import BookingScheduler
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
-from backend.closures.model import Closure
+from backend.closure import Closure
 from backend.fencing import deciding_endpoint
+from backend.state import app_state
 from backend.tasks.manager import TaskManager
 
 __all__ = ["bookings", "venue_zone"]
@@ -61,11 +62,11 @@ async def bookings(app: FastAPI) -> AsyncIterator[None]:
     await service.restore()
 
     def closures() -> list[Closure]:
-        found = getattr(app.state, "closures", None)
+        found = app_state(app).closures
         return list(found.closures.values()) if found is not None else []
 
     def alarm() -> str | None:
-        emergency = getattr(app.state, "emergency", None)
+        emergency = app_state(app).emergency
         hold = getattr(emergency, "refusal", None)
         return hold(None) if hold is not None else None
 
@@ -74,7 +75,7 @@ async def bookings(app: FastAPI) -> AsyncIterator[None]:
         service,
         store,
         tasks,
-        getattr(app.state, "alerts", None),
+        app_state(app).alerts,
         closures=closures,
         alarm=alarm,
         check_lead_s=settings.booking_check_lead_s,

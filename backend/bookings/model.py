@@ -10,7 +10,7 @@ from zoneinfo import ZoneInfo
 
 from pydantic import BaseModel, ConfigDict, Field, StrictInt
 
-from backend.api.models import RequestBody
+from backend.rest.models import RequestBody
 
 __all__ = [
     "DAYS",

@@ -12,7 +12,6 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, status
 
 from backend.actions import require_action
-from backend.api.deps import Anyone
 from backend.auth import Principal
 from backend.bookings.model import (
     BookingError,
@@ -23,6 +22,8 @@ from backend.bookings.model import (
 )
 from backend.bookings.service import BookingService
 from backend.bookings.words import next_tours
+from backend.rest.deps import Anyone
+from backend.state import app_state
 
 __all__ = ["router"]
 
@@ -38,7 +39,7 @@ MAX_LIST_DAYS = 62
 
 
 def _service(request: Request) -> BookingService:
-    service = getattr(request.app.state, "bookings", None)
+    service = app_state(request.app).bookings
     if not isinstance(service, BookingService):
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "bookings not running")
     return service

@@ -24,7 +24,7 @@ from backend.bookings.reserve import Reservations
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
 from backend.bookings.words import coming
-from backend.closures.model import Closure, closed_nodes
+from backend.closure import Closure, closed_nodes
 from backend.tasks.model import Task, TaskError
 from backend.tasks.robots import RobotInfo
 from guidebot.bus import BusEndpoint

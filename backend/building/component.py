@@ -21,6 +21,7 @@ from backend.building.interface import BuildingInterface
 from backend.fencing import deciding_endpoint
 from backend.health import ComponentState
 from backend.site.offloop import off_loop
+from backend.state import app_state
 from guidebot.site.building_config import BUILDING_KEYS, BuildingConfigError, load_building
 
 __all__ = ["building_interface"]
@@ -94,7 +95,7 @@ class _Runner:
 
     def _gate(self, node: str) -> str | None:
         """The fire alarm's refusal for a device at ``node`` (backend.emergency), if any."""
-        emergency = getattr(self.app.state, "emergency", None)
+        emergency = app_state(self.app).emergency
         return None if emergency is None else emergency.building_refusal(node)
 
     async def load(self, site: Any, *, startup: bool = False) -> None:

@@ -26,7 +26,9 @@ from guidebot.payloads.building import BuildingModuleHealth
 from guidebot.service import cancel_and_wait
 from guidebot.site.building import BuildingModule, PointKind
 
-__all__ = ["HealthState", "ModuleHealth", "ModulePoller", "Sample"]
+__all__ = ["HealthState", "ModuleClient", "ModuleHealth", "ModulePoller", "Sample"]
+# ModuleClient: the client class each poller builds, named here so that a bench can swap it
+# (bench/plan_modbus.py; mypy's strict no_implicit_reexport).
 
 log = logging.getLogger(__name__)
 

@@ -6,7 +6,8 @@ from typing import Any
 
 from fastapi import APIRouter, Request
 
-from backend.api.deps import Watcher
+from backend.rest.deps import Watcher
+from backend.state import app_state
 
 __all__ = ["router"]
 
@@ -20,7 +21,7 @@ async def building_state(request: Request, _: Watcher) -> dict[str, Any]:
 
     ``enabled`` is false when the site has no modules or the building interface is off.
     """
-    building = getattr(request.app.state, "building", None)
+    building = app_state(request.app).building
     if building is None:
         return {"enabled": False, "modules": [], "points": [], "elevators": []}
     return {

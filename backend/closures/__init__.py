@@ -7,7 +7,7 @@ that does not come closes itself for a while (``TroubleWatch``). Paths avoid eve
 (``routing.path_avoiding``); a goal that only closed nodes reach is refused with the reason,
 and a tour skips it."""
 
-from backend.closures.model import Closure, ClosureError, ClosureKind
-from backend.closures.routing import RouteClosed, path_avoiding
+from backend.closure import Closure, ClosureError, ClosureKind
+from backend.detours import RouteClosed, path_avoiding
 
 __all__ = ["Closure", "ClosureError", "ClosureKind", "RouteClosed", "path_avoiding"]

@@ -8,10 +8,11 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Request, status
 
 from backend.actions import require_action
-from backend.api.deps import Watcher
 from backend.auth import Principal
-from backend.closures.model import ClosureError, ClosureRequest
+from backend.closure import ClosureError, ClosureRequest
 from backend.closures.service import ClosureService
+from backend.rest.deps import Watcher
+from backend.state import app_state
 
 __all__ = ["router"]
 
@@ -21,7 +22,7 @@ Modes = Annotated[Principal, Depends(require_action("building_modes"))]
 
 
 def _service(request: Request) -> ClosureService:
-    service = getattr(request.app.state, "closures", None)
+    service = app_state(request.app).closures
     if not isinstance(service, ClosureService):
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "building modes not running")
     return service

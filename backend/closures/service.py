@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
-from backend.closures.model import (
+from backend.closure import (
     Closure,
     ClosureError,
     ClosureRequest,

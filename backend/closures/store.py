@@ -8,7 +8,7 @@ from typing import Any
 
 from sqlalchemy import delete, or_, select
 
-from backend.closures.model import Closure
+from backend.closure import Closure
 from backend.db.models import ClosureRow
 
 __all__ = ["ClosureStore"]

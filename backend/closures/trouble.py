@@ -9,7 +9,7 @@ door open) or when ``hold_s`` has passed (robots may try it again)."""
 
 from __future__ import annotations
 
-from backend.closures.model import Closure
+from backend.closure import Closure
 
 __all__ = ["TROUBLE_HOLD_S", "TROUBLE_WORDS", "trouble_of"]
 

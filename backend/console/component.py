@@ -10,6 +10,7 @@ from fastapi import FastAPI
 from backend.console.alerts import AlertWatcher
 from backend.console.feed import ConsoleFeed, relay_events
 from backend.console.robocan import RobocanBook
+from backend.state import app_state
 
 __all__ = ["console"]
 
@@ -31,7 +32,7 @@ async def console(app: FastAPI) -> AsyncIterator[None]:
     listener = relay_events(endpoint)
     store.listeners.append(listener)
     await watcher.start()
-    emergency = getattr(app.state, "emergency", None)
+    emergency = app_state(app).emergency
     if emergency is not None:  # an alarm kept across a restart was published before this
         watcher.emergency_now(emergency.snapshot())
     await feed.start()

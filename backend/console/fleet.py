@@ -10,11 +10,12 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException, Path, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import Sites, Staff, Store, Tasks, Watcher, not_found
 from backend.console.feed import ConsoleFeed
 from backend.console.routes import Feed
 from backend.db.store import DbStore
+from backend.rest.deps import Sites, Staff, Store, Tasks, Watcher, not_found
 from backend.site.service import SiteService
+from backend.state import app_state
 from backend.tasks.manager import TaskManager
 from backend.tasks.model import TaskError
 from guidebot.payloads.building import CallElevator, OpenDoor, ReleaseDoor
@@ -40,9 +41,7 @@ class Call(BaseModel):
 
 def _fleet_view(request: Request, manager: TaskManager) -> dict[str, Any]:
     """The Task Manager says whether it is paused; who paused it, when and why is kept here."""
-    state: dict[str, Any] = (
-        (getattr(request.app.state, "fleet_pause", None) or {}) if manager.paused else {}
-    )
+    state: dict[str, Any] = (app_state(request.app).fleet_pause or {}) if manager.paused else {}
     return {
         "paused": bool(manager.paused),
         "by": state.get("by"),
@@ -130,7 +129,7 @@ async def send_to_charge(who: Staff, manager: Tasks, db: Store, name: Name) -> d
 
 
 def _building(request: Request) -> Any:
-    building = getattr(request.app.state, "building", None)
+    building = app_state(request.app).building
     if building is None:
         raise HTTPException(status.HTTP_409_CONFLICT, "the building interface is off")
     return building

@@ -11,7 +11,8 @@ from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Reques
 from pydantic import Field
 
 from backend.alerts import AlertNotFound, AlertStore
-from backend.api.deps import (
+from backend.console.feed import ConsoleFeed
+from backend.rest.deps import (
     NetKiller,
     NetReader,
     Sites,
@@ -22,8 +23,7 @@ from backend.api.deps import (
     error_response,
     not_found,
 )
-from backend.api.models import RequestBody
-from backend.console.feed import ConsoleFeed
+from backend.rest.models import RequestBody
 from backend.tasks.model import TaskNotFound
 from petri_nets.layout import doc_drawing
 from petri_nets.library import UnknownNet

@@ -181,7 +181,7 @@ class ClosureRow(Base):
     __tablename__ = "closures"
     id: Mapped[str] = mapped_column(String(32), primary_key=True)
     data: Mapped[dict[str, Any]] = mapped_column(JSON)
-    """The closure as shown (backend.closures.model.Closure)."""
+    """The closure as shown (backend.closure.Closure)."""
     end: Mapped[float | None] = mapped_column(Float, nullable=True)
 
 

@@ -11,6 +11,7 @@ from fastapi import FastAPI
 
 from backend.emergency.service import EmergencyService
 from backend.fencing import deciding_endpoint
+from backend.state import app_state
 
 __all__ = ["emergency"]
 
@@ -23,7 +24,7 @@ async def emergency(app: FastAPI) -> AsyncIterator[None]:
         lambda: app.state.sites.site,
         tasks,
         app.state.store,
-        lambda: getattr(app.state, "building", None),
+        lambda: app_state(app).building,
     )
     await service.restore()
     async with service:

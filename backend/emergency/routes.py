@@ -7,9 +7,10 @@ from typing import Any
 from fastapi import APIRouter, HTTPException, Request, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.api.deps import Anyone, Staff
 from backend.emergency.service import EmergencyService
 from backend.emergency.state import EmergencyError, IllegalMove, ResumeRefused
+from backend.rest.deps import Anyone, Staff
+from backend.state import app_state
 from guidebot.site.emergency import AlarmZone
 
 __all__ = ["router"]
@@ -25,7 +26,7 @@ class Declare(BaseModel):
 
 
 def _service(request: Request) -> EmergencyService:
-    service = getattr(request.app.state, "emergency", None)
+    service = app_state(request.app).emergency
     if not isinstance(service, EmergencyService):
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "emergency service not running")
     return service

@@ -16,6 +16,7 @@ from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect
 
 from backend.auth import Authenticator, bearer_token, client_address
+from backend.state import app_state
 
 from .core import Hub, RemoteClient
 from .session import Refused, admit, serve_client
@@ -35,7 +36,7 @@ async def hub_socket(websocket: WebSocket) -> None:
     auth: Authenticator = websocket.app.state.auth
     query = websocket.query_params
     token = bearer_token(websocket.headers.get("authorization"), query.get("token"))
-    sessions: Any = getattr(websocket.app.state, "sessions", None)  # backend/accounts CookieGate
+    sessions: Any = app_state(websocket.app).sessions  # narrowed by hand below (session)
     session = None
     if token is None and sessions is not None:
         session = await sessions.websocket_session(websocket)

@@ -8,6 +8,7 @@ from collections.abc import AsyncIterator
 from fastapi import FastAPI
 
 from backend.metrics.server import ServerMetrics
+from backend.state import app_state
 
 __all__ = ["metrics"]
 
@@ -16,7 +17,7 @@ __all__ = ["metrics"]
 async def metrics(app: FastAPI) -> AsyncIterator[None]:
     """Tap the hub for the server's whole life; services are looked up at scrape time."""
     endpoint = app.state.hub.endpoint("metrics")
-    server_metrics = ServerMetrics(app.state, endpoint)
+    server_metrics = ServerMetrics(app_state(app), endpoint)
     app.state.metrics = server_metrics
     try:
         async with server_metrics:

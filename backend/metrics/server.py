@@ -20,6 +20,7 @@ from prometheus_client.registry import Collector
 
 from backend.auth import Role
 from backend.metrics.reaction import STEPS, ReactionJoin, steps_ms
+from backend.state import AppState
 from guidebot.messages import Message
 from guidebot.payloads.tasks import ReactionMeasured
 from guidebot.service import Service
@@ -42,7 +43,7 @@ def _bounded_put(table: OrderedDict[str, Any], key: str, value: Any) -> None:
 class ServerMetrics(Service):
     """Everything ``GET /metrics`` shows; ``app_state`` is the FastAPI app's state."""
 
-    def __init__(self, app_state: Any, endpoint: Any = None) -> None:
+    def __init__(self, app_state: AppState, endpoint: Any = None) -> None:
         """``endpoint``: the hub endpoint tapped while started (and reaction_measured's
         sender); without one, feed ``observe`` by hand."""
         super().__init__()
@@ -168,12 +169,12 @@ class ServerMetrics(Service):
     # -- the reaction chain ------------------------------------------------------------------
 
     def _requester_of(self, task_id: str) -> str | None:
-        tasks = getattr(self.state, "task_manager", None)
+        tasks = self.state.task_manager
         task = tasks.tasks.get(task_id) if tasks is not None else None
         return None if task is None else str(task.requester)
 
     def _button_input(self, button_id: str) -> tuple[str, str] | None:
-        sites = getattr(self.state, "sites", None)
+        sites = self.state.sites
         for button in sites.site.buttons if sites is not None else ():
             if button.id == button_id:
                 return (button.input.module, button.input.point)
@@ -227,13 +228,13 @@ class _ScrapeCollector(Collector):
             m.messages_out,
         )
         yield from self._hub(state.hub)
-        yield from self._tasks(getattr(state, "task_manager", None))
+        yield from self._tasks(state.task_manager)
         yield _counter("guidebot_tasks_ended", "Tasks ended, by outcome", "outcome", m.tasks_ended)
-        yield from self._modbus(getattr(state, "building", None))
-        master = getattr(state, "vda5050", None)  # the VDA 5050 master control, when it runs
+        yield from self._modbus(state.building)
+        master = state.vda5050  # the VDA 5050 master control, when it runs
         if master is not None:
             yield from master.metrics()
-        notifier = getattr(state, "notify", None)  # the notifier, when it runs (the leader)
+        notifier = state.notify  # the notifier, when it runs (the leader)
         if notifier is not None:
             yield from notifier.metrics()
         steps = GaugeMetricFamily(

@@ -11,13 +11,14 @@ from fastapi import FastAPI
 from backend.fencing import deciding_endpoint
 from backend.notify.service import Notifier
 from backend.notify.store import NotifyStore
+from backend.state import app_state
 
 __all__ = ["notify"]
 
 
 @contextlib.asynccontextmanager
 async def notify(app: FastAPI) -> AsyncIterator[None]:
-    leadership = getattr(app.state, "leadership", None)
+    leadership = app_state(app).leadership
     notifier = Notifier(
         deciding_endpoint(app, "notify"),
         NotifyStore(app.state.store.sessionmaker),

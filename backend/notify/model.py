@@ -15,7 +15,7 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from pydantic import AfterValidator, Field, model_validator
 
-from backend.api.models import RequestBody
+from backend.rest.models import RequestBody
 from guidebot.payloads.alerts import AlertSeverity
 
 __all__ = [

@@ -9,10 +9,11 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Request, status
 
 from backend.actions import require_action
-from backend.api.deps import not_found
 from backend.auth import Principal
 from backend.notify.model import DAYS, SEVERITIES, ChannelIn, Smtp
 from backend.notify.service import LOG_SIZE, Notifier
+from backend.rest.deps import not_found
+from backend.state import app_state
 
 __all__ = ["router"]
 
@@ -24,7 +25,7 @@ ChannelId = Annotated[str, Path(min_length=1, max_length=40)]
 
 
 def _notifier(request: Request) -> Notifier:
-    notifier = getattr(request.app.state, "notify", None)
+    notifier = app_state(request.app).notify
     if not isinstance(notifier, Notifier):
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "notifications not running")
     return notifier

@@ -117,7 +117,7 @@ def _patched(clock: VirtualClock) -> Iterator[None]:
     import anyio.to_thread
 
     saved_time, saved_mono = time.time, time.monotonic
-    saved_exec = aiosqlite.core.Connection._execute
+    saved_exec: Any = aiosqlite.core.Connection._execute  # untyped (mypy strict)
     saved_connect = aiosqlite.core.Connection._connect
     saved_run_sync = anyio.to_thread.run_sync
 

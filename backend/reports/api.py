@@ -9,11 +9,11 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
 from backend.actions import require_action
-from backend.api.deps import app_service
 from backend.auth import Principal
 from backend.reports.figures import FIGURES, Reports
 from backend.reports.period import BadPeriod, Period, parse_period
 from backend.reports.replay import replay
+from backend.rest.deps import app_service
 
 __all__ = ["router"]
 

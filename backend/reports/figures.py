@@ -53,7 +53,9 @@ class Reports:
             await self.flush()
         await self.rollups.catch_up()
 
-    async def _sums(self, period: Period, metrics: tuple[str, ...]) -> dict[str, dict[str, list]]:
+    async def _sums(
+        self, period: Period, metrics: tuple[str, ...]
+    ) -> dict[str, dict[str, list[Any]]]:
         """metric -> key -> [n, total] over the period: its whole UTC days from the daily
         rollups, the hours before the first and after the last from the hourly ones."""
         first_day = -(-int(period.start) // DAY) * DAY
@@ -79,7 +81,7 @@ class Reports:
             for start, end in edges
             if end > start
         ]
-        out: dict[str, dict[str, list]] = {m: {} for m in metrics}
+        out: dict[str, dict[str, list[Any]]] = {m: {} for m in metrics}
         async with self.rollups.sessionmaker() as session:
             for query in queries:
                 for metric, key, n, total in await session.execute(query):
@@ -101,7 +103,7 @@ class Reports:
 
     async def _series(
         self, period: Period, metrics: tuple[str, ...], key: str | None = None
-    ) -> dict[float, dict[str, list]]:
+    ) -> dict[float, dict[str, list[Any]]]:
         """bin start -> metric -> [n, total], the bins in the venue's time (days on UTC: from
         the daily rollups; otherwise from the hours)."""
         t: Any = ReportDayRow if period.utc_days() else ReportRollupRow
@@ -113,7 +115,9 @@ class Reports:
             query = query.where(t.key == key)
         query = query.group_by(t.metric, when)
         starts = period.bins()
-        bins: dict[float, dict[str, list]] = {b: {m: [0, 0.0] for m in metrics} for b in starts}
+        bins: dict[float, dict[str, list[Any]]] = {
+            b: {m: [0, 0.0] for m in metrics} for b in starts
+        }
         async with self.rollups.sessionmaker() as session:
             for metric, hour, n, total in await session.execute(query):
                 cell = bins[starts[bisect.bisect_right(starts, hour) - 1]][metric]
@@ -153,7 +157,7 @@ class Reports:
         n_wait = sum(c[0] for c in sums["wait"].values())
         n_len = sum(c[0] for c in sums["tour_length"].values())
 
-        def mean(cell: list) -> float | None:
+        def mean(cell: list[Any]) -> float | None:
             return _r(cell[1] / cell[0]) if cell[0] else None
 
         return {

@@ -21,8 +21,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from backend.closures.model import Closure
-from backend.closures.routing import RouteClosed, path_avoiding
+from backend.closure import Closure
+from backend.detours import RouteClosed, path_avoiding
 from guidebot.site.graph import NoPath, SiteGraph, UnknownNode
 
 __all__ = ["FIRST_BACKOFF_S", "MAX_BACKOFF_S", "Bar", "BlockedErrands", "cut_off_by"]

@@ -18,8 +18,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from backend.closures.model import Closure
-from backend.closures.routing import RouteClosed
+from backend.closure import Closure
+from backend.detours import RouteClosed
 from backend.tasks.blocked import cut_off_by
 from guidebot.site.graph import SiteGraph
 

@@ -15,8 +15,8 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.alerts import AlertStore
-from backend.closures.model import Closure
-from backend.closures.routing import RouteClosed, path_avoiding, step_free_path_of
+from backend.closure import Closure
+from backend.detours import RouteClosed, path_avoiding, step_free_path_of
 from backend.traffic.locks import AreaLocks, Cut, Grant, LockError, LockView, Yield
 from backend.traffic.restarts import BootIds, release_former_holds
 from backend.traffic.whereabouts import areas_near, claimed_areas

@@ -13,6 +13,7 @@ from typing import Any
 
 from fastapi import FastAPI
 
+from backend.state import app_state
 from backend.tasks.manager import NETS
 from backend.tasks.targets import net_params
 from backend.vda5050.master import MasterControl
@@ -60,7 +61,7 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
         if alerts.is_active(kind, subject):
             alerts.resolve(kind, subject, why)
 
-    tasks = getattr(app.state, "task_manager", None)
+    tasks = app_state(app).task_manager
 
     def task_of(robot: str, task_id: str) -> tuple[str, dict[str, Any]] | None:
         """The Task Manager's word on a task a vehicle still runs (after a fail-over)."""
@@ -75,13 +76,13 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
         return task.net or NETS[task.kind], params
 
     def holder(area: str) -> str | None:
-        traffic = getattr(app.state, "traffic", None)
+        traffic = app_state(app).traffic
         if traffic is None or area not in traffic.locks.areas:
             return None
         return traffic.locks.holder(area)  # type: ignore[no-any-return]
 
     def gate(robot: str, area: str) -> str | None:
-        traffic = getattr(app.state, "traffic", None)
+        traffic = app_state(app).traffic
         check = getattr(traffic, "gate", None)
         return check(robot, area) if check is not None else None  # type: ignore[no-any-return]
 

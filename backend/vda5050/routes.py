@@ -8,8 +8,9 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Path, Request, status
 
-from backend.api.deps import Sites, Staff, Store, not_found
-from backend.api.models import RequestBody
+from backend.rest.deps import Sites, Staff, Store, not_found
+from backend.rest.models import RequestBody
+from backend.state import app_state
 
 __all__ = ["router"]
 
@@ -37,7 +38,7 @@ def _vehicle(sites: Any, request: Request, name: str, instead: str) -> Any:
             status.HTTP_409_CONFLICT,
             f"{name} runs GuideBot's robot agent: {instead}",
         )
-    master = getattr(request.app.state, "vda5050", None)
+    master = app_state(request.app).vda5050
     robot = next((r for r in master.robots.values() if r.name == name), None) if master else None
     if robot is None:
         raise HTTPException(

@@ -7,8 +7,8 @@ from __future__ import annotations
 import asyncio
 from types import SimpleNamespace
 
-from backend.api.component import announce_robot_links
 from backend.hub.core import CLOSE_OVERFLOW
+from backend.robot_links import announce_robot_links
 from backend.testing import RunningServer
 from guidebot.bus import Bus
 from guidebot.delivery import Courier, ack_for, courier_for, listen

@@ -111,7 +111,7 @@ async def test_a_query_parameter_the_hub_does_not_take_is_ignored_as_docs_say(
     server: RunningServer,
 ) -> None:
     """/ws takes ``token`` and ``name``; others are ignored, not refused (docs/protocol.md,
-    "Connecting"; the REST routes refuse them, backend/api/query.py): a misspelt ``name``
+    "Connecting"; the REST routes refuse them, backend/rest/query.py): a misspelt ``name``
     shows in the welcome."""
     token = server.admin_token
     async with raw_socket(f"{server.hub_url}?token={token}&nmae=rgm&lang=de") as ws:

@@ -17,7 +17,7 @@ from backend.bookings.reserve import Reservations
 from backend.bookings.schedule import BookingScheduler
 from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
-from backend.closures.model import Closure
+from backend.closure import Closure
 from backend.db import make_engine, make_sessionmaker, migrate
 from backend.tasks import TaskManager
 from guidebot.bus import Bus

@@ -9,10 +9,10 @@ from pathlib import Path
 import httpx
 import pytest
 
-from backend.closures.model import Closure, ClosureRequest, closed_nodes
-from backend.closures.routing import RouteClosed, path_avoiding
+from backend.closure import Closure, ClosureRequest, closed_nodes
 from backend.closures.service import ClosureService
 from backend.closures.trouble import trouble_of
+from backend.detours import RouteClosed, path_avoiding
 from backend.testing import running_server
 from guidebot.bus import Bus
 from guidebot.site import Site, validate_site

@@ -6,8 +6,8 @@ import httpx
 import pytest
 from fastapi import FastAPI, HTTPException
 
-from backend.api.deps import Tasks
 from backend.api.errors import install_error_handlers
+from backend.rest.deps import Tasks
 from backend.tasks.model import (
     IllegalTransition,
     InvalidTask,

@@ -8,7 +8,6 @@ import json
 import re
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import httpx
 import yaml
@@ -18,6 +17,7 @@ from backend.auth import Role
 from backend.hub import Hub
 from backend.metrics.server import ServerMetrics
 from backend.settings import Settings, StaticToken
+from backend.state import AppState
 from backend.testing import running_server
 from bench.reaction import bench_site
 from building_sim.simulator import BuildingSimulator
@@ -155,7 +155,7 @@ def test_dashboard_queries_only_documented_metrics() -> None:
 
 def test_lock_waits_are_per_area_and_only_the_reply_counts() -> None:
     hub = Hub(gc_freeze=False)
-    metrics = ServerMetrics(SimpleNamespace(hub=hub))
+    metrics = ServerMetrics(AppState({"hub": hub}))
     asked = Message(type="request_area", source="R1", payload={"robot": "R1", "area": "corridor"})
     asked.timestamp = 100.0
     metrics.observe(asked)

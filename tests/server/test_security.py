@@ -16,10 +16,10 @@ import websockets
 from pydantic import ValidationError
 from websockets.exceptions import ConnectionClosed
 
-from backend.api.component import InsecureSite
 from backend.app import create_app
 from backend.auth import token_digest
 from backend.settings import Settings, StaticToken, describe_errors
+from backend.site.tokens import InsecureSite
 from backend.testing import running_server
 
 from .conftest import OPERATOR_TOKEN, PANEL_TOKEN, server_settings

@@ -14,7 +14,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from backend.closures.routing import StepsOnly, step_free_path_of
+from backend.detours import StepsOnly, step_free_path_of
 from backend.site.cli import site as site_cli
 from backend.tasks.model import InvalidTask, Task
 from backend.tasks.targets import net_params, target_node

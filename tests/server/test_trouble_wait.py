@@ -90,7 +90,7 @@ async def test_a_visit_behind_a_lift_that_stays_broken_fails_after_a_few_waits(
 async def test_a_visit_cut_off_by_a_closure_of_staff_fails_at_once(
     bus: Bus, manager: TaskManager, closures: ClosureService
 ) -> None:
-    from backend.closures.model import ClosureRequest
+    from backend.closure import ClosureRequest
 
     r1 = RobotStub(bus, "R1", "hall")
     r1.state()

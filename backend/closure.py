@@ -25,8 +25,8 @@ class ClosureError(ValueError):
 
 class ClosureRequest(BaseModel):
     """What staff ask for (REST body): which element, why, and when (none: from now on).
-    Strict as every REST body (backend.api.models.RequestBody, not imported: the Traffic
-    Manager imports this module and backend.api imports the Traffic Manager)."""
+    Strict as every REST body (backend.rest.models.RequestBody, not imported: this module sits
+    below the Traffic Manager, which the REST kit's typed services name)."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
 

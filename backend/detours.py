@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from backend.closures.model import Closure
+from backend.closure import Closure
 from guidebot.site.graph import NoPath, PathResult, SiteGraph
 
 __all__ = ["RouteClosed", "StepsOnly", "path_avoiding", "step_free_path_of"]
