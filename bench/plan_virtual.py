@@ -190,7 +190,7 @@ async def _serve(
             task_request_burst=10000,
             site_workers=0,
         )
-        with in_process_modbus(building), _quiet_housekeeping():
+        with in_process_modbus(building), _quiet_housekeeping(), _spoken_once():
             async with running_server(settings) as server:
                 agents = [_agent(server.hub_url, entry, served) for entry in data["robots"]]
                 try:
@@ -241,6 +241,39 @@ def _quiet_housekeeping() -> Iterator[None]:
         component.SWEEP_EVERY_S, interface.ALARM_POLL_MS = saved
 
 
+@contextlib.contextmanager
+def _spoken_once() -> Iterator[None]:
+    """The robots speak as in service and in the busy demo: ``guidebot robot``'s default speech
+    engine, espeak-ng where it is installed, whose audio's length is how long the robot talks
+    (where it is not, the length is estimated from the text, as on such a robot). Its synthesis
+    runs in a process of its own, in real time: the virtual clock stands still while it works
+    (counted as thread work, ``backend.planning.vtime``), and each text is synthesised once per
+    run (a pure function of the text, the voice and the rate)."""
+    from robot_agent.speech import Speech
+
+    saved = Speech._duration
+    lengths: dict[tuple[str, str | None, float], float] = {}
+
+    async def duration(self: Speech, text: str, voice: str | None) -> float:
+        key = (text, voice, self.dwell)
+        if key not in lengths:
+            clock = getattr(asyncio.get_running_loop(), "clock", None)
+            if clock is not None:
+                clock.busy(1)
+            try:
+                lengths[key] = await saved(self, text, voice)
+            finally:
+                if clock is not None:
+                    clock.busy(-1)
+        return lengths[key]
+
+    Speech._duration = duration  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        Speech._duration = saved  # type: ignore[method-assign]
+
+
 def _agent(hub_url: str, entry: dict[str, Any], site_file: Path) -> RobotAgent:
     """A bare simulated robot with a simulated battery on its clock (no RoboCAN: its reader
     threads would not follow virtual time)."""
@@ -256,7 +289,7 @@ def _agent(hub_url: str, entry: dict[str, Any], site_file: Path) -> RobotAgent:
             battery_low=entry["battery_low"],
             battery_panic=entry["battery_panic"],
             bare_battery=True,
-            speech_engine=None,
+            speech_engine="auto",
             state_period_s=STATE_PERIOD_S,
             site=site_file,
             gui_port=0,
