@@ -15,6 +15,7 @@ robot agent meet only over the bus, never in one import, and ``time.time`` is pa
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import json
 import logging
@@ -24,7 +25,7 @@ import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -38,19 +39,30 @@ from backend.planning.sim import Outcome
 from backend.planning.vtime import virtual_time
 from backend.settings import Settings, StaticToken
 from backend.testing import running_server
+from bench.plan_modbus import in_process_modbus
 from building_sim.simulator import BuildingSimulator
 from guidebot.site.building_config import BuildingConfig
 from guidebot.site.schema import Site
 from guidebot.site.yamlio import load_site_file
 from robot_agent.agent import AgentConfig, RobotAgent
+from robot_agent.gui import OnboardScreen
 
 __all__ = ["EPOCH", "main", "play"]
 
 EPOCH = 1_800_000_000.0
 """The virtual clock's epoch seconds at the start of every run (the same for each: a run is
 repeatable)."""
-STATE_PERIOD_S = 0.5
-"""The robots' robot_state period, as the live run's (``--state-period 0.5``)."""
+STATE_PERIOD_S = 1.0
+"""The robots' robot_state period: ``guidebot robot``'s default, as a robot in service and the
+busy demo the plan is checked against (the live run sends twice as many, as the soak)."""
+SWEEP_S = 600.0
+"""Seconds between two sweeps of people's expired sessions (the server's: every 5 s). Nobody
+signs in during a plan (it uses tokens), so the sweep finds nothing; every 5 s it was a
+database transaction, 7 200 of them in a 10-hour day."""
+ALARM_POLL_MS = 1000
+"""The period of the fire alarm input's own read (the server's: 50 ms, for the alarm's speed,
+docs/emergency.md). A plan sounds no alarm, and each module's poll (200 ms on the demo site)
+still reads the input; every 50 ms it was 720 000 reads in a 10-hour day."""
 POLL_S = 0.5
 """Simulated seconds between the visitors' looks at the screens and the clock: an answer comes
 2.5 to 3 s after its question (the live run at 10x: 2.5 to 3.5 s)."""
@@ -178,31 +190,33 @@ async def _serve(
             task_request_burst=10000,
             site_workers=0,
         )
-        async with running_server(settings) as server:
-            agents = [_agent(server.hub_url, entry, served) for entry in data["robots"]]
-            try:
-                for agent in agents:
-                    await agent.__aenter__()
-                import httpx
+        with in_process_modbus(building), _quiet_housekeeping(), _spoken_once():
+            async with running_server(settings) as server:
+                agents = [_agent(server.hub_url, entry, served) for entry in data["robots"]]
+                try:
+                    for agent in agents:
+                        await agent.__aenter__()
+                    import httpx
 
-                # Idle connections are dropped well before the servers' keep-alive (5 s) ends: in
-                # virtual time a request can come at the very instant the server closes one.
-                limits = httpx.Limits(keepalive_expiry=1.0)
-                async with httpx.AsyncClient(timeout=30.0, limits=limits) as http:
-                    await _online(http, server.url, server.admin_token, robots)
-                    screens = [_screen(agent) for agent in agents]
-                    opts.log(f"a fleet of {robots} online (virtual time)")
-                    driver = _Driver(
-                        http, server.url, server.admin_token, panel, screens, requests, opts
-                    )
-                    driver.scale, driver.poll_s, driver.states_s = 1.0, POLL_S, STATES_S
-                    driver.patience_s, driver.queue_limit = patience_s, queue_limit
-                    t0 = time.time()
-                    await driver.run(day_s, _NoProcesses())  # type: ignore[arg-type]
-                    t_end = time.time()
-            finally:
-                for agent in reversed(agents):
-                    await agent.__aexit__(None, None, None)
+                    # Idle connections are dropped well before the servers' keep-alive (5 s)
+                    # ends: in virtual time a request can come at the very instant the server
+                    # closes one.
+                    limits = httpx.Limits(keepalive_expiry=1.0)
+                    async with httpx.AsyncClient(timeout=30.0, limits=limits) as http:
+                        await _online(http, server.url, server.admin_token, robots)
+                        screens = {agent.config.name: _screen(agent) for agent in agents}
+                        opts.log(f"a fleet of {robots} online (virtual time)")
+                        driver = _Visitors(
+                            http, server.url, server.admin_token, panel, screens, requests, opts
+                        )
+                        driver.scale, driver.poll_s, driver.states_s = 1.0, POLL_S, STATES_S
+                        driver.patience_s, driver.queue_limit = patience_s, queue_limit
+                        t0 = time.time()
+                        await driver.run(day_s, _NoProcesses())  # type: ignore[arg-type]
+                        t_end = time.time()
+                finally:
+                    for agent in reversed(agents):
+                        await agent.__aexit__(None, None, None)
     events = await read_events(db)
     outcome = _outcome(
         events, site, driver, robots=robots, day_s=day_s, t0=t0, t_end=t_end, scale=1.0, wall_s=0.0
@@ -212,8 +226,57 @@ async def _serve(
     return outcome
 
 
+@contextlib.contextmanager
+def _quiet_housekeeping() -> Iterator[None]:
+    """The server's watches that have nothing to find in a plan, less often (``SWEEP_S``,
+    ``ALARM_POLL_MS``)."""
+    from backend.accounts import component
+    from backend.building import interface
+
+    saved = component.SWEEP_EVERY_S, interface.ALARM_POLL_MS
+    component.SWEEP_EVERY_S, interface.ALARM_POLL_MS = SWEEP_S, ALARM_POLL_MS
+    try:
+        yield
+    finally:
+        component.SWEEP_EVERY_S, interface.ALARM_POLL_MS = saved
+
+
+@contextlib.contextmanager
+def _spoken_once() -> Iterator[None]:
+    """The robots speak as in service and in the busy demo: ``guidebot robot``'s default speech
+    engine, espeak-ng where it is installed, whose audio's length is how long the robot talks
+    (where it is not, the length is estimated from the text, as on such a robot). Its synthesis
+    runs in a process of its own, in real time: the virtual clock stands still while it works
+    (counted as thread work, ``backend.planning.vtime``), and each text is synthesised once per
+    run (a pure function of the text, the voice and the rate)."""
+    from robot_agent.speech import Speech
+
+    saved = Speech._duration
+    lengths: dict[tuple[str, str | None, float], float] = {}
+
+    async def duration(self: Speech, text: str, voice: str | None) -> float:
+        key = (text, voice, self.dwell)
+        if key not in lengths:
+            clock = getattr(asyncio.get_running_loop(), "clock", None)
+            if clock is not None:
+                clock.busy(1)
+            try:
+                lengths[key] = await saved(self, text, voice)
+            finally:
+                if clock is not None:
+                    clock.busy(-1)
+        return lengths[key]
+
+    Speech._duration = duration  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        Speech._duration = saved  # type: ignore[method-assign]
+
+
 def _agent(hub_url: str, entry: dict[str, Any], site_file: Path) -> RobotAgent:
-    """A bare simulated robot (no RoboCAN: its reader threads would not follow virtual time)."""
+    """A bare simulated robot with a simulated battery on its clock (no RoboCAN: its reader
+    threads would not follow virtual time)."""
     return RobotAgent(
         AgentConfig(
             name=entry["name"],
@@ -225,7 +288,8 @@ def _agent(hub_url: str, entry: dict[str, Any], site_file: Path) -> RobotAgent:
             max_speed=entry["max_speed_mps"],
             battery_low=entry["battery_low"],
             battery_panic=entry["battery_panic"],
-            speech_engine=None,
+            bare_battery=True,
+            speech_engine="auto",
             state_period_s=STATE_PERIOD_S,
             site=site_file,
             gui_port=0,
@@ -233,10 +297,37 @@ def _agent(hub_url: str, entry: dict[str, Any], site_file: Path) -> RobotAgent:
     )
 
 
-def _screen(agent: RobotAgent) -> str:
-    if agent.screen_server is None:
+def _screen(agent: RobotAgent) -> OnboardScreen:
+    if agent.screen is None:
         raise PlanError(f"virtual run: robot {agent.config.name} has no touch screen")
-    return str(agent.screen_server.url)
+    return agent.screen
+
+
+class _Visitors(_Driver):
+    """The live run's visitors (``_Driver``: the same requests, answers and patience), who look
+    at the robots' touch screens and touch them in-process: the plan owns both ends, and this
+    is what the screen's ``GET /api/screen`` and ``POST /api/answer`` call. Over HTTP, looking
+    at two screens every half second of every tour was the run's largest cost after the
+    Modbus polls. Their requests to the server stay HTTP, as a visitor panel's."""
+
+    def __init__(
+        self,
+        http: Any,
+        url: str,
+        admin: str,
+        panel: str,
+        screens: dict[str, OnboardScreen],
+        requests: Sequence[Request],
+        opts: LiveOptions,
+    ) -> None:
+        super().__init__(http, url, admin, panel, list(screens), requests, opts)
+        self.onboard = screens
+
+    async def _look(self) -> list[dict[str, Any] | None]:
+        return [self.onboard[name].screen(None) for name in self.screens]
+
+    async def _touch(self, screen: str, answer: str) -> bool:
+        return self.onboard[screen].answer("yes" if answer == "yes" else "no")
 
 
 async def _online(http: Any, url: str, admin: str, robots: int) -> None:

@@ -62,6 +62,9 @@ class AgentConfig:
     battery_panic: float = 0.1
     battery_level: float | None = None
     """Initial level of the simulated battery (None: the simulator's default)."""
+    bare_battery: bool = False
+    """With ``can=None``: a simulated battery too (drain, charging; robot_agent/sim_base.py), on
+    the robot's clock (``guidebot plan --virtual``). Without it a bare robot has no battery."""
     state_period_s: float = 1.0
     site: Path | None = None
     """Site file: tours and points of interest for the touch screen."""
@@ -186,7 +189,10 @@ class RobotAgent(Service):
                 battery_level=c.battery_level,
             )
         else:
-            self.hardware = BareSimulation(hw_ep, self.clock)
+            level = 1.0 if c.battery_level is None else c.battery_level
+            self.hardware = BareSimulation(
+                hw_ep, self.clock, battery=level if c.bare_battery else None
+            )
 
         # Control modules.
         self.navigator = Navigator(

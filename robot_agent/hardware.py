@@ -14,7 +14,7 @@ from typing import Any, Protocol
 from guidebot.bus import Endpoint
 from guidebot.service import Service
 from robot_agent.clock import Clock
-from robot_agent.sim_base import SimulatedBase
+from robot_agent.sim_base import SimulatedBase, SimulatedBattery
 
 __all__ = ["BareSimulation", "Hardware", "RoboCANHardware"]
 
@@ -32,12 +32,18 @@ class Hardware(Protocol):
 class BareSimulation(Service):
     """A simulated base on the on-board bus, without CAN."""
 
-    def __init__(self, endpoint: Endpoint, clock: Clock) -> None:
+    def __init__(self, endpoint: Endpoint, clock: Clock, *, battery: float | None = None) -> None:
         super().__init__()
         self.base = SimulatedBase(endpoint, clock)
+        self.battery = (
+            None if battery is None else SimulatedBattery(endpoint, clock, self.base, level=battery)
+        )
+        """``battery``: a simulated battery starting at that level (None: no battery)."""
 
     async def on_start(self) -> None:
         await self.enter(self.base)
+        if self.battery is not None:
+            await self.enter(self.battery)
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "bare-simulation", "velocity_commands": self.base.velocity_commands}

@@ -16,8 +16,9 @@ from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.service import Service
 from robot_agent.clock import Clock
+from robot_agent.robocan.sim.battery import SimBattery
 
-__all__ = ["SimulatedBase"]
+__all__ = ["SimulatedBase", "SimulatedBattery"]
 
 
 MAX_STEP_S = 0.1
@@ -85,3 +86,68 @@ class SimulatedBase(Service):
                 "odometry",
                 {"x": self.x, "y": self.y, "theta": self.theta, "v": self.v, "w": self.w},
             )
+
+
+class SimulatedBattery(Service):
+    """The battery of a bare simulated robot: RoboCAN's simulated battery module (``SimBattery``,
+    its rates) without CAN, stepped on the robot's clock, so that it also follows a virtual
+    clock (``guidebot plan --virtual``, docs/planning.md). Drains while the base moves (faster)
+    or stands, charges while the charger contact is closed (``set_charging``), and publishes
+    ``battery_level`` every ``period_s`` robot seconds and at once when charging starts or
+    stops, as the battery entity does."""
+
+    def __init__(
+        self,
+        endpoint: BusEndpoint,
+        clock: Clock,
+        base: SimulatedBase,
+        *,
+        level: float = 1.0,
+        period_s: float = 1.0,
+    ) -> None:
+        super().__init__()
+        if not 0.0 <= level <= 1.0:
+            raise ValueError(f"battery level must be within 0..1, got {level}")
+        self.ep = endpoint
+        self.clock = clock
+        self.base = base
+        self.level = level
+        self.period_s = period_s
+        self.charging = False
+        self._last = 0.0
+
+    async def on_start(self) -> None:
+        self._last = self.clock.now()
+        self.subscribe(self.ep, "set_charging", self._on_set_charging)
+        self.spawn(self._run(), name="sim-battery")
+
+    def _on_set_charging(self, message: Message) -> None:
+        self.step()
+        self.charging = bool(message.payload.get("on", False))
+        # Reported after the handler returns, as the module's report comes back over CAN: the
+        # battery monitor undocks while it publishes (it would hear the report in the middle).
+        asyncio.get_running_loop().call_soon(self._publish)
+
+    def step(self) -> None:
+        """Drain or charge over the robot time since the last step, at the present motion."""
+        now = self.clock.now()
+        dt, self._last = now - self._last, now
+        if self.charging:
+            self.level = min(1.0, self.level + SimBattery.CHARGE * dt)
+        else:
+            moving = abs(self.base.v) + abs(self.base.w) > 0.01
+            drain = SimBattery.MOVING_DRAIN if moving else SimBattery.IDLE_DRAIN
+            self.level = max(0.0, self.level - drain * dt)
+
+    def _publish(self) -> None:
+        self.ep.publish(
+            "battery_level",
+            {"level": self.level, "charging": self.charging, "voltage": 22.0 + 4.0 * self.level},
+        )
+
+    async def _run(self) -> None:
+        self._publish()
+        while True:
+            await self.clock.sleep(self.period_s)
+            self.step()
+            self._publish()

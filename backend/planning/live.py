@@ -376,13 +376,9 @@ class _Driver:
         if not any(s in ("assigned", "running") for s in self.state.values()):
             return  # no tour under way: no screen asks anything
         now = time.monotonic()
-        replies = await asyncio.gather(
-            *(self.http.get(f"{s}/api/screen") for s in self.screens), return_exceptions=True
-        )
-        for screen, reply in zip(self.screens, replies, strict=True):
-            if isinstance(reply, BaseException) or reply.status_code != 200:
+        for screen, shown in zip(self.screens, await self._look(), strict=True):
+            if shown is None:
                 continue
-            shown = reply.json()
             question, task = shown.get("question"), shown.get("task") or {}
             if not question:
                 self._asked.pop(screen, None)
@@ -398,13 +394,27 @@ class _Driver:
             i = self.task_of.get(task_id)
             follow = self.requests[i].follow if i is not None else 1_000
             answer = "yes" if done + 1 < follow else "no"
-            try:
-                r = await self.http.post(f"{screen}/api/answer", json={"answer": answer})
-            except httpx.HTTPError:
-                continue
-            if r.status_code < 300:
+            if await self._touch(screen, answer):
                 self.answered[task_id] = done + 1
                 del self._asked[screen]
+
+    async def _look(self) -> list[dict[str, Any] | None]:
+        """What each robot's touch screen shows (``GET /api/screen``; None: no answer)."""
+        replies = await asyncio.gather(
+            *(self.http.get(f"{s}/api/screen") for s in self.screens), return_exceptions=True
+        )
+        return [
+            None if isinstance(r, BaseException) or r.status_code != 200 else r.json()
+            for r in replies
+        ]
+
+    async def _touch(self, screen: str, answer: str) -> bool:
+        """Touch ``answer`` on a screen (``POST /api/answer``); False if it was not taken."""
+        try:
+            r = await self.http.post(f"{screen}/api/answer", json={"answer": answer})
+        except httpx.HTTPError:
+            return False
+        return r.status_code < 300
 
 
 def _outcome(

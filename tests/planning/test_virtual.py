@@ -5,6 +5,7 @@ timer whenever every task waits (docs/planning.md, "The virtual run")."""
 from __future__ import annotations
 
 import asyncio
+import shutil
 import time
 from pathlib import Path
 
@@ -17,9 +18,12 @@ from backend.planning.recorded import learn_pace
 from backend.planning.sim import simulate
 from backend.planning.virtual import run_virtual
 from backend.planning.vtime import virtual_time
-from bench.plan_virtual import EPOCH
+from bench.plan_virtual import EPOCH, _spoken_once
+from guidebot.bus import Bus
 from guidebot.site.graph import SiteGraph
 from guidebot.site.yamlio import load_site_file
+from robot_agent.clock import Clock
+from robot_agent.speech import Speech
 from tests.planning.test_sim import DEMO
 
 
@@ -105,3 +109,25 @@ def test_a_virtual_day_is_repeatable_and_its_tours_last_as_the_model_says(
 
 MOVE = (1.0, 1.2)
 TALK = (1.4, 1.9)
+
+
+@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng is not installed")
+def test_speech_takes_its_audios_length_and_synthesis_takes_no_virtual_time() -> None:
+    async def main() -> tuple[float, float, float, bool]:
+        loop = asyncio.get_running_loop()
+        speech = Speech(Bus().endpoint("speech"), Clock(), engine="auto")
+        ticker = asyncio.create_task(asyncio.sleep(30.0))  # must not fire during synthesis
+        with _spoken_once():
+            start = loop.time()
+            voice = await speech._voice("en")
+            first = await speech._duration("Welcome to the museum. Follow me!", voice)
+            second = await speech._duration("Welcome to the museum. Follow me!", voice)
+            took = loop.time() - start
+        done = ticker.done()
+        ticker.cancel()
+        return first, second, took, done
+
+    first, second, took, ticker_done = virtual_time(main(), epoch=EPOCH)
+    # espeak-ng's audio of that text lasts a couple of seconds; the same text, the same length.
+    assert 1.0 < first < 5.0 and second == first
+    assert took == 0.0 and not ticker_done
