@@ -8,10 +8,13 @@ vendored axe-core and fails on serious or critical violations.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
 import re
+import threading
 from collections.abc import AsyncIterator, Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -20,6 +23,7 @@ from urllib.parse import urlsplit
 
 import httpx
 import pytest
+import pytest_asyncio
 import uvicorn
 import yaml
 
@@ -44,6 +48,12 @@ BUILDING_TIME_SCALE = 10.0
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Browser tests run in the event loop of their pytest process (pytest-xdist worker), which
+    holds the one Chromium they share (``chromium`` below); without Chromium they are skipped."""
+    for item in items:
+        if "browser" in getattr(item, "fixturenames", ()):
+            # before pytest-asyncio's own mark (auto mode), which names no loop scope
+            item.add_marker(pytest.mark.asyncio(loop_scope="session"), append=False)
     if CHROMIUM.exists():
         return
     skip = pytest.mark.skip(
@@ -54,16 +64,66 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item.add_marker(skip)
 
 
-@pytest.fixture
-async def browser() -> AsyncIterator[Any]:
+@pytest_asyncio.fixture(scope="session", loop_scope="session")
+async def chromium() -> AsyncIterator[Any]:
+    """One Playwright driver and one Chromium per pytest process, started by the first browser
+    test that runs there: starting them took about 0.8 CPU-second per test. Each test still
+    gets new browser contexts (``Pages``: no cookies, storage or cache shared) and a fresh
+    start of the browser if the last one went away (``browser`` below)."""
     from playwright.async_api import async_playwright
 
     async with async_playwright() as p:
-        chromium = await p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        launched: list[Any] = []
+
+        async def connected() -> Any:
+            if not launched or not launched[-1].is_connected():
+                launched.append(
+                    await p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+                )
+            return launched[-1]
+
         try:
-            yield chromium
+            yield connected
         finally:
-            await chromium.close()
+            for chromium in launched:
+                if chromium.is_connected():
+                    await chromium.close()
+
+
+@pytest_asyncio.fixture(loop_scope="session")
+async def browser(chromium: Any) -> AsyncIterator[Any]:
+    """The process's Chromium, for one test, in the event loop the browser tests share: what
+    the test's own loop gave it, the shared loop gives it too. Tasks it left running are
+    cancelled when it ends, and it has its own default executor (the thread-leak check sees
+    the threads stop), as when pytest-asyncio closed a loop of its own after each test."""
+    browser = await chromium()
+    loop = asyncio.get_running_loop()
+    executor = ThreadPoolExecutor(thread_name_prefix="asyncio")
+    loop.set_default_executor(executor)
+    before = asyncio.all_tasks(loop)
+    try:
+        yield browser
+    finally:
+        this = asyncio.current_task()
+        left = [t for t in asyncio.all_tasks(loop) if t not in before and t is not this]
+        for task in left:
+            task.cancel()
+        await asyncio.gather(*left, return_exceptions=True)
+        await _shut_down(executor)
+
+
+async def _shut_down(executor: ThreadPoolExecutor) -> None:
+    """Wait for the executor's threads to end without blocking the loop (what
+    ``loop.shutdown_default_executor`` does for a loop that closes)."""
+    loop = asyncio.get_running_loop()
+    done = loop.create_future()
+
+    def shut_down() -> None:
+        executor.shutdown(wait=True)
+        loop.call_soon_threadsafe(done.set_result, None)
+
+    threading.Thread(target=shut_down, name="executor-shutdown", daemon=True).start()
+    await done
 
 
 @dataclass
@@ -140,7 +200,7 @@ class Pages:
         await watch.page.context.close()
 
 
-@pytest.fixture
+@pytest_asyncio.fixture(loop_scope="session")
 async def open_page(browser: Any, monkeypatch: pytest.MonkeyPatch) -> AsyncIterator[Pages]:
     """``await open_page(url)`` -> PageWatch; any console error fails the test.
 

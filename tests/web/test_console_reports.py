@@ -32,6 +32,9 @@ async def test_reports_view_charts_csv_errors_and_print(
 ) -> None:
     async with fleet_factory(robots=1) as fleet:
         async with fleet.http() as http:
+            # The tour waits in the queue: had R1 run it, it could end (its visitor gone after
+            # the first stop) before the page looked for "no tour ended yet" below.
+            (await http.post("/api/fleet/pause", json={"reason": "a report"})).raise_for_status()
             reply = await http.post(
                 "/api/tasks", json={"kind": "tour", "params": {"tour": "ground"}}
             )
