@@ -166,8 +166,9 @@ class Settings(BaseSettings):
 
     # Traffic Manager: release a lock whose holder went offline before entering its area.
     lock_offline_grace_s: float = Field(default=30.0, gt=0)
-    # Trouble (docs/server.md, "Building modes and trouble"): how long a door that did not open
-    # or a lift that did not come stays closed unless seen working before.
+    # Trouble (docs/server.md, "Building modes and trouble"): the longest a door that did not
+    # open or a lift that did not come stays closed unless seen working before (its first
+    # failure a twelfth of it, each next one in a row twice as long: backend/closures/trouble.py).
     trouble_hold_s: float = Field(default=120.0, gt=0)
     # Bookings (docs/server.md, "Bookings"): the venue's time zone (an IANA name) booked times
     # are read in; how long before its time a booking is checked (and flagged to staff).

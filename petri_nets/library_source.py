@@ -26,6 +26,11 @@ from petri_nets.pnml import write_pnml
 
 __all__ = ["library_nets", "write_library"]
 
+TROUBLE_WAIT_S = 30.0
+"""How long a tour waits at a stop that only trouble cuts off (a door jammed, a lift stuck:
+"... out of order") for the way to open before it skips the stop (its ``trouble_wait_s``):
+a jam of a few seconds costs the visitor a short wait, not the stops behind it."""
+
 EYES = {"open": 0.0, "closed": 60.0, "speed": 180.0}
 """Eyelid positions in degrees and servo speed in degrees per second (the RoboCAN head)."""
 
@@ -306,17 +311,24 @@ def give_tour() -> NetDoc:
         "Visit each point of the tour (navigate, show, explain); before each next "
         "point ask to continue; end on no, on time-out, or when navigation fails (Figure 11). "
         "A point only closed elements lead to (building modes, a jammed door, a stuck lift) "
-        "is skipped: point_skipped says which and why, and the tour goes on.",
+        "is skipped: point_skipped says which and why, and the tour goes on; one only trouble "
+        "cuts off (out of order) is waited for up to trouble_wait_s first.",
         params={
             "question": "Shall we continue the tour?",
             "answer_timeout_s": ANSWER_TIMEOUT_S,  # a slower tour's are longer (guidebot/pace.py)
             "patience_s": PATIENCE_S,
+            "trouble_wait_s": TROUBLE_WAIT_S,
             "lang": "en",
         },
         required=("tour", "points"),
     )
     b.place("first_point", initial=1, action=next_item("points", "point"))
-    b.place("navigate_to_point", action=publish("navigate_to", {"node": "${point.node}"}))
+    b.place(
+        "navigate_to_point",
+        action=publish(
+            "navigate_to", {"node": "${point.node}", "trouble_wait_s": "${trouble_wait_s}"}
+        ),
+    )
     b.place(
         "point_skipped",
         action=publish("point_skipped", {"point": "${point}", "reason": "${skip_reason}"}),

@@ -10,6 +10,9 @@ One goal at a time (a new navigate_to pre-empts the old one). For each path the 
 - plans again when ``closures_changed`` closes a node of its path ahead (building modes, a
   jammed door, a stuck lift), and plans with the server only while any node is closed; a goal
   only closed nodes lead to fails with ``navigation_failed`` ``closed`` (a tour skips it);
+  a goal given ``trouble_wait_s`` (a tour's stop) that only trouble cuts off (a jammed door,
+  a stuck lift: "... out of order") first waits that long for a ``closures_changed`` and plans
+  again, so a jam of a few seconds does not cost the visitor the stops behind it;
 - reports every node it reaches (node_reached: what the fleet's invariants are checked on);
 - stops on bumper_hit, reports it as robot_fault, and goes on after ``bumper_pause_s``;
 - stops for good on base_fault (a critical module lost) and fails the goal.
@@ -67,6 +70,12 @@ class ReplanRequested(Exception):
 
 class RouteClosed(NavigationError):
     """The server says only closed elements lead to the goal; ``reason`` says which and why."""
+
+    @property
+    def trouble_only(self) -> bool:
+        """Every closure that cuts it off is trouble: its parts all read "<door|elevator> <id>
+        out of order" (backend/closures/routing.py), not a closure by staff."""
+        return all(part.endswith(" out of order") for part in self.reason.split("; "))
 
 
 MAX_REPLANS = 8
@@ -132,6 +141,8 @@ class Navigator(MotionControl):
         self.closed: frozenset[str] = frozenset()
         """Nodes closed now (closures_changed): never driven onto; plans come from the server
         while any is closed (the on-board map does not know them)."""
+        self._closures_news = asyncio.Event()
+        """Set by each closures_changed: a goal waiting for trouble to lift plans again."""
         self._ahead: list[str] = []
         """The nodes of the path being followed not reached yet."""
         self.replans = 0
@@ -220,7 +231,15 @@ class Navigator(MotionControl):
                 correlation_id=message.id,
             )
             return
-        self._start_goal(self._goal(node, message.id, reply=GoalReached(node=node)))
+        wait = message.payload.get("trouble_wait_s")
+        trouble_wait_s = 0.0
+        if isinstance(wait, int | float) and not isinstance(wait, bool) and wait > 0:
+            trouble_wait_s = float(wait)
+        self._start_goal(
+            self._goal(
+                node, message.id, reply=GoalReached(node=node), trouble_wait_s=trouble_wait_s
+            )
+        )
 
     def _on_dock(self, message: Message) -> None:
         """The battery_charge net is at the station's node: run the docking approach."""
@@ -289,6 +308,7 @@ class Navigator(MotionControl):
         if "nodes" not in message.payload:
             return  # says nothing of the nodes (the model's default is none closed)
         self.closed = frozenset(changed.nodes)
+        self._closures_news.set()
         cut = [n for n in self._ahead if n in self.closed]
         if cut and self._goal_task is not None and not self.evacuating:
             log.info("%s: closed ahead (%s): planning again", self.robot, ", ".join(cut))
@@ -298,18 +318,28 @@ class Navigator(MotionControl):
 
     # -- goals --------------------------------------------------------------------------------
 
-    async def _goal(self, node: str, request_id: str, *, reply: GoalReached | Docked) -> None:
-        """Drive to ``node`` and answer ``reply`` (or navigation_failed)."""
+    async def _goal(
+        self,
+        node: str,
+        request_id: str,
+        *,
+        reply: GoalReached | Docked,
+        trouble_wait_s: float = 0.0,
+    ) -> None:
+        """Drive to ``node`` and answer ``reply`` (or navigation_failed); a way cut off by
+        trouble alone is waited for up to ``trouble_wait_s`` (robot seconds) first."""
         self.goal = node
         self._replan = None
         try:
             yields = replans = 0
+            give_up_at: float | None = None  # from the first answer that it is cut off
             backing: YieldRequested | None = None
             while True:
                 try:
                     if backing is not None:  # a yield or a closure may come while backing off
                         await self._back_off(backing)
                         backing = None
+                    self._closures_news.clear()  # a change from now on: plan again
                     await self.go_to(node)
                     break
                 except YieldRequested as request:
@@ -319,6 +349,13 @@ class Navigator(MotionControl):
                             f"asked to yield too often on the way to {node}"
                         ) from None
                     backing = request
+                except RouteClosed as cut:
+                    if give_up_at is None:
+                        give_up_at = self.clock.now() + trouble_wait_s
+                    left = give_up_at - self.clock.now()
+                    if left <= 0 or not cut.trouble_only:
+                        raise
+                    await self._wait_closures(left, node, cut)
                 except ReplanRequested as closed:
                     replans += 1
                     self._replan = None
@@ -343,6 +380,15 @@ class Navigator(MotionControl):
         if isinstance(reply, Docked):
             await self.clock.sleep(self.docking_s)  # the final approach onto the contacts
         self.ep.publish(reply, correlation_id=request_id)
+
+    async def _wait_closures(self, left_s: float, node: str, cut: RouteClosed) -> None:
+        """Stand still until the closures change (trouble lifted: plan again) or ``left_s``
+        robot seconds have passed (then the goal is planned once more and, still cut off,
+        fails ``closed``)."""
+        self._send_velocity(0.0, 0.0, force=True)
+        log.info("%s: %s cut off (%s): waiting up to %.0f s", self.robot, node, cut.reason, left_s)
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._closures_news.wait(), self.clock.wall(left_s))
 
     async def _back_off(self, request: YieldRequested) -> None:
         """Leave the area for its passing place, give it up, then the goal is tried again."""

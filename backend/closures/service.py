@@ -26,7 +26,7 @@ from backend.closure import (
     element_nodes,
 )
 from backend.closures.store import ClosureStore
-from backend.closures.trouble import TROUBLE_HOLD_S, trouble_of
+from backend.closures.trouble import TROUBLE_HOLD_S, hold_for, trouble_of
 from guidebot.bus import BusEndpoint
 from guidebot.messages import Message
 from guidebot.payloads.traffic import ClosuresChanged
@@ -64,7 +64,10 @@ class ClosureService(Service):
         self.store = store
         self.events = events
         self.trouble_hold_s = trouble_hold_s
+        """The longest hold of trouble (``hold_for``)."""
         self.clock = clock
+        self._failures: dict[str, int] = {}
+        """Trouble closure id -> its device's failures in a row (not seen working since)."""
         self.closures: dict[str, Closure] = {}
         self._closed: dict[str, Closure] = {}
         self._site_seen: Site | None = None
@@ -175,6 +178,11 @@ class ClosureService(Service):
         except ClosureError:
             return
         known = trouble.id in self.closures
+        # A failure while it is closed (another robot's) is the same one; one after its hold
+        # ended, not seen working since, is the next in a row: held twice as long.
+        failures = self._failures.get(trouble.id, 0) + (0 if known else 1)
+        self._failures[trouble.id] = failures
+        trouble.end = trouble.created_at + hold_for(failures, self.trouble_hold_s)
         self.closures[trouble.id] = trouble  # again: held on from now
         if not known:
             log.warning("trouble: %s; robots re-plan around it", trouble.reason)
@@ -189,6 +197,7 @@ class ClosureService(Service):
             key = f"trouble-elevator-{p.get('elevator')}"
         else:
             return
+        self._failures.pop(key, None)  # working: its next failure is a first one again
         trouble = self.closures.pop(key, None)
         if trouble is not None:
             log.info("trouble over: %s works again", trouble.what())
@@ -207,6 +216,7 @@ class ClosureService(Service):
         gone = [c for c in self.closures.values() if c.source == "trouble" and offline in c.reason]
         for trouble in gone:
             del self.closures[trouble.id]
+            self._failures.pop(trouble.id, None)
             log.info("trouble over: %s, its module is back online", trouble.what())
             self._log("trouble_cleared", trouble, "building", why="its module is back online")
         if gone:

@@ -121,6 +121,9 @@ class PeopleFaced(PayloadModel):
 @register_payload("navigate_to")
 class NavigateTo(PayloadModel):
     node: str
+    trouble_wait_s: float | None = None
+    """A tour's stop: wait this long for trouble alone cutting it off to lift (robot_agent/
+    navigation.py)."""
 
 
 @register_payload("goal_reached")

@@ -192,6 +192,22 @@ class Fleet:
         assert ended["outcome"] == "done", f"{robot} to {node}: {ended}"
 
 
+def one_door_site() -> dict[str, Any]:
+    """The safety venue's ground floor only: west of door D0 (``west``, ``w_dock`` and the
+    corridors) nothing leads to the hall and the chargers (home1..3) but through D0."""
+    data = safety_site()
+    gone = {"la0", "lb0", "door1"} | {n["id"] for n in data["nodes"] if n["floor"] == "F1"}
+    data["floors"] = [f for f in data["floors"] if f["id"] == "F0"]
+    data["nodes"] = [n for n in data["nodes"] if n["id"] not in gone]
+    data["edges"] = [e for e in data["edges"] if not {e["a"], e["b"]} & gone]
+    data["areas"] = [a for a in data["areas"] if not set(a["nodes"]) & gone]
+    data["wait_points"] = [w for w in data["wait_points"] if w["node"] not in gone]
+    data["doors"] = [d for d in data["doors"] if d["id"] == "D0"]
+    data["elevators"] = []
+    data["modules"] = [m for m in data["modules"] if m["id"] == "M0"]
+    return data
+
+
 def rig_agent(
     url: str, robot: dict[str, Any], site_file: Path | None, start_node: str
 ) -> RobotAgent:

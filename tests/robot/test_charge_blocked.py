@@ -10,32 +10,15 @@ Modbus/TCP), a robot agent on a real WebSocket link (tests/robot/safety_rig.py).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import httpx
 import pytest
 
-from tests.robot.safety_rig import fleet, safety_site
+from tests.robot.safety_rig import fleet, one_door_site
 
 pytestmark = pytest.mark.timeout(120)
 
 STATIONS = {"home1", "home2", "home3"}
-
-
-def one_door_site() -> dict[str, Any]:
-    """The safety venue's ground floor only: west of door D0 (``west``, ``w_dock`` and the
-    corridors) nothing leads to the chargers (home1..3, past the hall) but through D0."""
-    data = safety_site()
-    gone = {"la0", "lb0", "door1"} | {n["id"] for n in data["nodes"] if n["floor"] == "F1"}
-    data["floors"] = [f for f in data["floors"] if f["id"] == "F0"]
-    data["nodes"] = [n for n in data["nodes"] if n["id"] not in gone]
-    data["edges"] = [e for e in data["edges"] if not {e["a"], e["b"]} & gone]
-    data["areas"] = [a for a in data["areas"] if not set(a["nodes"]) & gone]
-    data["wait_points"] = [w for w in data["wait_points"] if w["node"] not in gone]
-    data["doors"] = [d for d in data["doors"] if d["id"] == "D0"]
-    data["elevators"] = []
-    data["modules"] = [m for m in data["modules"] if m["id"] == "M0"]
-    return data
 
 
 async def test_a_robot_that_cannot_reach_a_charger_waits_for_the_door_with_one_alert(

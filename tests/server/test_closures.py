@@ -11,7 +11,7 @@ import pytest
 
 from backend.closure import Closure, ClosureRequest, closed_nodes
 from backend.closures.service import ClosureService
-from backend.closures.trouble import trouble_of
+from backend.closures.trouble import FIRST_HOLD_PART, trouble_of
 from backend.detours import RouteClosed, path_avoiding
 from backend.testing import running_server
 from guidebot.bus import Bus
@@ -187,6 +187,54 @@ async def test_trouble_closes_a_door_or_a_lift_until_it_is_seen_working() -> Non
             "elevator_in_position", {"elevator": lift.id, "floor": "F1", "door_open": True}
         )
         assert not service.closed
+    finally:
+        await service.stop()
+
+
+async def test_a_jammed_door_is_held_closed_briefly_then_longer_while_it_keeps_failing() -> None:
+    """Nobody sees a door work again while robots keep off it: a jam of a few seconds held it
+    closed for the whole 120 s and tours skipped every stop behind it (30-minute fault soak).
+    Its first failure holds it briefly; each failure in a row after that twice as long."""
+    bus = Bus()
+    site = demo_site()
+    now = [1000.0]
+    service = ClosureService(
+        bus.endpoint("closures"), lambda: site, None, None, trouble_hold_s=120, clock=lambda: now[0]
+    )
+    await service.start()
+    door = site.doors[0]
+    key = f"trouble-door-{door.id}"
+    first = 120 / FIRST_HOLD_PART  # 10 s
+    building = bus.endpoint("building")
+
+    def jammed() -> float:
+        """The door fails a robot's open_door: how long it is held closed from now."""
+        failed = {"command": "open_door", "reason": "not open within 4 s", "target": door.id}
+        building.publish("command_failed", failed, destination="R1")
+        end = service.closures[key].end
+        assert end is not None and door.node in service.closed
+        return end - now[0]
+
+    def hold_ends(held: float) -> None:
+        now[0] += held
+        service.refresh()
+        assert door.node not in service.closed
+
+    try:
+        assert jammed() == first
+        now[0] += 2
+        assert jammed() == first  # another robot, same outage: held on from now
+        hold_ends(first)
+        assert jammed() == 2 * first  # failed again at its next try
+        hold_ends(2 * first)
+        assert jammed() == 4 * first
+        hold_ends(4 * first)
+        assert jammed() == 8 * first
+        hold_ends(8 * first)
+        assert jammed() == 120  # never more than the longest hold
+        building.publish("door_opened", {"door": door.id})
+        assert door.node not in service.closed
+        assert jammed() == first  # seen working: a first failure again
     finally:
         await service.stop()
 

@@ -251,6 +251,7 @@ export interface MoveServos {
 
 export interface NavigateTo {
   node: string;
+  trouble_wait_s?: number | null;
 }
 
 /** A goal was not reached (robot_agent.motion.NavigationError says why). */
