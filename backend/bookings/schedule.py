@@ -48,6 +48,8 @@ staff before this many seconds."""
 LATE_CLEAR_S = 20.0
 """A "cannot reach the meeting point in time" flag is resolved only once the robot can be
 there this long before the time (an estimate that wobbles does not raise it again and again)."""
+LATE_CONFIRM_S = 10.0
+"""A reservation's lateness (or none to reserve) is told to staff once it has lasted this long."""
 MISSED_LOOKBACK_S = 86400.0
 """At start: occurrences of the last day never started are told to staff as missed."""
 
@@ -115,6 +117,8 @@ class BookingScheduler(Service):
         self.done: dict[tuple[str, float], dict[str, Any]] = {}
         """Occurrences taken (this life or an earlier one) -> their start row."""
         self.flags: dict[tuple[str, float], str] = service.flags
+        self._late_since: dict[tuple[str, float], float] = {}
+        """Occurrences found late (reserve.py) -> since when (``LATE_CONFIRM_S``)."""
         self._lock = asyncio.Lock()
         self._started: float | None = None
         """time.monotonic() of the start (None: driven by a test, no grace)."""
@@ -163,7 +167,8 @@ class BookingScheduler(Service):
                 reserving = self._reserve(booking, at, now)
                 if reserving:
                     kept.add(key)
-                await self._check(booking, at, reserving=reserving)
+                await self._check(booking, at, now, reserving=reserving)
+            self._late_since = {k: v for k, v in self._late_since.items() if k in kept}
             if self.reservations is not None:
                 self.reservations.forget_except(kept)
                 self.reservations.send(now)
@@ -313,11 +318,25 @@ class BookingScheduler(Service):
         """Within the grace after a start: robots are still reconnecting."""
         return self._started is not None and time.monotonic() - self._started < RECONNECT_GRACE_S
 
-    async def _check(self, booking: Booking, at: float, *, reserving: bool = False) -> None:
+    def _lasting(self, key: tuple[str, float], why: str | None, now: float) -> str | None:
+        """``why`` once it has held ``LATE_CONFIRM_S`` (or the time is nearer than that), or
+        it was told already: a robot held up at a door for a few seconds, an estimate that
+        wobbles, is not told to staff."""
+        if why is None:
+            self._late_since.pop(key, None)
+            return None
+        since = self._late_since.setdefault(key, now)
+        if key in self.flags or now - since >= LATE_CONFIRM_S or key[1] - now <= LATE_CONFIRM_S:
+            return why
+        return None
+
+    async def _check(
+        self, booking: Booking, at: float, now: float, *, reserving: bool = False
+    ) -> None:
         why = self.trouble(booking, at)
-        if why is None and reserving and not self._reconnecting():
-            why = self.late(booking, at)
         key = (booking.id, at)
+        if why is None and reserving and not self._reconnecting():
+            why = self._lasting(key, self.late(booking, at), now)
         if why is None:
             if key in self.flags:
                 self._unflag(booking, at, "can be served again")

@@ -417,6 +417,9 @@ async def test_a_reserved_robot_that_cannot_be_there_in_time_is_told_to_staff_be
             clock.now = local("10:28")
             await scheduler.step(clock.now)
             subject = f"{booking.id}@{DAY} 10:30"
+            assert alerts.get("booking_at_risk", subject) is None  # a wobble is not told
+            clock.now = local("10:28:10")
+            await scheduler.step(clock.now)  # lasting: told
             told = alerts.get("booking_at_risk", subject)
             assert told is not None and told.active
             assert (
@@ -426,7 +429,8 @@ async def test_a_reserved_robot_that_cannot_be_there_in_time_is_told_to_staff_be
             (post,) = await hooks.wait_for("/desk", 1)
             assert "R3 cannot reach Welcome hall by 10:30" in str(orjson.loads(post.body)["text"])
 
-            await scheduler.step(local("10:28:30"))  # the same reason: not told again
+            clock.now = local("10:28:30")
+            await scheduler.step(clock.now)  # the same reason: not told again
             assert told.count == 1
 
             r3.node = "gb2"
@@ -462,6 +466,7 @@ async def test_no_robot_to_reserve_is_told_to_staff_before_the_time(
         BookingRequest(tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3), by="desk"
     )
     await scheduler.step(clock.now)
+    await scheduler.step(clock.now + 10)
     told = alerts.get("booking_at_risk", f"{booking.id}@{DAY} 10:30")
     assert told is not None and told.active
     assert "no robot can be reserved to be at Welcome hall by 10:30" in told.message
