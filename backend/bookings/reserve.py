@@ -149,26 +149,32 @@ class Reservations:
     def reserve(
         self, key: tuple[str, float], requester: str, node: str, duration_s: float
     ) -> Reservation | None:
-        """The occurrence's robot, chosen again at every pass while it is not sent: one that
-        cannot be there by the time is swapped for one that can, if any, even one reserved
-        for a later occurrence (which chooses again: the scheduler goes in time order).
-        None when no robot fits now."""
+        """The occurrence's robot, looked at again at every pass: one not sent yet that cannot
+        be there by the time, or one whose battery will not last until the tour ends (sent or
+        not: see ``lasts``), is swapped for one that can, if any, even one reserved for a
+        later occurrence (which chooses again: the scheduler goes in time order). None when
+        no robot fits now."""
         found = self.by_key.get(key)
-        if found is not None and found.sent is not None:
-            return found
         if found is None and (adopted := self._adopt(key, requester, node, duration_s)):
             return adopted
         now = self.clock()
         if found is not None:
             robot = self.tasks.robots.get(found.robot)
-            if robot is not None and now + self.ready_in(robot, node) <= key[1]:
-                return found
+            if robot is not None and self._fits(robot) and self.lasts(robot, key[1], duration_s):
+                if found.sent is not None or now + self.ready_in(robot, node) <= key[1]:
+                    return found
         choice = self._choose(key, node, duration_s)
         if choice is None or (found is not None and choice[1]):
-            return found  # nothing better: staff are told if it is late (schedule.py)
+            return found  # nothing better: staff are told (schedule.py)
         robot = choice[0]
         if found is not None:
-            log.info("booking %s: %s would be late, %s instead", key[0], found.robot, robot.name)
+            log.info(
+                "booking %s: %s late or short of battery, %s instead",
+                key[0],
+                found.robot,
+                robot.name,
+            )
+            self._unsend(found)
             self.release(key)
         taken = self.by_robot.get(robot.name)
         if taken is not None:
@@ -313,7 +319,7 @@ class Reservations:
                 continue
             if not self._fits(robot):
                 continue
-            if not can_finish(robot, self.travel_s(robot, robot.node, node) + duration_s):
+            if not self.lasts(robot, at, duration_s):
                 continue
             ready = self.ready_in(robot, node)
             late = now + ready > at - self.margin_s
@@ -369,6 +375,33 @@ class Reservations:
         if task is None or task.final or robot is None or robot.name in self.by_robot:
             return None
         return self._take(key, requester, node, duration_s, robot, sent=task.id)
+
+    def lasts(self, robot: RobotInfo, at: float, duration_s: float) -> bool:
+        """At its learned drain, its battery stays above ``battery_low`` until the booked time
+        (else it is sent to charge first) and lasts the tour (``can_finish``); an unknown
+        drain: yes."""
+        drain = robot.drain_per_s
+        if drain is None:
+            return True
+        wait = max(0.0, at - self.clock())
+        if robot.battery - drain * wait <= robot.config.battery_low:
+            return False
+        return can_finish(robot, wait + duration_s)
+
+    def short_of_battery(self, key: tuple[str, float]) -> bool:
+        """The reserved robot's battery will not last until the booked tour ends."""
+        r = self.by_key.get(key)
+        robot = self.tasks.robots.get(r.robot) if r is not None else None
+        return robot is not None and r is not None and not self.lasts(robot, r.at, r.ends_at - r.at)
+
+    def _unsend(self, r: Reservation) -> None:
+        """Call back a robot sent to a meeting point another robot now goes to."""
+        meet = self.tasks.tasks.get(r.sent) if r.sent is not None else None
+        if meet is not None and not meet.final:
+            try:
+                self.tasks.cancel(meet.id, reason="another robot takes the booking", by="bookings")
+            except TaskError:
+                pass
 
     def _fits(self, robot: RobotInfo) -> bool:
         """In service, online, sound and not due to charge."""

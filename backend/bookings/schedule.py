@@ -286,8 +286,9 @@ class BookingScheduler(Service):
 
     def late(self, booking: Booking, at: float) -> str | None:
         """Why the occurrence, within its reservation lead, will not have its robot at the
-        meeting point by its time (None: it will): none could be reserved, or the reserved
-        one cannot be there in time (its current task, then its way: reserve.py ``arrival``).
+        meeting point by its time (None: it will): none could be reserved, the reserved one's
+        battery will not last (no stand-in was found), or it cannot be there in time (its
+        current task, then its way: reserve.py ``arrival``).
         Once told, it stays told until the robot can be there ``LATE_CLEAR_S`` early."""
         if self.reservations is None:
             return None
@@ -302,6 +303,12 @@ class BookingScheduler(Service):
                 "is reserved for another booking, due to charge or offline"
             )
         robot, when = found
+        if self.reservations.short_of_battery(key):
+            return (
+                f"{robot}, the robot reserved, must charge first: its battery will not last "
+                f"from now until the tour at {by} ends, and no other robot can be at {place} "
+                "in time"
+            )
         told = self.flags.get(key, "").startswith(f"{robot} cannot reach")
         if when <= at - (LATE_CLEAR_S if told else 0.0):
             return None

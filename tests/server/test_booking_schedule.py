@@ -505,3 +505,48 @@ async def test_a_robot_already_sent_to_the_meeting_point_stays_reserved_after_a_
     kept = reservations.by_key[(booking.id, at)]
     assert (kept.robot, kept.sent) == ("R1", meet.id)
     assert not any(t.robot == "R3" and not t.internal for t in manager.tasks.values())
+
+
+async def test_a_robot_whose_battery_will_be_low_by_the_time_is_not_the_one_kept(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """The soak's whole fleet drains alike and goes to charge within a minute and a half: the
+    robot parked at the meeting point reached ``battery_low`` seconds before its booked tour,
+    went to charge, and the tour waited for a charged robot. A robot whose battery (at its
+    learned drain) would be low by the time is not reserved, a reserved one that would be is
+    swapped, and when none would last, staff are told before the time."""
+    for name, node, level in (("R3", "hall", 0.35), ("R1", "charge_a", 0.9)):
+        RobotStub(bus, name, node, battery=level).state()
+        manager.robots[name].drain_per_s = 0.001  # 10 % in 100 s
+    clock = Clock(local("10:27"))
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    service = BookingService(
+        store,
+        lambda: manager.site,
+        lambda: 3,
+        tz=MADRID,
+        duration=lambda kind, params: 100.0,
+        clock=clock,
+    )
+    reservations = Reservations(manager, clock=clock)
+    scheduler = BookingScheduler(
+        service, store, manager, alerts, tick_s=None, clock=clock, reservations=reservations
+    )
+    booking = await service.create(
+        BookingRequest(
+            tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3, meeting_point="welcome"
+        ),
+        by="desk",
+    )
+    key = (booking.id, local("10:30"))
+    await scheduler.step(clock.now)
+    # R3 stands at the meeting point, but at 10:30 its battery is 17 %: R1 goes.
+    assert reservations.by_key[key].robot == "R1"
+
+    manager.robots["R1"].battery = 0.4  # a long walk-up took more than foreseen
+    for now in (local("10:27:30"), local("10:27:40")):
+        clock.now = now
+        await scheduler.step(now)
+    assert reservations.by_key[key].robot == "R1"  # no stand-in either
+    told = alerts.get("booking_at_risk", f"{booking.id}@{DAY} 10:30")
+    assert told is not None and "R1, the robot reserved, must charge first" in told.message
