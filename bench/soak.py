@@ -30,7 +30,7 @@ import click
 import httpx
 import yaml
 
-from bench.soak_bookings import SoakBookings
+from bench.soak_bookings import SoakBookings, walk_ups
 from bench.soak_faults import KINDS, Fault, schedule
 from bench.soak_fleet import Child, LinkRelay, free_port, healthy, wait_for
 from bench.soak_site import PANELS, robot_token, soak_site, with_ports
@@ -449,6 +449,7 @@ async def run_soak(opts: SoakOptions) -> dict[str, Any]:
         "minutes": opts.minutes,
         "robots": opts.robots,
         **counts,
+        **walk_ups(watch.tasks),
         "area_violations": by_kind["area"] + len(watch.lock_violations),
         "door_violations": by_kind["door"],
         "elevator_violations": by_kind["cabin"],

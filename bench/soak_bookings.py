@@ -11,17 +11,28 @@ from __future__ import annotations
 
 import datetime as dt
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import httpx
 
-__all__ = ["ON_TIME_S", "SoakBookings"]
+__all__ = ["ON_TIME_S", "SoakBookings", "walk_ups"]
 
 ON_TIME_S = 60.0
 """A booked tour started this long after its time at most is on time."""
 FIRST_AFTER_S = 45.0
 """The first booking is this long after the load starts (the schedule needs a few ticks)."""
+
+
+def walk_ups(tasks: Mapping[str, Any]) -> dict[str, int]:
+    """The visitors' own requests (a panel's, not a booking's tour or its way to the meeting
+    point, whose requesters start ``booking:``): requested and done."""
+    mine = [t for t in tasks.values() if not str(t.requester).startswith("booking:")]
+    return {
+        "walk_ups_requested": len(mine),
+        "walk_ups_done": sum(1 for t in mine if t.state == "done"),
+    }
 
 
 @dataclass

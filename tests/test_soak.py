@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from bench.soak_bookings import walk_ups
 from bench.soak_faults import ALL_KINDS, KINDS, schedule
 from bench.soak_measures import Measures, percentiles
 from bench.soak_watch import TaskSeen, Watch
@@ -141,3 +142,13 @@ async def test_a_short_soak_loses_nothing_and_breaks_no_invariant(tmp_path: Path
     assert 0 <= result["done_share"] <= 1, result
     assert set(result["utilisation"]) == {"R1", "R2", "R3"}, result
     assert set(result["handover_s"]) == {"p50", "p99", "n"}, result
+
+
+def test_walk_ups_leave_out_the_booked_tours_and_their_ways_to_the_meeting_point() -> None:
+    tasks = {
+        "a": TaskSeen("done", "", "panel-1"),
+        "b": TaskSeen("failed", "door jammed", "panel-2"),
+        "c": TaskSeen("done", "", "booking:x1@1800000000"),
+        "d": TaskSeen("cancelled", "the booked tour starts", "booking:x1@1800000000:meet"),
+    }
+    assert walk_ups(tasks) == {"walk_ups_requested": 2, "walk_ups_done": 1}

@@ -179,6 +179,13 @@ async def visitor_menu(
         assert view is not None
         told = estimator.preview("go_to_poi", {"poi": poi.id, "lang": chosen} | paced).as_dict()
         pois.append({**view, "estimate": told, "steps_only": poi.node in cut})
+    overall = estimator.service()
+    if (
+        overall == "available"
+        and (tours or pois)
+        and not any(item["estimate"]["service"] == "available" for item in (*tours, *pois))
+    ):
+        overall = "busy"  # the free robots are kept for booked tours (backend/bookings)
     return {
         "site": site.name,
         "languages": site_languages(site),
@@ -186,7 +193,7 @@ async def visitor_menu(
         "lang": chosen,
         "pace": pace,
         "step_free": step_free,
-        "service": estimator.service(),
+        "service": overall,
         "tours": tours,
         "pois": pois,
     }

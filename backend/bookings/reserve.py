@@ -1,12 +1,29 @@
-"""A robot reserved ahead for each booked occurrence (docs/server.md, "Bookings"): chosen
-``RESERVE_AHEAD_S`` before the time among the robots in service, online and charged enough for
-the way there and the tour; sent to the meeting point (a ``go_to`` task) in time to be there
-``MARGIN_S`` early, then kept there; the booked tour is pinned to it at its time.
+"""A robot reserved ahead for each booked occurrence (docs/server.md, "Bookings").
 
-The Task Manager asks ``keeps(robot, task)`` before giving a robot a task (a reserved robot takes
-no walk-up that would make it late) and ``parks(robot)`` before sending an idle robot to a
-station (the reserved robot waits at its meeting point); the ETA estimator asks ``back_after``
-so a walk-up's wait counts the reservation (backend/tasks/manager.py, backend/tasks/eta.py).
+How far ahead (``lead_s``): long enough for any robot to end the longest visitor task it may
+have just started and drive across the site to the meeting point, plus ``MARGIN_S``; all in
+real seconds (the ETA estimator's learned factors, backend/tasks/eta.py), so a fleet at a
+higher time scale, or with short tours, reserves later and keeps its robots for walk-ups.
+
+Which robot: among those in service, online, sound, not due to charge and charged enough for
+the way and the tour, the one that can be at the meeting point ``MARGIN_S`` before the time
+(its current task's remaining seconds, then its way from where that task ends), an idle one
+first, then the soonest there. Every pass looks again: the robot's leaving time follows where
+it is; one that would be late is swapped for one in time; one no longer fit is given up and
+another chosen. At its leaving time it is sent to the meeting point (a ``go_to`` task), then
+kept there; the booked tour is pinned to it at its time.
+
+The Task Manager asks ``keeps(robot, task)`` before giving a robot a task (a reserved robot
+takes no walk-up that would make it late, counting its way from where the walk-up ends) and
+``parks(robot)`` before sending an idle robot to a station (the reserved robot waits at its
+meeting point); the ETA estimator asks ``back_after`` so a walk-up's wait counts the
+reservation (backend/tasks/manager.py, backend/tasks/eta.py). The scheduler asks ``arrival``
+to tell staff ahead when the reserved robot cannot be there in time (backend/bookings/
+schedule.py).
+
+Kept across a restart: a reservation whose robot was already sent is found again from its
+``go_to`` task (requester ``booking:<id>@<time>:meet``), which the Task Manager keeps; one not
+yet sent is simply chosen again by the next pass.
 """
 
 from __future__ import annotations
@@ -19,19 +36,22 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.tasks.charging import can_finish
-from backend.tasks.model import Task, TaskError
+from backend.tasks.model import Task, TaskError, TaskState
 from backend.tasks.robots import RobotInfo
 
-__all__ = ["MARGIN_S", "RESERVE_AHEAD_S", "Reservation", "Reservations"]
+__all__ = ["MARGIN_S", "MEET_SUFFIX", "Reservation", "Reservations"]
 
 log = logging.getLogger(__name__)
 
-RESERVE_AHEAD_S = 900.0
-"""A robot is chosen this long before the booked time (15 minutes)."""
 MARGIN_S = 60.0
-"""It is sent to arrive this long before the booked time."""
+"""A reserved robot is sent to arrive this long before the booked time."""
 UNKNOWN_TRAVEL_S = 300.0
 """The way to the meeting point when no path is known (a robot not placed yet)."""
+RELEASE_FACTOR = 1.5
+"""A reservation not yet sent whose time is further off than this many leads is given back
+(the lead shrank as the fleet's real speed was learned): its robot serves walk-ups freely."""
+MEET_SUFFIX = ":meet"
+"""The requester of the ``go_to`` to the meeting point: the occurrence's, plus this."""
 
 
 @dataclass
@@ -43,7 +63,7 @@ class Reservation:
     node: str
     """The meeting point's node."""
     leave_at: float
-    """When it must set off (Unix seconds)."""
+    """When it must set off (Unix seconds), from where it is (or where its task ends)."""
     ends_at: float
     """When the booked tour is expected to end."""
     requester: str
@@ -56,23 +76,30 @@ class Reservation:
 
 
 class Reservations:
-    """The reservations of the coming occurrences, kept in memory (rebuilt by the scheduler's
-    next pass after a restart: a robot is chosen again)."""
+    """The reservations of the coming occurrences, kept in memory (see the module's text for
+    what survives a restart)."""
 
     def __init__(
         self, tasks: Any, *, margin_s: float = MARGIN_S, clock: Callable[[], float] = time.time
     ) -> None:
         self.tasks = tasks
-        """The Task Manager (robots, graph, estimator, request, cancel)."""
+        """The Task Manager (robots, tasks, graph, site, estimator, request, cancel)."""
         self.margin_s = margin_s
         self.clock = clock
         self.by_robot: dict[str, Reservation] = {}
         self.by_key: dict[tuple[str, float], Reservation] = {}
+        self._meets: dict[str, Task] | None = None
+        """The go_to tasks to meeting points found at the first pass (an earlier life's)."""
+        self._farthest: dict[str, tuple[Any, float]] = {}
+        """Meeting point's node -> (site, metres from the farthest point of interest)."""
+        self._longest: tuple[Any, float, float, float] | None = None
+        """(site, move factor, talk factor, the longest tour's real seconds)."""
 
     # -- hooks of the Task Manager and the ETA estimator ------------------------------------
 
     def keeps(self, robot: RobotInfo, task: Task) -> bool:
-        """The robot is reserved and ``task`` (not the booking's) would make it late."""
+        """The robot is reserved and ``task`` (not the booking's) would make it late: the
+        task, then the way from where it ends to the meeting point."""
         r = self.by_robot.get(robot.name)
         if r is None or task.requester.startswith(r.requester):
             return False
@@ -80,7 +107,8 @@ class Reservations:
         if now >= r.leave_at:
             return True
         took = self._task_s(task, robot.node)
-        return now + took + self._travel_s(robot, r.node) > r.at - self.margin_s
+        back = self.travel_s(robot, self._end_node(task) or robot.node, r.node)
+        return now + took + back > r.at - self.margin_s
 
     def parks(self, robot: RobotInfo) -> bool:
         """Sent to its meeting point: it waits there, not at a station."""
@@ -100,43 +128,84 @@ class Reservations:
 
     # -- planning ----------------------------------------------------------------------------
 
+    def lead_s(self, node: str) -> float:
+        """How long before its time an occurrence meeting at ``node`` gets its robot: the
+        margin, the longest tour a robot may have just started, and the longest way to
+        ``node`` from a point of interest (where tours end) or a robot (real seconds)."""
+        far = self.tasks.graph.distances_to(node)
+        site = self.tasks.site
+        found = self._farthest.get(node)
+        if found is None or found[0] is not site:
+            known = [far.get(p.node) for p in site.pois]
+            found = (site, max((m for m in known if m is not None), default=0.0))
+            self._farthest[node] = found
+        robots = self.tasks.robots.values()
+        here = [far.get(r.node) for r in robots if r.node]
+        metres = max([found[1], *(m for m in here if m is not None)])
+        speed = min((r.config.max_speed_mps for r in robots), default=0.5)
+        way = metres / max(speed, 0.05) * self.tasks.estimator.move.value
+        return self.margin_s + self._longest_s() + way
+
     def reserve(
         self, key: tuple[str, float], requester: str, node: str, duration_s: float
     ) -> Reservation | None:
-        """Choose a robot for this occurrence (once); None when none fits now."""
+        """The occurrence's robot, looked at again at every pass: one not sent yet that cannot
+        be there by the time, or one whose battery will not last until the tour ends (sent or
+        not: see ``lasts``), is swapped for one that can, if any, even one reserved for a
+        later occurrence (which chooses again: the scheduler goes in time order). None when
+        no robot fits now."""
         found = self.by_key.get(key)
+        if found is None and (adopted := self._adopt(key, requester, node, duration_s)):
+            return adopted
+        now = self.clock()
         if found is not None:
-            return found
-        best: tuple[float, RobotInfo] | None = None
-        for robot in self.tasks.robots.values():
-            if robot.name in self.by_robot or not self._fits(robot):
+            robot = self.tasks.robots.get(found.robot)
+            if robot is not None and self._fits(robot) and self.lasts(robot, key[1], duration_s):
+                if found.sent is not None or now + self.ready_in(robot, node) <= key[1]:
+                    return found
+        choice = self._choose(key, node, duration_s)
+        if choice is None or (found is not None and choice[1]):
+            return found  # nothing better: staff are told (schedule.py)
+        robot = choice[0]
+        if found is not None:
+            log.info(
+                "booking %s: %s late or short of battery, %s instead",
+                key[0],
+                found.robot,
+                robot.name,
+            )
+            self._unsend(found)
+            self.release(key)
+        taken = self.by_robot.get(robot.name)
+        if taken is not None:
+            log.info("booking %s: %s taken for an earlier one", taken.booking, robot.name)
+            self.release((taken.booking, taken.at))
+        return self._take(key, requester, node, duration_s, robot)
+
+    def refresh(self, now: float) -> None:
+        """Every pass, before ``reserve``: a reserved robot no longer fit is given up (the
+        occurrence chooses again); the leaving time of one not yet sent follows where it is;
+        one whose way to the meeting point ended short is sent again."""
+        for r in list(self.by_key.values()):
+            robot = self.tasks.robots.get(r.robot)
+            if r.sent is not None:
+                meet = self.tasks.tasks.get(r.sent)
+                if meet is None or not meet.final or meet.state is TaskState.DONE:
+                    continue
+                r.sent = None  # failed or cancelled on the way: sent again
+            if robot is None or not self._fits(robot):
+                self.drop(r, f"{r.robot} is no longer fit")
                 continue
-            travel = self._travel_s(robot, node)
-            if not can_finish(robot, travel + duration_s):
-                continue
-            busy = 0.0 if self._idle(robot) else 600.0  # rather a free robot
-            cost = busy + travel
-            if best is None or cost < best[0]:
-                best = (cost, robot)
-        if best is None:
+            start = self._free_node(robot)
+            r.leave_at = r.at - self.margin_s - self.travel_s(robot, start, r.node)
+
+    def arrival(self, key: tuple[str, float]) -> tuple[str, float] | None:
+        """(robot, when it can be at the meeting point) for a reserved occurrence, else None."""
+        r = self.by_key.get(key)
+        robot = self.tasks.robots.get(r.robot) if r is not None else None
+        if r is None or robot is None:
             return None
-        robot = best[1]
-        at = key[1]
-        r = Reservation(
-            booking=key[0],
-            at=at,
-            robot=robot.name,
-            node=node,
-            leave_at=at - self.margin_s - self._travel_s(robot, node),
-            ends_at=at + duration_s,
-            requester=requester,
-        )
-        self.by_key[key] = self.by_robot[robot.name] = r
-        log.info(
-            "booking %s at %.0f: %s reserved, leaves at %.0f", key[0], at, robot.name, r.leave_at
-        )
-        self.tasks.dispatch()
-        return r
+        return r.robot, self.clock() + self.ready_in(robot, r.node)
 
     def send(self, now: float) -> None:
         """Reserved robots whose time to leave has come go to their meeting points."""
@@ -147,15 +216,14 @@ class Reservations:
             if robot is None or not self._fits(robot):
                 self.drop(r, f"{r.robot} is no longer fit")
                 continue
-            current = self.tasks.tasks.get(robot.current) if robot.current else None
-            if current is not None and not current.internal and not current.final:
+            if not self.idle(robot):
                 continue  # still on a task given before the reservation: it goes after
             try:
                 task = self.tasks.request(
                     "go_to",
                     {"node": r.node},
                     priority=50,
-                    requester=f"{r.requester}:meet",
+                    requester=r.requester + MEET_SUFFIX,
                     robot=r.robot,
                 )
             except TaskError as exc:
@@ -178,7 +246,7 @@ class Reservations:
                 except TaskError:
                     pass
         robot = self.tasks.robots.get(r.robot)
-        if robot is None or not self._fits(robot) or not self._idle(robot):
+        if robot is None or not self._fits(robot) or not self.idle(robot):
             return None  # lost, charging or still busy: the first robot free takes it
         return r.robot
 
@@ -193,11 +261,147 @@ class Reservations:
         self.release((r.booking, r.at))
 
     def forget_except(self, keys: set[tuple[str, float]]) -> None:
-        """Drop reservations of occurrences no longer coming (cancelled, moved)."""
+        """Drop reservations of occurrences no longer coming (cancelled, moved) or, not yet
+        sent, further off than ``RELEASE_FACTOR`` leads."""
         for key in [k for k in self.by_key if k not in keys]:
             self.release(key)
 
+    def too_early(self, key: tuple[str, float], node: str, now: float) -> bool:
+        """Not reserved yet: its time is beyond the lead. Reserved: beyond RELEASE_FACTOR
+        leads and not sent (kept, a lead that jitters would take and give back)."""
+        lead = self.lead_s(node)
+        r = self.by_key.get(key)
+        if r is None:
+            return key[1] - now > lead
+        return r.sent is None and key[1] - now > lead * RELEASE_FACTOR
+
+    # -- estimates -----------------------------------------------------------------------------
+
+    def ready_in(self, robot: RobotInfo, node: str) -> float:
+        """Real seconds until ``robot`` can be at ``node``: what its current task still takes,
+        then its way from where that task ends (inf: held up, nobody can say)."""
+        if robot.held_up:
+            return math.inf
+        current = self.tasks.tasks.get(robot.current) if robot.current else None
+        if current is None or current.internal or current.final:
+            return self.travel_s(robot, robot.node, node)
+        if current.requester.endswith(MEET_SUFFIX) and current.params.get("node") == node:
+            return self.travel_s(robot, robot.node, node)  # on its way there
+        left = self.tasks.estimator.estimate(current).remaining_s
+        if left is None or not math.isfinite(left):
+            left = self._task_s(current, robot.node)
+        return left + self.travel_s(robot, self._end_node(current) or robot.node, node)
+
+    def travel_s(self, robot: RobotInfo, start: str | None, node: str) -> float:
+        """Real seconds of the way from ``start`` to ``node`` at the robot's speed, the lift's
+        queue included (nominal seconds times the learned factor of legs)."""
+        if start == node:
+            return 0.0
+        metres = self.tasks.graph.distances_to(node).get(start) if start else None
+        if metres is None or not math.isfinite(metres):
+            return UNKNOWN_TRAVEL_S
+        nominal = float(metres) / robot.config.max_speed_mps + self.tasks.lift_wait_s(start, node)
+        return nominal * self.tasks.estimator.move.value
+
     # -- helpers -----------------------------------------------------------------------------
+
+    def _choose(
+        self, key: tuple[str, float], node: str, duration_s: float
+    ) -> tuple[RobotInfo, bool] | None:
+        """The robot to reserve and whether it is late (there after the time minus the
+        margin): in time first, then one not reserved, then idle, then the soonest there. A
+        robot reserved for a later occurrence, not sent yet, is a candidate only in time."""
+        now, at = self.clock(), key[1]
+        best: tuple[tuple[bool, bool, bool, float], RobotInfo] | None = None
+        for robot in self.tasks.robots.values():
+            other = self.by_robot.get(robot.name)
+            if other is not None and (other.at <= at or other.sent is not None):
+                continue
+            if not self._fits(robot):
+                continue
+            if not self.lasts(robot, at, duration_s):
+                continue
+            ready = self.ready_in(robot, node)
+            late = now + ready > at - self.margin_s
+            if late and other is not None:
+                continue
+            cost = (late, other is not None, not self.idle(robot), ready)
+            if best is None or cost < best[0]:
+                best = (cost, robot)
+        return (best[1], best[0][0]) if best is not None else None
+
+    def _take(
+        self,
+        key: tuple[str, float],
+        requester: str,
+        node: str,
+        duration_s: float,
+        robot: RobotInfo,
+        sent: str | None = None,
+    ) -> Reservation:
+        at = key[1]
+        start = self._free_node(robot)
+        r = Reservation(
+            booking=key[0],
+            at=at,
+            robot=robot.name,
+            node=node,
+            leave_at=at - self.margin_s - self.travel_s(robot, start, node),
+            ends_at=at + duration_s,
+            requester=requester,
+            sent=sent,
+        )
+        self.by_key[key] = self.by_robot[robot.name] = r
+        log.info(
+            "booking %s at %.0f: %s reserved, leaves at %.0f", key[0], at, robot.name, r.leave_at
+        )
+        self.tasks.dispatch()
+        return r
+
+    def _adopt(
+        self, key: tuple[str, float], requester: str, node: str, duration_s: float
+    ) -> Reservation | None:
+        """A robot already on its way to this meeting point (the go_to of an earlier life,
+        kept by the Task Manager) stays the reserved one; the tasks are looked through once,
+        at the first pass of a life."""
+        if self._meets is None:
+            self._meets = {
+                t.requester: t
+                for t in self.tasks.tasks.values()
+                if not t.final and t.requester.endswith(MEET_SUFFIX) and t.robot
+            }
+        task = self._meets.pop(requester + MEET_SUFFIX, None)
+        robot = self.tasks.robots.get(task.robot) if task is not None and task.robot else None
+        if task is None or task.final or robot is None or robot.name in self.by_robot:
+            return None
+        return self._take(key, requester, node, duration_s, robot, sent=task.id)
+
+    def lasts(self, robot: RobotInfo, at: float, duration_s: float) -> bool:
+        """At its learned drain, its battery stays above ``battery_low`` until the booked time
+        (else it is sent to charge first) and lasts the tour (``can_finish``); an unknown
+        drain: yes."""
+        drain = robot.drain_per_s
+        if drain is None:
+            return True
+        wait = max(0.0, at - self.clock())
+        if robot.battery - drain * wait <= robot.config.battery_low:
+            return False
+        return can_finish(robot, wait + duration_s)
+
+    def short_of_battery(self, key: tuple[str, float]) -> bool:
+        """The reserved robot's battery will not last until the booked tour ends."""
+        r = self.by_key.get(key)
+        robot = self.tasks.robots.get(r.robot) if r is not None else None
+        return robot is not None and r is not None and not self.lasts(robot, r.at, r.ends_at - r.at)
+
+    def _unsend(self, r: Reservation) -> None:
+        """Call back a robot sent to a meeting point another robot now goes to."""
+        meet = self.tasks.tasks.get(r.sent) if r.sent is not None else None
+        if meet is not None and not meet.final:
+            try:
+                self.tasks.cancel(meet.id, reason="another robot takes the booking", by="bookings")
+            except TaskError:
+                pass
 
     def _fits(self, robot: RobotInfo) -> bool:
         """In service, online, sound and not due to charge."""
@@ -209,15 +413,52 @@ class Reservations:
             and robot.battery > robot.config.battery_low
         )
 
-    def _idle(self, robot: RobotInfo) -> bool:
+    def idle(self, robot: RobotInfo) -> bool:
+        """No visitor task (nothing, or the Task Manager's own errand: preemptible)."""
         current = self.tasks.tasks.get(robot.current) if robot.current else None
         return current is None or current.internal or current.final
 
-    def _travel_s(self, robot: RobotInfo, node: str) -> float:
-        metres = self.tasks.graph.distances_to(node).get(robot.node) if robot.node else None
-        if metres is None or not math.isfinite(metres):
-            return UNKNOWN_TRAVEL_S
-        return float(metres) / robot.config.max_speed_mps + self.tasks.lift_wait_s(robot.node, node)
+    def _free_node(self, robot: RobotInfo) -> str | None:
+        """Where the robot is once its current visitor task is over."""
+        current = self.tasks.tasks.get(robot.current) if robot.current else None
+        if current is None or current.internal or current.final:
+            return robot.node
+        return self._end_node(current) or robot.node
+
+    def _end_node(self, task: Task) -> str | None:
+        """Where ``task`` ends: a tour's last stop, a visit's point, else its target."""
+        site = self.tasks.site
+        if task.kind == "tour" and (tour := site.tour(str(task.params.get("tour")))) is not None:
+            poi = site.poi(tour.points[-1]) if tour.points else None
+            return poi.node if poi is not None else None
+        try:
+            return str(self.tasks.target_of(task.kind, task.params))
+        except (TaskError, ValueError, KeyError):
+            return None
+
+    def _longest_s(self) -> float:
+        """Real seconds of the site's longest tour (its way to the first stop included)."""
+        est = self.tasks.estimator
+        site = self.tasks.site
+        found = self._longest
+        if (
+            found is not None
+            and found[0] is site
+            and found[1:3] == (est.move.value, est.talk.value)
+        ):
+            return found[3]
+        tooks = [
+            self._task_s(
+                Task(
+                    id="~lead", kind="tour", params={"tour": t.id}, priority=5, requester="", seq=0
+                ),
+                None,
+            )
+            for t in site.tours
+        ]
+        longest = max((t for t in tooks if math.isfinite(t)), default=UNKNOWN_TRAVEL_S)
+        self._longest = (site, est.move.value, est.talk.value, longest)
+        return longest
 
     def _task_s(self, task: Task, start: str | None) -> float:
         try:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import logging
+import math
 import time
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
@@ -33,7 +34,7 @@ from guidebot.payloads.bookings import NextTour, NextTours
 from guidebot.service import Service
 from guidebot.site.schema import Site
 
-__all__ = ["BOOKING_PRIORITY", "LATE_S", "BookingScheduler"]
+__all__ = ["BOOKING_PRIORITY", "LATE_CLEAR_S", "LATE_S", "BookingScheduler"]
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,11 @@ LATE_S = 600.0
 RECONNECT_GRACE_S = 30.0
 """After a start (a restart, a new leader) robots reconnect: "no robot online" is not told to
 staff before this many seconds."""
+LATE_CLEAR_S = 20.0
+"""A "cannot reach the meeting point in time" flag is resolved only once the robot can be
+there this long before the time (an estimate that wobbles does not raise it again and again)."""
+LATE_CONFIRM_S = 10.0
+"""A reservation's lateness (or none to reserve) is told to staff once it has lasted this long."""
 MISSED_LOOKBACK_S = 86400.0
 """At start: occurrences of the last day never started are told to staff as missed."""
 
@@ -111,6 +117,8 @@ class BookingScheduler(Service):
         self.done: dict[tuple[str, float], dict[str, Any]] = {}
         """Occurrences taken (this life or an earlier one) -> their start row."""
         self.flags: dict[tuple[str, float], str] = service.flags
+        self._late_since: dict[tuple[str, float], float] = {}
+        """Occurrences found late (reserve.py) -> since when (``LATE_CONFIRM_S``)."""
         self._lock = asyncio.Lock()
         self._started: float | None = None
         """time.monotonic() of the start (None: driven by a test, no grace)."""
@@ -146,30 +154,36 @@ class BookingScheduler(Service):
     async def step(self, now: float) -> None:
         self.tell(now)
         async with self._lock:
-            coming: set[tuple[str, float]] = set()
+            if self.reservations is not None:
+                self.reservations.refresh(now)
+            kept: set[tuple[str, float]] = set()
             for at, booking in self.service.between(now - LATE_S, now + self.check_lead_s):
                 key = (booking.id, at)
                 if key in self.done:
                     continue
                 if at <= now:
                     await self._start(booking, at)
-                else:
-                    coming.add(key)
-                    self._reserve(booking, at)
-                    await self._check(booking, at)
+                    continue
+                reserving = self._reserve(booking, at, now)
+                if reserving:
+                    kept.add(key)
+                await self._check(booking, at, now, reserving=reserving)
+            self._late_since = {k: v for k, v in self._late_since.items() if k in kept}
             if self.reservations is not None:
-                self.reservations.forget_except(coming)
+                self.reservations.forget_except(kept)
                 self.reservations.send(now)
 
-    def _reserve(self, booking: Booking, at: float) -> None:
+    def _reserve(self, booking: Booking, at: float, now: float) -> bool:
+        """Reserve a robot once the occurrence is within the lead (reserve.py); True: it is."""
         if self.reservations is None:
-            return
+            return False
         poi = self.fleet.site.poi(booking.meeting_point)
-        if poi is not None:
-            duration = self.service.duration_s(booking)
-            self.reservations.reserve(
-                (booking.id, at), requester_of(booking, at), poi.node, duration
-            )
+        key = (booking.id, at)
+        if poi is None or self.reservations.too_early(key, poi.node, now):
+            return False
+        duration = self.service.duration_s(booking)
+        self.reservations.reserve(key, requester_of(booking, at), poi.node, duration)
+        return True
 
     # -- telling visitors ---------------------------------------------------------------------
 
@@ -258,10 +272,7 @@ class BookingScheduler(Service):
         if not robots:
             return "no robot in service"
         if not any(r.online for r in robots):
-            reconnecting = (
-                self._started is not None and time.monotonic() - self._started < RECONNECT_GRACE_S
-            )
-            return None if reconnecting else "no robot in service is online"
+            return None if self._reconnecting() else "no robot in service is online"
         site = self.fleet.site
         closed = closed_nodes(site, self.closures(), at)
         if closed:
@@ -273,9 +284,66 @@ class BookingScheduler(Service):
                     )
         return None
 
-    async def _check(self, booking: Booking, at: float) -> None:
+    def late(self, booking: Booking, at: float) -> str | None:
+        """Why the occurrence, within its reservation lead, will not have its robot at the
+        meeting point by its time (None: it will): none could be reserved, the reserved one's
+        battery will not last (no stand-in was found), or it cannot be there in time (its
+        current task, then its way: reserve.py ``arrival``).
+        Once told, it stays told until the robot can be there ``LATE_CLEAR_S`` early."""
+        if self.reservations is None:
+            return None
+        key = (booking.id, at)
+        found = self.reservations.arrival(key)
+        poi = self.fleet.site.poi(booking.meeting_point)
+        place = poi.name if poi is not None else booking.meeting_point
+        by = dt.datetime.fromtimestamp(at, self.service.tz).strftime("%H:%M")
+        if found is None:
+            return (
+                f"no robot can be reserved to be at {place} by {by}: every robot in service "
+                "is reserved for another booking, due to charge or offline"
+            )
+        robot, when = found
+        if self.reservations.short_of_battery(key):
+            return (
+                f"{robot}, the robot reserved, must charge first: its battery will not last "
+                f"from now until the tour at {by} ends, and no other robot can be at {place} "
+                "in time"
+            )
+        told = self.flags.get(key, "").startswith(f"{robot} cannot reach")
+        if when <= at - (LATE_CLEAR_S if told else 0.0):
+            return None
+        current = self.fleet.robots.get(robot)
+        if not math.isfinite(when):
+            cause = "it is held up"
+        elif current is not None and not self.reservations.idle(current):
+            cause = "it is still on another task"
+        else:
+            cause = "its way there is too long"
+        return f"{robot} cannot reach {place} by {by}: {cause}"
+
+    def _reconnecting(self) -> bool:
+        """Within the grace after a start: robots are still reconnecting."""
+        return self._started is not None and time.monotonic() - self._started < RECONNECT_GRACE_S
+
+    def _lasting(self, key: tuple[str, float], why: str | None, now: float) -> str | None:
+        """``why`` once it has held ``LATE_CONFIRM_S`` (or the time is nearer than that), or
+        it was told already: a robot held up at a door for a few seconds, an estimate that
+        wobbles, is not told to staff."""
+        if why is None:
+            self._late_since.pop(key, None)
+            return None
+        since = self._late_since.setdefault(key, now)
+        if key in self.flags or now - since >= LATE_CONFIRM_S or key[1] - now <= LATE_CONFIRM_S:
+            return why
+        return None
+
+    async def _check(
+        self, booking: Booking, at: float, now: float, *, reserving: bool = False
+    ) -> None:
         why = self.trouble(booking, at)
         key = (booking.id, at)
+        if why is None and reserving and not self._reconnecting():
+            why = self._lasting(key, self.late(booking, at), now)
         if why is None:
             if key in self.flags:
                 self._unflag(booking, at, "can be served again")

@@ -5,10 +5,12 @@ SQLite database and the alert store (docs/server.md, "Bookings")."""
 from __future__ import annotations
 
 import datetime as dt
+import math
 from collections.abc import AsyncIterator
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
+import orjson
 import pytest
 
 from backend.alerts import AlertStore
@@ -19,8 +21,12 @@ from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
 from backend.closure import Closure
 from backend.db import make_engine, make_sessionmaker, migrate
+from backend.notify.model import WebhookChannel
+from backend.notify.service import Notifier
+from backend.notify.store import NotifyStore
 from backend.tasks import TaskManager
 from guidebot.bus import Bus
+from tests.notify.receivers import webhook_receiver
 
 from .helpers import RobotStub
 
@@ -189,9 +195,10 @@ async def test_a_booking_that_cannot_start_is_flagged_ahead_then_missed_with_the
 async def test_a_robot_is_reserved_ahead_sent_to_the_meeting_point_and_kept_for_the_booking(
     manager: TaskManager, bus: Bus, store: BookingStore
 ) -> None:
-    """One robot online: reserved 15 minutes ahead, a walk-up that would make it late waits
-    (its ETA counts the booked tour), the robot goes to the meeting point in time and the
-    booked tour is given to it at its time, ahead of the walk-up."""
+    """One robot online: reserved a lead ahead (the margin, the longest tour and the longest
+    way to the meeting point: about 5 minutes on the demo site), a walk-up that would make it
+    late waits (its ETA counts the booked tour), the robot goes to the meeting point in time
+    and the booked tour is given to it at its time, ahead of the walk-up."""
     r3 = RobotStub(bus, "R3", "entrance")
     r3.state()
     clock = Clock(local("10:00"))
@@ -213,9 +220,10 @@ async def test_a_robot_is_reserved_ahead_sent_to_the_meeting_point_and_kept_for_
         by="desk",
     )
     key = (booking.id, local("10:30"))
-    await scheduler.step(local("10:10"))
-    assert key not in reservations.by_key  # not yet: 15 minutes ahead
-    clock.now = local("10:16")
+    assert 300 < reservations.lead_s("hall") < 360
+    await scheduler.step(local("10:20"))
+    assert key not in reservations.by_key  # not yet: 10 minutes ahead
+    clock.now = local("10:25")
     await scheduler.step(clock.now)
     reserved = reservations.by_key[key]
     assert reserved.robot == "R3" and reserved.node == "hall"
@@ -251,7 +259,7 @@ async def test_a_reserved_robot_that_must_charge_is_replaced_by_another(
 ) -> None:
     for name, node in (("R3", "entrance"), ("R1", "charge_a")):
         RobotStub(bus, name, node).state()
-    clock = Clock(local("10:16"))
+    clock = Clock(local("10:26"))
     service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
     reservations = Reservations(manager, clock=clock)
     scheduler = BookingScheduler(
@@ -269,3 +277,276 @@ async def test_a_reserved_robot_that_must_charge_is_replaced_by_another(
     await scheduler.step(clock.now)  # given up ...
     await scheduler.step(clock.now + 1)  # ... and another chosen
     assert reservations.by_key[key].robot == "R1"
+
+
+class Fleet:
+    """Robot stubs that start what they are given at once and end a tour after ``tour_s`` of
+    the test's clock (sent to a meeting point, they are there at once and wait; the Task
+    Manager's own errands are left alone: preemptible)."""
+
+    def __init__(self, manager: TaskManager, bus: Bus, clock: Clock, tour_s: float) -> None:
+        self.manager = manager
+        self.clock = clock
+        self.tour_s = tour_s
+        self.stubs = {n: RobotStub(bus, n, "entrance") for n in manager.robots}
+        self.started: dict[str, float] = {}
+        """task id -> when its robot started it (the test's clock)."""
+        for stub in self.stubs.values():
+            stub.state()
+
+    def act(self) -> None:
+        site = self.manager.site
+        for task in list(self.manager.tasks.values()):
+            stub = self.stubs.get(task.robot or "")
+            if stub is None or task.final or task.internal:
+                continue
+            if task.id not in self.started:
+                self.started[task.id] = self.clock.now
+                stub.start(task.id)
+            if task.kind == "go_to":  # there at once (the way's time is not learned)
+                stub.node = task.params["node"]
+                stub.state("busy")
+            elif self.clock.now - self.started[task.id] >= self.tour_s:
+                tour = site.tour(task.params["tour"])
+                stub.node = site.poi(tour.points[-1]).node  # type: ignore[union-attr]
+                stub.end(task.id)
+                stub.state()
+
+
+async def test_a_reserved_robot_gone_to_charge_is_replaced_and_every_booking_starts_on_time(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """Bookings 3 minutes apart with 3 robots; the robot reserved for the second goes to
+    charge a little before it. The soak's late start (93 s): every robot was reserved 15
+    minutes ahead, so the one gone to charge had no stand-in, and its booking's tour waited
+    for a robot no later booking held (a whole tour). Reserved a lead ahead, a stand-in is
+    free, and every booked tour starts at its time."""
+    clock = Clock(local("10:15"))
+    fleet = Fleet(manager, bus, clock, tour_s=300.0)
+    service = BookingService(
+        store,
+        lambda: manager.site,
+        lambda: 3,
+        tz=MADRID,
+        duration=lambda kind, params: 200.0,
+        clock=clock,
+    )
+    reservations = Reservations(manager, clock=clock)
+    manager.reservations = reservations
+    manager.estimator.back_after = reservations.back_after
+    scheduler = BookingScheduler(
+        service, store, manager, None, tick_s=None, clock=clock, reservations=reservations
+    )
+    times = ["10:30", "10:33", "10:36", "10:39"]
+    made = [
+        await service.create(
+            BookingRequest(tour="ground", start=f"{DAY}T{t}", lang="en", group_size=5),
+            by="desk",
+        )
+        for t in times
+    ]
+    second = (made[1].id, local("10:33"))
+    charging = None
+    while clock.now < local("10:42"):
+        if charging is None and clock.now >= local("10:31"):
+            charging = reservations.by_key[second].robot
+            manager.robots[charging].needs_charge = True  # battery low: it goes to charge
+        await scheduler.step(clock.now)
+        fleet.act()
+        clock.now += 5.0
+    late = {}
+    for booking, at in zip(made, times, strict=True):
+        task = next(
+            t
+            for t in manager.tasks.values()
+            if t.requester.startswith(f"booking:{booking.id}@") and t.kind == "tour"
+        )
+        late[at] = fleet.started.get(task.id, math.inf) - local(at)
+    assert all(0 <= s < 60 for s in late.values()), late
+    assert charging is not None
+
+
+async def test_a_reserved_robot_that_cannot_be_there_in_time_is_told_to_staff_before_the_time(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """R3 alone, on a walk-up tour when its booking's lead comes: it cannot be at the meeting
+    point by the booked time. Staff are told before the time, with the reason, as the alert
+    ``booking_at_risk`` and through the notification rules (a real webhook receiver); the
+    alert is resolved when the tour starts."""
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    async with webhook_receiver() as hooks:
+        notifier = Notifier(bus.endpoint("notify"), NotifyStore(store.sessionmaker), alerts=alerts)
+        async with notifier:
+            desk = WebhookChannel(
+                kind="webhook",
+                name="Front desk",
+                url=f"{hooks.url}/desk",
+                secret="a-shared-secret-of-the-venue",
+                severities=["warning"],
+            )
+            await notifier.put_channel(desk)
+            r3 = RobotStub(bus, "R3", "entrance")
+            r3.state()
+            clock = Clock(local("10:26"))
+            service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
+            reservations = Reservations(manager, clock=clock)
+            manager.reservations = reservations
+            scheduler = BookingScheduler(
+                service,
+                store,
+                manager,
+                alerts,
+                tick_s=None,
+                clock=clock,
+                reservations=reservations,
+            )
+            booking = await service.create(
+                BookingRequest(
+                    tour="highlights",
+                    start=f"{DAY}T10:30",
+                    lang="es",
+                    group_size=20,
+                    meeting_point="welcome",
+                ),
+                by="desk",
+            )
+            walk_up = manager.request("tour", {"tour": "ground"}, requester="panel-1")
+            assert walk_up.robot == "R3"  # nothing reserved yet: the lead is about 5 minutes
+            r3.start(walk_up.id)
+
+            clock.now = local("10:28")
+            await scheduler.step(clock.now)
+            subject = f"{booking.id}@{DAY} 10:30"
+            assert alerts.get("booking_at_risk", subject) is None  # a wobble is not told
+            clock.now = local("10:28:10")
+            await scheduler.step(clock.now)  # lasting: told
+            told = alerts.get("booking_at_risk", subject)
+            assert told is not None and told.active
+            assert (
+                "R3 cannot reach Welcome hall by 10:30: it is still on another task" in told.message
+            )
+            assert service.flags_view()[0]["reason"].startswith("R3 cannot reach Welcome hall")
+            (post,) = await hooks.wait_for("/desk", 1)
+            assert "R3 cannot reach Welcome hall by 10:30" in str(orjson.loads(post.body)["text"])
+
+            clock.now = local("10:28:30")
+            await scheduler.step(clock.now)  # the same reason: not told again
+            assert told.count == 1
+
+            r3.node = "gb2"
+            r3.end(walk_up.id)
+            r3.state()
+            await scheduler.step(local("10:30"))
+            assert not alerts.is_active("booking_at_risk", subject)  # started
+            tour = next(t for t in manager.tasks.values() if t.priority == 50)
+            assert tour.robot == "R3"
+
+
+async def test_no_robot_to_reserve_is_told_to_staff_before_the_time(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """Every robot due to charge when the lead comes: nothing can be reserved, and staff are
+    told why before the time."""
+    for name, node in (("R1", "charge_a"), ("R3", "entrance")):
+        RobotStub(bus, name, node).state()
+        manager.robots[name].needs_charge = True
+    clock = Clock(local("10:27"))
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
+    scheduler = BookingScheduler(
+        service,
+        store,
+        manager,
+        alerts,
+        tick_s=None,
+        clock=clock,
+        reservations=Reservations(manager, clock=clock),
+    )
+    booking = await service.create(
+        BookingRequest(tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3), by="desk"
+    )
+    await scheduler.step(clock.now)
+    await scheduler.step(clock.now + 10)
+    told = alerts.get("booking_at_risk", f"{booking.id}@{DAY} 10:30")
+    assert told is not None and told.active
+    assert "no robot can be reserved to be at Welcome hall by 10:30" in told.message
+
+
+async def test_a_robot_already_sent_to_the_meeting_point_stays_reserved_after_a_restart(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """Reservations live in memory, but the way to the meeting point is a task the Task
+    Manager keeps: a new life (a restart, a new leader) finds it and keeps that robot,
+    rather than sending a second one (R3 idle at the meeting point would be chosen)."""
+    for name, node in (("R1", "charge_a"), ("R3", "hall")):
+        RobotStub(bus, name, node).state()
+    clock = Clock(local("10:28"))
+    service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
+    booking = await service.create(
+        BookingRequest(
+            tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3, meeting_point="welcome"
+        ),
+        by="desk",
+    )
+    at = local("10:30")
+    meet = manager.request(
+        "go_to",
+        {"node": "hall"},
+        priority=50,
+        requester=f"booking:{booking.id}@{int(at)}:meet",
+        robot="R1",
+    )
+    assert meet.robot == "R1"
+    reservations = Reservations(manager, clock=clock)
+    scheduler = BookingScheduler(
+        service, store, manager, None, tick_s=None, clock=clock, reservations=reservations
+    )
+    await scheduler.step(clock.now)
+    kept = reservations.by_key[(booking.id, at)]
+    assert (kept.robot, kept.sent) == ("R1", meet.id)
+    assert not any(t.robot == "R3" and not t.internal for t in manager.tasks.values())
+
+
+async def test_a_robot_whose_battery_will_be_low_by_the_time_is_not_the_one_kept(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """The soak's whole fleet drains alike and goes to charge within a minute and a half: the
+    robot parked at the meeting point reached ``battery_low`` seconds before its booked tour,
+    went to charge, and the tour waited for a charged robot. A robot whose battery (at its
+    learned drain) would be low by the time is not reserved, a reserved one that would be is
+    swapped, and when none would last, staff are told before the time."""
+    for name, node, level in (("R3", "hall", 0.35), ("R1", "charge_a", 0.9)):
+        RobotStub(bus, name, node, battery=level).state()
+        manager.robots[name].drain_per_s = 0.001  # 10 % in 100 s
+    clock = Clock(local("10:27"))
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    service = BookingService(
+        store,
+        lambda: manager.site,
+        lambda: 3,
+        tz=MADRID,
+        duration=lambda kind, params: 100.0,
+        clock=clock,
+    )
+    reservations = Reservations(manager, clock=clock)
+    scheduler = BookingScheduler(
+        service, store, manager, alerts, tick_s=None, clock=clock, reservations=reservations
+    )
+    booking = await service.create(
+        BookingRequest(
+            tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3, meeting_point="welcome"
+        ),
+        by="desk",
+    )
+    key = (booking.id, local("10:30"))
+    await scheduler.step(clock.now)
+    # R3 stands at the meeting point, but at 10:30 its battery is 17 %: R1 goes.
+    assert reservations.by_key[key].robot == "R1"
+
+    manager.robots["R1"].battery = 0.4  # a long walk-up took more than foreseen
+    for now in (local("10:27:30"), local("10:27:40")):
+        clock.now = now
+        await scheduler.step(now)
+    assert reservations.by_key[key].robot == "R1"  # no stand-in either
+    told = alerts.get("booking_at_risk", f"{booking.id}@{DAY} 10:30")
+    assert told is not None and "R1, the robot reserved, must charge first" in told.message

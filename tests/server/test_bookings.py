@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import datetime as dt
+import time
 from pathlib import Path
 from typing import Any
 
@@ -15,8 +16,10 @@ from click.testing import CliRunner, Result
 from backend.bookings.cli import bookings as bookings_cli
 from backend.bookings.schedule import requester_of
 from backend.testing import RunningServer, running_server
+from guidebot.testing import wait_until
 
 from .conftest import OPERATOR_TOKEN, PANEL_TOKEN, PERSON_TOKENS, server_settings
+from .helpers import RobotStub
 
 VIEWER_TOKEN = PERSON_TOKENS[next(r for r in PERSON_TOKENS if r.value == "viewer")]
 
@@ -281,3 +284,30 @@ async def test_guidebot_bookings_on_the_command_line(server: RunningServer) -> N
         "moved",
         "cancelled",
     ]
+
+
+async def test_the_panel_does_not_say_a_robot_is_free_when_the_free_one_is_kept_for_a_booking(
+    tmp_path: Path,
+) -> None:
+    """R1 alone online and idle: "a robot is free now" until a booked tour in two minutes
+    reserves it; then every tour would make it late, and the panel's line says busy with
+    the wait (not "free now", which the idle robot alone made it say)."""
+    async with running_server(server_settings(tmp_path)) as srv:
+        r1 = RobotStub(srv.app.state.hub, "R1", "entrance")
+        r1.state()
+        manager = srv.app.state.task_manager
+        async with client(srv, PANEL_TOKEN) as panel, client(srv, OPERATOR_TOKEN) as desk:
+            await wait_until(lambda: manager.robots["R1"].online)
+            assert (await panel.get("/api/visitor")).json()["service"] == "available"
+            soon = dt.datetime.now(dt.UTC) + dt.timedelta(seconds=100)
+            made = await desk.post(
+                "/api/bookings", json=spanish(soon.strftime("%Y-%m-%dT%H:%M:%S"))
+            )
+            assert made.status_code == 201, made.text
+            scheduler = srv.app.state.booking_scheduler
+            await scheduler.step(time.time())
+            assert scheduler.reservations.by_robot["R1"].booking == made.json()["id"]
+            menu = (await panel.get("/api/visitor")).json()
+        assert menu["service"] == "busy"
+        assert all(t["estimate"]["service"] == "busy" for t in menu["tours"])
+        assert menu["tours"][0]["estimate"]["eta_s"] > 60  # after the booked tour

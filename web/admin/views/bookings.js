@@ -174,7 +174,7 @@ export function bookingsView(ui) {
     ui.draw();
   };
   return html`<h2>Bookings</h2>
-    <p class="muted">A robot is reserved 15 minutes ahead and sent to the meeting point; the tour starts at its time, ahead of walk-ups. Times are the venue's (${b.data?.tz ?? "…"}).</p>
+    <p class="muted">A robot is reserved a few minutes ahead (long enough to end a tour and get there) and sent to the meeting point; staff are told if it cannot be there in time; the tour starts at its time, ahead of walk-ups. Times are the venue's (${b.data?.tz ?? "…"}).</p>
     ${b.error ? html`<p class="notice error" role="alert">Bookings could not be read: ${b.error}</p>` : ""}
     ${flags.length
       ? html`<div class="notice error" role="alert"><strong>Cannot be served as things stand:</strong>
