@@ -209,9 +209,10 @@ def one_door_site() -> dict[str, Any]:
 
 
 def rig_agent(
-    url: str, robot: dict[str, Any], site_file: Path | None, start_node: str
+    url: str, robot: dict[str, Any], site_file: Path | None, start_node: str, **extra: Any
 ) -> RobotAgent:
-    """One robot of the rig: bare simulated base, real WebSocket link to ``url``."""
+    """One robot of the rig: bare simulated base, real WebSocket link to ``url``; ``extra``
+    goes to its AgentConfig (a touch screen: ``gui_port=0, auto_answer="yes"``)."""
     return RobotAgent(
         AgentConfig(
             name=robot["name"],
@@ -224,8 +225,49 @@ def rig_agent(
             state_period_s=0.2,
             site=site_file,
             idle_net=None,
+            **extra,
         )
     )
+
+
+WALK_STOPS = ["p_hall", "p_west", "p_east"]
+
+
+def with_walk(site: dict[str, Any]) -> dict[str, Any]:
+    """``site`` with the tour "walk": hall, then west and east (the points at those nodes)."""
+    site["pois"] = [
+        {"id": poi, "node": poi.removeprefix("p_"), "name": poi, "text": f"This is {poi}."}
+        for poi in WALK_STOPS
+    ]
+    site["tours"] = [{"id": "walk", "name": "Walk", "points": WALK_STOPS}]
+    return site
+
+
+@contextlib.asynccontextmanager
+async def guides(f: Fleet, names: list[str]) -> AsyncIterator[dict[str, RobotAgent]]:
+    """The robots of a fleet started with ``external=``, each with its touch screen and a
+    visitor who always wants more, once each is linked and has told its state."""
+    agents: dict[str, RobotAgent] = {}
+    try:
+        for name in names:
+            spec = f.robots[name]
+            agent = rig_agent(
+                f.server.url,
+                spec,
+                f.site_file,
+                spec["start_node"],
+                gui_port=0,
+                auto_answer="yes",
+            )
+            await agent.start()
+            agents[name] = f.agents[name] = agent
+        hub = f.server.app.state.hub
+        await f.wait_for(lambda: set(agents) <= set(hub.clients))
+        await f.wait_for(lambda: all(f.states.get(n) for n in agents))
+        yield agents
+    finally:
+        for agent in agents.values():
+            await agent.stop()
 
 
 @contextlib.asynccontextmanager

@@ -9,64 +9,15 @@ with a three-stop tour: hall, west, east (through the corridors).
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 
-from robot_agent.agent import AgentConfig, RobotAgent
-from tests.robot.safety_rig import ROBOT_SCALE, Fleet, fleet, safety_site
+from tests.robot.safety_rig import Fleet, fleet, guides, safety_site, with_walk
 
 pytestmark = pytest.mark.timeout(150)
-
-STOPS = ["p_hall", "p_west", "p_east"]
-
-
-def tour_site() -> dict[str, Any]:
-    site = safety_site()
-    site["pois"] = [
-        {"id": poi, "node": poi.removeprefix("p_"), "name": poi, "text": f"This is {poi}."}
-        for poi in STOPS
-    ]
-    site["tours"] = [{"id": "walk", "name": "Walk", "points": STOPS}]
-    return site
-
-
-@contextlib.asynccontextmanager
-async def screens(f: Fleet, names: list[str]) -> AsyncIterator[dict[str, RobotAgent]]:
-    """The robots, each with its touch screen and a visitor who always wants more."""
-    agents: dict[str, RobotAgent] = {}
-    try:
-        for name in names:
-            spec = f.robots[name]
-            agent = RobotAgent(
-                AgentConfig(
-                    name=name,
-                    server=f.server.url,
-                    token=spec["token"],
-                    can=None,
-                    time_scale=ROBOT_SCALE,
-                    start_node=spec["start_node"],
-                    speech_engine=None,
-                    state_period_s=0.2,
-                    site=f.site_file,
-                    idle_net=None,
-                    gui_port=0,
-                    auto_answer="yes",
-                )
-            )
-            await agent.start()
-            agents[name] = f.agents[name] = agent
-        hub = f.server.app.state.hub
-        await f.wait_for(lambda: set(agents) <= set(hub.clients))
-        await f.wait_for(lambda: all(f.states.get(n) for n in agents))
-        yield agents
-    finally:
-        for agent in agents.values():
-            await agent.stop()
 
 
 async def post(f: Fleet, path: str, body: dict[str, Any]) -> dict[str, Any]:
@@ -94,8 +45,10 @@ async def test_a_robot_taken_out_mid_tour_hands_it_over_from_the_visitors_stop(
     tmp_path: Path,
 ) -> None:
     async with (
-        fleet(tmp_path, ["R1", "R2"], site=tour_site(), external=frozenset({"R1", "R2"})) as f,
-        screens(f, ["R1", "R2"]) as agents,
+        fleet(
+            tmp_path, ["R1", "R2"], site=with_walk(safety_site()), external=frozenset({"R1", "R2"})
+        ) as f,
+        guides(f, ["R1", "R2"]) as agents,
     ):
         task = await post(f, "/api/tasks", {"kind": "tour", "params": {"tour": "walk"}})
         task_id = task["id"]
@@ -133,11 +86,11 @@ async def test_staff_send_a_robot_to_charge_from_the_console(tmp_path: Path) -> 
         fleet(
             tmp_path,
             ["R1", "R2"],
-            site=tour_site(),
+            site=with_walk(safety_site()),
             start={"R2": "west"},
             external=frozenset({"R1", "R2"}),
         ) as f,
-        screens(f, ["R1", "R2"]),
+        guides(f, ["R1", "R2"]),
     ):
         sent = await post(f, "/api/robots/R2/charge", {})
         # R1 stands on c1: R2 takes the nearest free station.
@@ -160,9 +113,12 @@ async def test_staff_send_a_robot_to_charge_from_the_console(tmp_path: Path) -> 
 async def test_idle_robots_take_turns(tmp_path: Path) -> None:
     async with (
         fleet(
-            tmp_path, ["R1", "R2", "R3"], site=tour_site(), external=frozenset({"R1", "R2", "R3"})
+            tmp_path,
+            ["R1", "R2", "R3"],
+            site=with_walk(safety_site()),
+            external=frozenset({"R1", "R2", "R3"}),
         ) as f,
-        screens(f, ["R1", "R2", "R3"]),
+        guides(f, ["R1", "R2", "R3"]),
     ):
         served = []
         for _ in range(3):

@@ -13,60 +13,15 @@ hall, then west and east, which only door D0 leads to.
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 
-from robot_agent.agent import AgentConfig, RobotAgent
-from tests.robot.safety_rig import ROBOT_SCALE, Fleet, fleet, one_door_site
+from tests.robot.safety_rig import WALK_STOPS, Fleet, fleet, guides, one_door_site, with_walk
 
 pytestmark = pytest.mark.timeout(120)
-
-STOPS = ["p_hall", "p_west", "p_east"]
-
-
-def tour_site() -> dict[str, Any]:
-    site = one_door_site()
-    site["pois"] = [
-        {"id": poi, "node": poi.removeprefix("p_"), "name": poi, "text": f"This is {poi}."}
-        for poi in STOPS
-    ]
-    site["tours"] = [{"id": "walk", "name": "Walk", "points": STOPS}]
-    return site
-
-
-@contextlib.asynccontextmanager
-async def guide(f: Fleet, name: str) -> AsyncIterator[RobotAgent]:
-    """Robot ``name`` with its touch screen and a visitor who always wants more."""
-    spec = f.robots[name]
-    agent = RobotAgent(
-        AgentConfig(
-            name=name,
-            server=f.server.url,
-            token=spec["token"],
-            can=None,
-            time_scale=ROBOT_SCALE,
-            start_node=spec["start_node"],
-            speech_engine=None,
-            state_period_s=0.2,
-            site=f.site_file,
-            idle_net=None,
-            gui_port=0,
-            auto_answer="yes",
-        )
-    )
-    await agent.start()
-    try:
-        f.agents[name] = agent
-        await f.wait_for(lambda: name in f.server.app.state.hub.clients)
-        await f.wait_for(lambda: f.states.get(name))
-        yield agent
-    finally:
-        await agent.stop()
 
 
 async def call(f: Fleet, method: str, path: str, body: dict[str, Any] | None = None) -> Any:
@@ -84,8 +39,8 @@ async def test_a_tour_waits_for_a_door_jammed_a_moment_and_visits_the_stops_behi
     # The trouble hold outlasts the jam (the default is 120 s): only staff reopening the door,
     # the door seen working or the hold's end lifts it; here staff reopen it once it works.
     async with (
-        fleet(tmp_path, ["R1"], site=tour_site(), external=frozenset({"R1"})) as f,
-        guide(f, "R1"),
+        fleet(tmp_path, ["R1"], site=with_walk(one_door_site()), external=frozenset({"R1"})) as f,
+        guides(f, ["R1"]),
     ):
         f.building.jam_door("D0")
         task = await call(f, "POST", "/api/tasks", {"kind": "tour", "params": {"tour": "walk"}})
@@ -101,5 +56,5 @@ async def test_a_tour_waits_for_a_door_jammed_a_moment_and_visits_the_stops_behi
         progress = [(m.payload["stage"], m.payload["poi"]) for m in f.of("tour_progress")]
         assert not [poi for stage, poi in progress if stage == "skipped"], progress
         arrived = [poi for stage, poi in progress if stage == "arrived"]
-        assert arrived == STOPS, progress
+        assert arrived == WALK_STOPS, progress
         assert not f.checker.violations, f.checker.violations

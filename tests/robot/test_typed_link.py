@@ -12,12 +12,18 @@ from robot_agent.link import Link
 from .test_modules import _FakeUpstream
 
 
-async def test_a_message_from_the_hub_goes_on_board_typed_once() -> None:
+async def linked() -> tuple[Bus, _FakeUpstream, Link]:
+    """R1's link, started, on a bus of its own, to an upstream the test delivers from."""
     bus = Bus()
     up = _FakeUpstream()
     up.connected.set()
     link = Link(bus.endpoint("link"), up, "R1")
     await link.start()
+    return bus, up, link
+
+
+async def test_a_message_from_the_hub_goes_on_board_typed_once() -> None:
+    bus, up, link = await linked()
     onboard = bus.endpoint("navigation")
     kept: list[object] = []
     typed: list[ClosuresChanged] = []
@@ -30,11 +36,7 @@ async def test_a_message_from_the_hub_goes_on_board_typed_once() -> None:
 
 
 async def test_a_payload_that_is_not_its_model_reaches_no_typed_handler() -> None:
-    bus = Bus()
-    up = _FakeUpstream()
-    up.connected.set()
-    link = Link(bus.endpoint("link"), up, "R1")
-    await link.start()
+    bus, up, link = await linked()
     onboard = bus.endpoint("navigation")
     raw: list[Message] = []
     typed: list[AreaYield] = []

@@ -8,6 +8,7 @@ import datetime as dt
 import math
 from collections.abc import AsyncIterator
 from pathlib import Path
+from typing import Any
 from zoneinfo import ZoneInfo
 
 import orjson
@@ -51,8 +52,38 @@ async def store(tmp_path: Path) -> AsyncIterator[BookingStore]:
     await engine.dispose()
 
 
+SCHOOL_GROUP = BookingRequest(
+    tour="highlights", start=f"{DAY}T10:30", lang="es", group_size=20, meeting_point="welcome"
+)
+"""A Spanish school group of 20 for the highlights at 10:30, met in the Welcome hall."""
+
+
 def local(hh_mm: str, day: dt.date = DAY) -> float:
     return dt.datetime.fromisoformat(f"{day}T{hh_mm}").replace(tzinfo=MADRID).timestamp()
+
+
+def booked(
+    manager: TaskManager,
+    store: BookingStore,
+    clock: Clock,
+    alerts: AlertStore | None = None,
+    *,
+    wire: bool = False,
+    **service_options: Any,
+) -> tuple[BookingService, Reservations, BookingScheduler]:
+    """A test's booking service, reservations and scheduler on ``clock``, stepped by hand;
+    ``wire``: the Task Manager and its ETAs know the reservations, as the server wires them."""
+    service = BookingService(
+        store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock, **service_options
+    )
+    reservations = Reservations(manager, clock=clock)
+    if wire:
+        manager.reservations = reservations
+        manager.estimator.back_after = reservations.back_after
+    scheduler = BookingScheduler(
+        service, store, manager, alerts, tick_s=None, clock=clock, reservations=reservations
+    )
+    return service, reservations, scheduler
 
 
 async def test_a_recurring_schedule_runs_a_whole_day_each_occurrence_once_and_on_time(
@@ -202,23 +233,8 @@ async def test_a_robot_is_reserved_ahead_sent_to_the_meeting_point_and_kept_for_
     r3 = RobotStub(bus, "R3", "entrance")
     r3.state()
     clock = Clock(local("10:00"))
-    service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
-    reservations = Reservations(manager, clock=clock)
-    manager.reservations = reservations
-    manager.estimator.back_after = reservations.back_after
-    scheduler = BookingScheduler(
-        service, store, manager, None, tick_s=None, clock=clock, reservations=reservations
-    )
-    booking = await service.create(
-        BookingRequest(
-            tour="highlights",
-            start=f"{DAY}T10:30",
-            lang="es",
-            group_size=20,
-            meeting_point="welcome",
-        ),
-        by="desk",
-    )
+    service, reservations, scheduler = booked(manager, store, clock, wire=True)
+    booking = await service.create(SCHOOL_GROUP, by="desk")
     key = (booking.id, local("10:30"))
     assert 300 < reservations.lead_s("hall") < 360
     await scheduler.step(local("10:20"))
@@ -260,11 +276,7 @@ async def test_a_reserved_robot_that_must_charge_is_replaced_by_another(
     for name, node in (("R3", "entrance"), ("R1", "charge_a")):
         RobotStub(bus, name, node).state()
     clock = Clock(local("10:26"))
-    service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
-    reservations = Reservations(manager, clock=clock)
-    scheduler = BookingScheduler(
-        service, store, manager, None, tick_s=None, clock=clock, reservations=reservations
-    )
+    service, reservations, scheduler = booked(manager, store, clock)
     booking = await service.create(
         BookingRequest(tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3),
         by="desk",
@@ -323,19 +335,8 @@ async def test_a_reserved_robot_gone_to_charge_is_replaced_and_every_booking_sta
     free, and every booked tour starts at its time."""
     clock = Clock(local("10:15"))
     fleet = Fleet(manager, bus, clock, tour_s=300.0)
-    service = BookingService(
-        store,
-        lambda: manager.site,
-        lambda: 3,
-        tz=MADRID,
-        duration=lambda kind, params: 200.0,
-        clock=clock,
-    )
-    reservations = Reservations(manager, clock=clock)
-    manager.reservations = reservations
-    manager.estimator.back_after = reservations.back_after
-    scheduler = BookingScheduler(
-        service, store, manager, None, tick_s=None, clock=clock, reservations=reservations
+    service, reservations, scheduler = booked(
+        manager, store, clock, wire=True, duration=lambda kind, params: 200.0
     )
     times = ["10:30", "10:33", "10:36", "10:39"]
     made = [
@@ -400,16 +401,7 @@ async def test_a_reserved_robot_that_cannot_be_there_in_time_is_told_to_staff_be
                 clock=clock,
                 reservations=reservations,
             )
-            booking = await service.create(
-                BookingRequest(
-                    tour="highlights",
-                    start=f"{DAY}T10:30",
-                    lang="es",
-                    group_size=20,
-                    meeting_point="welcome",
-                ),
-                by="desk",
-            )
+            booking = await service.create(SCHOOL_GROUP, by="desk")
             walk_up = manager.request("tour", {"tour": "ground"}, requester="panel-1")
             assert walk_up.robot == "R3"  # nothing reserved yet: the lead is about 5 minutes
             r3.start(walk_up.id)
@@ -520,17 +512,8 @@ async def test_a_robot_whose_battery_will_be_low_by_the_time_is_not_the_one_kept
         manager.robots[name].drain_per_s = 0.001  # 10 % in 100 s
     clock = Clock(local("10:27"))
     alerts = AlertStore(bus.endpoint("alerts").publish)
-    service = BookingService(
-        store,
-        lambda: manager.site,
-        lambda: 3,
-        tz=MADRID,
-        duration=lambda kind, params: 100.0,
-        clock=clock,
-    )
-    reservations = Reservations(manager, clock=clock)
-    scheduler = BookingScheduler(
-        service, store, manager, alerts, tick_s=None, clock=clock, reservations=reservations
+    service, reservations, scheduler = booked(
+        manager, store, clock, alerts, duration=lambda kind, params: 100.0
     )
     booking = await service.create(
         BookingRequest(

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sqlite3
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import asyncpg
@@ -15,6 +17,33 @@ from backend.db import DbStore, make_engine, make_sessionmaker, migrate
 from backend.tasks.model import Task, TaskState
 
 from .postgres import PostgresServer
+
+
+@contextlib.asynccontextmanager
+async def sqlite_store(tmp_path: Path) -> AsyncIterator[tuple[DbStore, Path]]:
+    """A started store on a migrated SQLite file (and the file, for a second connection)."""
+    path = tmp_path / "guidebot.db"
+    engine = make_engine(f"sqlite+aiosqlite:///{path}")
+    try:
+        await migrate(engine)
+        store = DbStore(make_sessionmaker(engine))
+        await store.start()
+        yield store, path
+        await store.stop()
+    finally:
+        await engine.dispose()
+
+
+@contextlib.contextmanager
+def write_lock_held(path: Path) -> Iterator[None]:
+    """Another writer holding SQLite's write lock (BEGIN IMMEDIATE) while the block runs."""
+    other = sqlite3.connect(path, isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")
+    try:
+        yield
+    finally:
+        other.execute("ROLLBACK")
+        other.close()
 
 
 async def test_migrations_build_the_schema_and_the_store_round_trips(db_url: str) -> None:
@@ -78,31 +107,18 @@ async def test_a_read_while_another_writer_holds_the_database_answers_what_is_wr
     """GET /api/tasks flushes pending rows first; when another writer holds SQLite's write lock
     past the busy time-out (the reports' rollup on a loaded machine did), the read answers what
     is written instead of failing with 500, and nothing pending is lost."""
-    path = tmp_path / "guidebot.db"
-    engine = make_engine(f"sqlite+aiosqlite:///{path}")
-    try:
-        await migrate(engine)
-        store = DbStore(make_sessionmaker(engine))
-        await store.start()
+    async with sqlite_store(tmp_path) as (store, path):
         first = Task("t1", "go_to", {"node": "hall"}, 3, "admin", 1)
         store.record(first, "created")
         await store.flush()
-        other = sqlite3.connect(path, isolation_level=None)
-        other.execute("BEGIN IMMEDIATE")  # holds the write lock, as a long transaction does
-        try:
+        with write_lock_held(path):  # as a long transaction holds it
             second = Task("t2", "go_to", {"node": "hall"}, 3, "admin", 2)
             store.record(second, "created")
             total, tasks = await store.list_tasks()
             assert (total, [t.id for t in tasks]) == (1, ["t1"])
-        finally:
-            other.execute("ROLLBACK")
-            other.close()
         await store.flush()
         total, tasks = await store.list_tasks()
         assert sorted(t.id for t in tasks) == ["t1", "t2"]
-        await store.stop()
-    finally:
-        await engine.dispose()
 
 
 async def test_the_writer_meeting_another_writer_s_lock_past_the_time_out_logs_no_traceback(
@@ -113,30 +129,16 @@ async def test_the_writer_meeting_another_writer_s_lock_past_the_time_out_logs_n
     keeps the rows queued and writes them once the lock is free."""
     from tests.server.test_api import eventually
 
-    path = tmp_path / "guidebot.db"
-    engine = make_engine(f"sqlite+aiosqlite:///{path}")
-    try:
-        await migrate(engine)
-        store = DbStore(make_sessionmaker(engine))
-        await store.start()
-        other = sqlite3.connect(path, isolation_level=None)
-        other.execute("BEGIN IMMEDIATE")
-        try:
-            with caplog.at_level(logging.WARNING, logger="backend.db.store"):
-                store.record(Task("t1", "go_to", {"node": "hall"}, 3, "admin", 1), "created")
-                said = await eventually(
-                    lambda: [r for r in caplog.records if r.name == "backend.db.store"], timeout=60
-                )
-        finally:
-            other.execute("ROLLBACK")
-            other.close()
+    async with sqlite_store(tmp_path) as (store, path):
+        with write_lock_held(path), caplog.at_level(logging.WARNING, logger="backend.db.store"):
+            store.record(Task("t1", "go_to", {"node": "hall"}, 3, "admin", 1), "created")
+            said = await eventually(
+                lambda: [r for r in caplog.records if r.name == "backend.db.store"], timeout=60
+            )
         assert said[0].levelno == logging.WARNING and said[0].exc_info is None
         assert "database is busy" in said[0].getMessage()
         await eventually(lambda: store.written == 3)  # the task, its history row, its event
         assert [t.id for t in (await store.list_tasks())[1]] == ["t1"]
-        await store.stop()
-    finally:
-        await engine.dispose()
 
 
 async def test_a_server_frozen_inside_a_transaction_does_not_hold_its_row_locks_for_ever(
