@@ -418,7 +418,7 @@ class _Driver:
 
 
 FATES = ("served", "refused", "abandoned", "failed", "skipped", "unfinished")
-"""What became of a request: each is exactly one (docs/planning.md, "What it prints")."""
+"""What became of a request: each is exactly one (docs/planning.md, its JSON keys)."""
 
 
 def request_fates(

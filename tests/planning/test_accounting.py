@@ -1,5 +1,5 @@
 """A live or virtual run's row adds up: every request is exactly one of served, refused,
-abandoned, failed, skipped or unfinished (docs/planning.md, "What it prints"). The 300-visitor
+abandoned, failed, skipped or unfinished (docs/planning.md, its JSON keys). The 300-visitor
 virtual day once reported 120 requests, 99 served and nothing else: 21 tours had ended with
 their first point skipped (a door out of order on the way) and were counted nowhere."""
 
