@@ -6,10 +6,10 @@ time scale 1, talking over loopback sockets as in service. The visitors are the 
 ``_Driver``. Nothing waits on the wall clock, so the outcome is in exact simulated seconds and
 the wall time is only the CPU the fleet needs. docs/planning.md, "The virtual run".
 
-It runs as a process of its own (``backend.planning.virtual`` starts it): the server and the
-robot agent meet only over the bus, never in one import, and ``time.time`` is patched only here.
-
-    python -m bench.plan_virtual JOB.json OUTCOME.json
+It runs as a process of its own (``backend.planning.virtual`` starts it, through
+``bench.plan_virtual_run``, which switches the clock before the product is imported): the server
+and the robot agent meet only over the bus, never in one import, and ``time.time`` is patched
+only there.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from backend.planning.live import LiveOptions, _Driver, _fleet_entries, _outcome
 from backend.planning.measure import read_events
 from backend.planning.profile import PlanError, Request
 from backend.planning.sim import Outcome
-from backend.planning.vtime import virtual_time
+from backend.planning.vtime import installed, virtual_time
 from backend.settings import Settings, StaticToken
 from backend.testing import running_server
 from bench.plan_modbus import in_process_modbus
@@ -91,7 +91,11 @@ def play(
     queue_limit: int | None = None,
     options: LiveOptions | None = None,
 ) -> Outcome:
-    """Play ``requests`` on a fleet of ``robots`` in virtual time (call with no running loop)."""
+    """Play ``requests`` on a fleet of ``robots`` in virtual time (call with no running loop,
+    in a process started by ``bench.plan_virtual_run``)."""
+    if not installed():
+        # The product's clock=time.time defaults would read the real clock (vtime's docstring).
+        raise PlanError("virtual run: start it with python -m bench.plan_virtual_run")
     opts = options or LiveOptions()
     started, cpu = time.perf_counter(), time.process_time()
     outcome = virtual_time(
@@ -345,7 +349,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Read the job (``backend.planning.virtual.job``), play it, write the outcome."""
     args = list(sys.argv[1:] if argv is None else argv)
     if len(args) != 2:
-        print("usage: python -m bench.plan_virtual JOB.json OUTCOME.json", file=sys.stderr)
+        print("usage: python -m bench.plan_virtual_run JOB.json OUTCOME.json", file=sys.stderr)
         return 2
     job = json.loads(Path(args[0]).read_text(encoding="utf-8"))
     site_path = Path(job["site"])
@@ -371,7 +375,3 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     Path(args[1]).write_text(json.dumps(dataclasses.asdict(outcome)), encoding="utf-8")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -113,7 +113,7 @@ def plan(
 
 def _table(rows: list[dict[str, Any]]) -> str:
     head = (
-        f"{'run':<6}{'policy':<13}{'robots':>6}{'served':>8}{'refused':>8}{'left':>6}"
+        f"{'run':<8}{'policy':<13}{'robots':>6}{'served':>8}{'refused':>8}{'left':>6}{'lost':>6}"
         f"{'wait p50':>10}{'wait p95':>10}{'within':>8}{'busy':>7}"
     )
     lines = [head]
@@ -123,9 +123,11 @@ def _table(rows: list[dict[str, Any]]) -> str:
             return "-" if v is None else f"{v / 60:.1f} min"
 
         share = r["served_within_share"]
+        # Failed, skipped and unfinished tours (a live or virtual run's): the row adds up.
+        lost = r["requests"] - r["served"] - r["refused"] - r["abandoned"]
         lines.append(
-            f"{r['mode']:<6}{r['policy']:<13}{r['robots']:>6}{r['served']:>8}{r['refused']:>8}"
-            f"{r['abandoned']:>6}{minutes(r['wait_p50_s']):>10}{minutes(r['wait_p95_s']):>10}"
+            f"{r['mode']:<8}{r['policy']:<13}{r['robots']:>6}{r['served']:>8}{r['refused']:>8}"
+            f"{r['abandoned']:>6}{lost:>6}{minutes(r['wait_p50_s']):>10}{minutes(r['wait_p95_s']):>10}"
             f"{'-' if share is None else f'{share:.0%}':>8}{r['utilisation']:>7.0%}"
         )
     return "\n".join(lines)

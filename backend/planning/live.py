@@ -25,7 +25,7 @@ from typing import Any
 import httpx
 import yaml
 
-from backend.planning.measure import read_events, tallies, tour_waits
+from backend.planning.measure import read_events, tallies, tour_ends, tour_waits
 from backend.planning.profile import PlanError, Request
 from backend.planning.sim import Outcome, fleet
 from backend.reports.rollup import node_positions
@@ -33,7 +33,7 @@ from guidebot.demo_site import site_with_ports
 from guidebot.processes import spawn_guidebot, stop_process
 from guidebot.site.schema import Site
 
-__all__ = ["LiveOptions", "run_live"]
+__all__ = ["FATES", "LiveOptions", "request_fates", "run_live"]
 
 ANSWER_S = 2.5
 """Simulated seconds a group takes to answer "continue the tour?" (the demo's visitors: 1 to 4)."""
@@ -417,6 +417,47 @@ class _Driver:
         return r.status_code < 300
 
 
+FATES = ("served", "refused", "abandoned", "failed", "skipped", "unfinished")
+"""What became of a request: each is exactly one (docs/planning.md, its JSON keys)."""
+
+
+def request_fates(
+    requests: int,
+    *,
+    refused: set[int],
+    abandoned: set[int],
+    task_of: dict[str, int],
+    served: set[int],
+    ended: dict[str, str],
+) -> dict[str, int]:
+    """How many requests (indexes ``0..requests-1``) had each of ``FATES``, so that they add up
+    to ``requests``: refused; served (its robot reached the tour's first point; a group that
+    gave up as it arrived was served); abandoned (the group gave up first); then, by how its
+    tour ended (``ended``: task id -> its last end event): failed (``task_failed``, or
+    cancelled by the server), skipped (``task_done`` without ever reaching the first point: the
+    Task Manager skipped it, a door or lift on the way out of order), unfinished (still queued
+    or under way when the run stopped, or never asked)."""
+    task_by_index = {i: task for task, i in task_of.items()}
+    counts = dict.fromkeys(FATES, 0)
+    for i in range(requests):
+        task = task_by_index.get(i)
+        end = ended.get(task) if task is not None else None
+        if i in refused:
+            fate = "refused"
+        elif i in served:
+            fate = "served"
+        elif i in abandoned:
+            fate = "abandoned"
+        elif end in ("task_failed", "task_cancelled"):
+            fate = "failed"
+        elif end == "task_done":
+            fate = "skipped"
+        else:
+            fate = "unfinished"
+        counts[fate] += 1
+    return counts
+
+
 def _outcome(
     events: list[Any],
     site: Site,
@@ -437,10 +478,15 @@ def _outcome(
         if task in waits:
             out.wait_of[i] = waits[task] * scale
     out.waits_s = [out.wait_of[i] for i in sorted(out.wait_of)]
-    # A group that gave up just as its robot arrived (the cancel raced the assignment) was
-    # served: it counts once, as served.
-    out.refused = len(driver.refused)
-    out.abandoned = sum(1 for i in driver.abandoned if i not in out.wait_of)
+    fates = request_fates(
+        len(driver.requests),
+        refused=set(driver.refused),
+        abandoned=set(driver.abandoned),
+        task_of=driver.task_of,
+        served=set(out.wait_of),
+        ended=tour_ends(events),
+    )
+    out.refused, out.abandoned = fates["refused"], fates["abandoned"]
     ends = [
         at
         for at, kind, _, d in events
@@ -466,16 +512,12 @@ def _outcome(
         ranked = sorted(sums.get(metric, {}).items(), key=lambda kv: (-kv[1][0], kv[0]))
         return [{"name": key, "count": int(n)} for key, (n, _) in ranked[:10]]
 
-    failed = sum(
-        1
-        for _, kind, _, d in events
-        if kind == "task_failed" and str(d.get("task_id")) in driver.task_of
-    )
     out.extra = {
         "mode": "live",
         "time_scale": scale,
-        "failed": failed,
-        "unfinished": driver.unfinished,
+        "failed": fates["failed"],
+        "skipped": fates["skipped"],
+        "unfinished": fates["unfinished"],
         "lock_wait": waited("lock_wait"),
         "lock_wait_s": round(sum(v[1] for v in sums.get("lock_wait", {}).values()) * scale, 1),
         "elevator_wait": waited("elevator_wait"),

@@ -16,7 +16,7 @@ from backend.db import make_engine, make_sessionmaker
 from backend.db.models import EventRow
 from backend.reports.fold import Fold, Positions
 
-__all__ = ["Event", "read_events", "tallies", "tour_waits"]
+__all__ = ["Event", "read_events", "tallies", "tour_ends", "tour_waits"]
 
 Event = tuple[float, str, str, dict[str, Any]]
 """(at, kind, source, data) of one logged event."""
@@ -63,6 +63,19 @@ def tour_waits(events: Iterable[Event]) -> tuple[dict[str, float], dict[str, flo
         ):
             waits[task] = at - created[task]
     return waits, created, robots
+
+
+TOUR_ENDS = ("task_done", "task_failed", "task_cancelled")
+
+
+def tour_ends(events: Iterable[Event]) -> dict[str, str]:
+    """How each task ended: task id -> its last ``task_done``, ``task_failed`` or
+    ``task_cancelled`` (a task that has none has not ended)."""
+    ends: dict[str, str] = {}
+    for _, kind, _, d in events:
+        if kind in TOUR_ENDS:
+            ends[str(d.get("task_id"))] = kind
+    return ends
 
 
 def tallies(

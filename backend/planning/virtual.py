@@ -1,5 +1,5 @@
 """``guidebot plan --live --virtual``: the live run on virtual time. The building simulator, the
-server and bare simulated robots run in one child process (``bench.plan_virtual``) on an event
+server and bare simulated robots run in one child process (``bench.plan_virtual_run``) on an event
 loop whose clock jumps to the next timer whenever every task waits (``backend.planning.vtime``):
 exact simulated seconds, as fast as the CPU allows. This side writes the job, starts the child
 and reads its outcome. docs/planning.md, "The virtual run"."""
@@ -52,7 +52,7 @@ def run_virtual(
     out_file.unlink(missing_ok=True)
     opts.log(f"a fleet of {robots} in virtual time (log: {workdir / f'virtual-{robots}'})")
     done = subprocess.run(
-        [sys.executable, "-m", "bench.plan_virtual", str(job_file), str(out_file)],
+        [sys.executable, "-m", "bench.plan_virtual_run", str(job_file), str(out_file)],
         stdin=subprocess.DEVNULL,
         check=False,
     )

@@ -4,7 +4,13 @@ timers and sockets runs as fast as the CPU allows and in exact simulated seconds
 
 While ``virtual_time()`` is active, ``time.time()`` and ``time.monotonic()`` read the virtual
 clock (every module of the product reads time through the ``time`` module's attributes), so
-timestamps in the event log, robot clocks, lock timers and the loop's timers agree.
+timestamps in the event log, robot clocks, lock timers and the loop's timers agree. A module
+that keeps a reference to them (a default argument ``clock=time.time``, a dataclass's
+``default_factory=time.time``) took it when it was imported: the run's process calls
+``install()`` before it imports any of the product, so those references are this module's
+switches, which read the virtual clock while a run is active. Without it a door's trouble
+closure (the closures service's ``clock=time.time``) ran on the real clock: held 120 real
+seconds, it stayed closed for hours of a virtual day.
 
 Work in threads (aiosqlite's connection thread, its connecting included, ``run_in_executor``,
 anyio's worker threads behind Starlette's thread pool) is counted: while any is pending, the
@@ -22,12 +28,39 @@ import time
 from collections.abc import Awaitable, Callable, Iterator
 from typing import Any, TypeVar
 
-__all__ = ["VirtualClock", "VirtualLoop", "virtual_time"]
+__all__ = ["VirtualClock", "VirtualLoop", "install", "installed", "virtual_time"]
 
 T = TypeVar("T")
 
 REAL_WAIT_S = 0.05
 """Real seconds the loop waits at a time for a thread's result (virtual time stands still)."""
+
+
+_REAL_TIME, _REAL_MONOTONIC = time.time, time.monotonic
+_active: VirtualClock | None = None
+"""The running virtual clock (None: the real clock)."""
+
+
+def _time() -> float:
+    clock = _active
+    return _REAL_TIME() if clock is None else clock.time()
+
+
+def _monotonic() -> float:
+    clock = _active
+    return _REAL_MONOTONIC() if clock is None else clock.monotonic()
+
+
+def install() -> None:
+    """Make ``time.time`` and ``time.monotonic`` this module's switches for good (the real
+    clock, the virtual one while ``virtual_time`` runs), so that references modules take
+    when they are imported follow a run's clock too: call it before importing the product."""
+    time.time, time.monotonic = _time, _monotonic  # type: ignore[assignment]
+
+
+def installed() -> bool:
+    """``install()`` was called (and nobody replaced the switches since)."""
+    return time.time is _time and time.monotonic is _monotonic  # type: ignore[comparison-overlap]
 
 
 class VirtualClock:
@@ -130,6 +163,8 @@ def _patched(clock: VirtualClock) -> Iterator[None]:
     async def run_sync(func: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         return await _counted(clock, saved_run_sync(func, *args, **kwargs))
 
+    global _active
+    saved_active, _active = _active, clock
     time.time, time.monotonic = clock.time, clock.monotonic  # type: ignore[assignment]
     aiosqlite.core.Connection._execute = execute  # type: ignore[method-assign]
     aiosqlite.core.Connection._connect = connect  # type: ignore[method-assign]
@@ -137,6 +172,7 @@ def _patched(clock: VirtualClock) -> Iterator[None]:
     try:
         yield
     finally:
+        _active = saved_active
         time.time, time.monotonic = saved_time, saved_mono  # type: ignore[assignment]
         aiosqlite.core.Connection._execute = saved_exec  # type: ignore[method-assign]
         aiosqlite.core.Connection._connect = saved_connect  # type: ignore[method-assign]

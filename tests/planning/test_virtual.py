@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import shutil
+import sqlite3
 import time
 from pathlib import Path
 
@@ -13,12 +14,12 @@ import pytest
 
 from backend.planning.live import LiveOptions
 from backend.planning.measure import read_events
-from backend.planning.profile import Request
+from backend.planning.profile import PlanError, Request
 from backend.planning.recorded import learn_pace
 from backend.planning.sim import simulate
 from backend.planning.virtual import run_virtual
-from backend.planning.vtime import virtual_time
-from bench.plan_virtual import EPOCH, _spoken_once
+from backend.planning.vtime import install, installed, virtual_time
+from bench.plan_virtual import EPOCH, _spoken_once, play
 from guidebot.bus import Bus
 from guidebot.site.graph import SiteGraph
 from guidebot.site.yamlio import load_site_file
@@ -41,6 +42,31 @@ def test_the_virtual_clock_jumps_to_the_next_timer_and_time_reads_it() -> None:
     # An hour of sleeping is not waited for (the bound is generous: it is about a jump).
     assert time.perf_counter() - wall < 60.0
     assert abs(time.time() - EPOCH) > 1.0  # the real clock is back after the run
+
+
+def test_a_clock_a_module_took_at_import_follows_the_virtual_clock(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The real clock is put back after the test (install() is for good in a run's process).
+    monkeypatch.setattr(time, "time", time.time)
+    monkeypatch.setattr(time, "monotonic", time.monotonic)
+    install()
+    # What a default argument (``clock=time.time``) or a dataclass's default_factory keeps.
+    taken_time, taken_monotonic = time.time, time.monotonic
+
+    async def main() -> tuple[float, float]:
+        await asyncio.sleep(3600.0)
+        return taken_time(), taken_monotonic()
+
+    epoch_s, mono = virtual_time(main(), epoch=EPOCH)
+    assert epoch_s == pytest.approx(EPOCH + 3600.0) and mono == pytest.approx(3600.0)
+    assert installed() and abs(taken_time() - EPOCH) > 1.0  # the real clock outside a run
+
+
+def test_a_virtual_run_refuses_a_process_whose_clock_was_not_switched_first() -> None:
+    site = load_site_file(DEMO)
+    with pytest.raises(PlanError, match="plan_virtual_run"):
+        play(DEMO, site, [Request(0.0, "ground", 1)], robots=1, day_s=60.0)
 
 
 def test_work_in_a_thread_takes_no_virtual_time() -> None:
@@ -86,6 +112,12 @@ def test_a_virtual_day_is_repeatable_and_its_tours_last_as_the_model_says(
             read_events(f"sqlite+aiosqlite:///{tmp_path / name}/virtual-1/plan.db")
         )
         summary = outcome.summary(10.0) | {"wait_of": outcome.wait_of, "end": outcome.last_end_s}
+        # Times the product took with a clock it kept from its import (the tasks' created_at:
+        # default_factory=time.time) are virtual too: a door's trouble closure kept that way
+        # was held 120 real seconds, hours of a virtual day.
+        with sqlite3.connect(tmp_path / name / "virtual-1" / "plan.db") as db:
+            created = db.execute("SELECT min(created_at), max(created_at) FROM tasks").fetchone()
+        assert EPOCH <= created[0] <= created[1] <= EPOCH + 900.0 + 3600.0, created
         return summary, events
 
     (first, log), (second, log_again) = play("a"), play("b")
