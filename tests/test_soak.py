@@ -24,6 +24,8 @@ KEYS = [
     "tasks_cancelled",
     "tasks_failed",
     "tasks_lost",
+    "walk_ups_requested",
+    "walk_ups_done",
     "area_violations",
     "door_violations",
     "elevator_violations",

@@ -179,7 +179,10 @@ async def test_event_log_has_the_history_and_concurrent_reloads_agree(
             await page.unroute(EVENTS)
             # Paged back from the REST log, a page at a time: then the page holds all of it.
             await older.click()
-            await expect(page.get_by_text("That is the whole event log.")).to_be_visible()
+            # A thousand rows more to fetch and draw: as long as the first page may take.
+            await expect(page.get_by_text("That is the whole event log.")).to_be_visible(
+                timeout=20_000
+            )
             await expect(count).to_contain_text(f"{await logged(http)} events loaded")
             # A refresh that fails says so on the page.
             watch.expect_error(r"status of 500")

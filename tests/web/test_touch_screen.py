@@ -111,7 +111,12 @@ async def test_the_touch_screen_names_a_single_point_by_its_name_in_the_visitors
         await expect(page.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
         task.publish(
             "task_assigned",
-            {"task_id": "t1", "net": "go_to_poi", "params": {"poi": "sword", "lang": "es"}},
+            {
+                "task_id": "t1",
+                "robot": "R1",
+                "net": "go_to_poi",
+                "params": {"poi": "sword", "lang": "es"},
+            },
         )
         task.publish("show_point", {"poi": "sword", "text": "Esta espada tiene tres mil años."})
         now = page.get_by_role("region", name="Ahora")
@@ -131,7 +136,12 @@ async def test_on_the_way_to_the_first_stop_the_screen_says_which_tour_starts(
         await expect(now).to_contain_text("Touch a tour or a point to start.")
         task.publish(
             "task_assigned",
-            {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
+            {
+                "task_id": "t1",
+                "robot": "R1",
+                "net": "give_tour",
+                "params": {"tour": "ground", "lang": "en"},
+            },
         )
         await expect(now).to_contain_text(
             "Ground floor tour is starting: come with me to the first stop."
@@ -148,7 +158,12 @@ async def test_on_the_way_to_the_next_stop_the_last_one_is_not_called_now(
     async with touch_screen(open_page) as (page, task):
         task.publish(
             "task_assigned",
-            {"task_id": "t1", "net": "give_tour", "params": {"tour": "ground", "lang": "en"}},
+            {
+                "task_id": "t1",
+                "robot": "R1",
+                "net": "give_tour",
+                "params": {"tour": "ground", "lang": "en"},
+            },
         )
         point = {"index": 1, "total": 5, "name": "Welcome hall"}
         task.publish("show_point", {"poi": "welcome", "point": point, "text": "Welcome."})
