@@ -96,6 +96,11 @@ often (wall seconds), as a person keeps the button pressed: the building's door 
 run out under it."""
 
 
+DOOR_ASK_S = 10.0
+"""A door asked for and not answered (the building refused it, or it did not open in time)
+is asked again this often (wall seconds)."""
+
+
 class DriveFailed(Exception):
     """A goal the vehicle cannot reach, with the reason the task fails with."""
 
@@ -190,6 +195,13 @@ class VdaRobot:
         self.doors: set[str] = set()
         """Doors asked for (open_door sent) and not released."""
         self.open_doors: set[str] = set()
+        self.door_asks: dict[str, tuple[str, float]] = {}
+        """Door -> (id of our last open_door, when sent), until the building answers it."""
+        self.held_doors: set[str] = set()
+        """Doors the building has answered our open_door for and not closed since: it holds
+        them open for us. Only these are passed: another robot's opening may end (its
+        release_door handled before our open_door) after the base is released through the
+        door (``_releasable``)."""
         self.route: dict[int, str] = {}
         """The current order's nodes ahead by sequence id (``_reached``)."""
         self.route_seq = 0
@@ -761,8 +773,7 @@ class VdaRobot:
                 self.granted.add(step["area"])
                 self.requested.add(step["area"])
             if step.get("door") and node in ahead and step["door"] not in self.doors:
-                self.doors.add(step["door"])
-                self.ep.publish(OpenDoor(door=step["door"]))
+                self._open_door(step["door"])
         log.warning(
             "%s: resumes task %s on the vehicle's order %s (update %s, at %s)",
             self.name,
@@ -1092,13 +1103,9 @@ class VdaRobot:
                 self.waiting = "waiting_area"
                 return i - 1
             door = steps[i].get("door")
-            if door and (door not in self.doors or door not in self.open_doors):
-                if door not in self.doors:
-                    self.doors.add(door)
-                    self.ep.publish(OpenDoor(door=door))
-                if door not in self.open_doors:
-                    self.waiting = "waiting_door"
-                    return i - 1
+            if door and not self._passable(door):
+                self.waiting = "waiting_door"
+                return i - 1
             elevator = steps[i].get("elevator")
             if elevator and steps[i - 1].get("elevator") != elevator:  # into the cabin
                 floor = str(steps[i]["floor"])
@@ -1117,7 +1124,7 @@ class VdaRobot:
                 self._release_area(area)
         passed_doors = {s.get("door") for s in steps[:progress]}
         for door in sorted(self.doors & passed_doors):
-            self.doors.discard(door)
+            self._forget_door(door)
             self.ep.publish(ReleaseDoor(door=door))
 
     def _left(self, before: str | None, now: str) -> None:
@@ -1141,8 +1148,8 @@ class VdaRobot:
         area, or drive on into it until it stops), kept until a state shows it out of them
         (issue 36's rule for GuideBot robots: backend/traffic/whereabouts.py)."""
         for door in sorted(self.doors):
+            self._forget_door(door)
             self.ep.publish(ReleaseDoor(door=door))
-        self.doors.clear()
         near = self._may_be_in()
         for area in sorted(self.granted | self.requested):
             if area in near:
@@ -1225,12 +1232,39 @@ class VdaRobot:
             self._called[(elevator, floor)] = now
             self.ep.publish(CallElevator(elevator=elevator, floor=floor))
 
+    def _open_door(self, door: str) -> None:
+        """Ask the building to open ``door`` and hold it open for this vehicle."""
+        self.doors.add(door)
+        message = self.ep.publish(OpenDoor(door=door))
+        self.door_asks[door] = (message.id, asyncio.get_running_loop().time())
+
+    def _forget_door(self, door: str) -> None:
+        self.doors.discard(door)
+        self.held_doors.discard(door)
+        self.door_asks.pop(door, None)
+
+    def _passable(self, door: str) -> bool:
+        """``door`` is open and held for this vehicle (asked for now if not yet; asked again
+        every ``DOOR_ASK_S`` while the building has not answered: a refusal is not heard)."""
+        if door not in self.doors:
+            self._open_door(door)
+        elif door not in self.held_doors:
+            _, sent = self.door_asks.get(door, ("", -math.inf))
+            if asyncio.get_running_loop().time() - sent >= DOOR_ASK_S:
+                self._open_door(door)
+        return door in self.held_doors and door in self.open_doors
+
     def _on_door(self, msg: Message, answer: DoorOpened | DoorClosed) -> None:
         door = answer.door
         if msg.type == "door_opened":
             self.open_doors.add(door)
-        else:
+            ask = self.door_asks.get(door)
+            if ask is not None and msg.correlation_id == ask[0] and door in self.doors:
+                self.held_doors.add(door)  # the building's answer to our open_door
+                del self.door_asks[door]
+        else:  # closed under our hold too (staff, the hold ran out): asked again
             self.open_doors.discard(door)
+            self.held_doors.discard(door)
         self.changed.set()
 
 

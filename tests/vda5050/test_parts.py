@@ -328,3 +328,41 @@ async def test_the_fire_alarm_revokes_a_granted_zone_and_rejects_a_new_request()
         if topic == "responses":
             check("responses", message, "3.0.0")
     await robot.close()
+
+
+async def test_a_door_another_robot_opened_is_passed_only_once_it_is_held_for_v1() -> None:
+    """R1 holds the gallery door open (broadcast door_opened); V1 asks for it as R1's
+    release_door is already on its way: the building lets R1 go first (the door closes: nobody
+    holds it), then opens it again for V1. V1's base is released through the door only once
+    the building answers V1's own open_door, never on R1's opening (the mixed-fleet test saw
+    V1 reach door_hall while door_gallery was closed, under load)."""
+    robot, bus, seen, _ = robot_on_a_bus()
+    building = bus.endpoint("building")
+    steps = [
+        {"node": "a", "floor": "F0", "area": None, "door": None},
+        {"node": "b", "floor": "F0", "area": None, "door": "d1"},
+        {"node": "c", "floor": "F0", "area": None, "door": None},
+    ]
+    building.publish("door_opened", {"door": "d1"})  # R1's opening
+    assert robot._releasable(steps, 0) == 0  # V1 asks, and waits for its own answer
+    asks = [m for m in seen if m.type == "open_door" and m.source == "V1"]
+    assert [m.payload["door"] for m in asks] == ["d1"]
+    building.publish("door_closed", {"door": "d1"})  # R1's release_door came first
+    assert robot._releasable(steps, 0) == 0
+    building.publish("door_opened", {"door": "d1"})  # the building opens it for V1...
+    building.publish(
+        "door_opened", {"door": "d1"}, destination="V1", correlation_id=asks[0].id
+    )  # ... and answers V1
+    assert robot._releasable(steps, 0) == 2
+    building.publish("door_closed", {"door": "d1"})  # closed under V1's hold (staff)
+    assert robot._releasable(steps, 0) == 0  # asked again at once
+    asks = [m for m in seen if m.type == "open_door" and m.source == "V1"]
+    assert len(asks) == 2
+    building.publish("door_opened", {"door": "d1"})  # someone's opening: not V1's answer
+    assert robot._releasable(steps, 0) == 0
+    building.publish("door_opened", {"door": "d1"}, destination="V1", correlation_id=asks[1].id)
+    assert robot._releasable(steps, 0) == 2
+    robot._release_behind(steps, 2)  # passed: let go; the next time it is asked again
+    assert [m.type for m in seen if m.type == "release_door"] == ["release_door"]
+    assert robot._releasable(steps, 0) == 0
+    await robot.close()
