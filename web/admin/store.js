@@ -38,6 +38,7 @@ export class Store extends EventTarget {
     this.frame = 0;
     this.error = null; // the last background failure (shown on the page until the next success)
     this.olderEvents = true; // the event log has rows older than this.events[0]
+    this.snapshots = 0; // event-log snapshots taken (reloads): a page of older rows is of one
     this.eventPage = EVENT_PAGE; // rows per page of the event log (a test may make it small)
     this.reloading = null; // the reload in flight (a second caller joins it, then runs again)
     this.reloadAgain = false;
@@ -224,6 +225,7 @@ export class Store extends EventTarget {
     this.#setTasks(tasks.tasks);
     for (const alert of alerts) this.#alert(alert, false);
     const last = events.events.length ? events.events[events.events.length - 1].at : 0;
+    this.snapshots += 1;
     this.events = [];
     this.olderEvents = events.events.length === this.eventPage;
     this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);
@@ -266,11 +268,16 @@ export class Store extends EventTarget {
     return e.robots?.[name] ?? null;
   }
 
-  /** One more page of the event log, older than the oldest row shown. */
+  /** One more page of the event log, older than the oldest row shown. A snapshot on its way
+   * (a reconnect) is awaited first, and a page that a snapshot overtook is not added: it
+   * would sit before rows the snapshot replaced, with a gap the page would not show. */
   async loadOlderEvents() {
+    if (this.reloading) await this.reloading;
     const first = this.events.find((row) => row.id !== undefined)?.id;
     if (first === undefined) return;
+    const snapshots = this.snapshots;
     const page = await this.api.get(`/api/events?latest=true&before_id=${first}&limit=${this.eventPage}`);
+    if (snapshots !== this.snapshots) return;
     this.olderEvents = page.events.length === this.eventPage;
     this.events.unshift(...page.events);
     this.changed();
