@@ -389,18 +389,8 @@ async def test_a_reserved_robot_that_cannot_be_there_in_time_is_told_to_staff_be
             r3 = RobotStub(bus, "R3", "entrance")
             r3.state()
             clock = Clock(local("10:26"))
-            service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
-            reservations = Reservations(manager, clock=clock)
+            service, reservations, scheduler = booked(manager, store, clock, alerts)
             manager.reservations = reservations
-            scheduler = BookingScheduler(
-                service,
-                store,
-                manager,
-                alerts,
-                tick_s=None,
-                clock=clock,
-                reservations=reservations,
-            )
             booking = await service.create(SCHOOL_GROUP, by="desk")
             walk_up = manager.request("tour", {"tour": "ground"}, requester="panel-1")
             assert walk_up.robot == "R3"  # nothing reserved yet: the lead is about 5 minutes
@@ -444,16 +434,7 @@ async def test_no_robot_to_reserve_is_told_to_staff_before_the_time(
         manager.robots[name].needs_charge = True
     clock = Clock(local("10:27"))
     alerts = AlertStore(bus.endpoint("alerts").publish)
-    service = BookingService(store, lambda: manager.site, lambda: 3, tz=MADRID, clock=clock)
-    scheduler = BookingScheduler(
-        service,
-        store,
-        manager,
-        alerts,
-        tick_s=None,
-        clock=clock,
-        reservations=Reservations(manager, clock=clock),
-    )
+    service, _, scheduler = booked(manager, store, clock, alerts)
     booking = await service.create(
         BookingRequest(tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3), by="desk"
     )
