@@ -43,6 +43,10 @@ export class Store extends EventTarget {
     this.reloading = null; // the reload in flight (a second caller joins it, then runs again)
     this.reloadAgain = false;
     this.inFlight = []; // event_logged rows that arrived while a reload was in flight
+    /** "kind:key" -> live messages that set it: a snapshot fetched before one of them came is
+     * older than it for that key, so it does not overwrite it (a lift the page saw start to move
+     * went back to "not seen" when a reload's late answer landed: CI). */
+    this.liveSets = new Map();
     this.tasksTimer = 0;
     this.taskFetch = null;
     this.taskFetchAgain = false;
@@ -126,6 +130,7 @@ export class Store extends EventTarget {
       robot.faults = [{ at: m.timestamp, kind: m.payload.kind, detail: m.payload.detail }, ...robot.faults].slice(0, 5);
     });
     on("lock_changed", (m) => {
+      this.#live(`lock:${m.payload.area}`);
       this.locks.set(m.payload.area, m.payload);
       this.emit("lock", m.payload);
     });
@@ -140,14 +145,25 @@ export class Store extends EventTarget {
     });
     on("building_input_changed", (m) => {
       const { module, point, value } = m.payload;
+      this.#live(`point:${module}/${point}`);
       this.#point(module, point, value);
       // An alarm input moved: what it reads decides whether "Resume service" can work.
       if ((this.emergency?.alarms ?? []).some((a) => a.module === module && a.point === point)) this.refreshEmergency();
     });
-    on("building_module_health", (m) => this.building.modules.set(m.payload.module, m.payload));
-    on("door_opened", (m) => this.#door(m.payload.door, true));
-    on("door_closed", (m) => this.#door(m.payload.door, false));
-    on("elevator_state", (m) => this.#lift(m.payload));
+    on("building_module_health", (m) => {
+      this.#live(`module:${m.payload.module}`);
+      this.building.modules.set(m.payload.module, m.payload);
+    });
+    for (const [type, open] of /** @type {const} */ ([["door_opened", true], ["door_closed", false]])) {
+      on(type, (m) => {
+        this.#live(`door:${m.payload.door}`);
+        this.#door(m.payload.door, open);
+      });
+    }
+    on("elevator_state", (m) => {
+      this.#live(`lift:${m.payload.elevator}`);
+      this.#lift(m.payload);
+    });
     // The fire alarm: the state changes (banner), and each robot's evacuation as it reports it.
     on("emergency_changed", (m) => {
       this.emergency = { ...(this.emergency ?? {}), ...m.payload };
@@ -199,6 +215,9 @@ export class Store extends EventTarget {
   async #reloadOnce() {
     this.inFlight = []; // events logged while the snapshot is fetched
     const links = new Map([...this.robots].map(([name, r]) => [name, r.links]));
+    const sets = new Map(this.liveSets);
+    /** @param {string} key */
+    const unchanged = (key) => this.liveSets.get(key) === sets.get(key);
     const [robots, locks, tasks, alerts, events, building, fleet, emergency] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
@@ -219,6 +238,7 @@ export class Store extends EventTarget {
       if (info.robocan && !(robot.robocan?.at > info.robocan.at)) robot.robocan = info.robocan;
     }
     for (const view of locks) {
+      if (!unchanged(`lock:${view.area}`)) continue;
       this.locks.set(view.area, view);
       this.emit("lock", view);
     }
@@ -231,9 +251,9 @@ export class Store extends EventTarget {
     this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);
     this.inFlight = [];
     this.building.enabled = building.enabled;
-    for (const m of building.modules) this.building.modules.set(m.module, m);
-    for (const p of building.points) this.#point(p.module, p.point, p.value);
-    for (const car of building.elevators ?? []) this.#lift(car);
+    for (const m of building.modules) if (unchanged(`module:${m.module}`)) this.building.modules.set(m.module, m);
+    for (const p of building.points) if (unchanged(`point:${p.module}/${p.point}`)) this.#point(p.module, p.point, p.value);
+    for (const car of building.elevators ?? []) if (unchanged(`lift:${car.elevator}`)) this.#lift(car);
     this.changed();
   }
 
@@ -339,6 +359,11 @@ export class Store extends EventTarget {
     for (const door of this.site?.doors ?? []) {
       if (door.is_open && door.is_open.module === module && door.is_open.point === point) this.#door(door.id, Boolean(value));
     }
+  }
+
+  /** A live message set ``key`` (see liveSets). @param {string} key */
+  #live(key) {
+    this.liveSets.set(key, (this.liveSets.get(key) ?? 0) + 1);
   }
 
   #lift(car) {
