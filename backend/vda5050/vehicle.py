@@ -202,6 +202,13 @@ class VdaRobot:
         them open for us. Only these are passed: another robot's opening may end (its
         release_door handled before our open_door) after the base is released through the
         door (``_releasable``)."""
+        self.door_pause: str | None = None
+        """The door on the released base ahead that closed under the vehicle's hold, for which
+        the master paused it (``startPause``) until the building holds it open again
+        (``_guard_doors``)."""
+        self.door_paused_at = -math.inf
+        self.staff_paused = False
+        """Staff paused the vehicle (``pause``): a door's ``stopPause`` does not let it go on."""
         self.route: dict[int, str] = {}
         """The current order's nodes ahead by sequence id (``_reached``)."""
         self.route_seq = 0
@@ -604,8 +611,10 @@ class VdaRobot:
         else moving, else what it waits for."""
         if self.hibernating:
             return "hibernating"
-        if state.get("paused"):
+        if state.get("paused") and (self.door_pause is None or self.staff_paused):
             return "paused"
+        if self.door_pause is not None:
+            return "waiting_door"
         if state.get("driving"):
             return "moving"
         return self.waiting or "idle"
@@ -618,8 +627,14 @@ class VdaRobot:
 
     async def pause(self, paused: bool) -> None:
         """Staff pause the vehicle where it stands (``startPause``) or let it go on
-        (``stopPause``): its order is kept (docs/vda5050.md, "Pause")."""
+        (``stopPause``): its order is kept (docs/vda5050.md, "Pause"). Let go on while the
+        master holds it before a door that closed under it, it goes on once the door is open
+        again."""
         log.info("%s: %s", self.name, "paused by staff" if paused else "resumed by staff")
+        self.staff_paused = paused
+        if not paused and self.door_pause is not None:
+            log.info("%s: goes on once door %s is open again", self.name, self.door_pause)
+            return
         await self.instant("startPause" if paused else "stopPause")
 
     # -- tasks -----------------------------------------------------------------------------
@@ -709,6 +724,10 @@ class VdaRobot:
         """The task is over: doors and areas given back, ``task_ended``; then an assignment
         that came while it was being cancelled starts."""
         self._release_all()
+        if self.door_pause is not None:  # not left paused for the next task
+            self.door_pause = None
+            if not self.staff_paused:
+                self._spawn(self.instant("stopPause"))
         self.order_id = None
         self.route = {}
         self.placed = None
@@ -1025,6 +1044,7 @@ class VdaRobot:
             progress = step_of_seq(state["lastNodeSequenceId"]) if ours else first
             self._release_behind(steps, progress)
             released_to = self._releasable(steps, progress)
+            await self._guard_doors(steps, progress, base_end)
             if released_to > base_end:
                 update += 1
                 order = build_order(
@@ -1114,6 +1134,41 @@ class VdaRobot:
                     self.waiting = "waiting_elevator"
                     return i - 1
         return len(steps) - 1
+
+    async def _guard_doors(self, steps: list[dict[str, Any]], progress: int, base_end: int) -> None:
+        """A door on the released base ahead (not reached yet) that is no longer held open for
+        the vehicle (the building closed it under its hold: staff, its own timer) pauses it
+        (``startPause``: a released base cannot be taken back), while it is asked again
+        (``_passable``); once the building holds it open again, ``stopPause``. A pause the
+        vehicle's state does not show is sent again after ``ACK_TIMEOUT_S``."""
+        closed = next(
+            (
+                str(steps[i]["door"])
+                for i in range(progress + 1, min(base_end, len(steps) - 1) + 1)
+                if steps[i].get("door") and not self._passable(str(steps[i]["door"]))
+            ),
+            None,
+        )
+        now = asyncio.get_running_loop().time()
+        if closed is not None:
+            self.waiting = "waiting_door"
+            shown = (self.state or {}).get("paused")
+            if self.door_pause is None or (not shown and now - self.door_paused_at > ACK_TIMEOUT_S):
+                if self.door_pause is None:
+                    log.warning(
+                        "%s: door %s closed before the vehicle passed it: paused until it is "
+                        "open again",
+                        self.name,
+                        closed,
+                    )
+                self.door_pause, self.door_paused_at = closed, now
+                await self.instant("startPause")
+            self.door_pause = closed
+        elif self.door_pause is not None:
+            log.info("%s: door %s open again: goes on", self.name, self.door_pause)
+            self.door_pause = None
+            if not self.staff_paused:
+                await self.instant("stopPause")
 
     def _release_behind(self, steps: list[dict[str, Any]], progress: int) -> None:
         """Give back the areas left and the doors passed."""

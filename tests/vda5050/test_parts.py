@@ -4,6 +4,7 @@ vendored schemas."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -365,4 +366,121 @@ async def test_a_door_another_robot_opened_is_passed_only_once_it_is_held_for_v1
     robot._release_behind(steps, 2)  # passed: let go; the next time it is asked again
     assert [m.type for m in seen if m.type == "release_door"] == ["release_door"]
     assert robot._releasable(steps, 0) == 0
+    await robot.close()
+
+
+DOOR_STEPS = [
+    {"node": "a", "floor": "F0", "x": 0, "y": 0, "area": None, "door": None},
+    {"node": "b", "floor": "F0", "x": 4, "y": 0, "area": None, "door": "d1"},
+    {"node": "c", "floor": "F0", "x": 8, "y": 0, "area": None, "door": None},
+]
+
+
+class DoorLeg:
+    """V1 (``robot_on_a_bus``) on a leg a -> b (door d1) -> c, the building and the vehicle
+    played by the test: ``answer()`` opens d1 for V1's last open_door, ``state(...)`` is the
+    vehicle's report on its order."""
+
+    def __init__(self) -> None:
+        self.robot, bus, self.seen, self.sent = robot_on_a_bus()
+        self.building = bus.endpoint("building")
+        self.sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+        self.robot.on_state(self.sim.state())
+        self.leg = asyncio.get_running_loop().create_task(
+            self.robot._leg("T1", DOOR_STEPS, 0, None, None)
+        )
+
+    def asks(self) -> list[Message]:
+        return [m for m in self.seen if m.type == "open_door" and m.source == "V1"]
+
+    def answer(self) -> None:
+        ask = self.asks()[-1]
+        self.building.publish("door_opened", {"door": "d1"})
+        self.building.publish(
+            "door_opened", {"door": "d1"}, destination="V1", correlation_id=ask.id
+        )
+
+    def state(self, seq: int, *, driving: bool, paused: bool = False) -> None:
+        update = max(int(m["orderUpdateId"]) for t, m in self.sent if t == "order")
+        self.robot.on_state(
+            self.sim.state()
+            | {
+                "orderId": "T1-1",
+                "orderUpdateId": update,
+                "lastNodeId": DOOR_STEPS[seq // 2]["node"],
+                "lastNodeSequenceId": seq,
+                "driving": driving,
+                "paused": paused,
+            }
+        )
+
+    def instants(self) -> list[str]:
+        """The pauses sent (startPause, stopPause), in order."""
+        kinds = [
+            a["actionType"] for t, m in self.sent if t == "instantActions" for a in m["actions"]
+        ]
+        return [k for k in kinds if k in ("startPause", "stopPause")]
+
+    def released_to(self) -> int:
+        orders = [m for t, m in self.sent if t == "order"]
+        return max(n["sequenceId"] for o in orders for n in o["nodes"] if n["released"])
+
+
+async def test_a_door_that_closes_under_a_released_base_pauses_the_vehicle_until_open() -> None:
+    """The building closes the gallery door 2 s after it opened, held or not (the museum's
+    building_sim): V1's base was already released through it, and a released base cannot be
+    taken back (the mixed-fleet test saw V1 reach door_hall while door_gallery was closed).
+    The master pauses the vehicle (startPause), asks for the door again, and lets it go on
+    (stopPause) once the building answers that open_door."""
+    leg = DoorLeg()
+    robot = leg.robot
+    await wait_until(lambda: len(leg.asks()) == 1, 5)
+    leg.answer()
+    await wait_until(lambda: leg.released_to() == 4, 5)  # through the door to c
+    leg.state(0, driving=True)  # on its way from a to the door
+    leg.building.publish("door_closed", {"door": "d1"})  # the building's own timer
+    await wait_until(lambda: "startPause" in leg.instants(), 5)
+    assert len(leg.asks()) == 2  # asked again at once
+    leg.state(1, driving=False, paused=True)  # stopped on the edge a->b
+    assert robot._navigation(robot.state or {}) == "waiting_door"
+    leg.building.publish("door_opened", {"door": "d1"})  # someone else's opening: not V1's
+    await asyncio.sleep(0)
+    assert "stopPause" not in leg.instants()
+    leg.answer()
+    await wait_until(lambda: "stopPause" in leg.instants(), 5)
+    assert leg.instants() == ["startPause", "stopPause"]
+    leg.state(4, driving=False)
+    await asyncio.wait_for(leg.leg, 5)
+    assert [m.payload["door"] for m in leg.seen if m.type == "release_door"] == ["d1"]
+    await robot.close()
+
+
+async def test_staff_cannot_let_a_vehicle_paused_for_a_door_drive_through_it() -> None:
+    """Paused before a door that closed under it, V1 is let go on by staff: it goes on only
+    once the door is open for it again. Paused by staff meanwhile, the door's opening does not
+    let it go on: staff do. A task that ends while the vehicle waits so does not leave it
+    paused."""
+    leg = DoorLeg()
+    robot = leg.robot
+    await wait_until(lambda: len(leg.asks()) == 1, 5)
+    leg.answer()
+    await wait_until(lambda: leg.released_to() == 4, 5)
+    leg.state(0, driving=True)
+    leg.building.publish("door_closed", {"door": "d1"})
+    await wait_until(lambda: "startPause" in leg.instants(), 5)
+    await robot.pause(False)  # staff: "Let V1 go on"
+    assert leg.instants() == ["startPause"]
+    await robot.pause(True)  # staff: "Pause V1"
+    leg.answer()
+    await wait_until(lambda: robot.door_pause is None, 5)
+    assert leg.instants() == ["startPause", "startPause"]  # staff's, and no stopPause
+    await robot.pause(False)
+    assert leg.instants() == ["startPause", "startPause", "stopPause"]
+    leg.building.publish("door_closed", {"door": "d1"})  # again, and the task is cancelled
+    await wait_until(lambda: leg.instants().count("startPause") == 3, 5)
+    leg.leg.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await leg.leg
+    robot._end("T1", "cancelled", "cancelled")
+    await wait_until(lambda: leg.instants()[-1] == "stopPause", 5)
     await robot.close()
