@@ -2,7 +2,12 @@
 
 1. No robot reaches a door node while that door is closed (a door whose sensor cannot be read,
    ``door_closed`` with ``sensed`` false, is unknown: not checked until it is sensed again).
-2. No robot enters a cabin node unless the cabin is at that floor with its door open.
+2. No robot enters a cabin node unless the cabin is at that floor with its door open. A robot
+   that rode there (its last node another stop of that elevator) did not drive in: it arrived
+   with the cabin, which must have stood at that floor with its door open at some moment of
+   the ride (the robot reports its arrival once it has heard of it, and at time scale 10 the
+   cabin's door may be closed again by then: the soak saw "entered lift1 while lift was closed
+   or moving" for a robot that had ridden there).
 3. No two robots in one restricted area (by position, and by grants).
 4. While a fire alarm holds a zone (docs/emergency.md): no robot enters an escape route of the
    zone (a robot already in one may leave it), no elevator ride starts with a robot in the cabin
@@ -247,7 +252,18 @@ class InvariantChecker:
         if cabin is not None:
             self.counts["cabin"] += 1
             elevator, floor = cabin
-            where = self._line(self.cabins, elevator, None).at(at)
+            cabin_line = self._line(self.cabins, elevator, None)
+            where = cabin_line.at(at)
+            came_from = self.cabin_at.get(before or "")
+            if (
+                where != floor
+                and before_at is not None
+                and came_from is not None
+                and came_from[0] == elevator
+                and came_from[1] != floor
+                and any(w == floor for _, w in cabin_line.changes(before_at, at))
+            ):
+                where = floor  # rode there: the cabin stood open at this floor on the way
             if where != floor:
                 state = f"open at {where}" if where else "closed or moving"
                 self._fail("cabin", robot, f"entered {node} while {elevator} was {state}", at)

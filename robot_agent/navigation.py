@@ -519,7 +519,10 @@ class Navigator(MotionControl):
         self.state = NavState.IDLE
 
     async def _approach(self, steps: list[PathStep], i: int, called: Called) -> None:
-        """Drive to step ``i``, never onto a closed door or into a cabin that is not here."""
+        """Drive to step ``i``, never onto a closed door or into a cabin that is not here, and
+        out of a cabin only while it stands open at its floor (called there to keep its door
+        open, as a person presses the button; not while evacuating: the fire alarm refuses
+        calls, and the robot gets out where the cabin stopped, docs/emergency.md)."""
         step = steps[i]
         cabin = (
             step.elevator is not None
@@ -527,6 +530,8 @@ class Navigator(MotionControl):
             and steps[i + 1].elevator == step.elevator
             and steps[i + 1].floor != step.floor
         )
+        prev = steps[i - 1]
+        leaving = prev if prev.elevator is not None and step.elevator != prev.elevator else None
         passage = self.passage
         while True:
             if step.area is not None and passage.must_ask(step.area):
@@ -536,13 +541,16 @@ class Navigator(MotionControl):
             if cabin:
                 assert step.elevator is not None
                 await passage.wait_elevator(step.elevator, step.floor, called)
+            out_of = None if self.evacuating else leaving
+            if out_of is not None:
+                assert out_of.elevator is not None
+                await passage.wait_elevator(out_of.elevator, out_of.floor, called)
             if step.area is not None and passage.must_ask(step.area):
                 continue  # the grant was forgotten while we waited (the link dropped): ask again
             if step.area is not None:
                 passage.edge_areas.add(step.area)  # from here on it may be inside
-            if await self.drive_to(
-                step.x, step.y, stop=i == len(steps) - 1, clear=passage.passable(step, cabin)
-            ):
+            clear = passage.passable(step, cabin, leaving=out_of)
+            if await self.drive_to(step.x, step.y, stop=i == len(steps) - 1, clear=clear):
                 return
             log.warning("%s: %s not passable now, stopped before it", self.robot, step.node)
             passage.stopped_before(step, called)

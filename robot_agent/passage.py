@@ -13,7 +13,8 @@ of it lives here, apart from route following. For each path
   every ``door_retry_s`` until ``wait_timeout_s``;
 - elevators ahead are called once the robot holds the lift's area (its turn); the robot
   waits for elevator_in_position on its floor, rides, gets out; it never drives into a cabin
-  that is not at its floor with the door open.
+  that is not at its floor with the door open, and gets out only while the cabin stands open
+  at its floor (called there to keep the door open).
 """
 
 from __future__ import annotations
@@ -344,12 +345,22 @@ class Passage:
         message = self.ep.publish(OpenDoor(door=door))
         self._door_requests[message.id] = door
 
-    def passable(self, step: PathStep, cabin: bool) -> Callable[[], bool]:
+    def passable(
+        self, step: PathStep, cabin: bool, *, leaving: PathStep | None = None
+    ) -> Callable[[], bool]:
         """While driving onto ``step``: is its area still ours, its door open, its cabin here
-        (called again now and then, as a person keeps the button pressed)?"""
-        door, elevator, floor = step.door, step.elevator, step.floor
-        area = step.area
-        next_hold = self.clock.now() + CABIN_HOLD_CALL_S
+        (``cabin``: driving in) or the cabin the robot gets out of (``leaving``: its stop)
+        still open at its floor? The cabin is called again now and then, as a person keeps the
+        button pressed; getting out, at once: its door has stood open since it arrived."""
+        door, area = step.door, step.area
+        held = (
+            (step.elevator, step.floor)
+            if cabin
+            else (leaving.elevator, leaving.floor)
+            if leaving is not None
+            else None
+        )
+        next_hold = self.clock.now() + (CABIN_HOLD_CALL_S if cabin else 0.0)
 
         def clear() -> bool:
             nonlocal next_hold
@@ -357,15 +368,16 @@ class Passage:
                 return False
             if door is not None and door not in self._doors_open:
                 return False
-            if not cabin:
+            if held is None:
                 return True
-            if self._elevators.get(elevator or "") != floor:
+            elevator, floor = held
+            assert elevator is not None  # a cabin's step names its elevator
+            if self._elevators.get(elevator) != floor:
                 return False
             if self.clock.now() >= next_hold:
-                # Driving in: call again, as a person keeps the button pressed, so the cabin
-                # door does not close on the robot (the soak saw it close under one).
+                # Driving in or out: call again, as a person keeps the button pressed, so the
+                # cabin door does not close on the robot (the soak saw it close under one).
                 next_hold = self.clock.now() + CABIN_HOLD_CALL_S
-                assert elevator is not None  # a cabin's step names its elevator
                 self.ep.publish(CallElevator(elevator=elevator, floor=floor))
             return True
 

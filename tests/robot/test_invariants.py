@@ -167,3 +167,34 @@ def test_a_late_report_that_the_other_robot_had_left_clears_the_area_violation()
     feed("node_reached", {"robot": "R3", "node": "cb1", "at": 150.0}, 150.0)
     feed("node_reached", {"robot": "R2", "node": "cb2", "at": 145.0}, 160.0)
     assert {(v.robot, v.at) for v in checker.violations} == {("R3", 150.0)}
+
+
+def test_a_ride_is_judged_by_the_cabin_standing_open_at_its_floor_during_the_ride() -> None:
+    """R1 rides lift_a from F0 to F1; the cabin's door stands open upstairs 0.8 s (time scale
+    10) and R1's report of its arrival comes after it closed again: no violation (the soak
+    counted "entered la1 while lift_a was closed or moving"). A ride whose cabin never stood
+    open at F1, and a robot that drives into la1 from up_w after the door closed, are."""
+    from guidebot.site.validate import validate_site
+
+    checker = InvariantChecker.from_site(validate_site(safety_site()))
+    feed = checker.feed
+    lift = "lift_a"
+    feed("elevator_in_position", {"elevator": lift, "floor": "F0", "door_open": True}, 100.0)
+    feed("node_reached", {"robot": "R1", "node": "la0", "floor": "F0", "at": 101.0}, 101.0)
+    feed("elevator_in_position", {"elevator": lift, "floor": "F0", "door_open": False}, 102.0)
+    feed("elevator_in_position", {"elevator": lift, "floor": "F1", "door_open": True}, 110.0)
+    feed("elevator_in_position", {"elevator": lift, "floor": "F1", "door_open": False}, 110.8)
+    feed("node_reached", {"robot": "R1", "node": "la1", "floor": "F1", "at": 111.0}, 111.0)
+    assert checker.violations == []
+    # R2 boards at F1 after R1 left, rides down: the cabin never opens at F0 before its report.
+    feed("node_reached", {"robot": "R1", "node": "up_w", "floor": "F1", "at": 112.0}, 112.0)
+    feed("elevator_in_position", {"elevator": lift, "floor": "F1", "door_open": True}, 120.0)
+    feed("node_reached", {"robot": "R2", "node": "la1", "floor": "F1", "at": 121.0}, 121.0)
+    feed("elevator_in_position", {"elevator": lift, "floor": "F1", "door_open": False}, 122.0)
+    feed("node_reached", {"robot": "R2", "node": "la0", "floor": "F0", "at": 130.0}, 130.0)
+    assert [(v.invariant, v.robot) for v in checker.violations] == [("cabin", "R2")]
+    # R1 drives back into la1 from the landing: the door closed at 122, judged as an entry
+    # (R2 still stands in the lift's area below: that is an area violation besides).
+    feed("node_reached", {"robot": "R1", "node": "la1", "floor": "F1", "at": 131.0}, 131.0)
+    cabin = [v.robot for v in checker.violations if v.invariant == "cabin"]
+    assert cabin == ["R2", "R1"]

@@ -15,6 +15,7 @@ from backend.traffic.manager import TrafficManager
 from guidebot.bus import Bus
 from guidebot.messages import Message
 from guidebot.site.schema import Site
+from guidebot.testing import wait_until
 from robot_agent.clock import Clock
 from robot_agent.motion import NavigationError
 from robot_agent.navigation import Navigator
@@ -82,13 +83,53 @@ async def test_navigate_with_elevator_ride(rig: Rig) -> None:
     assert not rig.seen.of("navigation_failed"), rig.seen.of("navigation_failed")[0].payload
     assert rig.nav.node == "gc1" and rig.nav.floor == "F1"
     # Called to F0, called again while driving in (8 m, about 11 s: the door must not close
-    # on the robot; the building holds it 8 s per call), then sent to F1.
+    # on the robot; the building holds it 8 s per call), then sent to F1, and called there
+    # again while it gets out (at once: the door has stood open since the cabin arrived).
     calls = rig.building.calls
-    assert calls[0] == ("lift", "F0") and calls[-1] == ("lift", "F1"), calls
-    assert len(calls) >= 3 and set(calls[:-1]) == {("lift", "F0")}, calls
+    up = calls.index(("lift", "F1"))
+    assert up >= 2 and set(calls[:up]) == {("lift", "F0")}, calls
+    assert len(calls) - up >= 2 and set(calls[up:]) == {("lift", "F1")}, calls
     assert rig.building.opened == ["door_upstairs"]
     assert [m.payload["area"] for m in rig.seen.of("request_area")] == ["elevator"]
     assert [m.payload["area"] for m in rig.seen.of("release_area")] == ["elevator"]
+
+
+async def test_a_robot_gets_out_of_a_cabin_only_while_it_stands_open(rig: Rig) -> None:
+    """The cabin's door closes as the robot arrives upstairs (at time scale 10 it stands open
+    0.8 s of wall time, and the soak's robots reported lift1 after it had closed): the robot
+    does not drive out through the closed door. It calls the cabin to its floor and gets out
+    once the building reports it open there again, calling to keep it open on the way out."""
+    building = rig.bus.endpoint("building-broadcast")
+    closed_at: list[int] = []
+
+    def on_reached(message: Message) -> None:
+        if message.payload["node"] == "lift1" and not closed_at:
+            rig.building.delay_s = 3600.0  # the cabin opens again when this test says
+            building.publish(
+                "elevator_in_position", {"elevator": "lift", "floor": "F1", "door_open": False}
+            )
+            closed_at.append(len(rig.seen.messages))
+
+    rig.bus.endpoint("watch").subscribe("node_reached", on_reached, tap=True)
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gc1"})
+    await wait_until(  # the robot's state announces itself with no message
+        lambda: (
+            bool(closed_at or rig.seen.of("navigation_failed"))
+            and (rig.nav.node != "lift1" or rig.nav.state == "waiting_elevator")
+        ),
+        20,
+    )
+    assert rig.nav.node == "lift1", f"drove out of a closed cabin to {rig.nav.node}"
+    assert rig.building.calls[-1] == ("lift", "F1")  # called to its floor: the door opens
+    after = rig.seen.messages[closed_at[0] :]
+    moving = [m for m in after if m.type == "set_velocity" and m.payload.get("v")]
+    assert moving == [], moving
+    rig.building.delay_s = 0.05
+    building.publish("elevator_in_position", {"elevator": "lift", "floor": "F1", "door_open": True})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert rig.nav.node == "gc1" and not rig.seen.of("navigation_failed")
+    out = [c for c in rig.building.calls if c == ("lift", "F1")]
+    assert len(out) >= 3, rig.building.calls  # the ride, the call back, the keep-open call
 
 
 async def test_bumper_hit_stops_and_reports(rig: Rig) -> None:
