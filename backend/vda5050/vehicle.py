@@ -202,11 +202,12 @@ class VdaRobot:
         them open for us. Only these are passed: another robot's opening may end (its
         release_door handled before our open_door) after the base is released through the
         door (``_releasable``)."""
-        self.door_pause: str | None = None
-        """The door on the released base ahead that closed under the vehicle's hold, for which
-        the master paused it (``startPause``) until the building holds it open again
-        (``_guard_doors``)."""
-        self.door_paused_at = -math.inf
+        self.paused_for: tuple[str, str] | None = None
+        """("door", id) on the released base ahead that closed under the vehicle's hold, or
+        ("elevator", id) whose cabin the vehicle is getting out of and that is no longer open
+        at its floor: the master paused the vehicle (``startPause``) until it is open again
+        (``_guard_base``)."""
+        self.paused_at = -math.inf
         self.staff_paused = False
         """Staff paused the vehicle (``pause``): a door's ``stopPause`` does not let it go on."""
         self.route: dict[int, str] = {}
@@ -611,10 +612,10 @@ class VdaRobot:
         else moving, else what it waits for."""
         if self.hibernating:
             return "hibernating"
-        if state.get("paused") and (self.door_pause is None or self.staff_paused):
+        if state.get("paused") and (self.paused_for is None or self.staff_paused):
             return "paused"
-        if self.door_pause is not None:
-            return "waiting_door"
+        if self.paused_for is not None:
+            return f"waiting_{self.paused_for[0]}"
         if state.get("driving"):
             return "moving"
         return self.waiting or "idle"
@@ -628,12 +629,12 @@ class VdaRobot:
     async def pause(self, paused: bool) -> None:
         """Staff pause the vehicle where it stands (``startPause``) or let it go on
         (``stopPause``): its order is kept (docs/vda5050.md, "Pause"). Let go on while the
-        master holds it before a door that closed under it, it goes on once the door is open
-        again."""
+        master holds it before a door (or in a cabin) that closed under it, it goes on once
+        that is open again."""
         log.info("%s: %s", self.name, "paused by staff" if paused else "resumed by staff")
         self.staff_paused = paused
-        if not paused and self.door_pause is not None:
-            log.info("%s: goes on once door %s is open again", self.name, self.door_pause)
+        if not paused and self.paused_for is not None:
+            log.info("%s: goes on once %s %s is open again", self.name, *self.paused_for)
             return
         await self.instant("startPause" if paused else "stopPause")
 
@@ -724,8 +725,8 @@ class VdaRobot:
         """The task is over: doors and areas given back, ``task_ended``; then an assignment
         that came while it was being cancelled starts."""
         self._release_all()
-        if self.door_pause is not None:  # not left paused for the next task
-            self.door_pause = None
+        if self.paused_for is not None:  # not left paused for the next task
+            self.paused_for = None
             if not self.staff_paused:
                 self._spawn(self.instant("stopPause"))
         self.order_id = None
@@ -1044,7 +1045,7 @@ class VdaRobot:
             progress = step_of_seq(state["lastNodeSequenceId"]) if ours else first
             self._release_behind(steps, progress)
             released_to = self._releasable(steps, progress)
-            await self._guard_doors(steps, progress, base_end)
+            await self._guard_base(steps, progress, base_end)
             if released_to > base_end:
                 update += 1
                 order = build_order(
@@ -1112,8 +1113,15 @@ class VdaRobot:
 
     def _releasable(self, steps: list[dict[str, Any]], progress: int) -> int:
         """The last step the vehicle may be released to: before the next area not granted or
-        the next door not open (asking for them on the way)."""
+        the next door not open (asking for them on the way), or the cabin it stands in while
+        that is not open at its floor (calling it there)."""
         self.waiting = None
+        if self._getting_out(steps, progress):  # out of a cabin only while it stands open here
+            cabin, floor = str(steps[progress]["elevator"]), str(steps[progress]["floor"])
+            if self.cabins.get(cabin) != (floor, True):
+                self._call(cabin, floor)
+                self.waiting = "waiting_elevator"
+                return progress
         for i in range(progress + 1, len(steps)):
             area = steps[i].get("area")
             if area and area != steps[i - 1].get("area") and area not in self.granted:
@@ -1135,40 +1143,60 @@ class VdaRobot:
                     return i - 1
         return len(steps) - 1
 
-    async def _guard_doors(self, steps: list[dict[str, Any]], progress: int, base_end: int) -> None:
-        """A door on the released base ahead (not reached yet) that is no longer held open for
-        the vehicle (the building closed it under its hold: staff, its own timer) pauses it
-        (``startPause``: a released base cannot be taken back), while it is asked again
-        (``_passable``); once the building holds it open again, ``stopPause``. A pause the
-        vehicle's state does not show is sent again after ``ACK_TIMEOUT_S``."""
-        closed = next(
-            (
-                str(steps[i]["door"])
-                for i in range(progress + 1, min(base_end, len(steps) - 1) + 1)
-                if steps[i].get("door") and not self._passable(str(steps[i]["door"]))
-            ),
-            None,
-        )
+    async def _guard_base(self, steps: list[dict[str, Any]], progress: int, base_end: int) -> None:
+        """Something on the released base ahead that is no longer open for the vehicle
+        (``_closed_ahead``: the building closed it under its hold: staff, its own timer) pauses
+        it (``startPause``: a released base cannot be taken back) while it is asked for again
+        (``_passable``, the keep-open call of ``_leg``); once it is open again, ``stopPause``.
+        A pause the vehicle's state does not show is sent again after ``ACK_TIMEOUT_S``."""
+        closed = self._closed_ahead(steps, progress, base_end)
         now = asyncio.get_running_loop().time()
         if closed is not None:
-            self.waiting = "waiting_door"
+            self.waiting = f"waiting_{closed[0]}"
             shown = (self.state or {}).get("paused")
-            if self.door_pause is None or (not shown and now - self.door_paused_at > ACK_TIMEOUT_S):
-                if self.door_pause is None:
+            if self.paused_for is None or (not shown and now - self.paused_at > ACK_TIMEOUT_S):
+                if self.paused_for is None:
                     log.warning(
-                        "%s: door %s closed before the vehicle passed it: paused until it is "
+                        "%s: %s %s closed before the vehicle passed it: paused until it is "
                         "open again",
                         self.name,
-                        closed,
+                        *closed,
                     )
-                self.door_pause, self.door_paused_at = closed, now
+                self.paused_for, self.paused_at = closed, now
                 await self.instant("startPause")
-            self.door_pause = closed
-        elif self.door_pause is not None:
-            log.info("%s: door %s open again: goes on", self.name, self.door_pause)
-            self.door_pause = None
+            self.paused_for = closed
+        elif self.paused_for is not None:
+            log.info("%s: %s %s open again: goes on", self.name, *self.paused_for)
+            self.paused_for = None
             if not self.staff_paused:
                 await self.instant("stopPause")
+
+    def _closed_ahead(
+        self, steps: list[dict[str, Any]], progress: int, base_end: int
+    ) -> tuple[str, str] | None:
+        """("elevator", id) when the vehicle stands in a cabin it is released to get out of and
+        the cabin is no longer open at its floor; ("door", id) for a door on the released base
+        ahead (its node not reached yet: one already reached is driven through) that is no
+        longer held open for it; else None."""
+        if base_end > progress and self._getting_out(steps, progress):
+            cabin, floor = str(steps[progress]["elevator"]), str(steps[progress]["floor"])
+            if self.cabins.get(cabin) != (floor, True):
+                return ("elevator", cabin)
+        for i in range(progress + 1, min(base_end, len(steps) - 1) + 1):
+            door = steps[i].get("door")
+            if door and not self._passable(str(door)):
+                return ("door", str(door))
+        return None
+
+    @staticmethod
+    def _getting_out(steps: list[dict[str, Any]], progress: int) -> bool:
+        """The vehicle stands in a cabin and its next step is out of it."""
+        cabin = steps[progress].get("elevator")
+        return (
+            bool(cabin)
+            and progress + 1 < len(steps)
+            and steps[progress + 1].get("elevator") != cabin
+        )
 
     def _release_behind(self, steps: list[dict[str, Any]], progress: int) -> None:
         """Give back the areas left and the doors passed."""

@@ -472,7 +472,7 @@ async def test_staff_cannot_let_a_vehicle_paused_for_a_door_drive_through_it() -
     assert leg.instants() == ["startPause"]
     await robot.pause(True)  # staff: "Pause V1"
     leg.answer()
-    await wait_until(lambda: robot.door_pause is None, 5)
+    await wait_until(lambda: robot.paused_for is None, 5)
     assert leg.instants() == ["startPause", "startPause"]  # staff's, and no stopPause
     await robot.pause(False)
     assert leg.instants() == ["startPause", "startPause", "stopPause"]
@@ -483,4 +483,56 @@ async def test_staff_cannot_let_a_vehicle_paused_for_a_door_drive_through_it() -
         await leg.leg
     robot._end("T1", "cancelled", "cancelled")
     await wait_until(lambda: leg.instants()[-1] == "stopPause", 5)
+    await robot.close()
+
+
+async def test_a_vehicle_gets_out_of_a_cabin_only_while_it_stands_open() -> None:
+    """V1 stands in the cabin (after a ride, or a task that starts there): its way out is
+    released only while the building reports the cabin open at its floor (the cabin called
+    there meanwhile), and a cabin door that closes before V1 is out pauses it until the cabin
+    stands open again (the keep-open call came too late, at time scale 10 the door stands open
+    0.8 s of wall time)."""
+    robot, bus, seen, sent = robot_on_a_bus()
+    robot.recall_s = 0.0
+    building = bus.endpoint("building")
+    steps = [
+        {"node": "a", "floor": "F0", "x": 0, "y": 0, "area": None, "elevator": "lift"},
+        {"node": "b", "floor": "F0", "x": 4, "y": 0, "area": None, "door": None},
+        {"node": "c", "floor": "F0", "x": 8, "y": 0, "area": None, "door": None},
+    ]
+
+    def cabin(door_open: bool) -> None:
+        payload = {"elevator": "lift", "floor": "F0", "door_open": door_open}
+        building.publish("elevator_in_position", payload)
+
+    def released_to() -> int:
+        orders = [m for t, m in sent if t == "order"]
+        return max(n["sequenceId"] for o in orders for n in o["nodes"] if n["released"])
+
+    def pauses() -> list[str]:
+        kinds = [a["actionType"] for t, m in sent if t == "instantActions" for a in m["actions"]]
+        return [k for k in kinds if k in ("startPause", "stopPause")]
+
+    def calls() -> int:
+        return len([m for m in seen if m.type == "call_elevator" and m.source == "V1"])
+
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    robot.on_state(sim.state())
+    cabin(False)  # its door closed before the leg began
+    leg = asyncio.get_running_loop().create_task(robot._leg("T1", steps, 0, None, None))
+    await wait_until(lambda: calls() >= 1 and [t for t, _ in sent if t == "order"], 5)
+    assert released_to() == 0 and robot.waiting == "waiting_elevator"  # stays in
+    cabin(True)
+    await wait_until(lambda: released_to() == 4, 5)
+    base = {"orderId": "T1-1", "orderUpdateId": 1, "lastNodeId": "a", "lastNodeSequenceId": 0}
+    robot.on_state(sim.state() | base | {"driving": True})
+    asked = calls()
+    cabin(False)  # closes under it
+    await wait_until(lambda: pauses() == ["startPause"], 5)
+    await wait_until(lambda: calls() > asked, 5)  # called back to its floor
+    assert robot._navigation(robot.state or {}) == "waiting_elevator"
+    cabin(True)
+    await wait_until(lambda: pauses() == ["startPause", "stopPause"], 5)
+    robot.on_state(sim.state() | base | {"lastNodeId": "c", "lastNodeSequenceId": 4})
+    await asyncio.wait_for(leg, 5)
     await robot.close()
