@@ -41,13 +41,15 @@ typecheck: $(STAMP)
 # The suite waits far more than it computes (servers, browsers, robots at work): six
 # pytest-xdist workers (WORKERS) share 2 CPUs, and lint and the type check (15 s of one CPU) run beside them
 # (their few lines come among pytest's first ones); any of the three failing fails `make test`
-# once the others end. `--dist loadgroup` keeps the docker tests in one worker; they and the
-# other longest tests start first (tests/conftest.py).
+# once the others end. The set-up runs side by side too: the venv's install, the Debian
+# packages' check (and the sign-on tests' npm ci) and the TypeScript checker's npm ci
+# (scripts/system-deps.sh takes a lock, so two of its runs never call apt at once).
+# `--dist loadgroup` keeps the docker tests in one worker; they start first (tests/conftest.py).
 WORKERS ?= 6
-test: $(STAMP) system-deps
+test:
 	$(MAKE) --no-print-directory -j 3 lint typecheck suite
 
-suite: $(STAMP)
+suite: $(STAMP) system-deps
 	$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup
 
 # docs/screenshots/*.png from the browser tests' scenarios (needs /usr/bin/chromium).

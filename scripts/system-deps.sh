@@ -11,6 +11,10 @@
 #   oidc-provider, installed there with npm ci; it wants Node.js 20 or later).
 # With arguments, only those packages (make demo: mosquitto).
 set -euo pipefail
+# One run at a time: `make test` runs this beside the TypeScript checker's set-up, which runs
+# it for nodejs and npm, and apt refuses a second caller; a run that waited finds them there.
+exec 9>"${TMPDIR:-/tmp}/guidebot-system-deps.lock"
+command -v flock >/dev/null && flock 9
 wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light prometheus mosquitto nodejs npm)
 all=1
 [ $# -gt 0 ] && wanted=("$@") && all=0

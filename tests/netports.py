@@ -4,44 +4,69 @@ They are taken below the kernel's ephemeral range (``ip_local_port_range``), whe
 never picks a port by itself: between the moment a port is chosen here and the moment the
 process it is given to binds it, no connection of a neighbour can take it as its local end
 and no ``bind(("127.0.0.1", 0))`` can be handed it (with ports chosen by binding port 0 and
-closing, both could, which kept the demo's tests out of the parallel run). Each pytest-xdist
-worker takes ports from a stretch of its own, so two workers never give out the same one; a
-port that something holds (or that is in TIME_WAIT) is skipped.
+closing, both could, which kept the demo's tests out of the parallel run).
+
+Each process gives out ports from a stretch of its own, which it holds with a lock file
+(``flock`` on ``LOCKS/<first port>.lock``) for as long as it runs: the pytest-xdist workers of
+one run, two plain ``pytest`` processes started side by side and two runs of ``-n`` at once
+never give out the same port. A process starts with the stretch of its pytest-xdist worker
+number and takes the next free one when another process holds it; the kernel drops the lock
+when the process ends, however it ends. A port that something holds (or that is in
+TIME_WAIT) is skipped.
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import socket
+import tempfile
 from pathlib import Path
+from typing import IO
 
 __all__ = ["free_block", "free_ports"]
 
 EPHEMERAL = Path("/proc/sys/net/ipv4/ip_local_port_range")
+LOCKS = Path(tempfile.gettempdir()) / "guidebot-netports"
+"""One lock file per stretch, held by the process that gives out its ports."""
 LOWEST = 10_000
 """No port below this is given (well-known services cluster lower)."""
 STRETCH = 500
-"""Ports per pytest-xdist worker."""
+"""Ports per process."""
 
 
-def _stretch() -> range:
-    """This process's ports: below the ephemeral range, a stretch per pytest-xdist worker."""
+def _starts() -> list[int]:
+    """The first port of every stretch: below the ephemeral range, or above it when it
+    starts too low to leave one."""
     try:
         low, high = (int(x) for x in EPHEMERAL.read_text().split())
     except (OSError, ValueError):
         low, high = 32768, 60999  # Linux's default
+    if (low - LOWEST) // STRETCH >= 1:
+        return list(range(LOWEST, low - STRETCH + 1, STRETCH))
+    return list(range(high + 1, 65536 - STRETCH + 1, STRETCH)) or [high + 1]
+
+
+def _claim() -> tuple[range, IO[str]]:
+    """Lock a stretch no other process holds, starting at this pytest-xdist worker's."""
+    starts = _starts()
     match = re.fullmatch(r"gw(\d+)", os.environ.get("PYTEST_XDIST_WORKER", ""))
-    worker = int(match[1]) if match else 0
-    stretches = (low - LOWEST) // STRETCH
-    if stretches >= 1:
-        start = LOWEST + (worker % stretches) * STRETCH
-    else:  # an ephemeral range that starts low: above it instead
-        start = high + 1 + (worker % max(1, (65535 - high) // STRETCH)) * STRETCH
-    return range(start, min(start + STRETCH, 65536))
+    first = int(match[1]) if match else 0
+    LOCKS.mkdir(mode=0o1777, exist_ok=True)
+    for i in range(len(starts)):
+        start = starts[(first + i) % len(starts)]
+        lock = (LOCKS / f"{start}.lock").open("a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # another process gives out these ports
+            lock.close()
+            continue
+        return range(start, min(start + STRETCH, 65536)), lock
+    raise RuntimeError(f"every stretch of {STRETCH} ports is held by another process ({LOCKS})")
 
 
-PORTS = _stretch()
+PORTS, _LOCK = _claim()
 _next = 0
 
 
