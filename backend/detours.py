@@ -35,6 +35,12 @@ class RouteClosed(NoPath):
             for c in self.closures
         )
 
+    @property
+    def trouble(self) -> bool:
+        """Only trouble cuts it off (a jammed door, a stuck lift), no closure by staff: the
+        ``path`` answer's ``trouble`` flag, on which a robot waits for the way to clear."""
+        return bool(self.closures) and all(c.source == "trouble" for c in self.closures)
+
 
 class StepsOnly(RouteClosed):
     """No way to the goal for a step-free tour but over steps (``Edge.steps``): the reason is

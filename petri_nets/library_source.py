@@ -272,12 +272,13 @@ def go_to_poi() -> NetDoc:
     b = NetBuilder(
         "go_to_poi",
         "Take the visitor to one point of interest, show it and explain it.",
-        params={"poi": "", "text": "Here we are."},
+        params={"poi": "", "text": "Here we are.", "lang": "en"},
         required=("node",),
     )
+    shown = {"poi": "${poi}", "text": "${text}", "lang": "${lang}"}
     b.place("navigate", initial=1, action=run("navigate_to_point", {"node": "${node}"}))
-    b.place("show_point", action=publish("show_point", {"poi": "${poi}", "text": "${text}"}))
-    b.place("explain_point", action=run("explain_point", {"text": "${text}"}))
+    b.place("show_point", action=publish("show_point", shown))
+    b.place("explain_point", action=run("explain_point", {"text": "${text}", "lang": "${lang}"}))
     b.place("arrived", final=True).place("failed", final=True, outcome="failed")
     b.transition("reached", ["navigate"], ["show_point"], net_ended("navigate_to_point", "done"))
     b.transition("not_reached", ["navigate"], ["failed"], net_ended("navigate_to_point"))

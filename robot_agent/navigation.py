@@ -11,8 +11,9 @@ One goal at a time (a new navigate_to pre-empts the old one). For each path the 
   jammed door, a stuck lift), and plans with the server only while any node is closed; a goal
   only closed nodes lead to fails with ``navigation_failed`` ``closed`` (a tour skips it);
   a goal given ``trouble_wait_s`` (a tour's stop) that only trouble cuts off (a jammed door,
-  a stuck lift: "... out of order") first waits that long for a ``closures_changed`` and plans
-  again, so a jam of a few seconds does not cost the visitor the stops behind it;
+  a stuck lift: the server's ``path`` answer says ``trouble``) first waits that long for a
+  ``closures_changed`` and plans again, so a jam of a few seconds does not cost the visitor
+  the stops behind it;
 - reports every node it reaches (node_reached: what the fleet's invariants are checked on);
 - stops on bumper_hit, reports it as robot_fault, and goes on after ``bumper_pause_s``;
 - stops for good on base_fault (a critical module lost) and fails the goal.
@@ -69,13 +70,13 @@ class ReplanRequested(Exception):
 
 
 class RouteClosed(NavigationError):
-    """The server says only closed elements lead to the goal; ``reason`` says which and why."""
+    """The server says only closed elements lead to the goal; ``reason`` says which and why,
+    ``trouble_only`` that every closure cutting it off is trouble, none by staff (the ``path``
+    answer's ``trouble`` flag: the reason is words for the visitor, never parsed)."""
 
-    @property
-    def trouble_only(self) -> bool:
-        """Every closure that cuts it off is trouble: its parts all read "<door|elevator> <id>
-        out of order" (backend/closures/routing.py), not a closure by staff."""
-        return all(part.endswith(" out of order") for part in self.reason.split("; "))
+    def __init__(self, reason: str, *, trouble_only: bool = False) -> None:
+        super().__init__(reason)
+        self.trouble_only = trouble_only
 
 
 MAX_REPLANS = 8
@@ -454,7 +455,10 @@ class Navigator(MotionControl):
                 log.warning("%s: no path to %s yet (attempt %d)", self.robot, node, attempt + 1)
                 continue
             if reply.type == "path" and reply.payload.get("closed"):
-                raise RouteClosed(str(reply.payload.get("reason") or f"{node} is closed"))
+                raise RouteClosed(
+                    str(reply.payload.get("reason") or f"{node} is closed"),
+                    trouble_only=reply.payload.get("trouble") is True,
+                )
             if reply.type != "path" or not reply.payload.get("steps"):
                 reason = reply.payload.get("error") or reply.payload.get("reason") or reply.payload
                 raise NavigationError(f"no path to {node}: {reason}")

@@ -110,8 +110,9 @@ class TaskStatus(BaseModel):
     duration_s: float | None
     """The task's own length from its first point."""
     progress: dict[str, Any] | None
-    """Tours on their robot: {index, total, poi, name, stage: arrived | explained}: the point
-    the robot reported, by id and by name in the task's language."""
+    """Tours on their robot: {index, total, poi, name, stage: arrived | explained, skipped}:
+    the point the robot reported, by id and by name in the task's language, and the stops
+    skipped; a finished tour keeps its last (none after a restart)."""
     cancelled_by: str = ""
     """Cancelled tasks: "staff", "requester" or "" (the system; not kept across a restart)."""
     handover: dict[str, Any] | None = None

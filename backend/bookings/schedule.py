@@ -26,6 +26,7 @@ from backend.bookings.service import BookingService
 from backend.bookings.store import BookingStore
 from backend.bookings.words import coming
 from backend.closure import Closure, closed_nodes
+from backend.db.session import log_failure
 from backend.tasks.model import Task, TaskError
 from backend.tasks.robots import RobotInfo
 from guidebot.bus import BusEndpoint
@@ -147,8 +148,8 @@ class BookingScheduler(Service):
         while True:
             try:
                 await self.step(self.clock())
-            except Exception:  # one bad pass must not end the schedule
-                log.exception("booking scheduler pass failed")
+            except Exception as exc:  # one bad pass must not end the schedule
+                log_failure(log, exc, "booking scheduler pass failed; trying again in %g s", tick_s)
             await asyncio.sleep(tick_s)
 
     async def step(self, now: float) -> None:

@@ -14,7 +14,10 @@ Safety rules (docs/building.md, "Doors"):
   drive on such an announcement);
 - robots hold a door from ``open_door`` until ``release_door``; the coil is cleared when the
   last holder lets go, when a holder has held it ``max_hold_s`` (a lost robot), or when a
-  holder's agent restarted and it does not stand on the door's node (BuildingInterface).
+  holder's agent restarted and it does not stand on the door's node (BuildingInterface);
+- a holder that lets go while its ``open_door`` still waits for the door withdrew it
+  (``DoorReleased``): the door did not fail (a virtual plan day saw a robot's goal cancelled
+  right after it asked, and the wait's time-out closed the working door as trouble).
 """
 
 from __future__ import annotations
@@ -26,11 +29,15 @@ from dataclasses import dataclass, field
 
 from guidebot.site.building import Door
 
-__all__ = ["STALE_MARGIN_S", "DoorKeeper"]
+__all__ = ["STALE_MARGIN_S", "DoorKeeper", "DoorReleased"]
 
 STALE_MARGIN_S = 0.02
 """A sample slotted within this of a close write may have been read before it (timers fire a
 little early): it does not count."""
+
+
+class DoorReleased(Exception):
+    """The holder let the door go while its open_door waited for it: withdrawn, not failed."""
 
 
 @dataclass
@@ -51,7 +58,8 @@ class DoorKeeper:
     set_at: float = -math.inf
     """time.monotonic() of the last coil set (sensorless doors)."""
     holders: dict[str, asyncio.TimerHandle] = field(default_factory=dict)
-    _waiters: list[asyncio.Future[None]] = field(default_factory=list)
+    _waiters: dict[asyncio.Future[None], str] = field(default_factory=dict)
+    """Each open_door waiting for the door -> its holder."""
     _open_timer: asyncio.TimerHandle | None = None
 
     def state(self, is_open: bool, *, sensed: bool = True) -> None:
@@ -114,15 +122,20 @@ class DoorKeeper:
         self.closed_at = max(self.closed_at, now) if self.closed_at != math.inf else math.inf
         self.state(False, sensed=False)
 
-    async def wait_open(self, timeout_s: float) -> None:
+    async def wait_open(self, timeout_s: float, holder: str = "") -> None:
+        """Until the door is open: TimeoutError after ``timeout_s``, DoorReleased as soon as
+        ``holder`` lets it go (its request withdrawn), or at once if it already did (while the
+        coil was being written)."""
+        if holder and holder not in self.holders:
+            raise DoorReleased(holder)
         if self.is_open:
             return
         future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-        self._waiters.append(future)
+        self._waiters[future] = holder
         try:
             await asyncio.wait_for(future, timeout_s)
         finally:
-            self._waiters.remove(future)
+            del self._waiters[future]
 
     def hold(self, holder: str, expire: Callable[[], None]) -> None:
         """(Re)start ``holder``'s hold; ``expire`` runs if it is not released in time."""
@@ -136,6 +149,9 @@ class DoorKeeper:
         timer = self.holders.pop(holder, None)
         if timer is not None:
             timer.cancel()
+            for future, waiting in self._waiters.items():
+                if waiting == holder and not future.done():
+                    future.set_exception(DoorReleased(holder))
         return not self.holders
 
     def release_all(self) -> None:

@@ -26,7 +26,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.building._modbus import ModbusIOError
-from backend.building.doors import DoorKeeper
+from backend.building.doors import DoorKeeper, DoorReleased
 from backend.building.elevators import ElevatorWatch
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
@@ -452,7 +452,10 @@ class BuildingInterface(Service):
             keeper.coil_set(time.monotonic())
             timeout = door.open_time_s + self.command_margin_s
             try:
-                await keeper.wait_open(timeout)
+                await keeper.wait_open(timeout, holder)
+            except DoorReleased:  # its goal cancelled: nobody waits for this answer
+                log.info("door %s: %s let it go before it opened", door.id, holder)
+                return {"door": door.id}
             except TimeoutError:
                 health = self.pollers[door.open.module].health
                 why = f"; module {door.open.module} is {health.state.value}"

@@ -1,6 +1,6 @@
 """``guidebot plan``: how many robots, and which policy, for a day of visitors
-(docs/planning.md). Prints a table per fleet size and policy; with ``--json`` the last line
-is one JSON object."""
+(docs/planning.md). Prints a table per fleet size and policy; with ``--json`` stdout is one
+JSON object on one line (the table goes to stderr)."""
 
 from __future__ import annotations
 
@@ -215,7 +215,12 @@ def _table(rows: list[dict[str, Any]]) -> str:
     type=click.Path(dir_okay=False, path_type=Path),
     help="Write a report page with plots here.",
 )
-@click.option("--json", "as_json", is_flag=True, help="Last line: one JSON object.")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print one JSON object on stdout (the table on stderr).",
+)
 def plan_command(
     site_path: Path,
     profile_path: Path | None,
@@ -261,7 +266,7 @@ def plan_command(
     except PlanError as exc:
         raise click.UsageError(str(exc)) from None
     result["wall_s"] = round(time.perf_counter() - started, 3)
-    click.echo(_table(result["fleets"]))
+    click.echo(_table(result["fleets"]), err=as_json)  # with --json, stdout is the JSON alone
     if html_path is not None:
         from backend.planning.html import write_report
 

@@ -18,6 +18,7 @@ from sqlalchemy import Insert, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 
 from backend.db.models import EventRow, ReportCursorRow, ReportDayRow, ReportRollupRow
+from backend.db.session import log_failure
 from backend.reports.fold import Fold, Positions
 from guidebot.site.schema import Site
 
@@ -97,9 +98,10 @@ class Rollups:
                     await session.rollback()
                     return 0  # another process folded it meanwhile
             await _add(session, fold.tally)
-            self._state = fold.state
-            self.folded += len(rows)
-            return len(rows)
+        # Committed (a busy database raises on the way out, before this): only now counted.
+        self._state = fold.state
+        self.folded += len(rows)
+        return len(rows)
 
     async def tail(self, now: float) -> Tally:
         """What the rollups do not hold yet: each robot's time from its last event to ``now``
@@ -113,13 +115,14 @@ class Rollups:
         return fold.tally
 
     async def run_periodically(self, every_s: float) -> None:
-        """The server's background fold: every ``every_s``."""
+        """The server's background fold: every ``every_s``; a fold that fails wrote nothing
+        (its chunk's transaction and cursor move together), and the next one folds it."""
         while True:
             await asyncio.sleep(every_s)
             try:
                 await self.catch_up()
-            except Exception:
-                log.exception("report rollups failed; trying again in %.0f s", every_s)
+            except Exception as exc:  # a busy database: one warning line (log_failure)
+                log_failure(log, exc, "report rollups failed; trying again in %.0f s", every_s)
 
 
 async def _add(session: Any, tally: Tally) -> None:

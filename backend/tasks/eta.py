@@ -269,7 +269,7 @@ class EtaEstimator:
             start = robot.node if robot is not None else None
             self._running[task.id] = self._track(task, start)
         elif task.state is TaskState.QUEUED or task.final:
-            self._running.pop(task.id, None)
+            self._drop(task)
         sched = self._schedule
         if sched is None or task.internal:
             return
@@ -329,7 +329,7 @@ class EtaEstimator:
 
     def ended(self, task: Task, took_s: float | None) -> None:
         """Learn from a task that ended done: the whole, when no segment was reported."""
-        run = self._running.pop(task.id, None)
+        run = self._drop(task)
         if task.kind == "charge" and took_s:
             self.charge_s = took_s
             return
@@ -341,6 +341,13 @@ class EtaEstimator:
             scale = took_s / predicted  # spread the surprise over both kinds of segment
             self.move.learn(moves * self.move.value * scale, moves)
             self.talk.learn(talks * self.talk.value * scale, talks)
+
+    def _drop(self, task: Task) -> _Progress | None:
+        """Stop following ``task`` (ended, or back in the queue); a finished tour keeps its
+        last progress on the task (``Task.last_progress``: what its status shows)."""
+        if task.final and task.id in self._running:
+            task.last_progress = self.progress_view(task)
+        return self._running.pop(task.id, None)
 
     # --- what the visitor sees ----------------------------------------------------------------
     def service(self) -> Service:

@@ -356,7 +356,8 @@ class TrafficManager(Service):
             result = self.path(start, req.to_node, step_free=req.step_free)
         except RouteClosed as exc:
             log.info("traffic: no open path for %s to %s: %s", robot, req.to_node, exc.reason)
-            self._reply(msg, "path", {"error": str(exc), "closed": True, "reason": exc.reason})
+            refusal = {"error": str(exc), "closed": True, "reason": exc.reason}
+            self._reply(msg, "path", refusal | {"trouble": exc.trouble})
             return
         except (UnknownNode, NoPath) as exc:
             self._reply(msg, "path", {"error": str(exc).strip("'\"")})

@@ -43,6 +43,10 @@ class Path(PayloadModel):
     """With ``error``: only closed elements lead there (building modes or trouble)."""
     reason: str | None = None
     """With ``closed``: the closures' reasons ("gallery g2 closed: cleaning"), for the visitor."""
+    trouble: bool = False
+    """With ``closed``: every closure that cuts the way off is trouble (a jammed door, a stuck
+    lift: it lifts itself), none is by staff; a robot told to wait for trouble
+    (``navigate_to``'s ``trouble_wait_s``) waits for this one, and reads no ``reason`` text."""
 
 
 @register_payload("request_area")

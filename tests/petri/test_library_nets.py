@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import copy
 import json
+from pathlib import Path
 
 import pytest
 
+from petri_nets import library_source
 from petri_nets.describe import describe
 from petri_nets.library import NetLibrary
 from petri_nets.scripted import DEFAULT_REPLIES
@@ -30,6 +32,17 @@ def test_library_is_valid_and_complete() -> None:
         "battery_charge",
         "waiting",
     }
+
+
+def test_every_library_file_is_what_its_source_writes(tmp_path: Path) -> None:
+    """The .pnml files are generated (``python -m petri_nets.library_source``): a hand edit of
+    one (go_to_poi's ``lang``) was lost on the next regeneration. Edit the source, then run it."""
+    library = Path(library_source.__file__).with_name("library")
+    written = {p.name: p.read_bytes() for p in library_source.write_library(tmp_path)}
+    shipped = {p.name: p.read_bytes() for p in library.glob("*.pnml")}
+    assert sorted(shipped) == sorted(written)
+    stale = [name for name in written if shipped[name] != written[name]]
+    assert not stale, f"{stale} differ from petri_nets/library_source.py: edit it, then run it"
 
 
 def test_wink_one_eye_moves_servos_in_the_paper_order(rig: Rig) -> None:

@@ -41,6 +41,18 @@ def test_a_profile_gives_one_row_per_fleet_and_policy() -> None:
     assert "wait p95" in output.splitlines()[0]
 
 
+def test_with_json_stdout_is_the_json_object_alone_and_the_table_goes_to_stderr() -> None:
+    """``guidebot plan --json | jq`` read the table's lines first: stdout is one JSON line."""
+    args = ["plan", "--site", str(DEMO), "--visitors", str(DEMO_PROFILE), "--robots", "2"]
+    result = CliRunner().invoke(main, [*args, "--json"])
+    assert result.exit_code == 0, result.output
+    [line] = result.stdout.splitlines()
+    assert [row["robots"] for row in json.loads(line)["fleets"]] == [2]
+    assert "wait p95" in result.stderr.splitlines()[0]
+    table = CliRunner().invoke(main, args)
+    assert "wait p95" in table.stdout.splitlines()[0]  # without --json: the table, on stdout
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [

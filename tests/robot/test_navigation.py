@@ -7,12 +7,13 @@ import math
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import pytest
 
+from backend.closure import Closure, closed_nodes
 from backend.traffic.manager import TrafficManager
-from guidebot.bus import Bus
+from guidebot.bus import Bus, Endpoint
 from guidebot.messages import Message
 from guidebot.site.schema import Site
 from guidebot.testing import wait_until
@@ -524,3 +525,48 @@ async def test_a_robot_waiting_its_turn_for_an_area_does_not_give_up_while_linke
     assert not rig.seen.of("navigation_failed") and rig.nav.state == "waiting_area"
     r2.publish("release_area", {"robot": "R2", "area": "corridor"})
     await rig.seen.wait_for(lambda: rig.seen.of("goal_reached"), timeout=30)
+
+
+def close_door_gallery(
+    rig: Rig, demo_site: Site, source: Literal["staff", "trouble"], reason: str
+) -> Endpoint:
+    """Close door_gallery (node door_hall) as staff or as trouble, and say so to the fleet
+    (over the endpoint returned: the closures' own)."""
+    shut = Closure(id="c1", kind="door", target="door_gallery", reason=reason, source=source)
+    closed = closed_nodes(demo_site, [shut], time.time())
+    rig.traffic.closures = lambda: closed
+    closures = rig.bus.endpoint("closures")
+    closures.publish("closures_changed", {"nodes": sorted(closed)})
+    return closures
+
+
+async def test_a_staff_closure_in_words_of_trouble_is_not_waited_for(
+    rig: Rig, demo_site: Site, helpers: Any
+) -> None:
+    """The robot told trouble from the path refusal's reason text: staff who close a door
+    "out of order" made a tour wait its whole ``trouble_wait_s`` for a door nobody would
+    reopen. The ``path`` answer's ``trouble`` flag says it, the words are the visitor's."""
+    paths = helpers.Recorder(rig.bus.endpoint("watch"), "path")
+    close_door_gallery(rig, demo_site, "staff", "out of order")
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1", "trouble_wait_s": 36000.0})
+    await rig.seen.wait_for(lambda: rig.seen.of("navigation_failed"))
+    failed = rig.seen.of("navigation_failed")[0].payload
+    assert failed["closed"] is True
+    assert failed["reason"] == "door door_gallery closed: out of order"
+    assert paths.of("path", closed=True, trouble=False)
+
+
+async def test_a_way_only_trouble_cuts_off_is_waited_for(
+    rig: Rig, demo_site: Site, helpers: Any
+) -> None:
+    paths = helpers.Recorder(rig.bus.endpoint("watch"), "path")
+    closures = close_door_gallery(rig, demo_site, "trouble", "door door_gallery not open in 4 s")
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1", "trouble_wait_s": 36000.0})
+    await paths.wait_for(lambda: paths.of("path", closed=True, trouble=True))
+    assert paths.of("path")[0].payload["reason"] == "door door_gallery out of order"
+    # The door works again: the trouble lifts, and the robot plans again and goes.
+    rig.traffic.closures = dict
+    closures.publish("closures_changed", {"nodes": []})
+    await rig.seen.wait_for(lambda: rig.seen.of("goal_reached") or rig.seen.of("navigation_failed"))
+    assert not rig.seen.of("navigation_failed"), rig.seen.of("navigation_failed")[0].payload
+    assert rig.nav.node == "gb1"

@@ -134,6 +134,7 @@ async def test_get_path_goes_around_a_closure_and_says_why_when_it_cannot() -> N
         reply = await robot.endpoint.request("get_path", {"robot": "R1", "to_node": "e"})
         assert reply.payload["closed"] is True
         assert reply.payload["reason"] == "gallery west closed: wet floor"
+        assert reply.payload["trouble"] is False  # staff's closure: nothing to wait for
         reply = await robot.endpoint.request("get_path", {"robot": "R1", "to_node": "b"})
         assert reply.payload["nodes"] == ["w", "a", "b"]
         (only,) = service.closures

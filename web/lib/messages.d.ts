@@ -320,6 +320,7 @@ export interface Path {
   error?: string | null;
   closed?: boolean;
   reason?: string | null;
+  trouble?: boolean;
 }
 
 export interface PathStep {
