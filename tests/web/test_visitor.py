@@ -234,10 +234,20 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
         await expect(question.get_by_role("timer")).to_contain_text("s left to answer")
         await web.axe_check(screen)
         await web.screenshot(screen, "touch-screen-question")
-        await question.get_by_role("button", name="No, thanks").click()
-        await expect(page.locator(".request-state")).to_contain_text(
-            "The tour has ended", timeout=LONG
+        # The phone says where the visitor is and what comes next (it said "(explained)").
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("Stop 1 of 5: Welcome hall, seen.")
+        await expect(state).to_contain_text(
+            "Next: R1 asks on its screen “Shall we continue the tour?”"
         )
+        await question.get_by_role("button", name="No, thanks").click()
+        await expect(state).to_contain_text("The tour has ended", timeout=LONG)
+        # ... and how far it got: the tour ended at its first stop, not at its last.
+        await expect(state).to_contain_text("It ended at stop 1 of 5: Welcome hall.")
+        await expect(page.get_by_role("progressbar", name="Tour progress")).to_have_attribute(
+            "value", "1"
+        )
+        await web.axe_check(page)
         ended = next(
             iter(
                 t for t in vf.fleet.server.app.state.task_manager.tasks.values() if t.kind == "tour"
@@ -245,8 +255,14 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
         )
         async with vf.fleet.http() as staff:
             history = (await staff.get(f"/api/tasks/{ended.id}/history")).json()
+            status = (await staff.get(f"/api/tasks/{ended.id}")).json()
         events = [h["event"] for h in history]
         assert "point 1/5 explained" in events and "point 2/5 arrived" not in events
+        # The task's status keeps where the tour got to once it is done (it said null).
+        assert status["state"] == "done"
+        assert status["progress"] is not None, status
+        assert (status["progress"]["index"], status["progress"]["total"]) == (1, 5)
+        assert status["progress"]["poi"] == "welcome"
         await expect(screen.get_by_role("button", name="Ground floor tour")).to_be_visible()
 
 

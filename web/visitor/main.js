@@ -522,8 +522,10 @@ function statusLines(r) {
     } else {
       const place = placeOf(progress);
       if (progress.index === 1 && progress.stage === "arrived") lines.push(t("state_arrived", { robot, place }));
-      const key = progress.stage === "explained" ? "state_explained" : "state_progress";
-      lines.push(t(key, { i: progress.index, n: progress.total, place }));
+      const explained = progress.stage === "explained";
+      lines.push(t(explained ? "state_explained" : "state_progress", { i: progress.index, n: progress.total, place }));
+      // After a stop's explanation the robot asks on its screen whether to go on, then walks on.
+      if (explained && progress.index < progress.total) lines.push(t("state_next_stop", { robot }));
       if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
     }
   } else if (r.state === "done") lines.push(point ? t("state_point_done", { robot, place: poiName(r.params?.poi) }) : t("state_done"));
@@ -531,7 +533,17 @@ function statusLines(r) {
   else if (r.service === "withdrawn") lines.push(t("state_withdrawn"));
   else if (r.cancelled_by === "staff") lines.push(t(point ? "state_cancelled_staff_point" : "state_cancelled_staff_tour"));
   else lines.push(t("state_cancelled"));
+  if (FINAL.has(r.state)) lines.push(...endedAt(r));
   return lines;
+}
+
+/** How far a tour that ended got (the server keeps its last progress): said unless it ended
+ * done at its last stop. */
+function endedAt(r) {
+  const p = r.progress;
+  if (r.kind !== "tour" || !p?.index) return [];
+  if (r.state === "done") return p.index < p.total ? [t("state_ended_at", { i: p.index, n: p.total, place: placeOf(p) })] : [];
+  return [t("state_got_to", { i: p.index, n: p.total, place: placeOf(p) })];
 }
 
 function requestView() {
