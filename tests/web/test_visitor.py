@@ -103,6 +103,16 @@ def visitor_fleet(
     return make
 
 
+async def painted_to_bottom(page: Any) -> bool:
+    """Whether the page's own background reaches the bottom of the viewport (the body, not
+    the bare document under it)."""
+    return bool(
+        await page.evaluate(
+            "document.elementFromPoint(2, innerHeight - 2) !== document.documentElement"
+        )
+    )
+
+
 async def request_from(page: Any, tour_name: str, button: str = "Take this tour") -> None:
     card = page.get_by_role("article", name=tour_name)
     await card.get_by_role("button", name=button).click()
@@ -248,6 +258,9 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
             "value", "1"
         )
         await web.axe_check(page)
+        # A short page is the page's colour to the bottom of the screen (it was white below
+        # the text: the body, which has the colour, ended with it).
+        assert await painted_to_bottom(page)
         ended = next(
             iter(
                 t for t in vf.fleet.server.app.state.task_manager.tasks.values() if t.kind == "tour"
