@@ -308,16 +308,26 @@ async function start({ me, vocabulary }) {
   const library = {
     async publish(form) {
       const name = model.doc.id;
+      let saved;
       try {
-        const saved = await api.post("/api/net-editor/publish", { net: model.doc, note: form.get("note") ?? "" });
-        ui.library = await api.get("/api/nets");
-    await attachment.loadTargets();
-        ui.libraryNet = name;
-        await loadVersions(name);
-        say(`${name} version ${saved.version} published: robots start it at their next task.`);
+        saved = await api.post("/api/net-editor/publish", { net: model.doc, note: form.get("note") ?? "" });
       } catch (err) {
         say(`Not published: ${err.message}`, true);
+        return;
       }
+      // Published: what the page reads after it (the library, the robots, the versions) may
+      // fail without taking that back.
+      const published = `${name} version ${saved.version} published: robots start it at their next task.`;
+      ui.libraryNet = name;
+      let stale = "";
+      try {
+        ui.library = await api.get("/api/nets");
+        await attachment.loadTargets();
+      } catch (err) {
+        stale = ` The library's list could not be read again (${err.message}): reload the page to see it.`;
+      }
+      await loadVersions(name);
+      say(`${published}${stale}`);
     },
     async open(version) {
       try {
