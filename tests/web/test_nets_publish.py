@@ -114,9 +114,11 @@ async def test_a_publish_that_went_through_says_so_when_the_lists_cannot_be_read
         await page.get_by_label("Library net").select_option("explain_point")
         await page.get_by_role("button", name="Open", exact=True).click()
         await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
-        await page.locator("#lists").get_by_role(
-            "button", name="synthesize text (synthesize_text)"
-        ).click()
+        await (
+            page.locator("#lists")
+            .get_by_role("button", name="synthesize text (synthesize_text)")
+            .click()
+        )
         payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
         await payload.fill(NEW_WORDS)
         await payload.press("Tab")
