@@ -134,6 +134,11 @@ async def test_a_phone_visitor_follows_a_tour_from_request_to_end(
         )
         assert broken == 0
         assert await page.evaluate("document.documentElement.scrollWidth") <= PHONE[0]
+        # A point's length is the time there, not a tour's (it said "Tour: 5 s").
+        point = page.get_by_role("article", name="Welcome hall")
+        await expect(point).to_contain_text("At the point: ")
+        await expect(point).not_to_contain_text("Tour: ")
+        await expect(page.get_by_role("article", name="Highlights")).to_contain_text("Tour: ")
         await web.axe_check(page)
         await web.screenshot(page, "visitor-phone-en")
         # Keep the robot busy with a staff tour, so the visitor waits in line first.

@@ -397,7 +397,9 @@ function card(kind, item) {
   const stepsOnly = kind === "poi" && state.stepFree && item.steps_only; // refused: said why
   const facts = [];
   if (kind === "tour") facts.push(t("stops", { n: item.stops.length }));
-  const length = state.menu.pace === "slow" ? "tour_length_slow" : "tour_length";
+  // A point's length is its explanation there (the walk to it is the wait), not a tour's.
+  const slow = state.menu.pace === "slow";
+  const length = kind === "tour" ? (slow ? "tour_length_slow" : "tour_length") : (slow ? "point_length_slow" : "point_length");
   if (estimate?.duration_s) facts.push(t(length, { t: state.texts.duration(estimate.duration_s) }));
   const media = kind === "tour" ? item.stops.flatMap((s) => s.media) : item.media;
   const id = `${kind}-${item.id}`;
