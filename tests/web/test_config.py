@@ -305,3 +305,32 @@ async def test_publish_after_a_save_that_failed_does_not_leave_the_change_out(
         assert site["version"] == 2
         tours = {t["id"]: t for t in site["site"]["tours"]}
         assert tours["highlights"]["name"] == "Best of the museum"
+
+
+async def test_a_publish_note_goes_with_its_version_only(
+    fleet_factory: Any, open_page: Any
+) -> None:
+    """The note stayed in the bar after publishing, so the next version went out with the last
+    one's note ("rename welcome" on a version that changed a tour): the history lied."""
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet)).page
+        await page.get_by_role("button", name="Points of interest").click()
+        await page.get_by_role("button", name="Welcome hall (welcome)").click()
+        await page.get_by_label("name", exact=True).fill("Welcome desk")
+        await page.get_by_label("name", exact=True).press("Enter")
+        note = page.get_by_label("Note")
+        await note.fill("rename welcome")
+        await page.get_by_role("button", name="Publish", exact=True).click()
+        await expect(page.locator(".notice.ok")).to_contain_text("Version 2 is live.")
+        await expect(note).to_have_value("")
+        await page.get_by_role("button", name="Tours").click()
+        await page.get_by_role("button", name="Ground floor tour (ground)").click()
+        await page.locator("ol.tour-points li").first.focus()
+        await page.keyboard.press("Alt+ArrowDown")
+        await page.evaluate("guidebotProbe.saved()")
+        await page.get_by_role("button", name="Publish", exact=True).click()
+        await expect(page.locator(".notice.ok")).to_contain_text("Version 3 is live.")
+        async with fleet.http() as http:
+            versions = (await http.get("/api/site/versions")).json()
+        notes = {v["version"]: v["note"] for v in versions}
+        assert notes[2] == "rename welcome" and notes[3] == "", notes
