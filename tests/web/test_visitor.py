@@ -195,6 +195,42 @@ async def test_a_spanish_visitor_gets_spanish_pages_speech_and_touch_screen(
         assert any("mosaicos" in p["text"] for p in spoken)
 
 
+async def test_a_wait_counted_down_to_nothing_never_says_about_0_s(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The server told a wait of a few seconds and then nothing new for a while (it tells a
+    new wait only when its estimate drifts; seen on the busy demo, the robot ahead late): the
+    countdown reached nothing and the page said "A robot will start for you in about 0 s."."""
+    async with visitor_fleet(time_scale=1.0) as vf:
+        watch = await open_page("", viewport=PHONE)
+        page = watch.page
+
+        async def no_task_news(ws: Any) -> None:  # the server says nothing new of the wait
+            server = ws.connect_to_server()
+            server.on_message(lambda m: None if "task_event" in str(m) else ws.send(m))
+
+        async def told_a_short_wait(route: Any) -> None:
+            reply = await route.fetch()
+            status = await reply.json()
+            status |= {"eta_s": 3.0, "service": "busy"}
+            await route.fulfill(response=reply, json=status)
+
+        await page.route_web_socket("**/ws*", no_task_news)
+        await page.goto(vf.panel_url())
+        async with vf.fleet.http() as staff:  # R1 busy: the visitor waits in line
+            r = await staff.post(
+                "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "telescope"}}
+            )
+            assert r.status_code == 201, r.text
+        await page.route("**/api/tasks", told_a_short_wait)
+        await request_from(page, "Highlights")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("You are number 1 in line.")
+        await expect(state).to_contain_text("A robot will start for you any moment now.")
+        await expect(state).not_to_contain_text("0 s")
+        await web.axe_check(page)
+
+
 async def test_a_visitor_cancels_and_a_second_panel_cannot_see_or_cancel_it(
     visitor_fleet: Any, open_page: Any, web: SimpleNamespace
 ) -> None:

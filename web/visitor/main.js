@@ -386,7 +386,8 @@ function serviceLine(estimate) {
   if (estimate.service === "held_up") return t("service_held_up");
   if (estimate.service === "busy") {
     const wait = countdown(estimate.eta_s, state.menuAt);
-    return wait === null ? t("service_busy_unknown") : t("service_busy", { t: state.texts.duration(wait) });
+    if (wait === null) return t("service_busy_unknown");
+    return wait > 0 ? t("service_busy", { t: state.texts.duration(wait) }) : t("service_busy_now");
   }
   return t("service_available");
 }
@@ -509,7 +510,9 @@ function statusLines(r) {
       if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
       const wait = countdown(r.eta_s, r.toldAt);
       if (r.service === "held_up") lines.push(t("service_held_up"));
-      else lines.push(wait === null ? t("service_busy_unknown") : t("state_wait", { t: state.texts.duration(wait) }));
+      else if (wait === null) lines.push(t("service_busy_unknown"));
+      // A wait counted down to nothing while still in line: no "in about 0 s".
+      else lines.push(wait > 0 ? t("state_wait", { t: state.texts.duration(wait) }) : t("state_wait_now"));
     }
   } else if (r.state === "assigned" || r.state === "running") {
     if (point) {
@@ -520,7 +523,7 @@ function statusLines(r) {
     } else if (!progress || progress.index === 0) {
       lines.push(t("state_assigned", { robot }));
       if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
-      else if (arrival !== null) lines.push(t("state_on_its_way", { robot, t: state.texts.duration(arrival) }));
+      else if (arrival !== null) lines.push(arrival > 0 ? t("state_on_its_way", { robot, t: state.texts.duration(arrival) }) : t("state_on_its_way_now", { robot }));
     } else {
       const place = placeOf(progress);
       if (progress.index === 1 && progress.stage === "arrived") lines.push(t("state_arrived", { robot, place }));
