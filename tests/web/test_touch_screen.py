@@ -200,7 +200,7 @@ async def test_during_a_tour_the_language_buttons_say_the_screen_follows_the_tou
         spanish = languages.get_by_role("button", name="Español")
         await expect(spanish).to_be_disabled()
         await expect(page.locator("#lang-help")).to_have_text(
-            "During a tour the screen speaks the tour's language."
+            "During a visit the screen speaks its visitor's language."
         )
         await expect(spanish).to_have_attribute("aria-describedby", "lang-help")
         await web.axe_check(page)
