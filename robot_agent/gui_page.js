@@ -241,10 +241,16 @@ function viewOptions(s) {
   </div>`;
 }
 
+/** The language buttons; during a task the screen follows its visitor's language (a tap would
+ * change nothing), so they are off and say why. */
 function languages(s) {
-  return s.languages.length > 1 ? html`<div class="languages" role="group" aria-label=${t("choose_language")}>
+  if (s.languages.length < 2) return "";
+  const fixed = Boolean(s.task && s.tour_lang);
+  return html`<div class="languages" role="group" aria-label=${t("choose_language")}>
     ${s.languages.map((lang) => html`<button class="secondary" lang=${lang} aria-pressed=${String(lang === s.lang)}
-      @click=${() => { state.chosen = lang; refresh(); }}>${on(lang === s.lang)}${names.get(lang) ?? lang}</button>`)}</div>` : "";
+      ?disabled=${fixed} aria-describedby=${fixed ? "lang-help" : nothing}
+      @click=${() => { state.chosen = lang; refresh(); }}>${on(lang === s.lang)}${names.get(lang) ?? lang}</button>`)}
+    ${fixed ? html`<p class="muted" id="lang-help">${t("touch_lang_of_tour")}</p>` : ""}</div>`;
 }
 
 function draw() {

@@ -269,7 +269,7 @@ class EtaEstimator:
             start = robot.node if robot is not None else None
             self._running[task.id] = self._track(task, start)
         elif task.state is TaskState.QUEUED or task.final:
-            self._drop(task)
+            self._stop(task)
         sched = self._schedule
         if sched is None or task.internal:
             return
@@ -329,7 +329,7 @@ class EtaEstimator:
 
     def ended(self, task: Task, took_s: float | None) -> None:
         """Learn from a task that ended done: the whole, when no segment was reported."""
-        run = self._drop(task)
+        run = self._stop(task)
         if task.kind == "charge" and took_s:
             self.charge_s = took_s
             return
@@ -341,13 +341,6 @@ class EtaEstimator:
             scale = took_s / predicted  # spread the surprise over both kinds of segment
             self.move.learn(moves * self.move.value * scale, moves)
             self.talk.learn(talks * self.talk.value * scale, talks)
-
-    def _drop(self, task: Task) -> _Progress | None:
-        """Stop following ``task`` (ended, or back in the queue); a finished tour keeps its
-        last progress on the task (``Task.last_progress``: what its status shows)."""
-        if task.final and task.id in self._running:
-            task.last_progress = self.progress_view(task)
-        return self._running.pop(task.id, None)
 
     # --- what the visitor sees ----------------------------------------------------------------
     def service(self) -> Service:
@@ -419,10 +412,25 @@ class EtaEstimator:
             return None
         return round(max(0.0, sched.heap[0][0] - (self.tm.clock() - sched.built_at)), 1)
 
+    def _stop(self, task: Task) -> _Progress | None:
+        """Stop following a task on its robot; a tour that ended keeps where it got to."""
+        run = self._running.pop(task.id, None)
+        if run is not None and task.final and task.kind == "tour":
+            task.final_progress = self._view(run)
+        return run
+
     def progress_view(self, task: Task) -> dict[str, Any] | None:
-        run = self._running.get(task.id)
-        if run is None or task.kind != "tour":
+        """A tour's progress on its robot; once it ended, where it got to (None: it never
+        reached its robot, or a restart forgot it)."""
+        if task.kind != "tour":
             return None
+        run = self._running.get(task.id)
+        if run is None:
+            return task.final_progress if task.final else None
+        return self._view(run)
+
+    @staticmethod
+    def _view(run: _Progress) -> dict[str, Any]:
         return {
             "index": run.index,
             "total": run.total,

@@ -418,12 +418,11 @@ class TaskManager(Service):
     def status(self, task: Task) -> dict[str, Any]:
         """The task as ``GET /api/tasks/{id}`` shows it; a finished tour keeps its last
         progress (how far it went, the stops it skipped)."""
-        progress = task.last_progress if task.final else self.estimator.progress_view(task)
         return {
             **task.as_dict(),
             "queue_position": self.queue_position(task),
             **self.estimator.estimate(task).as_dict(),
-            "progress": progress,
+            "progress": self.estimator.progress_view(task),
             "trouble": self.trouble_view(task),
         }
 

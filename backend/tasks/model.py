@@ -105,9 +105,10 @@ class Task:
     handover: dict[str, Any] | None = None
     """The last handover of a tour: from_robot, stop, total, poi, name, reason, at (Unix
     seconds), arrived_after_s (None until the new robot is at the visitor's stop)."""
-    last_progress: dict[str, Any] | None = None
-    """A tour's progress as it stood when the tour ended (its skipped stops with it): what
-    ``GET /api/tasks/{id}`` shows of a finished tour. Not kept across a restart."""
+    final_progress: dict[str, Any] | None = None
+    """A tour that ended on its robot: where it got to (``progress`` of its status, which its
+    visitor's page still shows: the stop it ended at, the stops it skipped). Not kept across a
+    restart."""
     created_at: float = field(default_factory=time.time)
     updated_at: float = field(default_factory=time.time)
     started_at: float | None = None

@@ -201,9 +201,14 @@ async def test_a_running_tour_reports_its_progress_live(tmp_path: Path) -> None:
         progress = [
             (e.payload["progress"]["index"], e.payload["progress"]["stage"])
             for e in events
-            if e.payload["task_id"] == task_id and e.payload.get("progress")
+            if e.payload["task_id"] == task_id
+            and e.payload.get("progress")
+            and e.payload["state"] == "running"
         ]
         assert progress[-4:] == [(1, "arrived"), (1, "explained"), (2, "arrived"), (2, "explained")]
+        # The end keeps where the tour got to (the visitor's page says it).
+        end = first(events, task_id, "done")
+        assert end is not None and end.payload["progress"]["index"] == 2
         remaining = [
             e.payload["remaining_s"]
             for e in events

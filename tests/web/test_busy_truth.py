@@ -37,7 +37,7 @@ VISITOR_VIEW = r"""() => {
   const lines = [...box.querySelectorAll("p")].map((p) => p.textContent.trim());
   let number = null, place = null;
   const patterns = [/ is going to (.+?)(?:: there in about .*|\. Meet it there!)$/,
-    / has arrived at (.+)\. Join it there!$/, /^Stop \d+ of \d+: (.+?)(?: \(explained\))?$/,
+    / has arrived at (.+)\. Join it there!$/, /^Stop \d+ of \d+: (.+?)(?:, seen\.)?$/,
     / has shown you (.+)\. Thank you for your visit!$/];
   for (const line of lines) {
     const n = line.match(/^You are number (\d+) in line\.$/);

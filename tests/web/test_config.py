@@ -264,3 +264,73 @@ async def test_new_floor_with_plan_calibrated_published_and_planned_to(
             assert path.status_code == 200, path.text
             assert any(s.get("elevator") == "lift" for s in path.json()["steps"])
         await web.axe_check(page)
+
+
+async def test_publish_after_a_save_that_failed_does_not_leave_the_change_out(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """An edit whose save failed (the server unreachable for a moment) is not in the shared
+    draft: publishing then published the draft without it and said "Version 2 is live.", and
+    the editor's copy took the published draft, so the change was gone without a word."""
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_editor(open_page, fleet)
+        watch.expect_error(r"status of 503")
+        page = watch.page
+
+        async def unavailable(route: Any) -> None:
+            if route.request.method == "PUT":
+                await route.fulfill(status=503, json={"detail": "restarting"})
+            else:
+                await route.fallback()
+
+        await page.route("**/api/site/draft", unavailable)
+        await page.get_by_role("button", name="Tours").click()
+        await page.get_by_role("button", name="Highlights (highlights)").click()
+        await page.get_by_label("name", exact=True).fill("Best of the museum")
+        await page.get_by_label("name", exact=True).press("Enter")
+        await page.evaluate("guidebotProbe.saved()")
+        await expect(page.locator("#draft-status")).to_contain_text("not saved")
+        await page.get_by_role("button", name="Publish", exact=True).click()
+        refused = page.get_by_role("alert").filter(has_text="Publish refused")
+        await expect(refused).to_contain_text("your last change is not saved")
+        await web.axe_check(page)
+        async with fleet.http() as http:
+            assert (await http.get("/api/site")).json()["version"] == 1
+            # The server is back: Publish saves the change first, then publishes it.
+            await page.unroute("**/api/site/draft", unavailable)
+            await page.get_by_role("button", name="Publish", exact=True).click()
+            await expect(page.locator(".notice.ok")).to_contain_text("Version 2 is live.")
+            await expect(page.locator("#draft-status")).not_to_contain_text("not saved")
+            site = (await http.get("/api/site")).json()
+        assert site["version"] == 2
+        tours = {t["id"]: t for t in site["site"]["tours"]}
+        assert tours["highlights"]["name"] == "Best of the museum"
+
+
+async def test_a_publish_note_goes_with_its_version_only(
+    fleet_factory: Any, open_page: Any
+) -> None:
+    """The note stayed in the bar after publishing, so the next version went out with the last
+    one's note ("rename welcome" on a version that changed a tour): the history lied."""
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_editor(open_page, fleet)).page
+        await page.get_by_role("button", name="Points of interest").click()
+        await page.get_by_role("button", name="Welcome hall (welcome)").click()
+        await page.get_by_label("name", exact=True).fill("Welcome desk")
+        await page.get_by_label("name", exact=True).press("Enter")
+        note = page.get_by_label("Note")
+        await note.fill("rename welcome")
+        await page.get_by_role("button", name="Publish", exact=True).click()
+        await expect(page.locator(".notice.ok")).to_contain_text("Version 2 is live.")
+        await expect(note).to_have_value("")
+        await page.get_by_role("button", name="Tours").click()
+        await page.get_by_role("button", name="Ground floor tour (ground)").click()
+        await page.locator("ol.tour-points li").first.focus()
+        await page.keyboard.press("Alt+ArrowDown")
+        await page.evaluate("guidebotProbe.saved()")
+        await page.get_by_role("button", name="Publish", exact=True).click()
+        await expect(page.locator(".notice.ok")).to_contain_text("Version 3 is live.")
+        async with fleet.http() as http:
+            versions = (await http.get("/api/site/versions")).json()
+        notes = {v["version"]: v["note"] for v in versions}
+        assert notes[2] == "rename welcome" and notes[3] == "", notes

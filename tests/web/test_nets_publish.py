@@ -98,3 +98,84 @@ async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words
         await wait_until(lambda: robot.net_follower.version == 2)
         await expect(page.locator("#lists")).to_contain_text("synthesize_text")
         await web.axe_check(page)
+
+
+async def test_a_publish_that_went_through_says_so_when_the_lists_cannot_be_read_after(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The publish is one call; reading the library and the robots again after it is another.
+    When that read failed, the page said "Not published: …" of a net the fleet runs now."""
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_page(f"{fleet.server.url}/nets/")
+        watch.expect_error(r"status of 503")
+        page = watch.page
+        await page.get_by_label("Staff token").fill(fleet.server.admin_token)
+        await page.get_by_label("Staff token").press("Enter")
+        await page.get_by_label("Library net").select_option("explain_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
+        await (
+            page.locator("#lists")
+            .get_by_role("button", name="synthesize text (synthesize_text)")
+            .click()
+        )
+        payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
+        await payload.fill(NEW_WORDS)
+        await payload.press("Tab")
+        await expect(page.locator("#problem-count")).to_have_text("No problems")
+
+        async def unavailable(route: Any) -> None:
+            await route.fulfill(status=503, json={"detail": "restarting"})
+
+        await page.route("**/api/nets", unavailable)  # the library's list, read after publishing
+        await page.get_by_role("button", name="Publish explain_point to the fleet").click()
+        notices = page.locator("#notices")
+        await expect(notices).to_contain_text("explain_point version 1 published")
+        await expect(notices).not_to_contain_text("Not published")
+        await web.axe_check(page)
+        async with fleet.http() as http:
+            versions = (await http.get("/api/net-editor/versions/explain_point")).json()
+        assert versions["live"] == 1, versions
+
+
+async def test_opening_another_net_asks_before_dropping_changes_not_published(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """Edits live only in the tab until published: opening another net dropped them without a
+    word, and nothing said they were not published. The bar says so, opening another net asks
+    first, and once published nothing is asked."""
+    async with fleet_factory(robots=0) as fleet:
+        page = (await open_page(f"{fleet.server.url}/nets/")).page
+        await page.get_by_label("Staff token").fill(fleet.server.admin_token)
+        await page.get_by_label("Staff token").press("Enter")
+        await page.get_by_label("Library net").select_option("explain_point")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
+        unpublished = page.locator("#unpublished")
+        await expect(unpublished).to_have_count(0)
+        await (
+            page.locator("#lists")
+            .get_by_role("button", name="synthesize text (synthesize_text)")
+            .click()
+        )
+        payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
+        await payload.fill(NEW_WORDS)
+        await payload.press("Tab")
+        await expect(unpublished).to_have_text("Changes not published")
+        await web.axe_check(page)
+        await page.get_by_label("Library net").select_option("give_tour")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        ask = page.get_by_role("dialog", name="Drop your changes to explain_point?")
+        await expect(ask).to_be_visible()
+        await web.axe_check(page)
+        await ask.get_by_role("button", name="Keep editing explain_point").click()
+        await expect(ask).to_have_count(0)
+        await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
+        await expect(payload).to_have_value(NEW_WORDS)
+        await page.get_by_role("button", name="Publish explain_point to the fleet").click()
+        await expect(page.locator("#notices")).to_contain_text("explain_point version 1 published")
+        await expect(unpublished).to_have_count(0)
+        await page.get_by_label("Library net").select_option("give_tour")
+        await page.get_by_role("button", name="Open", exact=True).click()
+        await expect(page.locator("#notices")).to_contain_text("Net give_tour opened")
+        await expect(page.get_by_role("dialog")).to_have_count(0)

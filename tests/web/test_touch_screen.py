@@ -176,3 +176,35 @@ async def test_on_the_way_to_the_next_stop_the_last_one_is_not_called_now(
         task.publish("goal_reached", {"node": "ga1"})
         await expect(now).to_contain_text("Stop 1 of 5: Welcome hall")
         await web.axe_check(page)
+
+
+async def test_during_a_tour_the_language_buttons_say_the_screen_follows_the_tour(
+    open_page: Any, web: SimpleNamespace
+) -> None:
+    """A tap on "Español" during an English tour did nothing at all (the screen goes back to
+    the tour's language at once; seen on the busy demo): during a task the buttons are off and
+    say why; after it, a tap changes the language again."""
+    async with touch_screen(open_page) as (page, task):
+        languages = page.get_by_role("group", name="Language")
+        await expect(languages.get_by_role("button", name="Español")).to_be_enabled()
+        task.publish(
+            "task_assigned",
+            {
+                "task_id": "t1",
+                "robot": "R1",
+                "net": "give_tour",
+                "params": {"tour": "ground", "lang": "en"},
+            },
+        )
+        await expect(page.get_by_role("region", name="Now")).to_contain_text("is starting")
+        spanish = languages.get_by_role("button", name="Español")
+        await expect(spanish).to_be_disabled()
+        await expect(page.locator("#lang-help")).to_have_text(
+            "During a visit the screen speaks its visitor's language."
+        )
+        await expect(spanish).to_have_attribute("aria-describedby", "lang-help")
+        await web.axe_check(page)
+        task.publish("task_ended", {"task_id": "t1", "robot": "R1", "state": "done"})
+        await expect(page.get_by_role("region", name="Tours")).to_be_visible()
+        await spanish.click()
+        await expect(page.get_by_role("heading", name="Hola, soy R1")).to_be_visible()

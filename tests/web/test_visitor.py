@@ -103,6 +103,16 @@ def visitor_fleet(
     return make
 
 
+async def painted_to_bottom(page: Any) -> bool:
+    """Whether the page's own background reaches the bottom of the viewport (the body, not
+    the bare document under it)."""
+    return bool(
+        await page.evaluate(
+            "document.elementFromPoint(2, innerHeight - 2) !== document.documentElement"
+        )
+    )
+
+
 async def request_from(page: Any, tour_name: str, button: str = "Take this tour") -> None:
     card = page.get_by_role("article", name=tour_name)
     await card.get_by_role("button", name=button).click()
@@ -124,6 +134,11 @@ async def test_a_phone_visitor_follows_a_tour_from_request_to_end(
         )
         assert broken == 0
         assert await page.evaluate("document.documentElement.scrollWidth") <= PHONE[0]
+        # A point's length is the time there, not a tour's (it said "Tour: 5 s").
+        point = page.get_by_role("article", name="Welcome hall")
+        await expect(point).to_contain_text("At the point: ")
+        await expect(point).not_to_contain_text("Tour: ")
+        await expect(page.get_by_role("article", name="Highlights")).to_contain_text("Tour: ")
         await web.axe_check(page)
         await web.screenshot(page, "visitor-phone-en")
         # Keep the robot busy with a staff tour, so the visitor waits in line first.
@@ -180,6 +195,42 @@ async def test_a_spanish_visitor_gets_spanish_pages_speech_and_touch_screen(
         assert any("mosaicos" in p["text"] for p in spoken)
 
 
+async def test_a_wait_counted_down_to_nothing_never_says_about_0_s(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The server told a wait of a few seconds and then nothing new for a while (it tells a
+    new wait only when its estimate drifts; seen on the busy demo, the robot ahead late): the
+    countdown reached nothing and the page said "A robot will start for you in about 0 s."."""
+    async with visitor_fleet(time_scale=1.0) as vf:
+        watch = await open_page("", viewport=PHONE)
+        page = watch.page
+
+        async def no_task_news(ws: Any) -> None:  # the server says nothing new of the wait
+            server = ws.connect_to_server()
+            server.on_message(lambda m: None if "task_event" in str(m) else ws.send(m))
+
+        async def told_a_short_wait(route: Any) -> None:
+            reply = await route.fetch()
+            status = await reply.json()
+            status |= {"eta_s": 3.0, "service": "busy"}
+            await route.fulfill(response=reply, json=status)
+
+        await page.route_web_socket("**/ws*", no_task_news)
+        await page.goto(vf.panel_url())
+        async with vf.fleet.http() as staff:  # R1 busy: the visitor waits in line
+            r = await staff.post(
+                "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "telescope"}}
+            )
+            assert r.status_code == 201, r.text
+        await page.route("**/api/tasks", told_a_short_wait)
+        await request_from(page, "Highlights")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("You are number 1 in line.")
+        await expect(state).to_contain_text("A robot will start for you any moment now.")
+        await expect(state).not_to_contain_text("0 s")
+        await web.axe_check(page)
+
+
 async def test_a_visitor_cancels_and_a_second_panel_cannot_see_or_cancel_it(
     visitor_fleet: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
@@ -234,10 +285,23 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
         await expect(question.get_by_role("timer")).to_contain_text("s left to answer")
         await web.axe_check(screen)
         await web.screenshot(screen, "touch-screen-question")
-        await question.get_by_role("button", name="No, thanks").click()
-        await expect(page.locator(".request-state")).to_contain_text(
-            "The tour has ended", timeout=LONG
+        # The phone says where the visitor is and what comes next (it said "(explained)").
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("Stop 1 of 5: Welcome hall, seen.")
+        await expect(state).to_contain_text(
+            "Next: R1 asks on its screen “Shall we continue the tour?”"
         )
+        await question.get_by_role("button", name="No, thanks").click()
+        await expect(state).to_contain_text("The tour has ended", timeout=LONG)
+        # ... and how far it got: the tour ended at its first stop, not at its last.
+        await expect(state).to_contain_text("It ended at stop 1 of 5: Welcome hall.")
+        await expect(page.get_by_role("progressbar", name="Tour progress")).to_have_attribute(
+            "value", "1"
+        )
+        await web.axe_check(page)
+        # A short page is the page's colour to the bottom of the screen (it was white below
+        # the text: the body, which has the colour, ended with it).
+        assert await painted_to_bottom(page)
         ended = next(
             iter(
                 t for t in vf.fleet.server.app.state.task_manager.tasks.values() if t.kind == "tour"
@@ -245,8 +309,14 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
         )
         async with vf.fleet.http() as staff:
             history = (await staff.get(f"/api/tasks/{ended.id}/history")).json()
+            status = (await staff.get(f"/api/tasks/{ended.id}")).json()
         events = [h["event"] for h in history]
         assert "point 1/5 explained" in events and "point 2/5 arrived" not in events
+        # The task's status keeps where the tour got to once it is done (it said null).
+        assert status["state"] == "done"
+        assert status["progress"] is not None, status
+        assert (status["progress"]["index"], status["progress"]["total"]) == (1, 5)
+        assert status["progress"]["poi"] == "welcome"
         await expect(screen.get_by_role("button", name="Ground floor tour")).to_be_visible()
 
 

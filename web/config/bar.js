@@ -11,7 +11,8 @@ export function barView(ui) {
   const count = model.issues.length;
   return html`
       <span>${me.name} <span class="badge">${me.role}</span></span>
-      <span class="muted" id="draft-status">Draft revision ${model.revision} · live version ${model.liveVersion}</span>
+      <span class="muted" id="draft-status">Draft revision ${model.revision} · live version ${model.liveVersion}${model.unsaved
+        ? html` · <strong class="error">your last change is not saved</strong>` : nothing}</span>
       <button type="button" class="secondary" ?disabled=${!model.undoStack.length} @click=${() => model.undo()}
         title=${model.undoStack.length ? `Undo ${model.undoStack.at(-1).label}` : "Nothing to undo"}>Undo</button>
       <button type="button" class="secondary" ?disabled=${!model.redoStack.length} @click=${() => model.redo()}>Redo</button>

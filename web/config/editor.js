@@ -86,7 +86,7 @@ export async function startEditor(session, me, parts) {
   };
   installProbe(ui);
   hub.on("site_rollout", (m) => { ui.rollout = m.payload; draw(); });
-  model.addEventListener("failure", (e) => { ui.notice = { error: true, text: /** @type {CustomEvent} */ (e).detail.message }; draw(); });
+  model.addEventListener("failure", (e) => { ui.notice = { error: true, text: `Your last change is not saved: ${/** @type {CustomEvent} */ (e).detail.message} The next change, or Publish, tries again.` }; draw(); });
   model.addEventListener("change", () => draw());
   wirePlan(ui);
 

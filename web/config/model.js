@@ -60,6 +60,7 @@ export class DraftModel extends EventTarget {
     this.conflict = null; // {message, revision, updated_by} after a refused save
     this.saving = Promise.resolve();
     this.saved = 0; // edits saved (for tests and the benchmark)
+    this.unsaved = false; // the last save failed: this tab holds an edit the shared draft lacks
   }
 
   async load() {
@@ -68,6 +69,7 @@ export class DraftModel extends EventTarget {
     this.undoStack = [];
     this.redoStack = [];
     this.conflict = null;
+    this.unsaved = false;
     this.#changed();
   }
 
@@ -127,11 +129,13 @@ export class DraftModel extends EventTarget {
       this.issues = reply.issues;
       this.synced = doc;
       this.saved += 1;
+      this.unsaved = false;
     } catch (err) {
       if (err instanceof ApiError && err.status === 409) {
         const d = err.detail ?? {};
         this.conflict = { message: d.msg ?? err.message, revision: d.revision, by: d.updated_by };
       } else {
+        this.unsaved = true;
         this.dispatchEvent(new CustomEvent("failure", { detail: err }));
       }
     }
@@ -155,8 +159,12 @@ export class DraftModel extends EventTarget {
     return this.save();
   }
 
+  /** Publish the shared draft. An edit whose save failed is saved first: publishing without it
+   * would leave it out, and reloading the published draft would drop it from this tab too. */
   async publish(note = "") {
     await this.saving;
+    if (this.unsaved) await this.save();
+    if (this.unsaved) throw new Error("your last change is not saved on the server yet, so it would be left out: try again");
     const reply = await this.api.post("/api/site/publish", { revision: this.revision, note });
     await this.load();
     return reply.version;

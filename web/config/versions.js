@@ -21,9 +21,12 @@ export async function loadVersions(ui) {
 export async function publish(ui) {
   const { api, model, say } = ui;
   try {
-    const note = /** @type {HTMLInputElement | null} */ (document.getElementById("publish-note"))?.value ?? "";
+    const input = /** @type {HTMLInputElement | null} */ (document.getElementById("publish-note"));
+    const note = input?.value ?? "";
     const untranslated = await translationWarning(api, model);
     const version = await model.publish(note);
+    // The note went with this version: the next one must not carry it unasked.
+    if (input) input.value = "";
     ui.rollout = ui.rollout?.version === version ? ui.rollout : { version, expected: [], loaded_ms: {}, complete: false };
     await loadVersions(ui);
     say(`Version ${version} is live.${untranslated}`);

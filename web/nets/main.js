@@ -9,6 +9,7 @@ import { detailsForm } from "/nets/forms.js";
 import { Attachment, attachPanel } from "/nets/attach.js";
 import { libraryPanel } from "/nets/library.js";
 import { NetModel, emptyNet } from "/nets/model.js";
+import { confirmAction } from "/lib/confirm.js";
 import { Run, defaultParams, parseReplies, simulationPanel } from "/nets/simulation.js";
 
 const $ = (id) => document.getElementById(id);
@@ -40,6 +41,8 @@ async function start({ me, vocabulary }) {
   $("editor").hidden = false;
   const readOnly = !vocabulary.may_publish;
   const model = new NetModel(api);
+  // Leaving the page drops edits that are nowhere else: the browser asks first.
+  addEventListener("beforeunload", (e) => { if (!readOnly && model.unpublished) e.preventDefault(); });
   const ui = { me, model, readOnly, tool: "select", selected: null, notice: null, library: [], vocabulary, libraryNet: "",
     group: new Set(), clipboard: null, run: null, playing: null, simParams: "{}", simReplies: "", analysis: null,
     versions: null, diff: null, mayDebug: vocabulary.may_publish, stepwise: null };
@@ -242,7 +245,20 @@ async function start({ me, vocabulary }) {
     },
   };
 
-  async function openLibrary(name) {
+  /** Opening another net drops the open one's edits that are nowhere else: ask first. */
+  async function mayDrop(what) {
+    if (readOnly || !model.unpublished) return true;
+    const name = model.doc.id;
+    return confirmAction({
+      title: `Drop your changes to ${name}?`,
+      text: `${name} has changes that are not published: ${what} drops them (export it as PNML to keep a copy).`,
+      confirm: "Drop my changes",
+      keep: `Keep editing ${name}`,
+    });
+  }
+
+  async function openLibrary(name, ask = true) {
+    if (ask && !(await mayDrop(`opening ${name}`))) return;
     try {
       model.open(await api.get(`/api/net-editor/library/${encodeURIComponent(name)}`));
       opened();
@@ -308,18 +324,31 @@ async function start({ me, vocabulary }) {
   const library = {
     async publish(form) {
       const name = model.doc.id;
+      let saved;
       try {
-        const saved = await api.post("/api/net-editor/publish", { net: model.doc, note: form.get("note") ?? "" });
-        ui.library = await api.get("/api/nets");
-    await attachment.loadTargets();
-        ui.libraryNet = name;
-        await loadVersions(name);
-        say(`${name} version ${saved.version} published: robots start it at their next task.`);
+        const doc = structuredClone(model.doc);
+        saved = await api.post("/api/net-editor/publish", { net: doc, note: form.get("note") ?? "" });
+        model.published(doc);
       } catch (err) {
         say(`Not published: ${err.message}`, true);
+        return;
       }
+      // Published: what the page reads after it (the library, the robots, the versions) may
+      // fail without taking that back.
+      const published = `${name} version ${saved.version} published: robots start it at their next task.`;
+      ui.libraryNet = name;
+      let stale = "";
+      try {
+        ui.library = await api.get("/api/nets");
+        await attachment.loadTargets();
+      } catch (err) {
+        stale = ` The library's list could not be read again (${err.message}): reload the page to see it.`;
+      }
+      await loadVersions(name);
+      say(`${published}${stale}`);
     },
     async open(version) {
+      if (!(await mayDrop(`opening version ${version}`))) return;
       try {
         model.open(await api.get(versionsPath(version)));
         opened();
@@ -340,7 +369,7 @@ async function start({ me, vocabulary }) {
       const name = ui.versions.net;
       try {
         const saved = await api.post(`/api/net-editor/restore/${encodeURIComponent(name)}/${version}`, {});
-        await openLibrary(name);
+        await openLibrary(name, false);
         say(`${name} version ${version} restored as version ${saved.version}: robots start it at their next task.`);
       } catch (err) {
         say(`Not restored: ${err.message}`, true);
@@ -351,6 +380,7 @@ async function start({ me, vocabulary }) {
   /** Open a PNML file's text (the file input's, or the benchmark's); resolves once it is
    * drawn and checked. */
   async function openPnml(text, name) {
+    if (!(await mayDrop(`opening ${name}`))) return;
     try {
       const reply = await sendFile("/api/net-editor/import", text);
       model.open(reply.net);
@@ -452,13 +482,14 @@ async function start({ me, vocabulary }) {
         ${ui.library.map((n) => html`<option value=${n} ?selected=${n === ui.libraryNet}>${n}</option>`)}</select></label>
       <button type="button" class="secondary" @click=${() => openLibrary(ui.libraryNet || ui.library[0])}>Open</button>
       <label>Open a PNML file <input type="file" accept=".pnml,.xml,application/xml,text/xml" @change=${(e) => openFile(e.target)}></label>
-      ${readOnly ? nothing : html`<button type="button" class="secondary" @click=${() => { model.open(emptyNet()); opened(); select("net", "new_net"); }}>New net</button>`}
+      ${readOnly ? nothing : html`<button type="button" class="secondary" @click=${async () => { if (!(await mayDrop("a new net"))) return; model.open(emptyNet()); opened(); select("net", "new_net"); }}>New net</button>`}
       ${readOnly ? nothing : html`
         <button type="button" class="secondary" ?disabled=${!model.undoStack.length} @click=${() => model.undo()}
           title=${model.undoStack.length ? `Undo ${model.undoStack.at(-1).label}` : "Nothing to undo"}>Undo</button>
         <button type="button" class="secondary" ?disabled=${!model.redoStack.length} @click=${() => model.redo()}>Redo</button>`}
       <button type="button" ?disabled=${!doc} @click=${exportPnml}>Export PNML</button>
-      <span id="problem-count" role="status" class=${count ? "error" : "ok-text"}>${!doc ? "" : count ? `${count} problem(s)` : "No problems"}</span>`, $("bar"));
+      <span id="problem-count" role="status" class=${count ? "error" : "ok-text"}>${!doc ? "" : count ? `${count} problem(s)` : "No problems"}</span>
+      ${!readOnly && model.unpublished ? html`<span id="unpublished" class="warn-text">Changes not published</span>` : nothing}`, $("bar"));
     render(ui.notice ? html`<div class=${`notice ${ui.notice.error ? "error" : "ok"}`} role=${ui.notice.error ? "alert" : "status"}>${ui.notice.text}</div>` : nothing, $("notices"));
     if (!doc) {
       render(html`<p class="muted">Open a net of the library or a PNML file${readOnly ? "" : ", or start a new net"}.</p>`, $("lists"));

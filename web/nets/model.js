@@ -13,14 +13,26 @@ export class NetModel extends EventTarget {
     this.problems = [];
     this.checked = null; // a promise: the check of the current document
     this.sequence = 0;
+    this.kept = ""; // the document as opened or last published: edits since are this tab's only
   }
 
   /** Start over with a document (a library net, a file, a new net): no history. */
   open(doc) {
     this.doc = structuredClone(doc);
+    this.kept = JSON.stringify(this.doc);
     this.undoStack = [];
     this.redoStack = [];
     this.changed();
+  }
+
+  /** Whether the net has edits that are nowhere but in this tab (not published since opened). */
+  get unpublished() {
+    return this.doc !== null && JSON.stringify(this.doc) !== this.kept;
+  }
+
+  /** The document as it stands is published: nothing of it is this tab's only. */
+  published(doc) {
+    this.kept = JSON.stringify(doc);
   }
 
   /** One undoable edit: `fn` changes the document in place. */

@@ -386,7 +386,8 @@ function serviceLine(estimate) {
   if (estimate.service === "held_up") return t("service_held_up");
   if (estimate.service === "busy") {
     const wait = countdown(estimate.eta_s, state.menuAt);
-    return wait === null ? t("service_busy_unknown") : t("service_busy", { t: state.texts.duration(wait) });
+    if (wait === null) return t("service_busy_unknown");
+    return wait > 0 ? t("service_busy", { t: state.texts.duration(wait) }) : t("service_busy_now");
   }
   return t("service_available");
 }
@@ -397,7 +398,9 @@ function card(kind, item) {
   const stepsOnly = kind === "poi" && state.stepFree && item.steps_only; // refused: said why
   const facts = [];
   if (kind === "tour") facts.push(t("stops", { n: item.stops.length }));
-  const length = state.menu.pace === "slow" ? "tour_length_slow" : "tour_length";
+  // A point's length is its explanation there (the walk to it is the wait), not a tour's.
+  const slow = state.menu.pace === "slow";
+  const length = kind === "tour" ? (slow ? "tour_length_slow" : "tour_length") : (slow ? "point_length_slow" : "point_length");
   if (estimate?.duration_s) facts.push(t(length, { t: state.texts.duration(estimate.duration_s) }));
   const media = kind === "tour" ? item.stops.flatMap((s) => s.media) : item.media;
   const id = `${kind}-${item.id}`;
@@ -507,7 +510,9 @@ function statusLines(r) {
       if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
       const wait = countdown(r.eta_s, r.toldAt);
       if (r.service === "held_up") lines.push(t("service_held_up"));
-      else lines.push(wait === null ? t("service_busy_unknown") : t("state_wait", { t: state.texts.duration(wait) }));
+      else if (wait === null) lines.push(t("service_busy_unknown"));
+      // A wait counted down to nothing while still in line: no "in about 0 s".
+      else lines.push(wait > 0 ? t("state_wait", { t: state.texts.duration(wait) }) : t("state_wait_now"));
     }
   } else if (r.state === "assigned" || r.state === "running") {
     if (point) {
@@ -518,12 +523,14 @@ function statusLines(r) {
     } else if (!progress || progress.index === 0) {
       lines.push(t("state_assigned", { robot }));
       if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
-      else if (arrival !== null) lines.push(t("state_on_its_way", { robot, t: state.texts.duration(arrival) }));
+      else if (arrival !== null) lines.push(arrival > 0 ? t("state_on_its_way", { robot, t: state.texts.duration(arrival) }) : t("state_on_its_way_now", { robot }));
     } else {
       const place = placeOf(progress);
       if (progress.index === 1 && progress.stage === "arrived") lines.push(t("state_arrived", { robot, place }));
-      const key = progress.stage === "explained" ? "state_explained" : "state_progress";
-      lines.push(t(key, { i: progress.index, n: progress.total, place }));
+      const explained = progress.stage === "explained";
+      lines.push(t(explained ? "state_explained" : "state_progress", { i: progress.index, n: progress.total, place }));
+      // After a stop's explanation the robot asks on its screen whether to go on, then walks on.
+      if (explained && progress.index < progress.total) lines.push(t("state_next_stop", { robot }));
       if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
     }
   } else if (r.state === "done") lines.push(point ? t("state_point_done", { robot, place: poiName(r.params?.poi) }) : t("state_done"));
@@ -531,7 +538,17 @@ function statusLines(r) {
   else if (r.service === "withdrawn") lines.push(t("state_withdrawn"));
   else if (r.cancelled_by === "staff") lines.push(t(point ? "state_cancelled_staff_point" : "state_cancelled_staff_tour"));
   else lines.push(t("state_cancelled"));
+  if (FINAL.has(r.state)) lines.push(...endedAt(r));
   return lines;
+}
+
+/** How far a tour that ended got (the server keeps its last progress): said unless it ended
+ * done at its last stop. */
+function endedAt(r) {
+  const p = r.progress;
+  if (r.kind !== "tour" || !p?.index) return [];
+  if (r.state === "done") return p.index < p.total ? [t("state_ended_at", { i: p.index, n: p.total, place: placeOf(p) })] : [];
+  return [t("state_got_to", { i: p.index, n: p.total, place: placeOf(p) })];
 }
 
 function requestView() {
