@@ -232,7 +232,8 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
         question = screen.get_by_role("alertdialog", name="Shall we continue the tour?")
         await expect(question).to_be_visible(timeout=LONG)
         await expect(question.get_by_role("timer")).to_contain_text("s left to answer")
-        await web.axe_check(screen)
+        # The open dialog's axe check is in test_touch_screen.py, where the question is held
+        # open: here it closes after 5 s of wall time, which axe outlasted under load.
         await web.screenshot(screen, "touch-screen-question")
         await question.get_by_role("button", name="No, thanks").click()
         await expect(page.locator(".request-state")).to_contain_text(
