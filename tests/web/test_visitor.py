@@ -288,7 +288,8 @@ async def test_during_a_jam_a_visit_waits_saying_why_and_a_tour_skips_the_stops_
 
     The jam's first hold is an hour, not 10 s of wall time: under load the tour took longer
     than 10 s, the hold lifted by itself and the visit was tried again ("running", not
-    "queued"); here only staff lift it (trouble lifting by itself: tests/server/test_closures.py)."""
+    "queued"); here only staff lift it (trouble lifting by itself:
+    tests/server/test_closures.py)."""
     async with visitor_fleet(trouble_hold_s=12 * 3600.0) as vf:
         vf.fleet.building.jam_door("door_gallery")
         page = (await open_page(vf.panel_url(), viewport=PHONE)).page
