@@ -11,7 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
@@ -96,6 +96,30 @@ class ServerProcess:
         health = await self.health()
         return bool(health and health["cluster"]["broker"]["connected"])
 
+    async def until(self, check: Callable[[], Awaitable[Any]], what: str) -> Any:
+        """Poll ``check`` until it returns something truthy, for as long as this process runs.
+
+        A start or an election takes what it takes on a loaded machine (CI: a server still not
+        answering after 60 s beside 50 other processes), so no wall-clock bound here: the
+        caller's own time-out is the guard against a hang. A process that exits fails at once,
+        with the end of its log."""
+        while True:
+            result = await check()
+            if result:
+                return result
+            if self.process.poll() is not None:
+                raise AssertionError(
+                    f"server {self.name} exited ({self.process.returncode}) while waiting "
+                    f"for {what}:\n{self.log_tail()}"
+                )
+            await asyncio.sleep(0.1)
+
+    def log_tail(self, lines: int = 20) -> str:
+        """The last lines of this process's log."""
+        self.log.flush()
+        text = self.log_path.read_text(errors="replace")
+        return "\n".join(text.splitlines()[-lines:])
+
     async def leads(self) -> bool:
         """It leads and its components are up (``cluster.serving``)."""
         health = await self.health()
@@ -145,9 +169,9 @@ async def start_servers(
             # The first one migrates the database; start the others once it leads (its broker
             # link up is not enough: under load a second process started then could take the
             # lease while the first was still starting, and tests expect the first to lead).
-            await wait_until(servers[-1].ready, 60, f"server {name} to answer /api/health")
+            await servers[-1].until(servers[-1].ready, f"server {name} to answer /api/health")
             if len(servers) == 1:
-                await wait_until(servers[0].leads, 60, f"server {name} to lead")
+                await servers[0].until(servers[0].leads, f"server {name} to lead")
         yield servers
     finally:
         for server in servers:

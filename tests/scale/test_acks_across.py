@@ -36,7 +36,7 @@ async def test_a_robot_on_a_follower_is_acknowledged_by_the_leader_once_per_copy
     pair: list[ServerProcess],
 ) -> None:
     alpha, beta = pair
-    await wait_until(alpha.leads, 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     r1 = await AreaRobot.connect(beta, "R1")
     try:
         asked = f"ask-{next(_ids)}"
@@ -61,7 +61,7 @@ async def test_nothing_is_acknowledged_while_no_process_decides(
     pair: list[ServerProcess],
 ) -> None:
     alpha, beta = pair
-    await wait_until(alpha.leads, 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     r1 = await AreaRobot.connect(beta, "R1")
     try:
         alpha.pause()  # the leader decides nothing now; beta leads after alpha's lease
@@ -71,7 +71,7 @@ async def test_nothing_is_acknowledged_while_no_process_decides(
             await asyncio.sleep(0.5)
             assert not await beta.leads(), "beta led too soon for this test"
             assert _acks(r1, asked) == [], "a follower acknowledged what nobody handled"
-            await wait_until(beta.leads, 30, "beta to lead after alpha's lease")
+            await beta.until(beta.leads, "beta to lead after alpha's lease")
             # R1's link has no ack: it sends the same message again, and the new leader
             # grants the corridor.
             await _send(r1, "request_area", asked)
@@ -97,7 +97,7 @@ async def test_a_task_ended_during_a_fail_over_is_not_run_again(
     its back-off, and its robot_state, which no longer names the task, may reach the new
     leader first: the task must end done, not go back to the queue and to R1 a second time."""
     alpha, beta = pair
-    await wait_until(alpha.leads, 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     r1 = await WsClient.connect(beta, ROBOT_TOKENS["R1"])
     try:
         await _state(r1, None)
@@ -118,7 +118,7 @@ async def test_a_task_ended_during_a_fail_over_is_not_run_again(
         try:
             ended = f"e-{task_id}"
             await r1.send("task_ended", {"task_id": task_id, "robot": "R1"}, id=ended)
-            await wait_until(beta.leads, 30, "beta to lead after alpha's lease")
+            await beta.until(beta.leads, "beta to lead after alpha's lease")
             await _state(r1, None)  # its state, at its steady rate, comes first
             await r1.send("task_ended", {"task_id": task_id, "robot": "R1"}, id=ended)
             await wait_until(lambda: _task_state(beta, task_id, "done"), 20, "the task done")

@@ -24,7 +24,7 @@ async def test_robots_on_two_processes_take_turns_and_a_frozen_leader_grants_not
     pair: list[ServerProcess],
 ) -> None:
     alpha, beta = pair
-    await wait_until(alpha.leads, 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     r1, r2 = await AreaRobot.connect(beta, "R1"), await AreaRobot.connect(alpha, "R2")
     try:
         # Turns under alpha: R1 (on beta, through the broker) first, R2 (on alpha) after it.
@@ -40,7 +40,7 @@ async def test_robots_on_two_processes_take_turns_and_a_frozen_leader_grants_not
         alpha.pause()
         try:
             await r2.client.send("request_area", {"robot": "R2", "area": "corridor"})
-            await wait_until(beta.leads, 30, "beta to lead after alpha's lease")
+            await beta.until(beta.leads, "beta to lead after alpha's lease")
             await r1.ask()
             await r1.granted(2, "R1's grant from the new leader")
         finally:
@@ -68,14 +68,14 @@ async def test_leader_killed_while_a_robot_holds_the_area_no_second_grant(
     pair: list[ServerProcess],
 ) -> None:
     alpha, beta = pair
-    await wait_until(alpha.leads, 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     r1, r2 = await AreaRobot.connect(beta, "R1"), await AreaRobot.connect(beta, "R2")
     try:
         await r1.ask()
         await r1.granted(1, "R1's grant")
         await r1.report("corridor_w", holding=True)
         alpha.kill()
-        await wait_until(beta.leads, 30, "beta to lead")
+        await beta.until(beta.leads, "beta to lead")
         # The robot's resync (its next robot_state) tells the new leader what it holds.
         await r1.report("corridor_w", holding=True)
         await r2.ask()
@@ -99,14 +99,14 @@ async def test_the_new_leader_restores_the_lock_of_a_robot_that_lost_its_link(
     db = postgres.database()
     async with start_servers(["alpha", "beta"], db, redis.url, tmp_path, env=env) as pair:
         alpha, beta = pair
-        await wait_until(alpha.leads, 60, "alpha to lead")
+        await alpha.until(alpha.leads, "alpha to lead")
         r1, r2 = await AreaRobot.connect(alpha, "R1"), await AreaRobot.connect(beta, "R2")
         try:
             await r1.ask()
             await r1.granted(1, "R1's grant")
             await r1.report("corridor_w", holding=True)
             alpha.kill()
-            await wait_until(beta.leads, 30, "beta to lead")
+            await beta.until(beta.leads, "beta to lead")
             corridor = await _corridor(beta)
             assert corridor["holder"] == "R1" and corridor["entered"], corridor
             assert corridor["state"] == "holder_offline", corridor  # until R1 reports again

@@ -163,7 +163,7 @@ async def test_a_slow_process_does_not_hold_the_others_back(
         slow_url = f"redis://127.0.0.1:{slow_port}/0"
         gamma = ServerProcess("gamma", db, slow_url, tmp_path / "gamma.log")
         try:
-            await wait_until(gamma.ready, 60, "gamma to join through its slow link")
+            await gamma.until(gamma.ready, "gamma to join through its slow link")
             await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
             robot = await WsClient.connect(alpha, "robot-R1-demo-token")
             fast, slow = await _listener(beta), await _listener(gamma)

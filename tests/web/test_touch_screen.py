@@ -208,3 +208,30 @@ async def test_during_a_tour_the_language_buttons_say_the_screen_follows_the_tou
         await expect(page.get_by_role("region", name="Tours")).to_be_visible()
         await spanish.click()
         await expect(page.get_by_role("heading", name="Hola, soy R1")).to_be_visible()
+
+
+async def test_the_continue_question_is_accessible_while_it_is_open(
+    open_page: Any, web: SimpleNamespace
+) -> None:
+    """The "continue?" dialog under axe. In a tour (tests/web/test_visitor.py) it stays open 5 s
+    of wall time, which axe outlasted on a loaded machine; here it is asked for 600 robot
+    seconds, more than the test's time-out, so it is open for the whole check."""
+    async with touch_screen(open_page) as (page, task):
+        task.publish(
+            "task_assigned",
+            {
+                "task_id": "t1",
+                "robot": "R1",
+                "net": "give_tour",
+                "params": {"tour": "ground", "lang": "en"},
+            },
+        )
+        point = {"index": 1, "total": 5, "name": "Welcome hall"}
+        task.publish("show_point", {"poi": "welcome", "point": point, "text": "Welcome."})
+        task.publish("ask_continue", {"question": "Shall we continue the tour?", "timeout_s": 600})
+        question = page.get_by_role("alertdialog", name="Shall we continue the tour?")
+        await expect(question).to_be_visible()
+        await expect(question.get_by_role("timer")).to_contain_text("s left to answer")
+        await expect(question.get_by_role("button", name="No, thanks")).to_be_visible()
+        await web.axe_check(page)
+        await expect(question).to_be_visible()  # still open: axe saw the dialog

@@ -71,10 +71,12 @@ def visitor_fleet(
         visitor: str | None = "yes",
         time_scale: float = TIME_SCALE,
         edit: Callable[[dict[str, Any]], None] | None = None,
+        **settings: Any,
     ) -> AsyncIterator[VisitorFleet]:
-        """``edit``: changes the demo site's data before the server reads it."""
+        """``edit``: changes the demo site's data before the server reads it; ``settings``:
+        the server's, over the web harness's."""
         async with (
-            fleet_factory(robots=0, edit=edit) as fleet,
+            fleet_factory(robots=0, edit=edit, **settings) as fleet,
             contextlib.AsyncExitStack() as stack,
         ):
             tokens = fleet.server.app.state.tokens
@@ -283,7 +285,8 @@ async def test_no_on_the_touch_screen_ends_the_tour_early(
         question = screen.get_by_role("alertdialog", name="Shall we continue the tour?")
         await expect(question).to_be_visible(timeout=LONG)
         await expect(question.get_by_role("timer")).to_contain_text("s left to answer")
-        await web.axe_check(screen)
+        # The open dialog's axe check is in test_touch_screen.py, where the question is held
+        # open: here it closes after 5 s of wall time, which axe outlasted under load.
         await web.screenshot(screen, "touch-screen-question")
         # The phone says where the visitor is and what comes next (it said "(explained)").
         state = page.locator(".request-state")
@@ -351,8 +354,13 @@ async def test_during_a_jam_a_visit_waits_saying_why_and_a_tour_skips_the_stops_
     galleries behind it, a visit there waits in line, its visitor told why, since trouble lifts
     by itself; a tour skips those stops, tells its visitor which and why, and goes on to the
     stop it can reach (upstairs, by the lift). A door that stays jammed however often it is
-    tried fails the visit, saying why (docs/visitor.md, "Waiting for trouble")."""
-    async with visitor_fleet() as vf:
+    tried fails the visit, saying why (docs/visitor.md, "Waiting for trouble").
+
+    The jam's first hold is an hour, not 10 s of wall time: under load the tour took longer
+    than 10 s, the hold lifted by itself and the visit was tried again ("running", not
+    "queued"); here only staff lift it (trouble lifting by itself:
+    tests/server/test_closures.py)."""
+    async with visitor_fleet(trouble_hold_s=12 * 3600.0) as vf:
         vf.fleet.building.jam_door("door_gallery")
         page = (await open_page(vf.panel_url(), viewport=PHONE)).page
         service = page.get_by_role("status").first
