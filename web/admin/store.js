@@ -52,6 +52,15 @@ export class Store extends EventTarget {
     this.taskFetchAgain = false;
     this.emergencyFetch = null;
     this.emergencyFetchAgain = false;
+    this.stopped = false; // the sign-in ended: nothing of this store changes the page again
+  }
+
+  /** The sign-in ended (web/admin/main.js): no more refreshes, live messages or redraws. */
+  stop() {
+    this.stopped = true;
+    clearTimeout(this.tasksTimer);
+    cancelAnimationFrame(this.frame);
+    this.frame = 0;
   }
 
   /** A background refresh failed: the page shows why (never swallowed). */
@@ -62,7 +71,7 @@ export class Store extends EventTarget {
   }
 
   changed() {
-    if (!this.frame) {
+    if (!this.frame && !this.stopped) {
       this.frame = requestAnimationFrame(() => {
         this.frame = 0;
         this.dispatchEvent(new Event("change"));
@@ -93,6 +102,7 @@ export class Store extends EventTarget {
      * @param {(message: Message<T>) => void} fn
      */
     const on = (type, fn) => this.hub.on(type, (m) => {
+      if (this.stopped) return;
       fn(m);
       this.changed();
     });
@@ -329,6 +339,7 @@ export class Store extends EventTarget {
   }
 
   #setTasks(tasks) {
+    if (this.stopped) return;
     this.tasks = new Map(tasks.map((t) => [t.id, t]));
     clearTimeout(this.tasksTimer);
     if (tasks.some((t) => t.state === "queued")) {

@@ -42,6 +42,7 @@ export class FloorMap extends EventTarget {
       keyboard: true,
     });
     this.map.setView([0, 0], 3);
+    this.removed = false; // remove() took it off the page
     this.site = null;
     this.floor = null;
     this.floorLayers = new Map(); // floor id -> L.LayerGroup (plan + graph + fixtures)
@@ -68,6 +69,18 @@ export class FloorMap extends EventTarget {
     this.map.on("zoomend", () => this.#spread());
   }
 
+  /** Take the map off its element (the page signed out): the element can hold a new one. */
+  remove() {
+    this.removed = true;
+    cancelAnimationFrame(this.frame);
+    this.frame = 0;
+    // Leaflet 1.9 ends a zoom animation 250 ms after it began, on a map removed meanwhile too
+    // ("reading '_leaflet_pos'" of undefined): end it first.
+    const map = /** @type {any} */ (this.map);
+    if (map._animatingZoom) map._onZoomTransitionEnd();
+    this.map.remove();
+  }
+
   /** Draw a site (the document of GET /api/site/map) and show its first floor. */
   async setSite(site) {
     this.site = site;
@@ -79,6 +92,7 @@ export class FloorMap extends EventTarget {
     this.liftMarks.clear();
     for (const floor of site.floors) this.floorLayers.set(floor.id, L.layerGroup());
     await Promise.all(site.floors.map((f) => this.#drawPlan(f)));
+    if (this.removed) return; // taken off the page while its plans loaded
     this.#drawGraph(site);
     this.#drawFixtures(site);
     this.#drawClosed();
