@@ -13,10 +13,10 @@ const PX_PER_M = 16; // every floor at one scale
 function fleetControls(ui) {
   const fleet = ui.store.fleet;
   const pause = () => ui.act("Pause the fleet", async () => {
-    ui.store.fleet = await ui.api.post("/api/fleet/pause", { reason: inputValue("pause-reason") });
+    ui.store.takeFleet(await ui.api.post("/api/fleet/pause", { reason: inputValue("pause-reason") }));
   });
   const resume = () => ui.act("Resume the fleet", async () => {
-    ui.store.fleet = await ui.api.post("/api/fleet/resume");
+    ui.store.takeFleet(await ui.api.post("/api/fleet/resume"));
   });
   const home = async () => {
     const ok = await confirmAction({
