@@ -414,7 +414,7 @@ export class Store extends EventTarget {
 
   #lift(car) {
     this.lifts.set(car.elevator, car);
-    if (car.floor) this.emit("lift", car.elevator);
+    if (car.floor || car.state === "moving") this.emit("lift", car.elevator);
   }
 
   #door(id, open) {

@@ -277,13 +277,21 @@ export class FloorMap extends EventTarget {
     mark.setTooltipContent(`door ${doorId}: ${open ? "open" : "closed"}`);
   }
 
-  setElevator(liftId, floorId, doorOpen) {
+  /**
+   * Where an elevator's car is: at `floorId` (null: at no stop, a car on its way), its door
+   * open or not; `text` says it in the page's words for the tooltip (else the floor's id).
+   * @param {string} liftId
+   * @param {string | null} floorId
+   * @param {boolean} doorOpen
+   * @param {string} [text]
+   */
+  setElevator(liftId, floorId, doorOpen, text) {
     for (const { floor, mark } of this.liftMarks.get(liftId) ?? []) {
       const here = floor === floorId;
       const cls = `map-lift ${here ? (doorOpen ? "here open" : "here") : "away"}`;
       mark.options.className = cls;
       mark.getElement?.()?.setAttribute("class", `${cls} leaflet-interactive`);
-      mark.setTooltipContent(`elevator ${liftId}: ${here ? `here${doorOpen ? ", door open" : ""}` : `at ${floorId}`}`);
+      mark.setTooltipContent(`elevator ${liftId}: ${text ?? (here ? `here${doorOpen ? ", door open" : ""}` : `at ${floorId}`)}`);
     }
   }
 
