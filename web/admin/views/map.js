@@ -33,7 +33,7 @@ function robotDetails(ui, name) {
     <dl>
       <dt>Connection</dt><dd>${robot.online ? "online" : "offline"}</dd>
       ${evacuationText(ui.store, name) ? html`<dt>Evacuation</dt><dd class="state-evacuation">${evacuationText(ui.store, name).replace("evacuation: ", "")}</dd>` : ""}
-      <dt>Mode</dt><dd>${s.mode ?? robot.info?.mode ?? "—"}</dd>
+      <dt>Mode</dt><dd>${robot.online ? s.mode ?? robot.info?.mode ?? "—" : "offline"}</dd>
       ${waitingFor(ui.store, s) ? html`<dt>Waiting</dt><dd class="state-waiting">${waitingFor(ui.store, s)}</dd>` : ""}
       <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>
       <dt>Where</dt><dd>${s.node ? placeName(ui.store.site, s.node) : "—"} (${s.floor ? floorName(ui.store.site, s.floor) : "—"})</dd>
