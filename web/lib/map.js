@@ -42,6 +42,9 @@ export class FloorMap extends EventTarget {
       keyboard: true,
     });
     this.map.setView([0, 0], 3);
+    // Doors above the points' labels (Leaflet's tooltip pane is at 650): at 1280x800 the
+    // "Welcome hall" label covered door_gallery, so its state (red or green) could not be seen.
+    this.map.createPane("doors").style.zIndex = "660";
     this.removed = false; // remove() took it off the page
     this.site = null;
     this.floor = null;
@@ -223,7 +226,7 @@ export class FloorMap extends EventTarget {
     for (const door of site.doors) {
       const n = at(door.node);
       if (!n) continue;
-      const mark = L.circleMarker([n.y, n.x], { radius: 8, className: "map-door closed" });
+      const mark = L.circleMarker([n.y, n.x], { radius: 8, className: "map-door closed", pane: "doors" });
       mark.bindTooltip(`door ${door.id}: closed`, { direction: "bottom" });
       mark.on("click", () => this.#select("door", door.id));
       mark.addTo(this.floorLayers.get(n.floor));
