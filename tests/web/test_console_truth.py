@@ -371,3 +371,28 @@ async def test_the_robots_view_says_where_the_tour_stands_as_the_tasks_view_does
             await expect(task_line).to_have_text(
                 "Tour: Highlights, stop 1 of 3: Roman mosaics explained, going on", timeout=60_000
             )
+
+
+async def test_the_event_log_filtered_by_a_robot_shows_the_rows_it_sent(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """A row a robot sent without naming itself (its call_elevator) was shown under the robot
+    filter only for robots named "R<n>": a vehicle named V1 had none."""
+
+    def with_v1(data: dict[str, Any]) -> None:
+        data["robots"].append({"name": "V1", "token": "robot-V1-test-token", "start_node": "hall"})
+
+    async with fleet_factory(robots=0, edit=with_v1) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, fleet.server.admin_token)
+        await web.open_view(page, "Event log")
+        store = fleet.server.app.state.store
+        for robot in ("V1", "R1"):
+            store.record_event("call_elevator", robot, {"elevator": "lift", "floor": "F1"})
+        events = page.get_by_role("table", name="Events")
+        await expect(events.get_by_role("row").filter(has_text="call_elevator")).to_have_count(2)
+        await page.get_by_role("combobox", name="Robot").select_option("V1")
+        rows = events.get_by_role("row").filter(has_text="call_elevator")
+        await expect(rows).to_have_count(1)
+        await expect(rows).to_contain_text("V1")
