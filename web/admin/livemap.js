@@ -84,7 +84,9 @@ export function showBuilding(store, map) {
  */
 function showCar(store, map, id) {
   const car = store.lifts.get(id);
-  if (!car || car.state === "unknown") return;
+  // Before the site is loaded (a message may come first) there is nothing to draw it on:
+  // showBuilding draws it then.
+  if (!store.site || !car || car.state === "unknown") return;
   map.setElevator(id, car.state === "moving" ? null : car.floor, car.door_open, carText(car, store.site));
 }
 
