@@ -4,6 +4,7 @@ once."""
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 from typing import Any
 
@@ -107,3 +108,34 @@ async def test_doors_and_elevators_by_hand_and_every_floor_at_once(
         async with fleet.http("robot-R1-demo-token") as robot:  # staff only
             for path in ("/api/fleet/pause", "/api/fleet/home", "/api/building/doors/x/open"):
                 assert (await robot.post(path)).status_code == 403, path
+
+
+async def test_a_moving_car_is_shown_moving_not_at_the_floor_it_left(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The Fleet view said "at Ground floor" (and drew the car at its ground-floor stop) for
+    the whole ride up, and so did the map: they say what the Building view says, "moving to
+    First floor", and draw the car at no stop."""
+    async with fleet_factory(robots=0) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, web.operator_token)
+        await web.open_view(page, "Fleet")
+        lifts = page.get_by_role("table", name="Elevators")
+        await expect(lifts).to_contain_text("at Ground floor", timeout=20_000)
+        stop = page.locator('[data-floor="F0"] rect title', has_text="elevator lift")
+        await expect(stop).to_have_text("elevator lift: the car is here")
+        fleet.building.elevators["lift"].floor_s = 600.0  # a ride the test outlasts
+        await page.get_by_label("Floor to call elevator lift to").select_option("F1")
+        await lifts.get_by_role("button", name="Call elevator lift").click()
+        await expect(lifts).to_contain_text(
+            "moving to First floor (last at Ground floor)", timeout=20_000
+        )
+        moving = "elevator lift: the car is moving to First floor (last at Ground floor)"
+        await expect(stop).to_have_text(moving)  # not "here" at the floor it left
+        upstairs = page.locator('[data-floor="F1"] rect title', has_text="elevator lift")
+        await expect(upstairs).to_have_text(moving)
+        await web.axe_check(page)
+        # The map drew the car "here" at the ground floor for the whole ride.
+        await web.open_view(page, "Map")
+        await expect(page.locator("#map path.map-lift")).to_have_class(re.compile(r"\baway\b"))

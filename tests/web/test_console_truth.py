@@ -349,3 +349,50 @@ async def test_a_running_tour_shows_the_stop_its_visitor_is_told(
                 assert progress is None or progress["index"] >= seen[-1], (text, progress)
             assert seen and seen == sorted(seen) and seen[-1] == 3, seen
             assert (await http.get(f"/api/tasks/{task}")).json()["state"] == "done"
+
+
+async def test_the_robots_view_says_where_the_tour_stands_as_the_tasks_view_does(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """Leaving a stop, R1 went on saying "at Roman mosaics (1/3)" (the last point it showed)
+    all the way to the next one, standing elsewhere: it says the task's progress instead."""
+    async with fleet_factory(robots=1, time_scale=4, screens=True) as fleet:
+        async with fleet.http() as http:
+            watch = await open_page(fleet.admin_url)
+            page = watch.page
+            await web.sign_in(watch, web.operator_token)
+            await web.open_view(page, "Robots")
+            card = page.get_by_role("region", name="R1")
+            await expect(card).to_contain_text("online", timeout=20_000)
+            await request_tours(http, ["highlights"])
+            task_line = card.locator("dt", has_text="Task").locator(
+                "xpath=following-sibling::dd[1]"
+            )
+            await expect(task_line).to_have_text(
+                "Tour: Highlights, stop 1 of 3: Roman mosaics explained, going on", timeout=60_000
+            )
+
+
+async def test_the_event_log_filtered_by_a_robot_shows_the_rows_it_sent(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """A row a robot sent without naming itself (its call_elevator) was shown under the robot
+    filter only for robots named "R<n>": a vehicle named V1 had none."""
+
+    def with_v1(data: dict[str, Any]) -> None:
+        data["robots"].append({"name": "V1", "token": "robot-V1-test-token", "start_node": "hall"})
+
+    async with fleet_factory(robots=0, edit=with_v1) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, fleet.server.admin_token)
+        await web.open_view(page, "Event log")
+        store = fleet.server.app.state.store
+        for robot in ("V1", "R1"):
+            store.record_event("call_elevator", robot, {"elevator": "lift", "floor": "F1"})
+        events = page.get_by_role("table", name="Events")
+        await expect(events.get_by_role("row").filter(has_text="call_elevator")).to_have_count(2)
+        await page.get_by_role("combobox", name="Robot").select_option("V1")
+        rows = events.get_by_role("row").filter(has_text="call_elevator")
+        await expect(rows).to_have_count(1)
+        await expect(rows).to_contain_text("V1")

@@ -28,13 +28,15 @@ import { Monitor } from "/admin/views/monitor.js";
 
 /**
  * Start the console for `me`: open the live connection, load the snapshot, draw the view the
- * tab last showed.
+ * tab last showed. When `signal` aborts (the sign-in ended) it stops: no timer, listener or
+ * late answer of it draws on the page again, and its map leaves the page's element.
  * @param {import("/lib/session.js").StaffSession<Me>} session
  * @param {Me} me
+ * @param {AbortSignal} signal
  * @param {ConsoleParts} parts
  * @returns {Promise<void>}
  */
-export async function startConsole(session, me, parts) {
+export async function startConsole(session, me, signal, parts) {
   const { api } = session;
   const hub = session.connect(parts.connection);
   hub.addEventListener("status", () => {
@@ -76,11 +78,16 @@ export async function startConsole(session, me, parts) {
     if (view === "map") ui.map.shown();
   };
 
-  mountHeader(ui, session, parts.who);
+  mountHeader(ui, session, parts.who, signal);
   parts.tabs.hidden = false;
 
   const map = mountMap(ui, parts.map);
   ui.map = map;
+  signal.addEventListener("abort", () => {
+    store.stop();
+    ui.monitor.close();
+    map.remove();
+  }, { once: true });
   installProbe(map, () => draw());
   let alarmShown = false;
   ui.monitor = new Monitor(ui);
@@ -90,7 +97,7 @@ export async function startConsole(session, me, parts) {
   });
 
   function draw() {
-    if (!store.site) return;
+    if (!store.site || signal.aborted) return;
     const open = store.openAlerts();
     document.title = open.length ? `(${open.length}) GuideBot console` : "GuideBot console";
     render(alertBar(ui, open), parts.alertBar);
@@ -129,15 +136,18 @@ export async function startConsole(session, me, parts) {
   store.addEventListener("change", draw);
   try {
     await store.start();
+    if (signal.aborted) return;
     ui.go(ui.view);
     await map.setSite(store.site);
+    if (signal.aborted) return;
     await store.reload();
+    if (signal.aborted) return;
     await ui.modes.start();
   } catch (err) {
-    render(html`<p class="notice error" role="alert">${err.message}</p>`, parts.details);
+    if (!signal.aborted) render(html`<p class="notice error" role="alert">${err.message}</p>`, parts.details);
     return;
   }
-  showBuilding(store, map);
+  if (!signal.aborted) showBuilding(store, map);
 }
 
 /**

@@ -7,12 +7,14 @@ const SERVER_REFRESH_MS = 15000;
 
 /**
  * Draw the header into `who` once, and keep its server line fresh (at every reconnect and
- * every 15 s).
+ * every 15 s) until `signal` aborts (the sign-in ended): one timer per sign-in, never one more
+ * at each sign-in after a 401.
  * @param {any} ui  the console state (web/admin/console.js)
  * @param {import("/lib/session.js").StaffSession<any>} session
  * @param {HTMLElement} who
+ * @param {AbortSignal} signal
  */
-export function mountHeader(ui, session, who) {
+export function mountHeader(ui, session, who, signal) {
   const account = session.account;
   render(
     html`<span id="server-status" role="status"></span>
@@ -30,10 +32,13 @@ export function mountHeader(ui, session, who) {
     who,
   );
   const status = /** @type {HTMLElement} */ (who.querySelector("#server-status"));
-  const showServer = () => serverStatus(ui.api).then((view) => render(view, status));
+  const showServer = () => serverStatus(ui.api).then((view) => {
+    if (!signal.aborted) render(view, status);
+  });
   showServer();
   ui.hub.addEventListener("connect", showServer);
-  setInterval(showServer, SERVER_REFRESH_MS);
+  const timer = setInterval(showServer, SERVER_REFRESH_MS);
+  signal.addEventListener("abort", () => clearInterval(timer), { once: true });
 }
 
 /**

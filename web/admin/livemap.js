@@ -2,6 +2,7 @@
 // elevators, evacuation rings), what a click selects, and the selected robot's planned path.
 // Its toolbar and details panel are drawn by web/admin/views/map.js.
 import { robotDoing } from "/admin/names.js";
+import { carText } from "/admin/views/building.js";
 import { FloorMap } from "/lib/map.js";
 
 /**
@@ -32,10 +33,7 @@ export function mountMap(ui, element) {
   store.addEventListener("robot_offline", (/** @type {CustomEvent} */ e) => map.robotOffline(e.detail));
   store.addEventListener("lock", (/** @type {CustomEvent} */ e) => map.setAreaState(e.detail));
   store.addEventListener("door", (/** @type {CustomEvent} */ e) => map.setDoor(e.detail, store.doors.get(e.detail)));
-  store.addEventListener("lift", (/** @type {CustomEvent} */ e) => {
-    const lift = store.lifts.get(e.detail);
-    map.setElevator(e.detail, lift.floor, lift.door_open);
-  });
+  store.addEventListener("lift", (/** @type {CustomEvent} */ e) => showCar(store, map, e.detail));
   map.addEventListener("select", async (/** @type {CustomEvent} */ e) => {
     ui.selected = e.detail;
     if (e.detail.kind === "robot") {
@@ -73,7 +71,23 @@ export function mountMap(ui, element) {
 export function showBuilding(store, map) {
   for (const view of store.locks.values()) map.setAreaState(view);
   for (const [id, open] of store.doors) map.setDoor(id, open);
-  for (const [id, lift] of store.lifts) if (lift.floor) map.setElevator(id, lift.floor, lift.door_open);
+  for (const id of store.lifts.keys()) showCar(store, map, id);
+}
+
+/**
+ * Draw where an elevator's car is: at its floor, or at none while it moves (it left the floor
+ * it was last at: the map drew it there, "here", for the whole ride); its tooltip says it as
+ * the Building view does ("moving to First floor (last at Ground floor)").
+ * @param {any} store
+ * @param {FloorMap} map
+ * @param {string} id
+ */
+function showCar(store, map, id) {
+  const car = store.lifts.get(id);
+  // Before the site is loaded (a message may come first) there is nothing to draw it on:
+  // showBuilding draws it then.
+  if (!store.site || !car || car.state === "unknown") return;
+  map.setElevator(id, car.state === "moving" ? null : car.floor, car.door_open, carText(car, store.site));
 }
 
 /**

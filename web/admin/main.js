@@ -25,6 +25,12 @@ async function whoAmI(api) {
   }
 }
 
+/** The console signed in now, stopped when the sign-in form shows again (a 401, a refused live
+ * connection): its timers, map and listeners go with it, so the next sign-in starts one
+ * console, not a second one beside a stale first (signing in again found the map taken: "Map
+ * container is already initialized", and the console never showed). */
+let running = new AbortController();
+
 /** @type {StaffSession<import("/admin/console.js").Me>} */
 const session = new StaffSession({
   section: $("signin"),
@@ -32,6 +38,9 @@ const session = new StaffSession({
   missing: "Enter your account name and password, or a staff token.",
   check: whoAmI,
   hide() {
+    running.abort();
+    render("", $("who")); // no name, role nor "Sign out" of a sign-in that ended
+    render("", $("page-error"));
     $("tabs").hidden = true;
     $("map-view").hidden = true;
     $("view").hidden = true;
@@ -39,7 +48,7 @@ const session = new StaffSession({
     render("", $("declare"));
     $("emergency-banner").hidden = true;
   },
-  start: (me) => startConsole(session, me, {
+  start: (me) => startConsole(session, me, (running = new AbortController()).signal, {
     who: $("who"),
     connection: $("connection"),
     tabs: $("tabs"),

@@ -65,6 +65,13 @@ export function taskName(site, task) {
   return [task.kind, ...Object.values(p)].join(" ");
 }
 
+/** The id of the task a robot runs: what its last robot_state says (none when idle), else the
+ * snapshot's (a robot not heard from since the page loaded). The snapshot's is never a
+ * fallback for an idle robot: it named the task the robot ran at sign-in long after it ended. */
+export function robotTaskId(robot) {
+  return robot.state ? robot.state.task_id ?? null : robot.info?.task_id ?? null;
+}
+
 /** The task a robot runs, by name ("an automatic task" for one the console does not list). */
 export function taskLabel(store, id) {
   if (!id) return "none";

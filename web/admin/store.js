@@ -50,8 +50,19 @@ export class Store extends EventTarget {
     this.tasksTimer = 0;
     this.taskFetch = null;
     this.taskFetchAgain = false;
+    this.taskAsked = 0; // task listings requested (a reload's or a refresh's)
+    this.taskShown = 0; // the request whose listing the page shows: an older one never replaces it
     this.emergencyFetch = null;
     this.emergencyFetchAgain = false;
+    this.stopped = false; // the sign-in ended: nothing of this store changes the page again
+  }
+
+  /** The sign-in ended (web/admin/main.js): no more refreshes, live messages or redraws. */
+  stop() {
+    this.stopped = true;
+    clearTimeout(this.tasksTimer);
+    cancelAnimationFrame(this.frame);
+    this.frame = 0;
   }
 
   /** A background refresh failed: the page shows why (never swallowed). */
@@ -62,7 +73,7 @@ export class Store extends EventTarget {
   }
 
   changed() {
-    if (!this.frame) {
+    if (!this.frame && !this.stopped) {
       this.frame = requestAnimationFrame(() => {
         this.frame = 0;
         this.dispatchEvent(new Event("change"));
@@ -93,6 +104,7 @@ export class Store extends EventTarget {
      * @param {(message: Message<T>) => void} fn
      */
     const on = (type, fn) => this.hub.on(type, (m) => {
+      if (this.stopped) return;
       fn(m);
       this.changed();
     });
@@ -119,6 +131,7 @@ export class Store extends EventTarget {
       this.emit("robot_offline", m.payload.robot);
     });
     on("robot_service", (m) => {
+      this.#live(`service:${m.payload.robot}`);
       const robot = this.robot(m.payload.robot);
       robot.info = { ...(robot.info ?? {}), out_of_service: m.payload.out_of_service };
     });
@@ -140,8 +153,8 @@ export class Store extends EventTarget {
       this.#addEvents([m.payload]);
       if (this.reloading) this.inFlight.push(m.payload);
       const row = m.payload;
-      if (row.kind === "fleet_paused") this.fleet = { paused: true, by: row.data.by, since: row.at, reason: row.data.reason ?? "" };
-      if (row.kind === "fleet_resumed") this.fleet = { paused: false, by: null, since: null, reason: "" };
+      if (row.kind === "fleet_paused") this.takeFleet({ paused: true, by: row.data.by, since: row.at, reason: row.data.reason ?? "" });
+      if (row.kind === "fleet_resumed") this.takeFleet({ paused: false, by: null, since: null, reason: "" });
     });
     on("building_input_changed", (m) => {
       const { module, point, value } = m.payload;
@@ -166,11 +179,13 @@ export class Store extends EventTarget {
     });
     // The fire alarm: the state changes (banner), and each robot's evacuation as it reports it.
     on("emergency_changed", (m) => {
+      this.#live("emergency");
       this.emergency = { ...(this.emergency ?? {}), ...m.payload };
       this.refreshEmergency();
     });
     on("evacuation_state", (m) => {
       if (!this.emergency) return;
+      this.#live("emergency");
       const robots = { ...(this.emergency.robots ?? {}) };
       robots[m.source] = { ...(robots[m.source] ?? {}), ...m.payload, at: m.timestamp };
       this.emergency = { ...this.emergency, robots };
@@ -218,6 +233,7 @@ export class Store extends EventTarget {
     const sets = new Map(this.liveSets);
     /** @param {string} key */
     const unchanged = (key) => this.liveSets.get(key) === sets.get(key);
+    const taskAsk = ++this.taskAsked;
     const [robots, locks, tasks, alerts, events, building, fleet, emergency] = await Promise.all([
       this.api.get("/api/robots"),
       this.api.get("/api/locks"),
@@ -228,11 +244,15 @@ export class Store extends EventTarget {
       this.api.get("/api/fleet"),
       this.api.get("/api/emergency"),
     ]);
-    this.fleet = fleet;
-    this.emergency = emergency;
+    // A pause, a resume, an alarm or an evacuation step that came live while the snapshot was
+    // fetched is newer than it (the page showed the fleet running again, the banner gone).
+    if (unchanged("fleet")) this.fleet = fleet;
+    if (unchanged("emergency")) this.emergency = emergency;
+    else this.refreshEmergency(); // the rest of it (inputs, robots held), fetched after
     for (const info of robots) {
       const robot = this.robot(info.name);
-      robot.info = info;
+      const service = robot.info?.out_of_service;
+      robot.info = unchanged(`service:${info.name}`) ? info : { ...info, out_of_service: service };
       // A link event that came in while the snapshot was fetched is newer than it.
       if (robot.links === (links.get(info.name) ?? 0)) robot.online = info.online;
       if (info.robocan && !(robot.robocan?.at > info.robocan.at)) robot.robocan = info.robocan;
@@ -242,7 +262,7 @@ export class Store extends EventTarget {
       this.locks.set(view.area, view);
       this.emit("lock", view);
     }
-    this.#setTasks(tasks.tasks);
+    this.#setTasks(tasks.tasks, taskAsk);
     for (const alert of alerts) this.#alert(alert, false);
     const last = events.events.length ? events.events[events.events.length - 1].at : 0;
     this.snapshots += 1;
@@ -257,6 +277,20 @@ export class Store extends EventTarget {
     this.changed();
   }
 
+  /** The fleet's pause as a live message or this page's own pause or resume said it. */
+  takeFleet(view) {
+    this.#live("fleet");
+    this.fleet = view;
+    this.changed();
+  }
+
+  /** The emergency state as this page's declare or resume answered it. */
+  takeEmergency(view) {
+    this.#live("emergency");
+    this.emergency = view;
+    this.changed();
+  }
+
   /** The emergency state again (after emergency_changed: the robots held, the inputs' values,
    * the cut-off tasks come with the snapshot only). One request at a time, one more after. */
   refreshEmergency() {
@@ -268,7 +302,14 @@ export class Store extends EventTarget {
       try {
         do {
           this.emergencyFetchAgain = false;
-          this.emergency = await this.api.get("/api/emergency");
+          const live = this.liveSets.get("emergency");
+          const emergency = await this.api.get("/api/emergency");
+          // An evacuation step that came meanwhile is newer: ask again rather than undo it.
+          if (live !== this.liveSets.get("emergency")) {
+            this.emergencyFetchAgain = true;
+            continue;
+          }
+          this.emergency = emergency;
           for (const name of Object.keys(this.emergency.robots ?? {})) this.emit("evacuation", name);
           this.changed();
         } while (this.emergencyFetchAgain);
@@ -316,7 +357,8 @@ export class Store extends EventTarget {
       try {
         do {
           this.taskFetchAgain = false;
-          this.#setTasks((await this.api.get(TASK_LISTING)).tasks);
+          const ask = ++this.taskAsked;
+          this.#setTasks((await this.api.get(TASK_LISTING)).tasks, ask);
         } while (this.taskFetchAgain);
         this.error = null;
       } catch (err) {
@@ -328,7 +370,11 @@ export class Store extends EventTarget {
     return this.taskFetch;
   }
 
-  #setTasks(tasks) {
+  /** The listing of request `ask`, unless the page shows a later request's (a reload's answer
+   * that came after a refresh sent later: the task the refresh showed went away again). */
+  #setTasks(tasks, ask) {
+    if (this.stopped || ask < this.taskShown) return;
+    this.taskShown = ask;
     this.tasks = new Map(tasks.map((t) => [t.id, t]));
     clearTimeout(this.tasksTimer);
     if (tasks.some((t) => t.state === "queued")) {
@@ -368,7 +414,7 @@ export class Store extends EventTarget {
 
   #lift(car) {
     this.lifts.set(car.elevator, car);
-    if (car.floor) this.emit("lift", car.elevator);
+    if (car.floor || car.state === "moving") this.emit("lift", car.elevator);
   }
 
   #door(id, open) {

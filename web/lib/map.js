@@ -42,6 +42,10 @@ export class FloorMap extends EventTarget {
       keyboard: true,
     });
     this.map.setView([0, 0], 3);
+    // Doors above the points' labels (Leaflet's tooltip pane is at 650): at 1280x800 the
+    // "Welcome hall" label covered door_gallery, so its state (red or green) could not be seen.
+    this.map.createPane("doors").style.zIndex = "660";
+    this.removed = false; // remove() took it off the page
     this.site = null;
     this.floor = null;
     this.floorLayers = new Map(); // floor id -> L.LayerGroup (plan + graph + fixtures)
@@ -68,6 +72,18 @@ export class FloorMap extends EventTarget {
     this.map.on("zoomend", () => this.#spread());
   }
 
+  /** Take the map off its element (the page signed out): the element can hold a new one. */
+  remove() {
+    this.removed = true;
+    cancelAnimationFrame(this.frame);
+    this.frame = 0;
+    // Leaflet 1.9 ends a zoom animation 250 ms after it began, on a map removed meanwhile too
+    // ("reading '_leaflet_pos'" of undefined): end it first.
+    const map = /** @type {any} */ (this.map);
+    if (map._animatingZoom) map._onZoomTransitionEnd();
+    this.map.remove();
+  }
+
   /** Draw a site (the document of GET /api/site/map) and show its first floor. */
   async setSite(site) {
     this.site = site;
@@ -79,6 +95,7 @@ export class FloorMap extends EventTarget {
     this.liftMarks.clear();
     for (const floor of site.floors) this.floorLayers.set(floor.id, L.layerGroup());
     await Promise.all(site.floors.map((f) => this.#drawPlan(f)));
+    if (this.removed) return; // taken off the page while its plans loaded
     this.#drawGraph(site);
     this.#drawFixtures(site);
     this.#drawClosed();
@@ -209,7 +226,7 @@ export class FloorMap extends EventTarget {
     for (const door of site.doors) {
       const n = at(door.node);
       if (!n) continue;
-      const mark = L.circleMarker([n.y, n.x], { radius: 8, className: "map-door closed" });
+      const mark = L.circleMarker([n.y, n.x], { radius: 8, className: "map-door closed", pane: "doors" });
       mark.bindTooltip(`door ${door.id}: closed`, { direction: "bottom" });
       mark.on("click", () => this.#select("door", door.id));
       mark.addTo(this.floorLayers.get(n.floor));
@@ -263,13 +280,21 @@ export class FloorMap extends EventTarget {
     mark.setTooltipContent(`door ${doorId}: ${open ? "open" : "closed"}`);
   }
 
-  setElevator(liftId, floorId, doorOpen) {
+  /**
+   * Where an elevator's car is: at `floorId` (null: at no stop, a car on its way), its door
+   * open or not; `text` says it in the page's words for the tooltip (else the floor's id).
+   * @param {string} liftId
+   * @param {string | null} floorId
+   * @param {boolean} doorOpen
+   * @param {string} [text]
+   */
+  setElevator(liftId, floorId, doorOpen, text) {
     for (const { floor, mark } of this.liftMarks.get(liftId) ?? []) {
       const here = floor === floorId;
       const cls = `map-lift ${here ? (doorOpen ? "here open" : "here") : "away"}`;
       mark.options.className = cls;
       mark.getElement?.()?.setAttribute("class", `${cls} leaflet-interactive`);
-      mark.setTooltipContent(`elevator ${liftId}: ${here ? `here${doorOpen ? ", door open" : ""}` : `at ${floorId}`}`);
+      mark.setTooltipContent(`elevator ${liftId}: ${text ?? (here ? `here${doorOpen ? ", door open" : ""}` : `at ${floorId}`)}`);
     }
   }
 

@@ -31,10 +31,10 @@ export async function declareEmergency(ui, zone = {}, reason = "") {
   });
   if (!ok) return;
   await ui.act("Declare emergency", async () => {
-    ui.store.emergency = await ui.api.post("/api/emergency/declare", {
+    ui.store.takeEmergency(await ui.api.post("/api/emergency/declare", {
       zone,
       reason: reason.trim() || `declared from the console by ${ui.me.name}`,
-    });
+    }));
   });
 }
 
@@ -43,7 +43,7 @@ async function resumeService(ui) {
   ui.resumeRefusal = null;
   try {
     const reply = await ui.api.post("/api/emergency/resume");
-    ui.store.emergency = reply;
+    ui.store.takeEmergency(reply);
     const n = reply.resumed_tasks?.length ?? 0;
     ui.notice = { ok: true, text: `Resume service: done. ${n} task${n === 1 ? "" : "s"} cut off by the alarm run again in their places.` };
   } catch (err) {

@@ -16,8 +16,11 @@ export function severity(row) {
   return "info";
 }
 
-function robotOf(row) {
-  return row.data?.robot ?? (row.source && row.source.match(/^R\d+$/) ? row.source : null);
+/** The robot a row is about: the one it names, else the robot that sent it (any name the
+ * site gives a robot: "V1" or "guide-2", not only "R<n>": a vehicle's own rows were hidden
+ * when filtering by it). */
+function robotOf(ui, row) {
+  return row.data?.robot ?? (ui.store.robots.has(row.source) ? row.source : null);
 }
 
 /** The person (account or staff token name) a row is about: what they did, or who asked. */
@@ -28,7 +31,7 @@ function personOf(row) {
 function filtered(ui) {
   const f = ui.eventFilter ?? {};
   return ui.store.events.filter(
-    (row) => (!f.robot || robotOf(row) === f.robot) && (!f.person || personOf(row) === f.person)
+    (row) => (!f.robot || robotOf(ui, row) === f.robot) && (!f.person || personOf(row) === f.person)
       && (!f.kind || row.kind === f.kind) && (!f.severity || severity(row) === f.severity),
   );
 }

@@ -5,6 +5,7 @@ import { confirmAction } from "/lib/confirm.js";
 import { clock, inputValue } from "/lib/dom.js";
 import { WAITING } from "/lib/map.js";
 import { doorName, elevatorName, floorName, placeName, robotDoing } from "/admin/names.js";
+import { carText } from "/admin/views/building.js";
 
 const PAD_M = 2;
 const LABEL_M = 12; // room on the right for the names of the points there
@@ -13,10 +14,10 @@ const PX_PER_M = 16; // every floor at one scale
 function fleetControls(ui) {
   const fleet = ui.store.fleet;
   const pause = () => ui.act("Pause the fleet", async () => {
-    ui.store.fleet = await ui.api.post("/api/fleet/pause", { reason: inputValue("pause-reason") });
+    ui.store.takeFleet(await ui.api.post("/api/fleet/pause", { reason: inputValue("pause-reason") }));
   });
   const resume = () => ui.act("Resume the fleet", async () => {
-    ui.store.fleet = await ui.api.post("/api/fleet/resume");
+    ui.store.takeFleet(await ui.api.post("/api/fleet/resume"));
   });
   const home = async () => {
     const ok = await confirmAction({
@@ -56,10 +57,9 @@ function buildingControls(ui) {
     return ui.act(`Call ${elevatorName(site, lift.id)} to ${floorName(site, floor)}`, () => ui.api.post(`/api/building/elevators/${encodeURIComponent(lift.id)}/call`, { floor }));
   };
   const doorState = (id) => (ui.store.doors.has(id) ? (ui.store.doors.get(id) ? "open" : "closed") : "not read yet");
-  const car = (id) => {
-    const lift = ui.store.lifts.get(id);
-    return lift ? `at ${floorName(site, lift.floor)}${lift.door_open ? ", door open" : ""}` : "not reported yet";
-  };
+  // As the Building view says it: "moving to First floor (last at Ground floor)" while it
+  // moves, not "at Ground floor" (the floor it left).
+  const car = (id) => carText(ui.store.lifts.get(id), site);
   return html`<section aria-labelledby="by-hand-title">
     <h3 id="by-hand-title">Doors and elevators by hand</h3>
     <table aria-label="Doors">
@@ -129,8 +129,10 @@ function floorPlan(ui, floor) {
       ${(site.elevators ?? []).flatMap((e) => e.stops.filter((st) => byId.has(st.node)).map((st) => {
         const n = byId.get(st.node);
         const car = ui.store.lifts.get(e.id);
-        const here = car?.floor === st.floor;
-        return svg`<rect x=${n.x - 0.8} y=${Y(n.y) - 0.8} width="1.6" height="1.6" fill=${here ? "#8ab4f8" : "#ccc"} stroke="#444" stroke-width="0.15"><title>${elevatorName(site, e.id)}: ${here ? "the car is here" : "the car is elsewhere"}</title></rect>`;
+        // A moving car is at no stop: the one it left is not "here".
+        const here = car?.state !== "moving" && car?.floor === st.floor;
+        const where = here ? "the car is here" : car?.state === "moving" ? `the car is ${carText(car, site)}` : "the car is elsewhere";
+        return svg`<rect x=${n.x - 0.8} y=${Y(n.y) - 0.8} width="1.6" height="1.6" fill=${here ? "#8ab4f8" : "#ccc"} stroke="#444" stroke-width="0.15"><title>${elevatorName(site, e.id)}: ${where}</title></rect>`;
       }))}
       ${robotMarks}
     </svg>

@@ -2,7 +2,7 @@
 import { html } from "lit-html";
 import { carText } from "/admin/views/building.js";
 import { duration, percent } from "/lib/dom.js";
-import { evacuationText, floorName, placeName, taskLabel, waitingFor } from "/admin/names.js";
+import { evacuationText, floorName, placeName, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
 
 export function toolbarView(ui) {
   const { store, map } = ui;
@@ -33,11 +33,11 @@ function robotDetails(ui, name) {
     <dl>
       <dt>Connection</dt><dd>${robot.online ? "online" : "offline"}</dd>
       ${evacuationText(ui.store, name) ? html`<dt>Evacuation</dt><dd class="state-evacuation">${evacuationText(ui.store, name).replace("evacuation: ", "")}</dd>` : ""}
-      <dt>Mode</dt><dd>${s.mode ?? robot.info?.mode ?? "—"}</dd>
+      <dt>Mode</dt><dd>${robot.online ? s.mode ?? robot.info?.mode ?? "—" : "offline"}</dd>
       ${waitingFor(ui.store, s) ? html`<dt>Waiting</dt><dd class="state-waiting">${waitingFor(ui.store, s)}</dd>` : ""}
       <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>
       <dt>Where</dt><dd>${s.node ? placeName(ui.store.site, s.node) : "—"} (${s.floor ? floorName(ui.store.site, s.floor) : "—"})</dd>
-      <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? robot.info?.task_id)}</dd>
+      <dt>Task</dt><dd>${taskLabel(ui.store, robotTaskId(robot))}</dd>
       <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
     </dl>`;
 }

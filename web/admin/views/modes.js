@@ -20,19 +20,25 @@ export class Modes {
     this.closures = [];
     this.kind = "area";
     this.error = null;
+    this.live = 0; // closures_changed messages taken: a load sent before one of them is older
   }
 
   async start() {
-    this.ui.hub.on("closures_changed", (/** @type {import("/lib/messages.js").Message<"closures_changed">} */ m) => this.#take(m.payload.closures, m.payload.nodes));
+    this.ui.hub.on("closures_changed", (/** @type {import("/lib/messages.js").Message<"closures_changed">} */ m) => {
+      this.live += 1;
+      this.#take(m.payload.closures, m.payload.nodes);
+    });
     this.ui.hub.subscribe("closures_changed");
     this.ui.hub.addEventListener("connect", () => this.load());
     await this.load();
   }
 
   async load() {
+    const live = this.live;
     try {
       const view = await this.ui.api.get("/api/closures");
-      this.#take(view.closures, view.closed_nodes);
+      // A closures_changed that came while it was fetched says all of them, and is newer.
+      if (live === this.live) this.#take(view.closures, view.closed_nodes);
     } catch (err) {
       this.error = err.message;
       this.ui.draw();
@@ -40,6 +46,7 @@ export class Modes {
   }
 
   #take(closures, nodes) {
+    if (this.ui.store.stopped) return; // the sign-in ended: its map is gone
     this.closures = closures;
     this.error = null;
     const closed = new Map();

@@ -3,24 +3,24 @@
 // go on, cancel the task.
 import { html } from "lit-html";
 import { clock, inputValue, percent } from "/lib/dom.js";
-import { evacuationText, floorName, placeName, poiName, taskLabel, waitingFor } from "/admin/names.js";
-import { cancelTask } from "/admin/views/tasks.js";
+import { evacuationText, floorName, placeName, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
+import { cancelTask, tourProgress } from "/admin/views/tasks.js";
 
-export function tourStep(ui, robot) {
-  const s = robot.state;
-  const task = s?.task_id ? ui.store.tasks.get(s.task_id) : null;
-  if (!task || task.kind !== "tour" || !s.poi) return "";
-  const tour = ui.store.site.tours.find((t) => t.id === task.params.tour);
-  const at = tour ? tour.points.indexOf(s.poi) + 1 : 0;
-  const name = poiName(ui.store.site, s.poi);
-  return tour ? `${name} (${at}/${tour.points.length})` : name;
+/** The robot's task and where its tour stands, as the Tasks view says it ("Tour: Highlights,
+ * stop 2 of 3: Bronze Age sword explained, going on"): not "at Bronze Age sword (2/3)" from
+ * the last point the robot showed, which it said all the way to the next stop. */
+function taskText(ui, robot) {
+  const id = robotTaskId(robot);
+  const task = id ? ui.store.tasks.get(id) : null;
+  const step = task ? tourProgress(ui, task) : "";
+  return `${taskLabel(ui.store, id)}${step ? `, ${step}` : ""}`;
 }
 
 function actions(ui, robot) {
   if (!ui.operate) return "";
   const name = robot.name;
   const out = Boolean(robot.info?.out_of_service);
-  const taskId = robot.state?.task_id ?? robot.info?.task_id;
+  const taskId = robotTaskId(robot);
   const send = (kind, params) => ui.act(`${kind} ${name}`, () => ui.api.post("/api/tasks", { kind, params, robot: name, priority: 10 }));
   const nodeSelect = `node-${name}`;
   const vda = ui.store.site.robots.find((r) => r.name === name)?.interface === "vda5050";
@@ -100,7 +100,7 @@ export function robotsView(ui) {
           <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : asleep ? "offline, hibernating" : "offline"}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
           <dt>Pose</dt><dd>${node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
-          <dt>Task</dt><dd>${taskLabel(ui.store, s.task_id ?? info.task_id)}${tourStep(ui, robot) ? `, at ${tourStep(ui, robot)}` : ""}</dd>
+          <dt>Task</dt><dd>${taskText(ui, robot)}</dd>
           <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
           <dt>RoboCAN modules</dt><dd>${modules.length ? modules.map(([m, st]) => html`<span class=${`badge ${st === "ok" ? "ok" : "bad"}`}>${m}: ${st}</span> `) : "none reported"}</dd>
           <dt>Last errors</dt><dd>${robot.faults.length ? robot.faults.map((f) => html`<div>${clock(f.at)} ${f.kind} ${f.detail ?? ""}</div>`) : "none"}</dd>

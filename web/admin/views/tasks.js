@@ -92,17 +92,23 @@ async function showHistory(ui, task) {
   });
 }
 
-/** Where a running task stands, from the task's own progress (what its visitor is told: the
- * stop the robot reported, skipped stops left out), else the robot's place. */
-function progress(ui, task) {
+/** Where a tour stands, from the task's own progress (what its visitor is told: the stop the
+ * robot reported, skipped stops left out): "stop 2 of 3: Roman mosaics explained, going on";
+ * "" for a task without stops. The Robots view says the same. */
+export function tourProgress(ui, task) {
   const p = task.progress;
-  if (p?.total) {
-    if (!p.index) return `on the way to stop 1 of ${p.total}`;
-    const name = p.name ?? poiName(ui.store.site, p.poi);
-    return p.stage === "explained"
-      ? `stop ${p.index} of ${p.total}: ${name} explained, going on`
-      : `stop ${p.index} of ${p.total}: at ${name}`;
-  }
+  if (!p?.total) return "";
+  if (!p.index) return `on the way to stop 1 of ${p.total}`;
+  const name = p.name ?? poiName(ui.store.site, p.poi);
+  return p.stage === "explained"
+    ? `stop ${p.index} of ${p.total}: ${name} explained, going on`
+    : `stop ${p.index} of ${p.total}: at ${name}`;
+}
+
+/** Where a running task stands: its tour's progress, else the robot's place. */
+function progress(ui, task) {
+  const tour = tourProgress(ui, task);
+  if (tour) return tour;
   const s = task.robot ? ui.store.robots.get(task.robot)?.state : null;
   if (!s?.node) return "—";
   const place = placeName(ui.store.site, s.node);
