@@ -9,7 +9,9 @@ One goal at a time (a new navigate_to pre-empts the old one). For each path the 
   the goal again;
 - plans again when ``closures_changed`` closes a node of its path ahead (building modes, a
   jammed door, a stuck lift), and plans with the server only while any node is closed; a goal
-  only closed nodes lead to fails with ``navigation_failed`` ``closed`` (a tour skips it);
+  only closed nodes lead to fails with ``navigation_failed`` ``closed`` (a tour skips it),
+  and ``trouble`` when trouble alone cuts it off (the ``path`` answer's flag: the server
+  reads it from the task's task_ended, never the reason's words);
   a goal given ``trouble_wait_s`` (a tour's stop) that only trouble cuts off (a jammed door,
   a stuck lift: the server's ``path`` answer says ``trouble``) first waits that long for a
   ``closures_changed`` and plans again, so a jam of a few seconds does not cost the visitor
@@ -370,7 +372,10 @@ class Navigator(MotionControl):
             self._send_velocity(0.0, 0.0, force=True)
             self.ep.publish(
                 NavigationFailed(
-                    node=node, reason=failure.reason, closed=isinstance(failure, RouteClosed)
+                    node=node,
+                    reason=failure.reason,
+                    closed=isinstance(failure, RouteClosed),
+                    trouble=isinstance(failure, RouteClosed) and failure.trouble_only,
                 ),
                 correlation_id=request_id,
             )

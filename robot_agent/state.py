@@ -107,11 +107,16 @@ class StateReporter(Service):
             "seq": self.seq,
         }
 
-    def ended(self) -> list[dict[str, str]]:
+    def ended(self) -> list[dict[str, str | bool]]:
         """The last tasks that ended, newest first (robot_state ``ended``)."""
         last = list(self.tasks.finished)[-ENDED_REPORTED:]
         return [
-            {"task_id": t.task_id, "outcome": t.outcome or "failed", "reason": t.reason[:500]}
+            {
+                "task_id": t.task_id,
+                "outcome": t.outcome or "failed",
+                "reason": t.reason[:500],
+                "trouble": t.trouble,
+            }
             for t in reversed(last)
         ]
 

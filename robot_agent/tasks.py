@@ -72,6 +72,10 @@ class MainTask:
     problem: str = ""
     """The last thing that went wrong while it ran (navigation_failed, a robot fault): the
     reason given when its net fails without saying why."""
+    problem_trouble: bool = False
+    """``problem`` is a navigation_failed whose way trouble alone cut off (its flag)."""
+    trouble: bool = False
+    """It failed for ``problem_trouble``'s cause (task_ended's ``trouble``)."""
     history: list[TaskPhase] = field(default_factory=list)
     run_request_id: str = ""
     """The id of the run_petri_net request, to tie RG's refusal (an ``error``) to this task."""
@@ -242,6 +246,7 @@ class TaskRunner(Service):
         else:
             what = f"robot fault {p.get('kind') or '?'}: {p.get('detail') or ''}".rstrip(": ")
         task.problem = what
+        task.problem_trouble = message.type == "navigation_failed" and p.get("trouble") is True
 
     def _on_refused(self, message: Message) -> None:
         """RG's ``error`` for our run request: its reason becomes the task's failure reason."""
@@ -277,6 +282,7 @@ class TaskRunner(Service):
         if outcome == "failed" and not task.reason:
             # A failed task always says why, for the staff and the visitor who asked for it.
             task.reason = task.problem or f"the {task.net} task net failed (no step said why)"
+            task.trouble = task.problem_trouble
         task.move(TaskPhase.ENDED)
         task.outcome = outcome
         self.current = None
@@ -293,6 +299,7 @@ class TaskRunner(Service):
                 robot=self.robot,
                 outcome=task.outcome or "failed",
                 reason=task.reason,
+                trouble=task.trouble,
             )
         )
 

@@ -17,7 +17,9 @@ Safety rules (docs/building.md, "Doors"):
   holder's agent restarted and it does not stand on the door's node (BuildingInterface);
 - a holder that lets go while its ``open_door`` still waits for the door withdrew it
   (``DoorReleased``): the door did not fail (a virtual plan day saw a robot's goal cancelled
-  right after it asked, and the wait's time-out closed the working door as trouble).
+  right after it asked, and the wait's time-out closed the working door as trouble); so are
+  the waiting ``open_door`` requests of the holders the fire alarm drops (``release_all`` with
+  ``withdraw``: an evacuation raised door trouble and an alert for doors nobody wanted).
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ little early): it does not count."""
 
 
 class DoorReleased(Exception):
-    """The holder let the door go while its open_door waited for it: withdrawn, not failed."""
+    """The holder let the door go (or the fire alarm dropped it) while its open_door waited
+    for it: withdrawn, not failed. The text says why."""
 
 
 @dataclass
@@ -127,7 +130,7 @@ class DoorKeeper:
         ``holder`` lets it go (its request withdrawn), or at once if it already did (while the
         coil was being written)."""
         if holder and holder not in self.holders:
-            raise DoorReleased(holder)
+            raise DoorReleased(f"{holder} no longer holds it")
         if self.is_open:
             return
         future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -136,6 +139,12 @@ class DoorKeeper:
             await asyncio.wait_for(future, timeout_s)
         finally:
             del self._waiters[future]
+
+    def _withdraw(self, holders: set[str], why: str) -> None:
+        """Wake the open_door waits of ``holders`` with DoorReleased(why)."""
+        for future, waiting in self._waiters.items():
+            if waiting in holders and not future.done():
+                future.set_exception(DoorReleased(why))
 
     def hold(self, holder: str, expire: Callable[[], None]) -> None:
         """(Re)start ``holder``'s hold; ``expire`` runs if it is not released in time."""
@@ -149,15 +158,19 @@ class DoorKeeper:
         timer = self.holders.pop(holder, None)
         if timer is not None:
             timer.cancel()
-            for future, waiting in self._waiters.items():
-                if waiting == holder and not future.done():
-                    future.set_exception(DoorReleased(holder))
+            self._withdraw({holder}, f"{holder} let it go")
         return not self.holders
 
-    def release_all(self) -> None:
+    def release_all(self, *, withdraw: str = "") -> None:
+        """Drop every holder. With ``withdraw`` (why: the fire alarm), their ``open_door``
+        requests still waiting for the door are withdrawn too, as if each holder had let go:
+        nobody wants the door any more, so their time-out is no failure of the door."""
+        holders = set(self.holders)
         for timer in self.holders.values():
             timer.cancel()
         self.holders.clear()
+        if withdraw:
+            self._withdraw(holders, withdraw)
         if self._open_timer is not None:
             self._open_timer.cancel()
             self._open_timer = None

@@ -432,7 +432,9 @@ class BuildingInterface(Service):
         dropped = []
         for keeper in self.doors.values():
             if keeper.door.node in nodes and keeper.holders:
-                keeper.release_all()
+                # Their open_door requests still waiting are withdrawn, not failed: a time-out
+                # would close the door as trouble and raise an alert mid-evacuation.
+                keeper.release_all(withdraw="the fire alarm dropped its holders")
                 dropped.append(keeper.door.id)
                 task = asyncio.get_running_loop().create_task(self._close(keeper, best_effort=True))
                 self._commands.add(task)
@@ -453,8 +455,8 @@ class BuildingInterface(Service):
             timeout = door.open_time_s + self.command_margin_s
             try:
                 await keeper.wait_open(timeout, holder)
-            except DoorReleased:  # its goal cancelled: nobody waits for this answer
-                log.info("door %s: %s let it go before it opened", door.id, holder)
+            except DoorReleased as withdrawn:  # nobody waits for this answer any more
+                log.info("door %s: %s's open_door withdrawn: %s", door.id, holder, withdrawn)
                 return {"door": door.id}
             except TimeoutError:
                 health = self.pollers[door.open.module].health

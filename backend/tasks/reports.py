@@ -90,11 +90,14 @@ class TaskReports:
         if ended.outcome == "refused":
             self._refused(robot, task, ended.reason or "busy")
             return
-        self.end(robot, task, ended.outcome, ended.reason)
+        self.end(robot, task, ended.outcome, ended.reason, ended.trouble)
 
-    def end(self, robot: RobotInfo, task: Task, outcome: str, reason: str) -> None:
+    def end(
+        self, robot: RobotInfo, task: Task, outcome: str, reason: str, trouble: bool = False
+    ) -> None:
         """``robot`` ended ``task`` (not final, its own) with ``outcome``: from its task_ended,
-        or from the ``ended`` list of its robot_state when that task_ended was lost."""
+        or from the ``ended`` list of its robot_state when that task_ended was lost;
+        ``trouble``: their flag (the failure is a way trouble alone cut off)."""
         tm = self.tm
         state = _ENDED.get(outcome, TaskState.CANCELLED)
         reason = reason.strip()
@@ -112,7 +115,7 @@ class TaskReports:
         if (
             state is TaskState.FAILED
             and not task.internal
-            and self._waits_for_trouble(robot, task, reason)
+            and self._waits_for_trouble(robot, task, reason, trouble)
         ):
             return
         task.move(state, reason=reason)
@@ -135,12 +138,15 @@ class TaskReports:
         tm.changed(task, state.value)
         tm.dispatch()
 
-    def _waits_for_trouble(self, robot: RobotInfo, task: Task, reason: str) -> bool:
+    def _waits_for_trouble(self, robot: RobotInfo, task: Task, reason: str, trouble: bool) -> bool:
         """A visitor's task that failed because only trouble (a jammed door, a stuck lift)
-        cuts its way off goes back to the queue until the trouble lifts (trouble.py). Its
-        robot's reason must name trouble (RouteClosed's "<door|elevator> <id> out of order"):
-        a failure of another cause stands, whatever is closed meanwhile."""
-        if "out of order" not in reason:
+        cuts its way off goes back to the queue until the trouble lifts (trouble.py). The
+        robot says so with task_ended's typed ``trouble`` flag (its navigation_failed's; the
+        reason is words for people, never parsed): a failure of another cause stands, whatever
+        is closed meanwhile (an older robot sends no flag: its failures stand). The flag is a
+        pre-filter: the map must also show trouble alone cutting the goal off from the robot
+        (the trouble may have lifted, or staff closed the way since)."""
+        if not trouble:
             return False
         tm = self.tm
         closed = tm.closed_now()
@@ -167,7 +173,7 @@ class TaskReports:
                 continue
             log.info("%s: task %s ended by the robot's own state", robot.name, task.id)
             tm.courier.withdraw(("task", task.id, robot.name))
-            self.end(robot, task, item.outcome, item.reason)
+            self.end(robot, task, item.outcome, item.reason, item.trouble)
 
     def _refused(self, robot: RobotInfo, task: Task, reason: str) -> None:
         """Back to the queue, another robot preferred; this one waits for its next robot_state

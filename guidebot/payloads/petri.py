@@ -141,6 +141,11 @@ class NavigationFailed(PayloadModel):
     closed: bool = False
     """Only closed elements lead there (building modes or trouble, the server's ``path``
     answer): a tour skips the stop and says ``reason`` to its visitor."""
+    trouble: bool = False
+    """With ``closed``: every closure that cuts the way off is trouble, none by staff (the
+    ``path`` answer's ``trouble`` flag). The robot's task_ended carries it to the Task Manager,
+    which queues a visitor's task cut off by trouble alone until it lifts; ``reason`` is words
+    for people, never parsed."""
 
 
 @register_payload("ask_continue")

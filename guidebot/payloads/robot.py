@@ -47,6 +47,8 @@ class EndedTask(PayloadModel):
     task_id: str = Field(min_length=1, max_length=64)
     outcome: Literal["done", "failed", "cancelled"]
     reason: str = Field(default="", max_length=500)
+    trouble: bool = False
+    """As task_ended's ``trouble``."""
 
 
 @register_payload("robot_state")

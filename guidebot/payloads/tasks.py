@@ -67,6 +67,10 @@ class TaskEnded(PayloadModel):
     robot: str
     outcome: Outcome = "done"
     reason: str = ""
+    trouble: bool = False
+    """With outcome failed: the failure is a navigation_failed whose way trouble alone cut
+    off (its ``trouble`` flag): the Task Manager queues a visitor's task until the trouble
+    lifts, if its map shows it so. An older robot sends none: its failure stands."""
 
 
 @register_payload("task_reaction")

@@ -144,6 +144,32 @@ async def test_alarm_input_holds_the_fleet_and_resume_takes_two_steps(tmp_path: 
         assert "emergency_resumed" in kinds
 
 
+async def test_an_evacuation_raises_no_door_trouble_for_a_door_a_robot_was_waiting_for(
+    tmp_path: Path,
+) -> None:
+    """A robot's open_door still waiting for door_gallery (jammed: it cannot open first) when
+    the fire alarm comes: the alarm drops the door's holders, and the request is withdrawn, not
+    timed out into a trouble closure and a building_command_failed alert mid-evacuation."""
+    async with alarm_rig(tmp_path) as (sim, server, control, http):
+        hub = server.app.state.hub
+        building = server.app.state.building
+        failures = Recorder(hub.endpoint("test"), "command_failed", tap=True)
+        robot = RobotStub(hub, "R1", "hall")
+        robot.state()
+        sim.jam_door("door_gallery")
+        robot.endpoint.publish("open_door", {"door": "door_gallery"})
+        await wait_until(lambda: sim.read_point("otb_ground", "door_hall_open") == 1)
+        assert (await control.post(ALARM, json={"value": 1})).status_code == 200
+        await robot.wait_for("evacuate")
+        await wait_until(lambda: not building.doors["door_gallery"].holders)
+        await wait_until(lambda: not building._commands)  # the open_door's handler is done
+        assert failures.messages == []
+        assert sim.read_point("otb_ground", "door_hall_open") == 0
+        assert [c.id for c in server.app.state.closures.closures.values()] == []
+        alerts = (await http.get("/api/alerts")).json()
+        assert [a["kind"] for a in alerts if a["kind"] != "fire_alarm"] == []
+
+
 async def robot_held_still(server: RunningServer, name: str) -> bool:
     """The Task Manager gives the robot nothing while the alarm lasts."""
     tasks = server.app.state.task_manager

@@ -146,6 +146,33 @@ async def test_a_door_let_go_before_it_opened_is_not_a_door_that_failed(
         assert reply.type == "door_opened"
 
 
+async def test_the_fire_alarm_dropping_a_door_withdraws_the_open_doors_waiting_for_it(
+    hub: Bus, building: BuildingConfig, recorder: Recorder
+) -> None:
+    """The fire alarm lets go of the zone's doors (``drop_door_holders``); the open_door
+    requests still waiting for one kept waiting, and their time-out was published as a door
+    failure (a trouble closure and an alert mid-evacuation, for a door nobody wanted any more).
+    They are withdrawn, as when their robot lets go: no command_failed, nothing left waiting."""
+    async with (
+        BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
+        BuildingInterface(hub.endpoint("building"), sim.bound_config(), command_margin_s=0.5) as bi,
+    ):
+        await wait_until(lambda: all(p.health.polls > 0 for p in bi.pollers.values()))
+        sim.jam_door("D1")  # it cannot open before the alarm, however slow the machine
+        robots = [hub.endpoint(name) for name in ("R1", "R2")]
+        answers = [Recorder(robot, "command_failed", "door_opened") for robot in robots]
+        for robot in robots:
+            robot.publish("open_door", {"door": "D1"})
+        await wait_until(lambda: set(bi.doors["D1"].holders) == {"R1", "R2"})
+        await wait_until(lambda: sim.read_point("M1", "d1_cmd") == 1)
+        assert bi.drop_door_holders({"d1"}) == ["D1"]
+        await wait_until(lambda: not bi._commands)  # both open_doors and the close are done
+        assert [a.messages for a in answers] == [[], []]
+        assert recorder.of("command_failed") == []
+        assert bi.doors["D1"].holders == {}
+        assert sim.read_point("M1", "d1_cmd") == 0
+
+
 async def test_a_door_released_while_its_module_is_offline_is_closed_once_it_is_back(
     hub: Bus, building: BuildingConfig, recorder: Recorder
 ) -> None:

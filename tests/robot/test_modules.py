@@ -136,6 +136,7 @@ async def test_task_runner_reports_start_end_cancel_and_refuses_a_second_task(he
         "robot": "R1",
         "outcome": "cancelled",
         "reason": "battery panic",
+        "trouble": False,
     }
     assert runner.current is None
     assert seen.of("run_petri_net")[-1].payload["net"] == "waiting"
@@ -193,8 +194,48 @@ async def test_a_failed_task_says_why_from_what_went_wrong_while_it_ran(helpers:
     )
     assert ended["outcome"] == "failed"
     assert ended["reason"] == "navigation to gb1 failed: base fault: module 0x02 lost"
+    assert ended["trouble"] is False
     ended = run_and_fail("t2")  # nothing seen: still a sentence, and not the last task's
     assert ended["reason"] == "the go_to_poi task net failed (no step said why)"
+
+
+async def test_a_task_failed_by_trouble_alone_says_so_typed(helpers: Any) -> None:
+    """The Task Manager read trouble from the failure's words ("out of order"): the robot's
+    navigation_failed ``trouble`` flag goes into its task_ended and its state's ``ended``
+    list, and only for the failure that ended the task (a later robot fault wins)."""
+    bus = Bus()
+    runner = TaskRunner(bus.endpoint("tasks"), "R1", waiting_net=None)
+    seen = helpers.Recorder(bus.endpoint("t"), "task_ended", "run_petri_net")
+    await runner.start()
+    tm, dispatch, nav = bus.endpoint("tm"), bus.endpoint("dispatch"), bus.endpoint("navigation")
+    cut = {"node": "gb1", "reason": "door door_gallery out of order", "closed": True}
+
+    def run_and_fail(task_id: str, *problems: tuple[str, dict[str, Any]]) -> dict[str, Any]:
+        tm.publish("task_assigned", {"task_id": task_id, "robot": "R1", "net": "go_to_poi"})
+        instance = seen.of("run_petri_net")[-1].payload["instance_id"]
+        for type_, payload in problems:
+            nav.publish(type_, payload)
+        dispatch.publish(
+            "petri_net_ended", {"net": "go_to_poi", "instance_id": instance, "outcome": "failed"}
+        )
+        return dict(seen.of("task_ended")[-1].payload)
+
+    ended = run_and_fail("t1", ("navigation_failed", cut | {"trouble": True}))
+    assert ended["reason"] == "navigation to gb1 failed: door door_gallery out of order"
+    assert ended["trouble"] is True
+    assert run_and_fail("t2", ("navigation_failed", cut))["trouble"] is False  # staff's words
+    fault = {"robot": "R1", "kind": "motor_lost", "detail": "module 0x02 lost"}
+    later = run_and_fail(
+        "t3", ("navigation_failed", cut | {"trouble": True}), ("robot_fault", fault)
+    )
+    assert later["trouble"] is False
+    reporter = StateReporter(bus.endpoint("state"), "R1", None, None, runner)  # type: ignore[arg-type]
+    state = RobotState(robot="R1", ended=reporter.ended())  # what the hub checks
+    assert [(e.task_id, e.trouble) for e in state.ended] == [
+        ("t3", False),
+        ("t2", False),
+        ("t1", True),
+    ]
 
 
 async def test_the_robot_state_names_the_last_tasks_that_ended(helpers: Any) -> None:
@@ -245,7 +286,8 @@ async def test_an_assignment_resent_for_a_task_that_ended_is_answered_not_run(
     tm.publish("task_assigned", assign)  # resent
     assert len(seen.of("run_petri_net")) == 1  # not run again
     ended = [m.payload for m in seen.of("task_ended")]
-    assert ended == [{"task_id": "t1", "robot": "R1", "outcome": "done", "reason": ""}] * 2
+    once = {"task_id": "t1", "robot": "R1", "outcome": "done", "reason": "", "trouble": False}
+    assert ended == [once] * 2
     assert runner.current is None
     # The next task runs as usual.
     tm.publish("task_assigned", {**assign, "task_id": "t2"})

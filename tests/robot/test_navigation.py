@@ -176,6 +176,7 @@ async def test_navigate_to_without_a_node_fails_at_once(rig: Rig) -> None:
         "node": None,
         "reason": "navigate_to needs a node id",
         "closed": False,
+        "trouble": False,
     }
 
 
@@ -553,7 +554,20 @@ async def test_a_staff_closure_in_words_of_trouble_is_not_waited_for(
     failed = rig.seen.of("navigation_failed")[0].payload
     assert failed["closed"] is True
     assert failed["reason"] == "door door_gallery closed: out of order"
+    assert failed["trouble"] is False
     assert paths.of("path", closed=True, trouble=False)
+
+
+async def test_a_goal_trouble_alone_cuts_off_fails_saying_so_typed(
+    rig: Rig, demo_site: Site
+) -> None:
+    """The server told trouble from navigation_failed's reason text ("out of order"), which
+    carries the closures' words: the failure says it with the ``path`` answer's typed flag."""
+    close_door_gallery(rig, demo_site, "trouble", "door door_gallery not open in 4 s")
+    rig.bus.endpoint("net").publish("navigate_to", {"node": "gb1"})  # no trouble_wait_s
+    await rig.seen.wait_for(lambda: rig.seen.of("navigation_failed"))
+    failed = rig.seen.of("navigation_failed")[0].payload
+    assert failed["closed"] is True and failed["trouble"] is True
 
 
 async def test_a_way_only_trouble_cuts_off_is_waited_for(

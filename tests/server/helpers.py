@@ -62,9 +62,12 @@ class RobotStub:
         self.task_id = task_id
         self.endpoint.publish("task_started", {"task_id": task_id, "robot": self.name})
 
-    def end(self, task_id: str, outcome: str = "done", reason: str = "") -> None:
+    def end(
+        self, task_id: str, outcome: str = "done", reason: str = "", trouble: bool | None = None
+    ) -> None:
+        """task_ended; ``trouble`` (its flag) only when given, as an older robot sends none."""
         self.task_id = None
-        self.endpoint.publish(
-            "task_ended",
-            {"task_id": task_id, "robot": self.name, "outcome": outcome, "reason": reason},
-        )
+        payload = {"task_id": task_id, "robot": self.name, "outcome": outcome, "reason": reason}
+        if trouble is not None:
+            payload["trouble"] = trouble
+        self.endpoint.publish("task_ended", payload)

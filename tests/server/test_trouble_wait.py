@@ -44,7 +44,7 @@ async def test_a_visit_cut_off_by_a_stuck_lift_waits_for_it_and_is_given_out_aga
     r1.start(visit.id)
     lift_fails(bus, "R1")
     assert "lift0" in closures.closed
-    r1.end(visit.id, "failed", FAILED)
+    r1.end(visit.id, "failed", FAILED, trouble=True)
     assert visit.state is TaskState.QUEUED
     assert "waiting for elevator lift to work again" in visit.reason
     told = {"why": "elevator lift out of order", "wait": 1, "waits": MAX_WAITS}
@@ -77,7 +77,7 @@ async def test_a_visit_behind_a_lift_that_stays_broken_fails_after_a_few_waits(
         assert visit.state is TaskState.ASSIGNED
         r1.start(visit.id)
         lift_fails(bus, "R1", attempt)
-        r1.end(visit.id, "failed", FAILED)
+        r1.end(visit.id, "failed", FAILED, trouble=True)
         if attempt <= MAX_WAITS:
             assert visit.state is TaskState.QUEUED
             closures.closures.clear()  # its hold over; broken again at the next try
@@ -98,14 +98,25 @@ async def test_a_visit_cut_off_by_a_closure_of_staff_fails_at_once(
     await r1.wait_for("task_assigned")
     r1.start(visit.id)
     await closures.add(ClosureRequest(kind="elevator", target="lift", reason="service"), by="ann")
-    r1.end(visit.id, "failed", "navigation to gc1 failed: elevator lift closed: service")
+    r1.end(visit.id, "failed", "navigation to gc1 failed: elevator lift closed: service", False)
     assert visit.state is TaskState.FAILED
 
 
+@pytest.mark.parametrize(
+    ("reason", "trouble"),
+    [
+        ("navigation to gc1 failed: bumper pressed for too long", False),
+        # Words of trouble in another cause's reason: the server read the text, and queued it.
+        ("robot fault motor_lost: wheel driver out of order", False),
+        # An older robot that sends no flag: its failure stands.
+        (FAILED, None),
+    ],
+)
 async def test_a_visit_that_failed_for_another_cause_fails_even_while_trouble_cuts_its_way(
-    bus: Bus, manager: TaskManager, closures: ClosureService
+    bus: Bus, manager: TaskManager, closures: ClosureService, reason: str, trouble: bool | None
 ) -> None:
-    """The robot's reason decides: a motor fault during a lift jam is not the jam's doing."""
+    """The robot's typed flag decides, not its words: a motor fault during a lift jam is not
+    the jam's doing, whatever its text says."""
     r1 = RobotStub(bus, "R1", "hall")
     r1.state()
     visit = manager.request("go_to_poi", {"poi": "tapestries"})
@@ -113,5 +124,22 @@ async def test_a_visit_that_failed_for_another_cause_fails_even_while_trouble_cu
     r1.start(visit.id)
     lift_fails(bus, "R1")
     assert "lift0" in closures.closed
-    r1.end(visit.id, "failed", "navigation to gc1 failed: bumper pressed for too long")
-    assert visit.state is TaskState.FAILED
+    r1.end(visit.id, "failed", reason, trouble)
+    assert visit.state is TaskState.FAILED and visit.reason == reason
+
+
+async def test_a_visit_its_robot_says_trouble_cut_off_waits_whatever_the_words(
+    bus: Bus, manager: TaskManager, closures: ClosureService
+) -> None:
+    """The reason is words for people (the closures' own, maybe in another language): the
+    server looked for "out of order" in it and failed a visit the robot had said trouble cut
+    off. The typed flag, then the map, decide."""
+    r1 = RobotStub(bus, "R1", "hall")
+    r1.state()
+    visit = manager.request("go_to_poi", {"poi": "tapestries"})
+    await r1.wait_for("task_assigned")
+    r1.start(visit.id)
+    lift_fails(bus, "R1")
+    r1.end(visit.id, "failed", "navigation to gc1 failed: ascensor lift fuera de servicio", True)
+    assert visit.state is TaskState.QUEUED
+    assert "waiting for elevator lift to work again" in visit.reason

@@ -157,6 +157,7 @@ export interface EndedTask {
   task_id: string;
   outcome: "done" | "failed" | "cancelled";
   reason?: string;
+  trouble?: boolean;
 }
 
 /**
@@ -259,6 +260,7 @@ export interface NavigationFailed {
   node: string | null;
   reason?: string;
   closed?: boolean;
+  trouble?: boolean;
 }
 
 /**
@@ -592,6 +594,7 @@ export interface TaskEnded {
   robot: string;
   outcome?: "done" | "failed" | "cancelled" | "refused";
   reason?: string;
+  trouble?: boolean;
 }
 
 /** Every state change of a task, for GUIs, panels and the event log. */
