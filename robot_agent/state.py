@@ -68,6 +68,7 @@ class StateReporter(Service):
 
     def _on_show_point(self, message: Message) -> None:
         self.poi = (self.tasks.task_id, str(message.payload.get("poi")))
+        self.publish_now()  # at once: a visit's visitor is told the robot is there
 
     def mode(self) -> RobotMode:
         if self.nav.fault is not None:

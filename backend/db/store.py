@@ -133,10 +133,18 @@ class DbStore(Service):
         """Called with every event row as it is recorded (the console's live event log)."""
 
     # --- write-behind --------------------------------------------------------------------
-    def record(self, task: Task, event: str, detail: dict[str, Any] | None = None) -> None:
+    def record(
+        self,
+        task: Task,
+        event: str,
+        detail: dict[str, Any] | None = None,
+        at: float | None = None,
+    ) -> None:
         """A task changed: its snapshot and one history row. The event row also carries what
         the reports fold (backend/reports/): the kind, tour, point and language of a new task,
-        why one ended, and ``detail`` (a tour's progress: index, total, poi, stage)."""
+        why one ended, and ``detail`` (a tour's progress: index, total, poi, stage). ``at``:
+        when it happened, for news that leaves the task's ``updated_at`` as it was (a point
+        reached); default the task's last change."""
         snapshot = {f: getattr(task, f) for f in TASK_FIELDS}
         snapshot["params"] = dict(task.params)
         snapshot["state"] = task.state.value
@@ -145,7 +153,7 @@ class DbStore(Service):
             self._history,
             {
                 "task_id": task.id,
-                "at": task.updated_at,
+                "at": task.updated_at if at is None else at,
                 "event": event,
                 "state": task.state.value,
                 "robot": task.robot,

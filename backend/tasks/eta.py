@@ -58,7 +58,9 @@ CHECKPOINT_EVERY = 128
 MEMO_SIZE = 4096
 """Entries kept by each of the estimator's look-up memos before it starts afresh."""
 
-Service = Literal["available", "busy", "held_up", "unavailable", "ended", "withdrawn"]
+Service = Literal["available", "busy", "held_up", "paused", "unavailable", "ended", "withdrawn"]
+NO_PROMISE: frozenset[str] = frozenset({"unavailable", "held_up", "paused"})
+"""Services under which a queued task is told no wait (nobody can say when a robot starts)."""
 
 
 def _remember(memo: dict[int, Any], key: int, value: Any) -> None:
@@ -256,6 +258,9 @@ class EtaEstimator:
         may take the task when free in so many seconds, else when it is free after its booked
         tour; set by the bookings component."""
         self._cut_off = CutOff()
+        self.paused = False
+        """Staff paused the fleet (TaskManager.set_paused): no queued task starts until they
+        resume, so none is told a wait (service ``paused``)."""
 
     # --- hooks from the Task Manager -----------------------------------------------------------
     def changed(self, task: Task, event: str) -> None:
@@ -327,6 +332,17 @@ class EtaEstimator:
         )
         run.name = _point_name(task, poi)
 
+    def point_shown(self, task: Task, poi: str) -> bool:
+        """A visit's robot says it shows its point (robot_state ``poi``; a visit sends no
+        tour_progress): it arrived, as a tour's stop is reported (once). True if news."""
+        if task.kind != "go_to_poi" or poi != task.params.get("poi"):
+            return False
+        run = self._running.get(task.id)
+        if run is not None and run.index > 0:
+            return False
+        self.progress(task, 1, "arrived", poi)
+        return True
+
     def ended(self, task: Task, took_s: float | None) -> None:
         """Learn from a task that ended done: the whole, when no segment was reported."""
         run = self._stop(task)
@@ -346,7 +362,10 @@ class EtaEstimator:
     def service(self) -> Service:
         """available: a robot could start now; busy: all working robots are busy;
         held_up: every working robot is held up (a jam: nobody can say when one is free);
+        paused: staff paused the fleet (nothing starts until they resume);
         unavailable: no robot is in service (offline or in fault)."""
+        if self.paused:
+            return "paused"
         working = [r for r in self.tm.robots.values() if r.online and not r.fault]
         if not working:
             return "unavailable"
@@ -373,7 +392,7 @@ class EtaEstimator:
             return Estimate("available", 0.0, first, remaining, duration)
         duration = self._real(self.segments(task, None)[1:])
         service = self.service()
-        if service in ("unavailable", "held_up"):
+        if service in NO_PROMISE:
             return Estimate(service, None, None, None, duration)
         sched = self._current()
         found = sched.waits.get(task.id)
@@ -386,7 +405,7 @@ class EtaEstimator:
         probe = Task(id="~preview", kind=kind, params=params, priority=5, requester="", seq=0)
         duration = self._real(self.segments(probe, None)[1:])
         service = self.service()
-        if service in ("unavailable", "held_up"):
+        if service in NO_PROMISE:
             return Estimate(service, None, None, None, duration)
         sched = self._current()
         heap = list(sched.heap)
@@ -405,7 +424,7 @@ class EtaEstimator:
 
     def next_free_s(self) -> float | None:
         """Seconds until the first robot is free after the whole line (None: not known)."""
-        if self.service() in ("unavailable", "held_up"):
+        if self.service() in NO_PROMISE:
             return None
         sched = self._current()
         if not sched.heap or not math.isfinite(sched.heap[0][0]):
@@ -421,7 +440,11 @@ class EtaEstimator:
 
     def progress_view(self, task: Task) -> dict[str, Any] | None:
         """A tour's progress on its robot; once it ended, where it got to (None: it never
-        reached its robot, or a restart forgot it)."""
+        reached its robot, or a restart forgot it). A visit to one point: once its robot is
+        there (``point_shown``), index 1 of 1 arrived."""
+        if task.kind == "go_to_poi":
+            run = self._running.get(task.id)
+            return self._view(run) if run is not None and run.index > 0 else None
         if task.kind != "tour":
             return None
         run = self._running.get(task.id)

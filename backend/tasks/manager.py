@@ -83,7 +83,13 @@ CHARGE_UNREACHABLE = "charge_unreachable"
 class TaskStore(Protocol):
     """Where tasks and their history go (backend.db.store.DbTaskStore); must not block."""
 
-    def record(self, task: Task, event: str, detail: dict[str, Any] | None = None) -> None: ...
+    def record(
+        self,
+        task: Task,
+        event: str,
+        detail: dict[str, Any] | None = None,
+        at: float | None = None,
+    ) -> None: ...
 
     def record_service(self, robot: str, out_of_service: bool, by: str = "") -> None: ...
 
@@ -439,8 +445,11 @@ class TaskManager(Service):
     # --- assignment ----------------------------------------------------------------------
     def set_paused(self, paused: bool) -> None:
         """Staff pause the fleet: no queued task is given to a robot and no idle robot is sent
-        anywhere until they resume; running tasks go on (docs/console.md, "Fleet")."""
+        anywhere until they resume; running tasks go on (docs/console.md, "Fleet"). Queued
+        visitors are told the service is paused, with no wait, until then (eta.py)."""
         self.paused = paused
+        self.estimator.paused = paused
+        self.news.changed()
         if not paused:
             self.dispatch()
 

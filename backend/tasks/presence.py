@@ -90,9 +90,11 @@ class Presence:
         self.reports.ended_in_state(robot, p.ended)  # before a restored one is requeued
         self.reconcile(robot, reported)
         current = tm.book.current_of(robot)
-        if current is not None and current.kind == "tour" and p.poi is not None:
-            if current.state is TaskState.RUNNING and reported == current.id:
+        if current is not None and p.poi is not None and reported == current.id:
+            if current.state is TaskState.RUNNING and current.kind == "tour":
                 tm.estimator.seen_at(current, p.poi)  # its stop, after our restart
+            elif current.state is TaskState.RUNNING:
+                self.reports.point_shown(current, p.poi)  # a visit's robot is at its point
         if returned and current is not None and current.state is TaskState.ASSIGNED:
             if reported != current.id:
                 # Its link went before it acknowledged task_assigned (retries stop when a

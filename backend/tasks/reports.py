@@ -184,6 +184,16 @@ class TaskReports:
         tm.requeue(task, f"{robot.name} refused it: {reason}")
         tm.dispatch()
 
+    def point_shown(self, task: Task, poi: str) -> None:
+        """A visit's robot shows its point (robot_state ``poi``): its visitor is told the
+        robot is there, and the history says when."""
+        tm = self.tm
+        if not tm.estimator.point_shown(task, poi):
+            return
+        if tm.store is not None:
+            tm.store.record(task, "point 1/1 arrived", at=time.time())
+        tm.publish_event(task)
+
     def on_tour_progress(self, msg: Message, p: TourProgress) -> None:
         """A point reached, explained or skipped: into the task's history, refined estimate to
         all (a skipped point's reason goes to the visitor in the task's progress)."""
@@ -195,7 +205,10 @@ class TaskReports:
         tm.estimator.progress(task, p.index, p.stage, p.poi, p.reason)
         if tm.store is not None:
             detail = {"index": p.index, "total": p.total, "poi": p.poi, "stage": p.stage}
-            tm.store.record(task, f"point {p.index}/{p.total} {p.stage}", detail)
+            # its own time: a point leaves the task's updated_at (its last state change) alone
+            now = time.time()
+            tm.store.record(task, f"point {p.index}/{p.total} {p.stage}", detail, at=now)
         if arrived(task, p.index, p.stage) and tm.store is not None and task.handover:
-            tm.store.record(task, f"handover: {robot.name} at the visitor's stop {p.index}")
+            stop = f"handover: {robot.name} at the visitor's stop {p.index}"
+            tm.store.record(task, stop, at=time.time())
         tm.publish_event(task)

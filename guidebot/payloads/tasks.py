@@ -117,7 +117,7 @@ class TaskEvent(PayloadModel):
     eta_s: float | None = None
     """Estimated wait before a robot starts on it (None: no robot can serve it now)."""
     service: str | None = None
-    """available | busy | held_up | unavailable | ended | withdrawn (docs/visitor.md,
+    """available | busy | held_up | paused | unavailable | ended | withdrawn (docs/visitor.md,
     "The wait")."""
     arrival_s: float | None = None
     """Estimated seconds until the robot is at the first point."""
@@ -125,7 +125,8 @@ class TaskEvent(PayloadModel):
     duration_s: float | None = None
     progress: dict[str, Any] | None = None
     """Tours: {index, total, poi, name, stage: arrived | explained}; ``poi`` and ``name``
-    are the point the robot reported (its real place), never an index into the tour."""
+    are the point the robot reported (its real place), never an index into the tour. A visit
+    to one point: index 1 of 1, arrived, once its robot shows the point."""
     reason: str = ""
     cancelled_by: str = ""
     """Cancelled tasks: "staff", "requester" or "" (the system)."""

@@ -384,6 +384,7 @@ function serviceLine(estimate) {
   if (!estimate) return "";
   if (estimate.service === "unavailable") return t("service_unavailable");
   if (estimate.service === "held_up") return t("service_held_up");
+  if (estimate.service === "paused") return t("service_paused"); // staff paused: no countdown
   if (estimate.service === "busy") {
     const wait = countdown(estimate.eta_s, state.menuAt);
     if (wait === null) return t("service_busy_unknown");
@@ -392,12 +393,19 @@ function serviceLine(estimate) {
   return t("service_available");
 }
 
+/** The stops a visitor will get: step-free, those only steps lead to are left out (and said). */
+function stopsFact(tour) {
+  const skipped = state.stepFree ? (tour.step_free_skips?.length ?? 0) : 0;
+  const n = tour.stops.length - skipped;
+  return skipped ? t("stops_step_free", { n, k: skipped }) : t("stops", { n });
+}
+
 function card(kind, item) {
   const estimate = item.estimate;
   const unavailable = estimate?.service === "unavailable";
   const stepsOnly = kind === "poi" && state.stepFree && item.steps_only; // refused: said why
   const facts = [];
-  if (kind === "tour") facts.push(t("stops", { n: item.stops.length }));
+  if (kind === "tour") facts.push(stopsFact(item));
   // A point's length is its explanation there (the walk to it is the wait), not a tour's.
   const slow = state.menu.pace === "slow";
   const length = kind === "tour" ? (slow ? "tour_length_slow" : "tour_length") : (slow ? "point_length_slow" : "point_length");
@@ -506,7 +514,11 @@ function statusLines(r) {
     if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
   } else if (r.state === "queued") {
     if (r.service === "unavailable") lines.push(t("state_unavailable"));
-    else {
+    else if (r.service === "paused") {
+      // Staff paused the fleet: nothing starts until they resume, so no countdown.
+      if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
+      lines.push(t("state_paused"));
+    } else {
       if (r.queue_position) lines.push(t("state_queued", { n: r.queue_position }));
       const wait = countdown(r.eta_s, r.toldAt);
       if (r.service === "held_up") lines.push(t("service_held_up"));
@@ -517,7 +529,8 @@ function statusLines(r) {
   } else if (r.state === "assigned" || r.state === "running") {
     if (point) {
       const place = poiName(r.params?.poi);
-      if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
+      if (progress?.stage === "arrived" || progress?.stage === "explained") lines.push(t("state_point_arrived", { robot, place }));
+      else if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
       else if (arrival !== null && arrival > 0) lines.push(t("state_point_on_its_way", { robot, place, t: state.texts.duration(arrival) }));
       else lines.push(t("state_point_going", { robot, place }));
     } else if (!progress || progress.index === 0) {
