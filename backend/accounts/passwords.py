@@ -4,6 +4,7 @@ refusal of common passwords and of ones made of the account's name."""
 from __future__ import annotations
 
 import asyncio
+import functools
 
 from argon2 import PasswordHasher
 from argon2.exceptions import InvalidHashError, VerificationError
@@ -18,7 +19,14 @@ MAX_LENGTH = 256
 would only cost the server time."""
 
 _HASHER = PasswordHasher()
-_DUMMY = _HASHER.hash("not a password: spends the time of a real check")
+
+
+@functools.cache
+def _dummy() -> str:
+    """A hash to check against when an account has none, so it spends the time of a real check
+    (made on first use, not at import: every server process and test worker imports this
+    module, and one argon2 hash costs about 0.2 CPU-seconds)."""
+    return _HASHER.hash("not a password: spends the time of a real check")
 
 
 def password_problem(password: str, name: str, min_length: int = DEFAULT_MIN_LENGTH) -> str | None:
@@ -48,7 +56,7 @@ async def verify_password(stored: str, password: str) -> bool:
 
     def check() -> bool:
         try:
-            return _HASHER.verify(stored or _DUMMY, password) and bool(stored)
+            return _HASHER.verify(stored or _dummy(), password) and bool(stored)
         except (VerificationError, InvalidHashError):
             return False
 
