@@ -98,15 +98,16 @@ def _server(site: Path, db: Path, port: int) -> Any:
     try:
         url = f"http://127.0.0.1:{port}"
         deadline = time.monotonic() + 60
-        while True:
-            if process.poll() is not None:
-                raise click.ClickException(f"the server exited (code {process.returncode})")
-            with contextlib.suppress(httpx.HTTPError):
-                if httpx.get(f"{url}/api/health", timeout=1).status_code == 200:
-                    break
-            if time.monotonic() > deadline:
-                raise click.ClickException("the server did not start within 60 s")
-            time.sleep(0.2)
+        with httpx.Client(timeout=1) as http:  # one client for every poll (each costs ~20 ms)
+            while True:
+                if process.poll() is not None:
+                    raise click.ClickException(f"the server exited (code {process.returncode})")
+                with contextlib.suppress(httpx.HTTPError):
+                    if http.get(f"{url}/api/health").status_code == 200:
+                        break
+                if time.monotonic() > deadline:
+                    raise click.ClickException("the server did not start within 60 s")
+                time.sleep(0.2)
         yield url
     finally:
         process.terminate()

@@ -9,6 +9,7 @@ import json
 import os
 import signal
 import socket
+import ssl
 import subprocess
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -20,6 +21,11 @@ import httpx
 __all__ = ["ADMIN_TOKEN", "DEMO", "GUI_TOKEN", "ServerProcess", "start_servers", "wait_until"]
 
 DEMO = Path(__file__).resolve().parents[1] / "sites" / "demo_museum.yaml"
+
+_TLS = ssl.create_default_context()
+"""One TLS context for every health poll: httpx builds a new one (loading the CA bundle, about
+20 ms of CPU) for each client it makes, and a server starting under load is polled hundreds of
+times."""
 
 GUI_TOKEN = "gui-token-12345678"
 ADMIN_TOKEN = "admin-token-for-scale-tests"
@@ -86,7 +92,7 @@ class ServerProcess:
 
     async def health(self) -> dict[str, Any] | None:
         try:
-            async with httpx.AsyncClient(timeout=5) as http:
+            async with httpx.AsyncClient(timeout=5, verify=_TLS) as http:
                 response = await http.get(f"{self.url}/api/health")
         except httpx.HTTPError:
             return None
