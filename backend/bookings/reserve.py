@@ -36,6 +36,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.tasks.battery_forecast import (
+    CHARGED,
+    charge_rate,
     charged_level,
     lasts_from,
     latest_charge_start,
@@ -222,8 +224,10 @@ class Reservations:
         that can work longest before it must charge to be charged enough when it leaves
         (battery_forecast.py ``latest_charge_start``) is reserved to charge once that is
         ``CHARGE_SLACK_S`` away. A fleet that drains alike reaches ``battery_low`` together
-        and charges for minutes: a booking then had no robot. Robots counted on (lasting, or
-        charging later) are not counted again by a later occurrence in the same pass."""
+        and charges for minutes: a booking then had no robot. A robot that will have charged
+        in full (due to charge now, or once it reaches ``battery_low``) before it must leave
+        serves too. Robots counted on (lasting, charging in full in time, or charging ahead
+        later) are not counted again by a later occurrence in the same pass."""
         found = self.by_key.get(key)
         if found is not None:
             return found
@@ -232,6 +236,9 @@ class Reservations:
         for robot in self.tasks.robots.values():
             if robot.name in self.by_robot or robot.name in self._promised:
                 continue
+            if self._back_full(robot, node, at, duration_s):
+                self._promised.add(robot.name)
+                return None  # its own charge brings it back in time
             if not self._fits(robot):
                 continue
             if self.lasts(robot, at, duration_s):
@@ -267,6 +274,9 @@ class Reservations:
                 self.drop(r, f"{r.robot} is no longer fit")
                 continue
             r.leave_at = self._leave_at(robot, r.node, r.at)
+            if r.charge and self.lasts(robot, r.at, r.duration_s):
+                r.charge = False  # charged enough: walk-ups that leave it so, and given back
+                # when its time is far (``too_early``)
 
     def arrival(self, key: tuple[str, float]) -> tuple[str, float] | None:
         """(robot, when it can be at the meeting point) for a reserved occurrence, else None."""
@@ -488,6 +498,23 @@ class Reservations:
         level = robot.battery - (robot.drain_per_s or 0.0) * (busy + way)
         leave = at - self.margin_s - self.travel_s(robot, station.node, node)
         return level, now + busy + way, leave
+
+    def _back_full(self, robot: RobotInfo, node: str, at: float, duration_s: float) -> bool:
+        """Online and sound, due to charge or working on until ``battery_low``, it will have
+        charged in full (``CHARGED``) at the nearest station before it must leave it, and
+        then last, working on, until the tour at ``at`` ends (unknown drain: no)."""
+        drain, rate = robot.drain_per_s, charge_rate(robot)
+        if not robot.online or robot.fault or robot.out_of_service:
+            return False
+        if drain is None or rate is None or drain <= 0 or rate <= 0:
+            return False
+        level, start, leave = self._charge_plan(robot, node, at)
+        if not robot.needs_charge:  # it works on until battery_low, then goes
+            low = robot.config.battery_low
+            start += max(0.0, (level - low) / drain)
+            level = low
+        full_at = start + max(0.0, CHARGED - level) / rate
+        return full_at <= leave and lasts_from(robot, CHARGED, at - full_at, duration_s)
 
     def _enough(self, robot: RobotInfo, r: Reservation) -> bool:
         """The reserved robot lasts the booked tour, working on or charging until it leaves

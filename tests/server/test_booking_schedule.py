@@ -694,3 +694,38 @@ async def test_a_robot_charges_ahead_when_the_whole_fleet_would_be_low_at_the_bo
     assert charge and ahead_s > reservations.lead_s("hall"), charged_ahead
     assert tour.robot == robot
     assert any(t.kind == "charge" and t.robot == robot for t in manager.tasks.values())
+
+
+async def test_a_robot_is_not_charged_ahead_for_a_booking_its_own_charge_is_back_in_time_for(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """Fourteen minutes ahead no robot lasts until the tour by working on, but both will reach
+    ``battery_low`` within a minute and be charged in full (4 minutes at their learned rate)
+    long before they must leave: none is reserved to charge (the soak's first build held
+    robots from walk-ups for bookings a quarter of an hour off). Later, charged a little and
+    working on, they would reach ``battery_low`` too late to be charged in full by then: one
+    is reserved to charge."""
+    for name, node in (("R1", "hall"), ("R3", "entrance")):
+        RobotStub(bus, name, node, battery=0.35).state("busy")
+        manager.robots[name].drain_per_s = 0.001
+        manager.robots[name].charge_per_s = 0.004
+    clock = Clock(local("10:16"))
+    service, reservations, scheduler = booked(
+        manager, store, clock, duration=lambda kind, params: 100.0
+    )
+    booking = await service.create(
+        BookingRequest(tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3), by="desk"
+    )
+    key = (booking.id, local("10:30"))
+    await scheduler.step(clock.now)
+    assert key not in reservations.by_key
+
+    for robot in manager.robots.values():
+        robot.battery = 0.7  # ... they charged a little, and work on
+    clock.now = local("10:21")
+    while key not in reservations.by_key and clock.now < local("10:30"):
+        await scheduler.step(clock.now)
+        clock.now += 10.0
+        for robot in manager.robots.values():
+            robot.battery -= 0.001 * 10.0
+    assert reservations.by_key[key].charge  # from the end of its task to its leaving time
