@@ -35,7 +35,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from backend.tasks.charging import can_finish
+from backend.tasks.battery_forecast import (
+    CHARGED,
+    charge_rate,
+    charged_level,
+    lasts_from,
+    latest_charge_start,
+)
+from backend.tasks.charging import finish_floor
+from backend.tasks.choice import nearest
 from backend.tasks.model import Task, TaskError, TaskState
 from backend.tasks.robots import RobotInfo
 
@@ -52,6 +60,12 @@ RELEASE_FACTOR = 1.5
 (the lead shrank as the fleet's real speed was learned): its robot serves walk-ups freely."""
 MEET_SUFFIX = ":meet"
 """The requester of the ``go_to`` to the meeting point: the occurrence's, plus this."""
+CHARGE_SLACK_S = 60.0
+"""Charge ahead: a robot is reserved to charge once it must start within this many seconds
+(of the end of its current task) to be charged enough when it leaves."""
+CHARGE_MARGIN = 0.05
+"""Charge ahead: the battery it is to have when it leaves, above what the way and the tour
+take at its learned drain (an estimate that wobbles, a way to the station)."""
 
 
 @dataclass
@@ -70,9 +84,21 @@ class Reservation:
     """The occurrence's requester (``booking:<id>@<unix time>``): its tasks are not walk-ups."""
     sent: str | None = None
     """The go_to task that takes it to the meeting point, once given."""
+    charge: bool = False
+    """It lasts the booked tour only if it charges until it leaves: it takes no walk-up
+    meanwhile (the Task Manager's idle robots go to a station), and is not given back."""
+
+    @property
+    def duration_s(self) -> float:
+        return self.ends_at - self.at
 
     def view(self) -> dict[str, Any]:
-        return {"robot": self.robot, "leave_at": self.leave_at, "sent": self.sent}
+        return {
+            "robot": self.robot,
+            "leave_at": self.leave_at,
+            "sent": self.sent,
+            "charge": self.charge,
+        }
 
 
 class Reservations:
@@ -94,6 +120,8 @@ class Reservations:
         """Meeting point's node -> (site, metres from the farthest point of interest)."""
         self._longest: tuple[Any, float, float, float] | None = None
         """(site, move factor, talk factor, the longest tour's real seconds)."""
+        self._promised: set[str] = set()
+        """This pass: robots a later occurrence counts on (``charge_ahead``)."""
 
     # -- hooks of the Task Manager and the ETA estimator ------------------------------------
 
@@ -104,11 +132,17 @@ class Reservations:
         if r is None or task.requester.startswith(r.requester):
             return False
         now = self.clock()
-        if now >= r.leave_at:
+        if r.charge or now >= r.leave_at:
             return True
         took = self._task_s(task, robot.node)
         back = self.travel_s(robot, self._end_node(task) or robot.node, r.node)
-        return now + took + back > r.at - self.margin_s
+        if now + took + back > r.at - self.margin_s:
+            return True
+        drain = robot.drain_per_s
+        if drain is None or not math.isfinite(took):
+            return False
+        # ... or would leave its battery short of the booked tour.
+        return not lasts_from(robot, robot.battery - drain * took, r.at - now - took, r.duration_s)
 
     def parks(self, robot: RobotInfo) -> bool:
         """Sent to its meeting point: it waits there, not at a station."""
@@ -160,13 +194,13 @@ class Reservations:
         now = self.clock()
         if found is not None:
             robot = self.tasks.robots.get(found.robot)
-            if robot is not None and self._fits(robot) and self.lasts(robot, key[1], duration_s):
+            if robot is not None and self._fits(robot) and self._enough(robot, found):
                 if found.sent is not None or now + self.ready_in(robot, node) <= key[1]:
                     return found
         choice = self._choose(key, node, duration_s)
         if choice is None or (found is not None and choice[1]):
             return found  # nothing better: staff are told (schedule.py)
-        robot = choice[0]
+        robot, _, charge = choice
         if found is not None:
             log.info(
                 "booking %s: %s late or short of battery, %s instead",
@@ -180,12 +214,55 @@ class Reservations:
         if taken is not None:
             log.info("booking %s: %s taken for an earlier one", taken.booking, robot.name)
             self.release((taken.booking, taken.at))
-        return self._take(key, requester, node, duration_s, robot)
+        return self._take(key, requester, node, duration_s, robot, charge=charge)
+
+    def charge_ahead(
+        self, key: tuple[str, float], requester: str, node: str, duration_s: float
+    ) -> Reservation | None:
+        """Before the lead (the scheduler goes in time order): when no robot free of
+        reservations will last until the booked tour ends by working on (``lasts``), the one
+        that can work longest before it must charge to be charged enough when it leaves
+        (battery_forecast.py ``latest_charge_start``) is reserved to charge once that is
+        ``CHARGE_SLACK_S`` away. A fleet that drains alike reaches ``battery_low`` together
+        and charges for minutes: a booking then had no robot. A robot that will have charged
+        in full (due to charge now, or once it reaches ``battery_low``) before it must leave
+        serves too. Robots counted on (lasting, charging in full in time, or charging ahead
+        later) are not counted again by a later occurrence in the same pass."""
+        found = self.by_key.get(key)
+        if found is not None:
+            return found
+        at = key[1]
+        best: tuple[float, RobotInfo] | None = None
+        for robot in self.tasks.robots.values():
+            if robot.name in self.by_robot or robot.name in self._promised:
+                continue
+            if self._back_full(robot, node, at, duration_s):
+                self._promised.add(robot.name)
+                return None  # its own charge brings it back in time
+            if not self._fits(robot):
+                continue
+            if self.lasts(robot, at, duration_s):
+                self._promised.add(robot.name)
+                return None  # it serves this one, working on until then
+            level, start, leave = self._charge_plan(robot, node, at)
+            need = self._need(robot, at - leave, duration_s)
+            latest = latest_charge_start(robot, level, start, leave, need)
+            if latest is not None and (best is None or latest - start > best[0]):
+                best = (latest - start, robot)
+        if best is None:
+            return None  # no charge gets one there: staff are told at the lead
+        slack, robot = best
+        self._promised.add(robot.name)
+        if slack > CHARGE_SLACK_S:
+            return None  # it works on a while yet
+        log.info("booking %s: %s charges ahead for it", key[0], robot.name)
+        return self._take(key, requester, node, duration_s, robot, charge=True)
 
     def refresh(self, now: float) -> None:
         """Every pass, before ``reserve``: a reserved robot no longer fit is given up (the
         occurrence chooses again); the leaving time of one not yet sent follows where it is;
         one whose way to the meeting point ended short is sent again."""
+        self._promised.clear()
         for r in list(self.by_key.values()):
             robot = self.tasks.robots.get(r.robot)
             if r.sent is not None:
@@ -196,8 +273,10 @@ class Reservations:
             if robot is None or not self._fits(robot):
                 self.drop(r, f"{r.robot} is no longer fit")
                 continue
-            start = self._free_node(robot)
-            r.leave_at = r.at - self.margin_s - self.travel_s(robot, start, r.node)
+            r.leave_at = self._leave_at(robot, r.node, r.at)
+            if r.charge and self.lasts(robot, r.at, r.duration_s):
+                r.charge = False  # charged enough: walk-ups that leave it so, and given back
+                # when its time is far (``too_early``)
 
     def arrival(self, key: tuple[str, float]) -> tuple[str, float] | None:
         """(robot, when it can be at the meeting point) for a reserved occurrence, else None."""
@@ -233,11 +312,13 @@ class Reservations:
 
     def pinned(self, key: tuple[str, float]) -> str | None:
         """At its time: the reserved robot the booked task goes to (None: any), its way to
-        the meeting point ended (cancelled if it has not arrived: the tour goes on from there)."""
+        the meeting point ended (cancelled if it has not arrived: the tour goes on from
+        there). The caller releases the reservation once the booked task is made: until
+        then the robot, idle, is kept from the walk-ups waiting (the soak saw one take it
+        between the two, and the booked tour wait for its end)."""
         r = self.by_key.get(key)
         if r is None:
             return None
-        self.release(key)
         if r.sent is not None:
             meet = self.tasks.tasks.get(r.sent)
             if meet is not None and not meet.final:
@@ -273,7 +354,7 @@ class Reservations:
         r = self.by_key.get(key)
         if r is None:
             return key[1] - now > lead
-        return r.sent is None and key[1] - now > lead * RELEASE_FACTOR
+        return r.sent is None and not r.charge and key[1] - now > lead * RELEASE_FACTOR
 
     # -- estimates -----------------------------------------------------------------------------
 
@@ -287,9 +368,7 @@ class Reservations:
             return self.travel_s(robot, robot.node, node)
         if current.requester.endswith(MEET_SUFFIX) and current.params.get("node") == node:
             return self.travel_s(robot, robot.node, node)  # on its way there
-        left = self.tasks.estimator.estimate(current).remaining_s
-        if left is None or not math.isfinite(left):
-            left = self._task_s(current, robot.node)
+        left = self._busy_s(robot)
         return left + self.travel_s(robot, self._end_node(current) or robot.node, node)
 
     def travel_s(self, robot: RobotInfo, start: str | None, node: str) -> float:
@@ -307,28 +386,30 @@ class Reservations:
 
     def _choose(
         self, key: tuple[str, float], node: str, duration_s: float
-    ) -> tuple[RobotInfo, bool] | None:
-        """The robot to reserve and whether it is late (there after the time minus the
-        margin): in time first, then one not reserved, then idle, then the soonest there. A
-        robot reserved for a later occurrence, not sent yet, is a candidate only in time."""
+    ) -> tuple[RobotInfo, bool, bool] | None:
+        """The robot to reserve, whether it is late (there after the time minus the margin)
+        and whether it must charge until it leaves to last: in time first, then one not
+        reserved, then one that lasts working on, then idle, then the soonest there. A robot
+        reserved for a later occurrence, not sent yet, is a candidate only in time."""
         now, at = self.clock(), key[1]
-        best: tuple[tuple[bool, bool, bool, float], RobotInfo] | None = None
+        best: tuple[tuple[bool, bool, bool, bool, float], RobotInfo] | None = None
         for robot in self.tasks.robots.values():
             other = self.by_robot.get(robot.name)
             if other is not None and (other.at <= at or other.sent is not None):
                 continue
             if not self._fits(robot):
                 continue
-            if not self.lasts(robot, at, duration_s):
+            charge = not self.lasts(robot, at, duration_s)
+            if charge and not self.charges_enough(robot, at, duration_s, node):
                 continue
             ready = self.ready_in(robot, node)
             late = now + ready > at - self.margin_s
             if late and other is not None:
                 continue
-            cost = (late, other is not None, not self.idle(robot), ready)
+            cost = (late, other is not None, charge, not self.idle(robot), ready)
             if best is None or cost < best[0]:
                 best = (cost, robot)
-        return (best[1], best[0][0]) if best is not None else None
+        return (best[1], best[0][0], best[0][2]) if best is not None else None
 
     def _take(
         self,
@@ -338,22 +419,29 @@ class Reservations:
         duration_s: float,
         robot: RobotInfo,
         sent: str | None = None,
+        *,
+        charge: bool = False,
     ) -> Reservation:
         at = key[1]
-        start = self._free_node(robot)
         r = Reservation(
             booking=key[0],
             at=at,
             robot=robot.name,
             node=node,
-            leave_at=at - self.margin_s - self.travel_s(robot, start, node),
+            leave_at=self._leave_at(robot, node, at),
             ends_at=at + duration_s,
             requester=requester,
             sent=sent,
+            charge=charge,
         )
         self.by_key[key] = self.by_robot[robot.name] = r
         log.info(
-            "booking %s at %.0f: %s reserved, leaves at %.0f", key[0], at, robot.name, r.leave_at
+            "booking %s at %.0f: %s reserved, leaves at %.0f%s",
+            key[0],
+            at,
+            robot.name,
+            r.leave_at,
+            ", charging until then" if charge else "",
         )
         self.tasks.dispatch()
         return r
@@ -377,22 +465,81 @@ class Reservations:
         return self._take(key, requester, node, duration_s, robot, sent=task.id)
 
     def lasts(self, robot: RobotInfo, at: float, duration_s: float) -> bool:
-        """At its learned drain, its battery stays above ``battery_low`` until the booked time
-        (else it is sent to charge first) and lasts the tour (``can_finish``); an unknown
-        drain: yes."""
-        drain = robot.drain_per_s
-        if drain is None:
+        """Working on, at its learned drain, its battery stays above ``battery_low`` until the
+        booked time (else it is sent to charge first) and lasts the tour (``can_finish``); an
+        unknown drain: yes."""
+        return lasts_from(robot, robot.battery, at - self.clock(), duration_s)
+
+    def charges_enough(self, robot: RobotInfo, at: float, duration_s: float, node: str) -> bool:
+        """Charged at the nearest station from the end of its current visitor task until it
+        must leave it for ``node`` (its learned charge rate, battery_forecast.py), it lasts
+        until the tour ends; not if it reaches ``battery_low`` first (it would charge in
+        full, due to charge)."""
+        if robot.drain_per_s is None:
             return True
-        wait = max(0.0, at - self.clock())
-        if robot.battery - drain * wait <= robot.config.battery_low:
+        level, start, leave = self._charge_plan(robot, node, at)
+        if level <= robot.config.battery_low or start > leave:
             return False
-        return can_finish(robot, wait + duration_s)
+        return lasts_from(robot, charged_level(robot, level, leave - start), at - leave, duration_s)
+
+    def _charge_plan(self, robot: RobotInfo, node: str, at: float) -> tuple[float, float, float]:
+        """If it charges for the occurrence at ``node``: (its level when it reaches the
+        station, when that is, when it must leave the station); no station: never."""
+        now = self.clock()
+        busy = self._busy_s(robot)
+        free = self._free_node(robot)
+        stations = self.tasks.site.charging_stations
+        station = next((st for st in stations if st.node == free), None) or nearest(
+            free, stations, self.tasks.graph.distances_to
+        )
+        if station is None:
+            return robot.battery, math.inf, now
+        way = self.travel_s(robot, free, station.node)
+        level = robot.battery - (robot.drain_per_s or 0.0) * (busy + way)
+        leave = at - self.margin_s - self.travel_s(robot, station.node, node)
+        return level, now + busy + way, leave
+
+    def _back_full(self, robot: RobotInfo, node: str, at: float, duration_s: float) -> bool:
+        """Online and sound, due to charge or working on until ``battery_low``, it will have
+        charged in full (``CHARGED``) at the nearest station before it must leave it, and
+        then last, working on, until the tour at ``at`` ends (unknown drain: no)."""
+        drain, rate = robot.drain_per_s, charge_rate(robot)
+        if not robot.online or robot.fault or robot.out_of_service:
+            return False
+        if drain is None or rate is None or drain <= 0 or rate <= 0:
+            return False
+        level, start, leave = self._charge_plan(robot, node, at)
+        if not robot.needs_charge:  # it works on until battery_low, then goes
+            low = robot.config.battery_low
+            start += max(0.0, (level - low) / drain)
+            level = low
+        full_at = start + max(0.0, CHARGED - level) / rate
+        return full_at <= leave and lasts_from(robot, CHARGED, at - full_at, duration_s)
+
+    def _enough(self, robot: RobotInfo, r: Reservation) -> bool:
+        """The reserved robot lasts the booked tour, working on or charging until it leaves
+        (then it charges: ``Reservation.charge``)."""
+        if self.lasts(robot, r.at, r.duration_s):
+            return True
+        if self.charges_enough(robot, r.at, r.duration_s, r.node):
+            r.charge = True
+            return True
+        return False
 
     def short_of_battery(self, key: tuple[str, float]) -> bool:
-        """The reserved robot's battery will not last until the booked tour ends."""
+        """The reserved robot's battery will not last until the booked tour ends, even
+        charging until it leaves."""
         r = self.by_key.get(key)
         robot = self.tasks.robots.get(r.robot) if r is not None else None
-        return robot is not None and r is not None and not self.lasts(robot, r.at, r.ends_at - r.at)
+        return robot is not None and r is not None and not self._enough(robot, r)
+
+    def _need(self, robot: RobotInfo, wait_s: float, duration_s: float) -> float:
+        """The level to leave with: ``wait_s`` above ``battery_low``, then the tour above the
+        finish floor, at its learned drain, plus ``CHARGE_MARGIN``."""
+        drain = robot.drain_per_s or 0.0
+        low = robot.config.battery_low + drain * max(0.0, wait_s)
+        floor = finish_floor(robot) + drain * (max(0.0, wait_s) + duration_s)
+        return max(low, floor) + CHARGE_MARGIN
 
     def _unsend(self, r: Reservation) -> None:
         """Call back a robot sent to a meeting point another robot now goes to."""
@@ -417,6 +564,21 @@ class Reservations:
         """No visitor task (nothing, or the Task Manager's own errand: preemptible)."""
         current = self.tasks.tasks.get(robot.current) if robot.current else None
         return current is None or current.internal or current.final
+
+    def _busy_s(self, robot: RobotInfo) -> float:
+        """Real seconds its current visitor task still takes (0: none; inf: a target the
+        site no longer has)."""
+        current = self.tasks.tasks.get(robot.current) if robot.current else None
+        if current is None or current.internal or current.final:
+            return 0.0
+        left = self.tasks.estimator.estimate(current).remaining_s
+        if left is None or not math.isfinite(left):
+            left = self._task_s(current, robot.node)
+        return left
+
+    def _leave_at(self, robot: RobotInfo, node: str, at: float) -> float:
+        """When it must set off to be at ``node`` ``margin_s`` before ``at``."""
+        return at - self.margin_s - self.travel_s(robot, self._free_node(robot), node)
 
     def _free_node(self, robot: RobotInfo) -> str | None:
         """Where the robot is once its current visitor task is over."""

@@ -175,15 +175,20 @@ class BookingScheduler(Service):
                 self.reservations.send(now)
 
     def _reserve(self, booking: Booking, at: float, now: float) -> bool:
-        """Reserve a robot once the occurrence is within the lead (reserve.py); True: it is."""
+        """Reserve a robot once the occurrence is within the lead, or before it when one must
+        charge for it (reserve.py); True: it is."""
         if self.reservations is None:
             return False
         poi = self.fleet.site.poi(booking.meeting_point)
         key = (booking.id, at)
-        if poi is None or self.reservations.too_early(key, poi.node, now):
+        if poi is None:
             return False
         duration = self.service.duration_s(booking)
-        self.reservations.reserve(key, requester_of(booking, at), poi.node, duration)
+        requester = requester_of(booking, at)
+        if self.reservations.too_early(key, poi.node, now):
+            # A robot may have to start charging for it already (reserve.py).
+            return self.reservations.charge_ahead(key, requester, poi.node, duration) is not None
+        self.reservations.reserve(key, requester, poi.node, duration)
         return True
 
     # -- telling visitors ---------------------------------------------------------------------
@@ -234,6 +239,9 @@ class BookingScheduler(Service):
         except TaskError as exc:
             await self._missed(booking, at, str(exc), claimed=True)
             return
+        finally:
+            if self.reservations is not None:
+                self.reservations.release(key)  # kept from walk-ups until its task is made
         await self.store.started(booking.id, at, task.id)
         self._taken(key, {"task_id": task.id, "outcome": "started", "started_at": self.clock()})
         self._unflag(booking, at, f"started as task {task.id}")

@@ -686,8 +686,13 @@ class TaskManager(Service):
             self.errand_done(robot, f"charging station at {robot.node}")
 
     def _has_work_for(self, robot: RobotInfo) -> bool:
+        """A queued task it may take (not one its booking keeps it from: it charges or
+        waits for its booked tour meanwhile, backend/bookings/reserve.py)."""
+        kept = self.reservations
         for task in self.queue.head():
-            if task.pinned_robot in (None, robot.name):
+            if task.pinned_robot in (None, robot.name) and not (
+                kept is not None and kept.keeps(robot, task)
+            ):
                 return True
         return False
 

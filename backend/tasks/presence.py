@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Protocol
 
+from backend.tasks.battery_forecast import learn_charge
 from backend.tasks.charging import learn_drain
 from backend.tasks.desk import Desk
 from backend.tasks.model import Task, TaskState
@@ -76,6 +77,7 @@ class Presence:
         if "battery" in p.model_fields_set:  # a state without it says nothing of the battery
             robot.battery = p.battery
             learn_drain(robot, robot.battery, robot.mode, tm.clock())
+            learn_charge(robot, robot.battery, robot.mode, tm.clock())
             if robot.needs_charge and robot.battery >= 0.95:
                 robot.needs_charge = False
                 came_back = True  # available again: worth a dispatch

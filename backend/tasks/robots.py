@@ -40,6 +40,11 @@ class RobotInfo:
     yet known): a tour it cannot finish is not given to it (backend/tasks/charging.py)."""
     battery_at: tuple[float, float] | None = None
     """(when, level) of its last battery reading while not charging (to learn the drain)."""
+    charge_per_s: float | None = None
+    """Battery fraction a charger gives it per second, learned like the drain (None: not yet
+    known): when it must start charging for a booked tour (backend/tasks/battery_forecast.py)."""
+    charge_at: tuple[float, float] | None = None
+    """(when, level) of its last battery reading while charging (to learn the charge rate)."""
     refused: bool = False
     """It refused a task as busy with another: no new task until a robot_state shows it runs
     nothing or only what we gave it."""

@@ -270,6 +270,36 @@ async def test_a_robot_is_reserved_ahead_sent_to_the_meeting_point_and_kept_for_
     assert reservations.by_key == {}
 
 
+async def test_a_reserved_robot_still_on_its_way_at_the_time_takes_the_booked_tour(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """R3, reserved, is still on its way to the meeting point at the booked time (the soak's
+    wave: a robot reserved late) and a walk-up waits. Its way is cancelled and the booked
+    tour given to it; the walk-up did not take it in between (its reservation is released
+    only once the booked task is made), which made the booked tour wait a whole walk-up."""
+    r3 = RobotStub(bus, "R3", "entrance")
+    r3.state()
+    clock = Clock(local("10:25"))
+    service, reservations, scheduler = booked(manager, store, clock, wire=True)
+    booking = await service.create(SCHOOL_GROUP, by="desk")
+    await scheduler.step(clock.now)
+    reserved = reservations.by_key[(booking.id, local("10:30"))]
+    clock.now = reserved.leave_at + 1
+    await scheduler.step(clock.now)
+    meet = manager.tasks[reserved.sent]  # type: ignore[index]
+    r3.start(meet.id)  # on its way: not there yet
+    r3.state("busy")
+    walk_up = manager.request("tour", {"tour": "ground"}, requester="panel-1")
+    assert walk_up.robot is None  # kept for the booking
+
+    clock.now = local("10:30")
+    await scheduler.step(clock.now)
+    tour = next(t for t in manager.tasks.values() if t.kind == "tour" and t.priority == 50)
+    assert meet.final
+    assert tour.robot == "R3", (tour.robot, walk_up.robot)
+    assert walk_up.robot is None
+
+
 async def test_a_reserved_robot_that_must_charge_is_replaced_by_another(
     manager: TaskManager, bus: Bus, store: BookingStore
 ) -> None:
@@ -491,6 +521,7 @@ async def test_a_robot_whose_battery_will_be_low_by_the_time_is_not_the_one_kept
     for name, node, level in (("R3", "hall", 0.35), ("R1", "charge_a", 0.9)):
         RobotStub(bus, name, node, battery=level).state()
         manager.robots[name].drain_per_s = 0.001  # 10 % in 100 s
+        manager.robots[name].charge_per_s = 0.0001  # slow chargers: a charge does not help
     clock = Clock(local("10:27"))
     alerts = AlertStore(bus.endpoint("alerts").publish)
     service, reservations, scheduler = booked(
@@ -507,10 +538,194 @@ async def test_a_robot_whose_battery_will_be_low_by_the_time_is_not_the_one_kept
     # R3 stands at the meeting point, but at 10:30 its battery is 17 %: R1 goes.
     assert reservations.by_key[key].robot == "R1"
 
-    manager.robots["R1"].battery = 0.4  # a long walk-up took more than foreseen
+    manager.robots["R1"].battery = 0.33  # a long walk-up took more than foreseen
     for now in (local("10:27:30"), local("10:27:40")):
         clock.now = now
         await scheduler.step(now)
     assert reservations.by_key[key].robot == "R1"  # no stand-in either
     told = alerts.get("booking_at_risk", f"{booking.id}@{DAY} 10:30")
     assert told is not None and "R1, the robot reserved, must charge first" in told.message
+
+
+class DrainingFleet:
+    """Robot stubs with batteries, stepped with the test's clocks: each takes what it is given
+    at once; a tour takes its nominal time (the ETA estimator's segments, each point reported
+    as reached and explained) and drains ``drain`` a second; a charge (the Task Manager's
+    errand) docks at its station and fills ``charge`` a second up to 95 %; a robot that falls
+    to ``battery_low`` on a tour says so (``battery_low``); and visitors keep a few walk-ups
+    queued: the soak's busy fleet that drains alike."""
+
+    def __init__(
+        self,
+        manager: TaskManager,
+        bus: Bus,
+        clocks: tuple[Clock, Any],
+        *,
+        level: float,
+        drain: float,
+        charge: float,
+    ) -> None:
+        self.manager = manager
+        self.clock, self.tm_clock = clocks
+        self.drain, self.charge = drain, charge
+        starts = {"R1": "charge_a", "R2": "charge_b", "R3": "entrance"}
+        self.stubs = {n: RobotStub(bus, n, starts[n], battery=level) for n in manager.robots}
+        self.started: dict[str, float] = {}
+        """task id -> when its robot started it (the test's clock)."""
+        self.ends: dict[str, list[float]] = {}
+        """tour id -> when each of its segments ends (the test's clock)."""
+        self.low_told: set[str] = set()
+        for stub in self.stubs.values():
+            stub.state()
+
+    def step(self, dt: float) -> None:
+        self.clock.now += dt
+        self.tm_clock.now += dt
+        while sum(1 for t in self.manager.tasks.values() if t.robot is None and not t.final) < 3:
+            self.manager.request("tour", {"tour": "ground"}, requester="panel-1")
+        site = self.manager.site
+        for name, stub in self.stubs.items():
+            robot = self.manager.robots[name]
+            task = self.manager.tasks.get(robot.current) if robot.current else None
+            mode = "idle"
+            if task is not None and not task.final:
+                if task.id not in self.started:
+                    self.started[task.id] = self.clock.now
+                    stub.start(task.id)
+                    if task.kind == "tour":
+                        segments = self.manager.estimator.segments(task, stub.node)
+                        ends = [self.clock.now]
+                        for seg in segments:
+                            ends.append(ends[-1] + seg.nominal_s)
+                        self.ends[task.id] = ends[1:]
+                if task.kind == "charge":
+                    station = next(
+                        s for s in site.charging_stations if s.id == task.params["station"]
+                    )
+                    stub.node, mode = station.node, "charging"
+                    stub.battery = min(0.95, stub.battery + self.charge * dt)
+                    if stub.battery >= 0.95:
+                        stub.end(task.id)
+                        mode = "idle"
+                elif task.kind == "go_to":
+                    stub.node, mode = task.params["node"], "busy"
+                    if task.internal:
+                        stub.end(task.id)
+                else:
+                    mode = "busy"
+                    stub.battery -= self.drain * dt
+                    if self._progress(stub, task):
+                        mode = "idle"
+            low = robot.config.battery_low
+            if stub.battery <= low and name not in self.low_told:
+                self.low_told.add(name)
+                stub.endpoint.publish("battery_low", {"robot": name, "level": stub.battery})
+            elif stub.battery > low + 0.05:
+                self.low_told.discard(name)
+            stub.state(mode)
+
+    def _progress(self, stub: RobotStub, task: Any) -> bool:
+        """Each segment of the tour over by now reported; True: the tour ended."""
+        tour = self.manager.site.tour(task.params["tour"])
+        assert tour is not None
+        ends = self.ends[task.id]
+        while ends and ends[0] <= self.clock.now:
+            ends.pop(0)
+            done = len(tour.points) * 2 - len(ends)
+            index = (done + 1) // 2
+            poi = tour.points[index - 1]
+            stub.node = self.manager.site.poi(poi).node  # type: ignore[union-attr]
+            stub.endpoint.publish(
+                "tour_progress",
+                {
+                    "task_id": task.id,
+                    "robot": stub.name,
+                    "index": index,
+                    "total": len(tour.points),
+                    "poi": poi,
+                    "stage": "arrived" if done % 2 else "explained",
+                },
+            )
+        if ends:
+            return False
+        stub.end(task.id)
+        return True
+
+
+async def test_a_robot_charges_ahead_when_the_whole_fleet_would_be_low_at_the_booked_time(
+    manager: TaskManager, bus: Bus, store: BookingStore, clock: Any
+) -> None:
+    """The soak's misses (started 60-140 s late, told ahead): its fleet of ten drains alike,
+    reaches ``battery_low`` together and charges for minutes; a booking in that wave had no
+    robot charged enough when its lead came. Three busy robots here all reach it at about
+    10:20 and take 3 minutes to charge: a robot charges ahead for the 10:22 tour (reserved
+    before the lead, it takes no walk-up and goes to a station), goes to the meeting point
+    charged and starts the tour at its time, and staff are told nothing."""
+    test_clock = Clock(local("10:15"))
+    fleet = DrainingFleet(manager, bus, (test_clock, clock), level=0.6, drain=0.001, charge=0.004)
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    service, reservations, scheduler = booked(
+        manager, store, test_clock, alerts, wire=True, duration=lambda kind, params: 120.0
+    )
+    booking = await service.create(
+        BookingRequest(tour="ground", start=f"{DAY}T10:22", lang="en", group_size=5),
+        by="desk",
+    )
+    key = (booking.id, local("10:22"))
+    for robot in manager.robots.values():
+        robot.drain_per_s = 0.001  # learned on the tours before (the soak's first minutes)
+    charged_ahead = None
+    while test_clock.now < local("10:25"):
+        await scheduler.step(test_clock.now)
+        reserved = reservations.by_key.get(key)
+        if charged_ahead is None and reserved is not None:
+            charged_ahead = (reserved.robot, reserved.charge, local("10:22") - test_clock.now)
+        fleet.step(5.0)
+    tour = next(
+        t
+        for t in manager.tasks.values()
+        if t.requester.startswith(f"booking:{booking.id}@") and t.kind == "tour"
+    )
+    late = fleet.started.get(tour.id, math.inf) - local("10:22")
+    assert 0 <= late < 60, late
+    assert alerts.get("booking_at_risk", f"{booking.id}@{DAY} 10:22") is None
+    assert charged_ahead is not None
+    robot, charge, ahead_s = charged_ahead
+    assert charge and ahead_s > reservations.lead_s("hall"), charged_ahead
+    assert tour.robot == robot
+    assert any(t.kind == "charge" and t.robot == robot for t in manager.tasks.values())
+
+
+async def test_a_robot_is_not_charged_ahead_for_a_booking_its_own_charge_is_back_in_time_for(
+    manager: TaskManager, bus: Bus, store: BookingStore
+) -> None:
+    """Fourteen minutes ahead no robot lasts until the tour by working on, but both will reach
+    ``battery_low`` within a minute and be charged in full (4 minutes at their learned rate)
+    long before they must leave: none is reserved to charge (the soak's first build held
+    robots from walk-ups for bookings a quarter of an hour off). Later, charged a little and
+    working on, they would reach ``battery_low`` too late to be charged in full by then: one
+    is reserved to charge."""
+    for name, node in (("R1", "hall"), ("R3", "entrance")):
+        RobotStub(bus, name, node, battery=0.35).state("busy")
+        manager.robots[name].drain_per_s = 0.001
+        manager.robots[name].charge_per_s = 0.004
+    clock = Clock(local("10:16"))
+    service, reservations, scheduler = booked(
+        manager, store, clock, duration=lambda kind, params: 100.0
+    )
+    booking = await service.create(
+        BookingRequest(tour="ground", start=f"{DAY}T10:30", lang="en", group_size=3), by="desk"
+    )
+    key = (booking.id, local("10:30"))
+    await scheduler.step(clock.now)
+    assert key not in reservations.by_key
+
+    for robot in manager.robots.values():
+        robot.battery = 0.7  # ... they charged a little, and work on
+    clock.now = local("10:21")
+    while key not in reservations.by_key and clock.now < local("10:30"):
+        await scheduler.step(clock.now)
+        clock.now += 10.0
+        for robot in manager.robots.values():
+            robot.battery -= 0.001 * 10.0
+    assert reservations.by_key[key].charge  # from the end of its task to its leaving time

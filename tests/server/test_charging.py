@@ -73,6 +73,32 @@ async def test_a_charging_robot_is_not_given_a_tour_it_cannot_finish(
     await given(r1, short.id)  # a short visit it can finish
 
 
+async def test_the_charge_rate_is_learned_from_rising_readings_whatever_the_mode_says(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """The soak's robots say ``busy`` on their charge task while they fill: the rate the
+    bookings plan a charge ahead with (backend/tasks/battery_forecast.py) is learned from
+    the rising readings, not from the mode; readings too close, a fall, or a full battery
+    teach nothing."""
+    r1 = RobotStub(bus, "R1", "charge_a", battery=0.40)
+    robot = manager.robots["R1"]
+    # (seconds after the first reading, level, mode): 0.41 two seconds on is too close to tell
+    for at, level, mode in ((0, 0.40, "busy"), (2, 0.41, "busy"), (10, 0.43, "charging")):
+        clock.now = 1000.0 + at
+        r1.battery = level
+        r1.state(mode)
+    clock.now += 10
+    r1.battery = 0.46
+    r1.state("busy")
+    assert robot.charge_per_s is not None and abs(robot.charge_per_s - 0.003) < 1e-9
+    r1.battery = 0.46  # off the charger: falling, a new start
+    r1.state("busy")
+    clock.now += 10
+    r1.battery = 0.96  # full (a reading after a long gap): nothing learned
+    r1.state("idle")
+    assert abs(robot.charge_per_s - 0.003) < 1e-9
+
+
 async def test_touring_time_is_counted_per_robot(bus: Bus, manager: TaskManager) -> None:
     r1 = RobotStub(bus, "R1", "hall")
     r1.state()
