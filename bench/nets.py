@@ -61,6 +61,7 @@ PUBLISH = """async ([token]) => {
     headers: {Authorization: `Bearer ${token}`, "Content-Type": "application/json"},
     body: JSON.stringify({net: guidebotNets.model.doc, note: "bench"})});
   if (!reply.ok) throw new Error(`publish: ${reply.status} ${await reply.text()}`);
+  guidebotNets.model.published(guidebotNets.model.doc);  // as the page's Publish: nothing unsaved
   return (await reply.json()).seq;
 }"""
 
