@@ -51,6 +51,19 @@ async def touch_screen(open_page: Any) -> AsyncIterator[tuple[Any, Endpoint]]:
             await server.stop()
 
 
+def assign_ground_tour(task: Endpoint) -> None:
+    """The server gives R1 task t1, the English ground-floor tour (all of it the screen needs)."""
+    task.publish(
+        "task_assigned",
+        {
+            "task_id": "t1",
+            "robot": "R1",
+            "net": "give_tour",
+            "params": {"tour": "ground", "lang": "en"},
+        },
+    )
+
+
 async def test_the_touch_screen_rides_out_its_agent_restarting(open_page: Any) -> None:
     onboard = _screen()
     async with onboard:
@@ -134,15 +147,7 @@ async def test_on_the_way_to_the_first_stop_the_screen_says_which_tour_starts(
     async with touch_screen(open_page) as (page, task):
         now = page.get_by_role("region", name="Now")
         await expect(now).to_contain_text("Touch a tour or a point to start.")
-        task.publish(
-            "task_assigned",
-            {
-                "task_id": "t1",
-                "robot": "R1",
-                "net": "give_tour",
-                "params": {"tour": "ground", "lang": "en"},
-            },
-        )
+        assign_ground_tour(task)
         await expect(now).to_contain_text(
             "Ground floor tour is starting: come with me to the first stop."
         )
@@ -156,15 +161,7 @@ async def test_on_the_way_to_the_next_stop_the_last_one_is_not_called_now(
     """Walking to stop 2, the screen kept stop 1 under "Now" beside "Going to the next stop…"
     (seen on the busy demo): the stop the group just left is "Just seen" until the next one."""
     async with touch_screen(open_page) as (page, task):
-        task.publish(
-            "task_assigned",
-            {
-                "task_id": "t1",
-                "robot": "R1",
-                "net": "give_tour",
-                "params": {"tour": "ground", "lang": "en"},
-            },
-        )
+        assign_ground_tour(task)
         point = {"index": 1, "total": 5, "name": "Welcome hall"}
         task.publish("show_point", {"poi": "welcome", "point": point, "text": "Welcome."})
         now = page.get_by_role("region", name="Now")
@@ -187,15 +184,7 @@ async def test_during_a_tour_the_language_buttons_say_the_screen_follows_the_tou
     async with touch_screen(open_page) as (page, task):
         languages = page.get_by_role("group", name="Language")
         await expect(languages.get_by_role("button", name="Español")).to_be_enabled()
-        task.publish(
-            "task_assigned",
-            {
-                "task_id": "t1",
-                "robot": "R1",
-                "net": "give_tour",
-                "params": {"tour": "ground", "lang": "en"},
-            },
-        )
+        assign_ground_tour(task)
         await expect(page.get_by_role("region", name="Now")).to_contain_text("is starting")
         spanish = languages.get_by_role("button", name="Español")
         await expect(spanish).to_be_disabled()
@@ -217,15 +206,7 @@ async def test_the_continue_question_is_accessible_while_it_is_open(
     of wall time, which axe outlasted on a loaded machine; here it is asked for 600 robot
     seconds, more than the test's time-out, so it is open for the whole check."""
     async with touch_screen(open_page) as (page, task):
-        task.publish(
-            "task_assigned",
-            {
-                "task_id": "t1",
-                "robot": "R1",
-                "net": "give_tour",
-                "params": {"tour": "ground", "lang": "en"},
-            },
-        )
+        assign_ground_tour(task)
         point = {"index": 1, "total": 5, "name": "Welcome hall"}
         task.publish("show_point", {"poi": "welcome", "point": point, "text": "Welcome."})
         task.publish("ask_continue", {"question": "Shall we continue the tour?", "timeout_s": 600})
