@@ -115,7 +115,20 @@ async def test_the_booking_scheduler_waits_out_a_busy_database(
                 assert tasks() == []
                 held.close()  # the lock is free again
                 await wait_until(lambda: bool(tasks()), 30)
+                # The task is made, then its row written: wait for that write (CI stopped the
+                # scheduler in between; a restart finds the task and writes it then).
+                row = await written(bookings, local("10:00"))
         assert len(tasks()) == 1
-        [row] = await bookings.starts(local("10:00"))
         assert (row["outcome"], row["task_id"]) == ("started", tasks()[0])
         assert_busy_warnings_only(seen)
+
+
+async def written(bookings: BookingStore, since: float) -> dict[str, Any]:
+    """The one occurrence row from ``since`` once its task id is written (up to 30 s)."""
+    async with asyncio.timeout(30):
+        while True:
+            rows = await bookings.starts(since)
+            if rows and rows[0]["task_id"]:
+                [row] = rows
+                return row
+            await asyncio.sleep(0.01)
