@@ -36,6 +36,7 @@ export function mountMap(ui, element) {
   store.addEventListener("lift", (/** @type {CustomEvent} */ e) => showCar(store, map, e.detail));
   map.addEventListener("select", async (/** @type {CustomEvent} */ e) => {
     ui.selected = e.detail;
+    ui.draw(); // the details at once; a robot's path follows when the server answers
     if (e.detail.kind === "robot") {
       map.selectRobot(e.detail.id);
       await showPath(e.detail.id);
@@ -43,7 +44,6 @@ export function mountMap(ui, element) {
       map.selectRobot(null);
       map.setPath([]);
     }
-    ui.draw();
   });
   map.addEventListener("floor", () => ui.draw());
 
