@@ -30,7 +30,7 @@ async def test_the_header_shows_which_process_leads_and_follows_a_fail_over(
 
     # The leader dies (its page loses the server); beta takes over, and a console on beta's
     # process says so.
-    watch.expect_error(r"status of 50[23]|Failed to fetch|ERR_CONNECTION_REFUSED|WebSocket")
+    watch.expect_error(r"status of 50[23]|Failed to fetch|ERR_CONNECTION_(REFUSED|RESET)|WebSocket")
     alpha.kill()
     async with httpx.AsyncClient(base_url=beta.url) as http:
         await wait_until(
