@@ -51,8 +51,10 @@ DOORS = ("d1", "d2", "d3", "d4")
 Row = tuple[float, str, str, bytes]
 
 
-def venue_events(day: dt.date, robots: int, rng: random.Random) -> list[Row]:
-    """One opening day's events, in time order."""
+def venue_events(
+    day: dt.date, robots: int, rng: random.Random, *, prefix: str = "R"
+) -> list[Row]:
+    """One opening day's events, in time order, of robots ``{prefix}1`` to ``{prefix}{robots}``."""
     rows: list[Row] = []
     midnight = dt.datetime(day.year, day.month, day.day, tzinfo=dt.UTC).timestamp()
     seq = [0]
@@ -62,7 +64,7 @@ def venue_events(day: dt.date, robots: int, rng: random.Random) -> list[Row]:
 
     log(midnight + 8.5 * 3600, "server_started", "server", {"site_version": 1})
     for r in range(robots):
-        name = f"R{r + 1}"
+        name = f"{prefix}{r + 1}"
         t = midnight + 8.75 * 3600 + rng.uniform(0, 600)
         log(t, "robot_connected", name, {"robot": name})
         node = rng.choice(list(NODES))
