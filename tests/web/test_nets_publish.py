@@ -23,6 +23,29 @@ def two_point_tour(data: dict[str, Any]) -> None:
     data["tours"] += [{"id": "short", "name": "Short tour", "points": ["welcome", "mosaics"]}]
 
 
+async def open_explain_point(page: Any, token: str) -> None:
+    """Sign in to the editor and open the library's explain_point."""
+    await page.get_by_label("Staff token").fill(token)
+    await page.get_by_label("Staff token").press("Enter")
+    await page.get_by_label("Library net").select_option("explain_point")
+    await page.get_by_role("button", name="Open", exact=True).click()
+    await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
+
+
+async def write_new_words(page: Any) -> Any:
+    """Give synthesize_text the payload NEW_WORDS, as a person does (the edit lands on Tab);
+    returns the payload's field."""
+    await (
+        page.locator("#lists")
+        .get_by_role("button", name="synthesize text (synthesize_text)")
+        .click()
+    )
+    payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
+    await payload.fill(NEW_WORDS)
+    await payload.press("Tab")
+    return payload
+
+
 async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
@@ -39,16 +62,8 @@ async def test_edit_explain_point_publish_and_the_next_tour_speaks_the_new_words
         visitor.subscribe("task_ended", ended.append, tap=True)
         watch = await open_page(f"{fleet.server.url}/nets/")
         page = watch.page
-        await page.get_by_label("Staff token").fill(fleet.server.admin_token)
-        await page.get_by_label("Staff token").press("Enter")
-        await page.get_by_label("Library net").select_option("explain_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
-        await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
-        elements = page.locator("#lists")
-        await elements.get_by_role("button", name="synthesize text (synthesize_text)").click()
-        payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
-        await payload.fill(NEW_WORDS)
-        await payload.press("Tab")
+        await open_explain_point(page, fleet.server.admin_token)
+        await write_new_words(page)
         await expect(page.locator("#problem-count")).to_have_text("No problems")
         await page.get_by_label("What changed").fill("A warmer welcome")
 
@@ -109,19 +124,8 @@ async def test_a_publish_that_went_through_says_so_when_the_lists_cannot_be_read
         watch = await open_page(f"{fleet.server.url}/nets/")
         watch.expect_error(r"status of 503")
         page = watch.page
-        await page.get_by_label("Staff token").fill(fleet.server.admin_token)
-        await page.get_by_label("Staff token").press("Enter")
-        await page.get_by_label("Library net").select_option("explain_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
-        await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
-        await (
-            page.locator("#lists")
-            .get_by_role("button", name="synthesize text (synthesize_text)")
-            .click()
-        )
-        payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
-        await payload.fill(NEW_WORDS)
-        await payload.press("Tab")
+        await open_explain_point(page, fleet.server.admin_token)
+        await write_new_words(page)
         await expect(page.locator("#problem-count")).to_have_text("No problems")
 
         async def unavailable(route: Any) -> None:
@@ -146,21 +150,10 @@ async def test_opening_another_net_asks_before_dropping_changes_not_published(
     first, and once published nothing is asked."""
     async with fleet_factory(robots=0) as fleet:
         page = (await open_page(f"{fleet.server.url}/nets/")).page
-        await page.get_by_label("Staff token").fill(fleet.server.admin_token)
-        await page.get_by_label("Staff token").press("Enter")
-        await page.get_by_label("Library net").select_option("explain_point")
-        await page.get_by_role("button", name="Open", exact=True).click()
-        await expect(page.get_by_role("heading", name="Versions of explain_point")).to_be_visible()
+        await open_explain_point(page, fleet.server.admin_token)
         unpublished = page.locator("#unpublished")
         await expect(unpublished).to_have_count(0)
-        await (
-            page.locator("#lists")
-            .get_by_role("button", name="synthesize text (synthesize_text)")
-            .click()
-        )
-        payload = page.get_by_label("Payload (JSON, ${parameter} allowed)")
-        await payload.fill(NEW_WORDS)
-        await payload.press("Tab")
+        payload = await write_new_words(page)
         await expect(unpublished).to_have_text("Changes not published")
         await web.axe_check(page)
         await page.get_by_label("Library net").select_option("give_tour")
