@@ -52,12 +52,15 @@ async def test_a_fleet_of_two_processes_sends_once(
     database = postgres.database()
 
     def settings(process: str) -> Settings:
+        # No fail-over here: a lease long enough that alpha keeps it while beta starts in the
+        # same event loop (CI's loaded machine starved alpha's renewal past a 2 s lease, and
+        # beta led). A lease running out is the may_send part below.
         return Settings(
             db_url=database,
             broker_url=redis.url,
             site=DEMO,
-            leader_poll_s=0.2,
-            leader_lease_s=2.0,
+            leader_poll_s=0.5,
+            leader_lease_s=60.0,
             process_name=process,
         )
 

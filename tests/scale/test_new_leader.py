@@ -78,8 +78,10 @@ async def test_a_request_that_comes_while_the_new_leader_starts_is_handled_once(
             db_url=database,
             broker_url=redis.url,
             tokens=[ROBOT],
-            leader_poll_s=0.2,
-            leader_lease_s=2.0,
+            # No fail-over here: alpha keeps its lease while beta starts in the same event loop
+            # (a 2 s lease could lapse on a loaded machine and make beta the leader).
+            leader_poll_s=0.5,
+            leader_lease_s=60.0,
             process_name=process,
         )
 
