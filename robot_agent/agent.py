@@ -206,7 +206,8 @@ class RobotAgent(Service):
             position_of=onboard_site.position_of,
         )
         await self.enter(self.navigator)
-        self.head = HeadWatchdog(bus.endpoint("head_watchdog"), self.clock)
+        # Only RoboCAN's BellBot set has a head; a bare base's gestures are always skipped.
+        self.head = HeadWatchdog(bus.endpoint("head_watchdog"), self.clock, fitted=bool(c.can))
         await self.enter(self.head)
         self.speech = Speech(bus.endpoint("speech"), self.clock, engine=c.speech_engine)
         await self.enter(self.speech)

@@ -32,16 +32,22 @@ class HeadWatchdog(Service):
         *,
         timeout_s: float = 3.0,
         min_wall_s: float = 0.5,
+        fitted: bool = True,
     ) -> None:
         super().__init__()
         self.ep = endpoint
         self.clock = clock
         self.timeout_s = timeout_s
         self.min_wall_s = min_wall_s
+        self.fitted = fitted
+        """False for a robot built without a head (a bare base): its skipped gestures are
+        expected, not a fault worth a warning."""
         self.degraded = 0
         self._pending: dict[str, tuple[Any, asyncio.TimerHandle]] = {}
 
     async def on_start(self) -> None:
+        if not self.fitted:
+            log.info("this robot has no head: its gestures are skipped")
         self.subscribe(self.ep, "move_servos", self._on_move)
         self.subscribe(self.ep, "servo_in_position", self._on_in_position)
 
@@ -75,7 +81,7 @@ class HeadWatchdog(Service):
         if entry is None:
             return
         self.degraded += 1
-        if self.degraded == 1 or self.degraded % 100 == 0:
+        if self.fitted and (self.degraded == 1 or self.degraded % 100 == 0):
             log.warning(
                 "head did not confirm servo %r (%d so far): gestures skipped", servo, self.degraded
             )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 from typing import Any
 
 import pytest
@@ -362,6 +363,26 @@ async def test_head_watchdog_confirms_servos_a_lost_head_never_does(helpers: Any
     assert degraded == [{"servo": "left_eye", "position": 1.0, "degraded": True}]
     assert head.degraded == 1
     await head.stop()
+
+
+async def test_a_robot_without_a_head_skips_gestures_without_warning(
+    helpers: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A bare base has no head: every gesture is confirmed degraded, as for a lost head, but
+    that is how the robot is built, not a fault (the plan's virtual day logged ~3000 warnings)."""
+    bus = Bus()
+    head = HeadWatchdog(
+        bus.endpoint("head_watchdog"), Clock(10.0), timeout_s=1.0, min_wall_s=0.05, fitted=False
+    )
+    with caplog.at_level(logging.INFO, logger="robot_agent.head"):
+        await head.start()
+        seen = helpers.Recorder(bus.endpoint("t"), "servo_in_position")
+        bus.endpoint("net").publish("move_servos", {"servos": {"mouth": 0.5}})
+        await seen.wait_for(lambda: seen.of("servo_in_position"))
+        await head.stop()
+    assert seen.of("servo_in_position")[0].payload["degraded"] is True
+    assert [r.levelno for r in caplog.records] == [logging.INFO]
+    assert "no head" in caplog.records[0].getMessage()
 
 
 class _FakeUpstream:
