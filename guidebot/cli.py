@@ -39,6 +39,7 @@ BENCHMARKS: dict[str, str] = {
     "modbus": "bench.modbus:main",
     "reconfigure": "bench.reconfigure:main",
     "console": "bench.console:main",
+    "captions": "bench.captions:main",
     "nets": "bench.nets:main",
     "reaction": "bench.reaction:main",
     "emergency": "bench.emergency:main",

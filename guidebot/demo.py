@@ -13,11 +13,14 @@ and answer "continue the tour?" (demo_visitors.py).
 A supervisor: a robot process that dies is reported and restarted (back-off 1, 2, 4 ... 30 s);
 the server or the building simulator dying ends the demo. Ctrl-C or SIGTERM stops every process
 in order (robots, server, building), each with SIGTERM first and SIGKILL only if it does not
-exit within the grace period: no orphans.
+exit within the grace period: no orphans. A stop asked for while a child is being started waits
+until the child is recorded (else it would run on, never stopped), and a second Ctrl-C during
+the stop does not cut it short.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import select
@@ -27,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
@@ -67,17 +71,55 @@ class Fleet:
         self.children: list[Child] = []
         self.stopping = False
         self.env = env
+        self._starting = False
+        self._stop_asked = False
+
+    def on_signal(self, _signum: int, _frame: FrameType | None) -> None:
+        """SIGTERM and Ctrl-C: stop, raised as KeyboardInterrupt where the launcher is. Not
+        inside a child's start: raised there, between the fork and the ``Popen``'s return, it
+        left that child running and unknown, never stopped (holding the demo's output open:
+        whoever waited for it to end waited for ever); the stop is raised once the child is
+        recorded. Nor once the stop runs: it has its own grace period and SIGKILL."""
+        if self.stopping:
+            return
+        if self._starting:
+            self._stop_asked = True
+            return
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def _recording(self) -> Iterator[None]:
+        """A child's start and its record, with a stop asked for meanwhile raised after."""
+        self._starting = True
+        try:
+            yield
+        finally:
+            self._starting = False
+            if self._stop_asked:
+                self._stop_asked = False
+                raise KeyboardInterrupt
 
     def spawn(self, name: str, *args: str, stdout: int | None = None) -> Child:
         child = Child(name, list(args))
-        self._start(child, stdout)
         self.children.append(child)
+        self._start(child, stdout)
+        return child
+
+    def adopt(self, name: str, start: Callable[[], subprocess.Popen[bytes]]) -> Child:
+        """A child that is not ``guidebot`` (the MQTT broker): ``start()`` runs it, and the
+        fleet stops it with the others."""
+        child = Child(name, [])
+        self.children.append(child)
+        with self._recording():
+            child.process = start()
+            child.started = time.monotonic()
         return child
 
     def _start(self, child: Child, stdout: int | None = None) -> None:
         # A session of its own: Ctrl-C reaches only the launcher, which stops children in order.
-        child.process = spawn_guidebot(child.args, stdout=stdout, env=self.env)
-        child.started = time.monotonic()
+        with self._recording():
+            child.process = spawn_guidebot(child.args, stdout=stdout, env=self.env)
+            child.started = time.monotonic()
 
     def dead(self) -> list[Child]:
         return [c for c in self.children if c.process is not None and c.process.poll() is not None]
@@ -417,7 +459,13 @@ def demo(
     visitors: bool,
 ) -> None:
     """Run the building simulator, the server and N simulated robots until Ctrl-C."""
-    from guidebot.demo_vda import add_vda_robots, mosquitto_binary, start_broker
+    from guidebot.demo_vda import (
+        add_vda_robots,
+        broker_command,
+        launch_broker,
+        mosquitto_binary,
+        wait_broker,
+    )
     from guidebot.demo_visitors import Visitors
     from guidebot.site.yamlio import load_site_file
 
@@ -430,11 +478,8 @@ def demo(
     if len(operator_token) < 8:
         raise click.UsageError("--operator-token must be at least 8 characters")
     fleet = Fleet()
-
-    def on_signal(signum: int, _frame: FrameType | None) -> None:
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGTERM, fleet.on_signal)
+    signal.signal(signal.SIGINT, fleet.on_signal)
     url = f"http://127.0.0.1:{port}"
     admin = os.environ.get("GUIDEBOT_ADMIN_TOKEN", "dev-admin-token")
     scale = f"{time_scale:g}"
@@ -474,8 +519,10 @@ def demo(
             click.echo("demo: mosquitto is not installed: no VDA 5050 robot", err=True)
         vda: list[str] = []
         if mosquitto is not None:
-            broker, mqtt_url = start_broker(mosquitto, folder)
-            fleet.children.append(Child("mosquitto", [], broker, time.monotonic()))
+            command, mqtt_port = broker_command(mosquitto, folder)
+            broker = fleet.adopt("mosquitto", lambda: launch_broker(command))
+            assert broker.process is not None
+            mqtt_url = wait_broker(broker.process, mqtt_port)
             taken = {r.start_node or "" for r in known[:robots]}
             vda = add_vda_robots(served, vda_robots, taken, vda_version)
         fleet.env = _server_env(panel_token, operator_token, control)

@@ -12,7 +12,14 @@ from typing import Any
 
 import yaml
 
-__all__ = ["add_vda_robots", "mosquitto_binary", "start_broker"]
+__all__ = [
+    "add_vda_robots",
+    "broker_command",
+    "launch_broker",
+    "mosquitto_binary",
+    "start_broker",
+    "wait_broker",
+]
 
 START_NODES = ("entrance", "ga2", "gb2", "gc3", "hall")
 """Where the demo's vehicles start, the first ones no started GuideBot robot stands on."""
@@ -22,9 +29,10 @@ def mosquitto_binary() -> str | None:
     return shutil.which("mosquitto") or shutil.which("mosquitto", path="/usr/sbin:/sbin")
 
 
-def start_broker(binary: str, folder: Path) -> tuple[subprocess.Popen[bytes], str]:
-    """Mosquitto on a free port of 127.0.0.1, its configuration in ``folder``; waits until it
-    listens. Returns the process and its mqtt:// address."""
+def broker_command(binary: str, folder: Path) -> tuple[list[str], int]:
+    """Mosquitto's command line for a free port of 127.0.0.1 (its configuration written in
+    ``folder``), and that port. The launcher starts it (``launch_broker``) as one of its
+    children, so that it is stopped with them."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = int(s.getsockname()[1])
@@ -35,13 +43,19 @@ def start_broker(binary: str, folder: Path) -> tuple[subprocess.Popen[bytes], st
         "set_tcp_nodelay true\n",
         encoding="utf-8",
     )
-    process = subprocess.Popen(
-        [binary, "-c", str(config)],
-        start_new_session=True,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+    return [binary, "-c", str(config)], port
+
+
+def launch_broker(command: list[str]) -> subprocess.Popen[bytes]:
+    """Mosquitto in a session of its own (Ctrl-C reaches only the launcher), quiet."""
+    return subprocess.Popen(
+        command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
-    deadline = time.monotonic() + 20
+
+
+def wait_broker(process: subprocess.Popen[bytes], port: int, timeout_s: float = 20.0) -> str:
+    """Until the broker listens on ``port``; its mqtt:// address."""
+    deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if process.poll() is not None:
             raise RuntimeError(f"mosquitto exited with {process.returncode}")
@@ -50,9 +64,22 @@ def start_broker(binary: str, folder: Path) -> tuple[subprocess.Popen[bytes], st
         except OSError:
             time.sleep(0.05)
             continue
-        return process, f"mqtt://127.0.0.1:{port}"
-    process.kill()
-    raise RuntimeError(f"mosquitto did not listen on port {port} within 20 s")
+        return f"mqtt://127.0.0.1:{port}"
+    raise RuntimeError(f"mosquitto did not listen on port {port} within {timeout_s:g} s")
+
+
+def start_broker(binary: str, folder: Path) -> tuple[subprocess.Popen[bytes], str]:
+    """Mosquitto on a free port of 127.0.0.1, its configuration in ``folder``; waits until it
+    listens (killed if it does not, or the wait is cut short). Returns the process and its
+    mqtt:// address."""
+    command, port = broker_command(binary, folder)
+    process = launch_broker(command)
+    try:
+        return process, wait_broker(process, port)
+    except BaseException:
+        process.kill()
+        process.wait()
+        raise
 
 
 def add_vda_robots(served: Path, count: int, taken: set[str], version: str = "2.1.0") -> list[str]:

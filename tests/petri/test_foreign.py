@@ -4,7 +4,6 @@ their final marking, and written back as the same file."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -113,7 +112,6 @@ def test_an_edit_rewrites_only_what_changed() -> None:
 
 
 def test_a_looping_foreign_net_is_stopped_by_the_firing_guard_with_outcome_running() -> None:
-    started = time.monotonic()
     result = run_net(FOREIGN / "mcc_tokenring.pnml", {}, {}, max_firings=500)
     assert result["outcome"] == "running" and result["firings"] == 500
     assert result["final_marking"] == {"s0_has": 2}  # after an even number of passes
@@ -122,7 +120,6 @@ def test_a_looping_foreign_net_is_stopped_by_the_firing_guard_with_outcome_runni
     assert out.exit_code == 0, out.output
     assert '"outcome": "running"' in out.output.splitlines()[-1]
     assert '"firings": 10000' in out.output.splitlines()[-1]  # the default guard
-    assert time.monotonic() - started < 60  # no hang (generous: a loaded CI machine)
 
 
 def test_a_looping_foreign_net_yields_on_a_robot_and_stays_killable(tmp_path: Path) -> None:

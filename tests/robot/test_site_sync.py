@@ -52,10 +52,8 @@ async def test_a_slow_site_is_read_off_the_loop_and_only_the_newest_waiting_one_
     async with follower:
         server.publish("site_changed", {"version": 1, "site": doc})
         await until(lambda: len(read_in) == 1)
-        # The loop runs on while version 1 is read; 2 and 3 arrive meanwhile.
-        ticks_before = time.monotonic()
-        await asyncio.sleep(0.05)
-        assert time.monotonic() - ticks_before < 1.0
+        # The loop runs on while version 1 is read (this line runs while prepare() waits for
+        # the release only this test gives); 2 and 3 arrive meanwhile.
         server.publish("site_changed", {"version": 2, "site": doc})
         server.publish("site_changed", {"version": 3, "site": doc})
         await asyncio.sleep(0.05)

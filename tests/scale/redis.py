@@ -1,5 +1,6 @@
 """A throw-away redis-server for tests: 127.0.0.1 only, a free port, no persistence, stopped at
-the end. `make test` installs Debian's redis-server (scripts/system-deps.sh); without it the
+the end, however the test process ends (a reaper, tests/reaper.py: its own process group is
+killed). `make test` installs Debian's redis-server (scripts/system-deps.sh); without it the
 tests that need it are skipped, saying why."""
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from collections.abc import Iterator
 
 import pytest
 
+from tests.reaper import Reaper
+
 __all__ = ["RedisServer", "redis_server"]
 
 
@@ -24,19 +27,28 @@ def _free_port() -> int:
 
 
 class RedisServer:
-    def __init__(self, port: int, process: subprocess.Popen[bytes], args: list[str]) -> None:
-        self.port, self.process, self.args = port, process, args
+    def __init__(self, port: int, args: list[str], root: str) -> None:
+        self.port, self.args, self.root = port, args, root
+        self.process, self.reaper = self._launch()
+
+    def _launch(self) -> tuple[subprocess.Popen[bytes], Reaper]:
+        """redis-server in a process group of its own, and a reaper that kills that group
+        (and deletes its folder) if this process ends before ``stop()``."""
+        process = subprocess.Popen(
+            self.args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+        )
+        reaper = Reaper([["kill", "-s", "KILL", "--", f"-{process.pid}"], ["rm", "-rf", self.root]])
+        return process, reaper
 
     def stop(self) -> None:
         """SIGKILL: the broker is gone (every connection to it drops)."""
         self.process.kill()
         self.process.wait(10)
+        self.reaper.done()
 
     def start(self) -> None:
         """Start it again on the same port (empty: pub/sub keeps nothing)."""
-        self.process = subprocess.Popen(
-            self.args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-        )
+        self.process, self.reaper = self._launch()
         _wait_ping(self.port, self.process)
 
     @property
@@ -66,10 +78,9 @@ def redis_server() -> Iterator[RedisServer]:
     with tempfile.TemporaryDirectory(prefix="guidebot-redis-") as root:
         args = [binary, "--bind", "127.0.0.1", "--port", str(port), "--save", ""]
         args += ["--appendonly", "no", "--dir", root, "--protected-mode", "no"]
-        process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        server = RedisServer(port, process, args)
+        server = RedisServer(port, args, root)
         try:
-            _wait_ping(port, process)
+            _wait_ping(port, server.process)
             yield server
         finally:
             server.stop()

@@ -105,7 +105,7 @@ async def test_a_tour_completes_under_the_new_leader_after_a_sigkill(
             await wait_until(lambda: _true(in_corridor()), 60, "R1 in the corridor", 0.02)
             alpha.kill()
             killed_at = time.monotonic()
-            await wait_until(lambda: _serving(beta), 30, "beta to lead", 0.05)
+            await beta.until(lambda: _serving(beta), "beta to lead")
             took_over = time.monotonic() - killed_at
             await r2.ask()  # granted only once R1 has left the corridor
 
@@ -116,7 +116,7 @@ async def test_a_tour_completes_under_the_new_leader_after_a_sigkill(
                 assert task.get("state") not in ("failed", "cancelled"), task
                 return task if task.get("state") == "done" else None
 
-            task = await wait_until(done, 60, "the tour to end under beta")
+            task = await beta.until(done, "the tour to end under beta")
             finished = time.monotonic() - killed_at
             await r2.granted(1, "R2's grant once R1 left the corridor")
             await r2.release()

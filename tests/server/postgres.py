@@ -1,5 +1,6 @@
 """A throw-away PostgreSQL server for tests: its own cluster in a temporary folder, listening
-on 127.0.0.1 only, at a free port, stopped and deleted at the end of the session.
+on 127.0.0.1 only, at a free port, stopped and deleted at the end of the session, however the
+test process ends (a reaper, tests/reaper.py, stops it if the session's end never runs).
 
 `make test` installs Debian's postgresql package (scripts/system-deps.sh); the server is run as
 the `postgres` user when the tests run as root, because PostgreSQL refuses to run as root.
@@ -19,6 +20,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+from tests.reaper import Reaper
 
 __all__ = ["PostgresServer", "postgres_server"]
 
@@ -44,11 +47,17 @@ class PostgresServer:
 
     def __init__(self, bin_dir: Path, root: Path, port: int, as_user: list[str]) -> None:
         self.bin_dir, self.root, self.port, self._as_user = bin_dir, root, port, as_user
+        self.reaper: Reaper | None = None
+        """Stops the server if this process ends before the session's end does."""
+
+    def command(self, tool: str, *args: str) -> list[str]:
+        """One PostgreSQL tool's command line (as the postgres user when root)."""
+        return [*self._as_user, str(self.bin_dir / tool), *args]
 
     def run(self, tool: str, *args: str) -> None:
         """Run one PostgreSQL tool (as the postgres user when root); raise with its stderr."""
         done = subprocess.run(
-            [*self._as_user, str(self.bin_dir / tool), *args],
+            self.command(tool, *args),
             capture_output=True,
             text=True,
             timeout=60,
@@ -74,6 +83,8 @@ def postgres_server() -> Iterator[PostgresServer]:
         as_user = ["runuser", "-u", "postgres", "--"]
     server = PostgresServer(bin_dir, root, _free_port(), as_user)
     data, log = root / "data", root / "server.log"
+    stop = ("pg_ctl", "-D", str(data), "-m", "immediate", "-w", "stop")
+    server.reaper = reaper = Reaper([server.command(*stop), ["rm", "-rf", str(root)]])
     try:
         server.run("initdb", "-D", str(data), "-U", "guidebot", "-A", "trust", "--no-sync")
         options = f"-h 127.0.0.1 -p {server.port} -k {root} -c fsync=off"
@@ -82,5 +93,6 @@ def postgres_server() -> Iterator[PostgresServer]:
     finally:
         if (data / "postmaster.pid").exists():
             with contextlib.suppress(subprocess.SubprocessError):
-                server.run("pg_ctl", "-D", str(data), "-m", "immediate", "-w", "stop")
+                server.run(*stop)
         shutil.rmtree(root, ignore_errors=True)
+        reaper.done()

@@ -25,8 +25,23 @@ from tests.web.test_visitor import visitor_fleet as visitor_fleet  # the fixture
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
 
-CAPTION_LATE_S = 0.5
-"""A caption shows at most this long after its speech started (issue 41)."""
+# Issue 41's bound (a caption at most 0.5 s after its speech started) is wall time, the
+# machine's as much as the product's: `guidebot bench captions` measures it (bench/captions.py).
+# These tests check what holds however loaded the machine: each caption shows the words of an
+# utterance the robot started, in its language, not before it started, in the order spoken.
+
+
+def in_speech_order(shown: list[dict[str, Any]], spoken: list[dict[str, Any]]) -> bool:
+    """Whether the captions ``shown`` ({text, lang}) are utterances of ``spoken`` ({text,
+    lang}), in the order they were said (a page may miss an utterance shorter than a draw)."""
+    said = iter(spoken)
+    return all(any((s["text"], s["lang"]) == (c["text"], c["lang"]) for s in said) for c in shown)
+
+
+def print_lateness(screen: str, shown: list[dict[str, Any]]) -> None:
+    """How late each caption came (for the log: the bound is `guidebot bench captions`')."""
+    for c in shown:
+        print(f"{screen} caption {c['shown_at'] - c['started_at'] * 1000:.0f} ms after its speech")
 
 
 async def live_region_of(page: Any, text: str) -> str | None:
@@ -51,7 +66,7 @@ async def live_region_of(page: Any, text: str) -> str | None:
     return None
 
 
-async def test_the_touch_screen_captions_each_utterance_within_half_a_second_in_its_language(
+async def test_the_touch_screen_captions_each_utterance_as_it_is_said_in_its_language(
     visitor_fleet: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with visitor_fleet(time_scale=10.0) as vf:
@@ -74,9 +89,9 @@ async def test_the_touch_screen_captions_each_utterance_within_half_a_second_in_
         for c in shown:
             said = started[round(c["started_at"] * 1000)]  # each caption is an utterance's
             assert c["text"] == said["text"] and said["lang"] == "es"
-            late = c["shown_at"] / 1000 - c["started_at"]
-            print(f"touch-screen caption {late * 1000:.0f} ms after its speech_started")
-            assert late <= CAPTION_LATE_S, f"caption {late:.3f} s after its speech: {c['text']}"
+            assert c["shown_at"] >= round(c["started_at"] * 1000), c  # not before it is said
+        assert in_speech_order(shown, [m.payload for m in vf.speech]), shown
+        print_lateness("touch-screen", shown)
 
 
 async def test_a_screen_reader_hears_each_change_of_a_request_on_the_phone(
@@ -123,7 +138,7 @@ async def announced_live(page: Any) -> bool:
     return False
 
 
-async def test_the_phone_captions_what_its_robot_says_within_half_a_second(
+async def test_the_phone_captions_what_its_robot_says_as_it_says_it(
     visitor_fleet: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     async with visitor_fleet(time_scale=10.0) as vf:
@@ -137,15 +152,14 @@ async def test_the_phone_captions_what_its_robot_says_within_half_a_second(
         shown = await page.evaluate("window.captionsShown")
         assert len(shown) >= 3, shown  # one explanation per stop at least
         for c in shown:
-            # The robot's own speech_started (on board) of these words: the caption's delay
-            # counts the link, the hub and the page.
+            # The robot's own speech_started (on board) of these words, before the page showed
+            # them (the caption's delay counts the link, the hub and the page).
             said = [m for m in vf.speech if m.payload["text"] == c["text"]]
             assert said, c["text"]
-            start = max(m.timestamp for m in said if m.timestamp <= c["shown_at"] / 1000 + 0.01)
-            late = c["shown_at"] / 1000 - start
-            print(f"phone caption {late * 1000:.0f} ms after its speech_started")
-            assert late <= CAPTION_LATE_S, f"caption {late:.3f} s after its speech: {c['text']}"
+            assert min(m.timestamp for m in said) * 1000 <= c["shown_at"] + 10, c
             assert said[0].payload["lang"] == c["lang"] == "en"
+        assert in_speech_order(shown, [m.payload for m in vf.speech]), shown
+        print_lateness("phone", shown)
 
 
 async def test_the_touch_screen_offers_larger_text_and_high_contrast(
