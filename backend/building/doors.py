@@ -19,19 +19,24 @@ Safety rules (docs/building.md, "Doors"):
   (``DoorReleased``): the door did not fail (a virtual plan day saw a robot's goal cancelled
   right after it asked, and the wait's time-out closed the working door as trouble); so are
   the waiting ``open_door`` requests of the holders the fire alarm drops (``release_all`` with
-  ``withdraw``: an evacuation raised door trouble and an alert for doors nobody wanted).
+  ``withdraw``: an evacuation raised door trouble and an alert for doors nobody wanted), and
+  so are those of every holder when staff close the door (``close_door``: they did not fail,
+  the door was closed on purpose); but a holder the fire alarm drops that is not evacuating
+  (outside the alarm's zone) still wants the door: its waiting ``open_door`` is refused at once
+  with the alarm's reason (``DoorRefused``: a ``command_failed``), where it used to get no
+  answer and wait its whole ``wait_timeout_s``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 
 from guidebot.site.building import Door
 
-__all__ = ["STALE_MARGIN_S", "DoorKeeper", "DoorReleased"]
+__all__ = ["STALE_MARGIN_S", "DoorKeeper", "DoorRefused", "DoorReleased"]
 
 STALE_MARGIN_S = 0.02
 """A sample slotted within this of a close write may have been read before it (timers fire a
@@ -39,8 +44,13 @@ little early): it does not count."""
 
 
 class DoorReleased(Exception):
-    """The holder let the door go (or the fire alarm dropped it) while its open_door waited
-    for it: withdrawn, not failed. The text says why."""
+    """The holder let the door go (or the fire alarm dropped it, or staff closed the door)
+    while its open_door waited for it: withdrawn, not failed. The text says why."""
+
+
+class DoorRefused(Exception):
+    """The door was taken from a holder that still wants it (the fire alarm holds its node)
+    while its open_door waited: refused at once, the text is the reason the requester is told."""
 
 
 @dataclass
@@ -140,11 +150,13 @@ class DoorKeeper:
         finally:
             del self._waiters[future]
 
-    def _withdraw(self, holders: set[str], why: str) -> None:
-        """Wake the open_door waits of ``holders`` with DoorReleased(why)."""
+    def _withdraw(self, holders: set[str], why: str, *, refused: bool = False) -> None:
+        """Wake the open_door waits of ``holders`` with DoorReleased(why), or DoorRefused(why)
+        when ``refused``."""
+        error = DoorRefused if refused else DoorReleased
         for future, waiting in self._waiters.items():
             if waiting in holders and not future.done():
-                future.set_exception(DoorReleased(why))
+                future.set_exception(error(why))
 
     def hold(self, holder: str, expire: Callable[[], None]) -> None:
         """(Re)start ``holder``'s hold; ``expire`` runs if it is not released in time."""
@@ -161,14 +173,21 @@ class DoorKeeper:
             self._withdraw({holder}, f"{holder} let it go")
         return not self.holders
 
-    def release_all(self, *, withdraw: str = "") -> None:
-        """Drop every holder. With ``withdraw`` (why: the fire alarm), their ``open_door``
-        requests still waiting for the door are withdrawn too, as if each holder had let go:
-        nobody wants the door any more, so their time-out is no failure of the door."""
+    def release_all(
+        self, *, withdraw: str = "", refuse: str = "", spare: Collection[str] = ()
+    ) -> None:
+        """Drop every holder. With ``withdraw`` (why: the fire alarm, staff's close), their
+        ``open_door`` requests still waiting for the door are withdrawn too, as if each holder
+        had let go: their time-out is no failure of the door. With ``refuse`` (a reason: the
+        fire alarm's), the waiting requests of holders not in ``spare`` (those evacuating, who
+        want no door any more: withdrawn) are refused with it at once: they still want the
+        door, and told nothing they would wait for it in vain."""
         holders = set(self.holders)
         for timer in self.holders.values():
             timer.cancel()
         self.holders.clear()
+        if refuse:
+            self._withdraw(holders - set(spare), refuse, refused=True)
         if withdraw:
             self._withdraw(holders, withdraw)
         if self._open_timer is not None:

@@ -20,13 +20,13 @@ import asyncio
 import functools
 import logging
 import time
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Collection, Mapping
 from typing import Any
 
 from pydantic import ValidationError
 
 from backend.building._modbus import ModbusIOError
-from backend.building.doors import DoorKeeper, DoorReleased
+from backend.building.doors import DoorKeeper, DoorRefused, DoorReleased
 from backend.building.elevators import ElevatorWatch
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
@@ -426,15 +426,25 @@ class BuildingInterface(Service):
         if self.gate is not None and (reason := self.gate(node)) is not None:
             raise CommandError(reason)
 
-    def drop_door_holders(self, nodes: set[str]) -> list[str]:
+    def drop_door_holders(self, nodes: set[str], evacuating: Collection[str] = ()) -> list[str]:
         """Release every holder of the doors at ``nodes`` and close them (the fire alarm:
-        docs/emergency.md); the ids of the doors that were held."""
+        docs/emergency.md); the ids of the doors that were held. ``evacuating``: the robots
+        the alarm sends to safety."""
         dropped = []
         for keeper in self.doors.values():
             if keeper.door.node in nodes and keeper.holders:
-                # Their open_door requests still waiting are withdrawn, not failed: a time-out
-                # would close the door as trouble and raise an alert mid-evacuation.
-                keeper.release_all(withdraw="the fire alarm dropped its holders")
+                # The open_door requests still waiting of the robots evacuating are withdrawn,
+                # not failed: a time-out would close the door as trouble and raise an alert
+                # mid-evacuation. A robot outside the zone still wants the door: it is told at
+                # once that the alarm holds it (it waited its whole wait_timeout_s, unanswered).
+                refusal = (self.gate(keeper.door.node) if self.gate is not None else None) or (
+                    "fire alarm: its zone's doors are closed"
+                )
+                keeper.release_all(
+                    withdraw="the fire alarm dropped its holders",
+                    refuse=refusal,
+                    spare=evacuating,
+                )
                 dropped.append(keeper.door.id)
                 task = asyncio.get_running_loop().create_task(self._close(keeper, best_effort=True))
                 self._commands.add(task)
@@ -457,6 +467,9 @@ class BuildingInterface(Service):
                 await keeper.wait_open(timeout, holder)
             except DoorReleased as withdrawn:  # nobody waits for this answer any more
                 log.info("door %s: %s's open_door withdrawn: %s", door.id, holder, withdrawn)
+                return {"door": door.id}
+            except DoorRefused as refused:  # its hold is gone already, the door closing
+                self._fail(message, str(refused))
                 return {"door": door.id}
             except TimeoutError:
                 health = self.pollers[door.open.module].health
@@ -549,11 +562,13 @@ class BuildingInterface(Service):
             keeper.cleared(time.monotonic())
 
     async def _close_door(self, message: Message) -> dict[str, Any]:
-        """Close now, whoever holds the door (staff)."""
+        """Close now, whoever holds the door (staff). The open_door requests still waiting
+        for it are withdrawn (no answer): their time-out is no failure of the door, so no
+        trouble closure and no alert for a door staff closed on purpose."""
         close_door: CloseDoor = message.typed(CloseDoor)
         door = self._door(close_door.door)
         keeper = self.doors[door.id]
-        keeper.release_all()
+        keeper.release_all(withdraw=f"staff closed door {door.id}")
         await self._close(keeper)
         if door.is_open is not None:
             timeout = door.open_time_s + self.command_margin_s

@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, Protocol
 
 from backend.emergency.state import (
@@ -71,7 +71,7 @@ class EventStore(Protocol):
 class BuildingView(Protocol):
     values: dict[tuple[str, str], int]
 
-    def drop_door_holders(self, nodes: set[str]) -> list[str]: ...
+    def drop_door_holders(self, nodes: set[str], evacuating: Collection[str] = ()) -> list[str]: ...
 
 
 class EmergencyService(Service):
@@ -271,7 +271,11 @@ class EmergencyService(Service):
         log.warning("fire alarm (%s) by %s: %s", zone.describe(), by, reason)
         self._hold_robots()
         building = self._building()
-        doors = [] if building is None else building.drop_door_holders(set(self.held_nodes()))
+        doors = (
+            []
+            if building is None
+            else building.drop_door_holders(set(self.held_nodes()), set(self.evacuation))
+        )
         self.store.record_event(
             "emergency_declared",
             "emergency",

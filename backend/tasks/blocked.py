@@ -14,6 +14,10 @@ its target for that robot:
 - otherwise (its route failed for a reason the server does not see), for a back-off of
   ``FIRST_BACKOFF_S`` doubling with each failure in a row up to ``MAX_BACKOFF_S``;
 - never once the robot has moved to another node, or has charged (``clear``).
+
+A bar says why in words made from typed fields only: the closures' own reasons, else the
+errand's kind and the robot's ``trouble`` flag (task_ended's); never the robot's reason text,
+which is words for people (an older robot's, another language's, any cause's).
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from backend.closure import Closure
 from backend.detours import RouteClosed, path_avoiding
 from guidebot.site.graph import NoPath, SiteGraph, UnknownNode
 
-__all__ = ["FIRST_BACKOFF_S", "MAX_BACKOFF_S", "Bar", "BlockedErrands", "cut_off_by"]
+__all__ = ["FIRST_BACKOFF_S", "MAX_BACKOFF_S", "Bar", "BlockedErrands", "cut_off_by", "describe"]
 
 FIRST_BACKOFF_S = 5.0
 """Seconds a target whose failure no closure explains is barred after a first failure."""
@@ -44,7 +48,7 @@ class Bar:
     until: float
     """Clock time the back-off ends (closures: unused)."""
     why: str
-    """What cuts the way off ("door D0 out of order"), or the robot's reason."""
+    """What cuts the way off ("door D0 out of order"), else what failed (``describe``)."""
 
 
 def cut_off_by(
@@ -62,6 +66,19 @@ def cut_off_by(
     except (NoPath, UnknownNode):
         return None
     return None
+
+
+ERRAND_WORDS = {"charge": "its charge at", "go_to": "its errand to"}
+"""How a failed errand of each task kind is named."""
+
+
+def describe(kind: str, goal: str, trouble: bool) -> str:
+    """A failure no closure explains, from the typed fields: the errand's task ``kind`` and
+    the robot's ``trouble`` flag (its way was cut off by trouble that has lifted since)."""
+    what = f"{ERRAND_WORDS.get(kind, f'its {kind} to')} {goal}"
+    if trouble:
+        return f"trouble cut off {what} (none in force now)"
+    return f"{what} failed (no closure cuts its way off)"
 
 
 def _closed_bar(node: str, cut: RouteClosed, now: float) -> Bar:
@@ -83,12 +100,15 @@ class BlockedErrands:
         targets: Iterable[str],
         graph: SiteGraph,
         closed: Mapping[str, object],
-        reason: str,
         now: float,
+        *,
+        kind: str,
+        trouble: bool = False,
     ) -> Bar | None:
-        """``robot`` standing at ``node`` failed its errand to ``goal``: bar it, and every one
-        of ``targets`` the same closures cut off. Returns the bar of ``goal`` (None when the
-        robot's place is unknown: nothing to compare a later place with)."""
+        """``robot`` standing at ``node`` failed its errand (task ``kind``) to ``goal``: bar
+        it, and every one of ``targets`` the same closures cut off. ``trouble``: the robot's
+        flag (task_ended's: trouble alone cut its way off). Returns the bar of ``goal`` (None
+        when the robot's place is unknown: nothing to compare a later place with)."""
         if node is None:
             return None
         bars = self._bars.setdefault(robot, {})
@@ -102,7 +122,7 @@ class BlockedErrands:
         count = self._failures.get(robot, 0) + 1
         self._failures[robot] = count
         wait = min(MAX_BACKOFF_S, FIRST_BACKOFF_S * 2 ** (count - 1))
-        bar = Bar(node, frozenset(), now + wait, reason or "it failed without saying why")
+        bar = Bar(node, frozenset(), now + wait, describe(kind, goal, trouble))
         bars[goal] = bar
         return bar
 

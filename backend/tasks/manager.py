@@ -626,10 +626,11 @@ class TaskManager(Service):
         for robot, kind, params in errands:
             self._internal(robot, kind, params)
 
-    def errand_failed(self, robot: RobotInfo, task: Task, reason: str) -> None:
-        """An idle robot's errand (``task``: internal, charge or go_to) failed: its target is
-        not given to it again until something changes (blocked.py); a charge so barred raises
-        one alert for staff (``charge_unreachable``, the robot), resolved when it charges."""
+    def errand_failed(self, robot: RobotInfo, task: Task, trouble: bool = False) -> None:
+        """An idle robot's errand (``task``: internal, charge or go_to) failed (``trouble``:
+        its task_ended's flag): its target is not given to it again until something changes
+        (blocked.py); a charge so barred raises one alert for staff (``charge_unreachable``,
+        the robot), resolved when it charges."""
         try:
             goal = self.target_of(task.kind, task.params)
         except TaskError:
@@ -643,8 +644,9 @@ class TaskManager(Service):
             targets,
             self.graph,
             self.closed_now(),
-            reason,
             self.clock(),
+            kind=task.kind,
+            trouble=trouble,
         )
         if bar is None or task.kind != "charge" or not robot.needs_charge:
             return

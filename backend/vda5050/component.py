@@ -17,6 +17,7 @@ from backend.state import app_state
 from backend.tasks.manager import NETS
 from backend.tasks.targets import net_params
 from backend.vda5050.master import MasterControl
+from backend.vda5050.pauses import PauseOwner, read_owners
 from guidebot.site.schema import Site
 from guidebot.vda5050.topics import parse_broker
 
@@ -86,7 +87,18 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
         check = getattr(traffic, "gate", None)
         return check(robot, area) if check is not None else None  # type: ignore[no-any-return]
 
-    def make(site: Site) -> MasterControl:
+    store = app_state(app).store
+
+    def record(kind: str, data: dict[str, Any]) -> None:
+        if store is not None:
+            store.record_event(kind, "vda5050", data)
+
+    async def paused_by() -> dict[str, PauseOwner]:
+        """Who held each vehicle paused when the last master control stopped (a new leader,
+        a restarted server, a new site's master): the event log's word."""
+        return {} if store is None else await read_owners(store)
+
+    def make(site: Site, paused: dict[str, PauseOwner]) -> MasterControl:
         return MasterControl(
             site,
             broker,
@@ -97,9 +109,11 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
             task_of=task_of,
             holder=holder,
             gate=gate,
+            record=record,
+            paused_by=paused,
         )
 
-    masters = _Masters(app, make)
+    masters = _Masters(app, make, paused_by)
     await masters.start(site)
     sites.on_change(masters.on_site)
     try:
@@ -111,8 +125,8 @@ async def vda5050(app: FastAPI) -> AsyncIterator[None]:
 class _Masters:
     """The master control of the site now (None while it has no VDA 5050 robot)."""
 
-    def __init__(self, app: FastAPI, make: Any) -> None:
-        self.app, self.make = app, make
+    def __init__(self, app: FastAPI, make: Any, paused_by: Any) -> None:
+        self.app, self.make, self.paused_by = app, make, paused_by
         self.master: MasterControl | None = None
         self.stopped = False
         self._lock = asyncio.Lock()
@@ -120,7 +134,7 @@ class _Masters:
     async def start(self, site: Site) -> None:
         if not MasterControl.identities(site):
             return
-        master = self.make(site)
+        master = self.make(site, await self.paused_by())
         await master.__aenter__()
         self.master = self.app.state.vda5050 = master
 

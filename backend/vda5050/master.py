@@ -7,12 +7,13 @@ from __future__ import annotations
 import json
 import logging
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from prometheus_client.core import CounterMetricFamily, Metric
 
-from backend.vda5050.vehicle import Gate, Holder, Send, VdaRobot, vehicle_of
+from backend.vda5050.pauses import PauseOwner
+from backend.vda5050.vehicle import Gate, Holder, Record, Send, VdaRobot, vehicle_of
 from guidebot.bus import BusEndpoint
 from guidebot.service import Service
 from guidebot.site.graph import SiteGraph
@@ -50,8 +51,14 @@ class MasterControl(Service):
         task_of: TaskLookup | None = None,
         holder: Holder | None = None,
         gate: Gate | None = None,
+        record: Record | None = None,
+        paused_by: Mapping[str, PauseOwner] | None = None,
     ) -> None:
         super().__init__()
+        self.record = record
+        """Writes the event log: the master's own pauses, read back by the next one."""
+        self.paused_by = dict(paused_by or {})
+        """Robot -> who held it paused when the last master control stopped (the event log)."""
         self.task_of = task_of
         self.holder = holder
         """The lock table's holder of an area: a zone grant it took back is REVOKED."""
@@ -97,6 +104,8 @@ class MasterControl(Service):
                 step_of=lambda node: self._graph.step(node).as_dict(),
                 holder=self.holder,
                 gate=self.gate,
+                record=self.record,
+                paused_by=self.paused_by.get(config.name),
             )
             self.robots[(vehicle.interface, vehicle.manufacturer, vehicle.serial_number)] = robot
             self.on_cleanup(ep.close)  # type: ignore[attr-defined]

@@ -22,6 +22,7 @@ from backend.vda5050.order import (
     node_seq,
     step_of_seq,
 )
+from backend.vda5050.pauses import PAUSE_EVENT, PauseOwner
 from backend.vda5050.zones import area_boxes, inside, responses, zone_sets
 from guidebot.bus import BusEndpoint, RequestTimeout
 from guidebot.messages import Message
@@ -76,6 +77,8 @@ Holder = Callable[[str], str | None]
 """The robot the lock table gives an area to now (None: nobody)."""
 Gate = Callable[[str, str], str | None]
 """(robot, area) -> why the robot may not have the area now (the fire alarm), or None."""
+Record = Callable[[str, dict[str, Any]], None]
+"""Write a row of the event log (kind, data): what a new master control reads back."""
 
 ACK_TIMEOUT_S = 3.0
 """An order the vehicle's state does not name this long after it was sent is sent again."""
@@ -140,8 +143,14 @@ class VdaRobot:
         step_of: StepOf | None = None,
         holder: Holder | None = None,
         gate: Gate | None = None,
+        record: Record | None = None,
+        paused_by: PauseOwner | None = None,
     ) -> None:
         self.name = config.name
+        self.record = record
+        self.restored_pause = paused_by.device if paused_by is not None else None
+        """The last master control's own pause of the vehicle (the event log's word): taken
+        up again when this one goes on with the vehicle's order (``_adopt``)."""
         self.holder = holder
         self.gate = gate
         self.task_of = task_of
@@ -208,8 +217,9 @@ class VdaRobot:
         at its floor: the master paused the vehicle (``startPause``) until it is open again
         (``_guard_base``)."""
         self.paused_at = -math.inf
-        self.staff_paused = False
-        """Staff paused the vehicle (``pause``): a door's ``stopPause`` does not let it go on."""
+        self.staff_paused = paused_by.staff if paused_by is not None else False
+        """Staff paused the vehicle (``pause``): a door's ``stopPause`` does not let it go on.
+        Read back from the event log by a new master control."""
         self.route: dict[int, str] = {}
         """The current order's nodes ahead by sequence id (``_reached``)."""
         self.route_seq = 0
@@ -363,6 +373,15 @@ class VdaRobot:
     def on_state(self, message: dict[str, Any]) -> None:
         if self.hibernating:  # sent before it fell asleep: it speaks again after ONLINE
             return
+        if self._stale(message):
+            log.info(
+                "%s: a state older than the last one ignored (order %s, update %s, at %s)",
+                self.name,
+                message.get("orderId"),
+                message.get("orderUpdateId"),
+                message.get("lastNodeId"),
+            )
+            return
         if not self.online:
             self.on_connection({"connectionState": "ONLINE"})
         self._speak(str(message["version"]))
@@ -389,6 +408,22 @@ class VdaRobot:
             self._zones(message)
         self._publish_state()
         self.changed.set()
+
+    def _stale(self, state: Mapping[str, Any]) -> bool:
+        """A state older than the last one taken: it names an earlier order of the same task
+        (orders of a task are ``<task id>-<n>``, and a vehicle never goes back to an older
+        one), or the same order at an earlier update. A report the broker delivers late, after
+        a broken connection: taken, it moved the robot back and made the master think the
+        vehicle had lost its order, and send a new one from a node the vehicle had left
+        ("order refused: still driving an order", "not at hall")."""
+        last = self.state
+        if last is None:
+            return False
+        new_id, old_id = str(state.get("orderId") or ""), str(last.get("orderId") or "")
+        if new_id and new_id == old_id:
+            return int(state.get("orderUpdateId", 0)) < int(last.get("orderUpdateId", 0))
+        new, old = _order_number(new_id), _order_number(old_id)
+        return new is not None and old is not None and new[0] == old[0] and new[1] < old[1]
 
     # -- 3.0.0 zones -----------------------------------------------------------------------
     def _refresh_zones(self) -> None:
@@ -725,8 +760,9 @@ class VdaRobot:
         """The task is over: doors and areas given back, ``task_ended``; then an assignment
         that came while it was being cancelled starts."""
         self._release_all()
+        self.restored_pause = None
         if self.paused_for is not None:  # not left paused for the next task
-            self.paused_for = None
+            self._pause_for(None)
             if not self.staff_paused:
                 self._spawn(self.instant("stopPause"))
         self.order_id = None
@@ -773,16 +809,17 @@ class VdaRobot:
         updates (no order lost, none sent twice), instead of cancelling it. The areas and
         doors on the vehicle's released base were granted to it: they are its own again."""
         order_id = str(state.get("orderId") or "")
-        task_id, dash, n = order_id.rpartition("-")
-        if not dash or not n.isdigit() or self.task_of is None or self.step_of is None:
+        number = _order_number(order_id)
+        if number is None or self.task_of is None or self.step_of is None:
             return
+        task_id, n = number
         if any(e.task_id == task_id for e in self.ended):
             return  # ended here: the Task Manager has not heard it yet
         found = self.task_of(task_id)
         if found is None:
             return
         net, params = found
-        self._orders = max(self._orders, int(n))
+        self._orders = max(self._orders, n)
         here = [str(state["lastNodeId"])]
         ahead = [str(s["nodeId"]) for s in state.get("nodeStates", []) if s["released"]]
         for node in here + ahead:
@@ -794,6 +831,13 @@ class VdaRobot:
                 self.requested.add(step["area"])
             if step.get("door") and node in ahead and step["door"] not in self.doors:
                 self._open_door(step["door"])
+        if self.restored_pause is not None and state.get("paused"):
+            # The last master paused it before a door (in a cabin): still its own pause,
+            # let go on once that is open for this master (``_guard_base``), unlike staff's.
+            log.warning("%s: paused by the last master for %s %s", self.name, *self.restored_pause)
+            self.paused_for = self.restored_pause
+            self.paused_at = asyncio.get_running_loop().time()
+        self.restored_pause = None
         log.warning(
             "%s: resumes task %s on the vehicle's order %s (update %s, at %s)",
             self.name,
@@ -912,15 +956,27 @@ class VdaRobot:
                 await self._drive(task_id, goal, actions, on_arrival, resume)
                 return
             except OrderLost as exc:
+                here = self._where()
                 log.warning(
                     "%s: the vehicle no longer runs order %s: planned again from %s (%d)",
                     self.name,
                     exc,
-                    self.node,
+                    here,
                     replans + 1,
                 )
                 resume = None
+                await self._take_over()  # on another order: stopped first, or it refuses ours
         raise DriveFailed(f"{self.name} lost its order {REPLANS + 1} times on the way to {goal}")
+
+    def _where(self) -> str | None:
+        """Where the vehicle's state says it is (its ``lastNodeId``, when a node of the
+        site): a drive planned again starts there, whatever the master last thought (a
+        new order from another node is refused: "not at <node>")."""
+        last = str((self.state or {}).get("lastNodeId") or "")
+        if last in self.nodes and last != self.node:
+            log.info("%s: the vehicle says it is at %s, not %s", self.name, last, self.node)
+            self.node, self.floor, self.placed = last, self.nodes[last].floor, None
+        return self.node
 
     async def _drive(
         self,
@@ -1070,9 +1126,9 @@ class VdaRobot:
                         f"{self.name} never acknowledged order {order_id} "
                         f"(update {update}, sent {tries} times)"
                     )
-                tries += 1
                 sent_at = loop.time()
-                await self.send("order", order)
+                if await self.send("order", order):
+                    tries += 1  # one the broker never took (we were not connected) is no try
             refusal = self._refusal(order_id)
             if refusal is not None:
                 raise DriveFailed(f"{self.name} refused the order: {refusal}")
@@ -1096,10 +1152,9 @@ class VdaRobot:
     def _new_order_id(self, task_id: str) -> str:
         """``<task id>-<n>``, n after any order of this task the vehicle last had (from an
         earlier master control): an order id is never given twice."""
-        last = str((self.state or {}).get("orderId") or "")
-        head, dash, n = last.rpartition("-")
-        if dash and head == task_id and n.isdigit():
-            self._orders = max(self._orders, int(n))
+        last = _order_number(str((self.state or {}).get("orderId") or ""))
+        if last is not None and last[0] == task_id:
+            self._orders = max(self._orders, last[1])
         self._orders += 1
         return f"{task_id}-{self._orders}"
 
@@ -1162,14 +1217,26 @@ class VdaRobot:
                         self.name,
                         *closed,
                     )
-                self.paused_for, self.paused_at = closed, now
+                self._pause_for(closed)
+                self.paused_at = now
                 await self.instant("startPause")
-            self.paused_for = closed
+            self._pause_for(closed)
         elif self.paused_for is not None:
             log.info("%s: %s %s open again: goes on", self.name, *self.paused_for)
-            self.paused_for = None
+            self._pause_for(None)
             if not self.staff_paused:
                 await self.instant("stopPause")
+
+    def _pause_for(self, device: tuple[str, str] | None) -> None:
+        """The master's own pause is for ``device`` now (None: over), kept in the event log
+        on every change: a new master control (fail-over, restart) reads it back and lets the
+        vehicle go on once that device is open, where it took the pause for staff's."""
+        if device == self.paused_for:
+            return
+        self.paused_for = device
+        if self.record is not None:
+            where = {"for": device[0], "id": device[1]} if device is not None else {}
+            self.record(PAUSE_EVENT, {"robot": self.name, "paused": device is not None, **where})
 
     def _closed_ahead(
         self, steps: list[dict[str, Any]], progress: int, base_end: int
@@ -1349,6 +1416,12 @@ class VdaRobot:
             self.open_doors.discard(door)
             self.held_doors.discard(door)
         self.changed.set()
+
+
+def _order_number(order_id: str) -> tuple[str, int] | None:
+    """(task id, n) of an order id ``<task id>-<n>`` the master gives; None for another."""
+    task_id, dash, n = order_id.rpartition("-")
+    return (task_id, int(n)) if dash and task_id and n.isdigit() else None
 
 
 def _position(state: Mapping[str, Any]) -> dict[str, Any] | None:

@@ -170,6 +170,69 @@ async def test_an_evacuation_raises_no_door_trouble_for_a_door_a_robot_was_waiti
         assert [a["kind"] for a in alerts if a["kind"] != "fire_alarm"] == []
 
 
+async def test_a_robot_outside_the_zone_is_told_at_once_that_the_alarm_holds_its_door(
+    tmp_path: Path,
+) -> None:
+    """A floor alarm (F1) while R2, on the ground floor, waits for door_upstairs (F1, jammed:
+    it cannot open first) and R1, upstairs, waits for it too. The alarm drops the door's
+    holders: R1, evacuating, wants no door any more (withdrawn, no answer); R2 still wants it
+    and is told at once that the alarm holds it (it got no answer and waited its whole
+    wait_timeout_s). A refusal, not trouble: no trouble closure."""
+    async with alarm_rig(tmp_path) as (sim, server, _control, http):
+        hub = server.app.state.hub
+        building = server.app.state.building
+        inside, outside = RobotStub(hub, "R1", "gc1"), RobotStub(hub, "R2", "hall")
+        inside.state()
+        outside.state()
+        sim.jam_door("door_upstairs")
+        for robot in (inside, outside):
+            robot.endpoint.publish("open_door", {"door": "door_upstairs"})
+        await wait_until(lambda: set(building.doors["door_upstairs"].holders) == {"R1", "R2"})
+        declared = await http.post(
+            "/api/emergency/declare", json={"zone": {"floors": ["F1"]}, "reason": "drill"}
+        )
+        assert declared.status_code == 200, declared.text
+        await inside.wait_for("evacuate")
+        # Before the door's own time-out (7 s + margin): the alarm's words, not a jam.
+        failed = await outside.wait_for("command_failed", timeout=3.0)
+        assert failed.payload["command"] == "open_door"
+        assert failed.payload["target"] == "door_upstairs"
+        assert failed.payload["reason"].startswith("fire alarm: no door opened"), failed.payload
+        await wait_until(lambda: not building._commands)  # the open_doors' handlers are done
+        assert inside.of_type("command_failed") == []
+        assert outside.of_type("evacuate") == []
+        assert sim.read_point("otb_first", "door_f1_open") == 0
+        assert [c.id for c in server.app.state.closures.closures.values()] == []
+
+
+async def test_staff_closing_a_door_withdraws_the_open_doors_waiting_for_it(
+    tmp_path: Path,
+) -> None:
+    """Staff close door_gallery (close_door) while R1's open_door still waits for it (jammed):
+    every holder is dropped and R1's request withdrawn, as when a robot lets go; its time-out
+    used to be published as a door failure (command_failed, a trouble closure and a
+    building_command_failed alert) for a door staff had closed on purpose."""
+    async with alarm_rig(tmp_path) as (sim, server, _control, http):
+        hub = server.app.state.hub
+        building = server.app.state.building
+        failures = Recorder(hub.endpoint("test"), "command_failed", tap=True)
+        robot = RobotStub(hub, "R1", "hall")
+        robot.state()
+        sim.jam_door("door_gallery")
+        robot.endpoint.publish("open_door", {"door": "door_gallery"})
+        await wait_until(lambda: sim.read_point("otb_ground", "door_hall_open") == 1)
+        staff = hub.endpoint("staff")
+        closed = await staff.request("close_door", {"door": "door_gallery"}, timeout=10)
+        assert closed.type == "door_closed", closed.payload
+        await wait_until(lambda: not building._commands)  # the open_door's handler is done
+        assert failures.messages == []
+        assert building.doors["door_gallery"].holders == {}
+        assert sim.read_point("otb_ground", "door_hall_open") == 0
+        assert [c.id for c in server.app.state.closures.closures.values()] == []
+        alerts = (await http.get("/api/alerts")).json()
+        assert [a["kind"] for a in alerts] == []
+
+
 async def robot_held_still(server: RunningServer, name: str) -> bool:
     """The Task Manager gives the robot nothing while the alarm lasts."""
     tasks = server.app.state.task_manager

@@ -152,7 +152,9 @@ async def test_the_fire_alarm_dropping_a_door_withdraws_the_open_doors_waiting_f
     """The fire alarm lets go of the zone's doors (``drop_door_holders``); the open_door
     requests still waiting for one kept waiting, and their time-out was published as a door
     failure (a trouble closure and an alert mid-evacuation, for a door nobody wanted any more).
-    They are withdrawn, as when their robot lets go: no command_failed, nothing left waiting."""
+    Those of the robots it evacuates (R1) are withdrawn, as when their robot lets go: no
+    command_failed, nothing left waiting. A robot outside its zone (R2) still wants the door:
+    it is refused at once with the alarm's reason, not left waiting unanswered."""
     async with (
         BuildingSimulator(building, time_scale=TIME_SCALE, port_zero=True) as sim,
         BuildingInterface(hub.endpoint("building"), sim.bound_config(), command_margin_s=0.5) as bi,
@@ -165,10 +167,12 @@ async def test_the_fire_alarm_dropping_a_door_withdraws_the_open_doors_waiting_f
             robot.publish("open_door", {"door": "D1"})
         await wait_until(lambda: set(bi.doors["D1"].holders) == {"R1", "R2"})
         await wait_until(lambda: sim.read_point("M1", "d1_cmd") == 1)
-        assert bi.drop_door_holders({"d1"}) == ["D1"]
+        assert bi.drop_door_holders({"d1"}, evacuating={"R1"}) == ["D1"]
         await wait_until(lambda: not bi._commands)  # both open_doors and the close are done
-        assert [a.messages for a in answers] == [[], []]
-        assert recorder.of("command_failed") == []
+        assert answers[0].messages == []
+        [refused] = answers[1].messages
+        assert refused.type == "command_failed" and refused.payload["target"] == "D1"
+        assert refused.payload["reason"].startswith("fire alarm"), refused.payload
         assert bi.doors["D1"].holders == {}
         assert sim.read_point("M1", "d1_cmd") == 0
 

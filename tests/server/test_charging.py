@@ -154,7 +154,10 @@ async def test_a_charge_that_fails_at_once_is_not_made_again_before_a_back_off(
     assert len(r1.of_type("task_assigned")) == 2
     [alert] = alerts.active()
     assert alert.kind == "charge_unreachable" and alert.subject == "R1"
-    assert "cannot reach a charging station: navigation failed" in alert.message
+    # Said from the typed fields (the errand's kind, no trouble flag), not the robot's text.
+    assert "cannot reach a charging station: its charge at charge_" in alert.message
+    assert "failed (no closure cuts its way off)" in alert.message
+    assert "the base refused" not in alert.message
     clock.now += FIRST_BACKOFF_S
     r1.state()
     manager.check_timeouts()
@@ -164,3 +167,26 @@ async def test_a_charge_that_fails_at_once_is_not_made_again_before_a_back_off(
     r1.node = "charge_a" if stations[0] == "station_a" else "charge_b"
     r1.state("busy")  # it got there: the alert is resolved
     assert not alerts.active()
+
+
+async def test_an_errands_failure_is_described_from_its_typed_fields_not_the_robots_words(
+    bus: Bus, manager: TaskManager
+) -> None:
+    """The robot's reason is words for people: "door D0 out of order" from a robot whose
+    way no closure cuts off (and an older robot's, or another cause's, words) made staff's
+    alert name a door that was not the cause. The bar says what failed from the errand's
+    kind and the robot's ``trouble`` flag (trouble that has lifted since it failed)."""
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    manager.alerts = alerts
+    manager.robots["R2"].node = "entrance"  # (offline) off station_b, where the site starts it
+    r1 = RobotStub(bus, "R1", "hall", battery=0.25)
+    r1.state()
+    r1.endpoint.publish("battery_low", {"robot": "R1", "level": 0.25})
+    for n in (1, 2):
+        order = (await r1.wait_for("task_assigned", n)).payload
+        r1.start(order["task_id"])
+        r1.end(order["task_id"], "failed", "navigation failed: door D0 out of order", trouble=True)
+    [alert] = alerts.active()
+    assert alert.kind == "charge_unreachable"
+    assert "trouble cut off its charge at charge_" in alert.message, alert.message
+    assert "D0" not in alert.message

@@ -12,6 +12,7 @@ import aiomqtt
 import pytest
 
 from backend.tasks.model import FINAL_STATES, TaskState
+from backend.vda5050 import vehicle as vehicle_module
 from backend.vda5050.order import build_order
 from guidebot.payloads.traffic import ReleaseArea, RequestArea
 from guidebot.processes import spawn_guidebot
@@ -421,6 +422,83 @@ async def test_a_vehicle_back_within_the_grace_period_is_planned_again_from_wher
         history = (await f.http.get(f"/api/tasks/{task}/history")).json()
         events = [h["event"] for h in history]
         assert events.count("assigned") == 1 and "requeued" not in events, history
+
+
+async def test_a_late_state_after_a_broken_connection_is_not_taken_for_a_lost_order(
+    tmp_path: Path, broker: Mosquitto
+) -> None:
+    """Under load, after MQTT connections broke, V1's tour failed "order refused: still
+    driving an order" (or "not at hall"): the vehicle's connection broke (its last will) and
+    the broker then delivered a state it had sent before it took its current order, naming the
+    tour's first order at b. The master took it for a lost order and sent a new one from b
+    while the vehicle drove on to e. A state older than the last one (an earlier order of the
+    task, an earlier update) is ignored: the tour goes on with its order and ends done."""
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        sim.speed = 0.1  # 4 s of wall time per edge
+        await wait_until(lambda: f.robot("V1").online, 15)
+        tour = await f.task("tour", {"tour": "line"})
+        await wait_until(lambda: sim.order.order_id == f"{tour}-2" and sim.last_node == "c", 40)
+        late = sim.state() | {
+            "headerId": 0,
+            "orderId": f"{tour}-1",
+            "orderUpdateId": 0,
+            "lastNodeId": "b",
+            "lastNodeSequenceId": 2,
+            "nodeStates": [],
+            "edgeStates": [],
+            "driving": False,
+        }
+        async with aiomqtt.Client("127.0.0.1", broker.port) as client:
+            will = {**V1.header(7), "connectionState": "CONNECTIONBROKEN"}
+            await client.publish(V1.topic("connection"), json.dumps(will), qos=1)
+            await client.publish(V1.topic("state"), json.dumps(late), qos=1)
+        result = await until_done(f, tour, 60)
+        assert result["state"] == "done", result
+        assert sim.last_node == "e"
+        sent = sorted({o["orderId"] for o in sim.orders_received})
+        assert sent == [f"{tour}-1", f"{tour}-2"], sent
+        all_valid(sim.orders_received, "order")
+
+
+async def test_an_update_due_while_the_broker_is_down_is_sent_once_it_is_back(
+    tmp_path: Path, broker: Mosquitto, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """V1 waits at b for the corridor R1 holds; the broker dies, and R1 lets the corridor go
+    meanwhile: the update that releases it cannot leave. Each send the broker never took was
+    counted as one of the order's three tries, and the task failed "never acknowledged" before
+    the broker was back. Only sends that left count: the update goes once the broker is back,
+    and the task ends done."""
+    monkeypatch.setattr(vehicle_module, "ACK_TIMEOUT_S", 1.0)  # three tries within 3 s
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        other = f.server.app.state.hub.endpoint("R1")
+        other.publish(RequestArea(robot="R1", area="corridor"))
+        traffic = f.server.app.state.traffic
+        await wait_until(lambda: traffic.locks.holder("corridor") == "R1")
+        await wait_until(lambda: f.robot("V1").online, 15)
+        session = f.master.session
+        unsent: list[str] = []
+        publish = session.publish
+
+        async def counted(topic: str, message: dict, **options: bool) -> bool:
+            sent = await publish(topic, message, **options)
+            if not sent and topic.endswith("/order"):
+                unsent.append(str(message["orderUpdateId"]))
+            return sent
+
+        session.publish = counted
+        task = await f.task("go_to", {"node": "e"})
+        await wait_until(lambda: sim.last_node == "b" and not sim.driving, 20)
+        broker.stop()
+        await wait_until(lambda: not session.connected.is_set(), 15)
+        other.publish(ReleaseArea(robot="R1", area="corridor"))
+        await wait_until(lambda: len(unsent) > vehicle_module.ORDER_TRIES, 20)
+        assert (await f.task_state(task))["state"] == "running"
+        broker.start()
+        result = await until_done(f, task, 60)
+        other.close()
+        assert result["state"] == "done", result
+        assert sim.last_node == "e" and not sim.errors
+        all_valid(sim.orders_received, "order")
 
 
 async def test_a_site_edit_reaches_the_master_control_without_a_restart(
