@@ -54,3 +54,53 @@ async def test_a_visit_cancelled_at_its_point_says_the_robot_had_got_there(
         await page.get_by_role("button", name="Yes, cancel it").click()
         await expect(state).to_contain_text("Your request was cancelled.", timeout=LONG)
         await expect(state).to_contain_text("R1 had reached Welcome hall.")
+
+
+SEEN = """
+window.__seen = [];
+new MutationObserver(() => {
+  for (const el of document.querySelectorAll(".request-state")) {
+    const text = el.textContent.replace(/\\s+/g, " ").trim();
+    if (text && window.__seen.at(-1) !== text) window.__seen.push(text);
+  }
+}).observe(document, { subtree: true, childList: true, characterData: true });
+"""
+"""Every text the request's state showed, in order (a short-lived one too)."""
+
+
+async def test_a_told_wait_is_shown_to_the_nearest_ten_seconds(
+    visitor_fleet: Any, open_page: Any
+) -> None:
+    """The busy demo: told 21 s, the phone said "in about 30 s" (rounded up). The server here
+    tells a wait of 24 s and nothing new after it: the page says "about 20 s", never 30."""
+    async with visitor_fleet(time_scale=1.0) as vf:
+        page = (await open_page("", viewport=PHONE)).page
+
+        async def no_task_news(ws: Any) -> None:  # the server says nothing new of the wait
+            server = ws.connect_to_server()
+            server.on_message(lambda m: None if "task_event" in str(m) else ws.send(m))
+
+        async def told_24_s(route: Any) -> None:
+            reply = await route.fetch()
+            status = await reply.json()
+            status |= {"eta_s": 24.0, "service": "busy"}
+            await route.fulfill(response=reply, json=status)
+
+        await page.route_web_socket("**/ws*", no_task_news)
+        await page.goto(vf.panel_url())
+        async with vf.fleet.http() as staff:  # R1 busy: the visitor waits in line
+            r = await staff.post(
+                "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "telescope"}}
+            )
+            assert r.status_code == 201, r.text
+        await page.route("**/api/tasks", told_24_s)
+        await page.route("**/api/tasks/*", told_24_s)
+        await page.evaluate(SEEN)
+        await request_from(page, "Highlights")
+        state = page.locator(".request-state")
+        await expect(state).to_contain_text("A robot will start for you in about 20 s.")
+        await expect(state).to_contain_text(
+            "A robot will start for you in about 10 s.", timeout=LONG
+        )
+        seen: list[str] = await page.evaluate("window.__seen")
+        assert not [text for text in seen if "about 30 s" in text], seen

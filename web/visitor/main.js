@@ -175,11 +175,12 @@ function update(status, at = status.updated_at) {
 
 /** A told wait (seconds) minus the time since it was told: what the server estimates now,
  * until it tells another (it does when its estimate drifts from this countdown). Under a
- * minute in steps of 10 s, so that a screen reader is not told a new number every second. */
+ * minute to the nearest 10 s, so that a screen reader is not told a new number every second
+ * (rounded up, 21 s left read "about 30 s"); under 5 s it is 0: "any moment now". */
 function countdown(seconds, at) {
   if (seconds === null || seconds === undefined) return null;
   const left = Math.max(0, seconds - (performance.now() - at) / 1000);
-  return left < 60 ? Math.ceil(left / 10) * 10 : left;
+  return left < 60 ? Math.round(left / 10) * 10 : left;
 }
 
 async function refreshRequests(ids) {
