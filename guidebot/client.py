@@ -307,6 +307,11 @@ class HubClient(BusEndpoint):
         try:
             first = await asyncio.wait_for(ws.recv(), self.heartbeat_timeout)
             welcome = orjson.loads(first)
+            # What the hub's modules send a client as it connects (closures, booked tours,
+            # the fleet's service to a robot) may leave in the welcome's own frame.
+            along: list[Any] = []
+            if isinstance(welcome, list) and welcome:
+                welcome, along = welcome[0], welcome[1:]
             if not isinstance(welcome, dict) or welcome.get("type") != "welcome":
                 raise ConnectionError(f"expected welcome, got {first[:200]!r}")
             self.name = welcome["payload"]["name"]
@@ -318,6 +323,8 @@ class HubClient(BusEndpoint):
                 await ws.send(wire.encode(sub), text=True)
             self.connections += 1
             self.connected.set()
+            for item in along:
+                self._dispatch(item)
             tasks = [
                 asyncio.create_task(self._writer(ws), name=f"hub-writer-{self.name}"),
                 asyncio.create_task(self._heartbeat(ws), name=f"hub-heartbeat-{self.name}"),

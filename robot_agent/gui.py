@@ -39,7 +39,7 @@ from guidebot.paths import WEB_DIR
 from guidebot.payloads.bookings import NextTour, NextTours
 from guidebot.payloads.emergency import EmergencyChanged, Evacuate, EvacuationState
 from guidebot.payloads.petri import ContinueAnswer
-from guidebot.payloads.tasks import TaskAssigned
+from guidebot.payloads.tasks import TaskAssigned, VisitorService
 from guidebot.service import Service
 from guidebot.site.access import graph_of, step_free_skips, steps_only_nodes
 from guidebot.site.i18n import fallbacks, poi_texts, resolve_language, site_languages, tour_texts
@@ -144,6 +144,9 @@ class OnboardScreen(Service):
         self._question_timer: asyncio.TimerHandle | None = None
         self.next_tours: list[NextTour] = []
         """Today's coming public booked tours (the server's ``next_tours``)."""
+        self.service: str | None = None
+        """What a new visitor request would be told (the server's ``visitor_service``:
+        ``paused`` while staff pause the fleet); None before the server said."""
         self.alarm: dict[str, Any] | None = None
         """While a fire alarm holds the service: {words: {lang: text}, evacuation: this
         robot's own state (stopped, moving, safe, stuck) or None}; None otherwise."""
@@ -169,6 +172,7 @@ class OnboardScreen(Service):
         self.on(self.ep, Evacuate, self._on_evacuate)
         self.on(self.ep, EvacuationState, self._on_evacuation_state)
         self.subscribe(self.ep, "next_tours", self._on_next_tours)
+        self.on(self.ep, VisitorService, self._on_service)
 
     async def on_stop(self) -> None:
         if self._question_timer is not None:
@@ -188,6 +192,7 @@ class OnboardScreen(Service):
             "tours": self._tours(chosen),
             "pois": self._pois(chosen),
             "next_tours": in_language(site, self.next_tours, chosen) if site else [],
+            "service": self.service,
             "task": self.task,
             "going": self.going,
             "explanation": self.explanation,
@@ -259,6 +264,12 @@ class OnboardScreen(Service):
             log.warning("next_tours not understood: %r", message.payload)
             return
         self._push("next_tours", None)
+
+    def _on_service(self, message: Message, news: VisitorService) -> None:
+        """The fleet's service changed (staff paused it, resumed): the screen says so."""
+        if news.service != self.service:
+            self.service = news.service
+            self._push("service", {"service": news.service})
 
     def _push(self, kind: str, data: Any) -> None:
         self.ep.publish(SCREEN_EVENT, {"kind": kind, "data": data})

@@ -1,7 +1,8 @@
 // The robot's touch screen: the visitor panel's look and language files (/lib, /lang, /visitor
 // served by the robot itself), tours and points to request, the current explanation with its
-// picture, "continue the tour?" with a visible countdown, and the robot's state. During a fire
-// alarm: the evacuation screen, the site's words in the screen's language (docs/emergency.md).
+// picture, "continue the tour?" with a visible countdown, and the robot's state; while staff
+// pause the fleet, that they did (as the phone says it). During a fire alarm: the evacuation
+// screen, the site's words in the screen's language (docs/emergency.md).
 import { html, nothing, render } from "/vendor/lit-html/lit-html.js";
 import { loadTexts } from "/lib/i18n.js";
 import { nextTourLines } from "/lib/nexttours.js";
@@ -275,6 +276,7 @@ function draw() {
       ${viewOptions(s)}
     </header>
     ${stateView(s)}
+    ${s.service === "paused" && !s.task ? html`<p class="notice" role="status">${t("service_paused")}</p>` : ""}
     ${captionView(s)}
     ${s.task?.pace === "slow" ? html`<p class="pace">${t("state_slower_unknown")}</p>` : ""}
     ${s.task?.step_free ? html`<p class="pace">${t(s.task.tour ? "state_step_free" : "state_step_free_visit")}</p>` : ""}

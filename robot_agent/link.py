@@ -98,6 +98,7 @@ DOWN_TYPES: tuple[str, ...] = (
     "emergency_changed",
     "closures_changed",
     "next_tours",
+    "visitor_service",
 )
 """Hub message types published on the on-board bus (addressed to the robot, or broadcast)."""
 

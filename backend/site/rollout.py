@@ -24,7 +24,7 @@ from backend.site.offloop import off_loop, release
 from backend.site.service import SiteService
 from guidebot.bus import Endpoint
 from guidebot.messages import Message
-from guidebot.payloads.site import SiteRollout
+from guidebot.payloads.site import SitePublished, SiteRollout
 from guidebot.service import Service
 from guidebot.site import jsonio
 from guidebot.site.bulk import dump_site_doc
@@ -87,6 +87,7 @@ class RolloutTracker(Service):
         retired = [self._payload]  # the previous document, freed in a thread
         self._payload = payload
         self.ep.publish("site_changed", self._payload)
+        self.ep.publish(SitePublished(version=self.version))  # the visitor pages' menus
         self._report()
         await release(retired)
 

@@ -57,6 +57,14 @@ CHECKPOINT_EVERY = 128
 """A request that goes ahead of others is simulated from the nearest earlier checkpoint."""
 MEMO_SIZE = 4096
 """Entries kept by each of the estimator's look-up memos before it starts afresh."""
+OVERDUE_SHARE = 0.5
+"""A segment that has lasted longer than foretold is expected to last this share of the time
+it has taken so far again (a robot held at a door, a slow lift, a chatty group): what is left
+of it grows with the time it takes, never stays at a figure that has run out."""
+GO_ON_PRIOR_N = 4
+"""The prior share of visitors who answer "continue?" with yes (1.0) counts as this many
+answers; the share learned from the tours then moves as a mean over the last ~20 answers."""
+GO_ON_MIN_ALPHA = 0.05
 
 Service = Literal["available", "busy", "held_up", "paused", "unavailable", "ended", "withdrawn"]
 NO_PROMISE: frozenset[str] = frozenset({"unavailable", "held_up", "paused"})
@@ -128,6 +136,20 @@ class _Factor:
 
 
 @dataclass(slots=True)
+class _Share:
+    """The share of "continue?" questions answered yes: a prior of 1.0 worth
+    ``GO_ON_PRIOR_N`` answers, then a mean that follows the recent answers."""
+
+    value: float = 1.0
+    samples: int = 0
+
+    def learn(self, yes: bool) -> None:
+        alpha = max(GO_ON_MIN_ALPHA, 1.0 / (self.samples + 1 + GO_ON_PRIOR_N))
+        self.value = (1 - alpha) * self.value + alpha * (1.0 if yes else 0.0)
+        self.samples += 1
+
+
+@dataclass(slots=True)
 class _Rest:
     """The segments of a list of places after the leg to the first one, and their nominal
     seconds of legs and of explanations (a simulated task costs two multiplications)."""
@@ -139,10 +161,28 @@ class _Rest:
     """Factor on the speech at each stop (a slower tour: guidebot/pace.py)."""
     move_s: float = 0.0
     talk_s: float = 0.0
+    expected: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    """(share going on, nominal seconds of legs, of explanations) each weighted by the chance
+    its visitors still follow the robot then: what a robot is expected to spend on it."""
 
     def __post_init__(self) -> None:
         self.move_s = sum(s.nominal_s for s in self.segments if s.kind == "move")
         self.talk_s = sum(s.nominal_s for s in self.segments if s.kind == "talk")
+        self.expected = (1.0, self.move_s, self.talk_s)
+
+    def expected_s(self, go_on: float) -> tuple[float, float]:
+        """Nominal seconds of legs and explanations a robot is expected to spend on these
+        places when each "continue?" is answered yes with chance ``go_on`` (cached per share)."""
+        if self.expected[0] != go_on:
+            move = talk = 0.0
+            for seg in self.segments:
+                w = go_on ** (seg.index - 1)
+                if seg.kind == "move":
+                    move += w * seg.nominal_s
+                else:
+                    talk += w * seg.nominal_s
+            self.expected = (go_on, move, talk)
+        return self.expected[1], self.expected[2]
 
 
 @dataclass(slots=True)
@@ -169,6 +209,9 @@ class _Progress:
     first: int = 1
     """The tour's index of the first place in ``segments`` (a handed-over tour starts at the
     visitor's stop: backend/tasks/handover.py)."""
+    asking: bool = False
+    """A stop before the last was explained: the robot asks "continue?" and its visitors may
+    end the tour there (learned by ``EtaEstimator.go_on``)."""
 
     def __post_init__(self) -> None:
         move = talk = 0.0
@@ -235,6 +278,10 @@ class EtaEstimator:
         self.refresh_s = refresh_s
         self.move = _Factor()
         self.talk = _Factor()
+        self.go_on = _Share()
+        """How often visitors answer "continue?" with yes: a tour ended early by its
+        visitors frees its robot early, so the wait behind it counts each later stop by the
+        chance it is still walked (the demo's visitors, and the paper's, leave mid-tour)."""
         self.charge_s = CHARGE_S
         self._running: dict[str, _Progress] = {}
         self._schedule: _Schedule | None = None
@@ -293,6 +340,9 @@ class EtaEstimator:
             run = self._running[task.id] = self._track(task, None)
         now = self.tm.clock()
         at = index - run.first + 1  # the place in this robot's list
+        if run.asking and index > run.index:
+            run.asking = False  # the visitors went on after the question
+            self.go_on.learn(True)
         if stage == "skipped":
             name = _point_name(task, poi)
             run.skipped.append({"index": index, "poi": poi, "name": name, "reason": reason})
@@ -309,6 +359,7 @@ class EtaEstimator:
         run.mark_at = now
         run.index, run.stage, run.poi = index, stage, poi
         run.name = _point_name(task, poi)
+        run.asking = stage == "explained" and task.kind == "tour" and index < run.total
         self._schedule = None
         return self.progress_view(task) or {}
 
@@ -388,7 +439,11 @@ class EtaEstimator:
             if robot is not None and robot.held_up:  # a jam: no promise of when
                 return Estimate("held_up", 0.0, None if run.done == 0 else 0.0, None, duration)
             remaining = self._remaining(run)
-            first = self._remaining(run, upto=1) if run.done == 0 else 0.0
+            first: float | None = 0.0
+            if run.done == 0:
+                # Later than foretold on its way to the first stop: on its way, no figure
+                # (one that has run out is no promise: docs/visitor.md, "The wait").
+                first = None if self._overdue(run) else self._remaining(run, upto=1)
             return Estimate("available", 0.0, first, remaining, duration)
         duration = self._real(self.segments(task, None)[1:])
         service = self.service()
@@ -432,10 +487,14 @@ class EtaEstimator:
         return round(max(0.0, sched.heap[0][0] - (self.tm.clock() - sched.built_at)), 1)
 
     def _stop(self, task: Task) -> _Progress | None:
-        """Stop following a task on its robot; a tour that ended keeps where it got to."""
+        """Stop following a task on its robot; a tour that ended keeps where it got to, a
+        visit to one point that its robot had reached keeps that (the visit happened)."""
         run = self._running.pop(task.id, None)
-        if run is not None and task.final and task.kind == "tour":
-            task.final_progress = self._view(run)
+        if run is not None and task.final:
+            if task.kind == "tour" or (task.kind == "go_to_poi" and run.index > 0):
+                task.final_progress = self._view(run)
+            if run.asking and task.state is TaskState.DONE:
+                self.go_on.learn(False)  # its visitors ended the tour at "continue?"
         return run
 
     def progress_view(self, task: Task) -> dict[str, Any] | None:
@@ -444,7 +503,9 @@ class EtaEstimator:
         there (``point_shown``), index 1 of 1 arrived."""
         if task.kind == "go_to_poi":
             run = self._running.get(task.id)
-            return self._view(run) if run is not None and run.index > 0 else None
+            if run is None:
+                return task.final_progress if task.final else None
+            return self._view(run) if run.index > 0 else None
         if task.kind != "tour":
             return None
         run = self._running.get(task.id)
@@ -617,21 +678,57 @@ class EtaEstimator:
         move, talk = self.move.value, self.talk.value
         return sum(s.nominal_s * (move if s.kind == "move" else talk) for s in segments)
 
+    def _expected(self, segments: list[Segment]) -> float:
+        """Real seconds a robot is expected to spend on ``segments`` (a task's whole list):
+        each stop counted by the chance its visitors still go on then."""
+        move, talk, go_on = self.move.value, self.talk.value, self.go_on.value
+        return sum(
+            s.nominal_s * (move if s.kind == "move" else talk) * go_on ** max(0, s.index - 1)
+            for s in segments
+        )
+
     def _real_after(self, run: _Progress, k: int) -> float:
         """Real seconds of ``run.segments[k:]``."""
         move, talk = run.after[min(k, len(run.segments))]
         return move * self.move.value + talk * self.talk.value
 
+    def _seg_real(self, seg: Segment) -> float:
+        return seg.nominal_s * (self.move.value if seg.kind == "move" else self.talk.value)
+
+    def _overdue(self, run: _Progress) -> bool:
+        """The segment in progress has taken longer than foretold."""
+        if run.done >= len(run.segments):
+            return False
+        return self.tm.clock() - run.mark_at > self._seg_real(run.segments[run.done])
+
     def _remaining(self, run: _Progress, upto: int | None = None) -> float:
-        """Real seconds left of a running task (or of its first ``upto`` segments)."""
+        """Real seconds left of a running task (or of its first ``upto`` segments). The
+        segment in progress counts down from the last report; once it has taken longer than
+        foretold it is expected to take ``OVERDUE_SHARE`` of its time so far again (a figure
+        that grows while the robot is late, never one that ran out). The whole task counts
+        each later stop by the chance its visitors still go on then (``go_on``)."""
         end = len(run.segments) if upto is None else min(upto, len(run.segments))
         if run.done >= end:
             return 0.0
         elapsed = self.tm.clock() - run.mark_at
         seg = run.segments[run.done]
-        current = seg.nominal_s * (self.move.value if seg.kind == "move" else self.talk.value)
-        rest = self._real_after(run, run.done + 1) - self._real_after(run, end)
-        return max(0.0, current - elapsed) + rest
+        current = max(self._seg_real(seg) - elapsed, OVERDUE_SHARE * elapsed)
+        go_on = self.go_on.value
+        if upto is not None or go_on >= 1.0:
+            rest = self._real_after(run, run.done + 1) - self._real_after(run, end)
+            return current + rest
+        # Each "continue?" still to come may end the tour: an open one (the stop explained,
+        # the question asked) weighs even the segment in progress.
+        asked = seg.index - (1 if run.asking else 0)
+        move = talk = 0.0
+        for later in run.segments[run.done + 1 : end]:
+            w = go_on ** (later.index - asked)
+            if later.kind == "move":
+                move += w * later.nominal_s
+            else:
+                talk += w * later.nominal_s
+        now = go_on ** (seg.index - asked)
+        return now * current + move * self.move.value + talk * self.talk.value
 
     # --- the queue simulation -------------------------------------------------------------------
     def _current(self) -> _Schedule:
@@ -698,7 +795,7 @@ class EtaEstimator:
             if run is not None:
                 free_at = self._remaining(run)
             else:
-                free_at = self._real(self.segments(current, robot.node))
+                free_at = self._expected(self.segments(current, robot.node))
             points = self._points(current)
             node = points[-1][0] if points else node
         if robot.needs_charge or robot.battery <= robot.config.battery_low:
@@ -755,6 +852,7 @@ class EtaEstimator:
         move, talk = self.move.value, self.talk.value
         first = self._metres(node, points[0][0]) / speed * move
         first += self.tm.lift_wait_s(node, points[0][0]) * move
-        took = first + rest.move_s * move + rest.talk_s * talk
+        rest_move, rest_talk = rest.expected_s(self.go_on.value)
+        took = first + rest_move * move + rest_talk * talk
         heapq.heappush(heap, (free_at + took, tie, name, points[-1][0]))
         return free_at, free_at + first, name

@@ -57,6 +57,7 @@ from guidebot.bus import BusEndpoint
 from guidebot.delivery import courier_for, listen
 from guidebot.messages import Message, make_message
 from guidebot.payloads.robot import BatteryAlarm, RobotState
+from guidebot.payloads.site import SiteLoaded
 from guidebot.payloads.tasks import (
     RobotLink,
     RobotService,
@@ -197,6 +198,7 @@ class TaskManager(Service):
         self.on(ep, TourProgress, self.reports.on_tour_progress)
         self.on(ep, RobotState, self.presence.on_robot_state)
         self.on(ep, RobotLink, self.presence.on_robot_disconnected, types=["robot_disconnected"])
+        self.on(ep, SiteLoaded, self.news.robot_connected)  # on every robot's connect
         self.on(ep, BatteryAlarm, self.battery.on_battery_low, types=["battery_low"])
         self.on(ep, BatteryAlarm, self.battery.on_battery_panic, types=["battery_panic"])
         self.subscribe(ep, "closures_changed", self._on_closures_changed)  # news, no payload

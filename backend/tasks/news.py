@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Protocol
 from backend.tasks.book import TaskBook
 from backend.tasks.model import Task, TaskState
 from guidebot.bus import BusEndpoint
+from guidebot.messages import Message
+from guidebot.payloads.site import SiteLoaded
 from guidebot.payloads.tasks import TaskEvent, VisitorService
 
 if TYPE_CHECKING:
@@ -170,6 +172,19 @@ class QueueNews:
             or _drifted(told.eta_s, told.at, fresh.eta_s, now)
             or _drifted(told.arrival_s, told.at, fresh.arrival_s, now)
         )
+
+    def robot_connected(self, message: Message, loaded: SiteLoaded) -> None:
+        """A robot says which site it runs, as it does on every connect once its link is up
+        and subscribed: its touch screen is told the service as it stands (staff may have
+        paused the fleet meanwhile; later changes come as broadcasts). An answer to the
+        robot's own message, not to robot_connected: that would reach the robot in the hub's
+        first frame with its welcome, which its hub client takes for no welcome at all."""
+        robot = loaded.robot or message.source
+        if not robot:
+            return
+        estimator = self.tm.estimator
+        news = VisitorService(service=estimator.service(), eta_s=estimator.next_free_s())
+        self.tm.endpoint.publish(news, destination=robot)
 
     def _service(self, now: float) -> None:
         """``visitor_service`` when the overall service or the next free robot's wait moved

@@ -8,7 +8,7 @@ from pydantic import Field
 
 from guidebot.messages import PayloadModel, register_payload
 
-__all__ = ["SiteChanged", "SiteLoaded", "SiteRollout"]
+__all__ = ["SiteChanged", "SiteLoaded", "SitePublished", "SiteRollout"]
 
 
 @register_payload("site_changed")
@@ -19,6 +19,15 @@ class SiteChanged(PayloadModel):
     published_by: str = ""
     site: dict[str, Any] = Field(default_factory=dict)
     """The site without secrets (the robots' token digests)."""
+
+
+@register_payload("site_published")
+class SitePublished(PayloadModel):
+    """A new site version is live (published or rolled back), said to every page: the visitor
+    panels read their tours and points again at once. A few bytes, where site_changed carries
+    the whole site (for the robots and the staff pages)."""
+
+    version: int
 
 
 @register_payload("site_loaded")

@@ -145,7 +145,7 @@ class VisitorService(PayloadModel):
     for the next free robot): the visitor panels read their menu again (docs/visitor.md)."""
 
     service: str
-    """available | busy | held_up | unavailable."""
+    """available | busy | held_up | paused | unavailable."""
     eta_s: float | None = None
     """Seconds until the first robot is free after the line (None: not known)."""
 

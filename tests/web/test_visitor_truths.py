@@ -83,3 +83,52 @@ async def test_a_step_free_tours_card_counts_the_stops_the_visitor_gets(
         await expect(card).to_contain_text("4 stops (1 not step-free)")
         await expect(card).not_to_contain_text("5 stops")
         await web.axe_check(page)
+
+
+async def test_the_phone_learns_of_a_published_site_at_once(
+    visitor_fleet: Any, open_page: Any
+) -> None:
+    """The menu was read again only on task or service news (never in a quiet museum): a
+    published version now reaches the page at once (``site_published``)."""
+    async with visitor_fleet() as vf:
+        page = (await open_page(vf.panel_url(), viewport=PHONE)).page
+        await expect(page.get_by_role("article", name="Ground floor tour")).to_be_visible()
+        async with vf.fleet.http() as staff:
+            draft = (await staff.get("/api/site/draft")).json()
+            site = draft["draft"]
+            site["tours"][0]["name"] = "Ground floor, renamed"
+            saved = await staff.put(
+                "/api/site/draft", json={"draft": site, "revision": draft["revision"]}
+            )
+            assert saved.status_code == 200, saved.text
+            published = await staff.post(
+                "/api/site/publish", json={"revision": saved.json()["revision"]}
+            )
+            assert published.status_code == 200, published.text
+        await expect(page.get_by_role("article", name="Ground floor, renamed")).to_be_visible()
+        await expect(page.get_by_role("article", name="Ground floor tour")).to_have_count(0)
+
+
+async def test_the_touch_screen_says_staff_paused_the_fleet_in_its_language(
+    visitor_fleet: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """The robot's touch screen did not show the fleet's ``paused`` service: it says it, as
+    the phone does, in the screen's language, and no more once staff resume."""
+    async with visitor_fleet() as vf:
+        screen = (await open_page(vf.screen_url("R1"), viewport=(1024, 600))).page
+        await expect(screen.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
+        async with vf.fleet.http() as staff:
+            r = await staff.post("/api/fleet/pause", json={"reason": "cleaning"})
+            assert r.status_code == 200, r.text
+            await expect(screen.locator("#app")).to_contain_text(PAUSED, timeout=LONG)
+            await web.axe_check(screen)
+            await web.screenshot(screen, "touch-screen-paused")
+            await screen.get_by_role("button", name="Español").click()
+            await expect(screen.locator("#app")).to_contain_text(
+                "El personal ha pausado los robots un momento"
+            )
+            r = await staff.post("/api/fleet/resume")
+            assert r.status_code == 200, r.text
+        await expect(screen.locator("#app")).not_to_contain_text(
+            "El personal ha pausado", timeout=LONG
+        )

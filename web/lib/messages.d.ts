@@ -549,6 +549,15 @@ export interface SiteLoaded {
   version: number;
 }
 
+/**
+ * A new site version is live (published or rolled back), said to every page: the visitor
+ * panels read their tours and points again at once. A few bytes, where site_changed carries
+ * the whole site (for the robots and the staff pages).
+ */
+export interface SitePublished {
+  version: number;
+}
+
 /** How far a published version has reached the robots connected when it was published. */
 export interface SiteRollout {
   version: number;
@@ -745,6 +754,7 @@ export interface Payloads {
   show_point: ShowPoint;
   site_changed: SiteChanged;
   site_loaded: SiteLoaded;
+  site_published: SitePublished;
   site_rollout: SiteRollout;
   speech_ended: SpeechEnded;
   speech_started: SpeechStarted;

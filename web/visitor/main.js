@@ -175,11 +175,12 @@ function update(status, at = status.updated_at) {
 
 /** A told wait (seconds) minus the time since it was told: what the server estimates now,
  * until it tells another (it does when its estimate drifts from this countdown). Under a
- * minute in steps of 10 s, so that a screen reader is not told a new number every second. */
+ * minute to the nearest 10 s, so that a screen reader is not told a new number every second
+ * (rounded up, 21 s left read "about 30 s"); under 5 s it is 0: "any moment now". */
 function countdown(seconds, at) {
   if (seconds === null || seconds === undefined) return null;
   const left = Math.max(0, seconds - (performance.now() - at) / 1000);
-  return left < 60 ? Math.ceil(left / 10) * 10 : left;
+  return left < 60 ? Math.round(left / 10) * 10 : left;
 }
 
 async function refreshRequests(ids) {
@@ -537,6 +538,8 @@ function statusLines(r) {
       lines.push(t("state_assigned", { robot }));
       if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
       else if (arrival !== null) lines.push(arrival > 0 ? t("state_on_its_way", { robot, t: state.texts.duration(arrival) }) : t("state_on_its_way_now", { robot }));
+      // No figure from the server (the robot is later than it foretold): on its way, no countdown.
+      else if (r.arrival_s === null && r.service === "available") lines.push(t("state_on_its_way_nofigure", { robot }));
     } else {
       const place = placeOf(progress);
       if (progress.index === 1 && progress.stage === "arrived") lines.push(t("state_arrived", { robot, place }));
@@ -559,6 +562,8 @@ function statusLines(r) {
  * done at its last stop. */
 function endedAt(r) {
   const p = r.progress;
+  // A visit to one point that ended after its robot had got there (kept by the server).
+  if (r.kind === "go_to_poi") return p?.index && r.state !== "done" ? [t("state_point_reached", { robot: r.robot ?? "", place: poiName(r.params?.poi) })] : [];
   if (r.kind !== "tour" || !p?.index) return [];
   if (r.state === "done") return p.index < p.total ? [t("state_ended_at", { i: p.index, n: p.total, place: placeOf(p) })] : [];
   return [t("state_got_to", { i: p.index, n: p.total, place: placeOf(p) })];
@@ -779,7 +784,17 @@ async function live() {
   for (const lang of state.menu.languages) names.set(lang, (await loadTexts(lang)).name);
   draw();
   const hub = new HubClient({ token }).start();
-  hub.subscribe("task_event", "visitor_service", "emergency_changed", "speech_started", "speech_ended", "next_tours");
+  hub.subscribe("task_event", "visitor_service", "emergency_changed", "speech_started", "speech_ended", "next_tours", "site_published");
+  // A new site version is live (tours, points, names, pictures): read the menu again at once.
+  hub.on("site_published", async () => {
+    try {
+      await loadMenu();
+      await loadNextTours();
+    } catch {
+      /* the next event or the reconnect's reload reads it again */
+    }
+    draw();
+  });
   // The booked tours of today changed (booked, moved, cancelled, one started): read them again.
   hub.on("next_tours", async () => {
     try {
