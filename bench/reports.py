@@ -51,9 +51,7 @@ DOORS = ("d1", "d2", "d3", "d4")
 Row = tuple[float, str, str, bytes]
 
 
-def venue_events(
-    day: dt.date, robots: int, rng: random.Random, *, prefix: str = "R"
-) -> list[Row]:
+def venue_events(day: dt.date, robots: int, rng: random.Random, *, prefix: str = "R") -> list[Row]:
     """One opening day's events, in time order, of robots ``{prefix}1`` to ``{prefix}{robots}``."""
     rows: list[Row] = []
     midnight = dt.datetime(day.year, day.month, day.day, tzinfo=dt.UTC).timestamp()
