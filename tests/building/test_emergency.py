@@ -193,8 +193,9 @@ async def test_a_robot_outside_the_zone_is_told_at_once_that_the_alarm_holds_its
         )
         assert declared.status_code == 200, declared.text
         await inside.wait_for("evacuate")
-        # Before the door's own time-out (7 s + margin): the alarm's words, not a jam.
-        failed = await outside.wait_for("command_failed", timeout=3.0)
+        # The alarm's words, not the jammed door's time-out (the first answer R2 gets; no
+        # wall-clock bound: a loaded machine may take seconds, and "at once" is the order).
+        failed = await outside.wait_for("command_failed", timeout=60.0)
         assert failed.payload["command"] == "open_door"
         assert failed.payload["target"] == "door_upstairs"
         assert failed.payload["reason"].startswith("fire alarm: no door opened"), failed.payload
