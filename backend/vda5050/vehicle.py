@@ -115,6 +115,10 @@ class OrderLost(Exception):
 
 REPLANS = 3
 """Times one goal is planned again after the vehicle lost its order, before the task fails."""
+STALE_IN_ROW = 3
+"""States older than the last one (``VdaRobot._stale``) ignored in a row: one delivered late
+is ignored, but a vehicle that keeps saying so (it restarted with an older order) is
+believed."""
 
 
 def vehicle_of(config: RobotConfig) -> Vehicle:
@@ -246,6 +250,7 @@ class VdaRobot:
         self.faults: set[tuple[str, str]] = set()
         self.seq = 0
         self._headers: dict[str, int] = {}
+        self._stale_in_row = 0
         self._orders = 0
         self._speak(self.vehicle.version)
         self._unsubscribe = [
@@ -373,7 +378,8 @@ class VdaRobot:
     def on_state(self, message: dict[str, Any]) -> None:
         if self.hibernating:  # sent before it fell asleep: it speaks again after ONLINE
             return
-        if self._stale(message):
+        if self._stale(message) and self._stale_in_row < STALE_IN_ROW:
+            self._stale_in_row += 1
             log.info(
                 "%s: a state older than the last one ignored (order %s, update %s, at %s)",
                 self.name,
@@ -382,6 +388,7 @@ class VdaRobot:
                 message.get("lastNodeId"),
             )
             return
+        self._stale_in_row = 0
         if not self.online:
             self.on_connection({"connectionState": "ONLINE"})
         self._speak(str(message["version"]))

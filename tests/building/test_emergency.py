@@ -144,6 +144,19 @@ async def test_alarm_input_holds_the_fleet_and_resume_takes_two_steps(tmp_path: 
         assert "emergency_resumed" in kinds
 
 
+async def waiting_for_the_jammed_gallery_door(
+    sim: BuildingSimulator, server: RunningServer
+) -> RobotStub:
+    """R1 at the hall, its open_door waiting for door_gallery (jammed: it cannot open, however
+    slow the machine), the door's coil set."""
+    robot = RobotStub(server.app.state.hub, "R1", "hall")
+    robot.state()
+    sim.jam_door("door_gallery")
+    robot.endpoint.publish("open_door", {"door": "door_gallery"})
+    await wait_until(lambda: sim.read_point("otb_ground", "door_hall_open") == 1)
+    return robot
+
+
 async def test_an_evacuation_raises_no_door_trouble_for_a_door_a_robot_was_waiting_for(
     tmp_path: Path,
 ) -> None:
@@ -151,14 +164,9 @@ async def test_an_evacuation_raises_no_door_trouble_for_a_door_a_robot_was_waiti
     the fire alarm comes: the alarm drops the door's holders, and the request is withdrawn, not
     timed out into a trouble closure and a building_command_failed alert mid-evacuation."""
     async with alarm_rig(tmp_path) as (sim, server, control, http):
-        hub = server.app.state.hub
-        building = server.app.state.building
+        hub, building = server.app.state.hub, server.app.state.building
         failures = Recorder(hub.endpoint("test"), "command_failed", tap=True)
-        robot = RobotStub(hub, "R1", "hall")
-        robot.state()
-        sim.jam_door("door_gallery")
-        robot.endpoint.publish("open_door", {"door": "door_gallery"})
-        await wait_until(lambda: sim.read_point("otb_ground", "door_hall_open") == 1)
+        robot = await waiting_for_the_jammed_gallery_door(sim, server)
         assert (await control.post(ALARM, json={"value": 1})).status_code == 200
         await robot.wait_for("evacuate")
         await wait_until(lambda: not building.doors["door_gallery"].holders)
@@ -214,14 +222,9 @@ async def test_staff_closing_a_door_withdraws_the_open_doors_waiting_for_it(
     used to be published as a door failure (command_failed, a trouble closure and a
     building_command_failed alert) for a door staff had closed on purpose."""
     async with alarm_rig(tmp_path) as (sim, server, _control, http):
-        hub = server.app.state.hub
-        building = server.app.state.building
+        hub, building = server.app.state.hub, server.app.state.building
         failures = Recorder(hub.endpoint("test"), "command_failed", tap=True)
-        robot = RobotStub(hub, "R1", "hall")
-        robot.state()
-        sim.jam_door("door_gallery")
-        robot.endpoint.publish("open_door", {"door": "door_gallery"})
-        await wait_until(lambda: sim.read_point("otb_ground", "door_hall_open") == 1)
+        await waiting_for_the_jammed_gallery_door(sim, server)
         staff = hub.endpoint("staff")
         closed = await staff.request("close_door", {"door": "door_gallery"}, timeout=10)
         assert closed.type == "door_closed", closed.payload

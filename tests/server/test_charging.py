@@ -128,18 +128,25 @@ async def test_a_wait_across_floors_counts_the_lift_queue(
     assert manager.lift_wait_s("entrance", "hall") == 0.0
 
 
+def must_charge(bus: Bus, manager: TaskManager) -> tuple[AlertStore, RobotStub]:
+    """The manager's alerts, and R1 at the hall with its battery low: it must charge (R2,
+    offline, off the station where the site starts it)."""
+    alerts = AlertStore(bus.endpoint("alerts").publish)
+    manager.alerts = alerts
+    manager.robots["R2"].node = "entrance"
+    r1 = RobotStub(bus, "R1", "hall", battery=0.25)
+    r1.state()
+    r1.endpoint.publish("battery_low", {"robot": "R1", "level": 0.25})
+    return alerts, r1
+
+
 async def test_a_charge_that_fails_at_once_is_not_made_again_before_a_back_off(
     bus: Bus, manager: TaskManager, clock: Clock
 ) -> None:
     """A robot whose way to every station fails for a reason the server does not see (no
     closure explains it) tries each station once, then again after a back-off of seconds,
     not at once (the fault soak's loop: backend/tasks/blocked.py); staff get one alert."""
-    alerts = AlertStore(bus.endpoint("alerts").publish)
-    manager.alerts = alerts
-    manager.robots["R2"].node = "entrance"  # (offline) off station_b, where the site starts it
-    r1 = RobotStub(bus, "R1", "hall", battery=0.25)
-    r1.state()
-    r1.endpoint.publish("battery_low", {"robot": "R1", "level": 0.25})
+    alerts, r1 = must_charge(bus, manager)
     stations = []
     for n in (1, 2):
         order = (await r1.wait_for("task_assigned", n)).payload
@@ -176,12 +183,7 @@ async def test_an_errands_failure_is_described_from_its_typed_fields_not_the_rob
     way no closure cuts off (and an older robot's, or another cause's, words) made staff's
     alert name a door that was not the cause. The bar says what failed from the errand's
     kind and the robot's ``trouble`` flag (trouble that has lifted since it failed)."""
-    alerts = AlertStore(bus.endpoint("alerts").publish)
-    manager.alerts = alerts
-    manager.robots["R2"].node = "entrance"  # (offline) off station_b, where the site starts it
-    r1 = RobotStub(bus, "R1", "hall", battery=0.25)
-    r1.state()
-    r1.endpoint.publish("battery_low", {"robot": "R1", "level": 0.25})
+    alerts, r1 = must_charge(bus, manager)
     for n in (1, 2):
         order = (await r1.wait_for("task_assigned", n)).payload
         r1.start(order["task_id"])

@@ -63,6 +63,34 @@ async def _serving(server: ServerProcess) -> bool:
     return bool(health and health["cluster"]["serving"])
 
 
+async def _go_to_d(leader: ServerProcess) -> str:
+    """Once V1 is online on ``leader``: a go-to d pinned to it; its task id."""
+
+    async def v1_online() -> bool:
+        robots = await _get(leader, "/api/robots") or []
+        return any(r["name"] == "V1" and r.get("online") for r in robots)
+
+    await poll(v1_online, 30, f"V1 online on {leader.name}")
+    async with httpx.AsyncClient(headers=AUTH, timeout=10) as http:
+        created = await http.post(
+            f"{leader.url}/api/tasks",
+            json={"kind": "go_to", "params": {"node": "d"}, "robot": "V1"},
+        )
+    assert created.status_code == 201, created.text
+    return str(created.json()["id"])
+
+
+async def _until_done(leader: ServerProcess, task_id: str) -> None:
+    """Until ``task_id`` is done under ``leader`` (failed or cancelled: the test fails)."""
+
+    async def done() -> dict[str, Any] | None:
+        task = await _get(leader, f"/api/tasks/{task_id}") or {}
+        assert task.get("state") not in ("failed", "cancelled"), task
+        return task if task.get("state") == "done" else None
+
+    await poll(done, 60, f"the go-to to end under {leader.name}")
+
+
 async def test_a_new_leader_goes_on_with_the_vehicles_order(
     tmp_path: Path, broker: Mosquitto, postgres: PostgresServer, redis: RedisServer
 ) -> None:
@@ -85,19 +113,7 @@ async def test_a_new_leader_goes_on_with_the_vehicles_order(
             await r1.report("e", False)
             await r1.ask()
             await r1.granted(1, "R1's corridor")
-
-            async def v1_online() -> bool:
-                robots = await _get(alpha, "/api/robots") or []
-                return any(r["name"] == "V1" and r.get("online") for r in robots)
-
-            await poll(v1_online, 30, "V1 online on alpha")
-            async with httpx.AsyncClient(headers=AUTH, timeout=10) as http:
-                created = await http.post(
-                    f"{alpha.url}/api/tasks",
-                    json={"kind": "go_to", "params": {"node": "d"}, "robot": "V1"},
-                )
-            assert created.status_code == 201, created.text
-            task_id = created.json()["id"]
+            task_id = await _go_to_d(alpha)
             # its base ends at b: the corridor is R1's
             await wait_until(lambda: sim.last_node == "b" and not sim.driving, 30)
             assert [n["nodeId"] for n in sim.order.nodes if n["released"]] == []
@@ -105,13 +121,7 @@ async def test_a_new_leader_goes_on_with_the_vehicles_order(
             await poll(lambda: _serving(beta), 30, "beta to lead", 0.05)
             await r1.report("e", True)
             await r1.release()
-
-            async def done() -> dict[str, Any] | None:
-                task = await _get(beta, f"/api/tasks/{task_id}") or {}
-                assert task.get("state") not in ("failed", "cancelled"), task
-                return task if task.get("state") == "done" else None
-
-            await poll(done, 60, "the go-to to end under beta")
+            await _until_done(beta, task_id)
         finally:
             await r1.close()
         assert sim.last_node == "d"
@@ -184,19 +194,7 @@ async def test_a_new_leader_lets_go_on_a_vehicle_the_old_one_paused_for_a_door(
         ):
             sim.speed = 0.1  # 4 s of wall time from a to b
             await poll(lambda: _serving(alpha), 60, "alpha to lead")
-
-            async def v1_online() -> bool:
-                robots = await _get(alpha, "/api/robots") or []
-                return any(r["name"] == "V1" and r.get("online") for r in robots)
-
-            await poll(v1_online, 30, "V1 online on alpha")
-            async with httpx.AsyncClient(headers=AUTH, timeout=10) as http:
-                created = await http.post(
-                    f"{alpha.url}/api/tasks",
-                    json={"kind": "go_to", "params": {"node": "d"}, "robot": "V1"},
-                )
-            assert created.status_code == 201, created.text
-            task_id = created.json()["id"]
+            task_id = await _go_to_d(alpha)
             # door_b opened for V1: its base goes through b; the module drops before V1 is there
             await wait_until(lambda: any(n["nodeId"] == "b" for n in sim.order.nodes), 30)
             await wait_until(lambda: sim.order.nodes[0]["released"] and sim.driving, 30)
@@ -212,13 +210,7 @@ async def test_a_new_leader_lets_go_on_a_vehicle_the_old_one_paused_for_a_door(
             alpha.kill()
             await building.set_fault("m1", "none")
             await poll(lambda: _serving(beta), 30, "beta to lead", 0.05)
-
-            async def done() -> dict[str, Any] | None:
-                task = await _get(beta, f"/api/tasks/{task_id}") or {}
-                assert task.get("state") not in ("failed", "cancelled"), task
-                return task if task.get("state") == "done" else None
-
-            await poll(done, 60, "the go-to to end under beta")
+            await _until_done(beta, task_id)
         assert sim.last_node == "d" and not sim.paused and not sim.errors
         kinds = [a["actionType"] for m in sim.instant_received for a in m["actions"]]
         assert [k for k in kinds if k.endswith("Pause")][-1] == "stopPause", kinds

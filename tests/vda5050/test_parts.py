@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from backend.vda5050.order import build_order, instant_actions
-from backend.vda5050.vehicle import VdaRobot
+from backend.vda5050.vehicle import STALE_IN_ROW, VdaRobot
 from backend.vda5050.zones import STEPS_SPEED_MPS, zone_sets
 from guidebot.bus import Bus
 from guidebot.messages import Message
@@ -213,6 +213,31 @@ async def test_a_stale_state_on_the_current_order_reports_no_node_again() -> Non
     robot.on_state(state)  # the late one
     assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["b"]
     assert robot.node == "e"
+    await robot.close()
+
+
+async def test_a_late_state_is_ignored_but_a_vehicle_that_keeps_saying_it_is_believed() -> None:
+    """A state of an earlier order of the task (or an earlier update of the order) after a
+    newer one is a report delivered late (a broken connection): it neither moves the robot
+    back nor counts as the vehicle's word. A vehicle that keeps saying it (it restarted with
+    an older order) is believed after ``STALE_IN_ROW`` of them."""
+    robot, _, seen, _ = robot_on_a_bus()
+    sim = SimVehicle(parse_broker("mqtt://127.0.0.1:1"), V, map_id="ground", node="a")
+    now = sim.state() | {"orderId": "T1-2", "orderUpdateId": 1, "lastNodeId": "c"}
+    robot.on_state(now)
+    for late in (
+        now | {"orderId": "T1-1", "orderUpdateId": 3, "lastNodeId": "b"},
+        now | {"orderUpdateId": 0, "lastNodeId": "b"},
+    ):
+        robot.on_state(late)
+        assert robot.node == "c" and robot.state == now
+    robot.on_state(now)  # news again: the count starts afresh
+    for _ in range(STALE_IN_ROW):
+        robot.on_state(late)
+    assert robot.node == "c"
+    robot.on_state(late)
+    assert robot.node == "b" and robot.state == late
+    assert [m.payload["node"] for m in seen if m.type == "node_reached"] == ["c", "b"]
     await robot.close()
 
 
