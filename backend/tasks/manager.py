@@ -19,6 +19,7 @@ Handlers run inline on the bus and never block: persistence goes through a write
 from __future__ import annotations
 
 import itertools
+import math
 import time
 import uuid
 from collections.abc import Callable, Mapping
@@ -26,6 +27,7 @@ from typing import Any, Protocol
 
 from backend.alerts import AlertStore
 from backend.tasks.battery import BatteryAlarms
+from backend.tasks.battery_forecast import charge_first_s
 from backend.tasks.blocked import BlockedErrands
 from backend.tasks.book import TaskBook
 from backend.tasks.charging import can_finish, station_for
@@ -696,7 +698,8 @@ class TaskManager(Service):
         """What the queue holds for an idle robot: ``work``, a task it may take (not one its
         booking keeps it from: it charges or waits for its booked tour meanwhile, backend/
         bookings/reserve.py) and can finish on its battery; ``short``, only tasks its battery
-        would not last (it charges, then takes one: choice.py ``idle_errands``); ``none``.
+        would not last now but would once charged (it charges, then takes one: choice.py
+        ``idle_errands``); ``none``.
         Past ``SHORT_LOOK`` tasks it would not last, it is short (a long queue is not read
         through at every dispatch)."""
         kept = self.reservations
@@ -706,8 +709,14 @@ class TaskManager(Service):
                 kept is not None and kept.keeps(robot, task)
             ):
                 continue
-            if self._lasts(robot, task):
+            if task.kind not in VISITOR_KINDS:
                 return "work"
+            took = self.estimator.task_s(task, robot.node)
+            charge_s = charge_first_s(robot, robot.battery, took, self.robots.values())
+            if charge_s <= 0:
+                return "work"
+            if math.isinf(charge_s):
+                continue  # not even a full charge lasts it: no reason to charge for it
             short += 1
             if short >= SHORT_LOOK:
                 break

@@ -254,3 +254,23 @@ async def test_an_idle_robot_short_of_the_queued_tour_charges_then_takes_it(
         r3.state("charging")
         manager.check_timeouts()
         assert (tour.robot == "R3") is (level > enough)
+
+
+async def test_a_robot_no_charge_can_fit_to_the_queued_tour_is_not_sent_to_charge_for_it(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """A queued tour that even a full battery would not last is no reason to charge: a robot
+    idle at a station would else charge to full, end its charge, and be given another at
+    every dispatch."""
+    for name in ("R1", "R2"):
+        manager.robots[name].node = "hall"
+    probe = Task("p", "tour", {"tour": "ground"}, 5, "", 0)
+    drain = 1.0 / manager.estimator.task_s(probe, "charge_a")  # the whole battery and more
+    r3 = RobotStub(bus, "R3", "charge_a", battery=0.9 + drain * 10)
+    r3.state("idle")
+    clock.now += 10
+    r3.battery = 0.9
+    r3.state("idle")
+    tour = manager.request("tour", {"tour": "ground"})
+    assert tour.state is TaskState.QUEUED
+    assert manager.current_of(manager.robots["R3"]) is None
