@@ -31,7 +31,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -246,7 +246,7 @@ class Reservations:
                 return None  # it serves this one, working on until then
             level, start, leave = self._charge_plan(robot, node, at)
             need = self._need(robot, at - leave, duration_s)
-            latest = latest_charge_start(robot, level, start, leave, need)
+            latest = latest_charge_start(robot, level, start, leave, need, self._fleet())
             if latest is not None and (best is None or latest - start > best[0]):
                 best = (latest - start, robot)
         if best is None:
@@ -389,7 +389,8 @@ class Reservations:
     ) -> tuple[RobotInfo, bool, bool] | None:
         """The robot to reserve, whether it is late (there after the time minus the margin)
         and whether it must charge until it leaves to last: in time first, then one not
-        reserved, then one that lasts working on, then idle, then the soonest there. A robot
+        reserved, then one that lasts working on, then idle, then the soonest there (of those
+        that must charge: the one charged most above its need when it leaves, ``_surplus``). A robot
         reserved for a later occurrence, not sent yet, is a candidate only in time."""
         now, at = self.clock(), key[1]
         best: tuple[tuple[bool, bool, bool, bool, float], RobotInfo] | None = None
@@ -406,7 +407,12 @@ class Reservations:
             late = now + ready > at - self.margin_s
             if late and other is not None:
                 continue
-            cost = (late, other is not None, charge, not self.idle(robot), ready)
+            # One that must charge: the one charged most above what it needs (a robot at a
+            # station before one that has yet to get there), not the one nearest: a robot that
+            # barely charges enough is short a pass later, and was swapped (the first wave of
+            # the soak's charges saw reservations go from robot to robot).
+            rank = -self._surplus(robot, at, duration_s, node) if charge else ready
+            cost = (late, other is not None, charge, not self.idle(robot), rank)
             if best is None or cost < best[0]:
                 best = (cost, robot)
         return (best[1], best[0][0], best[0][2]) if best is not None else None
@@ -480,7 +486,18 @@ class Reservations:
         level, start, leave = self._charge_plan(robot, node, at)
         if level <= robot.config.battery_low or start > leave:
             return False
-        return lasts_from(robot, charged_level(robot, level, leave - start), at - leave, duration_s)
+        charged = charged_level(robot, level, leave - start, self._fleet())
+        return lasts_from(robot, charged, at - leave, duration_s)
+
+    def _surplus(self, robot: RobotInfo, at: float, duration_s: float, node: str) -> float:
+        """How far above what the way and the tour take (``_need`` without its margin) its
+        level is when it leaves the station, charged as ``charges_enough`` plans it (-inf:
+        it reaches ``battery_low`` first, or has no time to charge)."""
+        level, start, leave = self._charge_plan(robot, node, at)
+        if level <= robot.config.battery_low or start > leave:
+            return -math.inf
+        charged = charged_level(robot, level, leave - start, self._fleet())
+        return charged - (self._need(robot, at - leave, duration_s) - CHARGE_MARGIN)
 
     def _charge_plan(self, robot: RobotInfo, node: str, at: float) -> tuple[float, float, float]:
         """If it charges for the occurrence at ``node``: (its level when it reaches the
@@ -503,7 +520,7 @@ class Reservations:
         """Online and sound, due to charge or working on until ``battery_low``, it will have
         charged in full (``CHARGED``) at the nearest station before it must leave it, and
         then last, working on, until the tour at ``at`` ends (unknown drain: no)."""
-        drain, rate = robot.drain_per_s, charge_rate(robot)
+        drain, rate = robot.drain_per_s, charge_rate(robot, self._fleet())
         if not robot.online or robot.fault or robot.out_of_service:
             return False
         if drain is None or rate is None or drain <= 0 or rate <= 0:
@@ -549,6 +566,12 @@ class Reservations:
                 self.tasks.cancel(meet.id, reason="another robot takes the booking", by="bookings")
             except TaskError:
                 pass
+
+    def _fleet(self) -> Iterable[RobotInfo]:
+        """The robots whose learned charge rate stands in for one that has not charged yet
+        (battery_forecast.py ``charge_rate``)."""
+        robots: Iterable[RobotInfo] = self.tasks.robots.values()
+        return robots
 
     def _fits(self, robot: RobotInfo) -> bool:
         """In service, online, sound and not due to charge."""

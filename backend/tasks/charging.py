@@ -2,7 +2,8 @@
 it can finish a tour before it, and which station a robot sent to charge takes.
 
 - Each robot's drain (battery fraction per second away from a charger) is learned from its
-  ``robot_state`` readings: a running average over falling readings, never while it charges.
+  ``robot_state`` readings: a running average over falling readings, never while it charges,
+  and never from a fall no work explains (a fault: battery_rates.py ``is_jump``).
 - A robot is given a visitor's task only if, at that drain, its battery after the task (its
   foretold real duration, backend/tasks/eta.py) stays above ``finish_floor``: half-way between
   its ``battery_panic`` and ``battery_low``. Until its drain is known, ``battery_low`` alone
@@ -14,9 +15,11 @@ it can finish a tour before it, and which station a robot sent to charge takes.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable, Collection, Iterable
 
+from backend.tasks.battery_rates import fleet_rate, is_jump
 from backend.tasks.choice import OPPORTUNISTIC_BELOW, Distances, nearest
 from backend.tasks.robots import RobotInfo
 from guidebot.site.schema import ChargingStation, Site
@@ -30,14 +33,19 @@ __all__ = [
     "station_for",
 ]
 
+log = logging.getLogger(__name__)
+
 CHARGING_MODES = frozenset({"charging"})
 """robot_state modes in which the battery fills (readings then teach nothing of the drain)."""
 MIN_SPAN_S = 5.0
 """Readings closer than this are not compared (a battery level is coarse)."""
 
 
-def learn_drain(robot: RobotInfo, level: float, mode: str, now: float) -> None:
-    """A battery reading: the drain is the running average of the falling spans."""
+def learn_drain(
+    robot: RobotInfo, level: float, mode: str, now: float, fleet: Iterable[RobotInfo] = ()
+) -> None:
+    """A battery reading: the drain is the running average of the falling spans; a fall that
+    its drain (else the ``fleet``'s) does not explain is a jump and teaches nothing."""
     if mode in CHARGING_MODES or mode == "offline":
         robot.battery_at = None
         return
@@ -51,6 +59,18 @@ def learn_drain(robot: RobotInfo, level: float, mode: str, now: float) -> None:
     rate = (last[1] - level) / span
     robot.battery_at = (now, level)
     if rate <= 0 or not math.isfinite(rate):
+        return
+    known = robot.drain_per_s
+    if known is None:
+        known = fleet_rate(r.drain_per_s for r in fleet if r is not robot)
+    if is_jump(last[1] - level, span, known):
+        log.info(
+            "%s: battery fell from %.2f to %.2f in %.0f s: a jump, not learned as drain",
+            robot.name,
+            last[1],
+            level,
+            span,
+        )
         return
     robot.drain_per_s = rate if robot.drain_per_s is None else 0.7 * robot.drain_per_s + 0.3 * rate
 

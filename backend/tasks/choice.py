@@ -135,24 +135,33 @@ def idle_errands(
     distances_to: Callable[[str], Distances],
     has_work: Callable[[RobotInfo], bool],
     barred: Callable[[RobotInfo, str], bool] | None = None,
+    *,
+    short: Callable[[RobotInfo], bool] | None = None,
 ) -> list[Errand]:
     """Where the ``idle`` robots (free as far as tasks go) go: charge if they must, else a
     free charging station, else the nearest wait point; nowhere if already at one, or if
     ``has_work`` (a queued task it can take). ``charging_at``: stations a charge task holds.
     Stations go to the emptiest robots first (those that must charge, then by battery), and a
     robot at a wait point below ``OPPORTUNISTIC_BELOW`` goes to a station that is free.
+    ``short(robot)``: the queue holds work it may take but its battery would not last (above
+    ``battery_low``, yet short of every such task): it charges as one that must, so that it
+    takes the work after (else it stood idle at its wait point, work waiting, for ever).
     ``barred(robot, node)``: an errand of that robot to that node failed and nothing changed
     since (backend/tasks/blocked.py): it is not sent there."""
-    candidates = sorted(
-        (
-            r
-            for r in idle
-            if r.current is None and r.online and not r.fault and not r.out_of_service
-        ),
-        key=lambda r: (not r.needs_charge, r.battery, r.name),
-    )
-    if not candidates:
+    free = [
+        r
+        for r in idle
+        if r.current is None
+        and r.online
+        and not r.fault
+        and not r.out_of_service
+        and not has_work(r)
+    ]
+    if not free:
         return []
+    is_short = short or (lambda _robot: False)
+    must = {r.name for r in free if r.needs_charge or is_short(r)}
+    candidates = sorted(free, key=lambda r: (r.name not in must, r.battery, r.name))
     at = {s.node: s.id for s in site.charging_stations}
     taken: set[str | None] = set(charging_at)
     taken |= {at[r.node] for r in fleet if r.node in at}
@@ -161,21 +170,20 @@ def idle_errands(
     bar = barred or (lambda _robot, _node: False)
     errands: list[Errand] = []
     for robot in candidates:
-        if has_work(robot):
-            continue
+        charge = robot.name in must
         if robot.node in at:
-            if robot.needs_charge and robot.mode != "charging" and not bar(robot, robot.node):
+            if charge and robot.mode != "charging" and not bar(robot, robot.node):
                 errands.append((robot, "charge", {"station": at[robot.node]}))
             continue
         open_stations = [s for s in free_stations if s.id not in taken and not bar(robot, s.node)]
-        if robot.node in wait_nodes and not robot.needs_charge:
+        if robot.node in wait_nodes and not charge:
             if robot.battery >= OPPORTUNISTIC_BELOW or not open_stations:
                 continue
         station = nearest(robot.node, open_stations, distances_to)
         if station is not None:
             taken.add(station.id)
             errands.append((robot, "charge", {"station": station.id}))
-        elif not robot.needs_charge:
+        elif not charge:
             waits = [w for w in site.wait_points if not bar(robot, w.node)]
             wait = nearest(robot.node, waits, distances_to)
             if wait is not None and wait.node != robot.node:

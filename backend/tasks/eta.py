@@ -29,6 +29,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
+from backend.tasks.battery_forecast import CHARGED, charge_first_s
+from backend.tasks.charging import finish_floor
 from backend.tasks.cutoff import CutOff
 from backend.tasks.model import Task, TaskState
 from guidebot.pace import Pace, pace_of
@@ -226,17 +228,22 @@ class _Progress:
         self.after = after
 
 
+_Free = tuple[float, int, str, str | None, float]
+"""A robot in the simulated line: when it is free, a tie-breaker, its name, where it is then and
+its battery then (battery_forecast.py ``charge_first_s``: short of a task, it charges first)."""
+
+
 @dataclass
 class _Schedule:
     built_at: float
     waits: dict[str, tuple[float, float]] = field(default_factory=dict)
     """task id -> (wait, arrival) in real seconds from ``built_at``."""
-    heap: list[tuple[float, int, str, str | None]] = field(default_factory=list)
-    """(free at, tie, robot, node) after the last scheduled task."""
+    heap: list[_Free] = field(default_factory=list)
+    """(free at, tie, robot, node, battery level) after the last scheduled task."""
     keys: list[tuple[int, int]] = field(default_factory=list)
     """(-priority, seq) of the tasks simulated, in queue order (where a new request goes)."""
     tasks: list[Task] = field(default_factory=list)
-    checkpoints: list[list[tuple[float, int, str, str | None]]] = field(default_factory=list)
+    checkpoints: list[list[_Free]] = field(default_factory=list)
     """checkpoints[c]: the heap before ``tasks[c * CHECKPOINT_EVERY]`` was simulated."""
 
 
@@ -741,7 +748,7 @@ class EtaEstimator:
         sched = _Schedule(built_at=self.tm.clock())
         for tie, robot in enumerate(self._pool()):
             free_at, node = self._free(robot)
-            sched.heap.append((free_at, tie, robot.name, node))
+            sched.heap.append((free_at, tie, robot.name, node, self._level(robot, free_at)))
         heapq.heapify(sched.heap)
         for task in self.tm.queue.ordered():
             if not task.internal:
@@ -802,9 +809,17 @@ class EtaEstimator:
             free_at += self.charge_s
         return free_at, node
 
-    def _first_free(
-        self, heap: list[tuple[float, int, str, str | None]], task: Task
-    ) -> tuple[float, int, str, str | None]:
+    def _level(self, robot: RobotInfo, free_at: float) -> float:
+        """Its battery when it is free: charged after a charge it is due, else what its
+        current task leaves it at its learned drain."""
+        if robot.needs_charge or robot.battery <= robot.config.battery_low:
+            return CHARGED
+        drain = robot.drain_per_s
+        if drain is None or not math.isfinite(free_at):
+            return robot.battery
+        return robot.battery - drain * free_at
+
+    def _first_free(self, heap: list[_Free], task: Task) -> _Free:
         """The robot free first; with robots reserved for booked tours (``back_after``,
         backend/bookings/reserve.py), the first whose booking leaves time for ``task``: a
         reserved one counts from when its booked tour ends."""
@@ -826,11 +841,11 @@ class EtaEstimator:
             heapq.heappush(heap, e)
         return heapq.heappop(heap)
 
-    def _place(
-        self, heap: list[tuple[float, int, str, str | None]], task: Task
-    ) -> tuple[float, float, str | None]:
+    def _place(self, heap: list[_Free], task: Task) -> tuple[float, float, str | None]:
         """Give ``task`` to the robot free first (its pinned one if any); returns wait,
-        arrival and the robot, and books the robot until the task ends."""
+        arrival and the robot, and books the robot until the task ends. A robot whose battery
+        would not last the task charges first (the Task Manager sends it to a station): it is
+        free that much later, and another robot may be free before it."""
         if not heap:
             return math.inf, math.inf, None
         if task.pinned_robot is not None:
@@ -841,18 +856,32 @@ class EtaEstimator:
             heapq.heapify(heap)
         else:
             entry = self._first_free(heap, task)
-        free_at, tie, name, node = entry
         points = self._points(task)
         if not points:
-            heapq.heappush(heap, (free_at, tie, name, node))
-            return free_at, free_at, name
+            heapq.heappush(heap, entry)
+            return entry[0], entry[0], entry[2]
         speed = self._speed(task.robot)
         pace = pace_of(task.params)
         rest = self._rest(points, speed * pace.speed, pace.dwell)
         move, talk = self.move.value, self.talk.value
-        first = self._metres(node, points[0][0]) / speed * move
-        first += self.tm.lift_wait_s(node, points[0][0]) * move
         rest_move, rest_talk = rest.expected_s(self.go_on.value)
-        took = first + rest_move * move + rest_talk * talk
-        heapq.heappush(heap, (free_at + took, tie, name, points[-1][0]))
+        while True:
+            free_at, tie, name, node, level = entry
+            first = self._metres(node, points[0][0]) / speed * move
+            first += self.tm.lift_wait_s(node, points[0][0]) * move
+            took = first + rest_move * move + rest_talk * talk
+            robot = self.tm.robots.get(name)
+            if robot is None or robot.drain_per_s is None:
+                break
+            charge_s = charge_first_s(robot, level, took, self.tm.robots.values())
+            if charge_s <= 0:
+                level -= robot.drain_per_s * took
+                break
+            # Charged just enough for it: the same robot found again takes it at once.
+            level = finish_floor(robot) + robot.drain_per_s * took
+            entry = (free_at + charge_s, tie, name, node, level)
+            if task.pinned_robot is None:
+                heapq.heappush(heap, entry)
+                entry = self._first_free(heap, task)
+        heapq.heappush(heap, (free_at + took, tie, name, points[-1][0], level))
         return free_at, free_at + first, name

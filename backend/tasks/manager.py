@@ -19,6 +19,7 @@ Handlers run inline on the bus and never block: persistence goes through a write
 from __future__ import annotations
 
 import itertools
+import math
 import time
 import uuid
 from collections.abc import Callable, Mapping
@@ -26,6 +27,7 @@ from typing import Any, Protocol
 
 from backend.alerts import AlertStore
 from backend.tasks.battery import BatteryAlarms
+from backend.tasks.battery_forecast import charge_first_s
 from backend.tasks.blocked import BlockedErrands
 from backend.tasks.book import TaskBook
 from backend.tasks.charging import can_finish, station_for
@@ -79,6 +81,9 @@ __all__ = ["TaskManager", "TaskStore"]
 NETS = {kind: spec.net for kind, spec in KINDS.items()}
 CHARGE_UNREACHABLE = "charge_unreachable"
 """The alert kind (subject: the robot) of a robot whose way to a charger is blocked."""
+SHORT_LOOK = 20
+"""An idle robot whose battery would not last this many queued tasks it may take in a row is
+short of the queue's work (``_work_for``): it charges."""
 
 
 class TaskStore(Protocol):
@@ -527,11 +532,7 @@ class TaskManager(Service):
             avoid=self.book.avoided(task.id),
             rather_not=self.book.rather_not_robots(task.id),
             extra_cost=lambda robot: self.lift_wait_s(robot.node, first),
-            fits=(
-                (lambda robot: can_finish(robot, self.estimator.task_s(task, robot.node)))
-                if task.kind in VISITOR_KINDS  # a charge or a move by staff goes regardless
-                else None
-            ),
+            fits=(lambda robot: self._lasts(robot, task)),
         )
 
     def lift_wait_s(self, start: str | None, goal: str) -> float:
@@ -620,10 +621,11 @@ class TaskManager(Service):
             charging_at,
             self.site,
             self.graph.distances_to,
-            lambda robot: self._available(robot) and self._has_work_for(robot),
+            lambda robot: self._available(robot) and self._work_for(robot) == "work",
             lambda robot, node: (
                 self.blocked.barred(robot.name, robot.node, node, closed, now) is not None
             ),
+            short=lambda robot: self._available(robot) and self._work_for(robot) == "short",
         )
         for robot, kind, params in errands:
             self._internal(robot, kind, params)
@@ -689,16 +691,40 @@ class TaskManager(Service):
         ):
             self.errand_done(robot, f"charging station at {robot.node}")
 
-    def _has_work_for(self, robot: RobotInfo) -> bool:
-        """A queued task it may take (not one its booking keeps it from: it charges or
-        waits for its booked tour meanwhile, backend/bookings/reserve.py)."""
+    def _lasts(self, robot: RobotInfo, task: Task) -> bool:
+        """Its battery lasts ``task`` (charging.py ``can_finish``); a charge or a move by
+        staff goes regardless."""
+        if task.kind not in VISITOR_KINDS:
+            return True
+        return can_finish(robot, self.estimator.task_s(task, robot.node))
+
+    def _work_for(self, robot: RobotInfo) -> str:
+        """What the queue holds for an idle robot: ``work``, a task it may take (not one its
+        booking keeps it from: it charges or waits for its booked tour meanwhile, backend/
+        bookings/reserve.py) and can finish on its battery; ``short``, only tasks its battery
+        would not last now but would once charged (it charges, then takes one: choice.py
+        ``idle_errands``); ``none``.
+        Past ``SHORT_LOOK`` tasks it would not last, it is short (a long queue is not read
+        through at every dispatch)."""
         kept = self.reservations
+        short = 0
         for task in self.queue.head():
-            if task.pinned_robot in (None, robot.name) and not (
+            if task.pinned_robot not in (None, robot.name) or (
                 kept is not None and kept.keeps(robot, task)
             ):
-                return True
-        return False
+                continue
+            if task.kind not in VISITOR_KINDS:
+                return "work"
+            took = self.estimator.task_s(task, robot.node)
+            charge_s = charge_first_s(robot, robot.battery, took, self.robots.values())
+            if charge_s <= 0:
+                return "work"
+            if math.isinf(charge_s):
+                continue  # not even a full charge lasts it: no reason to charge for it
+            short += 1
+            if short >= SHORT_LOOK:
+                break
+        return "short" if short else "none"
 
     def _internal(self, robot: RobotInfo, kind: str, params: dict[str, Any]) -> None:
         task = Task(

@@ -76,8 +76,9 @@ class Presence:
         robot.floor = p.floor or tm.graph.floor_of.get(robot.node or "") or robot.floor
         if "battery" in p.model_fields_set:  # a state without it says nothing of the battery
             robot.battery = p.battery
-            learn_drain(robot, robot.battery, robot.mode, tm.clock())
-            learn_charge(robot, robot.battery, robot.mode, tm.clock())
+            fleet = tm.book.robots.values()  # rates stand in for a robot that has learned none
+            learn_drain(robot, robot.battery, robot.mode, tm.clock(), fleet)
+            learn_charge(robot, robot.battery, robot.mode, tm.clock(), fleet)
             if robot.needs_charge and robot.battery >= 0.95:
                 robot.needs_charge = False
                 came_back = True  # available again: worth a dispatch

@@ -192,3 +192,113 @@ async def test_an_errands_failure_is_described_from_its_typed_fields_not_the_rob
     assert alert.kind == "charge_unreachable"
     assert "trouble cut off its charge at charge_" in alert.message, alert.message
     assert "D0" not in alert.message
+
+
+async def test_a_battery_fault_is_not_learned_as_drain(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """The soak's ``battery_panic`` fault sets a robot's level to 5 % at once. Learned as drain
+    (0.83 in 5 s), it kept the robot from every tour long after it had charged back (and an
+    idle robot, whose level does not fall, never forgot it). A fall its learned drain does not
+    explain teaches nothing; nor does one the fleet's drain does not explain, for a robot that
+    has learned none yet; nor a rise its charge rate does not explain."""
+    r1 = RobotStub(bus, "R1", "hall", battery=0.90)
+    robot = manager.robots["R1"]
+    for level in (0.90, 0.89, 0.88):  # 0.001 a second on its way
+        r1.battery = level
+        r1.state("busy")
+        clock.now += 10
+    assert robot.drain_per_s is not None and abs(robot.drain_per_s - 0.001) < 1e-9
+    r1.battery = 0.05  # the fault
+    r1.state("busy")
+    r1.endpoint.publish("battery_panic", {"robot": "R1", "level": 0.05})
+    clock.now += 5
+    r1.state("busy")
+    assert abs(robot.drain_per_s - 0.001) < 1e-9
+
+    r3 = RobotStub(bus, "R3", "entrance", battery=0.90)  # no drain of its own yet
+    r3.state("idle")
+    clock.now += 5
+    r3.battery = 0.30  # ... set low at once: R1's drain does not explain it
+    r3.state("idle")
+    assert manager.robots["R3"].drain_per_s is None
+
+    # R1 charges back (a rise of 0.45 in 5 s is no charger either: not learned) ...
+    r1.node = "charge_a"
+    for step, level in enumerate((0.05, 0.10, 0.55, 0.60, 0.65, 0.95)):
+        clock.now += 5 if step == 2 else 50
+        r1.battery = level
+        r1.state("charging")
+    assert robot.charge_per_s is not None and abs(robot.charge_per_s - 0.001) < 1e-9
+    assert not robot.needs_charge
+    # ... and takes a tour it can finish at its real drain.
+    tour = manager.request("tour", {"tour": "ground"})
+    assert tour.robot == "R1"
+
+
+async def test_an_idle_robot_short_of_the_queued_tour_charges_then_takes_it(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """An idle robot above ``battery_low`` whose battery would not last the queued tour
+    counted as having work: it stood at its wait point (at 85 %, above where a robot at a
+    wait point charges on its own), the tour waiting, for ever, and the visitor was told a
+    robot was free. It goes to charge; the visitor's wait counts the charge; the tour takes
+    it off the charger once its battery lasts the tour."""
+    for name in ("R1", "R2"):  # offline, and off the stations the site starts them on
+        manager.robots[name].node = "hall"
+    probe = Task("p", "tour", {"tour": "ground"}, 5, "", 0)
+    tour_s = manager.estimator.task_s(probe, "entrance")
+    drain = 0.68 / tour_s  # 85 % would leave 17 %: under the finish floor (20 %)
+    slow = drain / 10
+    manager.robots["R1"].charge_per_s = slow  # learned on its charger: R3 has not charged yet
+    r3 = RobotStub(bus, "R3", "entrance", battery=0.85 + drain * 10)
+    r3.state("busy")
+    clock.now += 10
+    r3.battery = 0.85
+    r3.state("idle")
+    robot = manager.robots["R3"]
+    assert robot.drain_per_s is not None and abs(robot.drain_per_s - drain) < 1e-9
+
+    tour = manager.request("tour", {"tour": "ground"})
+    assert tour.state is TaskState.QUEUED
+    charge = manager.current_of(robot)
+    assert charge is not None and charge.kind == "charge"
+    clock.now += 2  # the foretold line is built again
+    told = manager.estimator.estimate(tour)
+    # It charges from 85 % to what the tour takes above the floor, at the rate R1 learned.
+    charge_s = (0.2 + drain * tour_s - 0.85) / slow
+    assert told.service == "busy" and told.wait_s is not None
+    assert abs(told.wait_s - charge_s) < 1.0, (told.wait_s, charge_s)
+
+    r3.start(charge.id)
+    station = next(s for s in manager.site.charging_stations if s.id == charge.params["station"])
+    r3.node = station.node
+    there_s = manager.estimator.task_s(probe, station.node)
+    enough = 0.2 + drain * there_s
+    assert enough < 0.94
+    for level in (0.85, enough - 0.01, enough + 0.01):
+        clock.now += 30
+        r3.battery = level
+        r3.state("charging")
+        manager.check_timeouts()
+        assert (tour.robot == "R3") is (level > enough)
+
+
+async def test_a_robot_no_charge_can_fit_to_the_queued_tour_is_not_sent_to_charge_for_it(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """A queued tour that even a full battery would not last is no reason to charge: a robot
+    idle at a station would else charge to full, end its charge, and be given another at
+    every dispatch."""
+    for name in ("R1", "R2"):
+        manager.robots[name].node = "hall"
+    probe = Task("p", "tour", {"tour": "ground"}, 5, "", 0)
+    drain = 1.0 / manager.estimator.task_s(probe, "charge_a")  # the whole battery and more
+    r3 = RobotStub(bus, "R3", "charge_a", battery=0.9 + drain * 10)
+    r3.state("idle")
+    clock.now += 10
+    r3.battery = 0.9
+    r3.state("idle")
+    tour = manager.request("tour", {"tour": "ground"})
+    assert tour.state is TaskState.QUEUED
+    assert manager.current_of(manager.robots["R3"]) is None
