@@ -546,7 +546,8 @@ function statusLines(r) {
       const explained = progress.stage === "explained";
       lines.push(t(explained ? "state_explained" : "state_progress", { i: progress.index, n: progress.total, place }));
       // After a stop's explanation the robot asks on its screen whether to go on, then walks on.
-      if (explained && progress.index < progress.total) lines.push(t("state_next_stop", { robot }));
+      // Once the robot is on its way again (the server saw it move: its visitors said yes).
+      if (explained && progress.index < progress.total) lines.push(t(progress.going ? "state_leading_on" : "state_next_stop", { robot }));
       if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
     }
   } else if (r.state === "done") lines.push(point ? t("state_point_done", { robot, place: poiName(r.params?.poi) }) : t("state_done"));
@@ -716,7 +717,7 @@ let announced = "";
 function announce() {
   const r = state.view === "request" && !alarm() && !offered() ? state.requests.get(state.current) : null;
   const p = r?.progress;
-  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by, r.trouble?.why]) : "";
+  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, p?.going, r.service, r.cancelled_by, r.trouble?.why]) : "";
   if (key === announced) return;
   announced = key;
   announcer.textContent = r ? statusLines(r).join(" ") : "";
