@@ -566,7 +566,11 @@ function endedAt(r) {
   // A visit to one point that ended after its robot had got there (kept by the server).
   if (r.kind === "go_to_poi") return p?.index && r.state !== "done" ? [t("state_point_reached", { robot: r.robot ?? "", place: poiName(r.params?.poi) })] : [];
   if (r.kind !== "tour" || !p?.index) return [];
-  if (r.state === "done") return p.index < p.total ? [t("state_ended_at", { i: p.index, n: p.total, place: placeOf(p) })] : [];
+  // Done with every stop after its last one skipped (closed, only steps): it went to its end.
+  const skipped = new Set((r.skipped ?? p.skipped ?? []).map((k) => k.index));
+  let last = p.total;
+  while (last > p.index && skipped.has(last)) last -= 1;
+  if (r.state === "done") return p.index < last ? [t("state_ended_at", { i: p.index, n: p.total, place: placeOf(p) })] : [];
   return [t("state_got_to", { i: p.index, n: p.total, place: placeOf(p) })];
 }
 
