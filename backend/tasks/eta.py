@@ -214,6 +214,8 @@ class _Progress:
     asking: bool = False
     """A stop before the last was explained: the robot asks "continue?" and its visitors may
     end the tour there (learned by ``EtaEstimator.go_on``)."""
+    going: bool = False
+    """The visitors said yes after the stop explained: the robot leads them to the next."""
 
     def __post_init__(self) -> None:
         move = talk = 0.0
@@ -350,6 +352,7 @@ class EtaEstimator:
         if run.asking and index > run.index:
             run.asking = False  # the visitors went on after the question
             self.go_on.learn(True)
+        run.going = False
         if stage == "skipped":
             name = _point_name(task, poi)
             run.skipped.append({"index": index, "poi": poi, "name": name, "reason": reason})
@@ -389,6 +392,18 @@ class EtaEstimator:
             poi,
         )
         run.name = _point_name(task, poi)
+
+    def went_on(self, task: Task) -> bool:
+        """A tour's robot is on its way again after a stop explained (its ``robot_state``
+        navigation): the visitors answered yes and it leads them to the next stop. True if
+        news (once per stop)."""
+        run = self._running.get(task.id)
+        if run is None or not run.asking:
+            return False
+        run.asking, run.going = False, True
+        self.go_on.learn(True)
+        self._schedule = None
+        return True
 
     def point_shown(self, task: Task, poi: str) -> bool:
         """A visit's robot says it shows its point (robot_state ``poi``; a visit sends no
@@ -522,7 +537,7 @@ class EtaEstimator:
 
     @staticmethod
     def _view(run: _Progress) -> dict[str, Any]:
-        return {
+        view = {
             "index": run.index,
             "total": run.total,
             "poi": run.poi,
@@ -530,6 +545,9 @@ class EtaEstimator:
             "stage": run.stage,
             "skipped": list(run.skipped),
         }
+        if run.going:  # its visitors said yes: the robot leads them to the next stop
+            view["going"] = True
+        return view
 
     # --- the model ------------------------------------------------------------------------------
     def segments(self, task: Task, start: str | None) -> list[Segment]:

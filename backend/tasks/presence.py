@@ -24,6 +24,11 @@ if TYPE_CHECKING:
 
 __all__ = ["Presence"]
 
+ON_ITS_WAY = frozenset(
+    {"planning", "moving", "waiting_area", "waiting_door", "waiting_elevator", "riding"}
+)
+"""A robot's navigation states on its way somewhere (a tour's robot leading its visitors on)."""
+
 log = logging.getLogger(__name__)
 
 BLOCKED = frozenset({"door_blocked"})
@@ -43,6 +48,7 @@ class PresenceDesk(Desk, Protocol):
 
     def send_assigned(self, task: Task, robot: RobotInfo) -> None: ...
     def moved_to(self, robot: RobotInfo) -> None: ...
+    def publish_event(self, task: Task) -> None: ...
 
 
 class Presence:
@@ -98,6 +104,9 @@ class Presence:
                 tm.estimator.seen_at(current, p.poi)  # its stop, after our restart
             elif current.state is TaskState.RUNNING:
                 self.reports.point_shown(current, p.poi)  # a visit's robot is at its point
+        if current is not None and reported == current.id and p.navigation in ON_ITS_WAY:
+            if current.kind == "tour" and tm.estimator.went_on(current):
+                tm.publish_event(current)  # its visitors said yes: leading them on
         if returned and current is not None and current.state is TaskState.ASSIGNED:
             if reported != current.id:
                 # Its link went before it acknowledged task_assigned (retries stop when a

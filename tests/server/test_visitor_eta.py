@@ -205,7 +205,10 @@ async def test_a_running_tour_reports_its_progress_live(tmp_path: Path) -> None:
             and e.payload.get("progress")
             and e.payload["state"] == "running"
         ]
-        assert progress[-4:] == [(1, "arrived"), (1, "explained"), (2, "arrived"), (2, "explained")]
+        # The robot seen on its way again after stop 1 is news of the same stop (``going``,
+        # tests/server/test_visitor_waits.py), when a robot_state came on the way.
+        stages = [p for i, p in enumerate(progress) if i == 0 or p != progress[i - 1]]
+        assert stages[-4:] == [(1, "arrived"), (1, "explained"), (2, "arrived"), (2, "explained")]
         # The end keeps where the tour got to (the visitor's page says it).
         end = first(events, task_id, "done")
         assert end is not None and end.payload["progress"]["index"] == 2

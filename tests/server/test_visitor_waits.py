@@ -162,3 +162,31 @@ async def test_a_robot_that_connects_is_told_the_fleet_is_paused(
     robot.endpoint.publish(SiteLoaded(robot="R1", version=1))
     told = robot.of_type("visitor_service")
     assert told and told[-1].payload["service"] == "paused"
+
+
+async def test_a_tours_robot_leading_its_visitors_on_is_told_and_counts_as_a_yes(
+    bus: Bus, manager: TaskManager, events: list[Message]
+) -> None:
+    """The busy demo: "Stop 2 of 3, seen. Next: R3 asks on its screen 'Shall we continue?'"
+    for 35 s while the robot was leading its group through the lift. Once the robot is on its
+    way after a stop explained, its visitors said yes: the task's progress says it goes on
+    (``going``) and the share of visitors who go on learns it."""
+    robot = RobotStub(bus, "R1", "charge_a")
+    robot.state()
+    task = manager.request("tour", {"tour": "ground"})
+    robot.start(task.id)
+    progress(robot, task, 1, "welcome", "arrived")
+    progress(robot, task, 1, "welcome", "explained")
+    robot.state("busy", navigation="idle")  # asking "continue?"
+    assert "going" not in (manager.status(task)["progress"] or {})
+    told_before = len(told(events, task.id))
+    robot.state("busy", navigation="moving")
+    news = told(events, task.id)
+    assert len(news) == told_before + 1, news[told_before:]
+    assert news[-1]["progress"]["going"] is True and news[-1]["progress"]["index"] == 1
+    assert manager.estimator.go_on.samples == 1 and manager.estimator.go_on.value == 1.0
+    robot.state("busy", navigation="moving")  # told once
+    assert len(told(events, task.id)) == told_before + 1
+    progress(robot, task, 2, "mosaics", "arrived")
+    assert "going" not in (manager.status(task)["progress"] or {})
+    assert manager.estimator.go_on.samples == 1  # the same yes, not counted twice

@@ -333,6 +333,9 @@ async def test_a_step_free_tour_skips_the_stop_only_steps_lead_to_and_says_so(
         await expect(skipped).to_contain_text(
             "Stop 5, Loom: only steps or a steep slope lead there"
         )
+        # It went to its end: the last stop skipped is no early end (it said "It ended at
+        # stop 4 of 5" beside the skipped loom).
+        await expect(state).not_to_contain_text("It ended at stop")
         await web.axe_check(page)
         await skipped.scroll_into_view_if_needed()
         await web.screenshot(page, "visitor-phone-step-free")

@@ -546,7 +546,8 @@ function statusLines(r) {
       const explained = progress.stage === "explained";
       lines.push(t(explained ? "state_explained" : "state_progress", { i: progress.index, n: progress.total, place }));
       // After a stop's explanation the robot asks on its screen whether to go on, then walks on.
-      if (explained && progress.index < progress.total) lines.push(t("state_next_stop", { robot }));
+      // Once the robot is on its way again (the server saw it move: its visitors said yes).
+      if (explained && progress.index < progress.total) lines.push(t(progress.going ? "state_leading_on" : "state_next_stop", { robot }));
       if (r.service === "held_up") lines.push(t("state_held_up", { robot }));
     }
   } else if (r.state === "done") lines.push(point ? t("state_point_done", { robot, place: poiName(r.params?.poi) }) : t("state_done"));
@@ -565,7 +566,11 @@ function endedAt(r) {
   // A visit to one point that ended after its robot had got there (kept by the server).
   if (r.kind === "go_to_poi") return p?.index && r.state !== "done" ? [t("state_point_reached", { robot: r.robot ?? "", place: poiName(r.params?.poi) })] : [];
   if (r.kind !== "tour" || !p?.index) return [];
-  if (r.state === "done") return p.index < p.total ? [t("state_ended_at", { i: p.index, n: p.total, place: placeOf(p) })] : [];
+  // Done with every stop after its last one skipped (closed, only steps): it went to its end.
+  const skipped = new Set((r.skipped ?? p.skipped ?? []).map((k) => k.index));
+  let last = p.total;
+  while (last > p.index && skipped.has(last)) last -= 1;
+  if (r.state === "done") return p.index < last ? [t("state_ended_at", { i: p.index, n: p.total, place: placeOf(p) })] : [];
   return [t("state_got_to", { i: p.index, n: p.total, place: placeOf(p) })];
 }
 
@@ -716,7 +721,7 @@ let announced = "";
 function announce() {
   const r = state.view === "request" && !alarm() && !offered() ? state.requests.get(state.current) : null;
   const p = r?.progress;
-  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, r.service, r.cancelled_by, r.trouble?.why]) : "";
+  const key = r ? JSON.stringify([r.id, r.state, r.queue_position, r.robot, p?.index, p?.stage, p?.going, r.service, r.cancelled_by, r.trouble?.why]) : "";
   if (key === announced) return;
   announced = key;
   announcer.textContent = r ? statusLines(r).join(" ") : "";
