@@ -15,16 +15,11 @@ import websockets
 from websockets.exceptions import ConnectionClosed
 
 from backend.accounts.cookies import CSRF_HEADER, SESSION_COOKIE
-from bench.servers import ADMIN_TOKEN, ServerProcess, wait_until
+from bench.servers import ADMIN_TOKEN, ServerProcess
 
 PASSWORD = "Tall-ships sail at dawn 7"
 AUTH = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
 WAIT = 20.0
-
-
-async def _serving(server: ServerProcess) -> bool:
-    health = await server.health()
-    return bool(health and health["cluster"]["serving"])
 
 
 async def signed_in(leader: ServerProcess, name: str, role: str) -> tuple[str, str]:
@@ -64,7 +59,7 @@ async def test_a_cookie_signs_a_page_in_on_a_follower_s_hub_until_the_session_en
     pair: list[ServerProcess],
 ) -> None:
     alpha, beta = pair
-    await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     cookie, _ = await signed_in(alpha, "ada", "operator")
     other, _ = await signed_in(alpha, "bob", "viewer")
 

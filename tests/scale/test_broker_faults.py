@@ -72,7 +72,7 @@ async def test_a_redis_restart_is_survived(postgres: PostgresServer, tmp_path: P
 
 
 async def _redis_restart(redis: RedisServer, alpha: ServerProcess, beta: ServerProcess) -> None:
-    await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     gui = await _listener(alpha)
     local_robot = await WsClient.connect(alpha, "robot-R2-demo-token")
     robot = await WsClient.connect(beta, "robot-R1-demo-token")
@@ -98,11 +98,6 @@ async def _redis_restart(redis: RedisServer, alpha: ServerProcess, beta: ServerP
     finally:
         for client in (gui, local_robot, robot):
             await client.close()
-
-
-async def _serving(server: ServerProcess) -> bool:
-    health = await server.health()
-    return bool(health and health["cluster"]["serving"])
 
 
 @contextlib.asynccontextmanager
@@ -171,7 +166,7 @@ async def test_a_slow_process_does_not_hold_the_others_back(
         gamma = ServerProcess("gamma", db, slow_url, tmp_path / "gamma.log")
         try:
             await gamma.until(gamma.ready, "gamma to join through its slow link")
-            await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+            await alpha.until(alpha.leads, "alpha to lead")
             robot = await WsClient.connect(alpha, "robot-R1-demo-token")
             fast, slow = await _listener(beta), await _listener(gamma)
             try:

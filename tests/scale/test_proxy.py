@@ -67,16 +67,11 @@ def proxy(pair: list[ServerProcess], tmp_path: Path) -> Iterator[str]:
         log.close()
 
 
-async def _serving(server: ServerProcess) -> bool:
-    health = await server.health()
-    return bool(health and health["cluster"]["serving"])
-
-
 async def test_rest_through_the_proxy_reaches_the_leader(
     pair: list[ServerProcess], proxy: str
 ) -> None:
     alpha, beta = pair
-    await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
 
     async def proxied() -> bool:
         try:
@@ -114,7 +109,7 @@ async def test_rest_through_the_proxy_reaches_the_leader(
             await robot.close()
 
         alpha.kill()
-        await wait_until(lambda: _serving(beta), 30, "beta to lead")
+        await beta.until(beta.leads, "beta to lead")
         after = await http.get(f"{proxy}/api/tasks", params={"limit": 1000})
         assert after.status_code == 200  # nginx skips the dead server and the 503s
         assert sorted(t["id"] for t in after.json()["tasks"]) == sorted(ids)
@@ -128,7 +123,7 @@ async def test_a_person_signed_in_by_cookie_uses_rest_and_the_hub_through_the_pr
     ``$http_host``, else every cookie request but a GET was refused). REST lands on the
     leader; hub links land on both servers in turn."""
     alpha, _ = pair
-    await wait_until(lambda: _serving(alpha), 60, "alpha to lead")
+    await alpha.until(alpha.leads, "alpha to lead")
     await signed_in(alpha, "ada", "operator")
     browser = {"Origin": proxy}
     async with httpx.AsyncClient(base_url=proxy, timeout=30, headers=browser) as http:
