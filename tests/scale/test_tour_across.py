@@ -143,8 +143,13 @@ async def test_a_tour_completes_under_the_new_leader_after_a_sigkill(
 
         assert [h["event"] for h in history].count("assigned") == 1, history
         assert not {"requeued", "reassigned"} & {h["event"] for h in history}, history
+        # R1's grants during the tour (once done it may cross the corridor again on its way
+        # back to a wait point: under load that return's grant came before the events were read).
+        done = _first(events, "task_done", task_id=task_id)
+        tour_grants = [(g["robot"], g["area"]) for g in _fresh_grants(events[:done])]
         grants = [(g["robot"], g["area"]) for g in _fresh_grants(events)]
-        assert grants.count(("R1", "corridor")) == 1 and grants.count(("R2", "corridor")) == 1
+        assert tour_grants.count(("R1", "corridor")) == 1, events[lives[1] :]
+        assert grants.count(("R2", "corridor")) == 1
         released = _first(events, "area_released", robot="R1", area="corridor")
         granted_r2 = _first(events, "area_granted", robot="R2", area="corridor")
         assert lives[1] < released < granted_r2, events[lives[1] :]
