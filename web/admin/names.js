@@ -27,6 +27,30 @@ export function elevatorName(site, id) {
   return lift?.name || `elevator ${id}`;
 }
 
+/** A robot's link as the console says it everywhere (Robots view, map, Fleet): "online";
+ * "hibernating" for a VDA 5050 3.x vehicle asleep (offline to the fleet, not lost); "lost" for
+ * one seen before and offline now; "never connected". */
+export function linkState(robot) {
+  if (!robot) return "never connected";
+  if (robot.online) return "online";
+  if (robot.state?.navigation === "hibernating") return "hibernating";
+  return robot.state || robot.info?.last_seen ? "lost" : "never connected";
+}
+
+/** Where the console draws a robot: its last robot_state, else (not heard from since the page
+ * loaded) the node the server last knew it at; null when there is neither. */
+export function lastKnown(robot) {
+  if (robot.state) return robot.state;
+  const node = robot.info?.node;
+  return node && robot.info?.last_seen ? { robot: robot.name, node, floor: null, x: 0, y: 0, theta: 0, mode: "offline", battery: robot.info.battery } : null;
+}
+
+/** A door's state as its sensor last said it, the same words on every view. */
+export function doorState(store, id) {
+  if (!store.doors.has(id)) return "not read yet";
+  return store.doors.get(id) ? "open" : "closed";
+}
+
 /** A node as a person would name the place: "Welcome hall", "charging station station_a",
  * "elevator lift", "door door_gallery", "near Roman mosaics" (the floor is said beside it). */
 export function placeName(site, nodeId) {

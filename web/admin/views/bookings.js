@@ -3,6 +3,7 @@
 // served are flagged with the reason (docs/console.md, "Bookings"; docs/server.md, "Bookings").
 import { html } from "lit-html";
 import { formText } from "/lib/dom.js";
+import { dateTime, venueDay } from "/admin/venue.js";
 
 const DAYS = [["mon", "Mon"], ["tue", "Tue"], ["wed", "Wed"], ["thu", "Thu"], ["fri", "Fri"], ["sat", "Sat"], ["sun", "Sun"]];
 const EVERY = { once: "once", daily: "every day", weekly: "every week" };
@@ -11,7 +12,7 @@ const isoDay = (date) => new Date(date.getTime() - date.getTimezoneOffset() * 60
 
 function state(ui) {
   if (!ui.bookings) {
-    ui.bookings = { day: isoDay(new Date()), data: null, error: null, every: "once", moving: null, history: null };
+    ui.bookings = { day: venueDay(), data: null, error: null, every: "once", moving: null, history: null };
     load(ui);
   }
   return ui.bookings;
@@ -151,7 +152,7 @@ function historyView(b) {
     <table aria-label="Booking history">
       <thead><tr><th scope="col">When</th><th scope="col">What</th><th scope="col">By</th><th scope="col">Detail</th></tr></thead>
       <tbody>${h.rows.map((r) => html`<tr>
-        <td>${new Date(r.at * 1000).toLocaleString()}</td><td>${r.action}</td><td>${r.by}</td><td>${detail(r.detail)}</td>
+        <td>${dateTime(r.at)}</td><td>${r.action}</td><td>${r.by}</td><td>${detail(r.detail)}</td>
       </tr>`)}</tbody>
     </table>
   </section>`;

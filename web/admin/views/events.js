@@ -1,8 +1,8 @@
 // Event log: live, filtered by robot, person, type and severity, downloadable as JSON lines
 // (admins: the audit export as CSV, docs/security.md "Audit").
 import { html } from "lit-html";
-import { clock } from "/lib/dom.js";
-import { placeName, poiName, taskName, tourName } from "/admin/names.js";
+import { clock } from "/admin/venue.js";
+import { floorName, placeName, poiName, taskName, tourName } from "/admin/names.js";
 
 const ERRORS = new Set(["robot_fault", "battery_panic", "task_failed", "robot_disconnected", "area_force_released", "alert_raised"]);
 const WARNINGS = new Set([
@@ -60,7 +60,7 @@ function download(rows) {
   setTimeout(() => URL.revokeObjectURL(url), 1000);
 }
 
-/** The row's data, ids named as the site names them (task, node, point, tour). */
+/** The row's data, ids named as the site names them (task, node, point, tour, floor). */
 function summary(ui, row) {
   const d = row.data ?? {};
   const site = ui.store.site;
@@ -72,8 +72,9 @@ function summary(ui, row) {
     node: (v) => ["at", placeName(site, v)],
     poi: (v) => ["point", poiName(site, v)],
     tour: (v) => ["tour", tourName(site, v)],
+    floor: (v) => ["floor", floorName(site, v)], // "First floor", as the other views say it
     // A time the sender stamped (node_reached: the robot's clock), not a place.
-    at: (v) => (typeof v === "number" ? ["reported", new Date(v * 1000).toLocaleTimeString()] : ["at", v]),
+    at: (v) => (typeof v === "number" ? ["reported", clock(v)] : ["at", v]),
   };
   return Object.entries(d)
     .filter(([, v]) => v !== null && typeof v !== "object")

@@ -3,7 +3,8 @@
 import { html } from "lit-html";
 import { repeat } from "lit-html/directives/repeat.js";
 import { confirmAction } from "/lib/confirm.js";
-import { clock, duration, inputValue } from "/lib/dom.js";
+import { duration, inputValue } from "/lib/dom.js";
+import { clock } from "/admin/venue.js";
 import { placeName, poiName, taskName } from "/admin/names.js";
 
 const FINAL = new Set(["done", "failed", "cancelled"]);
