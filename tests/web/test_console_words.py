@@ -79,7 +79,8 @@ async def test_every_time_is_the_venues_named_in_the_header(
             "task_failed", "t1", "a tour failed", "warning"
         )
         shown = await page.evaluate(
-            "([at, zone]) => new Date(at * 1000).toLocaleTimeString(undefined, {timeZone: zone})",
+            "([at, zone]) => new Date(at * 1000)"
+            ".toLocaleTimeString(undefined, {timeZone: zone, hourCycle: 'h23'})",
             [alert.raised_at, VENUE],
         )
         elsewhere = await page.evaluate(

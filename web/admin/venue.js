@@ -25,19 +25,20 @@ export function venueZone() {
   return zone;
 }
 
-/** The venue's clock time of a Unix timestamp (seconds), "—" without one. */
+/** The venue's clock time of a Unix timestamp (seconds), on the 24-hour clock as the server
+ * writes times (bookings, "by 14:00" in an alert): "16:52:10"; "—" without one. */
 export function clock(ts) {
-  return ts ? new Date(ts * 1000).toLocaleTimeString(undefined, { timeZone: zone }) : "—";
+  return ts ? new Date(ts * 1000).toLocaleTimeString(undefined, { timeZone: zone, hourCycle: "h23" }) : "—";
 }
 
 /** The venue's date and time of a Unix timestamp (seconds), "—" without one. */
 export function dateTime(ts) {
-  return ts ? new Date(ts * 1000).toLocaleString(undefined, { timeZone: zone }) : "—";
+  return ts ? new Date(ts * 1000).toLocaleString(undefined, { timeZone: zone, hourCycle: "h23" }) : "—";
 }
 
 /** The venue's hours and minutes now ("14:02"), for the header. */
 export function venueNow() {
-  return new Date().toLocaleTimeString(undefined, { timeZone: zone, hour: "2-digit", minute: "2-digit" });
+  return new Date().toLocaleTimeString(undefined, { timeZone: zone, hourCycle: "h23", hour: "2-digit", minute: "2-digit" });
 }
 
 /** The venue's date (YYYY-MM-DD) at `date` (default now): "today" at the venue. */

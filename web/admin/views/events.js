@@ -28,11 +28,16 @@ function personOf(row) {
   return row.data?.account ?? row.data?.by ?? null;
 }
 
+/** A row's type for the filter: its kind's first word. A task's progress is logged as
+ * "task_point 2/5 arrived" (and a handover as "task_handover: R1 at the visitor's stop 2"):
+ * one type each, not one per stop and stage (the filter listed every one of the day). */
+const typeOf = (row) => row.kind.split(/[\s:]/)[0];
+
 function filtered(ui) {
   const f = ui.eventFilter ?? {};
   return ui.store.events.filter(
     (row) => (!f.robot || robotOf(ui, row) === f.robot) && (!f.person || personOf(row) === f.person)
-      && (!f.kind || row.kind === f.kind) && (!f.severity || severity(row) === f.severity),
+      && (!f.kind || typeOf(row) === f.kind) && (!f.severity || severity(row) === f.severity),
   );
 }
 
@@ -87,7 +92,7 @@ export function eventsView(ui) {
   ui.eventFilter ??= {};
   const f = ui.eventFilter;
   const set = (key) => (e) => { f[key] = e.target.value; ui.draw(); };
-  const kinds = [...new Set(ui.store.events.map((r) => r.kind))].sort();
+  const kinds = [...new Set(ui.store.events.map(typeOf))].sort();
   const people = [...new Set(ui.store.events.map(personOf).filter((p) => typeof p === "string"))].sort();
   const rows = filtered(ui);
   const shown = rows.slice(-200).reverse();

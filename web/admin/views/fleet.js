@@ -5,7 +5,7 @@ import { confirmAction } from "/lib/confirm.js";
 import { inputValue } from "/lib/dom.js";
 import { clock } from "/admin/venue.js";
 import { WAITING } from "/lib/map.js";
-import { doorName, doorState, elevatorName, floorName, lastKnown, linkState, placeName, robotDoing } from "/admin/names.js";
+import { atPlace, doorName, doorState, elevatorName, floorName, lastKnown, linkState, robotDoing, robotPlace } from "/admin/names.js";
 import { carText } from "/admin/views/building.js";
 
 const PAD_M = 2;
@@ -118,8 +118,8 @@ function floorPlan(ui, floor) {
     const x = p.x + k * 1.4;
     const link = linkState(r);
     const label = r.online
-      ? `${r.name}: ${robotDoing(ui.store, s)}, at ${placeName(site, s.node)}`
-      : `${r.name}: ${link}, last seen at ${placeName(site, s.node)}`;
+      ? `${r.name}: ${robotDoing(ui.store, s)}, ${atPlace(robotPlace(site, s))}`
+      : `${r.name}: ${link}, last seen ${atPlace(robotPlace(site, s))}`;
     return svg`<g class="overview-robot" data-robot=${r.name} data-link=${link} role="img" aria-label=${label}><title>${label}</title>
       <circle cx=${x} cy=${Y(p.y)} r="0.8" fill=${robotColour(ui, s)} stroke=${r.online ? "#1a1a1a" : "#5f6368"} stroke-width="0.15" stroke-dasharray=${r.online ? "none" : "0.3 0.2"}></circle>
       <text x=${x} y=${Y(p.y) - 1.1} text-anchor="middle" font-size="1.1" font-weight="700" fill=${r.online ? "#1a1a1a" : "#5f6368"}>${r.online ? r.name : `${r.name} (${link})`}</text></g>`;

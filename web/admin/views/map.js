@@ -2,7 +2,7 @@
 import { html } from "lit-html";
 import { carText } from "/admin/views/building.js";
 import { duration, percent } from "/lib/dom.js";
-import { doorState, evacuationText, floorName, linkState, placeName, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
+import { doorState, evacuationText, floorName, linkState, placeName, robotPlace, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
 
 export function toolbarView(ui) {
   const { store, map } = ui;
@@ -36,11 +36,12 @@ function robotDetails(ui, name) {
   return html`<h3>Robot ${name}</h3>
     <dl>
       <dt>Connection</dt><dd>${link}</dd>
+      ${robot.info?.out_of_service ? html`<dt>Service</dt><dd>out of service (gets no task but those staff send it)</dd>` : ""}
       ${evacuationText(ui.store, name) ? html`<dt>Evacuation</dt><dd class="state-evacuation">${evacuationText(ui.store, name).replace("evacuation: ", "")}</dd>` : ""}
       <dt>Mode</dt><dd>${robot.online ? s.mode ?? robot.info?.mode ?? "—" : link === "hibernating" ? "offline, hibernating" : "offline"}</dd>
       ${waitingFor(ui.store, s) ? html`<dt>Waiting</dt><dd class="state-waiting">${waitingFor(ui.store, s)}</dd>` : ""}
       <dt>Battery</dt><dd>${percent(s.battery ?? robot.info?.battery)}</dd>
-      <dt>${robot.online ? "Where" : "Last seen"}</dt><dd>${where ? placeName(ui.store.site, where) : "—"} (${floor ? floorName(ui.store.site, floor) : "—"})</dd>
+      <dt>${robot.online ? "Where" : "Last seen"}</dt><dd>${s.floor ? robotPlace(ui.store.site, s) : where ? placeName(ui.store.site, where) : "—"} (${floor ? floorName(ui.store.site, floor) : "—"})</dd>
       <dt>Task</dt><dd>${taskLabel(ui.store, robotTaskId(robot))}</dd>
       <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
     </dl>`;

@@ -4,7 +4,7 @@
 import { html } from "lit-html";
 import { inputValue, percent } from "/lib/dom.js";
 import { clock } from "/admin/venue.js";
-import { evacuationText, floorName, linkState, placeName, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
+import { evacuationText, floorName, linkState, placeName, robotPlace, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
 import { cancelTask, tourProgress } from "/admin/views/tasks.js";
 
 /** The robot's task and where its tour stands, as the Tasks view says it ("Tour: Highlights,
@@ -100,7 +100,7 @@ export function robotsView(ui) {
           ${evacuationText(ui.store, robot.name) ? html`<dt>Evacuation</dt><dd class="state-evacuation" data-evacuation=${robot.name}>${evacuationText(ui.store, robot.name).replace("evacuation: ", "")}</dd>` : ""}
           <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : asleep ? "offline, hibernating" : "offline"}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
-          <dt>Pose</dt><dd>${node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
+          <dt>Pose</dt><dd>${s.floor ? robotPlace(ui.store.site, s) : node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
           <dt>Task</dt><dd>${taskText(ui, robot)}</dd>
           <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
           <dt>RoboCAN modules</dt><dd>${modules.length ? modules.map(([m, st]) => html`<span class=${`badge ${st === "ok" ? "ok" : "bad"}`}>${m}: ${st}</span> `) : "none reported"}</dd>
