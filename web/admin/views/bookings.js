@@ -10,21 +10,36 @@ const EVERY = { once: "once", daily: "every day", weekly: "every week" };
 
 const isoDay = (date) => new Date(date.getTime() - date.getTimezoneOffset() * 60000).toISOString().slice(0, 10);
 
+/** How old the day's listing may get while the view is shown: a robot reserved, a booking
+ * started or missed, one made on another screen come with no message of their own (the view
+ * loaded once, at its first opening, and said "booked" long after the tour started). */
+const REFRESH_MS = 10000;
+
 function state(ui) {
   if (!ui.bookings) {
-    ui.bookings = { day: venueDay(), data: null, error: null, every: "once", moving: null, history: null };
-    load(ui);
+    ui.bookings = { day: venueDay(), data: null, error: null, every: "once", moving: null, history: null, loadedAt: 0, loading: 0 };
   }
-  return ui.bookings;
+  const b = ui.bookings;
+  if (!b.loading && Date.now() - b.loadedAt > REFRESH_MS) load(ui); // drawn: shown now
+  return b;
 }
 
+/** Read the chosen day's bookings; an answer for a day no longer chosen is dropped. */
 async function load(ui) {
   const b = ui.bookings;
+  const day = b.day;
+  const asked = (b.loading = (b.asked = (b.asked ?? 0) + 1));
   try {
-    b.data = await ui.api.get(`/api/bookings?start=${encodeURIComponent(b.day)}`);
-    b.error = null;
+    const data = await ui.api.get(`/api/bookings?start=${encodeURIComponent(day)}`);
+    if (day === b.day) {
+      b.data = data;
+      b.error = null;
+    }
   } catch (err) {
     b.error = err.message;
+  } finally {
+    if (b.loading === asked) b.loading = 0;
+    b.loadedAt = Date.now();
   }
   ui.draw();
 }
