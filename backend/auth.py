@@ -146,6 +146,12 @@ class Authenticator:
                 f"too many failed sign-in attempts from this address; try again in {retry} s",
                 retry,
             )
+        if not token:
+            # No credential at all: nothing was guessed, so nothing is counted. A page whose
+            # session ended (expired, signed out) sends its requests in flight without one,
+            # each refused: counted, they spent the address's budget and its person's next
+            # sign-in met 429 (docs/security.md, "Rate limits").
+            raise SignInRefused(status.HTTP_401_UNAUTHORIZED, "missing or unknown bearer token")
         principal = self.tokens.lookup(token)
         if principal is None:
             # Counted even when this failure empties the bucket: the next attempt gets 429.

@@ -31,13 +31,15 @@ async def me(who: Anyone) -> dict[str, str]:
 
 
 @router.get("/site/map")
-async def site_map(_: Anyone, service: Sites) -> dict[str, Any]:
-    """The site without secrets (robot tokens): what every page draws its map from."""
+async def site_map(request: Request, _: Anyone, service: Sites) -> dict[str, Any]:
+    """The site without secrets (robot tokens): what every page draws its map from; and the
+    venue's time zone (``GUIDEBOT_TIMEZONE``), the one the console shows every time in."""
     data = service.site.model_dump(mode="json")
     data["robots"] = [{k: v for k, v in robot.items() if k != "token"} for robot in data["robots"]]
     for floor in data["floors"]:
         floor["plan_url"] = f"/api/site/plans/{floor['id']}" if floor["plan_image"] else None
-    return {"version": service.version, "site": data}
+    timezone: str = request.app.state.settings.timezone
+    return {"version": service.version, "site": data, "timezone": timezone}
 
 
 def plan_file(site_file: FsPath | None, image: str) -> FsPath | None:

@@ -217,7 +217,12 @@ async def test_every_view_follows_the_api_on_a_busy_day(
 
                 async def on_the_map(floor: str = floor) -> dict[str, Any]:
                     robots = (await staff.get("/api/robots")).json()
-                    shown = [r["name"] for r in robots if r["online"] and r["floor"] == floor]
+                    # A robot not online stays where it was last seen, labelled lost.
+                    shown = [
+                        r["name"] if r["online"] else f"{r['name']} (lost)"
+                        for r in robots
+                        if r["floor"] == floor and (r["online"] or r["last_seen"])
+                    ]
                     return {"floor": floor, "robots": sorted(shown)}
 
                 reads.setdefault("map", []).append(

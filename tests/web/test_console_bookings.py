@@ -98,3 +98,32 @@ async def test_staff_book_move_and_cancel_a_tour_in_the_console(
             .click()
         )
         await expect(row.filter(has_text="Highlights")).to_have_count(0)
+
+
+async def test_the_bookings_view_follows_bookings_made_elsewhere(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """A booking made on another screen (or a robot reserved, a tour started) comes with no
+    message of its own: the view read the day once and kept saying so. It reads the day again
+    while it is shown."""
+    async with fleet_factory(robots=0) as fleet:
+        console = await open_page(fleet.admin_url)
+        page = console.page
+        await web.sign_in(console, web.operator_token)
+        await web.open_view(page, "Bookings")
+        await page.get_by_role("button", name="Next day").click()
+        table = page.get_by_role("table", name=f"Bookings on {day(1)}")
+        await expect(table).to_contain_text("Nothing booked")
+        async with fleet.http(web.operator_token) as http:
+            reply = await http.post(
+                "/api/bookings",
+                json={
+                    "tour": "highlights",
+                    "start": f"{day(1)}T14:00",
+                    "lang": "en",
+                    "group_size": 8,
+                },
+            )
+            assert reply.status_code == 201, reply.text
+        row = table.get_by_role("row").filter(has_text="Highlights")
+        await expect(row).to_contain_text("14:00", timeout=20_000)

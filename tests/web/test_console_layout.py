@@ -1,6 +1,7 @@
 """The console at the screen sizes of a front desk (1280x800) and a control room (1920x1080),
 in a real browser against a real server: the tabs in one row, even with the alert count; a
-selected robot that is lost says it is offline in the map's details, as the Robots view does."""
+selected robot that is lost says so in the map's details (connection lost, mode offline), as the
+Robots view does."""
 
 from __future__ import annotations
 
@@ -38,7 +39,7 @@ async def test_a_lost_robot_raises_the_count_and_the_tabs_stay_in_one_row(
         assert await page.evaluate(TAB_ROWS) == 1
         # Its last state said "idle": the details say what the Robots view says.
         connection = details.locator("dt", has_text="Connection")
-        await expect(connection.locator("xpath=following-sibling::dd[1]")).to_have_text("offline")
+        await expect(connection.locator("xpath=following-sibling::dd[1]")).to_have_text("lost")
         mode = details.locator("dt", has_text="Mode").locator("xpath=following-sibling::dd[1]")
         await expect(mode).to_have_text("offline")
         await web.axe_check(page)

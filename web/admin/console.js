@@ -3,7 +3,7 @@
 // view draws itself (web/admin/views/*, listed in web/admin/registry.js); the map's controller
 // is web/admin/livemap.js, the header's web/admin/header.js, sign-in web/lib/session.js.
 import { html, render } from "lit-html";
-import { mountHeader } from "/admin/header.js";
+import { mountHeader, startVenueClock } from "/admin/header.js";
 import { mountMap, showBuilding } from "/admin/livemap.js";
 import { RENDER, VIEWS } from "/admin/registry.js";
 import { Store } from "/admin/store.js";
@@ -18,7 +18,7 @@ import { Monitor } from "/admin/views/monitor.js";
  * @typedef {{who: HTMLElement, connection: HTMLElement, tabs: HTMLElement, mapView: HTMLElement,
  *            view: HTMLElement, map: HTMLElement, mapToolbar: HTMLElement, details: HTMLElement,
  *            alertBar: HTMLElement, declare: HTMLElement, emergencyBanner: HTMLElement,
- *            pageError: HTMLElement}} ConsoleParts
+ *            pageError: HTMLElement, statusLine: HTMLElement}} ConsoleParts
  */
 
 /**
@@ -39,6 +39,8 @@ import { Monitor } from "/admin/views/monitor.js";
 export async function startConsole(session, me, signal, parts) {
   const { api } = session;
   const hub = session.connect(parts.connection);
+  // The status line may cut the banner short: its whole text in its tooltip.
+  hub.addEventListener("status", () => { parts.connection.title = parts.connection.textContent ?? ""; });
   hub.addEventListener("status", () => {
     if (hub.status === "refused") session.signInAgain(`The server closed the live connection: ${hub.reason}. Sign in again.`);
   });
@@ -80,6 +82,7 @@ export async function startConsole(session, me, signal, parts) {
 
   mountHeader(ui, session, parts.who, signal);
   parts.tabs.hidden = false;
+  parts.statusLine.hidden = false;
 
   const map = mountMap(ui, parts.map);
   ui.map = map;
@@ -110,10 +113,8 @@ export async function startConsole(session, me, signal, parts) {
     parts.emergencyBanner.hidden = !alarm;
     render(emergencyBanner(ui), parts.emergencyBanner);
     render(declareButton(ui), parts.declare);
-    render(
-      store.error ? html`<p class="notice error" role="alert">The console could not refresh: ${store.error} It tries again when the server is back.</p>` : "",
-      parts.pageError,
-    );
+    const refresh = store.error ? `The console could not refresh: ${store.error} It tries again when the server is back.` : "";
+    render(refresh ? html`<span role="alert" title=${refresh}>${refresh}</span>` : "", parts.pageError);
     render(
       VIEWS.filter(([, , only]) => !only || me.role === only).map(
         ([id, label]) => html`<button type="button" class="secondary" aria-current=${ui.view === id ? "page" : "false"}
@@ -130,13 +131,14 @@ export async function startConsole(session, me, signal, parts) {
       const notice = ui.notice
         ? html`<p class=${`notice ${ui.notice.ok ? "ok" : "error"}`} role=${ui.notice.ok ? "status" : "alert"}>${ui.notice.text}</p>`
         : "";
-      render(html`${notice}${RENDER[ui.view](ui)}`, parts.view);
+      render(html`<div class="view-notice">${notice}</div>${RENDER[ui.view](ui)}`, parts.view);
     }
   }
   store.addEventListener("change", draw);
   try {
     await store.start();
     if (signal.aborted) return;
+    startVenueClock(parts.who, signal);
     ui.go(ui.view);
     await map.setSite(store.site);
     if (signal.aborted) return;

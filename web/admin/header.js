@@ -2,6 +2,7 @@
 // and which server process serves the page.
 import { html, render } from "lit-html";
 import { addPasskey, passkeysAvailable } from "/lib/auth.js";
+import { venueNow, venueZone } from "/admin/venue.js";
 
 const SERVER_REFRESH_MS = 15000;
 
@@ -17,7 +18,8 @@ const SERVER_REFRESH_MS = 15000;
 export function mountHeader(ui, session, who, signal) {
   const account = session.account;
   render(
-    html`<span id="server-status" role="status"></span>
+    html`<span id="venue-clock"></span>
+      <span id="server-status" role="status"></span>
       <span>${account?.display_name || ui.me.name} <span class="badge">${ui.me.role}</span></span>
       ${ui.operate ? "" : html`<span id="read-only">Read only: a viewer watches, changes nothing.</span>`}
       <button type="button" @click=${() => session.signOut(false)}>Sign out</button>
@@ -39,6 +41,27 @@ export function mountHeader(ui, session, who, signal) {
   ui.hub.addEventListener("connect", showServer);
   const timer = setInterval(showServer, SERVER_REFRESH_MS);
   signal.addEventListener("abort", () => clearInterval(timer), { once: true });
+}
+
+/**
+ * The venue's clock in the header ("Venue time 14:02 (Europe/Madrid)"): every time the console
+ * shows is in that zone (web/admin/venue.js). Started once the zone is known (the site's
+ * answer); it turns with the minute until `signal` aborts.
+ * @param {HTMLElement} who  the header's part drawn by mountHeader
+ * @param {AbortSignal} signal
+ */
+export function startVenueClock(who, signal) {
+  const element = /** @type {HTMLElement | null} */ (who.querySelector("#venue-clock"));
+  if (!element) return;
+  let timer = 0;
+  const tick = () => {
+    if (signal.aborted) return;
+    render(html`Venue time <time>${venueNow()}</time> <span class="muted-light">(${venueZone()})</span>`, element);
+    element.title = `Every time on the console is the venue's (${venueZone()})`;
+    timer = window.setTimeout(tick, 60000 - (Date.now() % 60000) + 50);
+  };
+  tick();
+  signal.addEventListener("abort", () => clearTimeout(timer), { once: true });
 }
 
 /**

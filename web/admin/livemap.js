@@ -1,7 +1,7 @@
 // The console's map view controller: the live floor map (robots from robot_state, areas, doors,
 // elevators, evacuation rings), what a click selects, and the selected robot's planned path.
 // Its toolbar and details panel are drawn by web/admin/views/map.js.
-import { robotDoing } from "/admin/names.js";
+import { lastKnown, linkState, robotDoing } from "/admin/names.js";
 import { carText } from "/admin/views/building.js";
 import { FloorMap } from "/lib/map.js";
 
@@ -17,6 +17,7 @@ export function mountMap(ui, element) {
   const map = new FloorMap(element, (url) => api.get(url));
   map.describeRobot = (s) => robotDoing(store, s);
   map.evacuationOf = (name) => store.evacuation(name)?.state ?? null;
+  map.linkOf = (name) => linkState(store.robots.get(name));
   store.addEventListener("evacuation", () => map.restyleRobots());
   let pathKey = "";
   store.addEventListener("robot_state", (/** @type {CustomEvent} */ e) => {
@@ -30,7 +31,14 @@ export function mountMap(ui, element) {
       }
     }
   });
-  store.addEventListener("robot_offline", (/** @type {CustomEvent} */ e) => map.robotOffline(e.detail));
+  // A robot whose link came or went: drawn live again, or where it was last seen, as lost (one
+  // lost before the page loaded: at the node the server last knew it at).
+  store.addEventListener("robot_link", (/** @type {CustomEvent} */ e) => {
+    const robot = store.robots.get(e.detail);
+    const drawn = map.robots.get(e.detail);
+    if (drawn?.state) map.restyleRobot(e.detail);
+    else if (robot && !robot.online && lastKnown(robot)) map.showLastSeen(lastKnown(robot));
+  });
   store.addEventListener("lock", (/** @type {CustomEvent} */ e) => map.setAreaState(e.detail));
   store.addEventListener("door", (/** @type {CustomEvent} */ e) => map.setDoor(e.detail, store.doors.get(e.detail)));
   store.addEventListener("lift", (/** @type {CustomEvent} */ e) => showCar(store, map, e.detail));

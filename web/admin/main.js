@@ -42,6 +42,7 @@ const session = new StaffSession({
     render("", $("who")); // no name, role nor "Sign out" of a sign-in that ended
     render("", $("page-error"));
     $("tabs").hidden = true;
+    $("status-line").hidden = true;
     $("map-view").hidden = true;
     $("view").hidden = true;
     render("", $("alert-bar"));
@@ -61,6 +62,7 @@ const session = new StaffSession({
     declare: $("declare"),
     emergencyBanner: $("emergency-banner"),
     pageError: $("page-error"),
+    statusLine: $("status-line"),
   }),
 });
 session.boot();

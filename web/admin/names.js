@@ -27,6 +27,30 @@ export function elevatorName(site, id) {
   return lift?.name || `elevator ${id}`;
 }
 
+/** A robot's link as the console says it everywhere (Robots view, map, Fleet): "online";
+ * "hibernating" for a VDA 5050 3.x vehicle asleep (offline to the fleet, not lost); "lost" for
+ * one seen before and offline now; "never connected". */
+export function linkState(robot) {
+  if (!robot) return "never connected";
+  if (robot.online) return "online";
+  if (robot.state?.navigation === "hibernating") return "hibernating";
+  return robot.state || robot.info?.last_seen ? "lost" : "never connected";
+}
+
+/** Where the console draws a robot: its last robot_state, else (not heard from since the page
+ * loaded) the node the server last knew it at; null when there is neither. */
+export function lastKnown(robot) {
+  if (robot.state) return robot.state;
+  const node = robot.info?.node;
+  return node && robot.info?.last_seen ? { robot: robot.name, node, floor: null, x: 0, y: 0, theta: 0, mode: "offline", battery: robot.info.battery } : null;
+}
+
+/** A door's state as its sensor last said it, the same words on every view. */
+export function doorState(store, id) {
+  if (!store.doors.has(id)) return "not read yet";
+  return store.doors.get(id) ? "open" : "closed";
+}
+
 /** A node as a person would name the place: "Welcome hall", "charging station station_a",
  * "elevator lift", "door door_gallery", "near Roman mosaics" (the floor is said beside it). */
 export function placeName(site, nodeId) {
@@ -53,6 +77,30 @@ export function placeName(site, nodeId) {
     }
   }
   return best ? `near ${best.name || best.id}` : `${nodeId} (${floorName(site, node.floor)})`;
+}
+
+const AT_NODE_M = 0.6; // closer than this to a node, a robot is at it (the map's "together")
+
+/** Where a robot is, in the site's words, from its pose when it has one: at the node it stands
+ * on ("Welcome hall"), else near the node it is closest to ("near elevator lift"); from its
+ * last node when it reported none yet. Its last node alone said "Welcome hall" all the way to
+ * the lift, 6 m on. */
+export function robotPlace(site, s) {
+  if (!s) return "—";
+  if (!s.floor || typeof s.x !== "number" || typeof s.y !== "number") return placeName(site, s.node);
+  let best = null;
+  let bestD = Infinity;
+  for (const n of site.nodes ?? []) {
+    if (n.floor !== s.floor) continue;
+    const d = Math.hypot(n.x - s.x, n.y - s.y);
+    if (d < bestD) {
+      best = n;
+      bestD = d;
+    }
+  }
+  if (!best) return placeName(site, s.node);
+  const place = placeName(site, best.id);
+  return bestD < AT_NODE_M || place.startsWith("near ") ? place : `near ${place}`;
 }
 
 /** What a task does, in the site's words: "Tour: Highlights", "Go to: Roman mosaics". */
@@ -112,6 +160,11 @@ export function waitingFor(store, s) {
   return `waiting for ${lift ? elevatorName(site, lift.id) : "the elevator"}`;
 }
 
+/** "at Welcome hall", or "near Roman mosaics" for a place that is near one ("at near" was said). */
+export function atPlace(place) {
+  return place.startsWith("near ") ? place : `at ${place}`;
+}
+
 /** A robot's evacuation while a fire alarm holds it, as staff read it ("evacuation: moving to
  * its safe spot Charging station B", "evacuation: stuck near Roman mosaics: the way is
  * blocked"); null when no alarm holds it (docs/emergency.md, docs/console.md). */
@@ -120,25 +173,27 @@ export function evacuationText(store, name) {
   if (!e) return null;
   const site = store.site;
   const spot = e.safe_spot ? placeName(site, e.safe_spot) : null;
-  const at = e.node ? placeName(site, e.node) : "an unknown place";
+  const at = e.node ? atPlace(placeName(site, e.node)) : "at an unknown place";
   switch (e.state) {
     case "ordered":
       return spot ? `evacuation: ordered to its safe spot ${spot}` : `evacuation: no safe spot${e.why ? ` (${e.why})` : ""}`;
     case "stopped":
-      return `evacuation: stopped at ${at}`;
+      return `evacuation: stopped ${at}`;
     case "moving":
       return spot ? `evacuation: moving to its safe spot ${spot}` : "evacuation: moving to its safe spot";
     case "safe":
-      return `evacuation: safe at ${at}`;
+      return `evacuation: safe ${at}`;
     case "stuck":
-      return `evacuation: stuck at ${at}${e.why ? `: ${e.why}` : ""}`;
+      return `evacuation: stuck ${at}${e.why ? `: ${e.why}` : ""}`;
     default:
       return `evacuation: ${e.state}`;
   }
 }
 
 /** A robot's mode as the console says it: its evacuation during an alarm, the wait when it
- * waits, else its mode. */
+ * waits, else its mode; "out of service" first when staff took it out (the map's tooltip and
+ * the Fleet view said "idle" alone, as for a robot free to take a task). */
 export function robotDoing(store, s) {
-  return evacuationText(store, s?.robot) ?? waitingFor(store, s) ?? s?.mode ?? "—";
+  const doing = evacuationText(store, s?.robot) ?? waitingFor(store, s) ?? s?.mode ?? "—";
+  return store.robots?.get(s?.robot)?.info?.out_of_service ? `out of service, ${doing}` : doing;
 }

@@ -1,5 +1,6 @@
 // The console's live state: a REST snapshot at start (and after every reconnect), then hub
 // messages. Views read it; "change" events (at most one per animation frame) re-render them.
+import { setVenueZone } from "/admin/venue.js";
 
 const MAX_EVENTS = 20000;
 const EVENT_PAGE = 1000;
@@ -113,22 +114,25 @@ export class Store extends EventTarget {
       // A state the robot sent before its link dropped may be delivered after the drop was
       // announced: it must not bring the robot back online on the page.
       if (robot.downAt && m.timestamp <= robot.downAt) return;
+      const online = robot.online;
       robot.state = m.payload;
       robot.online = m.payload.mode !== "offline";
       this.emit("robot_state", m);
+      if (online !== robot.online) this.emit("robot_link", robot.name);
     });
     on("robot_connected", (m) => {
       const robot = this.robot(m.payload.robot);
       robot.online = true;
       robot.downAt = 0;
       robot.links += 1;
+      this.emit("robot_link", robot.name);
     });
     on("robot_disconnected", (m) => {
       const robot = this.robot(m.payload.robot);
       robot.online = false;
       robot.downAt = m.timestamp;
       robot.links += 1;
-      this.emit("robot_offline", m.payload.robot);
+      this.emit("robot_link", robot.name);
     });
     on("robot_service", (m) => {
       this.#live(`service:${m.payload.robot}`);
@@ -202,6 +206,7 @@ export class Store extends EventTarget {
       this.api.get("/api/site/map"),
       this.api.get("/api/building/simulator"),
     ]);
+    setVenueZone(site.timezone); // before the first view draws a time
     this.site = site.site;
     this.simulator = simulator.configured;
   }
@@ -256,6 +261,7 @@ export class Store extends EventTarget {
       // A link event that came in while the snapshot was fetched is newer than it.
       if (robot.links === (links.get(info.name) ?? 0)) robot.online = info.online;
       if (info.robocan && !(robot.robocan?.at > info.robocan.at)) robot.robocan = info.robocan;
+      this.emit("robot_link", info.name);
     }
     for (const view of locks) {
       if (!unchanged(`lock:${view.area}`)) continue;

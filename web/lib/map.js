@@ -5,7 +5,8 @@
 import * as L from "leaflet";
 
 const AREA_MARGIN_M = 1.2;
-const SPREAD_PX = 22; // robots standing together are drawn this far from their common place
+const RING_PX = 34; // robots standing together: each ring of spots around their place this much further out
+const RING_SPOTS = 6; // spots on the first ring (the k-th ring has k times as many)
 const TOGETHER_M = 0.6; // closer than this, two robots would hide each other
 /** Navigator states in which a robot stands and waits for something (robot_state.navigation). */
 export const WAITING = new Set(["waiting_area", "waiting_door", "waiting_elevator", "door_blocked"]);
@@ -23,6 +24,29 @@ function el(tag, className, text) {
   if (className) node.className = className;
   if (text !== undefined) node.textContent = text;
   return node;
+}
+
+/**
+ * Where spot `n` of a place is, in rings (units of RING_PX, east and north positive): spot 0
+ * is the place itself; ring k has RING_SPOTS * k spots, filled east, west, then between.
+ * @param {number} n
+ * @returns {[number, number]}
+ */
+export function spotOffset(n) {
+  if (!n) return [0, 0];
+  let ring = 1;
+  let first = 1;
+  while (n >= first + RING_SPOTS * ring) {
+    first += RING_SPOTS * ring;
+    ring += 1;
+  }
+  const count = RING_SPOTS * ring;
+  const i = n - first;
+  // East, west, then each half of the ring in turn: 0, 180, 60, 240, 120, 300 degrees (ring 1).
+  const half = count / 2;
+  const step = Math.floor(i / 2) + (i % 2) * half;
+  const angle = (2 * Math.PI * step) / count;
+  return [ring * Math.cos(angle), ring * Math.sin(angle)];
 }
 
 export class FloorMap extends EventTarget {
@@ -67,6 +91,17 @@ export class FloorMap extends EventTarget {
      * @type {((robot: string) => string | null) | null}
      */
     this.evacuationOf = null;
+    /**
+     * Optional: robot name -> its link as the page says it ("online", "lost", "hibernating").
+     * Given, a robot that is not online stays on the map where it was last seen, drawn as not
+     * live (grey, no heading, its label says why); without it (a replay) an offline robot
+     * leaves the map.
+     * @type {((robot: string) => string) | null}
+     */
+    this.linkOf = null;
+    /** "x,y" of a place where robots stand together -> {at, spots: robot name -> spot} */
+    this.places = new Map();
+    this.arrivals = 0;
     /** @type {Map<string, any> | null} floor id -> the bounds of its plan image, once drawn */
     this.planBounds = null;
     this.map.on("zoomend", () => this.#spread());
@@ -226,8 +261,9 @@ export class FloorMap extends EventTarget {
     for (const door of site.doors) {
       const n = at(door.node);
       if (!n) continue;
-      const mark = L.circleMarker([n.y, n.x], { radius: 8, className: "map-door closed", pane: "doors" });
-      mark.bindTooltip(`door ${door.id}: closed`, { direction: "bottom" });
+      // Grey until its sensor is read: a door drawn red before anything was read said "closed".
+      const mark = L.circleMarker([n.y, n.x], { radius: 8, className: "map-door unknown", pane: "doors" });
+      mark.bindTooltip(`door ${door.id}: not read yet`, { direction: "bottom" });
       mark.on("click", () => this.#select("door", door.id));
       mark.addTo(this.floorLayers.get(n.floor));
       this.doorMarks.set(door.id, mark);
@@ -344,6 +380,15 @@ export class FloorMap extends EventTarget {
     if (!this.frame) this.frame = requestAnimationFrame(() => this.#drawPending());
   }
 
+  /**
+   * A robot's last known place (the snapshot's, for a robot not online since the page loaded):
+   * drawn as a state is, not measured as one.
+   * @param {any} state  a robot_state payload
+   */
+  showLastSeen(state) {
+    this.updateRobot(/** @type {any} */ ({ type: "robot_state", payload: state, timestamp: 0 }));
+  }
+
   #drawPending() {
     this.frame = 0;
     const now = Date.now();
@@ -352,6 +397,7 @@ export class FloorMap extends EventTarget {
       if (!robot) robot = this.#newRobot(name);
       robot.state = message.payload;
       this.#placeRobot(name, robot);
+      if (!message.timestamp) continue; // a last known place from the snapshot, not a live state
       this.latencies[this.latencyCount % this.latencies.length] = now - message.timestamp * 1000;
       this.latencyCount += 1;
     }
@@ -371,7 +417,15 @@ export class FloorMap extends EventTarget {
       const element = marker.getElement();
       element.replaceChildren(parts.body);
       element.setAttribute("aria-label", `robot ${name}`);
+      // Leaflet's marker is focusable (role button) but answers only a keypress of Enter, which
+      // a focused marker did not get here: Enter and Space select it, as on any button.
+      element.addEventListener("keydown", (event) => {
+        if (event.key !== "Enter" && event.key !== " ") return;
+        event.preventDefault(); // no page scroll (Space), no second select from Leaflet's keypress
+        this.#select("robot", name);
+      });
       robot.cls = "";
+      robot.link = "";
       this.#style(robot);
     });
     this.robots.set(name, robot);
@@ -383,11 +437,26 @@ export class FloorMap extends EventTarget {
     if (!s) return;
     const element = robot.marker.getElement();
     if (!element) return;
+    const link = this.linkOf?.(s.robot) ?? "online";
+    if (link !== robot.link) {
+      robot.link = link;
+      const away = link === "online" ? "" : ` (${link})`;
+      robot.parts.label.textContent = `${s.robot}${away}`;
+      element.setAttribute("aria-label", `robot ${s.robot}${away}`);
+    }
+    const selected = robot.selected ? " selected" : "";
+    if (link !== "online") {
+      // Not live: where it was last seen, grey, no heading and no battery colour.
+      const cls = `robot-body lost${selected}`;
+      if (cls !== robot.cls) robot.parts.body.className = robot.cls = cls;
+      element.title = `${s.robot}: ${link}, shown where it was last seen`;
+      return;
+    }
     const waiting = WAITING.has(s.navigation) ? ` waiting nav-${s.navigation}` : "";
     // During a fire alarm the ring says the robot's evacuation (docs/emergency.md).
     const evacuation = this.evacuationOf?.(s.robot);
     const evac = evacuation ? ` evac evac-${evacuation}` : "";
-    const cls = `robot-body mode-${s.mode}${waiting}${evac} ${batteryClass(s.battery)}${robot.selected ? " selected" : ""}`;
+    const cls = `robot-body mode-${s.mode}${waiting}${evac} ${batteryClass(s.battery)}${selected}`;
     if (cls !== robot.cls) {
       robot.parts.body.className = cls;
       robot.cls = cls;
@@ -410,7 +479,8 @@ export class FloorMap extends EventTarget {
     const s = robot.state;
     if (!s) return;
     const pose = this.pose(s);
-    const visible = pose.floor === this.floor && s.mode !== "offline";
+    // With the page's links known (the console), a robot offline stays where it was last seen.
+    const visible = pose.floor === this.floor && (this.linkOf !== null || s.mode !== "offline");
     robot.at = visible ? [pose.y, pose.x] : null;
     if (visible) {
       robot.marker.setLatLng(robot.at);
@@ -425,18 +495,29 @@ export class FloorMap extends EventTarget {
     }
   }
 
-  /** Robots standing at one place are drawn around it (in name order), each visible and
-   * clickable; a robot alone is drawn where it is. */
+  /** Robots standing at one place are drawn around it, each visible and clickable: the one
+   * that stood there first at the place itself, each next one at the first free spot of rings
+   * around it (east, west, then the diagonals). A robot keeps its spot while it stays there,
+   * so one arriving or leaving never moves the others (a click aimed at one still lands on
+   * it); a robot left alone there is drawn where it is. */
   #spread() {
     const groups = new Map();
     for (const [name, robot] of this.robots) {
-      if (!robot.shown || !robot.at) continue;
+      if (!robot.shown || !robot.at) {
+        robot.placeKey = null; // back on the map, it comes to its place anew
+        continue;
+      }
       const key = `${Math.round(robot.at[1] / TOGETHER_M)},${Math.round(robot.at[0] / TOGETHER_M)}`;
+      if (robot.placeKey !== key) {
+        robot.placeKey = key;
+        robot.arrived = ++this.arrivals; // the order robots came to their place in
+      }
       if (!groups.has(key)) groups.set(key, []);
       groups.get(key).push([name, robot]);
     }
-    const metres = SPREAD_PX / 2 ** this.map.getZoom();
-    for (const group of groups.values()) {
+    for (const key of this.places.keys()) if ((groups.get(key)?.length ?? 0) < 2) this.places.delete(key);
+    const metres = RING_PX / 2 ** this.map.getZoom();
+    for (const [key, group] of groups) {
       if (group.length === 1) {
         const robot = group[0][1];
         if (robot.spread) {
@@ -445,17 +526,34 @@ export class FloorMap extends EventTarget {
         }
         continue;
       }
-      group.sort((a, b) => a[0].localeCompare(b[0]));
-      const [y, x] = group[0][1].at;
-      group.forEach(([, robot], i) => {
-        const angle = (2 * Math.PI * i) / group.length + Math.PI / 2;
+      let place = this.places.get(key);
+      // Newcomers in the order they came (the first one there keeps the place: it does not
+      // move), then by name.
+      const coming = group.filter(([name]) => !place?.spots.has(name))
+        .sort((a, b) => a[1].arrived - b[1].arrived || a[0].localeCompare(b[0]));
+      if (!place) {
+        place = { at: coming[0][1].at, spots: new Map() };
+        this.places.set(key, place);
+      }
+      const here = new Set(group.map(([name]) => name));
+      for (const name of [...place.spots.keys()]) if (!here.has(name)) place.spots.delete(name);
+      const taken = new Set(place.spots.values());
+      let free = 0;
+      for (const [name] of coming) {
+        while (taken.has(free)) free += 1;
+        place.spots.set(name, free);
+        taken.add(free);
+      }
+      const [y, x] = place.at;
+      for (const [name, robot] of group) {
+        const [dx, dy] = spotOffset(place.spots.get(name));
         robot.spread = true;
-        robot.marker.setLatLng([y + metres * Math.sin(angle), x + metres * Math.cos(angle)]);
-      });
+        robot.marker.setLatLng([y + metres * dy, x + metres * dx]);
+      }
     }
   }
 
-  /** Show a robot as offline (removed from the map until it reports again). */
+  /** Take a robot off the map until it reports again (a replay: a robot gone or not there yet). */
   robotOffline(name) {
     const robot = this.robots.get(name);
     if (robot?.state) {
@@ -469,6 +567,14 @@ export class FloorMap extends EventTarget {
    * alarm's evacuation). */
   restyleRobots() {
     for (const robot of this.robots.values()) this.#style(robot);
+  }
+
+  /** Draw one robot again (its link came or went: live, or where it was last seen). */
+  restyleRobot(name) {
+    const robot = this.robots.get(name);
+    if (!robot?.state) return;
+    this.#placeRobot(name, robot);
+    this.#spread();
   }
 
   selectRobot(name) {

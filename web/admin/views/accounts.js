@@ -5,6 +5,7 @@
 // Your passkeys (anyone signed in with an account): list them, remove one.
 import { html } from "lit-html";
 import { confirmAction } from "/lib/confirm.js";
+import { dateTime } from "/admin/venue.js";
 
 const ROLES = [
   ["admin", "admin: everything, accounts too"],
@@ -15,7 +16,7 @@ const ROLES = [
 ];
 
 function when(at) {
-  return at ? new Date(at * 1000).toLocaleString() : "never";
+  return at ? dateTime(at) : "never";
 }
 
 async function reload(ui) {

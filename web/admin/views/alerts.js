@@ -1,7 +1,7 @@
 // Alerts: the bar shown on every view while alerts are open, and the Alerts view. One row per
 // cause (kind and subject): seen again it counts; it resolves itself when its cause is gone.
 import { html } from "lit-html";
-import { clock } from "/lib/dom.js";
+import { clock } from "/admin/venue.js";
 
 function ack(ui, alert) {
   return ui.act(`Acknowledge ${alert.kind}`, () => ui.api.post(`/api/alerts/${encodeURIComponent(alert.id)}/ack`));
@@ -30,7 +30,8 @@ function rank(a) {
 export function alertBar(ui, open) {
   if (!open.length) return "";
   const latest = open[0];
-  return html`<span>${open.length} open alert${open.length > 1 ? "s" : ""}: ${latest.message}${times(latest)}</span>
+  const text = `${open.length} open alert${open.length > 1 ? "s" : ""}: ${latest.message}${times(latest)}`;
+  return html`<span class="alert-text" title=${text}>${text}</span>
     ${ui.operate ? html`<button type="button" class="danger" @click=${() => ack(ui, latest)}>Acknowledge</button>` : ""}
     ${ui.operate && open.length > 1 ? html`<button type="button" class="danger" @click=${() => ackAll(ui)}>Acknowledge all</button>` : ""}
     <button type="button" class="secondary" @click=${() => ui.go("alerts")}>All alerts</button>`;

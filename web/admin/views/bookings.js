@@ -3,27 +3,43 @@
 // served are flagged with the reason (docs/console.md, "Bookings"; docs/server.md, "Bookings").
 import { html } from "lit-html";
 import { formText } from "/lib/dom.js";
+import { dateTime, venueDay } from "/admin/venue.js";
 
 const DAYS = [["mon", "Mon"], ["tue", "Tue"], ["wed", "Wed"], ["thu", "Thu"], ["fri", "Fri"], ["sat", "Sat"], ["sun", "Sun"]];
 const EVERY = { once: "once", daily: "every day", weekly: "every week" };
 
 const isoDay = (date) => new Date(date.getTime() - date.getTimezoneOffset() * 60000).toISOString().slice(0, 10);
 
+/** How old the day's listing may get while the view is shown: a robot reserved, a booking
+ * started or missed, one made on another screen come with no message of their own (the view
+ * loaded once, at its first opening, and said "booked" long after the tour started). */
+const REFRESH_MS = 10000;
+
 function state(ui) {
   if (!ui.bookings) {
-    ui.bookings = { day: isoDay(new Date()), data: null, error: null, every: "once", moving: null, history: null };
-    load(ui);
+    ui.bookings = { day: venueDay(), data: null, error: null, every: "once", moving: null, history: null, loadedAt: 0, loading: 0 };
   }
-  return ui.bookings;
+  const b = ui.bookings;
+  if (!b.loading && Date.now() - b.loadedAt > REFRESH_MS) load(ui); // drawn: shown now
+  return b;
 }
 
+/** Read the chosen day's bookings; an answer for a day no longer chosen is dropped. */
 async function load(ui) {
   const b = ui.bookings;
+  const day = b.day;
+  const asked = (b.loading = (b.asked = (b.asked ?? 0) + 1));
   try {
-    b.data = await ui.api.get(`/api/bookings?start=${encodeURIComponent(b.day)}`);
-    b.error = null;
+    const data = await ui.api.get(`/api/bookings?start=${encodeURIComponent(day)}`);
+    if (day === b.day) {
+      b.data = data;
+      b.error = null;
+    }
   } catch (err) {
     b.error = err.message;
+  } finally {
+    if (b.loading === asked) b.loading = 0;
+    b.loadedAt = Date.now();
   }
   ui.draw();
 }
@@ -151,7 +167,7 @@ function historyView(b) {
     <table aria-label="Booking history">
       <thead><tr><th scope="col">When</th><th scope="col">What</th><th scope="col">By</th><th scope="col">Detail</th></tr></thead>
       <tbody>${h.rows.map((r) => html`<tr>
-        <td>${new Date(r.at * 1000).toLocaleString()}</td><td>${r.action}</td><td>${r.by}</td><td>${detail(r.detail)}</td>
+        <td>${dateTime(r.at)}</td><td>${r.action}</td><td>${r.by}</td><td>${detail(r.detail)}</td>
       </tr>`)}</tbody>
     </table>
   </section>`;

@@ -2,7 +2,7 @@
 // each car is, from the server's elevator_state); the building simulator's buttons when one is
 // configured; the fire alarm's section (views/emergency.js).
 import { html } from "lit-html";
-import { floorName } from "/admin/names.js";
+import { doorState, floorName } from "/admin/names.js";
 import { emergencySection } from "/admin/views/emergency.js";
 
 const BITS = new Set(["discrete_input", "coil"]);
@@ -44,10 +44,7 @@ export function buildingView(ui) {
     <h3>Doors</h3>
     <table aria-label="Doors">
       <thead><tr><th scope="col">Door</th><th scope="col">Node</th><th scope="col">Floor</th><th scope="col">State</th></tr></thead>
-      <tbody>${site.doors.map((d) => {
-        const open = ui.store.doors.get(d.id);
-        return html`<tr><td>${d.id}</td><td>${d.node}</td><td>${floorName(site, site.nodes.find((n) => n.id === d.node)?.floor)}</td><td data-door=${d.id}>${open === undefined ? "unknown" : open ? "open" : "closed"}</td></tr>`;
-      })}</tbody>
+      <tbody>${site.doors.map((d) => html`<tr><td>${d.id}</td><td>${d.node}</td><td>${floorName(site, site.nodes.find((n) => n.id === d.node)?.floor)}</td><td data-door=${d.id}>${doorState(ui.store, d.id)}</td></tr>`)}</tbody>
     </table>
     <h3>Elevators</h3>
     <table aria-label="Elevators">

@@ -4,7 +4,8 @@
 // Building view's section: declare for a zone, raise and clear the simulator's alarm input.
 import { html } from "lit-html";
 import { confirmAction } from "/lib/confirm.js";
-import { clock, inputValue } from "/lib/dom.js";
+import { inputValue } from "/lib/dom.js";
+import { clock } from "/admin/venue.js";
 import { evacuationText, floorName } from "/admin/names.js";
 
 /** "the whole site", "floor Ground floor", "areas corridor, gallery". */

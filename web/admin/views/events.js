@@ -1,8 +1,8 @@
 // Event log: live, filtered by robot, person, type and severity, downloadable as JSON lines
 // (admins: the audit export as CSV, docs/security.md "Audit").
 import { html } from "lit-html";
-import { clock } from "/lib/dom.js";
-import { placeName, poiName, taskName, tourName } from "/admin/names.js";
+import { clock } from "/admin/venue.js";
+import { floorName, placeName, poiName, taskName, tourName } from "/admin/names.js";
 
 const ERRORS = new Set(["robot_fault", "battery_panic", "task_failed", "robot_disconnected", "area_force_released", "alert_raised"]);
 const WARNINGS = new Set([
@@ -28,11 +28,16 @@ function personOf(row) {
   return row.data?.account ?? row.data?.by ?? null;
 }
 
+/** A row's type for the filter: its kind's first word. A task's progress is logged as
+ * "task_point 2/5 arrived" (and a handover as "task_handover: R1 at the visitor's stop 2"):
+ * one type each, not one per stop and stage (the filter listed every one of the day). */
+const typeOf = (row) => row.kind.split(/[\s:]/)[0];
+
 function filtered(ui) {
   const f = ui.eventFilter ?? {};
   return ui.store.events.filter(
     (row) => (!f.robot || robotOf(ui, row) === f.robot) && (!f.person || personOf(row) === f.person)
-      && (!f.kind || row.kind === f.kind) && (!f.severity || severity(row) === f.severity),
+      && (!f.kind || typeOf(row) === f.kind) && (!f.severity || severity(row) === f.severity),
   );
 }
 
@@ -60,7 +65,7 @@ function download(rows) {
   setTimeout(() => URL.revokeObjectURL(url), 1000);
 }
 
-/** The row's data, ids named as the site names them (task, node, point, tour). */
+/** The row's data, ids named as the site names them (task, node, point, tour, floor). */
 function summary(ui, row) {
   const d = row.data ?? {};
   const site = ui.store.site;
@@ -72,8 +77,9 @@ function summary(ui, row) {
     node: (v) => ["at", placeName(site, v)],
     poi: (v) => ["point", poiName(site, v)],
     tour: (v) => ["tour", tourName(site, v)],
+    floor: (v) => ["floor", floorName(site, v)], // "First floor", as the other views say it
     // A time the sender stamped (node_reached: the robot's clock), not a place.
-    at: (v) => (typeof v === "number" ? ["reported", new Date(v * 1000).toLocaleTimeString()] : ["at", v]),
+    at: (v) => (typeof v === "number" ? ["reported", clock(v)] : ["at", v]),
   };
   return Object.entries(d)
     .filter(([, v]) => v !== null && typeof v !== "object")
@@ -86,7 +92,7 @@ export function eventsView(ui) {
   ui.eventFilter ??= {};
   const f = ui.eventFilter;
   const set = (key) => (e) => { f[key] = e.target.value; ui.draw(); };
-  const kinds = [...new Set(ui.store.events.map((r) => r.kind))].sort();
+  const kinds = [...new Set(ui.store.events.map(typeOf))].sort();
   const people = [...new Set(ui.store.events.map(personOf).filter((p) => typeof p === "string"))].sort();
   const rows = filtered(ui);
   const shown = rows.slice(-200).reverse();

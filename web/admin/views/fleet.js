@@ -2,14 +2,17 @@
 // a door or call an elevator by hand) and every floor at once, each robot where it is.
 import { html, svg } from "lit-html";
 import { confirmAction } from "/lib/confirm.js";
-import { clock, inputValue } from "/lib/dom.js";
+import { inputValue } from "/lib/dom.js";
+import { clock } from "/admin/venue.js";
 import { WAITING } from "/lib/map.js";
-import { doorName, elevatorName, floorName, placeName, robotDoing } from "/admin/names.js";
+import { atPlace, doorName, doorState, elevatorName, floorName, lastKnown, linkState, robotDoing, robotPlace } from "/admin/names.js";
 import { carText } from "/admin/views/building.js";
 
 const PAD_M = 2;
 const LABEL_M = 12; // room on the right for the names of the points there
 const PX_PER_M = 16; // every floor at one scale
+/** A door's fill and edge by its state (doorState): green open, red closed, grey not read yet. */
+const DOOR_COLOURS = { open: ["#a8dab5", "#1b7a3a"], closed: ["#f4b6bf", "#b00020"], "not read yet": ["#e2e4e8", "#5f6368"] };
 
 function fleetControls(ui) {
   const fleet = ui.store.fleet;
@@ -56,7 +59,6 @@ function buildingControls(ui) {
     const floor = inputValue(`call-${lift.id}`);
     return ui.act(`Call ${elevatorName(site, lift.id)} to ${floorName(site, floor)}`, () => ui.api.post(`/api/building/elevators/${encodeURIComponent(lift.id)}/call`, { floor }));
   };
-  const doorState = (id) => (ui.store.doors.has(id) ? (ui.store.doors.get(id) ? "open" : "closed") : "not read yet");
   // As the Building view says it: "moving to First floor (last at Ground floor)" while it
   // moves, not "at Ground floor" (the floor it left).
   const car = (id) => carText(ui.store.lifts.get(id), site);
@@ -64,7 +66,7 @@ function buildingControls(ui) {
     <h3 id="by-hand-title">Doors and elevators by hand</h3>
     <table aria-label="Doors">
       <thead><tr><th scope="col">Door</th><th scope="col">Where</th><th scope="col">State</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
-      <tbody>${(site.doors ?? []).map((d) => html`<tr data-door-row=${d.id}><td>${doorName(site, d.id)}</td><td>${floorName(site, site.nodes.find((n) => n.id === d.node)?.floor)}</td><td>${doorState(d.id)}</td>
+      <tbody>${(site.doors ?? []).map((d) => html`<tr data-door-row=${d.id}><td>${doorName(site, d.id)}</td><td>${floorName(site, site.nodes.find((n) => n.id === d.node)?.floor)}</td><td>${doorState(ui.store, d.id)}</td>
         <td class="actions">${ui.operate ? html`<button type="button" @click=${() => door(d.id, "open")}>Open ${doorName(site, d.id)}</button>
           <button type="button" class="secondary" @click=${() => door(d.id, "close")}>Close ${doorName(site, d.id)}</button>` : ""}</td></tr>`)}</tbody>
     </table>
@@ -79,6 +81,7 @@ function buildingControls(ui) {
 }
 
 function robotColour(ui, s) {
+  if (!ui.store.robots.get(s.robot)?.online) return "#e2e4e8"; // lost: where it was last seen
   const evacuation = ui.store.evacuation(s.robot);
   if (evacuation) return evacuation.state === "safe" ? "#1b7a3a" : evacuation.state === "stuck" ? "#b00020" : "#b35900";
   if (s.mode === "fault" || s.navigation === "door_blocked") return "#b00020";
@@ -86,6 +89,8 @@ function robotColour(ui, s) {
   if (s.mode === "busy") return "#0b57d0";
   return "#1b7a3a";
 }
+
+const robotCount = (n) => `${n} robot${n === 1 ? "" : "s"}`;
 
 /** One floor, drawn from the site's coordinates (metres, y up), with every robot on it. */
 function floorPlan(ui, floor) {
@@ -100,21 +105,27 @@ function floorPlan(ui, floor) {
   const minY = Math.min(...ys) - PAD_M;
   const maxY = Math.max(...ys) + PAD_M;
   const Y = (y) => maxY + minY - y; // north up
-  const robots = [...ui.store.robots.values()].filter((r) => r.online && r.state && ui.map.pose(r.state).floor === floor.id);
+  // Online robots where they are; a lost one (as the map draws it) where it was last seen.
+  const robots = [...ui.store.robots.values()]
+    .map((r) => [r, lastKnown(r)])
+    .filter(([r, s]) => s && (r.online || linkState(r) !== "never connected") && ui.map.pose(s).floor === floor.id);
   const placed = new Map();
-  const robotMarks = robots.sort((a, b) => a.name.localeCompare(b.name)).map((r) => {
-    const p = ui.map.pose(r.state);
+  const robotMarks = robots.sort((a, b) => a[0].name.localeCompare(b[0].name)).map(([r, s]) => {
+    const p = ui.map.pose(s);
     const key = `${Math.round(p.x / 0.6)},${Math.round(p.y / 0.6)}`;
     const k = placed.get(key) ?? 0;
     placed.set(key, k + 1);
     const x = p.x + k * 1.4;
-    const label = `${r.name}: ${robotDoing(ui.store, r.state)}, at ${placeName(site, r.state.node)}`;
-    return svg`<g class="overview-robot" data-robot=${r.name} role="img" aria-label=${label}><title>${label}</title>
-      <circle cx=${x} cy=${Y(p.y)} r="0.8" fill=${robotColour(ui, r.state)} stroke="#1a1a1a" stroke-width="0.15"></circle>
-      <text x=${x} y=${Y(p.y) - 1.1} text-anchor="middle" font-size="1.1" font-weight="700">${r.name}</text></g>`;
+    const link = linkState(r);
+    const label = r.online
+      ? `${r.name}: ${robotDoing(ui.store, s)}, ${atPlace(robotPlace(site, s))}`
+      : `${r.name}: ${link}, last seen ${atPlace(robotPlace(site, s))}`;
+    return svg`<g class="overview-robot" data-robot=${r.name} data-link=${link} role="img" aria-label=${label}><title>${label}</title>
+      <circle cx=${x} cy=${Y(p.y)} r="0.8" fill=${robotColour(ui, s)} stroke=${r.online ? "#1a1a1a" : "#5f6368"} stroke-width="0.15" stroke-dasharray=${r.online ? "none" : "0.3 0.2"}></circle>
+      <text x=${x} y=${Y(p.y) - 1.1} text-anchor="middle" font-size="1.1" font-weight="700" fill=${r.online ? "#1a1a1a" : "#5f6368"}>${r.online ? r.name : `${r.name} (${link})`}</text></g>`;
   });
   return html`<figure class="overview-floor" data-floor=${floor.id}>
-    <figcaption>${floor.name || floor.id} · ${robots.length} robot${robots.length === 1 ? "" : "s"}</figcaption>
+    <figcaption>${floor.name || floor.id} · ${robotCount(robots.filter(([r]) => r.online).length)}${robots.some(([r]) => !r.online) ? `, ${robots.filter(([r]) => !r.online).length} not online` : ""}</figcaption>
     <svg viewBox=${`${minX} ${minY} ${maxX - minX} ${maxY - minY}`} style=${`width: ${Math.round((maxX - minX) * PX_PER_M)}px`} role="group" aria-label=${`Floor ${floor.name || floor.id}`}>
       ${site.edges.filter((e) => byId.has(e.a) && byId.has(e.b)).map((e) => svg`<line x1=${byId.get(e.a).x} y1=${Y(byId.get(e.a).y)} x2=${byId.get(e.b).x} y2=${Y(byId.get(e.b).y)} stroke="#9aa0a6" stroke-width="0.25"></line>`)}
       ${(site.pois ?? []).filter((p) => byId.has(p.node)).map((p) => {
@@ -123,8 +134,9 @@ function floorPlan(ui, floor) {
       })}
       ${(site.doors ?? []).filter((d) => byId.has(d.node)).map((d) => {
         const n = byId.get(d.node);
-        const open = ui.store.doors.get(d.id);
-        return svg`<rect x=${n.x - 0.5} y=${Y(n.y) - 0.5} width="1" height="1" fill=${open ? "#a8dab5" : "#f4b6bf"} stroke=${open ? "#1b7a3a" : "#b00020"} stroke-width="0.2"><title>${doorName(site, d.id)}: ${open ? "open" : "closed"}</title></rect>`;
+        const state = doorState(ui.store, d.id);
+        const [fill, stroke] = DOOR_COLOURS[state];
+        return svg`<rect x=${n.x - 0.5} y=${Y(n.y) - 0.5} width="1" height="1" fill=${fill} stroke=${stroke} stroke-width="0.2"><title>${doorName(site, d.id)}: ${state}</title></rect>`;
       })}
       ${(site.elevators ?? []).flatMap((e) => e.stops.filter((st) => byId.has(st.node)).map((st) => {
         const n = byId.get(st.node);

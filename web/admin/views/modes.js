@@ -4,7 +4,8 @@
 // lift that did not come) shows here too, and can be reopened once checked. The closed nodes
 // are drawn on the map.
 import { html } from "lit-html";
-import { clock, formText } from "/lib/dom.js";
+import { formText } from "/lib/dom.js";
+import { clock, venueSeconds } from "/admin/venue.js";
 
 const KINDS = [
   ["area", "Gallery (restricted area)"],
@@ -66,9 +67,9 @@ function targets(site, kind) {
   return [];
 }
 
-/** A datetime-local field's value as Unix seconds (empty: null). */
+/** A datetime-local field's value, a time at the venue, as Unix seconds (empty: null). */
 function seconds(value) {
-  return value ? new Date(value).getTime() / 1000 : null;
+  return venueSeconds(String(value ?? ""));
 }
 
 function closeForm(ui, modes) {

@@ -4,7 +4,7 @@
 // delivery log with its failures (docs/console.md "Notifications", docs/server.md).
 // Secrets are write-only: the server says whether one is set, never what it is.
 import { html } from "lit-html";
-import { clock } from "/lib/dom.js";
+import { clock, venueZone } from "/admin/venue.js";
 
 const DAYS = [["mon", "Mon"], ["tue", "Tue"], ["wed", "Wed"], ["thu", "Thu"], ["fri", "Fri"], ["sat", "Sat"], ["sun", "Sun"]];
 const SEVERITIES = ["warning", "error"];
@@ -109,7 +109,7 @@ function channelForm(ui) {
   const state = ui.notify;
   const old = state.editing === "new" ? null : state.settings.channels.find((c) => c.id === state.editing);
   const kind = old?.kind ?? state.kind;
-  const zone = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC";
+  const zone = venueZone(); // a new channel's hours are the venue's, as every time here
   const c = old ?? {
     name: "", enabled: true, severities: [...SEVERITIES], days: DAYS.map(([d]) => d),
     hours: { start: "00:00", end: "24:00" }, quiet: null, timezone: zone, repeat_minutes: null,

@@ -5,6 +5,7 @@ import { html, render, svg } from "lit-html";
 import uPlot from "uplot";
 import { doorName, floorName, placeName, tourName } from "/admin/names.js";
 import { FloorMap } from "/lib/map.js";
+import { dateTime, venueDay, venueZone } from "/admin/venue.js";
 
 const STATES = [
   ["touring", "Touring", "#0b57d0"],
@@ -28,7 +29,6 @@ const INCIDENT_NAMES = {
   lock_wait: "Waits for a restricted area",
   alarms: "Alerts and alarms",
 };
-const ZONE = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC";
 
 const isoDay = (date) => {
   const local = new Date(date.getTime() - date.getTimezoneOffset() * 60000);
@@ -42,15 +42,15 @@ const monday = (date) => {
 
 function state(ui) {
   if (!ui.reports) {
-    const today = isoDay(new Date());
-    ui.reports = { mode: "day", day: today, week: isoDay(monday(new Date())), start: `${today}T08:00`, end: `${today}T20:00`, data: null, error: null, loading: false };
+    const today = venueDay(); // the venue's day, wherever the browser is
+    ui.reports = { mode: "day", day: today, week: isoDay(monday(new Date(`${today}T12:00`))), start: `${today}T08:00`, end: `${today}T20:00`, data: null, error: null, loading: false };
   }
   return ui.reports;
 }
 
-/** The query of the chosen period (the browser's time zone is the venue's). */
+/** The query of the chosen period, in the venue's time zone (as every time on the console). */
 function query(r) {
-  const q = new URLSearchParams({ tz: ZONE });
+  const q = new URLSearchParams({ tz: venueZone() });
   if (r.mode === "day") q.set("day", r.day);
   else if (r.mode === "week") q.set("week", r.week);
   else {
@@ -419,7 +419,6 @@ function drawReplay(ui) {
   if (!stage || !player) return;
   const site = ui.store.site;
   const replay = replayMap(ui);
-  const at = new Date(player.t * 1000);
   const toggle = () => {
     if (player.playing) player.playing = false;
     else {
@@ -439,7 +438,7 @@ function drawReplay(ui) {
           @input=${(e) => player.show(Number(e.target.value))}></label>
         <label>Floor <select @change=${(e) => replay?.map.showFloor(e.target.value)}>
           ${site.floors.map((f) => html`<option value=${f.id} ?selected=${replay?.map.floor === f.id}>${floorName(site, f.id)}</option>`)}</select></label>
-        <output id="replay-clock">${at.toLocaleString()}</output>
+        <output id="replay-clock">${dateTime(player.t)}</output>
         ${player.replay.truncated ? html`<span class="muted">(the first 200 000 events only)</span>` : ""}
       </div>
       <p class="muted" id="replay-on-floor">${replay ? `On this floor: ${onFloor.sort().join(", ") || "no robot"}; ${s.locks.size} area(s) held.` : "Drawing the map…"}</p>`,
@@ -530,7 +529,8 @@ function drawCharts(ui) {
   const tours = document.getElementById("chart-tours");
   const waits = document.getElementById("chart-waits");
   if (!tours || !waits || tours.dataset.key === key) return;
-  // Bin labels are the venue's (this browser's) local time: "2026-07-14 10:00" or a day.
+  // Bin starts are the venue's wall-clock times ("2026-07-14 10:00" or a day), read and drawn
+  // as this browser's: the axis shows the venue's hours wherever the browser is.
   const binStarts = (rows) => rows.map((row) => Date.parse(row.start.length === 10 ? `${row.start}T00:00` : row.start.replace(" ", "T")) / 1000);
   const width = Math.max(320, Math.min(tours.parentElement.clientWidth - 16, 900));
   const common = { width, height: 220, legend: { show: false }, cursor: { drag: { x: false, y: false } } };

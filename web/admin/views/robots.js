@@ -2,8 +2,9 @@
 // actions: charge, send to a node, out of service and back, pause a VDA 5050 vehicle and let it
 // go on, cancel the task.
 import { html } from "lit-html";
-import { clock, inputValue, percent } from "/lib/dom.js";
-import { evacuationText, floorName, placeName, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
+import { inputValue, percent } from "/lib/dom.js";
+import { clock } from "/admin/venue.js";
+import { evacuationText, floorName, linkState, placeName, robotPlace, robotTaskId, taskLabel, waitingFor } from "/admin/names.js";
 import { cancelTask, tourProgress } from "/admin/views/tasks.js";
 
 /** The robot's task and where its tour stands, as the Tasks view says it ("Tour: Highlights,
@@ -83,11 +84,11 @@ export function robotsView(ui) {
       const s = robot.state ?? {};
       const info = robot.info ?? {};
       const modules = Object.entries(s.modules ?? {});
-      const seen = robot.online || robot.state || robot.info?.last_seen;
       // A lost robot's last robot_state still says what it was doing: the server says offline.
       // A VDA 5050 3.x vehicle asleep (HIBERNATING) is offline to the fleet, not lost.
-      const asleep = !robot.online && s.navigation === "hibernating";
-      const link = robot.online ? ["ok", "online"] : asleep ? ["warn", "hibernating"] : seen ? ["bad", "lost"] : ["warn", "never connected"];
+      const state = linkState(robot);
+      const asleep = state === "hibernating";
+      const link = [{ online: "ok", lost: "bad" }[state] ?? "warn", state];
       const node = s.node ?? info.node;
       const floor = s.floor ?? info.floor ?? ui.store.site.nodes.find((n) => n.id === node)?.floor;
       return html`<section class="robot-card" aria-labelledby=${`robot-${robot.name}`}>
@@ -99,7 +100,7 @@ export function robotsView(ui) {
           ${evacuationText(ui.store, robot.name) ? html`<dt>Evacuation</dt><dd class="state-evacuation" data-evacuation=${robot.name}>${evacuationText(ui.store, robot.name).replace("evacuation: ", "")}</dd>` : ""}
           <dt>Mode</dt><dd>${robot.online ? `${s.mode ?? info.mode ?? "—"}${waitingFor(ui.store, s) ? `, ${waitingFor(ui.store, s)}` : ""}` : asleep ? "offline, hibernating" : "offline"}</dd>
           <dt>Battery</dt><dd>${percent(s.battery ?? info.battery)}</dd>
-          <dt>Pose</dt><dd>${node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
+          <dt>Pose</dt><dd>${s.floor ? robotPlace(ui.store.site, s) : node ? placeName(ui.store.site, node) : "—"}, ${floor ? floorName(ui.store.site, floor) : "floor —"}${s.floor ? `, x ${s.x.toFixed(1)} m y ${s.y.toFixed(1)} m, ${Math.round((s.theta * 180) / Math.PI)}°` : ""}</dd>
           <dt>Task</dt><dd>${taskText(ui, robot)}</dd>
           <dt>Nets</dt><dd>${(s.nets ?? []).join(", ") || "none"}</dd>
           <dt>RoboCAN modules</dt><dd>${modules.length ? modules.map(([m, st]) => html`<span class=${`badge ${st === "ok" ? "ok" : "bad"}`}>${m}: ${st}</span> `) : "none reported"}</dd>

@@ -3,8 +3,9 @@
 import { html } from "lit-html";
 import { repeat } from "lit-html/directives/repeat.js";
 import { confirmAction } from "/lib/confirm.js";
-import { clock, duration, inputValue } from "/lib/dom.js";
-import { placeName, poiName, taskName } from "/admin/names.js";
+import { duration, inputValue } from "/lib/dom.js";
+import { clock } from "/admin/venue.js";
+import { atPlace, placeName, poiName, robotPlace, taskName } from "/admin/names.js";
 
 const FINAL = new Set(["done", "failed", "cancelled"]);
 const KINDS = [["tour", "Tour"], ["go_to_poi", "Point of interest"], ["go_to", "Go to node"], ["charge", "Charge"]];
@@ -105,14 +106,23 @@ export function tourProgress(ui, task) {
     : `stop ${p.index} of ${p.total}: at ${name}`;
 }
 
+/** Why a queued task has no estimated wait (its `service`, docs/visitor.md "The wait"), in the
+ * words staff read; the ETA column said only "—" while the fleet was paused. */
+const NO_WAIT = { paused: "fleet paused", unavailable: "no robot can take it", held_up: "held up" };
+
+/** A queued task's estimated wait, or why there is none. */
+function eta(task) {
+  if (typeof task.eta_s === "number") return duration(task.eta_s);
+  return NO_WAIT[task.service] ?? "—";
+}
+
 /** Where a running task stands: its tour's progress, else the robot's place. */
 function progress(ui, task) {
   const tour = tourProgress(ui, task);
   if (tour) return tour;
   const s = task.robot ? ui.store.robots.get(task.robot)?.state : null;
   if (!s?.node) return "—";
-  const place = placeName(ui.store.site, s.node);
-  return place.startsWith("near ") ? place : `at ${place}`;
+  return atPlace(robotPlace(ui.store.site, s));
 }
 
 export function tasksView(ui) {
@@ -120,12 +130,16 @@ export function tasksView(ui) {
   const queued = tasks.filter((t) => t.state === "queued").sort((a, b) => (a.queue_position ?? 1e9) - (b.queue_position ?? 1e9));
   const running = tasks.filter((t) => t.state !== "queued" && !FINAL.has(t.state));
   const history = tasks.filter((t) => FINAL.has(t.state)).sort((a, b) => b.updated_at - a.updated_at).slice(0, 50);
+  const fleet = ui.store.fleet;
   return html`<h2>Tasks</h2>
     ${createForm(ui)}
     <h3>Queue</h3>
+    ${fleet?.paused
+      ? html`<p class="notice warn" id="queue-paused">The fleet is paused (by ${fleet.by} at ${clock(fleet.since)}${fleet.reason ? `: ${fleet.reason}` : ""}): no queued task starts until someone resumes it in the Fleet view.</p>`
+      : ""}
     <table aria-label="Queued tasks">
       <thead><tr><th scope="col">#</th><th scope="col">Task</th><th scope="col">Priority</th><th scope="col">Robot</th><th scope="col">ETA</th><th scope="col">Requested by</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
-      <tbody>${repeat(queued, (t) => t.id, (t) => html`<tr data-task=${t.id}><td>${t.queue_position ?? "—"}</td><td>${describe(ui, t)}</td><td>${t.priority}</td><td>${t.pinned_robot ?? "any"}</td><td>${duration(t.eta_s)}</td><td>${t.requester}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
+      <tbody>${repeat(queued, (t) => t.id, (t) => html`<tr data-task=${t.id}><td>${t.queue_position ?? "—"}</td><td>${describe(ui, t)}</td><td>${t.priority}</td><td>${t.pinned_robot ?? "any"}</td><td>${eta(t)}</td><td>${t.requester}</td><td>${taskActions(ui, t)}</td></tr>`)}</tbody>
     </table>
     ${queued.length ? "" : html`<p class="muted">The queue is empty.</p>`}
     <h3>Running</h3>
