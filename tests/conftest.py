@@ -10,6 +10,10 @@ from collections.abc import Iterator
 import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
+from guidebot.heap import no_final_collection
+
+no_final_collection()  # each pytest process (xdist's workers too) exits without a last pass
+
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
