@@ -97,10 +97,13 @@ def server(
     access_log: bool | None,
 ) -> None:
     """Run the central server: hub at /ws, REST API at /api, docs at /docs, web pages at /."""
-    import uvicorn
+    from guidebot.heap import quiet_imports
 
-    from backend.app import create_app, uvicorn_config
-    from backend.settings import Settings, describe_errors
+    with quiet_imports():  # long-lived objects only: nothing to collect (guidebot/heap.py)
+        import uvicorn
+
+        from backend.app import create_app, uvicorn_config
+        from backend.settings import Settings, describe_errors
 
     overrides: dict[str, Any] = {
         key: value

@@ -12,6 +12,8 @@ from typing import Any
 
 import click
 
+from guidebot.heap import no_final_collection, quiet_imports
+
 COMMANDS: dict[str, str] = {
     "robot": "robot_agent.cli:robot",
     "demo": "guidebot.demo:demo",
@@ -65,7 +67,8 @@ class LazyGroup(click.Group):
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name in self.lazy:
             module_name, attribute = self.lazy[cmd_name].split(":")
-            command = getattr(importlib.import_module(module_name), attribute)
+            with quiet_imports():
+                command = getattr(importlib.import_module(module_name), attribute)
             if not isinstance(command, click.Command):
                 raise TypeError(f"{self.lazy[cmd_name]} is not a click command")
             return command
@@ -76,6 +79,7 @@ class LazyGroup(click.Group):
 @click.version_option(package_name="guidebot")
 def main() -> None:
     """GuideBot: run the central server, robots, building simulator, tools and benchmarks."""
+    no_final_collection()  # guidebot/heap.py: no collection of the whole heap at exit
 
 
 @main.group(cls=LazyGroup, lazy=BENCHMARKS)

@@ -10,6 +10,18 @@ from collections.abc import Iterator
 import pytest
 from compose_engine import EngineUnavailable, missing, private_engine
 
+from guidebot.heap import no_final_collection, quiet_imports
+
+no_final_collection()  # each pytest process (xdist's workers too) exits without a last pass
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_collection(session: pytest.Session) -> Iterator[None]:
+    """Collect (import every test module and what it imports) with the collector off, and
+    freeze what that made: it lives as long as the process (guidebot/heap.py)."""
+    with quiet_imports():
+        return (yield)
+
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -17,6 +17,7 @@ TIME_WAIT) is skipped.
 
 from __future__ import annotations
 
+import atexit
 import fcntl
 import os
 import re
@@ -67,6 +68,7 @@ def _claim() -> tuple[range, IO[str]]:
 
 
 PORTS, _LOCK = _claim()
+atexit.register(_LOCK.close)  # held to the end, then closed: no "unclosed file" at exit
 _next = 0
 
 
