@@ -24,7 +24,8 @@ Safety rules (docs/building.md, "Doors"):
   the door was closed on purpose); but a holder the fire alarm drops that is not evacuating
   (outside the alarm's zone) still wants the door: its waiting ``open_door`` is refused at once
   with the alarm's reason (``DoorRefused``: a ``command_failed``), where it used to get no
-  answer and wait its whole ``wait_timeout_s``.
+  answer and wait its whole ``wait_timeout_s``; a request dropped while its coil is still being
+  written gets the same answer when it comes to wait.
 """
 
 from __future__ import annotations
@@ -73,6 +74,11 @@ class DoorKeeper:
     holders: dict[str, asyncio.TimerHandle] = field(default_factory=dict)
     _waiters: dict[asyncio.Future[None], str] = field(default_factory=dict)
     """Each open_door waiting for the door -> its holder."""
+    _opening: dict[str, Exception | None] = field(default_factory=dict)
+    """Holders whose open_door is between ``hold`` and ``wait_open`` (its coil being written)
+    -> why they were dropped meanwhile (None: not dropped). A refusal that came then is the
+    answer ``wait_open`` gives (CI: the fire alarm dropped R2 while its coil was written, and
+    R2 got no answer at all)."""
     _open_timer: asyncio.TimerHandle | None = None
 
     def state(self, is_open: bool, *, sensed: bool = True) -> None:
@@ -139,8 +145,9 @@ class DoorKeeper:
         """Until the door is open: TimeoutError after ``timeout_s``, DoorReleased as soon as
         ``holder`` lets it go (its request withdrawn), or at once if it already did (while the
         coil was being written)."""
+        dropped = self._opening.pop(holder, None)
         if holder and holder not in self.holders:
-            raise DoorReleased(f"{holder} no longer holds it")
+            raise dropped or DoorReleased(f"{holder} no longer holds it")
         if self.is_open:
             return
         future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -157,12 +164,16 @@ class DoorKeeper:
         for future, waiting in self._waiters.items():
             if waiting in holders and not future.done():
                 future.set_exception(error(why))
+        for holder in holders:  # not waiting yet: told when it comes to wait (the first why)
+            if holder in self._opening and self._opening[holder] is None:
+                self._opening[holder] = error(why)
 
     def hold(self, holder: str, expire: Callable[[], None]) -> None:
         """(Re)start ``holder``'s hold; ``expire`` runs if it is not released in time."""
         old = self.holders.pop(holder, None)
         if old is not None:
             old.cancel()
+        self._opening[holder] = None
         self.holders[holder] = asyncio.get_running_loop().call_later(self.door.max_hold_s, expire)
 
     def release(self, holder: str) -> bool:
