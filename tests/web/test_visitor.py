@@ -116,6 +116,43 @@ async def painted_to_bottom(page: Any) -> bool:
     )
 
 
+SEEN = """
+window.__seen = [];
+new MutationObserver(() => {
+  for (const el of document.querySelectorAll(".request-state")) {
+    const text = el.textContent.replace(/\\s+/g, " ").trim();
+    if (text && window.__seen.at(-1) !== text) window.__seen.push(text);
+  }
+}).observe(document, { subtree: true, childList: true, characterData: true });
+"""
+"""Every text the request's state showed, in order (a short-lived one too)."""
+
+
+async def without_task_news(page: Any) -> None:
+    """The page's live connection hears no task_event: the server says nothing new of a wait
+    (it tells one only when its estimate drifts)."""
+
+    async def relay(ws: Any) -> None:
+        server = ws.connect_to_server()
+        server.on_message(lambda m: None if "task_event" in str(m) else ws.send(m))
+
+    await page.route_web_socket("**/ws*", relay)
+
+
+async def told_a_wait(page: Any, eta_s: float) -> None:
+    """The request's answer and every read of its status after it say ``eta_s`` (the page
+    reads it again when its live connection opens: CI saw the real wait come that way)."""
+
+    async def told(route: Any) -> None:
+        reply = await route.fetch()
+        status = await reply.json()
+        status |= {"eta_s": eta_s, "service": "busy"}
+        await route.fulfill(response=reply, json=status)
+
+    await page.route("**/api/tasks", told)
+    await page.route("**/api/tasks/*", told)
+
+
 async def request_from(page: Any, tour_name: str, button: str = "Take this tour") -> None:
     card = page.get_by_role("article", name=tour_name)
     await card.get_by_role("button", name=button).click()
@@ -212,27 +249,14 @@ async def test_a_wait_counted_down_to_nothing_never_says_about_0_s(
         watch = await open_page("", viewport=PHONE)
         page = watch.page
 
-        async def no_task_news(ws: Any) -> None:  # the server says nothing new of the wait
-            server = ws.connect_to_server()
-            server.on_message(lambda m: None if "task_event" in str(m) else ws.send(m))
-
-        async def told_a_short_wait(route: Any) -> None:
-            reply = await route.fetch()
-            status = await reply.json()
-            status |= {"eta_s": 3.0, "service": "busy"}
-            await route.fulfill(response=reply, json=status)
-
-        await page.route_web_socket("**/ws*", no_task_news)
+        await without_task_news(page)
         await page.goto(vf.panel_url())
         async with vf.fleet.http() as staff:  # R1 busy: the visitor waits in line
             r = await staff.post(
                 "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "telescope"}}
             )
             assert r.status_code == 201, r.text
-        # The request's answer and any read of its status after it (the page reads it again
-        # when its live connection opens: CI saw the real wait of a minute come that way).
-        await page.route("**/api/tasks", told_a_short_wait)
-        await page.route("**/api/tasks/*", told_a_short_wait)
+        await told_a_wait(page, 3.0)
         await request_from(page, "Highlights")
         state = page.locator(".request-state")
         await expect(state).to_contain_text("You are number 1 in line.")

@@ -11,23 +11,12 @@ from typing import Any
 import pytest
 from playwright.async_api import expect
 
-from tests.web.test_visitor import LONG, PHONE, request_from
+from tests.web.test_visitor import LONG, PHONE, SEEN, request_from
 from tests.web.test_visitor import visitor_fleet as visitor_fleet  # the fixture
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
 
 PAUSED = "Staff have paused the robots for a moment"
-
-SEEN = """
-window.__seen = [];
-new MutationObserver(() => {
-  for (const el of document.querySelectorAll(".request-state")) {
-    const text = el.textContent.replace(/\\s+/g, " ").trim();
-    if (text && window.__seen.at(-1) !== text) window.__seen.push(text);
-  }
-}).observe(document, { subtree: true, childList: true, characterData: true });
-"""
-"""Every text the request's state showed, in order (a short-lived one too)."""
 
 
 async def test_a_request_in_line_while_staff_pause_the_fleet_says_so_without_a_wait(

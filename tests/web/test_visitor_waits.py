@@ -10,7 +10,14 @@ from typing import Any
 import pytest
 from playwright.async_api import expect
 
-from tests.web.test_visitor import LONG, PHONE, request_from
+from tests.web.test_visitor import (
+    LONG,
+    PHONE,
+    SEEN,
+    request_from,
+    told_a_wait,
+    without_task_news,
+)
 from tests.web.test_visitor import visitor_fleet as visitor_fleet  # the fixture
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(120)]
@@ -56,18 +63,6 @@ async def test_a_visit_cancelled_at_its_point_says_the_robot_had_got_there(
         await expect(state).to_contain_text("R1 had reached Welcome hall.")
 
 
-SEEN = """
-window.__seen = [];
-new MutationObserver(() => {
-  for (const el of document.querySelectorAll(".request-state")) {
-    const text = el.textContent.replace(/\\s+/g, " ").trim();
-    if (text && window.__seen.at(-1) !== text) window.__seen.push(text);
-  }
-}).observe(document, { subtree: true, childList: true, characterData: true });
-"""
-"""Every text the request's state showed, in order (a short-lived one too)."""
-
-
 async def test_a_told_wait_is_shown_to_the_nearest_ten_seconds(
     visitor_fleet: Any, open_page: Any
 ) -> None:
@@ -76,25 +71,14 @@ async def test_a_told_wait_is_shown_to_the_nearest_ten_seconds(
     async with visitor_fleet(time_scale=1.0) as vf:
         page = (await open_page("", viewport=PHONE)).page
 
-        async def no_task_news(ws: Any) -> None:  # the server says nothing new of the wait
-            server = ws.connect_to_server()
-            server.on_message(lambda m: None if "task_event" in str(m) else ws.send(m))
-
-        async def told_24_s(route: Any) -> None:
-            reply = await route.fetch()
-            status = await reply.json()
-            status |= {"eta_s": 24.0, "service": "busy"}
-            await route.fulfill(response=reply, json=status)
-
-        await page.route_web_socket("**/ws*", no_task_news)
+        await without_task_news(page)
         await page.goto(vf.panel_url())
         async with vf.fleet.http() as staff:  # R1 busy: the visitor waits in line
             r = await staff.post(
                 "/api/tasks", json={"kind": "go_to_poi", "params": {"poi": "telescope"}}
             )
             assert r.status_code == 201, r.text
-        await page.route("**/api/tasks", told_24_s)
-        await page.route("**/api/tasks/*", told_24_s)
+        await told_a_wait(page, 24.0)
         await page.evaluate(SEEN)
         await request_from(page, "Highlights")
         state = page.locator(".request-state")
