@@ -197,5 +197,6 @@ class QueueNews:
         ):
             return
         self._overall = fresh
-        if told is not None:  # the first is what a page reads with its menu
-            self.tm.endpoint.publish(VisitorService(service=estimator.service(), eta_s=fresh.eta_s))
+        # The first too: a change (staff's pause) may come before the first check, and pages
+        # and touch screens that read the service earlier would never hear of it.
+        self.tm.endpoint.publish(VisitorService(service=estimator.service(), eta_s=fresh.eta_s))

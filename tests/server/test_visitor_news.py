@@ -105,3 +105,18 @@ async def test_a_robot_waiting_long_for_an_area_is_held_up(
     assert manager.robots["R1"].held_up
     robot.state("busy", navigation="moving")
     assert not manager.robots["R1"].held_up
+
+
+async def test_a_pause_before_the_first_check_is_told(
+    bus: Bus, manager: TaskManager, clock: Clock
+) -> None:
+    """Staff paused the fleet before the news' first check (a server just started): that check
+    only took what it found as its baseline, and the robots' touch screens, told the service
+    when they connected, never heard of the pause (CI, tests/web/test_visitor_truths.py)."""
+    service: list[Message] = []
+    bus.endpoint("panel").subscribe("visitor_service", service.append)
+    RobotStub(bus, "R1", "charge_a").state()
+    manager.set_paused(True)
+    clock.now += QUIET_EVERY_S
+    manager.check_timeouts()
+    assert service and service[-1].payload["service"] == "paused"
