@@ -52,7 +52,7 @@ test:
 suite: $(STAMP) system-deps
 	$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup
 
-# docs/screenshots/*.png from the browser tests' scenarios (needs /usr/bin/chromium).
+# docs/screenshots/*.png from the browser tests' scenarios (needs Debian's chromium-headless-shell).
 screenshots: $(STAMP) system-deps
 	GUIDEBOT_SCREENSHOTS=1 $(BIN)/python -m pytest tests/web -q
 

@@ -44,8 +44,10 @@ __all__ = ["CHROMIUM", "CHROMIUM_ARGS", "main"]
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
-CHROMIUM = "/usr/bin/chromium"
-"""Debian's Chromium (scripts/system-deps.sh); Playwright cannot download a browser here."""
+CHROMIUM = os.environ.get("GUIDEBOT_CHROMIUM", "/usr/bin/chromium")
+"""Debian's Chromium (scripts/system-deps.sh; Playwright cannot download a browser here), the
+browser people use; ``GUIDEBOT_CHROMIUM`` names another (the tests set Debian's
+chromium-headless-shell: tests/conftest.py)."""
 CHROMIUM_ARGS = [
     "--no-sandbox",
     "--headless",

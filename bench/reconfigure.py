@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import os
 import tempfile
 import time
 from collections.abc import AsyncIterator
@@ -28,11 +27,12 @@ import click
 import httpx
 import yaml
 
+from bench.console import CHROMIUM as BENCH_CHROMIUM
 from guidebot.benchutil import print_result
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
-CHROMIUM = Path(os.environ.get("GUIDEBOT_CHROMIUM", "/usr/bin/chromium"))
+CHROMIUM = Path(BENCH_CHROMIUM)
 CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--no-first-run"]
 NEW_NODE = ("stand_new", 27.5, 3.0)
 NEW_TOUR = ["mosaics", "amphorae", "sword", "welcome", "loom"]

@@ -2,7 +2,8 @@
 # Installs the Debian packages the tests use, only those missing (idempotent).
 # espeak-ng: the robots' speech (tests fall back to timed speech without it).
 # postgresql: the server's second database; tests run a private cluster on 127.0.0.1.
-# chromium: the browser tests (tests/web) drive /usr/bin/chromium with Playwright.
+# chromium, chromium-headless-shell: the browser tests (tests/web) drive the headless shell with
+#   Playwright (a third less CPU); the benchmarks (bench/console.py) measure the browser.
 # docker.io, debootstrap: tests/test_compose_engine.py runs docker-compose.yml on a private engine.
 # redis-server: the broker between server processes; tests run a private one (tests/scale).
 # nginx-light: tests/scale/test_proxy.py runs deploy/cluster/nginx.conf in front of two servers.
@@ -15,7 +16,7 @@ set -euo pipefail
 # it for nodejs and npm, and apt refuses a second caller; a run that waited finds them there.
 exec 9>"${TMPDIR:-/tmp}/guidebot-system-deps.lock"
 command -v flock >/dev/null && flock 9
-wanted=(espeak-ng postgresql chromium docker.io debootstrap redis-server nginx-light prometheus mosquitto nodejs npm)
+wanted=(espeak-ng postgresql chromium chromium-headless-shell docker.io debootstrap redis-server nginx-light prometheus mosquitto nodejs npm)
 all=1
 [ $# -gt 0 ] && wanted=("$@") && all=0
 oidc="$(cd "$(dirname "$0")/.." && pwd)/tests/oidc"

@@ -1,5 +1,6 @@
 """Browser tests of the web pages: a real server (+ building simulator + simulated robots) on
-127.0.0.1 and Playwright driving Debian's Chromium (/usr/bin/chromium, from system-deps).
+127.0.0.1 and Playwright driving Debian's Chromium (chromium-headless-shell, from system-deps;
+``GUIDEBOT_CHROMIUM`` names another: tests/conftest.py).
 
 Every page fixture fails its test on any JavaScript console error or uncaught exception
 (unless the test declared it expected, e.g. the 401 of a wrong token); ``axe_check`` runs the
@@ -41,7 +42,7 @@ from robot_agent.agent import AgentConfig, RobotAgent
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_SITE = ROOT / "sites" / "demo_museum.yaml"
 SCREENSHOTS = ROOT / "docs" / "screenshots"
-CHROMIUM = Path(os.environ.get("GUIDEBOT_CHROMIUM", BENCH_CHROMIUM))
+CHROMIUM = Path(BENCH_CHROMIUM)
 OPERATOR_TOKEN = "operator-desk-token"
 ROBOT_TIME_SCALE = 20.0
 BUILDING_TIME_SCALE = 10.0
