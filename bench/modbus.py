@@ -10,8 +10,8 @@ server does. Last line:
 - jitter_ms: how late each poll started against its fixed schedule (start + n x period).
 - cpu_percent: CPU time of this process (the BuildingInterface alone, not the simulator) over
   the measured window, in percent of one core.
-- detect_ms: from the start of a press (midpoint of the control API call that starts it) to its
-  building_input_changed on the hub. Floor: filter + half a period on average (200 + 100 ms).
+- detect_ms: from the control API call that starts a press (sent: the press cannot start
+  before it, so the figure never understates) to its building_input_changed on the hub. Floor: filter + half a period on average (200 + 100 ms).
 """
 
 from __future__ import annotations
@@ -279,9 +279,8 @@ async def _detect(
                 sent = time.monotonic()
                 reply = await http.post(f"/buttons/b{module}_{button}/press", json={"ms": press_ms})
                 reply.raise_for_status()
-                started = (sent + time.monotonic()) / 2
                 with contextlib.suppress(TimeoutError):
-                    detect.append((await asyncio.wait_for(future, 5) - started) * 1000)
+                    detect.append((await asyncio.wait_for(future, 5) - sent) * 1000)
                 del detected[key]
                 # Let the press end, then a random phase against the poll grid.
                 await asyncio.sleep(press_ms / 1000 + rng.uniform(0.05, period_ms / 1000))

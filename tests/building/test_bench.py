@@ -57,5 +57,7 @@ async def test_bench_modbus_prints_its_result_line() -> None:
     }
     # Both contenders read the same values (one button per module held down).
     assert result["agree"] is True
-    # Every press lasted filter + period + 200 ms: each was detected, after at least the filter.
+    # Every press lasted filter + period + 200 ms: each was detected, after at least the filter
+    # (from the press's request: CI's loaded machine answered one slowly enough that the call's
+    # midpoint came after the press, and the median was 198.1 ms).
     assert result["detect_ms"]["p50"] >= 200
