@@ -11,7 +11,8 @@ server does. Last line:
 - cpu_percent: CPU time of this process (the BuildingInterface alone, not the simulator) over
   the measured window, in percent of one core.
 - detect_ms: from the control API call that starts a press (sent: the press cannot start
-  before it, so the figure never understates) to its building_input_changed on the hub. Floor: filter + half a period on average (200 + 100 ms).
+  before it, so the figure never understates) to its building_input_changed on the hub.
+  Floor: filter + half a period on average (200 + 100 ms).
 """
 
 from __future__ import annotations
