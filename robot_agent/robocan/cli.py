@@ -56,10 +56,10 @@ def analyze(log: Path, bitrate: int, window: float, png: Path | None, as_json: b
 @robocan.command()
 @click.option(
     "--seconds",
-    type=click.FloatRange(min=1.0),
+    type=click.FloatRange(min=1.5),
     default=3.0,
     show_default=True,
-    help="Length of each phase (moving, stopped).",
+    help="Length of each phase (moving, stopped); measured over whole half seconds after 0.5 s.",
 )
 @click.option("--png", type=click.Path(dir_okay=False, path_type=Path), default=None)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object as the last line.")

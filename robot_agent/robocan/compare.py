@@ -5,16 +5,18 @@ exact frame lengths: RoboCAN = our master and simulated motor controllers (encod
 10 Hz, velocity commands at 8 Hz while moving, none while stopped, 10 Hz watchdogs); CANopen =
 frames built and sent by the ``canopen`` package as a DS402 drive pair and its master would
 (TPDO1 position + velocity actual at 10 Hz, RPDO1 controlword + target velocity at 8 Hz, sent
-cyclically moving or not, SYNC at 10 Hz, heartbeat at 10 Hz).
+cyclically moving or not, SYNC at 10 Hz, heartbeat at 10 Hz), each on its period's grid
+(``_on_grid``), as the RoboCAN modules send.
 """
 
 from __future__ import annotations
 
 import asyncio
+import math
 import tempfile
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +43,8 @@ MOTORS = (0x02, 0x04)
 PUBLISH_HZ = 10
 COMMAND_HZ = 8
 SETTLE_S = 0.5  # skip the first half second of each phase (start-up, last command)
+MIN_PHASE_S = 1.5
+"""The shortest phase with a whole-period window after SETTLE_S (``--seconds``)."""
 
 
 def _var(name: str, index: int, subindex: int, data_type: int) -> ODVariable:
@@ -121,11 +125,51 @@ async def run_robocan(phase_s: float, log_path: Path) -> dict[str, Any]:
     return _phases(frames, ids, t_move, t_stop, t_end)
 
 
+NMT_OPERATIONAL = 0x05
+"""A heartbeat's one data byte: the producer's NMT state (CiA 301)."""
+
+
+def _on_grid(hz: float, send: Callable[[], None]) -> asyncio.Task[None]:
+    """Call ``send`` ``hz`` times a second on the period's grid, catching up after a stall as
+    a drive's hardware timer and our simulated modules do (python-can's threaded cyclic
+    sender, which canopen's ``start`` uses, restarts its period after a late frame: on a loaded
+    machine CANopen then sent fewer frames than its schedule and looked as lean as RoboCAN)."""
+
+    async def run() -> None:
+        period, start, n = 1 / hz, time.monotonic(), 0
+        while True:
+            send()
+            n += 1
+            await asyncio.sleep(max(0.0, start + n * period - time.monotonic()))
+
+    return asyncio.get_running_loop().create_task(run())
+
+
+def _heartbeat(network: canopen.Network, node_id: int) -> Callable[[], None]:
+    """The drive's heartbeat frame (what ``nmt.start_heartbeat`` sends periodically)."""
+    return lambda: network.send_message(0x700 + node_id, bytes([NMT_OPERATIONAL]))
+
+
+WINDOW_GRID_S = 0.5
+"""Measured windows last a whole number of half seconds: whole periods of the 10 Hz and 8 Hz
+schedules, so each holds the same number of each frame."""
+WINDOW_OFFSET_S = 0.04
+"""Windows start this long off the schedules' grid (10 Hz and 8 Hz from the phase's start), so
+that no frame lands on an edge and is counted or not by a microsecond."""
+
+
 def _phases(
     frames: list[can.Message], ids: dict[int, int], t_move: float, t_stop: float, t_end: float
 ) -> dict[str, Any]:
-    moving, p1, b1 = measure(frames, ids, t_move + SETTLE_S, t_stop, len(MOTORS))
-    stopped, p2, b2 = measure(frames, ids, t_stop + SETTLE_S, t_end, len(MOTORS))
+    """Each phase measured over whole periods, after SETTLE_S (start-up, the last command)."""
+    usable = min(t_stop - t_move, t_end - t_stop) - SETTLE_S - WINDOW_OFFSET_S
+    window = math.floor(usable / WINDOW_GRID_S) * WINDOW_GRID_S
+    if window <= 0:
+        raise ValueError(f"phases of at least {MIN_PHASE_S} s are needed to measure")
+    (moving, p1, b1), (stopped, p2, b2) = (
+        measure(frames, ids, start, start + window, len(MOTORS))
+        for start in (t + SETTLE_S + WINDOW_OFFSET_S for t in (t_move, t_stop))
+    )
     return {"moving": moving, "stopped": stopped, "efficiency": (p1 + p2) / (b1 + b2)}
 
 
@@ -136,8 +180,8 @@ async def run_canopen(phase_s: float) -> dict[str, Any]:
     collector = _Collector()
     tap = can.Notifier(tap_bus, [collector], timeout=0.05)
     master_net, drive_net = canopen.Network(master_bus), canopen.Network(drive_bus)
-    tasks: list[Any] = []
     rpdos, tpdos = [], []
+    cyclic: list[asyncio.Task[None]] = []
     try:
         for node_id in MOTORS:
             remote = canopen.RemoteNode(node_id, ds402_dictionary())
@@ -160,39 +204,30 @@ async def run_canopen(phase_s: float) -> dict[str, Any]:
             tpdo.cob_id, tpdo.enabled = 0x180 + node_id, True
             tpdo[0x6064].raw = 1_234_567  # a drive that has travelled: realistic stuffing
             tpdo[0x606C].raw = 0
-            tpdo.start(1 / PUBLISH_HZ)
             tpdos.append(tpdo)
             drive.nmt.state = "OPERATIONAL"
-            drive.nmt.start_heartbeat(1000 // PUBLISH_HZ)
-            tasks += [tpdo, drive.nmt]
-        master_net.sync.start(1 / PUBLISH_HZ)
+            cyclic.append(_on_grid(PUBLISH_HZ, tpdo.transmit))
+            cyclic.append(_on_grid(PUBLISH_HZ, _heartbeat(drive_net, node_id)))
+        cyclic.append(_on_grid(PUBLISH_HZ, master_net.sync.transmit))
         await asyncio.sleep(SETTLE_S)
         t_move = time.time()
         for rpdo in rpdos:
             rpdo[0x60FF].raw = 500_000  # counts/s: moving
-            rpdo.start(1 / COMMAND_HZ)
+            cyclic.append(_on_grid(COMMAND_HZ, rpdo.transmit))
         for tpdo in tpdos:
             tpdo[0x606C].raw = 499_871
-            tpdo.update()
         await asyncio.sleep(phase_s)
         t_stop = time.time()
         for rpdo in rpdos:
-            rpdo[0x60FF].raw = 0
-            rpdo.update()  # a cyclic DS402 master keeps sending its set-point
+            rpdo[0x60FF].raw = 0  # a cyclic DS402 master keeps sending its set-point
         for tpdo in tpdos:
             tpdo[0x606C].raw = 0
-            tpdo.update()
         await asyncio.sleep(phase_s)
         t_end = time.time()
     finally:
-        master_net.sync.stop()
-        for rpdo in rpdos:
-            rpdo.stop()
-        for task in tasks:
-            if isinstance(task, canopen.pdo.base.PdoMap):
-                task.stop()
-            else:
-                task.stop_heartbeat()
+        for task in cyclic:
+            task.cancel()
+        await asyncio.gather(*cyclic, return_exceptions=True)
         await asyncio.to_thread(tap.stop, 1.0)
         for b in (master_bus, drive_bus, tap_bus):
             b.shutdown()
@@ -205,6 +240,8 @@ async def run_canopen(phase_s: float) -> dict[str, Any]:
 
 async def compare(phase_s: float = 3.0) -> dict[str, Any]:
     """Both runs; the result has the issue's keys (bits per second per motor controller)."""
+    if phase_s < MIN_PHASE_S:
+        raise ValueError(f"phases of at least {MIN_PHASE_S} s are needed to measure")
     with tempfile.TemporaryDirectory() as tmp:
         robocan = await run_robocan(phase_s, Path(tmp) / "robocan.log")
     canopen_result = await run_canopen(phase_s)
