@@ -5,6 +5,7 @@ its reported task with the one we gave it after a reconnect or a restart (docs/s
 from __future__ import annotations
 
 import logging
+import time
 from typing import TYPE_CHECKING, Protocol
 
 from backend.tasks.battery_forecast import learn_charge
@@ -70,6 +71,7 @@ class Presence:
         robot.online = True
         robot.offline_since = None
         robot.last_seen = tm.clock()
+        robot.seen_at = time.time()
         robot.mode = p.mode.value
         moved = False
         if p.node is not None and p.node in tm.graph:

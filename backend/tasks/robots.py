@@ -15,6 +15,9 @@ class RobotInfo:
     config: RobotConfig
     online: bool = False
     last_seen: float | None = None
+    """When its last robot_state came, on the Task Manager's clock (monotonic: time-outs)."""
+    seen_at: float | None = None
+    """The same moment as a Unix time (``GET /api/robots`` ``last_seen``), for people."""
     offline_since: float | None = None
     node: str | None = None
     floor: str | None = None
@@ -64,5 +67,5 @@ class RobotInfo:
             "out_of_service": self.out_of_service,
             "held_up": self.held_up,
             "touring_s": round(self.touring_s, 1),
-            "last_seen": self.last_seen,
+            "last_seen": self.seen_at,
         }

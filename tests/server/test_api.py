@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -127,6 +128,7 @@ async def test_waiting_visitor_sees_position_and_wait(server: RunningServer, htt
 
 async def test_reassign_running_task_off_a_dead_robot(server: RunningServer, http: Http) -> None:
     staff = http(OPERATOR_TOKEN)
+    started = time.time()
     async with robot(server, "R1", "hall") as r1:
         task = (await staff.post("/api/tasks", json=GROUND)).json()
         await r1.next_order("give_tour")
@@ -142,6 +144,9 @@ async def test_reassign_running_task_off_a_dead_robot(server: RunningServer, htt
         assert order.payload["task_id"] == task["id"]
         robots = {r["name"]: r for r in (await staff.get("/api/robots")).json()}
         assert robots["R2"]["task_id"] == task["id"] and robots["R1"]["task_id"] is None
+        # last_seen is a Unix time (docs/server.md), not the Task Manager's monotonic clock.
+        assert started <= robots["R1"]["last_seen"] <= robots["R2"]["last_seen"] <= time.time()
+        assert robots["R3"]["last_seen"] is None
 
 
 async def test_locks_listed_and_force_released_by_staff(server: RunningServer, http: Http) -> None:
