@@ -66,7 +66,8 @@ async def server(tmp_path: Path) -> AsyncIterator[RunningServer]:
 @pytest.fixture
 async def lenient(tmp_path: Path) -> AsyncIterator[RunningServer]:
     """The server with a module token too, and failed sign-ins not limited: for tests that
-    call every operation without a token (else the 11th answer is 429)."""
+    call every operation with a wrong token (else the 11th answer is 429; a call without a
+    token is not a failed sign-in, docs/security.md)."""
     settings = server_settings(tmp_path)
     settings.tokens.append(StaticToken(token=MODULE_TOKEN, name="module-1", role=Role.MODULE))
     for role, token in PERSON_TOKENS.items():
