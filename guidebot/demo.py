@@ -29,6 +29,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -62,6 +63,28 @@ class Child:
     started: float = 0.0
     restarts: int = 0
     restart_at: float | None = None
+    ready_line: str | None = None
+    """The start of the line the child prints once it is up (``robot R1 ready``): its output
+    is then relayed by the demo, which so knows when the line was printed (``ready``)."""
+    ready: threading.Event | None = None
+    relay: threading.Thread | None = None
+
+
+def _relay(child: Child, stream: IO[bytes], ready: threading.Event) -> None:
+    """Copy a child's output to the demo's, line by line, and set ``ready`` once its ready
+    line went out: the URL block must come after it (the server could see a robot online
+    before the robot's own line was printed, and the block was not the last thing shown)."""
+    shown = True
+    with stream:
+        for line in iter(stream.readline, b""):
+            if shown:
+                try:
+                    sys.stdout.buffer.write(line)
+                    sys.stdout.buffer.flush()
+                except (OSError, ValueError):  # nobody reads the demo's output any more
+                    shown = False  # keep draining: a full pipe would block the robot
+            if child.ready_line is not None and line.startswith(child.ready_line.encode()):
+                ready.set()  # after the line went out: the URL block follows it
 
 
 class Fleet:
@@ -99,8 +122,10 @@ class Fleet:
                 self._stop_asked = False
                 raise KeyboardInterrupt
 
-    def spawn(self, name: str, *args: str, stdout: int | None = None) -> Child:
-        child = Child(name, list(args))
+    def spawn(
+        self, name: str, *args: str, stdout: int | None = None, ready_line: str | None = None
+    ) -> Child:
+        child = Child(name, list(args), ready_line=ready_line)
         self.children.append(child)
         self._start(child, stdout)
         return child
@@ -117,9 +142,29 @@ class Fleet:
 
     def _start(self, child: Child, stdout: int | None = None) -> None:
         # A session of its own: Ctrl-C reaches only the launcher, which stops children in order.
+        if child.ready_line is None:
+            with self._recording():
+                child.process = spawn_guidebot(child.args, stdout=stdout, env=self.env)
+                child.started = time.monotonic()
+            return
+        # Relayed: unbuffered, so that its lines show as they come (a pipe is not a terminal).
+        env = {**(self.env if self.env is not None else os.environ), "PYTHONUNBUFFERED": "1"}
+        ready = child.ready = threading.Event()
         with self._recording():
-            child.process = spawn_guidebot(child.args, stdout=stdout, env=self.env)
+            child.process = spawn_guidebot(child.args, stdout=subprocess.PIPE, env=env)
             child.started = time.monotonic()
+        assert child.process.stdout is not None
+        child.relay = threading.Thread(
+            target=_relay,
+            args=(child, child.process.stdout, ready),
+            name=f"demo-relay-{child.name}",
+            daemon=True,
+        )
+        child.relay.start()
+
+    def ready(self, name: str) -> bool:
+        """Whether the child ``name`` printed its ready line (one without such a line: yes)."""
+        return all(c.ready is None or c.ready.is_set() for c in self.children if c.name == name)
 
     def dead(self) -> list[Child]:
         return [c for c in self.children if c.process is not None and c.process.poll() is not None]
@@ -153,6 +198,8 @@ class Fleet:
                 click.echo(
                     f"demo: {child.name} ignored SIGTERM for {GRACE_S:g} s: killed", err=True
                 )
+            if child.relay is not None:
+                child.relay.join(GRACE_S)  # its last lines, up to its output's end
 
 
 class Keys:
@@ -247,8 +294,9 @@ def _server_env(panel_token: str, operator_token: str, control: str) -> dict[str
 def _wait_robots_online(
     url: str, admin: str, names: list[str], fleet: Fleet, timeout_s: float = ROBOTS_ONLINE_S
 ) -> list[str]:
-    """Wait until the robots are online (their start-up lines come before the URL block, which
-    then stays the last thing printed); returns those still offline after ``timeout_s``."""
+    """Wait until the robots are online and have printed their ready line (their start-up lines
+    come before the URL block, which then stays the last thing printed); returns those still
+    offline or not ready after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
     offline = list(names)
     with httpx.Client(timeout=2.0, headers={"Authorization": f"Bearer {admin}"}) as http:
@@ -256,7 +304,7 @@ def _wait_robots_online(
             try:
                 robots = http.get(f"{url}/api/robots").json()
                 online = {r["name"] for r in robots if r.get("online")}
-                offline = [n for n in names if n not in online]
+                offline = [n for n in names if n not in online or not fleet.ready(n)]
             except (httpx.HTTPError, ValueError, TypeError, KeyError):
                 pass
             if offline:
@@ -544,7 +592,7 @@ def demo(
             args += ["--visitor", "yes"] if visitors and scenario == "quiet" else []
             args += ["--no-can"] if no_can else ["--simulate", "--can", f"virtual:{robot.name}"]
             robot_children.add(robot.name)
-            fleet.spawn(robot.name, *args)
+            fleet.spawn(robot.name, *args, ready_line=f"robot {robot.name} ready")
             screens.append((robot.name, robot.token, f"http://127.0.0.1:{gui_port + index}"))
         for name in vda:
             args = ["vda5050-sim", "--broker", mqtt_url, "--site", str(served), "--robot", name]
