@@ -394,7 +394,8 @@ class Navigator(MotionControl):
         self._send_velocity(0.0, 0.0, force=True)
         log.info("%s: %s cut off (%s): waiting up to %.0f s", self.robot, node, cut.reason, left_s)
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._closures_news.wait(), self.clock.wall(left_s))
+            async with asyncio.timeout(self.clock.wall(left_s)):
+                await self._closures_news.wait()
 
     async def _back_off(self, request: YieldRequested) -> None:
         """Leave the area for its passing place, give it up, then the goal is tried again."""

@@ -206,7 +206,8 @@ class _Connection(WSListener):
             transport.send_close(WSCloseCode(client.close_code), client.close_reason.encode())
             # The peer answers the close frame, then we drop the socket.
             with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(self.gone.wait(), CLOSE_SEND_TIMEOUT_S)
+                async with asyncio.timeout(CLOSE_SEND_TIMEOUT_S):
+                    await self.gone.wait()
         transport.disconnect(graceful=wrote_all)
 
 

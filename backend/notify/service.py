@@ -277,7 +277,8 @@ class Notifier(Service):
                     soonest = at if soonest is None else min(soonest, at)
             wait = None if soonest is None else max(0.0, soonest - self.clock())
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), wait)
+                async with asyncio.timeout(wait):
+                    await self._wake.wait()
 
     # --- the queue ------------------------------------------------------------------------
     def _logged(

@@ -807,7 +807,8 @@ class VdaRobot:
             if not started and loop.time() > deadline:
                 raise DriveFailed(f"{self.name} did not start charging")
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self.changed.wait(), 0.5)
+                async with asyncio.timeout(0.5):
+                    await self.changed.wait()
 
     def _adopt(self, state: dict[str, Any]) -> None:
         """A new master control (a new leader, a restarted server) finds the vehicle on an
@@ -890,7 +891,8 @@ class VdaRobot:
                 raise DriveFailed(f"{self.name} did not cancel its order {state['orderId']}")
             self.changed.clear()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self.changed.wait(), 0.5)
+                async with asyncio.timeout(0.5):
+                    await self.changed.wait()
 
     async def _visit(
         self,
@@ -1067,7 +1069,8 @@ class VdaRobot:
             self.changed.clear()
             self._call(elevator, floor)
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self.changed.wait(), 0.5)
+                async with asyncio.timeout(0.5):
+                    await self.changed.wait()
         self.node, self.floor = str(exit_["node"]), floor
         self.ep.publish(NodeReached(robot=self.name, node=self.node, floor=floor))
         map_id = self.map_ids.get(floor, floor)
@@ -1154,7 +1157,8 @@ class VdaRobot:
                 if not state.get("driving") and action_ids <= done:
                     return
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self.changed.wait(), 0.5)
+                async with asyncio.timeout(0.5):
+                    await self.changed.wait()
 
     def _new_order_id(self, task_id: str) -> str:
         """``<task id>-<n>``, n after any order of this task the vehicle last had (from an

@@ -746,7 +746,8 @@ class SimVehicle(Service):
     async def _report(self) -> None:
         while True:
             try:
-                await asyncio.wait_for(self._wake.wait(), self.state_period_s)
+                async with asyncio.timeout(self.state_period_s):
+                    await self._wake.wait()
             except TimeoutError:
                 pass
             self._wake.clear()

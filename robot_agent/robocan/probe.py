@@ -95,7 +95,8 @@ class Probe:
                 raise CheckFailed(f"no {what} within {timeout:.2f} s")
             self.changed.clear()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self.changed.wait(), remaining)
+                async with asyncio.timeout(remaining):
+                    await self.changed.wait()
 
     async def command(self, data: bytes, timeout: float = 0.5) -> int:
         """Send a command that is acknowledged; return the ACK's status byte. The ACK must
