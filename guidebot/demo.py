@@ -142,17 +142,17 @@ class Fleet:
 
     def _start(self, child: Child, stdout: int | None = None) -> None:
         # A session of its own: Ctrl-C reaches only the launcher, which stops children in order.
-        if child.ready_line is None:
-            with self._recording():
-                child.process = spawn_guidebot(child.args, stdout=stdout, env=self.env)
-                child.started = time.monotonic()
-            return
-        # Relayed: unbuffered, so that its lines show as they come (a pipe is not a terminal).
-        env = {**(self.env if self.env is not None else os.environ), "PYTHONUNBUFFERED": "1"}
-        ready = child.ready = threading.Event()
+        relayed = child.ready_line is not None
+        env = self.env
+        if relayed:  # unbuffered, so that its lines show as they come (a pipe is no terminal)
+            env = {**(env if env is not None else os.environ), "PYTHONUNBUFFERED": "1"}
+            stdout = subprocess.PIPE
         with self._recording():
-            child.process = spawn_guidebot(child.args, stdout=subprocess.PIPE, env=env)
+            child.process = spawn_guidebot(child.args, stdout=stdout, env=env)
             child.started = time.monotonic()
+        if not relayed:
+            return
+        ready = child.ready = threading.Event()
         assert child.process.stdout is not None
         child.relay = threading.Thread(
             target=_relay,
