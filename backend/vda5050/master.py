@@ -4,6 +4,7 @@ vehicle.py); what the schema refuses is logged, counted and raised as an alert, 
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 from collections import Counter
@@ -111,6 +112,7 @@ class MasterControl(Service):
             self.on_cleanup(ep.close)  # type: ignore[attr-defined]
             self.on_cleanup(robot.close)
         await self.enter(self.session)
+        self.spawn(self._watch_silence(), "vda5050 silence watch")
         log.info("VDA 5050: %d robot(s) on MQTT broker %s", len(self.robots), self.broker)
 
     @staticmethod
@@ -150,7 +152,17 @@ class MasterControl(Service):
         if self.resolve is not None:
             self.resolve("vda5050_broker", str(self.broker), "connected")
 
+    async def _watch_silence(self) -> None:
+        """A vehicle that stops speaking without a last will (its software hangs, or it never
+        came back after a broker outage) is disconnected after ``SILENCE_S``."""
+        while True:
+            await asyncio.sleep(1.0)
+            for robot in self.robots.values():
+                robot.check_silence()
+
     def _on_error(self, reason: str) -> None:
+        for robot in self.robots.values():
+            robot.broker_lost()
         log.error("VDA 5050: cannot reach the MQTT broker %s: %s", self.broker, reason)
         if self.alert is not None:
             self.alert(

@@ -83,7 +83,13 @@ Record = Callable[[str, dict[str, Any]], None]
 ACK_TIMEOUT_S = 3.0
 """An order the vehicle's state does not name this long after it was sent is sent again."""
 ORDER_TRIES = 3
-"""Sends of one order before the task fails: never resent forever."""
+"""Sends of one order before the task fails: never resent forever. Only sends the vehicle could
+hear count: the broker took them and the vehicle has been heard since the master control's
+last loss of the broker (``VdaRobot.heard``)."""
+SILENCE_S = 60.0
+"""A vehicle that says nothing (no state, connection or factsheet) this long is taken as a
+broken connection: VDA 5050 asks for a state at least every 30 s, and a vehicle whose software
+hangs, or that never came back after a broker outage, leaves no last will."""
 DONE_ACTIONS = frozenset({"FINISHED", "FAILED"})
 REPORTED_LEVELS = frozenset({"WARNING", "URGENT", "CRITICAL", "FATAL"})
 """Error levels that become a robot_fault (2.1.0 has WARNING and FATAL; 3.0.0 adds URGENT and
@@ -189,6 +195,11 @@ class VdaRobot:
         self.floor: str | None = self.nodes[self.node].floor if self.node in self.nodes else None
         self.state: dict[str, Any] | None = None
         self.online = False
+        self.heard = False
+        """The vehicle has spoken since the master control last lost the broker: what is sent
+        now can reach it (a vehicle still reconnecting after an outage hears nothing)."""
+        self.heard_at = -math.inf
+        """When the vehicle last spoke (the loop's clock): ``check_silence``."""
         self.hibernating = False
         """3.0.0: the vehicle says HIBERNATING (connected, silent, not moving)."""
         self.task_id: str | None = None
@@ -308,7 +319,31 @@ class VdaRobot:
         return message
 
     # -- from the vehicle ------------------------------------------------------------------
-    def on_connection(self, message: dict[str, Any]) -> None:
+    def broker_lost(self) -> None:
+        """The master control lost the broker: the vehicle may be still away once it is back
+        (its own reconnection has a back-off), so order sends do not count until it speaks."""
+        self.heard = False
+
+    def check_silence(self) -> None:
+        """Called every second: an online vehicle silent for ``SILENCE_S`` is disconnected
+        (the Task Manager's grace period, then its task back in the queue), as a broken
+        connection's last will would have done."""
+        silent = asyncio.get_running_loop().time() - self.heard_at
+        if self.online and silent > SILENCE_S:
+            self.on_connection(
+                {"connectionState": "CONNECTIONBROKEN"},
+                why=f"silent for {silent:.0f} s (VDA 5050: a state at least every 30 s)",
+            )
+
+    def _spoke(self) -> None:
+        self.heard = True
+        self.heard_at = asyncio.get_running_loop().time()
+
+    def on_connection(self, message: dict[str, Any], why: str | None = None) -> None:
+        """The vehicle's ``connection`` topic; ``why``: the master's own reason instead (a
+        silent vehicle)."""
+        if why is None:
+            self._spoke()
         state = message["connectionState"]
         was = self.online
         self.online = state == "ONLINE"
@@ -328,7 +363,7 @@ class VdaRobot:
             self.announce.publish("robot_connected", RobotLink(robot=self.name))
             self._spawn(self.instant("stateRequest", "factsheetRequest"))
         elif not self.online and was:
-            log.warning("%s: the vehicle's connection is %s", self.name, state)
+            log.warning("%s: %s", self.name, why or f"the vehicle's connection is {state}")
             if state == "OFFLINE":  # a clean goodbye
                 self._publish_state()
             self.announce.publish("robot_disconnected", RobotLink(robot=self.name))
@@ -357,6 +392,7 @@ class VdaRobot:
 
     def on_factsheet(self, message: dict[str, Any]) -> None:
         """What the vehicle can do: whether a tour stop is a ``speak`` or a timed ``wait``."""
+        self._spoke()
         self._speak(str(message["version"]))
         self.factsheet = message
         features = message["protocolFeatures"]
@@ -376,6 +412,7 @@ class VdaRobot:
         )
 
     def on_state(self, message: dict[str, Any]) -> None:
+        self._spoke()
         if self.hibernating:  # sent before it fell asleep: it speaks again after ONLINE
             return
         if self._stale(message) and self._stale_in_row < STALE_IN_ROW:
@@ -1089,7 +1126,7 @@ class VdaRobot:
         """One order: the vehicle from ``steps[first]`` to the last of ``steps``; ``lead``:
         (order id, update id, the step its base ends at) of the vehicle's order to extend
         (``_resumed_path``) instead of a new one."""
-        update, base_end, sent_at, tries = -1, first - 1, 0.0, 0
+        update, base_end, sent_at, tries = -1, first - 1, -math.inf, 0
         taken = lead is not None  # the vehicle has had this order (then losing it is news)
         if lead is None:
             order_id = self.order_id = self._new_order_id(task_id)
@@ -1125,20 +1162,22 @@ class VdaRobot:
                     map_ids=self.map_ids,
                     actions={last: actions or []} if base_end < last else None,
                 )
-                base_end, tries = released_to, 0
+                base_end, tries, sent_at = released_to, 0, -math.inf  # goes at once
             acked = ours and state.get("orderUpdateId", -1) >= update
             taken = taken or ours
             if taken and not ours and self.online:  # restarted, or lost it while away
                 raise OrderLost(order_id)
-            if not acked and self.online and (tries == 0 or loop.time() - sent_at > ACK_TIMEOUT_S):
+            if not acked and self.online and loop.time() - sent_at > ACK_TIMEOUT_S:
                 if tries >= ORDER_TRIES:
                     raise DriveFailed(
                         f"{self.name} never acknowledged order {order_id} "
                         f"(update {update}, sent {tries} times)"
                     )
-                sent_at = loop.time()
+                heard = self.heard  # before the send: a state meanwhile may not have heard it
                 if await self.send("order", order):
-                    tries += 1  # one the broker never took (we were not connected) is no try
+                    sent_at = loop.time()
+                    if heard:  # one the vehicle could not hear is no try
+                        tries += 1
             refusal = self._refusal(order_id)
             if refusal is not None:
                 raise DriveFailed(f"{self.name} refused the order: {refusal}")

@@ -14,7 +14,8 @@ RELEASE zone (``responses``: it waits for GRANTED, stops with RELEASE_LOST on RE
 a BLOCKED zone it does not drive into, SPEED_LIMIT zones, and hibernation (startHibernation,
 stopHibernation: connection HIBERNATING, no state meanwhile).
 Faults for tests: ``reject_orders`` (the next orders are refused with that reason),
-``deaf`` (orders dropped unanswered) and ``raise_error`` (an error in the state).
+``deaf`` (orders dropped unanswered), ``hung`` (connected, silent and deaf: no last will)
+and ``raise_error`` (an error in the state).
 """
 
 from __future__ import annotations
@@ -136,6 +137,9 @@ class SimVehicle(Service):
         """Orders are dropped unanswered (kept in ``orders_ignored``): a vehicle that never
         acknowledges them."""
         self.orders_ignored: list[dict[str, Any]] = []
+        self.hung = False
+        """Its software hangs: still connected to the broker (so no last will), it says and
+        hears nothing until it is let go again."""
         self.orders_received: list[dict[str, Any]] = []
         self.instant_received: list[dict[str, Any]] = []
         self.v3 = vehicle.version.startswith("3.")
@@ -172,9 +176,7 @@ class SimVehicle(Service):
 
     async def on_stop(self) -> None:
         if self.session.connected.is_set():
-            await self.session.publish(
-                self.vehicle.topic("connection"), self._connection("OFFLINE"), retain=True
-            )
+            await self._publish("connection", self._connection("OFFLINE"), retain=True)
 
     def _header(self, topic: str) -> dict[str, Any]:
         self._headers[topic] = self._headers.get(topic, -1) + 1
@@ -194,11 +196,18 @@ class SimVehicle(Service):
 
     async def _say(self, connection: str) -> None:
         message = {**self._header("connection"), "connectionState": connection}
-        await self.session.publish(self.vehicle.topic("connection"), message, retain=True)
+        await self._publish("connection", message, retain=True)
+
+    async def _publish(self, topic: str, message: dict[str, Any], *, retain: bool = False) -> bool:
+        if self.hung:
+            return False
+        return await self.session.publish(self.vehicle.topic(topic), message, retain=retain)
 
     # -- incoming --------------------------------------------------------------------------
     def _on_message(self, topic: str, payload: bytes) -> None:
         name = topic.rsplit("/", 1)[-1]
+        if self.hung:
+            return
         try:
             message = json.loads(payload)
             check(name, message, self.vehicle.version)
@@ -738,10 +747,10 @@ class SimVehicle(Service):
         }
 
     async def _publish_factsheet(self) -> None:
-        await self.session.publish(self.vehicle.topic("factsheet"), self.factsheet())
+        await self._publish("factsheet", self.factsheet())
 
     async def publish_state(self) -> None:
-        await self.session.publish(self.vehicle.topic("state"), self.state())
+        await self._publish("state", self.state())
 
     async def _report(self) -> None:
         while True:

@@ -466,8 +466,10 @@ async def test_an_update_due_while_the_broker_is_down_is_sent_once_it_is_back(
     """V1 waits at b for the corridor R1 holds; the broker dies, and R1 lets the corridor go
     meanwhile: the update that releases it cannot leave. Each send the broker never took was
     counted as one of the order's three tries, and the task failed "never acknowledged" before
-    the broker was back. Only sends that left count: the update goes once the broker is back,
-    and the task ends done."""
+    the broker was back. Then the broker is back before the vehicle (its own reconnection has
+    a back-off; here it hangs until let go): the sends the broker took while the vehicle could
+    not hear them were counted too (a clean run failed so). Only sends the vehicle could hear
+    count: the update goes once both are back, and the task ends done."""
     monkeypatch.setattr(vehicle_module, "ACK_TIMEOUT_S", 1.0)  # three tries within 3 s
     async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
         other = f.server.app.state.hub.endpoint("R1")
@@ -477,13 +479,14 @@ async def test_an_update_due_while_the_broker_is_down_is_sent_once_it_is_back(
         await wait_until(lambda: f.robot("V1").online, 15)
         session = f.master.session
         unsent: list[str] = []
+        sent: list[str] = []
         publish = session.publish
 
         async def counted(topic: str, message: dict, **options: bool) -> bool:
-            sent = await publish(topic, message, **options)
-            if not sent and topic.endswith("/order"):
-                unsent.append(str(message["orderUpdateId"]))
-            return sent
+            went = await publish(topic, message, **options)
+            if topic.endswith("/order"):
+                (sent if went else unsent).append(str(message["orderUpdateId"]))
+            return went
 
         session.publish = counted
         task = await f.task("go_to", {"node": "e"})
@@ -493,12 +496,43 @@ async def test_an_update_due_while_the_broker_is_down_is_sent_once_it_is_back(
         other.publish(ReleaseArea(robot="R1", area="corridor"))
         await wait_until(lambda: len(unsent) > vehicle_module.ORDER_TRIES, 20)
         assert (await f.task_state(task))["state"] == "running"
+        sim.hung = True
+        before = len(sent)
         broker.start()
+        await wait_until(lambda: len(sent) > before + vehicle_module.ORDER_TRIES, 30)
+        assert (await f.task_state(task))["state"] == "running"
+        sim.hung = False
         result = await until_done(f, task, 60)
         other.close()
         assert result["state"] == "done", result
         assert sim.last_node == "e" and not sim.errors
         all_valid(sim.orders_received, "order")
+
+
+async def test_a_vehicle_silent_without_a_last_will_is_disconnected_until_it_speaks(
+    tmp_path: Path, broker: Mosquitto, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A vehicle whose software hangs stays connected to the broker, so no last will comes: the
+    master took it for online for ever (a task on it waited with it). Silent for ``SILENCE_S``,
+    it is disconnected (the Task Manager's grace period follows); its next state brings it
+    back."""
+    monkeypatch.setattr(vehicle_module, "SILENCE_S", 2.0)
+    tm = None
+    async with fleet(tmp_path, broker.url) as f, vehicle(broker.url) as sim:
+        tm = f.server.app.state.task_manager
+        await wait_until(lambda: f.robot("V1").online and tm.robots["V1"].online, 15)
+        sim.hung = True
+        await wait_on(
+            f.changed,
+            lambda: any(m.payload["robot"] == "V1" for m in f.of("robot_disconnected")),
+            20,
+        )
+        assert sim.session.connected.is_set()
+        await wait_until(lambda: not tm.robots["V1"].online, 10)
+        connected = len(f.of("robot_connected"))
+        sim.hung = False
+        await wait_on(f.changed, lambda: len(f.of("robot_connected")) > connected, 20)
+        await wait_until(lambda: tm.robots["V1"].online, 10)
 
 
 async def test_a_site_edit_reaches_the_master_control_without_a_restart(
