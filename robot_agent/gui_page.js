@@ -123,7 +123,9 @@ function questionView(q) {
 
 function stateView(s) {
   const robot = s.state ?? {};
-  const mode = robot.mode ?? "idle";
+  // While staff pause the fleet an idle robot starts nothing: it is not "Ready".
+  const reported = robot.mode ?? "idle";
+  const mode = reported === "idle" && s.service === "paused" && !s.task ? "paused" : reported;
   const link = s.link ?? {};
   const battery = robot.battery === undefined ? "" : `${Math.round(robot.battery * 100)} %`;
   return html`${link.up === false

@@ -86,6 +86,9 @@ class Passage:
         # id of our last open_door request -> door; the reason when the building refused it.
         self._door_requests: dict[str, str] = {}
         self._door_failed: dict[str, str] = {}
+        self._door_shut: set[str] = set()
+        """Doors whose open_door the building answered ``door_closed`` (staff closed the door
+        while it waited): asked again after ``door_retry_s``."""
         self._elevators: dict[str, str] = {}
         self.arrivals: dict[str, tuple[int, str]] = {}
         """Elevator -> (how many times the building's broadcasts said its cabin came to stand
@@ -121,6 +124,8 @@ class Passage:
             self._doors_open.add(door)
         else:
             self._doors_open.discard(door)
+            if self._door_requests.pop(message.correlation_id or "", None) is not None:
+                self._door_shut.add(door)  # the answer to our open_door: staff closed it
         self._news.set()
 
     def _on_command_failed(self, message: Message) -> None:
@@ -334,11 +339,13 @@ class Passage:
             self.ep.publish(ReleaseDoor(door=door))
         self._held_doors.clear()
         self._door_requests.clear()
+        self._door_shut.clear()
 
     def _open_door(self, door: str) -> None:
         """Ask the building to open (and hold) ``door`` for this robot."""
         self._held_doors.add(door)
         self._door_failed.pop(door, None)
+        self._door_shut.discard(door)
         for request, known in list(self._door_requests.items()):
             if known == door:
                 del self._door_requests[request]
@@ -418,6 +425,14 @@ class Passage:
                     self.ep.publish(
                         RobotFault(robot=self.robot, kind="door_blocked", detail=detail)
                     )
+                retry_at = now + self.door_retry_s
+            if door in self._door_shut and retry_at is None:
+                log.info(
+                    "%s: staff closed door %s while it waited: asking again in %g s",
+                    self.robot,
+                    door,
+                    self.door_retry_s,
+                )
                 retry_at = now + self.door_retry_s
             if now >= deadline:
                 raise NavigationError(

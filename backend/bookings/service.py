@@ -163,6 +163,7 @@ class BookingService:
         old = self.get(booking_id)
         if old.status != "booked":
             raise BookingError(f"booking {booking_id} is {old.status}: it cannot be moved")
+        self._refuse_taken(old, "moved")
         changes = body.model_dump(exclude_none=True)
         if not changes:
             raise BookingError("nothing to change: give start, meeting_point, group_size or note")
@@ -180,6 +181,7 @@ class BookingService:
         old = self.get(booking_id)
         if old.status != "booked":
             raise BookingError(f"booking {booking_id} is already {old.status}")
+        self._refuse_taken(old, "cancelled", body.occurrence)
         if body.occurrence is None:
             new = old.model_copy(update={"status": "cancelled"})
             await self._save(new, by, "cancelled", {"reason": body.reason})
@@ -252,6 +254,28 @@ class BookingService:
                     f"{busy + 1} bookings at once at {_local(at, self.tz)} but {robots} "
                     f"robot(s) in service: move it or cancel another"
                 )
+
+    def _refuse_taken(self, booking: Booking, change: str, day: str | None = None) -> None:
+        """An occurrence the scheduler has started or recorded missed is history: a once
+        booking's (the booking as a whole) or, with ``day``, a series' on that date. A series
+        as a whole still changes its coming occurrences."""
+        if day is None and booking.recurrence.every != "once":
+            return
+        if day is None:
+            times = [local_time(booking.start, self.tz).timestamp()]
+        else:
+            times = [t for t in self._dates_of(booking, day) if _local(t, self.tz)[:10] == day]
+        for at in times:
+            taken = self.outcomes.get((booking.id, at))
+            if taken is None:
+                continue
+            what = f"booking {booking.id} at {_local(at, self.tz).replace('T', ' ')}"
+            if taken["outcome"] == "started":
+                raise BookingError(
+                    f"{what} has started (task {taken['task_id']}): it cannot be {change}; "
+                    "cancel its task instead"
+                )
+            raise BookingError(f"{what} was missed: it cannot be {change}")
 
     def _dates_of(self, booking: Booking, day: str) -> list[float]:
         midnight = local_time(f"{day}T00:00", self.tz).timestamp()

@@ -21,7 +21,8 @@ Safety rules (docs/building.md, "Doors"):
   the waiting ``open_door`` requests of the holders the fire alarm drops (``release_all`` with
   ``withdraw``: an evacuation raised door trouble and an alert for doors nobody wanted), and
   so are those of every holder when staff close the door (``close_door``: they did not fail,
-  the door was closed on purpose); but a holder the fire alarm drops that is not evacuating
+  the door was closed on purpose; each is answered ``door_closed``, ``DoorShut``, so a robot
+  waiting in front asks again); but a holder the fire alarm drops that is not evacuating
   (outside the alarm's zone) still wants the door: its waiting ``open_door`` is refused at once
   with the alarm's reason (``DoorRefused``: a ``command_failed``), where it used to get no
   answer and wait its whole ``wait_timeout_s``; a request dropped while its coil is still being
@@ -37,7 +38,7 @@ from dataclasses import dataclass, field
 
 from guidebot.site.building import Door
 
-__all__ = ["STALE_MARGIN_S", "DoorKeeper", "DoorRefused", "DoorReleased"]
+__all__ = ["STALE_MARGIN_S", "DoorKeeper", "DoorRefused", "DoorReleased", "DoorShut"]
 
 STALE_MARGIN_S = 0.02
 """A sample slotted within this of a close write may have been read before it (timers fire a
@@ -47,6 +48,12 @@ little early): it does not count."""
 class DoorReleased(Exception):
     """The holder let the door go (or the fire alarm dropped it, or staff closed the door)
     while its open_door waited for it: withdrawn, not failed. The text says why."""
+
+
+class DoorShut(DoorReleased):
+    """Staff closed the door while the holder's open_door waited for it: withdrawn (no
+    failure of the door), but the holder still wants it, so it is told the door is closed
+    (``door_closed`` in answer to its request) and asks again."""
 
 
 class DoorRefused(Exception):
@@ -157,10 +164,8 @@ class DoorKeeper:
         finally:
             del self._waiters[future]
 
-    def _withdraw(self, holders: set[str], why: str, *, refused: bool = False) -> None:
-        """Wake the open_door waits of ``holders`` with DoorReleased(why), or DoorRefused(why)
-        when ``refused``."""
-        error = DoorRefused if refused else DoorReleased
+    def _withdraw(self, holders: set[str], why: str, error: type[Exception] = DoorReleased) -> None:
+        """Wake the open_door waits of ``holders`` with ``error(why)``."""
         for future, waiting in self._waiters.items():
             if waiting in holders and not future.done():
                 future.set_exception(error(why))
@@ -185,11 +190,19 @@ class DoorKeeper:
         return not self.holders
 
     def release_all(
-        self, *, withdraw: str = "", refuse: str = "", spare: Collection[str] = ()
+        self,
+        *,
+        withdraw: str = "",
+        shut: str = "",
+        refuse: str = "",
+        spare: Collection[str] = (),
     ) -> None:
-        """Drop every holder. With ``withdraw`` (why: the fire alarm, staff's close), their
-        ``open_door`` requests still waiting for the door are withdrawn too, as if each holder
-        had let go: their time-out is no failure of the door. With ``refuse`` (a reason: the
+        """Drop every holder. With ``withdraw`` (why: the fire alarm), their ``open_door``
+        requests still waiting for the door are withdrawn too, as if each holder had let go:
+        their time-out is no failure of the door. ``shut`` (why: staff's close) withdraws
+        them with DoorShut: each holder is told the door closed, and asks again if it still
+        wants it (a robot waiting in front used to wait for its whole time-out, 600 s, for an
+        answer that never came). With ``refuse`` (a reason: the
         fire alarm's), the waiting requests of holders not in ``spare`` (those evacuating, who
         want no door any more: withdrawn) are refused with it at once: they still want the
         door, and told nothing they would wait for it in vain."""
@@ -198,9 +211,11 @@ class DoorKeeper:
             timer.cancel()
         self.holders.clear()
         if refuse:
-            self._withdraw(holders - set(spare), refuse, refused=True)
+            self._withdraw(holders - set(spare), refuse, DoorRefused)
         if withdraw:
             self._withdraw(holders, withdraw)
+        if shut:
+            self._withdraw(holders, shut, DoorShut)
         if self._open_timer is not None:
             self._open_timer.cancel()
             self._open_timer = None

@@ -26,7 +26,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.building._modbus import ModbusIOError
-from backend.building.doors import DoorKeeper, DoorRefused, DoorReleased
+from backend.building.doors import DoorKeeper, DoorRefused, DoorReleased, DoorShut
 from backend.building.elevators import ElevatorWatch
 from backend.building.filter import InputFilter
 from backend.building.poller import HealthState, ModuleHealth, ModulePoller, Sample
@@ -465,8 +465,10 @@ class BuildingInterface(Service):
             timeout = door.open_time_s + self.command_margin_s
             try:
                 await keeper.wait_open(timeout, holder)
-            except DoorReleased as withdrawn:  # nobody waits for this answer any more
+            except DoorReleased as withdrawn:  # no failure of the door
                 log.info("door %s: %s's open_door withdrawn: %s", door.id, holder, withdrawn)
+                if isinstance(withdrawn, DoorShut):  # the requester still waits: it may ask again
+                    self._reply(message, "door_closed", {"door": door.id})
                 return {"door": door.id}
             except DoorRefused as refused:  # its hold is gone already, the door closing
                 self._fail(message, str(refused))
@@ -563,12 +565,12 @@ class BuildingInterface(Service):
 
     async def _close_door(self, message: Message) -> dict[str, Any]:
         """Close now, whoever holds the door (staff). The open_door requests still waiting
-        for it are withdrawn (no answer): their time-out is no failure of the door, so no
-        trouble closure and no alert for a door staff closed on purpose."""
+        for it are answered ``door_closed``, not failed: no trouble closure and no alert for a
+        door staff closed on purpose, and a robot waiting in front knows to ask again."""
         close_door: CloseDoor = message.typed(CloseDoor)
         door = self._door(close_door.door)
         keeper = self.doors[door.id]
-        keeper.release_all(withdraw=f"staff closed door {door.id}")
+        keeper.release_all(shut=f"staff closed door {door.id}")
         await self._close(keeper)
         if door.is_open is not None:
             timeout = door.open_time_s + self.command_margin_s

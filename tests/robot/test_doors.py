@@ -90,3 +90,34 @@ async def test_robots_report_their_floor_from_the_start(tmp_path: Path) -> None:
         # robot_state places it at home2, not at the odometry's origin (0, 0)
         assert (f.states["R1"]["x"], f.states["R1"]["y"]) == (0.0, 3.0)
         assert not f.of("node_reached")
+
+
+async def test_a_robot_waiting_at_a_door_staff_close_asks_again_and_goes_through(
+    tmp_path: Path,
+) -> None:
+    """Staff close D0 (``close_door``, as an operator's hub client sends it) while R1 waits in
+    front of it for its open_door (the door jammed for the moment): the building withdrew R1's
+    request without an answer, and R1 waited its whole time-out (600 robot seconds) before a
+    closed door. It is answered ``door_closed``, asks again and goes through; no failure, no
+    alert, no trouble closure."""
+    async with fleet(tmp_path, ["R1"]) as f:
+        building = f.server.app.state.building
+        building.command_margin_s = 300.0  # the jammed door's open_door never times out here
+        f.building.jam_door("D0")
+        going = asyncio.create_task(f.go("R1", "west", timeout=60))
+        await f.wait_for(lambda: f.states.get("R1", {}).get("navigation") == "waiting_door")
+        await f.wait_for(lambda: building.doors["D0"].holders)
+        f.building.jam_door("D0", False)  # the coil is set: nothing moves until it is set again
+        staff = f.server.app.state.hub.endpoint("staff")
+        closed = await staff.request("close_door", {"door": "D0"}, timeout=30)
+        assert closed.type == "door_closed", closed.payload
+        await going
+        async with httpx.AsyncClient(base_url=f.server.url) as http:
+            alerts = await http.get(
+                "/api/alerts", headers={"Authorization": f"Bearer {f.server.admin_token}"}
+            )
+        assert len(f.of("open_door", door="D0")) >= 2
+        assert not f.of("command_failed")
+        assert "door0" in [m.payload["node"] for m in f.of("node_reached")]
+        assert [a["kind"] for a in alerts.json()] == []
+        assert not f.checker.violations, f.checker.violations

@@ -15,7 +15,7 @@ import orjson
 import pytest
 
 from backend.alerts import AlertStore
-from backend.bookings.model import BookingRequest
+from backend.bookings.model import BookingError, BookingRequest, CancelRequest, MoveRequest
 from backend.bookings.reserve import Reservations
 from backend.bookings.schedule import BookingScheduler
 from backend.bookings.service import BookingService
@@ -176,6 +176,18 @@ async def test_a_recurring_schedule_runs_a_whole_day_each_occurrence_once_and_on
     assert not risky.active  # resolved when it started
     history = await service.history(made["11:00"].id)
     assert [h["action"] for h in history] == ["created", "started"]
+    # A started occurrence is history: the console offered Move and Cancel on it, and a
+    # cancel of the started once booking "cancelled" a tour that ran on. A series as a whole
+    # still changes its coming occurrences.
+    with pytest.raises(BookingError, match=r"17:00 has started \(task .*\): it cannot be "):
+        await service.cancel(made["risky"].id, CancelRequest(), by="desk")
+    with pytest.raises(BookingError, match="has started"):
+        await service.move(made["risky"].id, MoveRequest(note="late"), by="desk")
+    with pytest.raises(BookingError, match=f"{DAY} 11:00 has started"):
+        await service.cancel(made["11:00"].id, CancelRequest(occurrence=str(DAY)), by="desk")
+    tomorrow = str(DAY + dt.timedelta(days=1))
+    await service.cancel(made["11:00"].id, CancelRequest(occurrence=tomorrow), by="desk")
+    await service.move(made["15:00"].id, MoveRequest(note="from next week"), by="desk")
 
 
 async def test_a_booking_that_cannot_start_is_flagged_ahead_then_missed_with_the_reason(
@@ -215,6 +227,8 @@ async def test_a_booking_that_cannot_start_is_flagged_ahead_then_missed_with_the
     assert manager.tasks == {}
     await scheduler.step(local("11:01"))
     assert missed.count == 1
+    with pytest.raises(BookingError, match="11:00 was missed: it cannot be moved"):
+        await service.move(booking.id, MoveRequest(start=f"{DAY}T12:00"), by="desk")
     assert [h["action"] for h in await service.history(booking.id)] == [
         "created",
         "flagged",

@@ -127,3 +127,18 @@ async def test_the_bookings_view_follows_bookings_made_elsewhere(
             assert reply.status_code == 201, reply.text
         row = table.get_by_role("row").filter(has_text="Highlights")
         await expect(row).to_contain_text("14:00", timeout=20_000)
+        await expect(row.get_by_role("button", name="Move Highlights at 14:00")).to_be_visible()
+
+        # Its tour starts (the scheduler's record of it, as at its time): the row said so and
+        # still offered Move and Cancel, which the server now refuses. It offers neither.
+        booking = reply.json()
+        bookings = fleet.server.app.state.bookings
+        at = bookings.between(0, 2**40)[0][0]
+        bookings.outcomes[(booking["id"], at)] = {"task_id": "t-42", "outcome": "started"}
+        await page.get_by_role("button", name="Refresh").click()
+        await expect(row).to_contain_text("started (task t-42)")
+        await expect(row.get_by_role("button")).to_have_text(["History of Highlights at 14:00"])
+        async with fleet.http(web.operator_token) as http:
+            refused = await http.post(f"/api/bookings/{booking['id']}/cancel", json={})
+        assert refused.status_code == 422, refused.text
+        assert "has started (task t-42)" in refused.json()["detail"]

@@ -102,7 +102,8 @@ async def test_the_touch_screen_says_staff_paused_the_fleet_in_its_language(
     visitor_fleet: Any, open_page: Any, web: SimpleNamespace
 ) -> None:
     """The robot's touch screen did not show the fleet's ``paused`` service: it says it, as
-    the phone does, in the screen's language, and no more once staff resume."""
+    the phone does, in the screen's language, and no more once staff resume. Its state line
+    said "Ready" beside it: it says "Paused by staff" until they resume."""
     async with visitor_fleet() as vf:
         screen = (await open_page(vf.screen_url("R1"), viewport=(1024, 600))).page
         await expect(screen.get_by_role("heading", name="Hello, I am R1")).to_be_visible()
@@ -110,6 +111,9 @@ async def test_the_touch_screen_says_staff_paused_the_fleet_in_its_language(
             r = await staff.post("/api/fleet/pause", json={"reason": "cleaning"})
             assert r.status_code == 200, r.text
             await expect(screen.locator("#app")).to_contain_text(PAUSED, timeout=LONG)
+            state = screen.locator(".touch-state")
+            await expect(state).to_contain_text("Paused by staff")
+            await expect(state).not_to_contain_text("Ready")
             await web.axe_check(screen)
             await web.screenshot(screen, "touch-screen-paused")
             await screen.get_by_role("button", name="Español").click()
@@ -121,3 +125,4 @@ async def test_the_touch_screen_says_staff_paused_the_fleet_in_its_language(
         await expect(screen.locator("#app")).not_to_contain_text(
             "El personal ha pausado", timeout=LONG
         )
+        await expect(screen.locator(".touch-state")).to_contain_text("Preparado")

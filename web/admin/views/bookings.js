@@ -218,7 +218,7 @@ export function bookingsView(ui) {
           <td>${o.note}</td>
           <td>
             <button type="button" class="secondary" @click=${() => history(o)}>History of ${o.name} at ${when(o)}</button>
-            ${ui.operate && o.status === "booked"
+            ${ui.operate && o.status === "booked" && !o.outcome
               ? html`<button type="button" class="secondary" @click=${() => { b.moving = o; ui.draw(); }}>Move ${o.name} at ${when(o)}</button>
                 ${o.recurrence.every !== "once"
                   ? html`<button type="button" class="secondary" @click=${() => cancel(o, o.local.slice(0, 10))}>Cancel ${o.name} on ${o.local.slice(0, 10)} only</button>`
