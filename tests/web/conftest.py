@@ -283,9 +283,15 @@ class WebFleet:
         return f"{self.server.url}/admin/"
 
     def http(self, token: str | None = None) -> httpx.AsyncClient:
+        """A staff client; it drops connections idle for 1 s, before the server's keep-alive
+        (5 s) does: a request sent on a connection the server was closing failed (ReadError)
+        after a test's page work had kept the client idle about 5 s (docs/server.md)."""
         token = token or self.server.admin_token
         return httpx.AsyncClient(
-            base_url=self.server.url, headers={"Authorization": f"Bearer {token}"}, timeout=10
+            base_url=self.server.url,
+            headers={"Authorization": f"Bearer {token}"},
+            timeout=10,
+            limits=httpx.Limits(keepalive_expiry=1.0),
         )
 
     async def kill(self, name: str) -> None:

@@ -50,6 +50,13 @@ async def test_reports_view_charts_csv_errors_and_print(
         # Both charts are drawn by the vendored uPlot.
         await expect(page.locator("#chart-tours canvas")).to_have_count(1)
         await expect(page.locator("#chart-waits canvas")).to_have_count(1)
+        # Their time axes on the 24-hour clock, as every time on the console (uPlot's own
+        # said "2pm"): the labels as drawn, which the canvas does not show a test.
+        for chart in ("#chart-tours", "#chart-waits"):
+            axis = page.locator(chart)
+            await expect(axis).to_have_attribute("data-x-ticks", re.compile(r"\b\d\d:00\b"))
+            ticks = await axis.get_attribute("data-x-ticks") or ""
+            assert not re.search(r"\d(am|pm)\b", ticks), ticks
         await expect(page.get_by_role("table", name="Robots' time and distance")).to_contain_text(
             "R1"
         )

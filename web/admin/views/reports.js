@@ -22,6 +22,22 @@ const TASK_SERIES = [
   ["failed", "Failed", "#b00020"],
   ["cancelled", "Cancelled", "#8a4b00"],
 ];
+const HOUR_S = 3600;
+const DAY_S = 86400;
+/** The charts' time axis on the 24-hour clock, day before month ("14:00", "3 Jul"), as every
+ * time on the console; uPlot's own is 12-hour and month first ("2pm", "7/3"). uPlot's table:
+ * [tick step at least (s), tick label, label when the year, month, day, hour, minute, second
+ * rolls over, 1: the roll-over label is added to the tick's]. */
+const TIME_AXIS = [
+  [DAY_S * 365, "{YYYY}", null, null, null, null, null, null, 1],
+  [DAY_S * 28, "{MMM}", "\n{YYYY}", null, null, null, null, null, 1],
+  [DAY_S, "{D} {MMM}", "\n{YYYY}", null, null, null, null, null, 1],
+  [HOUR_S, "{HH}:{mm}", "\n{D} {MMM} {YYYY}", null, "\n{D} {MMM}", null, null, null, 1],
+  [60, "{HH}:{mm}", "\n{D} {MMM} {YYYY}", null, "\n{D} {MMM}", null, null, null, 1],
+];
+/** The time axis's labels as drawn, on the chart's element (``data-x-ticks``, " | " between
+ * them): the canvas holds no text a test or a screen reader could read. */
+const tickHook = { draw: [(u) => { u.root.parentElement.dataset.xTicks = (u.axes[0]._values ?? []).join(" | "); }] };
 const INCIDENT_NAMES = {
   faults: "Robot faults",
   door_blocks: "Doors that did not open",
@@ -542,7 +558,8 @@ function drawCharts(ui) {
   new uPlot(
     {
       ...common,
-      axes: [{}, { label: "tours" }],
+      axes: [{ values: TIME_AXIS }, { label: "tours" }],
+      hooks: tickHook,
       series: [{}, ...TASK_SERIES.map(([k, label, colour], i) => ({
         label, stroke: colour, width: 2, fill: i === 0 ? `${colour}33` : undefined,
         paths: i === 0 ? uPlot.paths.bars({ size: [0.8] }) : undefined,
@@ -555,7 +572,8 @@ function drawCharts(ui) {
   new uPlot(
     {
       ...common,
-      axes: [{}, { label: "minutes" }],
+      axes: [{ values: TIME_AXIS }, { label: "minutes" }],
+      hooks: tickHook,
       series: [{}, { label: "Mean wait", stroke: "#0b57d0", width: 2, spanGaps: false, points: { show: true } }],
     },
     [binStarts(w), w.map((row) => (row.wait_mean_s === null ? null : row.wait_mean_s / 60))],
