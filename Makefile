@@ -40,14 +40,15 @@ lint: $(STAMP) $(TSC_STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy guidebot backend robot_agent building_sim petri_nets bench
 
-# The suite waits far more than it computes (servers, browsers, robots at work): six
-# pytest-xdist workers (WORKERS) share 2 CPUs, and lint and the type check (15 s of one CPU) run beside them
+# The suite's tests wait on servers, browsers and robots, but the CPUs are busy most of the run:
+# four pytest-xdist workers (WORKERS) share 2 CPUs (six took 20 min and 2305 CPU-s, four 17 min and
+# 1600 CPU-s, three 18.5 min: README), and lint and the type check (15 s of one CPU) run beside them
 # (their few lines come among pytest's first ones); any of the three failing fails `make test`
 # once the others end. The set-up runs side by side too: the venv's install, the Debian
 # packages' check (and the sign-on tests' npm ci) and the TypeScript checker's npm ci
 # (scripts/system-deps.sh takes a lock, so two of its runs never call apt at once).
 # `--dist loadgroup` keeps the docker tests in one worker; they start first (tests/conftest.py).
-WORKERS ?= 6
+WORKERS ?= 4
 test:
 	$(MAKE) --no-print-directory -j 3 lint typecheck suite
 

@@ -136,9 +136,13 @@ def _period_figures(
     }
 
 
-async def _cpu_window(seconds: float, timing: _Timing, settle_s: float = 1.0) -> float:
-    """CPU of this process (percent of one core) over ``seconds``, after ``settle_s``; the
-    poll timing is recorded over the same window only."""
+async def _cpu_window(
+    seconds: float, timing: _Timing, settle_s: float = 1.0
+) -> tuple[float, float]:
+    """CPU of this process (percent of one core) over about ``seconds`` after ``settle_s``,
+    and the window's real length: a loaded machine wakes the sleep late, and polls counted over
+    the longer window but divided by ``seconds`` read 69 polls/s of a 60/s schedule. The poll
+    timing is recorded over the same window only."""
     await asyncio.sleep(settle_s)
     timing.times.clear()
     process = psutil.Process()
@@ -150,7 +154,7 @@ async def _cpu_window(seconds: float, timing: _Timing, settle_s: float = 1.0) ->
         # the clear (a loaded machine delays the answer) counted too, and the plain peer read
         # 70 polls/s of a 60/s schedule; nor those that started after it closed.
         t[:] = [started for started in t if wall0 <= started <= wall0 + wall]
-    return round(cpu / wall * 100, 1)
+    return round(cpu / wall * 100, 1), wall
 
 
 async def _ours_window(
@@ -174,7 +178,7 @@ async def _ours_window(
         for poller in bi.pollers.values():
             poller.jitter_s.clear()
             poller.interval_s.clear()
-        cpu = await _cpu_window(seconds, timing, settle_s=0.0)
+        cpu, window_s = await _cpu_window(seconds, timing, settle_s=0.0)
         jitter = [j * 1000 for p in bi.pollers.values() for j in p.jitter_s]
         intervals = [i for p in bi.pollers.values() for i in p.interval_s]
         overruns = sum(p.health.overruns for p in bi.pollers.values())
@@ -182,7 +186,7 @@ async def _ours_window(
     return {
         "cpu_percent": cpu,
         "jitter_ms": percentiles(jitter),
-        **_period_figures(intervals, period_ms / 1000, polls, seconds),
+        **_period_figures(intervals, period_ms / 1000, polls, window_s),
         "overruns": overruns,
         "_last": timing.last,
     }
@@ -209,7 +213,7 @@ async def _peer_window(config: BuildingConfig, period_ms: int, seconds: float) -
             )
         )
     try:
-        cpu = await _cpu_window(seconds, timing)
+        cpu, window_s = await _cpu_window(seconds, timing)
     finally:
         # pymodbus awaits with Python 3.11's wait_for, which can swallow a cancellation that
         # races with an answer: cancel until every loop is really done (as ModulePoller.stop).
@@ -218,7 +222,7 @@ async def _peer_window(config: BuildingConfig, period_ms: int, seconds: float) -
                 task.cancel()
             await asyncio.wait(tasks, timeout=0.5)
     polls = sum(len(t) for t in timing.times.values())
-    figures = _period_figures(timing.intervals(), period_ms / 1000, polls, seconds)
+    figures = _period_figures(timing.intervals(), period_ms / 1000, polls, window_s)
     return {"cpu_percent": cpu, **figures, "_last": timing.last}
 
 
