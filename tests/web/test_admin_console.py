@@ -76,6 +76,11 @@ async def test_every_view_and_what_each_role_may_do(
         operator = await open_page(fleet.admin_url)
         await web.sign_in(operator, web.operator_token)
         await expect(operator.page.locator("#who")).to_contain_text("operator")
+        # Its snapshot first (R1 on its map), as the admin's page above: the monitor draws
+        # the nets the snapshot brings.
+        await expect(operator.page.get_by_role("button", name="robot R1")).to_be_visible(
+            timeout=20_000
+        )
         await web.open_view(operator.page, "RoboGraph monitor")
         await expect(operator.page.get_by_role("region", name="Net waiting")).to_be_visible()
         await expect(operator.page.get_by_role("button", name="Kill waiting")).to_have_count(0)

@@ -4,6 +4,7 @@ the live marking."""
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -210,3 +211,23 @@ async def test_a_net_without_a_drawing_is_laid_out_in_layers_with_no_label_over_
         assert len(boxes) == 10
         assert overlapping(boxes) == []
         await web.axe_check(page)
+
+
+async def test_the_monitor_opened_before_the_snapshot_shows_the_first_robot_online(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace
+) -> None:
+    """Opened at once after signing in, before the robots had come, the monitor chose the
+    server's own nets and said nothing ran there, with R1 online (CI, on a loaded machine)."""
+    async with fleet_factory(robots=1) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        held: asyncio.Queue[Any] = asyncio.Queue()
+        await page.route("**/api/robots", held.put_nowait)
+        await web.sign_in(watch, web.operator_token)
+        await web.open_view(page, "RoboGraph monitor")
+        await expect(page.get_by_text("Loading the nets…")).to_be_visible()
+        snapshot = await held.get()  # the console's snapshot asked for the robots: held
+        await snapshot.continue_()
+        await expect(page.get_by_role("region", name="Net waiting")).to_be_visible(timeout=20_000)
+        await expect(page.get_by_label("Show the nets of")).to_have_value("R1")
+        await expect(page.get_by_text("No net is running")).to_have_count(0)

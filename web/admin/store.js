@@ -16,6 +16,9 @@ const isOpen = (alert) => !alert.acked_at && !alert.resolved_at;
  */
 
 export class Store extends EventTarget {
+  /** @type {() => void} */
+  #markLoaded = () => {};
+
   /**
    * @param {import("/lib/rest.js").Api} api
    * @param {import("/lib/hub.js").HubClient} hub
@@ -40,6 +43,11 @@ export class Store extends EventTarget {
     this.error = null; // the last background failure (shown on the page until the next success)
     this.olderEvents = true; // the event log has rows older than this.events[0]
     this.snapshots = 0; // event-log snapshots taken (reloads): a page of older rows is of one
+    /** Resolves once the first snapshot is in: a view that chooses from the robots (the
+     * monitor's first robot) waits for it, or it chooses from none. @type {Promise<void>} */
+    this.loaded = new Promise((resolve) => {
+      this.#markLoaded = resolve;
+    });
     this.eventPage = EVENT_PAGE; // rows per page of the event log (a test may make it small)
     this.reloading = null; // the reload in flight (a second caller joins it, then runs again)
     this.reloadAgain = false;
@@ -272,6 +280,7 @@ export class Store extends EventTarget {
     for (const alert of alerts) this.#alert(alert, false);
     const last = events.events.length ? events.events[events.events.length - 1].at : 0;
     this.snapshots += 1;
+    this.#markLoaded();
     this.events = [];
     this.olderEvents = events.events.length === this.eventPage;
     this.#addEvents([...events.events, ...this.inFlight.filter((row) => row.at > last)]);

@@ -194,6 +194,7 @@ export class Monitor {
     this.drags = new Map();
     this.off = null;
     this.error = null;
+    this.loading = false; // the chosen target's running nets are being fetched
   }
 
   open() {
@@ -201,9 +202,15 @@ export class Monitor {
       this.off = this.ui.hub.on("petri_net_event", (m) => this.#event(m));
       this.ui.hub.subscribe("petri_net_event");
     }
-    if (!this.target) {
-      const first = [...this.ui.store.robots.values()].find((r) => r.online);
-      this.select(first ? first.name : "rgm");
+    if (!this.target && !this.loading) {
+      // The first robot online, once the snapshot has brought the robots: opened before it,
+      // the monitor chose the server's own nets though R1 was online (CI).
+      this.loading = true;
+      this.ui.store.loaded.then(() => {
+        if (this.target) return; // chosen on the page meanwhile
+        const first = [...this.ui.store.robots.values()].find((r) => r.online);
+        this.select(first ? first.name : "rgm");
+      });
     }
   }
 
@@ -228,16 +235,21 @@ export class Monitor {
     this.target = target;
     this.instances = new Map();
     this.views = new Map();
+    this.loading = true;
+    this.ui.draw();
     try {
       const running = await this.ui.api.get(`/api/nets/running?target=${encodeURIComponent(target)}`);
+      if (this.target !== target) return; // another target chosen while this one was fetched
       for (const n of running) {
         this.instances.set(n.instance_id, { net: n.net, marking: n.marking, firings: n.firings });
         this.#structure(n.net);
       }
       this.error = null;
     } catch (err) {
+      if (this.target !== target) return;
       this.error = err.message;
     }
+    this.loading = false;
     this.ui.draw();
   }
 
@@ -390,7 +402,7 @@ export function monitorView(ui) {
       <option value="rgm" ?selected=${monitor.target === "rgm"}>Server (RGM)</option>
     </select>
     ${monitor.error ? html`<p class="notice error" role="alert">${monitor.error}</p>` : ""}
-    ${monitor.instances.size ? "" : html`<p class="muted">No net is running on ${monitor.target}.</p>`}
+    ${monitor.loading ? html`<p class="muted">Loading the nets…</p>` : monitor.instances.size ? "" : html`<p class="muted">No net is running on ${monitor.target}.</p>`}
     ${[...monitor.instances].map(([id, inst]) => {
       const structure = monitor.structures.get(inst.net);
       return html`<section class="net-card" aria-label=${`Net ${inst.net}`}>
