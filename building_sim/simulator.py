@@ -25,6 +25,13 @@ from guidebot.site.io_rules import Role, allowed
 __all__ = ["BuildingSimulator", "SimulatorError"]
 
 DEFAULT_ELEVATOR_HOLD_S = 8.0
+HOLD_STEP_S = 0.05
+"""How often a held button counts the time it has been held."""
+MAX_HOLD_STEP_S = 0.1
+"""The most a held button counts at one step. A stall of the simulator's process freezes its
+hand, as it freezes the simulated base (robot_agent/sim_base.py): where the server's poller
+shares the process (the test fleets), a stall stopped the poller but not the press, whose
+release then came before the next sample, and an 800 ms press was never seen (CI)."""
 
 
 class SimulatorError(LookupError):
@@ -75,7 +82,7 @@ class BuildingSimulator(Service):
                 self._hook(stop.call, functools.partial(sim.on_call, index))
         self.buttons = {b.id: b for b in config.buttons}
         self.presses = 0
-        self._releases: dict[str, asyncio.TimerHandle] = {}
+        self._releases: dict[str, asyncio.Task[None]] = {}
         for module_id, store in self.stores.items():
             store.on_write = functools.partial(self._written, module_id)
 
@@ -142,7 +149,8 @@ class BuildingSimulator(Service):
             raise SimulatorError(f"no point {ref.point!r} on module {ref.module!r}") from None
 
     def press(self, button: str, ms: float = 300.0) -> None:
-        """Hold a button's input for ``ms`` milliseconds (real time: a hand is not scaled)."""
+        """Hold a button's input for ``ms`` milliseconds (real time: a hand is not scaled; it
+        stops while the simulator's process is stalled, ``MAX_HOLD_STEP_S``)."""
         if button not in self.buttons:
             raise SimulatorError(f"no button {button!r}; known: {sorted(self.buttons)}")
         if ms <= 0:
@@ -153,11 +161,19 @@ class BuildingSimulator(Service):
         old = self._releases.pop(button, None)
         if old is not None:
             old.cancel()
-        self._releases[button] = asyncio.get_running_loop().call_later(
-            ms / 1000, self._release, button
+        self._releases[button] = asyncio.get_running_loop().create_task(
+            self._hold(button, ms / 1000), name=f"press-{button}"
         )
 
-    def _release(self, button: str) -> None:
+    async def _hold(self, button: str, seconds: float) -> None:
+        """Release the button once it has been held ``seconds`` of the simulator's time."""
+        loop = asyncio.get_running_loop()
+        held, last = 0.0, loop.time()
+        while held < seconds:
+            await asyncio.sleep(min(HOLD_STEP_S, seconds - held))
+            now = loop.time()
+            held += min(now - last, MAX_HOLD_STEP_S)
+            last = now
         self._releases.pop(button, None)
         self.write(self.buttons[button].input, 0)
 
