@@ -51,6 +51,7 @@ BENCHMARKS: dict[str, str] = {
     "reports": "bench.reports:main",
     "plan": "bench.plan:main",
     "plan-check": "bench.plan_check:main",
+    "eta": "bench.eta:main",
 }
 
 
