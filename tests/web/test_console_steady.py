@@ -222,6 +222,43 @@ async def test_robots_standing_together_keep_their_spots_when_another_comes(
             assert await box(marker(page, "R3")) == three["R3"]
 
 
+LABEL_SEEN = """el => {
+    const r = el.querySelector('.robot-label').getBoundingClientRect();
+    const top = document.elementFromPoint(r.x + r.width / 2, r.y + r.height / 2);
+    return el.contains(top);
+}"""
+"""Whether a robot's label is the topmost thing at its own centre (no other marker over it)."""
+
+
+async def test_two_robots_a_little_apart_are_both_seen_and_labelled(
+    fleet_factory: Any, open_page: Any, web: SimpleNamespace, demo_site: Any
+) -> None:
+    """Two tours at one exhibit, R1 and R2 0.6 m apart: at the console's zoom their markers
+    were drawn one over the other and R1's label hidden under R2 (the busy demo). Closer than a
+    marker and its label on the screen, they are drawn apart, R1 (there first) at its pose."""
+    async with fleet_factory(robots=0, edit=quiet_site) as fleet:
+        watch = await open_page(fleet.admin_url)
+        page = watch.page
+        await web.sign_in(watch, fleet.server.admin_token)
+        hall = node(demo_site, "hall")
+        async with driven(fleet, demo_site, "R1", "R2") as robots:
+            await robots["R1"].at(hall)
+            await expect(marker(page, "R1")).to_be_visible(timeout=20_000)
+            alone = await box(marker(page, "R1"))
+            await robots["R2"].at({**hall, "y": hall["y"] - 0.6})
+            await expect(marker(page, "R2")).to_be_visible()
+            two = {n: await box(marker(page, n)) for n in ("R1", "R2")}
+            assert two["R1"] == alone  # the first one there stays at its pose
+            assert abs(two["R1"][0] - two["R2"][0]) + abs(two["R1"][1] - two["R2"][1]) >= 30
+            for name in ("R1", "R2"):
+                assert await marker(page, name).evaluate(LABEL_SEEN), f"{name}'s label is hidden"
+            # R2 drives off along the corridor: drawn where it is again, R1 still at its pose.
+            await robots["R2"].at(node(demo_site, "door_hall"))
+            door = await box(marker(page, "R2"))
+            assert await box(marker(page, "R1")) == alone
+            assert door[0] - alone[0] > 30
+
+
 async def test_enter_and_space_on_a_focused_robot_select_it(
     fleet_factory: Any, open_page: Any, web: SimpleNamespace, demo_site: Any
 ) -> None:

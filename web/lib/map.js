@@ -7,7 +7,8 @@ import * as L from "leaflet";
 const AREA_MARGIN_M = 1.2;
 const RING_PX = 34; // robots standing together: each ring of spots around their place this much further out
 const RING_SPOTS = 6; // spots on the first ring (the k-th ring has k times as many)
-const TOGETHER_M = 0.6; // closer than this, two robots would hide each other
+const STILL_M = 0.05; // a robot that moved less than this since its last state stood still
+const TOGETHER_PX = 44; // closer than this on the screen, a robot's marker or label hides another's
 /** Navigator states in which a robot stands and waits for something (robot_state.navigation). */
 export const WAITING = new Set(["waiting_area", "waiting_door", "waiting_elevator", "door_blocked"]);
 const STATE_COLOURS = { free: "#1b7a3a", held: "#b35900", holder_offline: "#b00020", yielding: "#6a3d9a" };
@@ -99,9 +100,9 @@ export class FloorMap extends EventTarget {
      * @type {((robot: string) => string) | null}
      */
     this.linkOf = null;
-    /** "x,y" of a place where robots stand together -> {at, spots: robot name -> spot} */
-    this.places = new Map();
-    this.arrivals = 0;
+    /** Places where robots are drawn around one: {at, spots: robot name -> spot} */
+    this.places = new Set();
+    this.moves = 0;
     /** @type {Map<string, any> | null} floor id -> the bounds of its plan image, once drawn */
     this.planBounds = null;
     this.map.on("zoomend", () => this.#spread());
@@ -481,7 +482,11 @@ export class FloorMap extends EventTarget {
     const pose = this.pose(s);
     // With the page's links known (the console), a robot offline stays where it was last seen.
     const visible = pose.floor === this.floor && (this.linkOf !== null || s.mode !== "offline");
-    robot.at = visible ? [pose.y, pose.x] : null;
+    const at = visible ? [pose.y, pose.x] : null;
+    if (at && (!robot.at || Math.hypot(at[0] - robot.at[0], at[1] - robot.at[1]) > STILL_M)) {
+      robot.moved = ++this.moves; // the order robots last moved in: who stood somewhere first
+    }
+    robot.at = at;
     if (visible) {
       robot.marker.setLatLng(robot.at);
       if (!robot.shown) {
@@ -495,62 +500,103 @@ export class FloorMap extends EventTarget {
     }
   }
 
-  /** Robots standing at one place are drawn around it, each visible and clickable: the one
-   * that stood there first at the place itself, each next one at the first free spot of rings
-   * around it (east, west, then the diagonals). A robot keeps its spot while it stays there,
-   * so one arriving or leaving never moves the others (a click aimed at one still lands on
-   * it); a robot left alone there is drawn where it is. */
+  /** Robots whose markers or labels would hide each other (closer than TOGETHER_PX on the
+   * screen, at its zoom) are drawn around one place, each visible and clickable: the one that
+   * stood there first at its own pose, and the place follows it; each next one at the first
+   * free spot of rings around it (east, west, then the diagonals). A robot keeps its spot
+   * while it stays near the place, so one arriving or leaving never moves the others (a click
+   * aimed at one still lands on it); a robot left alone there is drawn where it is. (Robots
+   * 0.6 m apart, two tours at one exhibit, were drawn one over the other at a venue's zoom,
+   * one label hidden.) */
   #spread() {
-    const groups = new Map();
+    /** @type {Map<string, any>} robot name -> its pose on the screen (layer pixels) */
+    const points = new Map();
     for (const [name, robot] of this.robots) {
-      if (!robot.shown || !robot.at) {
-        robot.placeKey = null; // back on the map, it comes to its place anew
-        continue;
-      }
-      const key = `${Math.round(robot.at[1] / TOGETHER_M)},${Math.round(robot.at[0] / TOGETHER_M)}`;
-      if (robot.placeKey !== key) {
-        robot.placeKey = key;
-        robot.arrived = ++this.arrivals; // the order robots came to their place in
-      }
-      if (!groups.has(key)) groups.set(key, []);
-      groups.get(key).push([name, robot]);
+      if (robot.shown && robot.at) points.set(name, this.map.latLngToLayerPoint(robot.at));
+      else if (robot.place) this.#leave(name, robot);
     }
-    for (const key of this.places.keys()) if ((groups.get(key)?.length ?? 0) < 2) this.places.delete(key);
-    const metres = RING_PX / 2 ** this.map.getZoom();
-    for (const [key, group] of groups) {
-      if (group.length === 1) {
-        const robot = group[0][1];
-        if (robot.spread) {
-          robot.spread = false;
-          robot.marker.setLatLng(robot.at);
-        }
+    const near = (a, b) => a.distanceTo(b) < TOGETHER_PX;
+    for (const place of this.places) {
+      const centre = [...place.spots].find(([, spot]) => spot === 0)?.[0];
+      if (centre !== undefined && points.has(centre)) place.at = this.robots.get(centre).at;
+      place.point = this.map.latLngToLayerPoint(place.at);
+    }
+    for (const [name, point] of points) {
+      const robot = this.robots.get(name);
+      if (robot.place && !near(point, robot.place.point)) this.#leave(name, robot);
+    }
+    // Robots with no place: the ones that stood still longest first, each to the nearest place
+    // it is near, or to a new one with the others near it that have none (a grid of cells as
+    // wide as TOGETHER_PX finds them: a fleet of hundreds is not compared pair by pair).
+    const loose = [...points.keys()].filter((name) => !this.robots.get(name).place)
+      .sort((a, b) => this.robots.get(a).moved - this.robots.get(b).moved || a.localeCompare(b));
+    const cells = new Map();
+    const cellOf = (point) => [Math.floor(point.x / TOGETHER_PX), Math.floor(point.y / TOGETHER_PX)];
+    for (const name of loose) {
+      const [cx, cy] = cellOf(points.get(name));
+      const key = `${cx},${cy}`;
+      if (!cells.has(key)) cells.set(key, []);
+      cells.get(key).push(name);
+    }
+    const neighbours = (point) => {
+      const [cx, cy] = cellOf(point);
+      const found = [];
+      for (let dx = -1; dx <= 1; dx += 1) {
+        for (let dy = -1; dy <= 1; dy += 1) found.push(...(cells.get(`${cx + dx},${cy + dy}`) ?? []));
+      }
+      return found.filter((name) => !this.robots.get(name).place && near(points.get(name), point));
+    };
+    for (const name of loose) {
+      const robot = this.robots.get(name);
+      if (robot.place) continue; // it joined one made earlier in this loop
+      const point = points.get(name);
+      let best = null;
+      for (const place of this.places) {
+        const d = point.distanceTo(place.point);
+        if (d < TOGETHER_PX && (!best || d < best.d)) best = { place, d };
+      }
+      if (best) {
+        this.#join(name, robot, best.place);
         continue;
       }
-      let place = this.places.get(key);
-      // Newcomers in the order they came (the first one there keeps the place: it does not
-      // move), then by name.
-      const coming = group.filter(([name]) => !place?.spots.has(name))
-        .sort((a, b) => a[1].arrived - b[1].arrived || a[0].localeCompare(b[0]));
-      if (!place) {
-        place = { at: coming[0][1].at, spots: new Map() };
-        this.places.set(key, place);
-      }
-      const here = new Set(group.map(([name]) => name));
-      for (const name of [...place.spots.keys()]) if (!here.has(name)) place.spots.delete(name);
-      const taken = new Set(place.spots.values());
-      let free = 0;
-      for (const [name] of coming) {
-        while (taken.has(free)) free += 1;
-        place.spots.set(name, free);
-        taken.add(free);
-      }
-      const [y, x] = place.at;
-      for (const [name, robot] of group) {
-        const [dx, dy] = spotOffset(place.spots.get(name));
+      const mates = neighbours(point).filter((other) => other !== name);
+      if (!mates.length) continue;
+      const place = { at: robot.at, point, spots: new Map() };
+      this.places.add(place);
+      for (const member of [name, ...mates]) this.#join(member, this.robots.get(member), place);
+    }
+    for (const place of this.places) {
+      if (place.spots.size > 1) continue;
+      for (const name of place.spots.keys()) this.#leave(name, this.robots.get(name));
+      this.places.delete(place);
+    }
+    const metres = RING_PX / 2 ** this.map.getZoom();
+    for (const name of points.keys()) {
+      const robot = this.robots.get(name);
+      if (robot.place) {
+        const [dx, dy] = spotOffset(robot.place.spots.get(name));
+        const [y, x] = robot.place.at;
         robot.spread = true;
         robot.marker.setLatLng([y + metres * dy, x + metres * dx]);
+      } else if (robot.spread) {
+        robot.spread = false;
+        robot.marker.setLatLng(robot.at);
       }
     }
+  }
+
+  /** ``name`` joins ``place`` at its first free spot. */
+  #join(name, robot, place) {
+    const taken = new Set(place.spots.values());
+    let free = 0;
+    while (taken.has(free)) free += 1;
+    place.spots.set(name, free);
+    robot.place = place;
+  }
+
+  #leave(name, robot) {
+    robot.place.spots.delete(name);
+    robot.place = null;
   }
 
   /** Take a robot off the map until it reports again (a replay: a robot gone or not there yet). */

@@ -55,7 +55,7 @@ export function buildingView(ui) {
       })}</tbody>
     </table>
     ${ui.store.simulator && ui.operate
-      ? html`<h3>Building simulator</h3><div class="actions">${(site.buttons ?? []).map((b) => html`<button type="button" @click=${() => press(b.id)}>Press ${b.id}</button>`)}</div>`
+      ? html`<h3>Buttons on the building simulator</h3><div class="actions">${(site.buttons ?? []).map((b) => html`<button type="button" @click=${() => press(b.id)}>Press ${b.id}</button>`)}</div>`
       : ""}
     ${site.modules.map((m) => moduleSection(ui, m))}`;
 }

@@ -99,7 +99,7 @@ function simulatorAlarms(ui) {
   if (!ui.store.simulator || !alarms.length || !ui.operate) return "";
   const set = (alarm, raised) =>
     ui.act(`${raised ? "Raise" : "Clear"} alarm input ${alarm.id}`, () => ui.api.post("/api/building/simulator/alarm", { alarm: alarm.id, raised }));
-  return html`<h4>Building simulator</h4>
+  return html`<h4>Alarm inputs on the building simulator</h4>
     <table aria-label="Simulated alarm inputs">
       <thead><tr><th scope="col">Alarm</th><th scope="col">Input</th><th scope="col">Reads</th><th scope="col"><span class="sr-only">Actions</span></th></tr></thead>
       <tbody>${alarms.map((a) => {
