@@ -27,7 +27,7 @@ async def test_the_fire_alarm_part_is_drawn_edited_checked_and_published(
     async with fleet_factory(robots=0) as fleet:
         watch = await open_editor(open_page, fleet)
         page = watch.page
-        await page.get_by_role("button", name="Fire alarm (1 input(s))").click()
+        await page.get_by_role("button", name="Fire alarm (1 input)").click()
         form = page.locator("section.emergency")
         alarm = form.get_by_role("group", name="Alarm fire_main")
         await expect(alarm.get_by_label("input", exact=True)).to_have_value("otb_ground/fire_alarm")

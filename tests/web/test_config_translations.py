@@ -109,7 +109,7 @@ async def test_missing_and_stale_counts_side_by_side_edit_and_a_po_round_trip(
             "Schwert aus der Bronzezeit → Bronzezeitliches Schwert"
         )
         imported = page.get_by_role("status").filter(has_text="site-de.po imported")
-        await expect(imported).to_contain_text("1 text(s) changed")
+        await expect(imported).to_contain_text("1 text changed")
         await page.get_by_role("radio", name="All texts").check()
         await expect(texts.locator('tr[data-key="pois/sword/name"] textarea')).to_have_value(
             "Bronzezeitliches Schwert"

@@ -2,6 +2,7 @@
 // count) and its notices (a change not saved, what the last action did, a robot's new token).
 import { html, nothing } from "lit-html";
 import { publish } from "/config/versions.js";
+import { counted } from "/lib/dom.js";
 
 /**
  * @param {import("/config/editor.js").EditorUi} ui
@@ -19,7 +20,7 @@ export function barView(ui) {
       <label>Note <input id="publish-note" placeholder="what changed" maxlength="500"></label>
       <button type="button" id="publish" ?disabled=${!!model.conflict} @click=${() => publish(ui)}
         aria-describedby="problem-count">Publish</button>
-      <span id="problem-count" class=${count ? "error" : "ok-text"}>${count ? `${count} problem(s): publishing is refused` : "No problems"}</span>`;
+      <span id="problem-count" class=${count ? "error" : "ok-text"}>${count ? `${counted(count, "problem")}: publishing is refused` : "No problems"}</span>`;
 }
 
 /**

@@ -2,6 +2,7 @@
 // elements of the kind chosen, to select one or add one.
 import { html, nothing } from "lit-html";
 import { KINDS, newElement } from "/config/forms.js";
+import { counted } from "/lib/dom.js";
 
 /**
  * @param {import("/config/editor.js").EditorUi} ui
@@ -18,9 +19,9 @@ export function listsView(ui, byElement) {
         return html`<li><button type="button" class=${ui.section === section ? "kind current" : "kind secondary"} aria-pressed=${ui.section === section ? "true" : "false"}
           @click=${() => select(section, null)}>${kind.label} (${(doc[section] ?? []).length})${bad ? html` <span class="error">⚠ ${bad}</span>` : nothing}</button></li>`;
       })}<li><button type="button" class=${ui.section === "emergency" ? "kind current" : "kind secondary"} aria-pressed=${ui.section === "emergency" ? "true" : "false"}
-          @click=${() => select("emergency", null)}>Fire alarm (${em ? `${em.alarms.length} input(s)` : "none"})${emIssues ? html` <span class="error">⚠ ${emIssues}</span>` : nothing}</button></li></ul></nav>
+          @click=${() => select("emergency", null)}>Fire alarm (${em ? counted(em.alarms.length, "input") : "none"})${emIssues ? html` <span class="error">⚠ ${emIssues}</span>` : nothing}</button></li></ul></nav>
       ${ui.section === "emergency" ? html`<h2 id="list-title">Fire alarm</h2>
-      <p class="muted">${em ? `${em.alarms.length} alarm input(s), ${em.safe_spots.length} safe spot(s), ${em.escape_routes.length} escape route(s): edit them on the right, safe spots also on the plan.` : "Not set up yet."}</p>` : html`
+      <p class="muted">${em ? `${counted(em.alarms.length, "alarm input")}, ${counted(em.safe_spots.length, "safe spot")}, ${counted(em.escape_routes.length, "escape route")}: edit them on the right, safe spots also on the plan.` : "Not set up yet."}</p>` : html`
       <h2 id="list-title">${KINDS[ui.section].label}</h2>
       <ul class="elements" aria-labelledby="list-title">${(doc[ui.section] ?? []).map((item, i) => {
         const label = ui.section === "edges" ? `${item.a} ${item.one_way ? "→" : "↔"} ${item.b}` : `${item.name && item.id ? `${item.name} (${item.id})` : item.name || item.id}`;

@@ -3,6 +3,7 @@
 // agency and imports it back. The server keeps the rules (backend/site/translations.py): this
 // page shows its answers and writes through /api/site/draft/translations.
 import { html, nothing, render } from "lit-html";
+import { counted } from "/lib/dom.js";
 
 const BASE = "/api/site/draft/translations";
 const STATES = {
@@ -110,7 +111,7 @@ export function mountTranslations({ model, api, sendFile, root, nav, columns }) 
       a.href = URL.createObjectURL(blob);
       a.download = `site-${ui.lang}.${format === "po" ? "po" : "xlf"}`;
       a.click();
-      say(`${a.download} exported: ${ui.texts.texts.length} text(s), the ones older than their source marked fuzzy.`);
+      say(`${a.download} exported: ${counted(ui.texts.texts.length, "text")}, the ones older than their source marked fuzzy.`);
     } catch (err) {
       say(`Export refused: ${err.message}`, true);
     }
@@ -129,7 +130,7 @@ export function mountTranslations({ model, api, sendFile, root, nav, columns }) 
       ui.report = { file: file.name, ...(await sendFile("POST", url, await file.arrayBuffer(), type)) };
       await model.load();
       const r = ui.report;
-      say(`${file.name} imported: ${r.changed.length} text(s) changed, ${r.unchanged} unchanged, ${r.skipped.length} not imported.`);
+      say(`${file.name} imported: ${counted(r.changed.length, "text")} changed, ${r.unchanged} unchanged, ${r.skipped.length} not imported.`);
     } catch (err) {
       ui.report = null;
       say(`${file.name} refused, nothing was changed: ${err.message}`, true);

@@ -2,7 +2,7 @@
 // versions with what each changed, and rolling back to one.
 import { html, nothing } from "lit-html";
 import { confirmAction } from "/lib/confirm.js";
-import { clock } from "/lib/dom.js";
+import { counted, dateTime } from "/lib/dom.js";
 import { ApiError } from "/lib/rest.js";
 import { translationWarning } from "/config/translations.js";
 
@@ -31,7 +31,7 @@ export async function publish(ui) {
     await loadVersions(ui);
     say(`Version ${version} is live.${untranslated}`);
   } catch (err) {
-    if (err instanceof ApiError && err.status === 422) say(`Publish refused: ${err.detail.length} problem(s), see the list.`, true);
+    if (err instanceof ApiError && err.status === 422) say(`Publish refused: ${counted(err.detail.length, "problem")}, see the list.`, true);
     else say(`Publish refused: ${err.detail?.msg ?? err.message}`, true);
   }
 }
@@ -81,7 +81,7 @@ export function versionsSection(ui) {
         <button type="button" class="secondary" @click=${() => showDiff(ui, model.liveVersion, "draft", "Draft compared with the live version")}>Changes in the draft</button>
         <table><caption class="sr-only">Published versions</caption><thead><tr><th>Version</th><th>By</th><th>When</th><th>Actions</th></tr></thead>
         <tbody>${ui.versions.map((v, i) => html`<tr><td>${v.version}${v.version === model.liveVersion ? " (live)" : ""}</td>
-          <td>${v.published_by || "—"}</td><td>${clock(v.published_at)}${v.note ? html`<br><span class="muted">${v.note}</span>` : nothing}</td>
+          <td>${v.published_by || "—"}</td><td>${dateTime(v.published_at)}${v.note ? html`<br><span class="muted">${v.note}</span>` : nothing}</td>
           <td>${ui.versions[i + 1] ? html`<button type="button" class="secondary small" aria-label=${`Changes in version ${v.version}`} @click=${() => showDiff(ui, ui.versions[i + 1].version, v.version, `Changes in version ${v.version}`)}>Changes</button>` : nothing}
           ${v.version !== model.liveVersion ? html`<button type="button" class="secondary small" aria-label=${`Roll back to version ${v.version}`} @click=${() => rollback(ui, v.version)}>Roll back</button>` : nothing}</td></tr>`)}</tbody></table>
         ${ui.diff ? html`<h3>${ui.diff.title}</h3><ul class="diff" aria-label=${ui.diff.title}>${ui.diff.changes.length ? ui.diff.changes.map((c) => html`<li class=${`diff-${c.change}`}>${c.text}</li>`) : html`<li>No changes.</li>`}</ul>` : nothing}</section>`;
@@ -96,6 +96,6 @@ export function rolloutText(r) {
   const n = r.expected.length;
   const done = Object.keys(r.loaded_ms).length;
   if (!n) return `Version ${r.version} is live (no robot connected).`;
-  if (r.complete) return `Version ${r.version} reached all ${n} robot(s) in ${Math.round(r.ms)} ms.`;
-  return `Version ${r.version}: ${done} of ${n} robot(s) updated…`;
+  if (r.complete) return `Version ${r.version} reached all ${counted(n, "robot")} in ${Math.round(r.ms)} ms.`;
+  return `Version ${r.version}: ${done} of ${counted(n, "robot")} updated…`;
 }

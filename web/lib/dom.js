@@ -9,9 +9,16 @@ export function duration(seconds) {
   return `${Math.floor(s / 3600)} h ${Math.round((s % 3600) / 60)} min`;
 }
 
-/** Local clock time of a Unix timestamp (seconds). */
-export function clock(ts) {
-  return ts ? new Date(ts * 1000).toLocaleTimeString() : "—";
+/** The browser's date and time of a Unix timestamp (seconds), on the 24-hour clock as the
+ * console and the server write times ("Nov 29, 2026, 14:05"); "—" without one. A version
+ * published yesterday showed its time alone, in the 12-hour clock ("12:53:58 AM"). */
+export function dateTime(ts) {
+  return ts ? new Date(ts * 1000).toLocaleString(undefined, { dateStyle: "medium", timeStyle: "short", hourCycle: "h23" }) : "—";
+}
+
+/** "1 safe spot", "2 safe spots": a count with its noun (English plural in -s). */
+export function counted(n, noun) {
+  return `${n} ${noun}${n === 1 ? "" : "s"}`;
 }
 
 export function percent(level) {
