@@ -3,6 +3,8 @@ end, problems shown and publish refused, two editors, roll back, broken YAML, a 
 
 from __future__ import annotations
 
+import datetime as dt
+import re
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -179,7 +181,14 @@ async def test_a_file_imported_while_the_version_list_loads_is_answered(
         assert held, "the version list was not held back"
         for route in held:
             await route.continue_()
-        await expect(page.get_by_role("table", name="Published versions")).to_contain_text("(live)")
+        versions = page.get_by_role("table", name="Published versions")
+        await expect(versions).to_contain_text("(live)")
+        # When it was published: the date too, on the 24-hour clock (was "12:53:58 AM").
+        async with fleet.http() as http:
+            live = (await http.get("/api/site/versions")).json()[0]["published_at"]
+        published = dt.datetime.fromtimestamp(live).astimezone()
+        await expect(versions).to_contain_text(f"{published:%b} {published.day}, {published:%Y}")
+        await expect(versions).not_to_contain_text(re.compile(r"\d [AP]M"))
 
 
 async def _settled_point(page: Any, x: float, y: float) -> dict[str, float]:
