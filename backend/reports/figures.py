@@ -131,6 +131,7 @@ class Reports:
         await self._fresh()
         sums = await self._sums(period, (*TASK_STATES, "failed_reason"))
         series = await self._series(period, TASK_STATES, key="tour")
+        now = time.time()  # bins that have not begun have no counts (null), not zeros
         kinds = sorted({k for m in TASK_STATES for k in sums[m]})
         return {
             "period": period.as_dict(),
@@ -142,7 +143,10 @@ class Reports:
                 key=lambda row: -int(row["count"]),
             ),
             "rows": [
-                {"start": period.label(b), **{m: cells[m][0] for m in TASK_STATES}}
+                {
+                    "start": period.label(b),
+                    **{m: cells[m][0] if b <= now else None for m in TASK_STATES},
+                }
                 for b, cells in series.items()
             ],
         }
@@ -152,6 +156,7 @@ class Reports:
         await self._fresh()
         sums = await self._sums(period, ("wait", "wait_hist", "tour_length", "tour_length_hist"))
         series = await self._series(period, ("wait", "tour_length"))
+        now = time.time()
         waits = {k: c[0] for k, c in sums["wait_hist"].items()}
         lengths = {k: c[0] for k, c in sums["tour_length_hist"].items()}
         n_wait = sum(c[0] for c in sums["wait"].values())
@@ -177,9 +182,9 @@ class Reports:
             "rows": [
                 {
                     "start": period.label(b),
-                    "waits": cells["wait"][0],
+                    "waits": cells["wait"][0] if b <= now else None,
                     "wait_mean_s": mean(cells["wait"]),
-                    "tours_done": cells["tour_length"][0],
+                    "tours_done": cells["tour_length"][0] if b <= now else None,
                     "tour_length_mean_s": mean(cells["tour_length"]),
                 }
                 for b, cells in series.items()
