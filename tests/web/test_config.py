@@ -107,7 +107,7 @@ async def test_roll_back_restores_the_previous_tour_order(
             "data-point", "welcome"
         )
         await page.get_by_role("button", name="Publish", exact=True).click()
-        await expect(page.locator("#rollout")).to_contain_text("reached all 1 robot")
+        await expect(page.locator("#rollout")).to_contain_text("reached its robot")
         async with fleet.http() as http:
             tours = (await http.get("/api/site")).json()["site"]["tours"]
             assert tours[0]["points"][:2] == ["mosaics", "welcome"]
@@ -260,7 +260,7 @@ async def test_new_floor_with_plan_calibrated_published_and_planned_to(
         await expect(page.locator("#problem-count")).to_have_text("No problems")
         await web.screenshot(page, "config-new-floor")
         await page.get_by_role("button", name="Publish", exact=True).click()
-        await expect(page.locator("#rollout")).to_contain_text("reached all 1 robot")
+        await expect(page.locator("#rollout")).to_contain_text("reached its robot")
         async with fleet.http() as http:
             floor = (await http.get("/api/site")).json()["site"]["floors"][-1]
             assert floor["scale_px_per_m"] == scale

@@ -96,6 +96,6 @@ export function rolloutText(r) {
   const n = r.expected.length;
   const done = Object.keys(r.loaded_ms).length;
   if (!n) return `Version ${r.version} is live (no robot connected).`;
-  if (r.complete) return `Version ${r.version} reached all ${counted(n, "robot")} in ${Math.round(r.ms)} ms.`;
+  if (r.complete) return `Version ${r.version} reached ${n === 1 ? "its robot" : `all ${n} robots`} in ${Math.round(r.ms)} ms.`;
   return `Version ${r.version}: ${done} of ${counted(n, "robot")} updated…`;
 }
