@@ -72,6 +72,10 @@ class CommandError(Exception):
     """A building command that cannot be done; the text is the command_failed reason."""
 
 
+class CommandRefused(CommandError):
+    """A rule refused the command (the fire alarm holds its device's zone): ``refused``."""
+
+
 class BuildingInterface(Service):
     """Polls the modules of one site and serves building commands on the hub."""
 
@@ -388,6 +392,8 @@ class BuildingInterface(Service):
             await handler(message)
         except ValidationError as exc:
             self._fail(message, f"bad payload: {exc.errors()[0]['msg']}")
+        except CommandRefused as exc:
+            self._fail(message, str(exc), refused=True)
         except (CommandError, ModbusIOError) as exc:
             self._fail(message, str(exc))
 
@@ -398,9 +404,17 @@ class BuildingInterface(Service):
                 type_name, payload, destination=request.source, correlation_id=request.id
             )
 
-    def _fail(self, request: Message, reason: str) -> None:
-        log.info("%s from %s failed: %s", request.type, request.source, reason)
-        payload = CommandFailed(command=request.type, reason=reason, target=_target(request))
+    def _fail(self, request: Message, reason: str, *, refused: bool = False) -> None:
+        log.info(
+            "%s from %s %s: %s",
+            request.type,
+            request.source,
+            "refused" if refused else "failed",
+            reason,
+        )
+        payload = CommandFailed(
+            command=request.type, reason=reason, target=_target(request), refused=refused
+        )
         if request.source:
             self.endpoint.publish(payload, destination=request.source, correlation_id=request.id)
         else:
@@ -424,7 +438,7 @@ class BuildingInterface(Service):
 
     def _check_gate(self, node: str) -> None:
         if self.gate is not None and (reason := self.gate(node)) is not None:
-            raise CommandError(reason)
+            raise CommandRefused(reason)
 
     def drop_door_holders(self, nodes: set[str], evacuating: Collection[str] = ()) -> list[str]:
         """Release every holder of the doors at ``nodes`` and close them (the fire alarm:
@@ -471,7 +485,7 @@ class BuildingInterface(Service):
                     self._reply(message, "door_closed", {"door": door.id})
                 return {"door": door.id}
             except DoorRefused as refused:  # its hold is gone already, the door closing
-                self._fail(message, str(refused))
+                self._fail(message, str(refused), refused=True)
                 return {"door": door.id}
             except TimeoutError:
                 health = self.pollers[door.open.module].health

@@ -8,8 +8,9 @@ Each cause is raised when it appears and resolved when a message says it is gone
 - can_module_lost: robot_state.modules[name] "lost"; resolved when it no longer is.
 - battery_panic: battery_panic; resolved when robot_state.battery is above its level again.
 - robot_fault: robot_fault; resolved by a robot_state out of that fault (navigation, mode).
-- building_command_failed: command_failed; resolved by the device doing it (door_opened,
-  door_closed, elevator_in_position, building_input_changed of the output).
+- building_command_failed: command_failed, not one a rule refused (``refused``: the fire
+  alarm's zone); resolved by the device doing it (door_opened, door_closed,
+  elevator_in_position, building_input_changed of the output).
 - module_offline: building_module_health online false; resolved by online true.
 - lock_holder_offline: lock_changed holder_offline; resolved by any other lock state.
 - task_failed: task_event failed; an event: resolved when acknowledged.
@@ -149,6 +150,8 @@ class AlertWatcher(Service):
 
     # --- building -----------------------------------------------------------------------
     def _on_command_failed(self, message: Message, failed: CommandFailed) -> None:
+        if failed.refused:  # a rule (the fire alarm), not a device: the alarm's alert says it
+            return
         command, reason = failed.command, failed.reason
         target = failed.target or reason[:40]
         self.alerts.raise_(

@@ -113,6 +113,10 @@ class CommandFailed(PayloadModel):
     reason: str
     target: str | None = None
     """What it was for: the door, the elevator, ``module/point`` (None: unknown, bad payload)."""
+    refused: bool = False
+    """A rule refused it (the fire alarm holds the device's zone): the device did not fail, so
+    no alert and no trouble closure. A robot outside the alarm's zone asks again every few
+    seconds while the alarm lasts: each refusal raised an alert among the alarm's own."""
 
 
 @register_payload("building_input_changed")

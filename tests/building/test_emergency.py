@@ -207,11 +207,18 @@ async def test_a_robot_outside_the_zone_is_told_at_once_that_the_alarm_holds_its
         assert failed.payload["command"] == "open_door"
         assert failed.payload["target"] == "door_upstairs"
         assert failed.payload["reason"].startswith("fire alarm: no door opened"), failed.payload
+        assert failed.payload["refused"] is True  # a rule, not the door: no alert
+        # R2 asks again (as a robot does every door_retry_s): refused at once, again no alert.
+        outside.endpoint.publish("open_door", {"door": "door_upstairs"})
+        again = await outside.wait_for("command_failed", count=2, timeout=60.0)
+        assert again.payload["refused"] is True and "fire alarm" in again.payload["reason"]
         await wait_until(lambda: not building._commands)  # the open_doors' handlers are done
         assert inside.of_type("command_failed") == []
         assert outside.of_type("evacuate") == []
         assert sim.read_point("otb_first", "door_f1_open") == 0
         assert [c.id for c in server.app.state.closures.closures.values()] == []
+        raised = {(a.kind, a.subject) for a in server.app.state.alerts.active()}
+        assert not any(kind == "building_command_failed" for kind, _ in raised), raised
 
 
 async def test_staff_closing_a_door_withdraws_the_open_doors_waiting_for_it(

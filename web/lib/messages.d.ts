@@ -103,6 +103,7 @@ export interface CommandFailed {
   command: string;
   reason: string;
   target?: string | null;
+  refused?: boolean;
 }
 
 export interface ContinueAnswer {
