@@ -194,7 +194,7 @@ export class Monitor {
     this.drags = new Map();
     this.off = null;
     this.error = null;
-    this.loading = false; // the chosen target's running nets are being fetched
+    this.loading = false; // waiting for the robots (the first snapshot) or for a target's nets
   }
 
   open() {
